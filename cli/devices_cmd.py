@@ -1,0 +1,23 @@
+"""`mlaa-stream devices`: list the OpenCL devices and which one is picked by default."""
+from __future__ import annotations
+
+import sys
+
+import click
+
+from ..device import DeviceError, list_devices, select_device
+
+
+@click.command("devices")
+def devices_command() -> None:
+    """List OpenCL devices; the one marked * is used by default."""
+    try:
+        infos = list_devices()
+        chosen = select_device(None)
+    except DeviceError as exc:
+        click.echo(f"mlaa-stream: {exc}", err=True)
+        sys.exit(3)
+    for info in infos:
+        mark = "*" if info.name == chosen.name.strip() else " "
+        click.echo(f"{mark} {info.index}: {info.name}  [{info.kind}, {info.platform}, "
+                   f"{info.compute_units} compute units, {info.global_mem_mb} MiB]")

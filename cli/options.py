@@ -1,0 +1,23 @@
+"""Options shared by several commands, defined once."""
+from __future__ import annotations
+
+import logging
+
+import click
+
+device_option = click.option(
+    "--device", "device", default=None, metavar="N|NAME",
+    help="OpenCL device: index or name part from 'mlaa-stream devices' "
+         "(default: $MLAA_STREAM_DEVICE, else a GPU, else the CPU).")
+
+
+def verbosity_options(f):
+    f = click.option("-v", "--verbose", count=True, help="More detail on stderr (repeatable).")(f)
+    f = click.option("-q", "--quiet", is_flag=True, help="Only errors on stderr.")(f)
+    return f
+
+
+def configure_logging(verbose: int, quiet: bool) -> None:
+    level = logging.ERROR if quiet else (logging.DEBUG if verbose > 1 else
+                                         logging.INFO if verbose else logging.WARNING)
+    logging.basicConfig(level=level, format="mlaa-stream: %(message)s")

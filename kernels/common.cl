@@ -1,0 +1,99 @@
+// common.cl: prepended to every kernel file by mlaa_stream.device.Context.program.
+// Pixel access for the frame formats we accept, set by defines from mlaa_stream.formats.defines_for():
+//   PIXEL_T   uchar | ushort | float | half-as-ushort is not used (half frames are widened to float on host)
+//   CHANNELS  1, 3 or 4 (interleaved)
+//   PIXEL_MAX 255.0f | 65535.0f | 1.0f
+//   ORDER_BGR 1 when channels 0..2 are B,G,R (OpenCV frames)
+//   LUT_SIZE  entries of each lookup table in `luts` (see colour tables below)
+#ifndef PIXEL_T
+#define PIXEL_T uchar
+#endif
+#ifndef CHANNELS
+#define CHANNELS 3
+#endif
+#ifndef PIXEL_MAX
+#define PIXEL_MAX 255.0f
+#endif
+#ifndef ORDER_BGR
+#define ORDER_BGR 0
+#endif
+#ifndef LUT_SIZE
+#define LUT_SIZE 4096
+#endif
+
+#define IDX(x, y, w) ((y) * (w) + (x))
+
+// A pixel as normalised RGBA (grayscale repeated in r, g, b; alpha 1 when absent).
+inline float4 load_px(__global const PIXEL_T *img, int i)
+{
+#if CHANNELS == 1
+    float v = (float)img[i] * (1.0f / PIXEL_MAX);
+    return (float4)(v, v, v, 1.0f);
+#else
+    __global const PIXEL_T *p = img + (size_t)i * CHANNELS;
+#if ORDER_BGR
+    float4 c = (float4)((float)p[2], (float)p[1], (float)p[0], 0.0f);
+#else
+    float4 c = (float4)((float)p[0], (float)p[1], (float)p[2], 0.0f);
+#endif
+    c *= (1.0f / PIXEL_MAX);
+#if CHANNELS == 4
+    c.w = (float)p[3] * (1.0f / PIXEL_MAX);
+#else
+    c.w = 1.0f;
+#endif
+    return c;
+#endif
+}
+
+inline PIXEL_T to_pixel(float v)
+{
+#ifdef PIXEL_IS_FLOAT
+    return v;
+#else
+    return (PIXEL_T)clamp(rint(v * PIXEL_MAX), 0.0f, PIXEL_MAX);
+#endif
+}
+
+// Store RGB (alpha is copied by the caller's choice: `alpha` argument).
+inline void store_px(__global PIXEL_T *img, int i, float4 c)
+{
+#if CHANNELS == 1
+    img[i] = to_pixel(c.x);
+#else
+    __global PIXEL_T *p = img + (size_t)i * CHANNELS;
+#if ORDER_BGR
+    p[0] = to_pixel(c.z); p[1] = to_pixel(c.y); p[2] = to_pixel(c.x);
+#else
+    p[0] = to_pixel(c.x); p[1] = to_pixel(c.y); p[2] = to_pixel(c.z);
+#endif
+#if CHANNELS == 4
+    p[3] = to_pixel(c.w);
+#endif
+#endif
+}
+
+// Tables (built on host by mlaa_stream.colour.device_luts): luts[0..LUT_SIZE] sRGB -> linear,
+// luts[LUT_SIZE+1 .. 2*LUT_SIZE+1] the CIELAB f(t) (cube root with the linear toe), both over [0,1],
+// LUT_SIZE+1 samples each, read with linear interpolation. PoCL's cbrt/pow are slow (see DESIGN.md).
+inline float lut_read(__global const float *lut, float x)
+{
+    float t = clamp(x, 0.0f, 1.0f) * (float)LUT_SIZE;
+    int i = min((int)t, LUT_SIZE - 1);
+    float f = t - (float)i;
+    return mad(f, lut[i + 1] - lut[i], lut[i]);
+}
+
+inline float srgb_to_linear(__global const float *luts, float v) { return lut_read(luts, v); }
+
+// CIELAB (D65) of an sRGB colour; values above 1 (float frames) are clamped for the comparison only.
+inline float3 rgb_to_lab(__global const float *luts, float4 c)
+{
+    __global const float *f = luts + LUT_SIZE + 1;
+    float r = lut_read(luts, c.x), g = lut_read(luts, c.y), b = lut_read(luts, c.z);
+    float X = (0.4124564f * r + 0.3575761f * g + 0.1804375f * b) * (1.0f / 0.95047f);
+    float Y = 0.2126729f * r + 0.7151522f * g + 0.0721750f * b;
+    float Z = (0.0193339f * r + 0.1191920f * g + 0.9503041f * b) * (1.0f / 1.08883f);
+    float fx = lut_read(f, X), fy = lut_read(f, Y), fz = lut_read(f, Z);
+    return (float3)(116.0f * fy - 16.0f, 500.0f * (fx - fy), 200.0f * (fy - fz));
+}

@@ -1,0 +1,191 @@
+"""OpenCL device selection and a program cache: one build per (device, source, defines)."""
+from __future__ import annotations
+
+import os
+import threading
+from dataclasses import dataclass
+from importlib import resources
+
+import numpy as np
+
+try:  # pyopencl is a hard dependency, but say how to fix a broken install in one sentence.
+    import pyopencl as cl
+except ImportError as exc:  # pragma: no cover - only on broken installs
+    cl = None
+    _IMPORT_ERROR: Exception | None = exc
+else:
+    _IMPORT_ERROR = None
+
+DEVICE_ENV = "MLAA_STREAM_DEVICE"
+
+NO_PLATFORM_HINT = (
+    "no OpenCL platform found: install the CPU runtime with "
+    "'pip install pocl-binary-distribution' (or a GPU vendor's OpenCL driver)"
+)
+
+
+class DeviceError(RuntimeError):
+    """No usable OpenCL device, or the one asked for does not exist."""
+
+
+class KernelBuildError(RuntimeError):
+    """An OpenCL program failed to build; names the file, the defines and the compiler log."""
+
+
+@dataclass(frozen=True)
+class DeviceInfo:
+    index: int
+    platform: str
+    name: str
+    kind: str  # "GPU", "CPU", "ACCELERATOR", ...
+    compute_units: int
+    global_mem_mb: int
+
+    def label(self) -> str:
+        return f"{self.name} ({self.kind}, {self.platform})"
+
+
+def _kind(dev) -> str:
+    t = dev.type
+    if t & cl.device_type.GPU:
+        return "GPU"
+    if t & cl.device_type.CPU:
+        return "CPU"
+    if t & cl.device_type.ACCELERATOR:
+        return "ACCELERATOR"
+    return "OTHER"
+
+
+def _all_devices() -> list:
+    if cl is None:
+        raise DeviceError(f"pyopencl cannot be imported ({_IMPORT_ERROR}); {NO_PLATFORM_HINT}")
+    try:
+        platforms = cl.get_platforms()
+    except cl.Error as exc:  # PLATFORM_NOT_FOUND_KHR and friends
+        raise DeviceError(NO_PLATFORM_HINT) from exc
+    devices = []
+    for p in platforms:
+        try:
+            devices.extend(p.get_devices())
+        except cl.Error:  # a platform with no devices: skip it, others may serve
+            continue
+    if not devices:
+        raise DeviceError(NO_PLATFORM_HINT)
+    return devices
+
+
+def list_devices() -> list[DeviceInfo]:
+    """All OpenCL devices, in the order `--device N` numbers them."""
+    return [
+        DeviceInfo(i, d.platform.name.strip(), d.name.strip(), _kind(d), d.max_compute_units,
+                   d.global_mem_size // (1 << 20))
+        for i, d in enumerate(_all_devices())
+    ]
+
+
+def select_device(spec: str | int | None = None):
+    """Pick a device: `spec` (index or name substring), else $MLAA_STREAM_DEVICE, else a GPU, else the first."""
+    devices = _all_devices()
+    if spec is None or spec == "":
+        spec = os.environ.get(DEVICE_ENV) or None
+    if spec is None:
+        gpus = [d for d in devices if _kind(d) == "GPU"]
+        return (gpus or devices)[0]
+    s = str(spec).strip()
+    if s.isdigit():
+        i = int(s)
+        if i >= len(devices):
+            raise DeviceError(f"expected a device index below {len(devices)}, got {i} "
+                              f"(see 'mlaa-stream devices')")
+        return devices[i]
+    matches = [d for d in devices if s.lower() in f"{d.platform.name} {d.name}".lower()
+               or s.upper() == _kind(d)]
+    if not matches:
+        names = ", ".join(d.name.strip() for d in devices)
+        raise DeviceError(f"no OpenCL device matches {s!r}; available: {names}")
+    return matches[0]
+
+
+def kernel_source(name: str) -> str:
+    """The text of kernels/<name>.cl as shipped inside the package."""
+    return resources.files("mlaa_stream.kernels").joinpath(f"{name}.cl").read_text()
+
+
+def format_defines(defines: dict[str, object]) -> list[str]:
+    """The one place where defines become compiler options."""
+    opts = []
+    for key in sorted(defines):
+        val = defines[key]
+        if isinstance(val, bool):
+            val = int(val)
+        if isinstance(val, float):
+            val = repr(float(val)) + "f"
+        opts.append(f"-D{key}={val}")
+    return opts
+
+
+class Context:
+    """One OpenCL context + queue on one device, with programs built once per (source, defines)."""
+
+    def __init__(self, device: str | int | None = None):
+        self.device = device if (cl is not None and isinstance(device, cl.Device)) else select_device(device)
+        self.ctx = cl.Context([self.device])
+        self.queue = cl.CommandQueue(self.ctx)
+        self._programs: dict[tuple, object] = {}
+        self._kernels: dict[tuple, object] = {}
+        self._lock = threading.Lock()
+
+    @property
+    def name(self) -> str:
+        return f"{self.device.name.strip()} ({_kind(self.device)}, {self.device.platform.name.strip()})"
+
+    def program(self, name: str, defines: dict[str, object] | None = None):
+        opts = format_defines(defines or {})
+        key = (name, tuple(opts))
+        with self._lock:
+            prg = self._programs.get(key)
+            if prg is None:
+                # common.cl (pixel formats, colour tables) is prepended to every kernel file.
+                src = kernel_source("common") + "\n#line 1\n" + kernel_source(name)
+                try:
+                    prg = cl.Program(self.ctx, src).build(options=["-cl-std=CL1.2", *opts])
+                except cl.Error as exc:
+                    raise KernelBuildError(
+                        f"kernels/{name}.cl failed to build on {self.name} with defines "
+                        f"{' '.join(opts) or '(none)'}:\n{exc}") from exc
+                self._programs[key] = prg
+            return prg
+
+    def kernel(self, name: str, function: str, defines: dict[str, object] | None = None):
+        """A kernel object, fetched once per (file, defines, function) and reused."""
+        key = (name, tuple(format_defines(defines or {})), function)
+        k = self._kernels.get(key)
+        if k is None:
+            k = cl.Kernel(self.program(name, defines), function)
+            self._kernels[key] = k
+        return k
+
+    def buffer(self, nbytes: int, flags=None):
+        return cl.Buffer(self.ctx, flags or cl.mem_flags.READ_WRITE, size=max(int(nbytes), 1))
+
+
+_contexts: dict[str, Context] = {}
+_contexts_lock = threading.Lock()
+
+
+def default_context(device: str | int | None = None) -> Context:
+    """A process-wide context per device choice, created on first use and shared (programs too)."""
+    key = "" if device is None else str(device)
+    with _contexts_lock:
+        ctx = _contexts.get(key)
+        if ctx is None:
+            ctx = _contexts[key] = Context(device)
+        return ctx
+
+
+def i32(v) -> np.int32:
+    return np.int32(v)
+
+
+def f32(v) -> np.float32:
+    return np.float32(v)

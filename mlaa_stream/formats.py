@@ -1,0 +1,70 @@
+"""Frame formats: which numpy frames we accept, and the one function that turns them into defines."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+LUT_SIZE = 4096
+
+_PIXEL_TYPES = {
+    np.dtype(np.uint8): ("uchar", 255.0),
+    np.dtype(np.uint16): ("ushort", 65535.0),
+    np.dtype(np.float32): ("float", 1.0),
+}
+
+
+@dataclass(frozen=True)
+class FrameFormat:
+    """What the kernels need to know about a frame: size, channels, sample type, channel order."""
+
+    height: int
+    width: int
+    channels: int
+    dtype: np.dtype
+    bgr: bool = False
+
+    @property
+    def pixels(self) -> int:
+        return self.height * self.width
+
+    @property
+    def nbytes(self) -> int:
+        return self.pixels * self.channels * self.dtype.itemsize
+
+
+def frame_format(frame: np.ndarray, bgr: bool = False, what: str = "frame") -> FrameFormat:
+    """Check a frame on the host and describe it; errors read 'expected X, got Y'."""
+    if not isinstance(frame, np.ndarray):
+        raise TypeError(f"{what}: expected a numpy array, got {type(frame).__name__}")
+    if frame.ndim == 2:
+        channels = 1
+    elif frame.ndim == 3 and frame.shape[2] in (1, 3, 4):
+        channels = frame.shape[2]
+    else:
+        raise ValueError(f"{what}: expected shape (H, W) or (H, W, 1|3|4), got {frame.shape}")
+    dtype = np.dtype(frame.dtype)
+    if dtype == np.float16 or dtype == np.float64:
+        dtype = np.dtype(np.float32)  # widened on upload; written back in the input's dtype
+    if dtype not in _PIXEL_TYPES:
+        raise ValueError(f"{what}: expected uint8, uint16, float16 or float32 samples, got {frame.dtype}")
+    h, w = frame.shape[:2]
+    if h < 1 or w < 1:
+        raise ValueError(f"{what}: expected at least 1x1 pixels, got {w}x{h}")
+    return FrameFormat(h, w, channels, dtype, bool(bgr) and channels >= 3)
+
+
+def defines_for(fmt: FrameFormat, **options: object) -> dict[str, object]:
+    """The one place where a frame format (and pass options) becomes OpenCL build defines."""
+    ctype, pmax = _PIXEL_TYPES[fmt.dtype]
+    d: dict[str, object] = {
+        "PIXEL_T": ctype,
+        "CHANNELS": fmt.channels,
+        "PIXEL_MAX": float(pmax),
+        "ORDER_BGR": int(fmt.bgr),
+        "LUT_SIZE": LUT_SIZE,
+    }
+    if ctype == "float":
+        d["PIXEL_IS_FLOAT"] = 1
+    d.update(options)
+    return d
