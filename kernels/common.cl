@@ -55,6 +55,17 @@ inline PIXEL_T to_pixel(float v)
 #endif
 }
 
+// Are pixels i and j bit-identical in colour? A cheap test that lets passes skip flat areas.
+inline int same_px(__global const PIXEL_T *img, int i, int j)
+{
+#if CHANNELS == 1
+    return img[i] == img[j];
+#else
+    __global const PIXEL_T *a = img + (size_t)i * CHANNELS, *b = img + (size_t)j * CHANNELS;
+    return a[0] == b[0] && a[1] == b[1] && a[2] == b[2];
+#endif
+}
+
 // Store RGB (alpha is copied by the caller's choice: `alpha` argument).
 inline void store_px(__global PIXEL_T *img, int i, float4 c)
 {
@@ -74,7 +85,8 @@ inline void store_px(__global PIXEL_T *img, int i, float4 c)
 }
 
 // Tables (built on host by mlaa_stream.colour.device_luts): luts[0..LUT_SIZE] sRGB -> linear,
-// luts[LUT_SIZE+1 .. 2*LUT_SIZE+1] the CIELAB f(t) (cube root with the linear toe), both over [0,1],
+// luts[LUT_SIZE+1 .. 2*LUT_SIZE+1] the CIELAB f(t) (cube root with the linear toe), then
+// luts[2*(LUT_SIZE+1) ..] linear -> sRGB; all over [0,1],
 // LUT_SIZE+1 samples each, read with linear interpolation. PoCL's cbrt/pow are slow (see DESIGN.md).
 inline float lut_read(__global const float *lut, float x)
 {

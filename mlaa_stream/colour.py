@@ -40,9 +40,10 @@ def rgb_to_lab(rgb: np.ndarray) -> np.ndarray:
 
 
 def device_luts() -> np.ndarray:
-    """The tables of kernels/common.cl: sRGB->linear and f(t), LUT_SIZE+1 samples each over [0, 1]."""
+    """The tables of kernels/common.cl, LUT_SIZE+1 samples each over [0, 1]:
+    sRGB->linear, CIELAB f(t), linear->sRGB."""
     x = np.linspace(0.0, 1.0, LUT_SIZE + 1)
-    return np.concatenate([srgb_to_linear(x), lab_f(x)]).astype(np.float32)
+    return np.concatenate([srgb_to_linear(x), lab_f(x), linear_to_srgb(x)]).astype(np.float32)
 
 
 def lut_read(lut: np.ndarray, x: np.ndarray) -> np.ndarray:

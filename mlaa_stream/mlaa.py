@@ -1,40 +1,253 @@
-"""The spatial MLAA filter (seed 000 §3) -- TEMPORARY STAND-IN: returns a copy of the frame.
+"""The spatial MLAA filter of seed 000 §3 as OpenCL passes: edges -> distances -> weights -> blend.
 
-Interface (stable, the real implementation replaces the body):
-    f = Filter(device=None, threshold=None, metric="lab", linear=True, reconstruct=False, bgr=False)
-    out = f.process(frame)            # same shape and dtype as frame
-    pending = f.submit(frame); out = pending.result()   # non-blocking upload/kernels/download
-    f.close()  /  with Filter() as f: ...
+    with Filter() as f:
+        out = f.process(frame)                      # same shape and dtype as `frame`
+        pending = f.submit(frame); out = pending.result()   # non-blocking: overlap frames
+
+Device buffers are allocated once per frame format and reused; two slots for the frame buffers let
+the upload of frame N+1 and the download of frame N-1 overlap the kernels of frame N (out-of-order
+queue with explicit events).
 """
 from __future__ import annotations
 
+import threading
+from dataclasses import dataclass
+
 import numpy as np
+import pyopencl as cl
+
+from .colour import device_luts
+from .device import Context, default_context
+from .formats import FrameFormat, defines_for, frame_format
+
+METRICS = {"lab": 0, "luma": 1, "rgb": 2}
+# Default discontinuity thresholds per metric: ΔE76 for lab, fraction of full scale for the others.
+DEFAULT_THRESHOLDS = {"lab": 8.0, "luma": 0.06, "rgb": 0.06}
+# ΔE76 <= LAB_LIPSCHITZ * max-channel sRGB difference over the whole cube (numerically 573, +10%):
+# pixels closer than threshold / LAB_LIPSCHITZ in every channel skip the CIELAB conversion.
+LAB_LIPSCHITZ = 630.0
+AREA_TABLE_L = 64
+
+# Named quality presets -> Filter keyword arguments (the CLI's --preset).
+PRESETS: dict[str, dict] = {
+    "default": {},
+    "sharp": {"threshold": 12.0},
+    "luma": {"metric": "luma"},
+    "reconstruct": {"reconstruct": True},
+}
+
+
+def area_table(max_len: int = AREA_TABLE_L) -> np.ndarray:
+    """Coverage areas of seed 000 eq. (2): table[L, p] for lines of length L and position p.
+
+    The rebuilt silhouette falls from 1/2 at the line's end to 0 at its middle L/2; a pixel
+    p..p+1 wholly before the middle gets the trapezoid 1/2 (1 - (2p+1)/L), the middle pixel of an
+    odd line the triangle 1/(8L), pixels past the middle nothing.
+    """
+    t = np.zeros((max_len + 1, max_len), dtype=np.float32)
+    for L in range(1, max_len + 1):
+        for p in range(L):
+            t[L, p] = trapezoid_area(p, L)
+    return t
+
+
+def trapezoid_area(p: int, L: int) -> float:
+    if 2 * p + 2 <= L:
+        return 0.5 * (1.0 - (2 * p + 1) / L)
+    if 2 * p + 1 == L:
+        return 1.0 / (8.0 * L)
+    return 0.0
+
+
+@dataclass(frozen=True)
+class FilterOptions:
+    threshold: float
+    metric: str
+    linear: bool
+    linear_input: bool
+    rounding: float
+    blend_u: bool
+
+    def pass_defines(self) -> dict[str, object]:
+        return {
+            "METRIC": METRICS[self.metric],
+            "CHEAP_BOUND": float(self.threshold / LAB_LIPSCHITZ),
+            "LINEAR_INPUT": int(self.linear_input),
+            "BLEND_LINEAR": int(self.linear),
+            "AREA_TABLE_L": AREA_TABLE_L,
+            "ROUNDING": float(self.rounding),
+            "BLEND_U": int(self.blend_u),
+        }
 
 
 class PendingFrame:
-    def __init__(self, out: np.ndarray):
-        self._out = out
+    """A frame in flight; `result()` waits for its download and returns it in the input's dtype."""
+
+    def __init__(self, host_out: np.ndarray, event, out_dtype: np.dtype, shape: tuple, keep=()):
+        self._out, self._event, self._dtype, self._shape = host_out, event, out_dtype, shape
+        self._keep = keep  # host arrays that must outlive the non-blocking copies
 
     def result(self) -> np.ndarray:
-        return self._out
+        self._event.wait()
+        self._keep = ()
+        out = self._out.reshape(self._shape)
+        return out if out.dtype == self._dtype else out.astype(self._dtype)
+
+
+class _FrameBuffers:
+    """All device memory for one frame format: allocated once, reused for every frame."""
+
+    SLOTS = 2
+
+    def __init__(self, context: Context, fmt: FrameFormat):
+        n = fmt.pixels
+        self.fmt = fmt
+        self.src = [context.buffer(fmt.nbytes) for _ in range(self.SLOTS)]
+        self.dst = [context.buffer(fmt.nbytes) for _ in range(self.SLOTS)]
+        self.edges = context.buffer(n)
+        self.hdist = context.buffer(4 * n)
+        self.vdist = context.buffer(4 * n)
+        self.weights = context.buffer(8 * n)
+        self.staging = [np.empty(fmt.nbytes // fmt.dtype.itemsize, fmt.dtype) for _ in range(self.SLOTS)]
+        self.last_use = [None] * self.SLOTS  # event after which slot k's src/dst/staging are free
+
+    def device_bytes(self) -> int:
+        return sum(b.size for b in [*self.src, *self.dst, self.edges, self.hdist, self.vdist, self.weights])
 
 
 class Filter:
-    def __init__(self, device=None, *, threshold=None, metric="lab", linear=True,
-                 reconstruct=False, bgr=False):
-        self.device_name = "stand-in"
+    """Spatial MLAA (seed 000 §3) on an OpenCL device, for numpy frames one after another."""
 
+    def __init__(self, device: str | int | None = None, *, threshold: float | None = None,
+                 metric: str = "lab", linear: bool = True, reconstruct: bool = False,
+                 bgr: bool = False, linear_input: bool = False, rounding: float = 0.0,
+                 blend_u: bool = False, context: Context | None = None):
+        if metric not in METRICS:
+            raise ValueError(f"metric: expected one of {', '.join(METRICS)}, got {metric!r}")
+        thr = DEFAULT_THRESHOLDS[metric] if threshold is None else float(threshold)
+        if not thr > 0:
+            raise ValueError(f"threshold: expected a positive number, got {threshold!r}")
+        self.options = FilterOptions(thr, metric, bool(linear), bool(linear_input),
+                                     float(rounding), bool(blend_u))
+        self.bgr = bool(bgr)
+        self.reconstruct = bool(reconstruct)
+        self.context = context or default_context(device)
+        dev = self.context.device
+        props = cl.command_queue_properties.OUT_OF_ORDER_EXEC_MODE_ENABLE
+        self.queue = cl.CommandQueue(self.context.ctx, dev,
+                                     properties=props if dev.queue_properties & props else 0)
+        self._luts = cl.Buffer(self.context.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
+                               hostbuf=device_luts())
+        self._table = cl.Buffer(self.context.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
+                                hostbuf=area_table())
+        self._buffers: _FrameBuffers | None = None
+        self._reconstructor = None
+        self._recon_buf = None
+        self._frame_no = 0
+        self._lock = threading.Lock()
+        self._last_event = None
+
+    @property
+    def device_name(self) -> str:
+        return self.context.name
+
+    # -- set-up, once per frame format -------------------------------------------------------
+    def _prepare(self, fmt: FrameFormat) -> _FrameBuffers:
+        if self._buffers is not None and self._buffers.fmt == fmt:
+            return self._buffers
+        self.finish()
+        self._buffers = bufs = _FrameBuffers(self.context, fmt)
+        defs = defines_for(fmt, **self.options.pass_defines())
+        k = self.context.kernel
+        self._k_edges = k("edges", "detect_edges", defs)
+        self._k_hdist = k("distances", "hline_distances", defs)
+        self._k_vdist = k("distances", "vline_distances", defs)
+        self._k_weights = k("weights", "blend_weights", defs)
+        self._k_blend = k("blend", "blend_neighbours", defs)
+        if self.reconstruct:
+            from .reconstruct import Reconstructor
+            self._reconstructor = Reconstructor(self.context, fmt)
+            self._recon_buf = self.context.buffer(fmt.nbytes)
+        return bufs
+
+    # -- per frame ---------------------------------------------------------------------------
     def submit(self, frame: np.ndarray) -> PendingFrame:
-        return PendingFrame(np.array(frame, copy=True))
+        """Enqueue upload, passes and download of `frame` without waiting; see PendingFrame."""
+        fmt = frame_format(frame, self.bgr)
+        with self._lock:
+            bufs = self._prepare(fmt)
+            slot = self._frame_no % bufs.SLOTS
+            self._frame_no += 1
+            if bufs.last_use[slot] is not None:
+                bufs.last_use[slot].wait()  # the frame that used this slot two frames ago is out
+            staging = bufs.staging[slot]
+            np.copyto(staging.reshape(frame.shape), frame, casting="unsafe")
+            up = cl.enqueue_copy(self.queue, bufs.src[slot], staging, is_blocking=False)
+            after = [up] + ([self._last_event] if self._last_event is not None else [])
+            done = self._enqueue_passes(bufs, bufs.src[slot], bufs.dst[slot], after)
+            host_out = np.empty_like(staging)
+            down = cl.enqueue_copy(self.queue, host_out, bufs.dst[slot], wait_for=[done],
+                                   is_blocking=False)
+            bufs.last_use[slot] = down
+            self._last_event = done
+            self.queue.flush()
+        return PendingFrame(host_out, down, np.dtype(frame.dtype), frame.shape, keep=(staging,))
+
+    def _enqueue_passes(self, bufs: _FrameBuffers, src, dst, after: list):
+        w, h = bufs.fmt.width, bufs.fmt.height
+        W, H = np.int32(w), np.int32(h)
+        q, g2 = self.queue, (w, h)
+        if self._reconstructor is not None:
+            ev = self._reconstructor.enqueue(q, src, self._recon_buf, self._luts, wait_for=after)
+            src, after = self._recon_buf, [ev]
+        e_edges = self._k_edges(q, g2, None, src, self._luts, bufs.edges, W, H,
+                                np.float32(self.options.threshold), wait_for=after)
+        e_h = self._k_hdist(q, (max(h - 1, 1),), None, bufs.edges, bufs.hdist, W, H, wait_for=[e_edges])
+        e_v = self._k_vdist(q, (max(w - 1, 1),), None, bufs.edges, bufs.vdist, W, H, wait_for=[e_edges])
+        e_w = self._k_weights(q, g2, None, bufs.edges, bufs.hdist, bufs.vdist, self._table,
+                              bufs.weights, W, H, wait_for=[e_h, e_v])
+        e_copy = cl.enqueue_copy(q, dst, src, byte_count=bufs.fmt.nbytes, wait_for=after)
+        return self._k_blend(q, g2, None, src, bufs.edges, bufs.weights, self._luts, dst, W, H,
+                             wait_for=[e_w, e_copy])
 
     def process(self, frame: np.ndarray) -> np.ndarray:
+        """Filter one frame and return it (same shape and dtype)."""
         return self.submit(frame).result()
 
-    def close(self) -> None:
-        pass
+    # -- inspection, for tests and the benchmark ---------------------------------------------
+    def intermediates(self, frame: np.ndarray) -> dict[str, np.ndarray]:
+        """Run one frame and return every pass's output (edges, hdist, vdist, weights, out)."""
+        out = self.process(frame)
+        bufs = self._buffers
+        h, w = bufs.fmt.height, bufs.fmt.width
+        res = {"out": out}
+        for name, dtype, shape in [("edges", np.uint8, (h, w)), ("hdist", np.uint16, (h, w, 2)),
+                                   ("vdist", np.uint16, (h, w, 2)), ("weights", np.uint16, (h, w, 4))]:
+            arr = np.empty(shape, dtype)
+            cl.enqueue_copy(self.queue, arr, getattr(bufs, name), is_blocking=True)
+            res[name] = arr
+        return res
 
-    def __enter__(self):
+    def device_bytes_per_pixel(self) -> float:
+        if self._buffers is None:
+            return 0.0
+        extra = self._recon_buf.size if self._recon_buf is not None else 0
+        return (self._buffers.device_bytes() + extra) / self._buffers.fmt.pixels
+
+    def finish(self) -> None:
+        self.queue.finish()
+
+    def close(self) -> None:
+        """Wait for work in flight and free the device buffers."""
+        try:
+            self.finish()
+        finally:
+            self._buffers = None
+            self._recon_buf = None
+            self._reconstructor = None
+
+    def __enter__(self) -> "Filter":
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, *exc) -> None:
         self.close()

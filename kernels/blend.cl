@@ -1,0 +1,63 @@
+// blend.cl -- blend each pixel with its four neighbours by the weights (seed 000 §3.5), in linear light.
+// A pixel next to several lines takes out = c + sum_k w_k^2 (n_k - c) / sum_k w_k: one neighbour alone
+// gives c + w (n - c); several never add up to more than the largest weight (no double blending,
+// as SMAA's choice of one axis), and the rule is the same under flips and transposes.
+// Defines: BLEND_LINEAR 1 decodes sRGB -> linear before mixing and encodes after (LINEAR_INPUT frames
+// are mixed as they are). Alpha is copied from the source pixel. dst must already hold a copy of
+// src (the host enqueues it): pixels next to no edge exit at once, and a weight slot is read only
+// where the edge it belongs to exists (weights.cl writes no others).
+#ifndef BLEND_LINEAR
+#define BLEND_LINEAR 1
+#endif
+#ifndef LINEAR_INPUT
+#define LINEAR_INPUT 0
+#endif
+#define DECODE (BLEND_LINEAR && !LINEAR_INPUT)
+
+inline float4 to_mix_space(__global const float *luts, float4 c)
+{
+#if DECODE
+    return (float4)(lut_read(luts, c.x), lut_read(luts, c.y), lut_read(luts, c.z), c.w);
+#else
+    return c;
+#endif
+}
+
+inline float4 from_mix_space(__global const float *luts, float4 c)
+{
+#if DECODE
+    __global const float *enc = luts + 2 * (LUT_SIZE + 1);
+    return (float4)(lut_read(enc, c.x), lut_read(enc, c.y), lut_read(enc, c.z), c.w);
+#else
+    return c;
+#endif
+}
+
+#define EDGE_BOTTOM 1
+#define EDGE_RIGHT 2
+
+__kernel void blend_neighbours(__global const PIXEL_T *src, __global const uchar *edges,
+                               __global const ushort *weights, __global const float *luts,
+                               __global PIXEL_T *dst, const int width, const int height)
+{
+    const int x = get_global_id(0), y = get_global_id(1);
+    if (x >= width || y >= height) return;
+    const int i = IDX(x, y, width);
+    const uchar e = edges[i];
+    const int top = y > 0 && (edges[i - width] & EDGE_BOTTOM);
+    const int left = x > 0 && (edges[i - 1] & EDGE_RIGHT);
+    if (e == 0 && !top && !left) return;
+    ushort4 w16 = vload4(i, weights);   // (top, bottom, left, right), valid where the edge exists
+    float4 w = (float4)(top ? w16.x : 0, (e & EDGE_BOTTOM) ? w16.y : 0,
+                        left ? w16.z : 0, (e & EDGE_RIGHT) ? w16.w : 0) * (1.0f / 65535.0f);
+    if (w.x == 0.0f && w.y == 0.0f && w.z == 0.0f && w.w == 0.0f) return;
+    float4 c = load_px(src, i);
+    float4 m = to_mix_space(luts, c), acc = (float4)(0.0f);
+    if (w.x > 0.0f) acc += w.x * w.x * (to_mix_space(luts, load_px(src, i - width)) - m);
+    if (w.y > 0.0f) acc += w.y * w.y * (to_mix_space(luts, load_px(src, i + width)) - m);
+    if (w.z > 0.0f) acc += w.z * w.z * (to_mix_space(luts, load_px(src, i - 1)) - m);
+    if (w.w > 0.0f) acc += w.w * w.w * (to_mix_space(luts, load_px(src, i + 1)) - m);
+    float4 out = from_mix_space(luts, m + acc / (w.x + w.y + w.z + w.w));
+    out.w = c.w;
+    store_px(dst, i, out);
+}

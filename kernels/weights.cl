@@ -1,0 +1,112 @@
+// weights.cl -- blending factors from L, Z and U shapes (seed 000 §3.4; corners from seed 002).
+// A discontinuity line of length L (from distances.cl) ends at each side in a crossing edge that
+// goes up, down, both or nowhere. The silhouette is rebuilt as a line from the middle of a single
+// crossing edge (height 1/2) to the middle of the line (height 0); a pixel at position p from that end
+// is covered by the trapezoid A = 1/2 (1 - (2p+1)/L) (seed 000 eq. 2), or the triangle 1/(8L) on
+// the middle pixel when L is odd; the covered pixel takes A of its neighbour across the line.
+// Areas come from a host-built table for L <= AREA_TABLE_L and from the same formula beyond.
+// Corners (seed 002): a crossing edge two pixels long marks a real corner, not a jaggy: its
+// area is scaled by ROUNDING (0 keeps corners sharp). U shapes (both ends to the same side: a bump
+// or the side of a box) are blended only when BLEND_U is 1.
+// Output weights[i] = (top, bottom, left, right) as 16-bit fractions: how much pixel i takes from
+// each neighbour. Only slots next to an edge are written (and read, by blend.cl): a pixel with a
+// bottom edge writes its own bottom slot and the top slot of the pixel below; with a right edge,
+// its own right slot and the left slot of the pixel to the right. Pixels without edges exit at once.
+#define EDGE_BOTTOM 1
+#define EDGE_RIGHT 2
+#ifndef AREA_TABLE_L
+#define AREA_TABLE_L 64
+#endif
+#ifndef ROUNDING
+#define ROUNDING 0.0f
+#endif
+#ifndef BLEND_U
+#define BLEND_U 0
+#endif
+
+inline float trapezoid_area(__global const float *table, int p, int L)
+{
+    if (L <= AREA_TABLE_L) return table[L * AREA_TABLE_L + p];
+    if (2 * p + 2 <= L) return 0.5f * (1.0f - (float)(2 * p + 1) / (float)L);
+    if (2 * p + 1 == L) return 1.0f / (8.0f * (float)L);
+    return 0.0f;
+}
+
+inline ushort to_u16(float a) { return (ushort)clamp(rint(a * 65535.0f), 0.0f, 65535.0f); }
+
+// Crossing at one end of a line: `a`/`b` say whether an edge crosses on side a (up/left) or side b
+// (down/right); `a2`/`b2` whether that crossing edge continues a second pixel (a corner).
+// Returns +1 for side a, -1 for side b, 0 for none or both, and the corner scale in *scale.
+inline int crossing(int a, int b, int a2, int b2, float *scale)
+{
+    if (a == b) { *scale = 0.0f; return 0; }
+    *scale = (a ? a2 : b2) ? ROUNDING : 1.0f;
+    return a ? 1 : -1;
+}
+
+// Areas for the pixel at distances (d0, d1) from the two ends with crossings s0, s1 (+1 side a, -1
+// side b): *ta = area taken by the side-a pixel from side b, *tb = the reverse.
+inline void line_areas(__global const float *table, int d0, int d1, int s0, int s1,
+                       float k0, float k1, float *ta, float *tb)
+{
+    *ta = 0.0f; *tb = 0.0f;
+    if (s0 == 0 && s1 == 0) return;
+    if (!BLEND_U && s0 == s1) return;
+    int L = d0 + d1 + 1;
+    if (s0 != 0) { float a = k0 * trapezoid_area(table, d0, L); if (s0 > 0) *ta += a; else *tb += a; }
+    if (s1 != 0) { float a = k1 * trapezoid_area(table, d1, L); if (s1 > 0) *ta += a; else *tb += a; }
+}
+
+inline int has(__global const uchar *edges, int x, int y, int width, int height, uchar bit)
+{
+    return x >= 0 && y >= 0 && x < width && y < height && (edges[IDX(x, y, width)] & bit);
+}
+
+__kernel void blend_weights(__global const uchar *edges, __global const ushort2 *hdist,
+                            __global const ushort2 *vdist, __global const float *table,
+                            __global ushort *weights, const int width, const int height)
+{
+    const int x = get_global_id(0), y = get_global_id(1);
+    if (x >= width || y >= height) return;
+    const int i = IDX(x, y, width);
+    const uchar e = edges[i];
+    if (e == 0) return;
+    float up = 0.0f, down = 0.0f, left = 0.0f, right = 0.0f;
+    if (e & EDGE_BOTTOM) {   // horizontal line between rows y and y+1, ends at x0 and x1
+        ushort2 d = hdist[i];
+        int x0 = x - d.x, x1 = x + d.y;
+        float k0, k1;
+        int s0 = crossing(has(edges, x0 - 1, y, width, height, EDGE_RIGHT),
+                          has(edges, x0 - 1, y + 1, width, height, EDGE_RIGHT),
+                          has(edges, x0 - 1, y - 1, width, height, EDGE_RIGHT),
+                          has(edges, x0 - 1, y + 2, width, height, EDGE_RIGHT), &k0);
+        int s1 = crossing(has(edges, x1, y, width, height, EDGE_RIGHT),
+                          has(edges, x1, y + 1, width, height, EDGE_RIGHT),
+                          has(edges, x1, y - 1, width, height, EDGE_RIGHT),
+                          has(edges, x1, y + 2, width, height, EDGE_RIGHT), &k1);
+        line_areas(table, d.x, d.y, s0, s1, k0, k1, &up, &down);
+    }
+    if (e & EDGE_RIGHT) {    // vertical line between columns x and x+1, ends at y0 and y1
+        ushort2 d = vdist[i];
+        int y0 = y - d.x, y1 = y + d.y;
+        float k0, k1;
+        int s0 = crossing(has(edges, x, y0 - 1, width, height, EDGE_BOTTOM),
+                          has(edges, x + 1, y0 - 1, width, height, EDGE_BOTTOM),
+                          has(edges, x - 1, y0 - 1, width, height, EDGE_BOTTOM),
+                          has(edges, x + 2, y0 - 1, width, height, EDGE_BOTTOM), &k0);
+        int s1 = crossing(has(edges, x, y1, width, height, EDGE_BOTTOM),
+                          has(edges, x + 1, y1, width, height, EDGE_BOTTOM),
+                          has(edges, x - 1, y1, width, height, EDGE_BOTTOM),
+                          has(edges, x + 2, y1, width, height, EDGE_BOTTOM), &k1);
+        line_areas(table, d.x, d.y, s0, s1, k0, k1, &left, &right);
+    }
+    __global ushort *w = weights + (size_t)i * 4;   // (top, bottom, left, right)
+    if (e & EDGE_BOTTOM) {
+        w[1] = to_u16(up);      // this pixel (above the line) takes `up` from the one below
+        weights[(size_t)(i + width) * 4 + 0] = to_u16(down);
+    }
+    if (e & EDGE_RIGHT) {
+        w[3] = to_u16(left);    // this pixel (left of the line) takes `left` from the right one
+        weights[(size_t)(i + 1) * 4 + 2] = to_u16(right);
+    }
+}

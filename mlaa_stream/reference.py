@@ -1,0 +1,178 @@
+"""Plain numpy references of the MLAA passes (slow, obvious) that the OpenCL kernels are tested against.
+
+Each function mirrors one kernel file: edges.cl, distances.cl, weights.cl, blend.cl.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .colour import LUMA, linear_to_srgb, rgb_to_lab, srgb_to_linear
+from .mlaa import DEFAULT_THRESHOLDS, trapezoid_area
+
+BOTTOM, RIGHT = 1, 2
+
+
+def normalised_rgb(frame: np.ndarray, bgr: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
+    """(H, W, 3) float64 colour in [0, 1] (grey repeated) and the alpha channel, if any."""
+    f = frame.astype(np.float64)
+    if frame.dtype == np.uint8:
+        f /= 255.0
+    elif frame.dtype == np.uint16:
+        f /= 65535.0
+    if f.ndim == 2:
+        f = f[..., None]
+    alpha = f[..., 3] if f.shape[2] == 4 else None
+    rgb = np.repeat(f, 3, axis=2) if f.shape[2] == 1 else f[..., :3]
+    if bgr and f.shape[2] >= 3:
+        rgb = rgb[..., ::-1]
+    return rgb, alpha
+
+
+def edges_reference(frame: np.ndarray, threshold: float | None = None, metric: str = "lab",
+                    bgr: bool = False, linear_input: bool = False) -> np.ndarray:
+    """Bit 0: colour differs from the pixel below; bit 1: from the pixel to the right."""
+    thr = DEFAULT_THRESHOLDS[metric] if threshold is None else threshold
+    rgb, _ = normalised_rgb(frame, bgr)
+    if linear_input:
+        rgb = linear_to_srgb(rgb)
+
+    def differ(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        if metric == "lab":
+            return np.linalg.norm(rgb_to_lab(a) - rgb_to_lab(b), axis=-1) > thr
+        if metric == "luma":
+            return np.abs((a - b) @ LUMA) > thr
+        return np.abs(a - b) @ LUMA > thr
+
+    e = np.zeros(rgb.shape[:2], np.uint8)
+    e[:-1] |= BOTTOM * differ(rgb[:-1], rgb[1:]).astype(np.uint8)
+    e[:, :-1] |= RIGHT * differ(rgb[:, :-1], rgb[:, 1:]).astype(np.uint8)
+    return e
+
+
+def _runs(on: np.ndarray, crossed: np.ndarray) -> np.ndarray:
+    """For a 1-D line: (distance to run start, distance to run end) where `on`; runs split where
+    `crossed[k]` (an edge crosses between k-1 and k)."""
+    n = len(on)
+    d = np.zeros((n, 2), np.int64)
+    k = 0
+    while k < n:
+        if not on[k]:
+            k += 1
+            continue
+        start = k
+        k += 1
+        while k < n and on[k] and not crossed[k]:
+            k += 1
+        for j in range(start, k):
+            d[j] = (j - start, k - 1 - j)
+    return d
+
+
+def distances_reference(edges: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """hdist (left, right) along bottom edges and vdist (up, down) along right edges; 0 elsewhere."""
+    h, w = edges.shape
+    hdist = np.zeros((h, w, 2), np.int64)
+    vdist = np.zeros((h, w, 2), np.int64)
+    b, r = (edges & BOTTOM) > 0, (edges & RIGHT) > 0
+    for y in range(h - 1):
+        crossed = np.zeros(w, bool)
+        crossed[1:] = r[y, :-1] | r[y + 1, :-1]
+        hdist[y] = _runs(b[y], crossed)
+    for x in range(w - 1):
+        crossed = np.zeros(h, bool)
+        crossed[1:] = b[:-1, x] | b[:-1, x + 1]
+        vdist[:, x] = _runs(r[:, x], crossed)
+    return hdist, vdist
+
+
+def weights_reference(edges: np.ndarray, hdist: np.ndarray, vdist: np.ndarray,
+                      rounding: float = 0.0, blend_u: bool = False) -> np.ndarray:
+    """(top, bottom, left, right) fractions each pixel takes from its neighbours (seed 000 eq. 2)."""
+    h, w = edges.shape
+    out = np.zeros((h, w, 4))
+
+    def has(x: int, y: int, bit: int) -> bool:
+        return 0 <= x < w and 0 <= y < h and bool(edges[y, x] & bit)
+
+    def crossing(a: bool, b: bool, a2: bool, b2: bool) -> tuple[int, float]:
+        if a == b:
+            return 0, 0.0
+        return (1 if a else -1), (rounding if (a2 if a else b2) else 1.0)
+
+    def areas(d0: int, d1: int, s0: int, k0: float, s1: int, k1: float) -> tuple[float, float]:
+        ta = tb = 0.0
+        if (s0 == 0 and s1 == 0) or (not blend_u and s0 == s1):
+            return ta, tb
+        length = d0 + d1 + 1
+        for s, k, d in ((s0, k0, d0), (s1, k1, d1)):
+            if s:
+                a = k * trapezoid_area(d, length)
+                if s > 0:
+                    ta += a
+                else:
+                    tb += a
+        return ta, tb
+
+    for y in range(h):
+        for x in range(w):
+            if edges[y, x] & BOTTOM:
+                dl, dr = hdist[y, x]
+                x0, x1 = x - dl, x + dr
+                s0, k0 = crossing(has(x0 - 1, y, RIGHT), has(x0 - 1, y + 1, RIGHT),
+                                  has(x0 - 1, y - 1, RIGHT), has(x0 - 1, y + 2, RIGHT))
+                s1, k1 = crossing(has(x1, y, RIGHT), has(x1, y + 1, RIGHT),
+                                  has(x1, y - 1, RIGHT), has(x1, y + 2, RIGHT))
+                up, down = areas(dl, dr, s0, k0, s1, k1)
+                out[y, x, 1] = up
+                out[y + 1, x, 0] = down
+            if edges[y, x] & RIGHT:
+                du, dd = vdist[y, x]
+                y0, y1 = y - du, y + dd
+                s0, k0 = crossing(has(x, y0 - 1, BOTTOM), has(x + 1, y0 - 1, BOTTOM),
+                                  has(x - 1, y0 - 1, BOTTOM), has(x + 2, y0 - 1, BOTTOM))
+                s1, k1 = crossing(has(x, y1, BOTTOM), has(x + 1, y1, BOTTOM),
+                                  has(x - 1, y1, BOTTOM), has(x + 2, y1, BOTTOM))
+                left, right = areas(du, dd, s0, k0, s1, k1)
+                out[y, x, 3] = left
+                out[y, x + 1, 2] = right
+    return out
+
+
+def blend_reference(frame: np.ndarray, weights: np.ndarray, linear: bool = True,
+                    linear_input: bool = False, bgr: bool = False) -> np.ndarray:
+    """out = c + sum w_k^2 (n_k - c) / sum w_k over the four neighbours (seed 000 §3.5)."""
+    rgb, alpha = normalised_rgb(frame, False)  # channel order does not matter for mixing
+    decode = linear and not linear_input
+    m = srgb_to_linear(rgb) if decode else rgb
+    pad = np.pad(m, ((1, 1), (1, 1), (0, 0)), mode="edge")
+    neighbours = [pad[:-2, 1:-1], pad[2:, 1:-1], pad[1:-1, :-2], pad[1:-1, 2:]]  # top, bottom, left, right
+    acc = sum(weights[..., k, None] ** 2 * (neighbours[k] - m) for k in range(4))
+    total = weights.sum(-1)[..., None]
+    out = m + np.divide(acc, total, out=np.zeros_like(m), where=total > 0)
+    out = linear_to_srgb(out) if decode else out
+    return _to_dtype(out, alpha, frame)
+
+
+def _to_dtype(rgb: np.ndarray, alpha: np.ndarray | None, like: np.ndarray) -> np.ndarray:
+    chans = 1 if like.ndim == 2 else like.shape[2]
+    if chans == 1:
+        res = rgb[..., :1]
+    else:
+        res = rgb if alpha is None else np.concatenate([rgb, alpha[..., None]], -1)
+    if like.dtype == np.uint8:
+        res = np.clip(np.rint(res * 255), 0, 255).astype(np.uint8)
+    elif like.dtype == np.uint16:
+        res = np.clip(np.rint(res * 65535), 0, 65535).astype(np.uint16)
+    else:
+        res = res.astype(like.dtype)
+    return res.reshape(like.shape)
+
+
+def mlaa_reference(frame: np.ndarray, threshold: float | None = None, metric: str = "lab",
+                   linear: bool = True, bgr: bool = False, linear_input: bool = False,
+                   rounding: float = 0.0, blend_u: bool = False) -> np.ndarray:
+    """The whole spatial filter, pass after pass."""
+    e = edges_reference(frame, threshold, metric, bgr, linear_input)
+    hd, vd = distances_reference(e)
+    wts = weights_reference(e, hd, vd, rounding, blend_u)
+    return blend_reference(frame, wts, linear, linear_input, bgr)

@@ -1,0 +1,238 @@
+"""The MLAA passes against their numpy references and against cases with known answers.
+
+Tolerances: edge masks agree exactly except where ΔE lies within 0.1 of the threshold (the kernel
+reads colour tables with linear interpolation, the reference uses the exact formulas); distances
+exactly; weights within 1e-4 (16-bit storage); 8-bit output within 1 level, >= 99% of pixels exact.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mlaa_stream.colour import rgb_to_lab
+from mlaa_stream.mlaa import Filter, area_table, trapezoid_area
+from mlaa_stream.reference import (distances_reference, edges_reference, mlaa_reference,
+                                   normalised_rgb, weights_reference)
+
+
+@pytest.fixture(scope="module")
+def filt():
+    with Filter() as f:
+        yield f
+
+
+def blocky(seed: int, h: int = 48, w: int = 64, dtype=np.uint8, channels: int = 3) -> np.ndarray:
+    """Random rectangles and staircases of random colours over a random background."""
+    rng = np.random.default_rng(seed)
+    img = np.empty((h, w, channels))
+    img[:] = rng.random(channels)
+    for _ in range(12):
+        y0, x0 = rng.integers(0, h - 2), rng.integers(0, w - 2)
+        y1, x1 = rng.integers(y0 + 1, h + 1), rng.integers(x0 + 1, w + 1)
+        img[y0:y1, x0:x1] = rng.random(channels)
+    yy, xx = np.mgrid[0:h, 0:w]
+    for _ in range(3):  # half-planes at random angles: staircases of every slope
+        a = rng.uniform(0, 2 * np.pi)
+        mask = np.cos(a) * (xx - w / 2) + np.sin(a) * (yy - h / 2) > rng.uniform(-10, 10)
+        img[mask] = rng.random(channels)
+    if channels == 4:
+        img[..., 3] = rng.random((h, w))
+    return to_dtype(img, dtype)
+
+
+def to_dtype(img: np.ndarray, dtype) -> np.ndarray:
+    if dtype == np.uint8:
+        return np.rint(img * 255).astype(np.uint8)
+    if dtype == np.uint16:
+        return np.rint(img * 65535).astype(np.uint16)
+    return img.astype(dtype)
+
+
+def near_threshold(frame: np.ndarray, threshold: float, bgr: bool = False) -> np.ndarray:
+    """Edge bits whose ΔE lies within 0.1 of the threshold: the only place kernel and reference may differ."""
+    rgb, _ = normalised_rgb(frame, bgr)
+    lab = rgb_to_lab(rgb)
+    amb = np.zeros(frame.shape[:2], np.uint8)
+    amb[:-1] |= np.uint8(1) * (np.abs(np.linalg.norm(lab[:-1] - lab[1:], axis=-1) - threshold) < 0.1)
+    amb[:, :-1] |= np.uint8(2) * (np.abs(np.linalg.norm(lab[:, :-1] - lab[:, 1:], axis=-1) - threshold) < 0.1)
+    return amb
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_edges_match_reference(filt, seed):
+    img = blocky(seed)
+    got = filt.intermediates(img)["edges"]
+    want = edges_reference(img, filt.options.threshold)
+    differ = (got ^ want) & ~near_threshold(img, filt.options.threshold)
+    assert not differ.any(), f"{differ.astype(bool).sum()} edge bits differ"
+    assert want.astype(bool).mean() > 0.01  # the image really has edges
+
+
+@pytest.mark.parametrize("metric,threshold", [("luma", 0.06), ("rgb", 0.06)])
+def test_other_metrics_match_reference(metric, threshold):
+    img = blocky(7)
+    with Filter(metric=metric, threshold=threshold) as f:
+        got = f.intermediates(img)["edges"]
+    want = edges_reference(img, threshold, metric)
+    assert (got == want).mean() > 0.999
+
+
+@pytest.mark.parametrize("seed", [4, 5])
+def test_distances_and_weights_match_reference(filt, seed):
+    img = blocky(seed)
+    r = filt.intermediates(img)
+    e = r["edges"]
+    hd, vd = distances_reference(e)
+    b, rt = (e & 1) > 0, (e & 2) > 0
+    np.testing.assert_array_equal(r["hdist"][b], hd[b])
+    np.testing.assert_array_equal(r["vdist"][rt], vd[rt])
+    want = weights_reference(e, hd, vd)
+    got = r["weights"] / 65535.0
+    valid = np.zeros_like(want, dtype=bool)  # slots the kernel writes: next to an existing edge
+    valid[1:, :, 0] = b[:-1]
+    valid[:, :, 1] = b
+    valid[:, 1:, 2] = rt[:, :-1]
+    valid[:, :, 3] = rt
+    np.testing.assert_allclose(got[valid], want[valid], atol=1e-4)
+    assert (want > 0).sum() > 20
+
+
+@pytest.mark.parametrize("dtype,channels,bgr", [(np.uint8, 3, False), (np.uint8, 3, True),
+                                                 (np.uint16, 3, False), (np.float32, 3, False),
+                                                 (np.uint8, 4, False), (np.uint8, 1, False)])
+def test_filter_matches_reference(dtype, channels, bgr):
+    img = blocky(11, dtype=dtype, channels=channels)
+    if channels == 1:
+        img = img[..., 0]
+    with Filter(bgr=bgr) as f:
+        got = f.process(img)
+    want = mlaa_reference(img, bgr=bgr)
+    assert got.shape == img.shape and got.dtype == img.dtype
+    scale = {np.uint8: 1.0, np.uint16: 1 / 257.0, np.float32: 255.0}[dtype]
+    diff = np.abs(got.astype(np.float64) - want.astype(np.float64)) * scale
+    assert diff.max() <= 1.0 + 1e-6, f"max difference {diff.max():.3f} levels"
+    changed = (want != img).any(axis=-1) if img.ndim == 3 else want != img
+    assert changed.mean() > 0.02  # the filter really did something
+    if dtype == np.uint8:
+        assert (diff == 0).mean() >= 0.99
+    if channels == 4:
+        np.testing.assert_array_equal(got[..., 3], img[..., 3])  # alpha passes through
+
+
+def test_float16_and_float64_keep_dtype(filt):
+    img = blocky(12, dtype=np.float32)
+    for dt in (np.float16, np.float64):
+        out = filt.process(img.astype(dt))
+        assert out.dtype == dt and out.shape == img.shape
+
+
+def test_constant_image_is_unchanged(filt):
+    img = np.empty((37, 53, 3), np.uint8)
+    img[:] = (200, 31, 77)
+    np.testing.assert_array_equal(filt.process(img), img)
+
+
+def test_axis_aligned_rectangles_are_unchanged(filt):
+    rng = np.random.default_rng(3)
+    img = np.full((60, 80, 3), (20, 90, 160), np.uint8)
+    for y0, x0, y1, x1 in [(5, 5, 20, 30), (25, 40, 55, 75), (10, 50, 14, 52), (40, 3, 58, 20)]:
+        img[y0:y1, x0:x1] = rng.integers(0, 256, 3)
+    np.testing.assert_array_equal(filt.process(img), img)
+
+
+@pytest.mark.parametrize("L", [4, 7, 16])
+def test_staircase_weights_follow_eq2(filt, L):
+    """A step edge of slope 1/L: each pixel next to the line gets A = 1/2 (1 - (2p+1)/L) (seed 000 eq. 2)."""
+    h, w = 24, 8 * L
+    img = np.full((h, w, 3), 30, np.uint8)
+    for x in range(w):
+        img[6 + x // L:, x] = 220  # rows below the line are light; the line drops one row every L px
+    r = filt.intermediates(img)
+    wts = r["weights"] / 65535.0
+    for k in range(2, 6):  # steps away from the image borders
+        x0, y_line = k * L, 5 + k  # segment k: the line between rows y_line, y_line+1 over [x0, x0+L)
+        for p in range(L // 2):
+            want = trapezoid_area(p, L)
+            # left end: the crossing edge goes up, so the upper row takes from below ...
+            assert wts[y_line, x0 + p, 1] == pytest.approx(want, abs=1e-4)
+            # ... right end: it goes down, so the lower row takes from above
+            assert wts[y_line + 1, x0 + L - 1 - p, 0] == pytest.approx(want, abs=1e-4)
+        assert wts[y_line, x0 + L - 1, 1] == 0.0 and wts[y_line + 1, x0, 0] == 0.0
+
+
+def test_long_edge_is_blended_along_its_whole_length(filt):
+    """Steps of 600 px: distances are not capped at 255 (the seed's limit)."""
+    L = 600
+    img = np.full((8, 3 * L, 3), 25, np.uint8)
+    for x in range(3 * L):
+        img[2 + x // L:, x] = 230
+    r = filt.intermediates(img)
+    hd = r["hdist"]
+    assert hd[2, L + 450, 0] == 450 and hd[2, L + 450, 1] == L - 1 - 450
+    wts = r["weights"] / 65535.0
+    # the upper row near the left end of the middle segment: p = 0 .. 299 all get eq. (2)'s area
+    p = np.arange(L // 2)
+    got = wts[2, L + p, 1]
+    want = np.array([trapezoid_area(int(q), L) for q in p])
+    np.testing.assert_allclose(got, want, atol=1e-4)
+    assert got[298] > 0 and got[299] > 0
+
+
+@pytest.mark.parametrize("op", ["fliplr", "flipud", "transpose"])
+def test_flips_and_transposes_commute(filt, op):
+    img = blocky(21)
+    f = {"fliplr": lambda a: a[:, ::-1], "flipud": lambda a: a[::-1],
+         "transpose": lambda a: a.transpose(1, 0, 2)}[op]
+    a = f(filt.process(img)).astype(int)
+    b = filt.process(np.ascontiguousarray(f(img))).astype(int)
+    assert np.abs(a - b).max() <= 1
+    assert (a == b).mean() >= 0.999
+
+
+def test_area_table_matches_formula():
+    t = area_table(32)
+    for L in range(1, 33):
+        for p in range(L):
+            assert t[L, p] == pytest.approx(trapezoid_area(p, L))
+    assert trapezoid_area(0, 1) == pytest.approx(1 / 8)          # middle pixel of an odd line
+    assert trapezoid_area(1, 4) == pytest.approx(0.5 * (1 - 3 / 4))
+
+
+def test_buffers_allocated_once_per_frame_size(filt):
+    img = blocky(30)
+    filt.process(img)
+    bufs = filt._buffers
+    for _ in range(3):
+        filt.process(img)
+    assert filt._buffers is bufs
+    filt.process(blocky(31, h=20, w=30))
+    assert filt._buffers is not bufs
+    assert filt.device_bytes_per_pixel() <= 32
+
+
+def test_submit_overlaps_and_keeps_order(filt):
+    frames = [blocky(40 + k) for k in range(5)]
+    want = [filt.process(f) for f in frames]
+    pending = [filt.submit(f) for f in frames[:2]]
+    got = []
+    for f in frames[2:]:
+        pending.append(filt.submit(f))
+        got.append(pending.pop(0).result())
+    got += [p.result() for p in pending]
+    for g, w in zip(got, want):
+        np.testing.assert_array_equal(g, w)
+
+
+@pytest.mark.parametrize("bad,msg", [(np.zeros((4, 4, 2), np.uint8), "expected shape"),
+                                     (np.zeros((4, 4, 3), np.int32), "expected uint8"),
+                                     (np.zeros((0, 4, 3), np.uint8), "at least 1x1")])
+def test_bad_frames_are_refused_before_any_kernel(filt, bad, msg):
+    with pytest.raises((ValueError, TypeError), match=msg):
+        filt.process(bad)
+
+
+@pytest.mark.parametrize("shape", [(1, 1, 3), (1, 9, 3), (9, 1, 3), (2, 2, 3)])
+def test_tiny_frames(filt, shape):
+    img = np.random.default_rng(5).integers(0, 256, shape).astype(np.uint8)
+    out = filt.process(img)
+    np.testing.assert_array_equal(out, mlaa_reference(img))
