@@ -36,12 +36,10 @@ inline float4 from_mix_space(__global const float *luts, float4 c)
 #define EDGE_BOTTOM 1
 #define EDGE_RIGHT 2
 
-__kernel void blend_neighbours(__global const PIXEL_T *src, __global const uchar *edges,
-                               __global const ushort *weights, __global const float *luts,
-                               __global PIXEL_T *dst, const int width, const int height)
+inline void blend_pixel(__global const PIXEL_T *src, __global const uchar *edges,
+                        __global const ushort *weights, __global const float *luts,
+                        __global PIXEL_T *dst, int x, int y, int width)
 {
-    const int x = get_global_id(0), y = get_global_id(1);
-    if (x >= width || y >= height) return;
     const int i = IDX(x, y, width);
     const uchar e = edges[i];
     const int top = y > 0 && (edges[i - width] & EDGE_BOTTOM);
@@ -60,4 +58,25 @@ __kernel void blend_neighbours(__global const PIXEL_T *src, __global const uchar
     float4 out = from_mix_space(luts, m + acc / (w.x + w.y + w.z + w.w));
     out.w = c.w;
     store_px(dst, i, out);
+}
+
+__kernel void blend_neighbours(__global const PIXEL_T *src, __global const uchar *edges,
+                               __global const ushort *weights, __global const float *luts,
+                               __global PIXEL_T *dst, const int width, const int height)
+{
+    const int x0 = get_global_id(0) * SEGMENT, y = get_global_id(1);
+    if (x0 >= width || y >= height) return;
+    const int x1 = min(x0 + SEGMENT, width);
+    const ulong bottom_bits = 0x0101010101010101UL;   // EDGE_BOTTOM in each of 8 bytes
+    for (int x = x0; x < x1;) {
+        const int i = IDX(x, y, width);
+        if (x + GROUP <= x1) {   // 8 pixels with no edge of their own, none from above or the left
+            ulong own = edge_group(edges + i);
+            ulong above = y > 0 ? edge_group(edges + i - width) & bottom_bits : 0;
+            int from_left = x > 0 && (edges[i - 1] & EDGE_RIGHT);
+            if ((own | above) == 0 && !from_left) { x += GROUP; continue; }
+        }
+        blend_pixel(src, edges, weights, luts, dst, x, y, width);
+        ++x;
+    }
 }

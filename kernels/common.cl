@@ -23,6 +23,16 @@
 
 #define IDX(x, y, w) ((y) * (w) + (x))
 
+// Per-pixel passes run one work item per SEGMENT pixels of a row: enough work items for a GPU, and
+// on a CPU a tight loop that skips flat stretches 8 pixels at a time. Global size (ceil(W/SEGMENT), H).
+#ifndef SEGMENT
+#define SEGMENT 64
+#endif
+#define GROUP 8
+
+// Eight edge bytes at once (vload8 needs only byte alignment).
+inline ulong edge_group(__global const uchar *e) { return as_ulong(vload8(0, e)); }
+
 // A pixel as normalised RGBA (grayscale repeated in r, g, b; alpha 1 when absent).
 inline float4 load_px(__global const PIXEL_T *img, int i)
 {

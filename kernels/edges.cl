@@ -28,38 +28,76 @@ inline float4 to_encoded(__global const float *luts, float4 c)
 
 inline float max3(float4 d) { return fmax(fmax(d.x, d.y), d.z); }
 
-// Does colour a differ from colour b? (both encoded, normalised)
-inline int differs(__global const float *luts, float4 a, float4 b, float threshold)
+// A pixel's colour as the metric sees it: CIELAB for METRIC 0 (computed only when a cheap test
+// needs it: `has_lab`), the encoded RGB otherwise.
+typedef struct { float4 rgb; float3 lab; int has_lab; } Colour;
+
+inline Colour colour_at(__global const PIXEL_T *src, __global const float *luts, int i)
 {
-    float4 d = fabs(a - b);
+    Colour c;
+    c.rgb = to_encoded(luts, load_px(src, i));
+    c.lab = (float3)(0.0f);
+    c.has_lab = 0;
+    return c;
+}
+
+// Does colour a differ from colour b? Lab values are computed once and kept in the Colour.
+inline int differs(__global const float *luts, Colour *a, Colour *b, float threshold)
+{
+    float4 d = fabs(a->rgb - b->rgb);
 #if METRIC == 0
     if (max3(d) < CHEAP_BOUND) return 0;          // cannot reach the ΔE threshold
-    float3 la = rgb_to_lab(luts, a), lb = rgb_to_lab(luts, b);
-    float3 dl = la - lb;
+    if (!a->has_lab) { a->lab = rgb_to_lab(luts, a->rgb); a->has_lab = 1; }
+    if (!b->has_lab) { b->lab = rgb_to_lab(luts, b->rgb); b->has_lab = 1; }
+    float3 dl = a->lab - b->lab;
     return dot(dl, dl) > threshold * threshold;   // ΔE76 = Euclidean distance in CIELAB
 #elif METRIC == 1
-    return fabs(dot(a.xyz - b.xyz, (float3)(0.2126f, 0.7152f, 0.0722f))) > threshold;
+    return fabs(dot(a->rgb.xyz - b->rgb.xyz, (float3)(0.2126f, 0.7152f, 0.0722f))) > threshold;
 #else
     return dot(d.xyz, (float3)(0.2126f, 0.7152f, 0.0722f)) > threshold;
 #endif
+}
+
+// GROUP pixels (and the one right of them) equal, sample for sample, to the row below and to their
+// right neighbours: no edge there. Flat areas (most of a rendered frame) cost just this compare.
+inline int flat_group(__global const PIXEL_T *src, int i, int width)
+{
+    __global const PIXEL_T *p = src + (size_t)i * CHANNELS, *q = p + (size_t)width * CHANNELS;
+    int same = 1;
+    for (int k = 0; k < GROUP * CHANNELS; ++k)
+        same &= (p[k] == p[k + CHANNELS]) & (p[k] == q[k]);
+    return same;
 }
 
 __kernel void detect_edges(__global const PIXEL_T *src, __global const float *luts,
                            __global uchar *edges, const int width, const int height,
                            const float threshold)
 {
-    const int x = get_global_id(0), y = get_global_id(1);
-    if (x >= width || y >= height) return;
-    const int i = IDX(x, y, width);
-    const int below = y + 1 < height && !same_px(src, i, i + width);
-    const int right = x + 1 < width && !same_px(src, i, i + 1);
-    uchar e = 0;
-    if (below || right) {   // flat areas (most of a rendered frame) stop here
-        float4 c = to_encoded(luts, load_px(src, i));
-        if (below && differs(luts, c, to_encoded(luts, load_px(src, i + width)), threshold))
-            e |= EDGE_BOTTOM;
-        if (right && differs(luts, c, to_encoded(luts, load_px(src, i + 1)), threshold))
-            e |= EDGE_RIGHT;
+    const int x0 = get_global_id(0) * SEGMENT, y = get_global_id(1);
+    if (x0 >= width || y >= height) return;
+    const int x1 = min(x0 + SEGMENT, width);
+    Colour c = colour_at(src, luts, IDX(x0, y, width));
+    for (int x = x0; x < x1;) {
+        const int i = IDX(x, y, width);
+        if (x + GROUP < width && x + GROUP <= x1 && y + 1 < height && flat_group(src, i, width)) {
+            vstore8((uchar8)(0), 0, edges + i);
+            x += GROUP;
+            if (x < x1) c = colour_at(src, luts, i + GROUP);
+            continue;
+        }
+        // c is this pixel; its right neighbour becomes the next c, so each colour is converted
+        // to CIELAB at most twice (as a right and as a bottom neighbour), not four times.
+        uchar e = 0;
+        if (y + 1 < height && !same_px(src, i, i + width)) {
+            Colour b = colour_at(src, luts, i + width);
+            if (differs(luts, &c, &b, threshold)) e |= EDGE_BOTTOM;
+        }
+        if (x + 1 < width) {
+            Colour r = colour_at(src, luts, i + 1);
+            if (!same_px(src, i, i + 1) && differs(luts, &c, &r, threshold)) e |= EDGE_RIGHT;
+            c = r;
+        }
+        edges[i] = e;
+        ++x;
     }
-    edges[i] = e;
 }

@@ -6,8 +6,10 @@
 // the middle pixel when L is odd; the covered pixel takes A of its neighbour across the line.
 // Areas come from a host-built table for L <= AREA_TABLE_L and from the same formula beyond.
 // Corners (seed 002): a crossing edge two pixels long marks a real corner, not a jaggy: its
-// area is scaled by ROUNDING (0 keeps corners sharp). U shapes (both ends to the same side: a bump
-// or the side of a box) are blended only when BLEND_U is 1.
+// area is scaled by ROUNDING (0 keeps corners sharp). U shapes (both ends to the same side: a bump,
+// or the side of a box when a crossing is long) are blended only when BLEND_U is 1 and not a box side. An end crossed on both sides (a thin
+// line stepping across this one) continues the silhouette opposite to the other end, which makes
+// a Z shape (as SMAA's area patterns do); with no single crossing at the other end it stays unblended.
 // Output weights[i] = (top, bottom, left, right) as 16-bit fractions: how much pixel i takes from
 // each neighbour. Only slots next to an edge are written (and read, by blend.cl): a pixel with a
 // bottom edge writes its own bottom slot and the top slot of the pixel below; with a right edge,
@@ -21,7 +23,7 @@
 #define ROUNDING 0.0f
 #endif
 #ifndef BLEND_U
-#define BLEND_U 0
+#define BLEND_U 1
 #endif
 
 inline float trapezoid_area(__global const float *table, int p, int L)
@@ -35,23 +37,32 @@ inline float trapezoid_area(__global const float *table, int p, int L)
 inline ushort to_u16(float a) { return (ushort)clamp(rint(a * 65535.0f), 0.0f, 65535.0f); }
 
 // Crossing at one end of a line: `a`/`b` say whether an edge crosses on side a (up/left) or side b
-// (down/right); `a2`/`b2` whether that crossing edge continues a second pixel (a corner).
-// Returns +1 for side a, -1 for side b, 0 for none or both, and the corner scale in *scale.
-inline int crossing(int a, int b, int a2, int b2, float *scale)
+// (down/right); `a2`/`b2` whether that crossing edge continues a second pixel (*long_edge: a corner).
+// Returns +1 for side a, -1 for side b, 0 for none, BOTH for both.
+#define BOTH 2
+inline int crossing(int a, int b, int a2, int b2, int *long_edge)
 {
-    if (a == b) { *scale = 0.0f; return 0; }
-    *scale = (a ? a2 : b2) ? ROUNDING : 1.0f;
-    return a ? 1 : -1;
+    *long_edge = (a && a2) || (b && b2);
+    if (a && b) return BOTH;
+    return a ? 1 : (b ? -1 : 0);
 }
 
-// Areas for the pixel at distances (d0, d1) from the two ends with crossings s0, s1 (+1 side a, -1
-// side b): *ta = area taken by the side-a pixel from side b, *tb = the reverse.
+// Areas for the pixel at distances (d0, d1) from the two ends with crossings s0, s1: *ta = area
+// taken by the side-a pixel from side b, *tb = the reverse. Long crossing edges mark corners
+// (seed 002): a U shape with one (the side of a box) is left sharp, other shapes are scaled by ROUNDING.
 inline void line_areas(__global const float *table, int d0, int d1, int s0, int s1,
-                       float k0, float k1, float *ta, float *tb)
+                       int long0, int long1, float *ta, float *tb)
 {
     *ta = 0.0f; *tb = 0.0f;
+    if (s0 == BOTH && s1 != BOTH) s0 = -s1;   // a thin line steps across: continue as a Z
+    if (s1 == BOTH && s0 != BOTH) s1 = -s0;
+    if (s0 == BOTH) s0 = 0;
+    if (s1 == BOTH) s1 = 0;
     if (s0 == 0 && s1 == 0) return;
-    if (!BLEND_U && s0 == s1) return;
+    float k0 = long0 ? ROUNDING : 1.0f, k1 = long1 ? ROUNDING : 1.0f;
+    if (s0 == s1) {
+        if (!BLEND_U || long0 || long1) return;
+    }
     int L = d0 + d1 + 1;
     if (s0 != 0) { float a = k0 * trapezoid_area(table, d0, L); if (s0 > 0) *ta += a; else *tb += a; }
     if (s1 != 0) { float a = k1 * trapezoid_area(table, d1, L); if (s1 > 0) *ta += a; else *tb += a; }
@@ -62,12 +73,10 @@ inline int has(__global const uchar *edges, int x, int y, int width, int height,
     return x >= 0 && y >= 0 && x < width && y < height && (edges[IDX(x, y, width)] & bit);
 }
 
-__kernel void blend_weights(__global const uchar *edges, __global const ushort2 *hdist,
-                            __global const ushort2 *vdist, __global const float *table,
-                            __global ushort *weights, const int width, const int height)
+inline void pixel_weights(__global const uchar *edges, __global const ushort2 *hdist,
+                          __global const ushort2 *vdist, __global const float *table,
+                          __global ushort *weights, int x, int y, int width, int height)
 {
-    const int x = get_global_id(0), y = get_global_id(1);
-    if (x >= width || y >= height) return;
     const int i = IDX(x, y, width);
     const uchar e = edges[i];
     if (e == 0) return;
@@ -75,7 +84,7 @@ __kernel void blend_weights(__global const uchar *edges, __global const ushort2 
     if (e & EDGE_BOTTOM) {   // horizontal line between rows y and y+1, ends at x0 and x1
         ushort2 d = hdist[i];
         int x0 = x - d.x, x1 = x + d.y;
-        float k0, k1;
+        int k0, k1;
         int s0 = crossing(has(edges, x0 - 1, y, width, height, EDGE_RIGHT),
                           has(edges, x0 - 1, y + 1, width, height, EDGE_RIGHT),
                           has(edges, x0 - 1, y - 1, width, height, EDGE_RIGHT),
@@ -89,7 +98,7 @@ __kernel void blend_weights(__global const uchar *edges, __global const ushort2 
     if (e & EDGE_RIGHT) {    // vertical line between columns x and x+1, ends at y0 and y1
         ushort2 d = vdist[i];
         int y0 = y - d.x, y1 = y + d.y;
-        float k0, k1;
+        int k0, k1;
         int s0 = crossing(has(edges, x, y0 - 1, width, height, EDGE_BOTTOM),
                           has(edges, x + 1, y0 - 1, width, height, EDGE_BOTTOM),
                           has(edges, x - 1, y0 - 1, width, height, EDGE_BOTTOM),
@@ -108,5 +117,19 @@ __kernel void blend_weights(__global const uchar *edges, __global const ushort2 
     if (e & EDGE_RIGHT) {
         w[3] = to_u16(left);    // this pixel (left of the line) takes `left` from the right one
         weights[(size_t)(i + 1) * 4 + 2] = to_u16(right);
+    }
+}
+
+__kernel void blend_weights(__global const uchar *edges, __global const ushort2 *hdist,
+                            __global const ushort2 *vdist, __global const float *table,
+                            __global ushort *weights, const int width, const int height)
+{
+    const int x0 = get_global_id(0) * SEGMENT, y = get_global_id(1);
+    if (x0 >= width || y >= height) return;
+    const int x1 = min(x0 + SEGMENT, width);
+    for (int x = x0; x < x1;) {
+        if (x + GROUP <= x1 && edge_group(edges + IDX(x, y, width)) == 0) { x += GROUP; continue; }
+        pixel_weights(edges, hdist, vdist, table, weights, x, y, width, height);
+        ++x;
     }
 }

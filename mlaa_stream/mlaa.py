@@ -27,6 +27,7 @@ DEFAULT_THRESHOLDS = {"lab": 8.0, "luma": 0.06, "rgb": 0.06}
 # pixels closer than threshold / LAB_LIPSCHITZ in every channel skip the CIELAB conversion.
 LAB_LIPSCHITZ = 630.0
 AREA_TABLE_L = 64
+SEGMENT = 64  # pixels of a row per work item in the per-pixel passes (kernels/common.cl)
 
 # Named quality presets -> Filter keyword arguments (the CLI's --preset).
 PRESETS: dict[str, dict] = {
@@ -77,6 +78,7 @@ class FilterOptions:
             "AREA_TABLE_L": AREA_TABLE_L,
             "ROUNDING": float(self.rounding),
             "BLEND_U": int(self.blend_u),
+            "SEGMENT": SEGMENT,
         }
 
 
@@ -121,7 +123,7 @@ class Filter:
     def __init__(self, device: str | int | None = None, *, threshold: float | None = None,
                  metric: str = "lab", linear: bool = True, reconstruct: bool = False,
                  bgr: bool = False, linear_input: bool = False, rounding: float = 0.0,
-                 blend_u: bool = False, context: Context | None = None):
+                 blend_u: bool = True, context: Context | None = None):
         if metric not in METRICS:
             raise ValueError(f"metric: expected one of {', '.join(METRICS)}, got {metric!r}")
         thr = DEFAULT_THRESHOLDS[metric] if threshold is None else float(threshold)
@@ -196,7 +198,7 @@ class Filter:
     def _enqueue_passes(self, bufs: _FrameBuffers, src, dst, after: list):
         w, h = bufs.fmt.width, bufs.fmt.height
         W, H = np.int32(w), np.int32(h)
-        q, g2 = self.queue, (w, h)
+        q, g2 = self.queue, (-(-w // SEGMENT), h)  # one work item per SEGMENT pixels of a row
         if self._reconstructor is not None:
             ev = self._reconstructor.enqueue(q, src, self._recon_buf, self._luts, wait_for=after)
             src, after = self._recon_buf, [ev]

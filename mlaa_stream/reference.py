@@ -10,6 +10,7 @@ from .colour import LUMA, linear_to_srgb, rgb_to_lab, srgb_to_linear
 from .mlaa import DEFAULT_THRESHOLDS, trapezoid_area
 
 BOTTOM, RIGHT = 1, 2
+BOTH = 2  # an end crossed on both sides
 
 
 def normalised_rgb(frame: np.ndarray, bgr: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
@@ -86,7 +87,7 @@ def distances_reference(edges: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def weights_reference(edges: np.ndarray, hdist: np.ndarray, vdist: np.ndarray,
-                      rounding: float = 0.0, blend_u: bool = False) -> np.ndarray:
+                      rounding: float = 0.0, blend_u: bool = True) -> np.ndarray:
     """(top, bottom, left, right) fractions each pixel takes from its neighbours (seed 000 eq. 2)."""
     h, w = edges.shape
     out = np.zeros((h, w, 4))
@@ -94,19 +95,26 @@ def weights_reference(edges: np.ndarray, hdist: np.ndarray, vdist: np.ndarray,
     def has(x: int, y: int, bit: int) -> bool:
         return 0 <= x < w and 0 <= y < h and bool(edges[y, x] & bit)
 
-    def crossing(a: bool, b: bool, a2: bool, b2: bool) -> tuple[int, float]:
-        if a == b:
-            return 0, 0.0
-        return (1 if a else -1), (rounding if (a2 if a else b2) else 1.0)
+    def crossing(a: bool, b: bool, a2: bool, b2: bool) -> tuple[int, bool]:
+        """(side: +1 a, -1 b, 0 none, BOTH; whether the crossing edge is two pixels long)."""
+        long_edge = (a and a2) or (b and b2)
+        return (BOTH if a and b else 1 if a else -1 if b else 0), long_edge
 
-    def areas(d0: int, d1: int, s0: int, k0: float, s1: int, k1: float) -> tuple[float, float]:
+    def areas(d0: int, d1: int, s0: int, long0: bool, s1: int, long1: bool) -> tuple[float, float]:
         ta = tb = 0.0
-        if (s0 == 0 and s1 == 0) or (not blend_u and s0 == s1):
+        if s0 == BOTH and s1 != BOTH:  # a thin line crossing: continue opposite to the other end (Z)
+            s0 = -s1
+        if s1 == BOTH and s0 != BOTH:
+            s1 = -s0
+        s0, s1 = (0 if s0 == BOTH else s0), (0 if s1 == BOTH else s1)
+        if s0 == 0 and s1 == 0:
+            return ta, tb
+        if s0 == s1 and (not blend_u or long0 or long1):  # U shape: a bump, or the side of a box
             return ta, tb
         length = d0 + d1 + 1
-        for s, k, d in ((s0, k0, d0), (s1, k1, d1)):
+        for s, long_edge, d in ((s0, long0, d0), (s1, long1, d1)):
             if s:
-                a = k * trapezoid_area(d, length)
+                a = (rounding if long_edge else 1.0) * trapezoid_area(d, length)
                 if s > 0:
                     ta += a
                 else:
@@ -170,7 +178,7 @@ def _to_dtype(rgb: np.ndarray, alpha: np.ndarray | None, like: np.ndarray) -> np
 
 def mlaa_reference(frame: np.ndarray, threshold: float | None = None, metric: str = "lab",
                    linear: bool = True, bgr: bool = False, linear_input: bool = False,
-                   rounding: float = 0.0, blend_u: bool = False) -> np.ndarray:
+                   rounding: float = 0.0, blend_u: bool = True) -> np.ndarray:
     """The whole spatial filter, pass after pass."""
     e = edges_reference(frame, threshold, metric, bgr, linear_input)
     hd, vd = distances_reference(e)
