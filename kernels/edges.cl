@@ -5,11 +5,18 @@
 //          LINEAR_INPUT 1 when samples are linear light (float EXR), 0 when sRGB-encoded.
 //          CHEAP_BOUND: for METRIC 0, a max-channel RGB difference below which ΔE cannot exceed
 //          THRESHOLD (host-computed Lipschitz bound), so Lab is only computed near real edges.
+//          RAMP_TEST / RAMP: leave soft transitions (ramps) alone, see is_ramp.
 #ifndef METRIC
 #define METRIC 0
 #endif
 #ifndef LINEAR_INPUT
 #define LINEAR_INPUT 0
+#endif
+#ifndef RAMP_TEST
+#define RAMP_TEST 1
+#endif
+#ifndef RAMP
+#define RAMP 0.5f
 #endif
 
 #define EDGE_BOTTOM 1
@@ -58,6 +65,26 @@ inline int differs(__global const float *luts, Colour *a, Colour *b, float thres
 #endif
 }
 
+// Soft transitions are not jaggies (seed 002's local contrast adaptation, along the gradient):
+// for the edge between p and q, with `before` the pixel on p's far side and `after` on q's, take
+// the channel where p and q differ most; if the colour keeps moving the same way one more pixel out
+// on either side, by more than RAMP times the step itself, the edge is a ramp -- a photograph's or
+// an already antialiased edge -- and is left alone. A thin line (before ~ q) is not a ramp.
+inline int is_ramp(float4 before, int has_before, float4 p, float4 q, float4 after, int has_after)
+{
+#if RAMP_TEST
+    float4 d = q - p;
+    float4 ad = fabs(d);
+    float d1 = ad.x >= ad.y && ad.x >= ad.z ? d.x : (ad.y >= ad.z ? d.y : d.z);
+    float d0 = ad.x >= ad.y && ad.x >= ad.z ? p.x - before.x : (ad.y >= ad.z ? p.y - before.y : p.z - before.z);
+    float d2 = ad.x >= ad.y && ad.x >= ad.z ? after.x - q.x : (ad.y >= ad.z ? after.y - q.y : after.z - q.z);
+    float lim = RAMP * fabs(d1);
+    return (has_before && d0 * d1 > 0.0f && fabs(d0) > lim) || (has_after && d2 * d1 > 0.0f && fabs(d2) > lim);
+#else
+    return 0;
+#endif
+}
+
 // GROUP pixels (and the one right of them) equal, sample for sample, to the row below and to their
 // right neighbours: no edge there. Flat areas (most of a rendered frame) cost just this compare.
 inline int flat_group(__global const PIXEL_T *src, int i, int width)
@@ -90,11 +117,17 @@ __kernel void detect_edges(__global const PIXEL_T *src, __global const float *lu
         uchar e = 0;
         if (y + 1 < height && !same_px(src, i, i + width)) {
             Colour b = colour_at(src, luts, i + width);
-            if (differs(luts, &c, &b, threshold)) e |= EDGE_BOTTOM;
+            if (differs(luts, &c, &b, threshold)
+                && !is_ramp(y > 0 ? to_encoded(luts, load_px(src, i - width)) : c.rgb, y > 0, c.rgb, b.rgb,
+                            y + 2 < height ? to_encoded(luts, load_px(src, i + 2 * width)) : b.rgb, y + 2 < height))
+                e |= EDGE_BOTTOM;
         }
         if (x + 1 < width) {
             Colour r = colour_at(src, luts, i + 1);
-            if (!same_px(src, i, i + 1) && differs(luts, &c, &r, threshold)) e |= EDGE_RIGHT;
+            if (!same_px(src, i, i + 1) && differs(luts, &c, &r, threshold)
+                && !is_ramp(x > 0 ? to_encoded(luts, load_px(src, i - 1)) : c.rgb, x > 0, c.rgb, r.rgb,
+                            x + 2 < width ? to_encoded(luts, load_px(src, i + 2)) : r.rgb, x + 2 < width))
+                e |= EDGE_RIGHT;
             c = r;
         }
         edges[i] = e;

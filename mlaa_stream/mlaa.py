@@ -68,6 +68,7 @@ class FilterOptions:
     linear_input: bool
     rounding: float
     blend_u: bool
+    ramp: float
 
     def pass_defines(self) -> dict[str, object]:
         return {
@@ -79,6 +80,8 @@ class FilterOptions:
             "ROUNDING": float(self.rounding),
             "BLEND_U": int(self.blend_u),
             "SEGMENT": SEGMENT,
+            "RAMP_TEST": int(self.ramp > 0),
+            "RAMP": float(self.ramp),
         }
 
 
@@ -123,14 +126,14 @@ class Filter:
     def __init__(self, device: str | int | None = None, *, threshold: float | None = None,
                  metric: str = "lab", linear: bool = True, reconstruct: bool = False,
                  bgr: bool = False, linear_input: bool = False, rounding: float = 0.0,
-                 blend_u: bool = True, context: Context | None = None):
+                 blend_u: bool = True, ramp: float = 0.35, context: Context | None = None):
         if metric not in METRICS:
             raise ValueError(f"metric: expected one of {', '.join(METRICS)}, got {metric!r}")
         thr = DEFAULT_THRESHOLDS[metric] if threshold is None else float(threshold)
         if not thr > 0:
             raise ValueError(f"threshold: expected a positive number, got {threshold!r}")
         self.options = FilterOptions(thr, metric, bool(linear), bool(linear_input),
-                                     float(rounding), bool(blend_u))
+                                     float(rounding), bool(blend_u), float(ramp))
         self.bgr = bool(bgr)
         self.reconstruct = bool(reconstruct)
         self.context = context or default_context(device)

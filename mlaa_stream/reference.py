@@ -30,8 +30,10 @@ def normalised_rgb(frame: np.ndarray, bgr: bool = False) -> tuple[np.ndarray, np
 
 
 def edges_reference(frame: np.ndarray, threshold: float | None = None, metric: str = "lab",
-                    bgr: bool = False, linear_input: bool = False) -> np.ndarray:
-    """Bit 0: colour differs from the pixel below; bit 1: from the pixel to the right."""
+                    bgr: bool = False, linear_input: bool = False, ramp: float = 0.35) -> np.ndarray:
+    """Bit 0: colour differs from the pixel below; bit 1: from the pixel to the right.
+    Ramps (the colour keeps moving the same way one pixel further out, by more than `ramp` times
+    the step, on the channel of the largest step) are not edges."""
     thr = DEFAULT_THRESHOLDS[metric] if threshold is None else threshold
     rgb, _ = normalised_rgb(frame, bgr)
     if linear_input:
@@ -44,9 +46,27 @@ def edges_reference(frame: np.ndarray, threshold: float | None = None, metric: s
             return np.abs((a - b) @ LUMA) > thr
         return np.abs(a - b) @ LUMA > thr
 
+    def ramp_along(c: np.ndarray) -> np.ndarray:
+        """For steps c[k] -> c[k+1] along axis 0: is it part of a ramp?"""
+        p, q = c[:-1], c[1:]
+        d = q - p
+        k = np.argmax(np.abs(d), axis=-1)[..., None]
+        d1 = np.take_along_axis(d, k, -1)[..., 0]
+        before = np.concatenate([p[:1], c[:-2]])   # the pixel before p (p itself at the border)
+        after = np.concatenate([c[2:], q[-1:]])    # the pixel after q (q itself at the border)
+        d0 = np.take_along_axis(p - before, k, -1)[..., 0]
+        d2 = np.take_along_axis(after - q, k, -1)[..., 0]
+        lim = ramp * np.abs(d1)
+        return ((d0 * d1 > 0) & (np.abs(d0) > lim)) | ((d2 * d1 > 0) & (np.abs(d2) > lim))
+
     e = np.zeros(rgb.shape[:2], np.uint8)
-    e[:-1] |= BOTTOM * differ(rgb[:-1], rgb[1:]).astype(np.uint8)
-    e[:, :-1] |= RIGHT * differ(rgb[:, :-1], rgb[:, 1:]).astype(np.uint8)
+    bottom = differ(rgb[:-1], rgb[1:])
+    right = differ(rgb[:, :-1], rgb[:, 1:])
+    if ramp > 0:
+        bottom &= ~ramp_along(rgb)
+        right &= ~ramp_along(rgb.transpose(1, 0, 2)).T
+    e[:-1] |= BOTTOM * bottom.astype(np.uint8)
+    e[:, :-1] |= RIGHT * right.astype(np.uint8)
     return e
 
 
@@ -178,9 +198,9 @@ def _to_dtype(rgb: np.ndarray, alpha: np.ndarray | None, like: np.ndarray) -> np
 
 def mlaa_reference(frame: np.ndarray, threshold: float | None = None, metric: str = "lab",
                    linear: bool = True, bgr: bool = False, linear_input: bool = False,
-                   rounding: float = 0.0, blend_u: bool = True) -> np.ndarray:
+                   rounding: float = 0.0, blend_u: bool = True, ramp: float = 0.35) -> np.ndarray:
     """The whole spatial filter, pass after pass."""
-    e = edges_reference(frame, threshold, metric, bgr, linear_input)
+    e = edges_reference(frame, threshold, metric, bgr, linear_input, ramp)
     hd, vd = distances_reference(e)
     wts = weights_reference(e, hd, vd, rounding, blend_u)
     return blend_reference(frame, wts, linear, linear_input, bgr)
