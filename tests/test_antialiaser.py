@@ -1,0 +1,126 @@
+"""mlaa_stream.Antialiaser: the capture-loop API on BGR frames, driven by a real cv2.VideoCapture."""
+from __future__ import annotations
+
+import os
+import threading
+
+import cv2
+import numpy as np
+import pytest
+
+import mlaa_stream
+from mlaa_stream import Antialiaser
+from mlaa_stream.mlaa import Filter
+from mlaa_stream.pipeline import PipelineError
+
+CLIP = os.path.join(os.path.dirname(__file__), "..", "fixtures", "demo", "clip.mp4")
+
+
+def captured_frames() -> list[np.ndarray]:
+    cap = cv2.VideoCapture(CLIP)
+    frames = []
+    while True:
+        ok, frame = cap.read()
+        if not ok:
+            break
+        frames.append(frame)
+    cap.release()
+    return frames
+
+
+def pipeline_threads():
+    return [t for t in threading.enumerate() if t.name.startswith("mlaa-stream-")]
+
+
+def test_exported_from_the_package():
+    assert mlaa_stream.Antialiaser is Antialiaser
+
+
+def test_call_matches_the_filter_with_bgr_order():
+    frames = captured_frames()
+    assert len(frames) == 10 and frames[0].shape == (48, 64, 3) and frames[0].dtype == np.uint8
+    with Antialiaser() as aa, Filter(bgr=True) as f:
+        for frame in frames[:3]:
+            out = aa(frame)
+            assert out.shape == frame.shape and out.dtype == np.uint8
+            np.testing.assert_array_equal(out, f.process(frame))
+        assert aa.index == 3
+    # BGR matters for the Lab metric: filtering the RGB view gives the same result, reordered
+    with Filter(bgr=False) as f_rgb:
+        np.testing.assert_array_equal(f_rgb.process(frames[0][:, :, ::-1].copy())[:, :, ::-1],
+                                      Filter(bgr=True).process(frames[0]))
+
+
+def test_stream_over_a_real_video_capture_matches_frame_by_frame():
+    frames = captured_frames()
+    with Antialiaser() as aa:
+        expected = [aa(f) for f in frames]
+    cap = cv2.VideoCapture(CLIP)
+    assert cap.isOpened()
+    try:
+        with Antialiaser() as aa:
+            got = list(aa.stream(cap))
+            assert aa.index == 10
+    finally:
+        cap.release()
+    assert len(got) == 10
+    for e, g in zip(expected, got):
+        np.testing.assert_array_equal(g, e)
+    assert sum(not np.array_equal(e, f) for e, f in zip(expected, frames)) >= 8
+    assert pipeline_threads() == []
+
+
+def test_stream_accepts_any_iterable_and_keeps_the_frame_index_across_calls():
+    frames = captured_frames()[:6]
+    seen = []
+    with Antialiaser(post_hooks=[lambda fr, i: (seen.append(i), fr)[1]]) as aa:
+        aa(frames[0])
+        list(aa.stream(iter(frames[1:4])))
+        aa(frames[4])
+        list(aa.stream(frames[5:]))
+    assert seen == [0, 1, 2, 3, 4, 5]
+
+
+def test_temporal_stage_sees_input_and_filtered_frames():
+    frames = captured_frames()[:4]
+    calls = []
+
+    def temporal(frame_in, filtered, index):
+        calls.append(index)
+        assert frame_in.shape == filtered.shape
+        return filtered
+
+    with Antialiaser(temporal=temporal) as aa:
+        list(aa.stream(frames))
+    assert calls == [0, 1, 2, 3]
+
+
+def test_breaking_out_of_a_stream_stops_its_reader():
+    cap = cv2.VideoCapture(CLIP)
+    try:
+        with Antialiaser() as aa:
+            for i, _ in enumerate(aa.stream(cap)):
+                if i == 2:
+                    break
+    finally:
+        cap.release()
+    for t in pipeline_threads():
+        t.join(timeout=2)
+    assert pipeline_threads() == []
+
+
+def test_a_bad_frame_names_its_index():
+    frames = captured_frames()[:3] + [np.zeros((4, 4, 2), np.uint8)]
+    with Antialiaser() as aa:
+        with pytest.raises(PipelineError, match="filter failed at frame 3"):
+            list(aa.stream(frames))
+    assert pipeline_threads() == []
+
+
+def test_closed_antialiaser_refuses_work_and_presets_are_checked():
+    aa = Antialiaser(preset=sorted(mlaa_stream.PRESETS)[0])
+    aa.close()
+    with pytest.raises(RuntimeError, match="closed"):
+        aa(captured_frames()[0])
+    with pytest.raises(ValueError, match="expected a preset among"):
+        Antialiaser(preset="nonesuch")

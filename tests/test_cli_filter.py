@@ -1,0 +1,492 @@
+"""`mlaa-stream INPUT -o OUTPUT` through click's CliRunner: exit codes and messages for images,
+folders, sequences and videos, for good input and for every kind of bad input."""
+from __future__ import annotations
+
+import _thread
+import errno
+import importlib.util
+import os
+import re
+import shutil
+import struct
+import subprocess
+import sys
+import types
+import zlib
+
+import av
+import numpy as np
+import OpenImageIO as oiio
+import pytest
+from click.testing import CliRunner
+
+from mlaa_stream import image_io
+from mlaa_stream.cli.main import main
+from mlaa_stream.image_io import read_image
+
+ROOT = os.path.join(os.path.dirname(__file__), "..")
+DEMO = os.path.join(ROOT, "fixtures", "demo")
+_spec = importlib.util.spec_from_file_location("make_demo", os.path.join(ROOT, "fixtures", "make_demo.py"))
+make_demo = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(make_demo)
+
+
+def run(*args: str):
+    result = CliRunner().invoke(main, [str(a) for a in args])
+    assert "Traceback" not in result.output, result.output
+    assert not isinstance(result.exception, Exception) or isinstance(result.exception, SystemExit), \
+        repr(result.exception)
+    return result
+
+
+def stderr(result) -> str:
+    return result.stderr if hasattr(result, "stderr") else result.output
+
+
+def temp_files(folder) -> list[str]:
+    return [os.path.join(d, n) for d, _, fs in os.walk(folder) for n in fs if image_io.is_temp_path(n)]
+
+
+def write_png(path, arr):
+    make_demo.write_oiio(str(path), arr, "uint8" if arr.dtype == np.uint8 else "uint16")
+
+
+def staircase(h=24, w=32, slope=3.0, dtype=np.uint8):
+    """An aliased half-plane: a staircase edge the filter must change."""
+    y, x = np.mgrid[0:h, 0:w]
+    hi = np.iinfo(dtype).max if np.dtype(dtype).kind == "u" else 1.0
+    img = np.where((y > x / slope + h / 4)[:, :, None], np.array([0.9, 0.8, 0.1]) * hi,
+                   np.array([0.1, 0.2, 0.6]) * hi)
+    return img.astype(dtype)
+
+
+def png_with_size(path, w, h):
+    """A syntactically valid PNG header claiming w x h pixels (0 is invalid in PNG)."""
+    def chunk(kind, data):
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+    raw = zlib.compress(b"")
+    path.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0))
+                     + chunk(b"IDAT", raw) + chunk(b"IEND", b""))
+
+
+# -- images and folders -------------------------------------------------------------------------
+def test_demo_folder_keeps_formats_depth_alpha_and_metadata(tmp_path):
+    out = tmp_path / "clean"
+    r = run(os.path.join(DEMO, "images"), "-o", out)
+    assert r.exit_code == 0, stderr(r)
+    names = sorted(os.listdir(os.path.join(DEMO, "images")))
+    assert sorted(os.listdir(out)) == names
+    changed = 0
+    for name in names:
+        a, b = read_image(os.path.join(DEMO, "images", name)), read_image(str(out / name))
+        assert b.pixels.dtype == a.pixels.dtype and b.pixels.shape == a.pixels.shape, name
+        assert b.spec.get_string_attribute("oiio:ColorSpace") == a.spec.get_string_attribute("oiio:ColorSpace")
+        if a.pixels.shape[2] == 4:
+            np.testing.assert_array_equal(b.pixels[:, :, 3], a.pixels[:, :, 3])  # alpha untouched
+        changed += not np.array_equal(a.pixels, b.pixels)
+    assert changed >= 6  # the jpeg is re-encoded anyway; the rest change only by filtering
+    assert temp_files(tmp_path) == []
+
+
+def test_single_image_refuses_to_overwrite_then_overwrites(tmp_path):
+    src = tmp_path / "in.png"
+    write_png(src, staircase())
+    dst = tmp_path / "out.png"
+    assert run(src, "-o", dst).exit_code == 0
+    first = dst.read_bytes()
+    r = run(src, "-o", dst)
+    assert r.exit_code == 2 and f"{dst}: exists" in stderr(r) and "--overwrite" in stderr(r)
+    assert dst.read_bytes() == first
+    r = run(src, "-o", dst, "--overwrite", "--metric", "luma")
+    assert r.exit_code == 0, stderr(r)
+    assert not np.array_equal(read_image(str(dst)).pixels, staircase())
+
+
+def test_output_into_an_existing_folder_keeps_the_name(tmp_path):
+    src = tmp_path / "in.png"
+    write_png(src, staircase())
+    (tmp_path / "o").mkdir()
+    assert run(src, "-o", tmp_path / "o").exit_code == 0
+    assert os.listdir(tmp_path / "o") == ["in.png"]
+
+
+@pytest.mark.parametrize("how", ["same", "dot", "symlink", "hardlink"])
+def test_output_that_is_the_input_is_refused(tmp_path, how):
+    src = tmp_path / "in.png"
+    write_png(src, staircase())
+    before = src.read_bytes()
+    if how == "same":
+        out = src
+    elif how == "dot":
+        out = tmp_path / "." / "in.png"
+    elif how == "symlink":
+        out = tmp_path / "link.png"
+        out.symlink_to(src)
+    else:
+        out = tmp_path / "hard.png"
+        os.link(src, out)
+    r = run(src, "-o", out, "--overwrite")
+    assert r.exit_code == 2 and "is the input" in stderr(r)
+    assert src.read_bytes() == before
+
+
+def test_a_folder_into_itself_is_refused(tmp_path):
+    write_png(tmp_path / "a.png", staircase())
+    r = run(tmp_path, "-o", tmp_path, "--overwrite")
+    assert r.exit_code == 2 and "is the input folder" in stderr(r)
+
+
+def test_nonexistent_input(tmp_path):
+    r = run(tmp_path / "nope.png", "-o", tmp_path / "o.png")
+    assert r.exit_code == 2 and "nope.png: no such file or directory" in stderr(r)
+
+
+def test_bad_files_in_a_folder_are_named_and_the_others_processed(tmp_path):
+    src = tmp_path / "in"
+    src.mkdir()
+    write_png(src / "a_good.png", staircase())
+    (src / "b_empty.png").write_bytes(b"")
+    (src / "c_text.png").write_text("not an image")
+    png_with_size(src / "d_zero_wide.png", 0, 5)
+    write_png(src / "e_one_wide.png", staircase(w=1))
+    write_png(src / "f_one_pixel.png", staircase(h=1, w=1))
+    write_png(src / "g_odd.png", staircase(h=7, w=13))
+    write_png(src / "h_sixteen.png", staircase(dtype=np.uint16))
+    Image = pytest.importorskip("PIL.Image")
+    Image.fromarray(staircase()).quantize(colors=4).save(src / "i_palette.png")
+    rgba = np.concatenate([staircase(), np.full((24, 32, 1), 77, np.uint8)], axis=2)
+    make_demo.write_oiio(str(src / "j_alpha.png"), rgba, "uint8", {"oiio:UnassociatedAlpha": 1})
+    (src / "notes.txt").write_text("a text file among the images")
+    out = tmp_path / "out"
+    r = run(src, "-o", out)
+    err = stderr(r)
+    assert r.exit_code == 1
+    for bad in ("b_empty.png", "c_text.png", "d_zero_wide.png"):
+        assert str(src / bad) in err
+        assert not (out / bad).exists()
+    assert "empty file" in err
+    assert "notes.txt: skipped (not an image file" in err
+    assert "3 failed, 7 written" in err
+    good = ["a_good.png", "e_one_wide.png", "f_one_pixel.png", "g_odd.png", "h_sixteen.png",
+            "i_palette.png", "j_alpha.png"]
+    assert sorted(os.listdir(out)) == good
+    assert read_image(str(out / "h_sixteen.png")).pixels.dtype == np.uint16
+    assert read_image(str(out / "e_one_wide.png")).pixels.shape == (24, 1, 3)
+    np.testing.assert_array_equal(read_image(str(out / "j_alpha.png")).pixels[:, :, 3], 77)
+    assert temp_files(tmp_path) == []
+
+
+def test_a_non_image_file_given_directly_is_refused(tmp_path):
+    bad = tmp_path / "photo.png"
+    bad.write_text("hello")
+    r = run(bad, "-o", tmp_path / "o.png")
+    assert r.exit_code == 1 and f"{bad}: expected an image" in stderr(r)
+    assert not (tmp_path / "o.png").exists()
+
+
+def test_unwritable_output_folder(tmp_path):
+    src = tmp_path / "in.png"
+    write_png(src, staircase())
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    if os.geteuid() == 0:  # root ignores permission bits; the immutable attribute still holds
+        if shutil.which("chattr") is None or subprocess.run(["chattr", "+i", str(locked)]).returncode:
+            pytest.skip("cannot make a folder unwritable for root here")
+    else:
+        locked.chmod(0o555)
+    try:
+        r = run(src, "-o", locked / "o.png")
+        assert r.exit_code == 1 and f"{locked}: cannot write in this folder" in stderr(r)
+        r = run(tmp_path / "in.png", "-o", locked / "o.png", "--overwrite")
+        assert r.exit_code == 1
+        folder = tmp_path / "folder"
+        folder.mkdir()
+        shutil.copy(src, folder / "a.png")
+        r = run(folder, "-o", locked / "sub")  # a folder output must be created: it cannot be
+        assert r.exit_code == 1 and f"{locked / 'sub'}: cannot create the output folder" in stderr(r)
+    finally:
+        if os.geteuid() == 0:
+            subprocess.run(["chattr", "-i", str(locked)])
+        else:
+            locked.chmod(0o755)
+    assert os.listdir(locked) == []
+
+
+def test_a_full_disk_stops_the_run_and_leaves_no_partial_file(tmp_path, monkeypatch):
+    src = tmp_path / "in"
+    src.mkdir()
+    for i in range(5):
+        write_png(src / f"f{i}.png", staircase(slope=2 + i))
+    calls = []
+
+    def full_after_two(tmp, pixels, spec, final):
+        calls.append(final)
+        if len(calls) > 2:
+            with open(tmp, "wb") as fh:
+                fh.write(b"partial")
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), final)
+        return real(tmp, pixels, spec, final)
+
+    real = image_io._write_file
+    monkeypatch.setattr(image_io, "_write_file", full_after_two)
+    r = run(src, "-o", tmp_path / "out")
+    assert r.exit_code == 1
+    assert "No space left on device" in stderr(r) and "f2.png" in stderr(r)
+    assert "stopped: 2 of 5 outputs written" in stderr(r)
+    assert sorted(os.listdir(tmp_path / "out")) == ["f0.png", "f1.png"]
+    assert len(calls) == 3  # stopped at the first full-disk error
+    assert temp_files(tmp_path) == []
+
+
+def test_ctrl_c_keeps_complete_files_and_no_temporary_one(tmp_path, monkeypatch):
+    src = tmp_path / "in"
+    src.mkdir()
+    for i in range(12):
+        write_png(src / f"f{i:02d}.png", staircase(slope=2 + i))
+    real = image_io._write_file
+    seen = []
+
+    def interrupt_at_third(tmp, pixels, spec, final):
+        seen.append(final)
+        if len(seen) == 3:
+            _thread.interrupt_main()  # Ctrl-C arrives while file 3 is being written
+        return real(tmp, pixels, spec, final)
+
+    monkeypatch.setattr(image_io, "_write_file", interrupt_at_third)
+    r = run(src, "-o", tmp_path / "out")
+    assert r.exit_code == 130 and "interrupted" in stderr(r)
+    written = sorted(os.listdir(tmp_path / "out"))
+    assert 2 <= len(written) < 12
+    for name in written:  # every file under a final name is complete
+        assert read_image(str(tmp_path / "out" / name)).pixels.shape == (24, 32, 3)
+    assert temp_files(tmp_path) == []
+
+
+# -- sequences ---------------------------------------------------------------------------------
+def make_sequence(folder, numbers, size=(24, 32), ext="png"):
+    folder.mkdir(exist_ok=True)
+    for n in numbers:
+        write_png(folder / f"shot.{n:04d}.{ext}", staircase(*size, slope=2 + n % 5))
+
+
+def test_sequence_with_a_frame_range_and_an_output_pattern(tmp_path):
+    make_sequence(tmp_path / "seq", range(1001, 1006))
+    r = run(tmp_path / "seq" / "shot.%04d.png", "--frames", "1002-1004", "-o", tmp_path / "o" / "c_%04d.png")
+    assert r.exit_code == 0, stderr(r)
+    assert sorted(os.listdir(tmp_path / "o")) == ["c_1002.png", "c_1003.png", "c_1004.png"]
+
+
+def test_sequence_gaps_are_reported(tmp_path):
+    make_sequence(tmp_path / "seq", [1, 2, 5, 6, 9])
+    r = run(tmp_path / "seq" / "shot.%04d.png", "-o", tmp_path / "o")
+    assert r.exit_code == 0
+    assert "missing frames 3-4, 7-8" in stderr(r)
+    assert len(os.listdir(tmp_path / "o")) == 5
+    r = run(tmp_path / "seq" / "shot.%04d.png", "--frames", "1-6", "-o", tmp_path / "o2")
+    assert r.exit_code == 1 and "missing frames 3-4" in stderr(r)
+    assert sorted(os.listdir(tmp_path / "o2")) == ["shot.0001.png", "shot.0002.png",
+                                                   "shot.0005.png", "shot.0006.png"]
+
+
+def test_sequence_resume_skips_complete_outputs(tmp_path):
+    make_sequence(tmp_path / "seq", range(1, 7))
+    out = tmp_path / "o"
+    out.mkdir()
+    write_png(out / "shot.0002.png", staircase())  # "already done" marker content
+    marker = (out / "shot.0002.png").read_bytes()
+    r = run(tmp_path / "seq" / "shot.%04d.png", "-o", out)
+    assert r.exit_code == 2 and "--resume" in stderr(r)
+    r = run(tmp_path / "seq" / "shot.%04d.png", "-o", out, "--resume", "-v")
+    assert r.exit_code == 0, stderr(r)
+    assert "1 outputs exist and are skipped" in stderr(r)
+    assert (out / "shot.0002.png").read_bytes() == marker
+    assert len(os.listdir(out)) == 6
+    r = run(tmp_path / "seq" / "shot.%04d.png", "-o", out, "--resume", "--overwrite")
+    assert r.exit_code == 2 and "contradict" in stderr(r)
+
+
+@pytest.mark.parametrize("change", ["size", "channels", "depth"])
+def test_a_sequence_whose_frames_change_stops_naming_the_frame(tmp_path, change):
+    make_sequence(tmp_path / "seq", range(1, 4))
+    bad = tmp_path / "seq" / "shot.0004.png"
+    if change == "size":
+        write_png(bad, staircase(20, 32))
+    elif change == "channels":
+        make_demo.write_oiio(str(bad), np.concatenate([staircase(), staircase()[:, :, :1]], 2), "uint8")
+    else:
+        write_png(bad, staircase(dtype=np.uint16))
+    make_sequence(tmp_path / "seq", range(5, 7))
+    r = run(tmp_path / "seq" / "shot.%04d.png", "-o", tmp_path / "o")
+    assert r.exit_code == 1
+    assert f"frame 4 ({bad})" in stderr(r) and "expected 32x24 with 3 channels of uint8" in stderr(r)
+    assert sorted(os.listdir(tmp_path / "o")) == ["shot.0001.png", "shot.0002.png", "shot.0003.png"]
+
+
+def test_frames_option_needs_a_pattern_and_a_range(tmp_path):
+    write_png(tmp_path / "a.png", staircase())
+    r = run(tmp_path / "a.png", "--frames", "1-3", "-o", tmp_path / "o.png")
+    assert r.exit_code == 2 and "--frames needs a frame pattern" in stderr(r)
+    make_sequence(tmp_path / "seq", [1])
+    r = run(tmp_path / "seq" / "shot.%04d.png", "--frames", "9-3", "-o", tmp_path / "o")
+    assert r.exit_code == 2 and "A <= B" in stderr(r)
+    r = run(tmp_path / "seq" / "nothing.%04d.png", "-o", tmp_path / "o")
+    assert r.exit_code == 2 and "no files match this frame pattern" in stderr(r)
+
+
+# -- video -------------------------------------------------------------------------------------
+def test_video_keeps_rate_frames_and_audio(tmp_path):
+    out = tmp_path / "out.mp4"
+    r = run(os.path.join(DEMO, "clip.mp4"), "-o", out, "-v")
+    assert r.exit_code == 0, stderr(r)
+    assert "device:" in stderr(r) and "device wait" in stderr(r)  # -v: per-stage timings
+    with av.open(str(out)) as c:
+        assert c.streams.video[0].average_rate == 24 and len(c.streams.audio) == 1
+        assert sum(1 for _ in c.decode(video=0)) == 10
+    assert os.listdir(tmp_path) == ["out.mp4"]
+
+
+def test_ten_bit_video_stays_ten_bit_and_lossless_codec_works(tmp_path):
+    src = tmp_path / "ten.mkv"
+    make_demo.write_clip(str(src), frames=4, pix_fmt="yuv420p10le", audio=False)
+    r = run(src, "-o", tmp_path / "out.mkv", "-q")
+    assert r.exit_code == 0 and stderr(r) == ""
+    with av.open(str(tmp_path / "out.mkv")) as c:
+        assert c.streams.video[0].codec_context.pix_fmt == "yuv420p10le"
+    r = run(src, "-o", tmp_path / "mid.mkv", "--codec", "ffv1")
+    assert r.exit_code == 0
+    with av.open(str(tmp_path / "mid.mkv")) as c:
+        assert c.streams.video[0].codec_context.name == "ffv1"
+        assert c.streams.video[0].codec_context.pix_fmt.startswith("gbrp1")
+
+
+def test_truncated_video_keeps_a_valid_shorter_file_and_says_where_it_stopped(tmp_path):
+    full = tmp_path / "full.mp4"
+    make_demo.write_clip(str(full), frames=30)
+    data = full.read_bytes()
+    cut = tmp_path / "cut.mp4"
+    cut.write_bytes(data[: len(data) * 2 // 3])
+    out = tmp_path / "out.mp4"
+    r = run(cut, "-o", out)
+    assert r.exit_code == 1
+    err = stderr(r)
+    # either the decoder fails on the cut packet, or the stream ends early for its declared length
+    m = re.search(re.escape(str(cut)) + r": (?:decoding stopped|the stream ended) at frame (\d+)", err)
+    assert m, err
+    stopped = int(m.group(1))
+    assert 0 < stopped < 30
+    assert f"kept as a valid shorter video with the {stopped} frames" in err
+    with av.open(str(out)) as c:
+        assert sum(1 for _ in c.decode(video=0)) == stopped
+    assert temp_files(tmp_path) == []
+
+
+def test_not_a_video(tmp_path):
+    bad = tmp_path / "movie.mp4"
+    bad.write_text("definitely not a video")
+    r = run(bad, "-o", tmp_path / "o.mp4")
+    assert r.exit_code == 1 and f"{bad}: expected a video" in stderr(r)
+    assert sorted(os.listdir(tmp_path)) == ["movie.mp4"]
+
+
+def test_video_output_rules(tmp_path):
+    clip = tmp_path / "c.mp4"
+    shutil.copy(os.path.join(DEMO, "clip.mp4"), clip)
+    r = run(clip, "-o", clip, "--overwrite")
+    assert r.exit_code == 2 and "is the input" in stderr(r)
+    (tmp_path / "o.mp4").write_bytes(b"keep me")
+    r = run(clip, "-o", tmp_path / "o.mp4")
+    assert r.exit_code == 2 and "exists; use --overwrite" in stderr(r)
+    assert (tmp_path / "o.mp4").read_bytes() == b"keep me"
+    r = run(clip, "-o", tmp_path / "o.mp4", "--codec", "nonesuch", "--overwrite")
+    assert r.exit_code == 1 and "expected an encoder" in stderr(r)
+    assert (tmp_path / "o.mp4").read_bytes() == b"keep me"
+
+
+def test_video_ctrl_c_removes_the_output(tmp_path, monkeypatch):
+    from mlaa_stream import video_io
+
+    real = video_io.VideoWriter.write
+
+    def write(self, frame, when=None):
+        if self.frames_written == 3:
+            _thread.interrupt_main()
+        return real(self, frame, when)
+
+    monkeypatch.setattr(video_io.VideoWriter, "write", write)
+    r = run(os.path.join(DEMO, "clip.mp4"), "-o", tmp_path / "o.mp4")
+    assert r.exit_code == 130 and "interrupted" in stderr(r)
+    assert os.listdir(tmp_path) == []
+
+
+def test_video_full_disk_removes_the_output(tmp_path, monkeypatch):
+    from mlaa_stream import video_io
+
+    def write(self, frame, when=None):
+        if self.frames_written == 4:
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        self.frames_written += 1
+
+    monkeypatch.setattr(video_io.VideoWriter, "write", write)
+    r = run(os.path.join(DEMO, "clip.mp4"), "-o", tmp_path / "o.mp4")
+    assert r.exit_code == 1
+    assert "write failed at frame 4" in stderr(r) and "No space left" in stderr(r)
+    assert os.listdir(tmp_path) == []
+
+
+def test_opencv_backend(tmp_path):
+    r = run(os.path.join(DEMO, "clip.mp4"), "-o", tmp_path / "o.mp4", "--video-backend", "opencv")
+    assert r.exit_code == 0, stderr(r)
+    with av.open(str(tmp_path / "o.mp4")) as c:
+        assert sum(1 for _ in c.decode(video=0)) == 10
+
+
+# -- options -----------------------------------------------------------------------------------
+def test_overlay_option_calls_load_overlay_lazily(tmp_path, monkeypatch):
+    calls = []
+
+    def load_overlay(path):
+        calls.append(("load", path))
+
+        def hook(frame, index):
+            calls.append(("draw", index))
+            out = frame.copy()
+            out[0, 0] = 255
+            return out
+        return hook
+
+    monkeypatch.setitem(sys.modules, "mlaa_stream.overlay",
+                        types.SimpleNamespace(load_overlay=load_overlay))
+    geo = tmp_path / "roads.geojson"
+    geo.write_text("{}")
+    r = run(os.path.join(DEMO, "clip.mp4"), "-o", tmp_path / "o.mkv", "--overlay", geo,
+            "--codec", "ffv1")
+    assert r.exit_code == 0, stderr(r)
+    assert calls[0] == ("load", str(geo)) and [c[1] for c in calls[1:]] == list(range(10))
+
+
+def test_bad_options_are_usage_errors(tmp_path):
+    src = os.path.join(DEMO, "images", "rgb8.png")
+    r = run(src, "-o", tmp_path / "o.png", "--metric", "hsv")
+    assert r.exit_code == 2 and "hsv" in stderr(r)
+    r = run(src, "-o", tmp_path / "o.png", "--preset", "nonesuch")
+    assert r.exit_code == 2
+    r = run(src, "-o", tmp_path / "o.png", "--threshold", "0")
+    assert r.exit_code == 2
+
+
+def test_preset_and_options(tmp_path):
+    from mlaa_stream.mlaa import PRESETS
+
+    src = tmp_path / "in.png"
+    write_png(src, staircase())
+    for name in sorted(PRESETS):
+        r = run(src, "-o", tmp_path / f"{name}.png", "--preset", name, "--display-space", "--no-reconstruct")
+        assert r.exit_code == 0, (name, stderr(r))
+
+
+def test_help_explains_with_examples():
+    r = run("filter", "--help")
+    assert r.exit_code == 0
+    for text in ("Examples:", "--overwrite", "--resume", "--frames", "--codec", "veryfast",
+                 "Exit codes", "130 interrupted", "valid shorter", "--overlay", "%04d"):
+        assert text in r.output, text

@@ -1,0 +1,67 @@
+"""Device selection, the program cache and the messages users see when OpenCL is missing or broken."""
+from __future__ import annotations
+
+import pyopencl as cl
+import pytest
+from click.testing import CliRunner
+
+from mlaa_stream import device as dev
+from mlaa_stream.cli.main import main
+
+
+def test_devices_command_lists_the_default_device():
+    res = CliRunner().invoke(main, ["devices"])
+    assert res.exit_code == 0, res.output
+    assert "* 0:" in res.output or "*" in res.output.splitlines()[0]
+
+
+def test_environment_variable_and_option_pick_the_device(monkeypatch):
+    first = dev.list_devices()[0]
+    monkeypatch.setenv(dev.DEVICE_ENV, "0")
+    assert dev.select_device(None).name.strip() == first.name
+    assert dev.select_device(first.name[:4]).name.strip() == first.name
+
+
+@pytest.mark.parametrize("spec,msg", [("99", "expected a device index below"),
+                                      ("no-such-device-xyz", "no OpenCL device matches")])
+def test_unknown_device_is_a_clear_error(spec, msg):
+    with pytest.raises(dev.DeviceError, match=msg):
+        dev.select_device(spec)
+
+
+def test_no_platform_gives_one_sentence_not_a_traceback(monkeypatch):
+    def boom():
+        raise cl.LogicError("clGetPlatformIDs failed: PLATFORM_NOT_FOUND_KHR")
+    monkeypatch.setattr(dev.cl, "get_platforms", boom)
+    with pytest.raises(dev.DeviceError, match="pip install pocl-binary-distribution"):
+        dev.list_devices()
+    res = CliRunner().invoke(main, ["devices"])
+    assert res.exit_code == 3
+    assert "no OpenCL platform found" in res.output
+    assert "Traceback" not in res.output
+
+
+def test_programs_are_built_once_per_source_and_defines(monkeypatch):
+    ctx = dev.Context(None)
+    calls = []
+    real = dev.kernel_source
+    monkeypatch.setattr(dev, "kernel_source", lambda name: calls.append(name) or real(name))
+    defs = {"PIXEL_T": "uchar", "CHANNELS": 3, "PIXEL_MAX": 255.0, "SEGMENT": 64}
+    p1 = ctx.program("distances", defs)
+    p2 = ctx.program("distances", dict(defs))
+    assert p1 is p2 and calls.count("distances") == 1
+    ctx.program("distances", {**defs, "CHANNELS": 4})
+    assert calls.count("distances") == 2
+    assert ctx.kernel("distances", "hline_distances", defs) is ctx.kernel("distances", "hline_distances", defs)
+
+
+def test_build_error_names_file_defines_and_log(monkeypatch):
+    ctx = dev.Context(None)
+    real = dev.kernel_source
+    monkeypatch.setattr(dev, "kernel_source",
+                        lambda name: "__kernel void broken(void) { undeclared_thing(); }" if name == "edges"
+                        else real(name))
+    with pytest.raises(dev.KernelBuildError) as err:
+        ctx.program("edges", {"METRIC": 0})
+    text = str(err.value)
+    assert "kernels/edges.cl" in text and "-DMETRIC=0" in text and "undeclared_thing" in text

@@ -1,0 +1,256 @@
+"""The streaming pipeline: order, overlap of frames in flight, hooks, errors with frame indices,
+Ctrl-C, and no thread left behind in any of these cases.
+
+Most tests drive the pipeline with `HostFilter`, a small numpy filter with the Filter protocol
+(submit -> pending.result()) that logs the order of calls; one test runs the real OpenCL Filter.
+"""
+from __future__ import annotations
+
+import _thread
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from mlaa_stream.pipeline import Item, PipelineError, StageTimes, run_pipeline, stream_items
+
+
+def frames(n: int, seed: int = 0, shape=(6, 8, 3)) -> list[np.ndarray]:
+    rng = np.random.default_rng(seed)
+    return [rng.integers(1, 255, shape, dtype=np.uint8) for _ in range(n)]
+
+
+class HostFilter:
+    """Inverts frames on the host; logs ('submit', i) and ('result', i) in call order."""
+
+    def __init__(self, fail_submit_at: int | None = None, fail_result_at: int | None = None):
+        self.log: list[tuple[str, int]] = []
+        self.n = 0
+        self.fail_submit_at, self.fail_result_at = fail_submit_at, fail_result_at
+
+    def submit(self, frame):
+        i = self.n
+        self.n += 1
+        if i == self.fail_submit_at:
+            raise RuntimeError("device lost")
+        self.log.append(("submit", i))
+        parent = self
+
+        class Pending:
+            def result(self_inner):
+                parent.log.append(("result", i))
+                if i == parent.fail_result_at:
+                    raise RuntimeError("kernel failed")
+                return 255 - frame
+
+        return Pending()
+
+
+def pipeline_threads() -> list[threading.Thread]:
+    return [t for t in threading.enumerate() if t.name.startswith("mlaa-stream-")]
+
+
+@pytest.fixture(autouse=True)
+def no_threads_left():
+    assert pipeline_threads() == []
+    yield
+    deadline = time.time() + 2
+    while pipeline_threads() and time.time() < deadline:
+        time.sleep(0.01)
+    assert pipeline_threads() == [], "a pipeline thread is still running"
+
+
+def test_frames_come_out_in_order_and_filtered():
+    src = frames(25)
+    out: list[Item] = []
+    n = run_pipeline(src, HostFilter(), out.append, queue_size=2)
+    assert n == 25
+    assert [it.index for it in out] == list(range(25))
+    for a, it in zip(src, out):
+        np.testing.assert_array_equal(it.frame, 255 - a)
+
+
+def test_slow_reader_and_writer_keep_order():
+    rng = np.random.default_rng(3)
+    delays = rng.uniform(0, 0.004, 40)
+
+    def slow_source():
+        for i, f in enumerate(frames(20, seed=4)):
+            time.sleep(delays[i])
+            yield f
+
+    got = []
+
+    def sink(item):
+        time.sleep(delays[20 + item.index])
+        got.append(int(item.frame[0, 0, 0]))
+
+    run_pipeline(slow_source(), HostFilter(), sink)
+    assert got == [255 - int(f[0, 0, 0]) for f in frames(20, seed=4)]
+
+
+@pytest.mark.parametrize("in_flight", [1, 2, 3])
+def test_in_flight_frames_are_submitted_before_the_oldest_result(in_flight):
+    f = HostFilter()
+    run_pipeline(frames(8), f, lambda item: None, in_flight=in_flight)
+    submits = [i for op, i in f.log if op == "submit"]
+    results = [i for op, i in f.log if op == "result"]
+    assert submits == results == list(range(8))
+    for i in range(8):
+        # with k frames in flight, frame i's result is taken after frame i+k-1 was submitted
+        last_submitted = f.log.index(("submit", min(i + in_flight - 1, 7)))
+        assert last_submitted < f.log.index(("result", i))
+        if in_flight == 1:
+            assert f.log.index(("result", i)) < f.log.index(("submit", min(i + 1, 7))) or i == 7
+
+
+def test_meta_travels_with_each_frame_and_hooks_run_in_order():
+    src = [Item(fr, meta=f"file{i}") for i, fr in enumerate(frames(5))]
+    calls = []
+
+    def temporal(frame_in, filtered, index):
+        calls.append(("temporal", index))
+        np.testing.assert_array_equal(frame_in, src[index].frame)
+        np.testing.assert_array_equal(filtered, 255 - src[index].frame)
+        return filtered // 2
+
+    def overlay(frame, index):
+        calls.append(("post", index))
+        return frame + 1
+
+    out = []
+    run_pipeline(src, HostFilter(), out.append, temporal=temporal, post_hooks=[overlay])
+    assert [it.meta for it in out] == [f"file{i}" for i in range(5)]
+    assert calls == [(s, i) for i in range(5) for s in ("temporal", "post")]
+    np.testing.assert_array_equal(out[2].frame, (255 - src[2].frame) // 2 + 1)
+
+
+def failing_source(n_ok: int):
+    for f in frames(n_ok):
+        yield f
+    raise ValueError("corrupt packet")
+
+
+def test_read_error_writes_the_frames_before_it_then_names_the_frame():
+    out = []
+    with pytest.raises(PipelineError) as ei:
+        run_pipeline(failing_source(6), HostFilter(), out.append)
+    assert ei.value.stage == "read" and ei.value.index == 6
+    assert "read failed at frame 6: corrupt packet" in str(ei.value)
+    assert [it.index for it in out] == list(range(6))
+
+
+@pytest.mark.parametrize("where,stage", [("submit", "filter"), ("result", "filter"),
+                                         ("temporal", "temporal"), ("post", "post"),
+                                         ("write", "write")])
+def test_an_error_in_any_stage_stops_all_and_names_the_frame(where, stage):
+    bad = 4
+    f = HostFilter(fail_submit_at=bad if where == "submit" else None,
+                   fail_result_at=bad if where == "result" else None)
+
+    def temporal(a, b, i):
+        if where == "temporal" and i == bad:
+            raise ArithmeticError("flow diverged")
+        return b
+
+    def post(fr, i):
+        if where == "post" and i == bad:
+            raise KeyError("bad overlay")
+        return fr
+
+    written = []
+
+    def sink(item):
+        if where == "write" and item.index == bad:
+            raise OSError(28, "No space left on device")
+        written.append(item.index)
+
+    read = []
+
+    def endless():  # a reader that would never stop by itself
+        i = 0
+        while True:
+            read.append(i)
+            yield frames(1, seed=i)[0]
+            i += 1
+
+    with pytest.raises(PipelineError) as ei:
+        run_pipeline(endless(), f, sink, temporal=temporal, post_hooks=[post])
+    assert ei.value.stage == stage and ei.value.index == bad
+    assert f"frame {bad}" in str(ei.value)
+    assert written == list(range(bad))  # frames before the failure are complete
+    assert len(read) < 40  # the reader was stopped, bounded by the queues
+
+
+def test_keyboard_interrupt_stops_every_stage():
+    written = []
+
+    def sink(item):
+        written.append(item.index)
+        if item.index == 3:
+            _thread.interrupt_main()  # what Ctrl-C does: KeyboardInterrupt in the main thread
+        time.sleep(0.01)
+
+    def endless():
+        i = 0
+        while True:
+            yield frames(1, seed=i)[0]
+            i += 1
+
+    with pytest.raises(KeyboardInterrupt):
+        run_pipeline(endless(), HostFilter(), sink)
+    assert written[:4] == [0, 1, 2, 3]
+
+
+def test_leaving_stream_items_early_stops_the_reader_and_closes_the_source():
+    state = {"closed": False}
+
+    def source():
+        try:
+            i = 0
+            while True:
+                yield frames(1, seed=i)[0]
+                i += 1
+        finally:
+            state["closed"] = True
+
+    gen = stream_items(source(), HostFilter())
+    for item in gen:
+        if item.index == 5:
+            break
+    gen.close()
+    assert state["closed"]
+
+
+def test_stage_times_count_frames_and_report_every_stage():
+    times = StageTimes()
+    run_pipeline(frames(7), HostFilter(), lambda item: None, times=times)
+    assert times.frames == 7
+    report = times.report()
+    for name in ("read", "device wait", "temporal", "post hooks", "write", "fps"):
+        assert name in report
+
+
+def test_in_flight_below_one_is_refused():
+    with pytest.raises(ValueError, match="expected in_flight >= 1, got 0"):
+        list(stream_items(frames(2), HostFilter(), in_flight=0))
+
+
+def test_real_filter_through_the_pipeline_matches_process():
+    from mlaa_stream.mlaa import Filter
+
+    rng = np.random.default_rng(11)
+    y, x = np.mgrid[0:36, 0:40]
+    src = []
+    for k in range(6):  # aliased half-planes of slope 1/3 to 1/8: staircases the filter smooths
+        colours = rng.integers(0, 255, (2, 3), dtype=np.uint8)
+        src.append(np.where((y > x / (3 + k) + 10)[:, :, None], colours[0], colours[1]).astype(np.uint8))
+    with Filter() as f:
+        expected = [f.process(x) for x in src]
+        for in_flight in (1, 2):
+            out = []
+            run_pipeline(src, f, out.append, in_flight=in_flight)
+            for e, it in zip(expected, out):
+                np.testing.assert_array_equal(it.frame, e)
+    assert all(not np.array_equal(e, x) for e, x in zip(expected, src))
