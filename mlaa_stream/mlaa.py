@@ -23,9 +23,11 @@ from .formats import FrameFormat, defines_for, frame_format
 METRICS = {"lab": 0, "luma": 1, "rgb": 2}
 # Default discontinuity thresholds per metric: ΔE76 for lab, fraction of full scale for the others.
 DEFAULT_THRESHOLDS = {"lab": 8.0, "luma": 0.06, "rgb": 0.06}
-# ΔE76 <= LAB_LIPSCHITZ * max-channel sRGB difference over the whole cube (numerically 573, +10%):
-# pixels closer than threshold / LAB_LIPSCHITZ in every channel skip the CIELAB conversion.
-LAB_LIPSCHITZ = 630.0
+# ΔE76 <= LAB_LIPSCHITZ * max-channel sRGB difference anywhere in the cube: the largest
+# infinity-to-2 norm of the sRGB->CIELAB Jacobian (493 on a 129^3 grid), +5%. The cube is convex,
+# so the bound holds for finite differences too: pixels closer than threshold / LAB_LIPSCHITZ in
+# every channel cannot be an edge and skip the CIELAB conversion.
+LAB_LIPSCHITZ = 520.0
 AREA_TABLE_L = 64
 SEGMENT = 64  # pixels of a row per work item in the per-pixel passes (kernels/common.cl)
 

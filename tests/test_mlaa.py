@@ -254,3 +254,13 @@ def test_display_space_blending_matches_reference():
         got = f.process(img)
     want = mlaa_reference(img, linear=False)
     assert np.abs(got.astype(int) - want).max() <= 1
+
+
+def test_cheap_rgb_bound_never_hides_a_lab_edge():
+    """The early exit of edges.cl: ΔE76 <= LAB_LIPSCHITZ * max channel difference, on random pairs."""
+    from mlaa_stream.mlaa import LAB_LIPSCHITZ
+    rng = np.random.default_rng(8)
+    a = rng.random((200000, 3))
+    b = np.clip(a + (rng.random((200000, 3)) - 0.5) * rng.choice([0.002, 0.02, 0.1], (200000, 1)), 0, 1)
+    de = np.linalg.norm(rgb_to_lab(a) - rgb_to_lab(b), axis=-1)
+    assert (de <= LAB_LIPSCHITZ * np.abs(a - b).max(-1) + 1e-9).all()
