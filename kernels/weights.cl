@@ -25,6 +25,9 @@
 #ifndef BLEND_U
 #define BLEND_U 1
 #endif
+#ifndef VALIDATE_CROSSINGS
+#define VALIDATE_CROSSINGS 1
+#endif
 
 inline float trapezoid_area(__global const float *table, int p, int L)
 {
@@ -68,12 +71,31 @@ inline void line_areas(__global const float *table, int d0, int d1, int s0, int 
     if (s1 != 0) { float a = k1 * trapezoid_area(table, d1, L); if (s1 > 0) *ta += a; else *tb += a; }
 }
 
+// A crossing edge turns the silhouette only if the pixel beyond it belongs to the other side: for
+// a crossing on side a, the pixel past it (pa) is closer in colour to the line's side-b pixel B
+// than to its side-a pixel A (and the reverse for side b). Texture next to a straight border
+// (a photograph under a frame) crosses the border without turning it and must not bend it.
+inline float dist2(float4 p, float4 q) { float3 d = p.xyz - q.xyz; return dot(d, d); }
+
+inline int end_type(__global const PIXEL_T *src, int a, int b, int a2, int b2,
+                    int pa, int pb, int iA, int iB, int *long_edge)
+{
+#if VALIDATE_CROSSINGS
+    if (a || b) {
+        float4 A = load_px(src, iA), B = load_px(src, iB);
+        if (a) { float4 p = load_px(src, pa); a = dist2(p, B) < dist2(p, A); }
+        if (b) { float4 p = load_px(src, pb); b = dist2(p, A) < dist2(p, B); }
+    }
+#endif
+    return crossing(a, b, a2, b2, long_edge);
+}
+
 inline int has(__global const uchar *edges, int x, int y, int width, int height, uchar bit)
 {
     return x >= 0 && y >= 0 && x < width && y < height && (edges[IDX(x, y, width)] & bit);
 }
 
-inline void pixel_weights(__global const uchar *edges, __global const ushort2 *hdist,
+inline void pixel_weights(__global const PIXEL_T *src, __global const uchar *edges, __global const ushort2 *hdist,
                           __global const ushort2 *vdist, __global const float *table,
                           __global ushort *weights, int x, int y, int width, int height)
 {
@@ -85,28 +107,36 @@ inline void pixel_weights(__global const uchar *edges, __global const ushort2 *h
         ushort2 d = hdist[i];
         int x0 = x - d.x, x1 = x + d.y;
         int k0, k1;
-        int s0 = crossing(has(edges, x0 - 1, y, width, height, EDGE_RIGHT),
+        int s0 = end_type(src, has(edges, x0 - 1, y, width, height, EDGE_RIGHT),
                           has(edges, x0 - 1, y + 1, width, height, EDGE_RIGHT),
                           has(edges, x0 - 1, y - 1, width, height, EDGE_RIGHT),
-                          has(edges, x0 - 1, y + 2, width, height, EDGE_RIGHT), &k0);
-        int s1 = crossing(has(edges, x1, y, width, height, EDGE_RIGHT),
+                          has(edges, x0 - 1, y + 2, width, height, EDGE_RIGHT),
+                          IDX(x0 - 1, y, width), IDX(x0 - 1, y + 1, width),
+                          IDX(x0, y, width), IDX(x0, y + 1, width), &k0);
+        int s1 = end_type(src, has(edges, x1, y, width, height, EDGE_RIGHT),
                           has(edges, x1, y + 1, width, height, EDGE_RIGHT),
                           has(edges, x1, y - 1, width, height, EDGE_RIGHT),
-                          has(edges, x1, y + 2, width, height, EDGE_RIGHT), &k1);
+                          has(edges, x1, y + 2, width, height, EDGE_RIGHT),
+                          IDX(x1 + 1, y, width), IDX(x1 + 1, y + 1, width),
+                          IDX(x1, y, width), IDX(x1, y + 1, width), &k1);
         line_areas(table, d.x, d.y, s0, s1, k0, k1, &up, &down);
     }
     if (e & EDGE_RIGHT) {    // vertical line between columns x and x+1, ends at y0 and y1
         ushort2 d = vdist[i];
         int y0 = y - d.x, y1 = y + d.y;
         int k0, k1;
-        int s0 = crossing(has(edges, x, y0 - 1, width, height, EDGE_BOTTOM),
+        int s0 = end_type(src, has(edges, x, y0 - 1, width, height, EDGE_BOTTOM),
                           has(edges, x + 1, y0 - 1, width, height, EDGE_BOTTOM),
                           has(edges, x - 1, y0 - 1, width, height, EDGE_BOTTOM),
-                          has(edges, x + 2, y0 - 1, width, height, EDGE_BOTTOM), &k0);
-        int s1 = crossing(has(edges, x, y1, width, height, EDGE_BOTTOM),
+                          has(edges, x + 2, y0 - 1, width, height, EDGE_BOTTOM),
+                          IDX(x, y0 - 1, width), IDX(x + 1, y0 - 1, width),
+                          IDX(x, y0, width), IDX(x + 1, y0, width), &k0);
+        int s1 = end_type(src, has(edges, x, y1, width, height, EDGE_BOTTOM),
                           has(edges, x + 1, y1, width, height, EDGE_BOTTOM),
                           has(edges, x - 1, y1, width, height, EDGE_BOTTOM),
-                          has(edges, x + 2, y1, width, height, EDGE_BOTTOM), &k1);
+                          has(edges, x + 2, y1, width, height, EDGE_BOTTOM),
+                          IDX(x, y1 + 1, width), IDX(x + 1, y1 + 1, width),
+                          IDX(x, y1, width), IDX(x + 1, y1, width), &k1);
         line_areas(table, d.x, d.y, s0, s1, k0, k1, &left, &right);
     }
     __global ushort *w = weights + (size_t)i * 4;   // (top, bottom, left, right)
@@ -120,7 +150,7 @@ inline void pixel_weights(__global const uchar *edges, __global const ushort2 *h
     }
 }
 
-__kernel void blend_weights(__global const uchar *edges, __global const ushort2 *hdist,
+__kernel void blend_weights(__global const PIXEL_T *src, __global const uchar *edges, __global const ushort2 *hdist,
                             __global const ushort2 *vdist, __global const float *table,
                             __global ushort *weights, const int width, const int height)
 {
@@ -129,7 +159,7 @@ __kernel void blend_weights(__global const uchar *edges, __global const ushort2 
     const int x1 = min(x0 + SEGMENT, width);
     for (int x = x0; x < x1;) {
         if (x + GROUP <= x1 && edge_group(edges + IDX(x, y, width)) == 0) { x += GROUP; continue; }
-        pixel_weights(edges, hdist, vdist, table, weights, x, y, width, height);
+        pixel_weights(src, edges, hdist, vdist, table, weights, x, y, width, height);
         ++x;
     }
 }

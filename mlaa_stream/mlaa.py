@@ -211,7 +211,7 @@ class Filter:
                                 np.float32(self.options.threshold), wait_for=after)
         e_h = self._k_hdist(q, (max(h - 1, 1),), None, bufs.edges, bufs.hdist, W, H, wait_for=[e_edges])
         e_v = self._k_vdist(q, (max(w - 1, 1),), None, bufs.edges, bufs.vdist, W, H, wait_for=[e_edges])
-        e_w = self._k_weights(q, g2, None, bufs.edges, bufs.hdist, bufs.vdist, self._table,
+        e_w = self._k_weights(q, g2, None, src, bufs.edges, bufs.hdist, bufs.vdist, self._table,
                               bufs.weights, W, H, wait_for=[e_h, e_v])
         e_copy = cl.enqueue_copy(q, dst, src, byte_count=bufs.fmt.nbytes, wait_for=after)
         return self._k_blend(q, g2, None, src, bufs.edges, bufs.weights, self._luts, dst, W, H,

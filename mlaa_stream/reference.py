@@ -107,10 +107,20 @@ def distances_reference(edges: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def weights_reference(edges: np.ndarray, hdist: np.ndarray, vdist: np.ndarray,
-                      rounding: float = 0.0, blend_u: bool = True) -> np.ndarray:
-    """(top, bottom, left, right) fractions each pixel takes from its neighbours (seed 000 eq. 2)."""
+                      rounding: float = 0.0, blend_u: bool = True,
+                      frame: np.ndarray | None = None) -> np.ndarray:
+    """(top, bottom, left, right) fractions each pixel takes from its neighbours (seed 000 eq. 2).
+    With `frame`, a crossing edge counts only if the pixel beyond it has the other side's colour."""
     h, w = edges.shape
     out = np.zeros((h, w, 4))
+    rgb = None if frame is None else normalised_rgb(frame)[0]
+
+    def turns(beyond: tuple[int, int], towards: tuple[int, int], away: tuple[int, int]) -> bool:
+        """Is the pixel at `beyond` (y, x) closer in colour to `towards` than to `away`?"""
+        if rgb is None:
+            return True
+        p = rgb[beyond]
+        return float(((p - rgb[towards]) ** 2).sum()) < float(((p - rgb[away]) ** 2).sum())
 
     def has(x: int, y: int, bit: int) -> bool:
         return 0 <= x < w and 0 <= y < h and bool(edges[y, x] & bit)
@@ -146,20 +156,24 @@ def weights_reference(edges: np.ndarray, hdist: np.ndarray, vdist: np.ndarray,
             if edges[y, x] & BOTTOM:
                 dl, dr = hdist[y, x]
                 x0, x1 = x - dl, x + dr
-                s0, k0 = crossing(has(x0 - 1, y, RIGHT), has(x0 - 1, y + 1, RIGHT),
-                                  has(x0 - 1, y - 1, RIGHT), has(x0 - 1, y + 2, RIGHT))
-                s1, k1 = crossing(has(x1, y, RIGHT), has(x1, y + 1, RIGHT),
-                                  has(x1, y - 1, RIGHT), has(x1, y + 2, RIGHT))
+                a0 = has(x0 - 1, y, RIGHT) and turns((y, x0 - 1), (y + 1, x0), (y, x0))
+                b0 = has(x0 - 1, y + 1, RIGHT) and turns((y + 1, x0 - 1), (y, x0), (y + 1, x0))
+                a1 = has(x1, y, RIGHT) and turns((y, x1 + 1), (y + 1, x1), (y, x1))
+                b1 = has(x1, y + 1, RIGHT) and turns((y + 1, x1 + 1), (y, x1), (y + 1, x1))
+                s0, k0 = crossing(a0, b0, has(x0 - 1, y - 1, RIGHT), has(x0 - 1, y + 2, RIGHT))
+                s1, k1 = crossing(a1, b1, has(x1, y - 1, RIGHT), has(x1, y + 2, RIGHT))
                 up, down = areas(dl, dr, s0, k0, s1, k1)
                 out[y, x, 1] = up
                 out[y + 1, x, 0] = down
             if edges[y, x] & RIGHT:
                 du, dd = vdist[y, x]
                 y0, y1 = y - du, y + dd
-                s0, k0 = crossing(has(x, y0 - 1, BOTTOM), has(x + 1, y0 - 1, BOTTOM),
-                                  has(x - 1, y0 - 1, BOTTOM), has(x + 2, y0 - 1, BOTTOM))
-                s1, k1 = crossing(has(x, y1, BOTTOM), has(x + 1, y1, BOTTOM),
-                                  has(x - 1, y1, BOTTOM), has(x + 2, y1, BOTTOM))
+                a0 = has(x, y0 - 1, BOTTOM) and turns((y0 - 1, x), (y0, x + 1), (y0, x))
+                b0 = has(x + 1, y0 - 1, BOTTOM) and turns((y0 - 1, x + 1), (y0, x), (y0, x + 1))
+                a1 = has(x, y1, BOTTOM) and turns((y1 + 1, x), (y1, x + 1), (y1, x))
+                b1 = has(x + 1, y1, BOTTOM) and turns((y1 + 1, x + 1), (y1, x), (y1, x + 1))
+                s0, k0 = crossing(a0, b0, has(x - 1, y0 - 1, BOTTOM), has(x + 2, y0 - 1, BOTTOM))
+                s1, k1 = crossing(a1, b1, has(x - 1, y1, BOTTOM), has(x + 2, y1, BOTTOM))
                 left, right = areas(du, dd, s0, k0, s1, k1)
                 out[y, x, 3] = left
                 out[y, x + 1, 2] = right
@@ -202,5 +216,5 @@ def mlaa_reference(frame: np.ndarray, threshold: float | None = None, metric: st
     """The whole spatial filter, pass after pass."""
     e = edges_reference(frame, threshold, metric, bgr, linear_input, ramp)
     hd, vd = distances_reference(e)
-    wts = weights_reference(e, hd, vd, rounding, blend_u)
+    wts = weights_reference(e, hd, vd, rounding, blend_u, frame)
     return blend_reference(frame, wts, linear, linear_input, bgr)

@@ -86,7 +86,7 @@ def test_distances_and_weights_match_reference(filt, seed):
     b, rt = (e & 1) > 0, (e & 2) > 0
     np.testing.assert_array_equal(r["hdist"][b], hd[b])
     np.testing.assert_array_equal(r["vdist"][rt], vd[rt])
-    want = weights_reference(e, hd, vd)
+    want = weights_reference(e, hd, vd, frame=img)
     got = r["weights"] / 65535.0
     valid = np.zeros_like(want, dtype=bool)  # slots the kernel writes: next to an existing edge
     valid[1:, :, 0] = b[:-1]
