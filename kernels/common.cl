@@ -56,12 +56,16 @@ inline float4 load_px(__global const PIXEL_T *img, int i)
 #endif
 }
 
+// PoCL calls built-ins such as clamp/min/rint as out-of-line functions (rint in software), so the
+// hot helpers here use plain expressions.
 inline PIXEL_T to_pixel(float v)
 {
 #ifdef PIXEL_IS_FLOAT
     return v;
 #else
-    return (PIXEL_T)clamp(rint(v * PIXEL_MAX), 0.0f, PIXEL_MAX);
+    float t = v * PIXEL_MAX + 0.5f;
+    t = t < 0.0f ? 0.0f : (t > PIXEL_MAX ? PIXEL_MAX : t);
+    return (PIXEL_T)t;   // truncation of t + 0.5: round half up
 #endif
 }
 
@@ -100,10 +104,12 @@ inline void store_px(__global PIXEL_T *img, int i, float4 c)
 // LUT_SIZE+1 samples each, read with linear interpolation. PoCL's cbrt/pow are slow (see DESIGN.md).
 inline float lut_read(__global const float *lut, float x)
 {
-    float t = clamp(x, 0.0f, 1.0f) * (float)LUT_SIZE;
-    int i = min((int)t, LUT_SIZE - 1);
-    float f = t - (float)i;
-    return mad(f, lut[i + 1] - lut[i], lut[i]);
+    float t = x * (float)LUT_SIZE;
+    t = t < 0.0f ? 0.0f : (t > (float)LUT_SIZE ? (float)LUT_SIZE : t);
+    int i = (int)t;
+    i = i > LUT_SIZE - 1 ? LUT_SIZE - 1 : i;
+    float f = t - (float)i, a = lut[i];
+    return a + f * (lut[i + 1] - a);
 }
 
 inline float srgb_to_linear(__global const float *luts, float v) { return lut_read(luts, v); }

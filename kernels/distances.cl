@@ -8,7 +8,11 @@
 #define EDGE_BOTTOM 1
 #define EDGE_RIGHT 2
 
-// Row y: horizontal lines between row y and row y+1.
+#define BOTTOM_BITS 0x0101010101010101UL   // EDGE_BOTTOM in each of 8 edge bytes
+#define RIGHT_BITS 0x0202020202020202UL    // EDGE_RIGHT in each of 8 edge bytes
+
+// Row y: horizontal lines between row y and row y+1. Stretches of 8 pixels with no bottom edge
+// and no line open are skipped at once.
 __kernel void hline_distances(__global const uchar *edges, __global ushort2 *hdist,
                               const int width, const int height)
 {
@@ -18,7 +22,8 @@ __kernel void hline_distances(__global const uchar *edges, __global ushort2 *hdi
     __global const uchar *below = row + width;
     __global ushort2 *out = hdist + (size_t)y * width;
     int start = -1;
-    for (int x = 0; x <= width; ++x) {
+    for (int x = 0; x <= width;) {
+        if (start < 0 && x + GROUP <= width && !(edge_group(row + x) & BOTTOM_BITS)) { x += GROUP; continue; }
         int on = x < width && (row[x] & EDGE_BOTTOM);
         // an edge crossing the line between x-1 and x splits it
         int crossed = x > 0 && x < width && ((row[x - 1] | below[x - 1]) & EDGE_RIGHT);
@@ -27,25 +32,40 @@ __kernel void hline_distances(__global const uchar *edges, __global ushort2 *hdi
             start = -1;
         }
         if (on && start < 0) start = x;
+        ++x;
     }
 }
 
-// Column x: vertical lines between column x and column x+1.
+// Columns x0 .. x0+SEGMENT-1: vertical lines between column x and x+1. The work item sweeps down
+// its columns row by row (memory order), keeping each column's open line; groups of 8 columns with
+// no right edge in this row and no open line are skipped at once.
 __kernel void vline_distances(__global const uchar *edges, __global ushort2 *vdist,
                               const int width, const int height)
 {
-    const int x = get_global_id(0);
-    if (x >= width - 1) return;
-    int start = -1;
+    const int x0 = get_global_id(0) * SEGMENT;
+    const int x1 = x0 + SEGMENT < width - 1 ? x0 + SEGMENT : width - 1;
+    if (x0 >= x1) return;
+    int start[SEGMENT];
+    int open_in_group[SEGMENT / GROUP];
+    for (int k = 0; k < SEGMENT; ++k) start[k] = -1;
+    for (int g = 0; g < SEGMENT / GROUP; ++g) open_in_group[g] = 0;
     for (int y = 0; y <= height; ++y) {
-        size_t i = (size_t)y * width + x;
-        int on = y < height && (edges[i] & EDGE_RIGHT);
-        int crossed = y > 0 && y < height && ((edges[i - width] | edges[i - width + 1]) & EDGE_BOTTOM);
-        if (start >= 0 && (!on || crossed)) {
-            for (int k = start; k < y; ++k)
-                vdist[(size_t)k * width + x] = (ushort2)((ushort)(k - start), (ushort)(y - 1 - k));
-            start = -1;
+        for (int x = x0; x < x1;) {
+            const int k = x - x0;
+            const size_t i = (size_t)y * width + x;
+            if ((k & (GROUP - 1)) == 0 && x + GROUP <= x1 && !open_in_group[k / GROUP]
+                && (y == height || !(edge_group(edges + i) & RIGHT_BITS))) { x += GROUP; continue; }
+            int on = y < height && (edges[i] & EDGE_RIGHT);
+            int crossed = y > 0 && y < height && ((edges[i - width] | edges[i - width + 1]) & EDGE_BOTTOM);
+            int s = start[k];
+            if (s >= 0 && (!on || crossed)) {
+                for (int j = s; j < y; ++j)
+                    vdist[(size_t)j * width + x] = (ushort2)((ushort)(j - s), (ushort)(y - 1 - j));
+                start[k] = -1;
+                open_in_group[k / GROUP]--;
+            }
+            if (on && start[k] < 0) { start[k] = y; open_in_group[k / GROUP]++; }
+            ++x;
         }
-        if (on && start < 0) start = y;
     }
 }

@@ -33,7 +33,14 @@ inline float4 to_encoded(__global const float *luts, float4 c)
 #endif
 }
 
-inline float max3(float4 d) { return fmax(fmax(d.x, d.y), d.z); }
+// PoCL calls built-ins (fabs, fmax, dot, ...) out of line: plain expressions in the hot path.
+inline float absf(float v) { return v < 0.0f ? -v : v; }
+inline float max_abs3(float4 d)
+{
+    float x = absf(d.x), y = absf(d.y), z = absf(d.z);
+    float m = x > y ? x : y;
+    return m > z ? m : z;
+}
 
 // A pixel's colour as the metric sees it: CIELAB for METRIC 0 (computed only when a cheap test
 // needs it: `has_lab`), the encoded RGB otherwise.
@@ -48,20 +55,30 @@ inline Colour colour_at(__global const PIXEL_T *src, __global const float *luts,
     return c;
 }
 
-// Does colour a differ from colour b? Lab values are computed once and kept in the Colour.
+// Could colours a and b differ by the metric? A cheap necessary test, before the ramp test and
+// before any CIELAB conversion.
+inline int may_differ(Colour *a, Colour *b, float threshold)
+{
+    float4 d = a->rgb - b->rgb;
+#if METRIC == 0
+    return max_abs3(d) >= CHEAP_BOUND;            // below it ΔE cannot reach the threshold
+#elif METRIC == 1
+    return absf(0.2126f * d.x + 0.7152f * d.y + 0.0722f * d.z) > threshold;
+#else
+    return 0.2126f * absf(d.x) + 0.7152f * absf(d.y) + 0.0722f * absf(d.z) > threshold;
+#endif
+}
+
+// Do colours a and b differ (given may_differ)? Lab values are computed once and kept in the Colour.
 inline int differs(__global const float *luts, Colour *a, Colour *b, float threshold)
 {
-    float4 d = fabs(a->rgb - b->rgb);
 #if METRIC == 0
-    if (max3(d) < CHEAP_BOUND) return 0;          // cannot reach the ΔE threshold
     if (!a->has_lab) { a->lab = rgb_to_lab(luts, a->rgb); a->has_lab = 1; }
     if (!b->has_lab) { b->lab = rgb_to_lab(luts, b->rgb); b->has_lab = 1; }
     float3 dl = a->lab - b->lab;
-    return dot(dl, dl) > threshold * threshold;   // ΔE76 = Euclidean distance in CIELAB
-#elif METRIC == 1
-    return fabs(dot(a->rgb.xyz - b->rgb.xyz, (float3)(0.2126f, 0.7152f, 0.0722f))) > threshold;
+    return dl.x * dl.x + dl.y * dl.y + dl.z * dl.z > threshold * threshold;  // ΔE76
 #else
-    return dot(d.xyz, (float3)(0.2126f, 0.7152f, 0.0722f)) > threshold;
+    return 1;
 #endif
 }
 
@@ -74,12 +91,13 @@ inline int is_ramp(float4 before, int has_before, float4 p, float4 q, float4 aft
 {
 #if RAMP_TEST
     float4 d = q - p;
-    float4 ad = fabs(d);
-    float d1 = ad.x >= ad.y && ad.x >= ad.z ? d.x : (ad.y >= ad.z ? d.y : d.z);
-    float d0 = ad.x >= ad.y && ad.x >= ad.z ? p.x - before.x : (ad.y >= ad.z ? p.y - before.y : p.z - before.z);
-    float d2 = ad.x >= ad.y && ad.x >= ad.z ? after.x - q.x : (ad.y >= ad.z ? after.y - q.y : after.z - q.z);
-    float lim = RAMP * fabs(d1);
-    return (has_before && d0 * d1 > 0.0f && fabs(d0) > lim) || (has_after && d2 * d1 > 0.0f && fabs(d2) > lim);
+    float ax = absf(d.x), ay = absf(d.y), az = absf(d.z);
+    int kx = ax >= ay && ax >= az, ky = !kx && ay >= az;
+    float d1 = kx ? d.x : (ky ? d.y : d.z);
+    float d0 = kx ? p.x - before.x : (ky ? p.y - before.y : p.z - before.z);
+    float d2 = kx ? after.x - q.x : (ky ? after.y - q.y : after.z - q.z);
+    float lim = RAMP * absf(d1);
+    return (has_before && d0 * d1 > 0.0f && absf(d0) > lim) || (has_after && d2 * d1 > 0.0f && absf(d2) > lim);
 #else
     return 0;
 #endif
@@ -117,16 +135,18 @@ __kernel void detect_edges(__global const PIXEL_T *src, __global const float *lu
         uchar e = 0;
         if (y + 1 < height && !same_px(src, i, i + width)) {
             Colour b = colour_at(src, luts, i + width);
-            if (differs(luts, &c, &b, threshold)
+            if (may_differ(&c, &b, threshold)
                 && !is_ramp(y > 0 ? to_encoded(luts, load_px(src, i - width)) : c.rgb, y > 0, c.rgb, b.rgb,
-                            y + 2 < height ? to_encoded(luts, load_px(src, i + 2 * width)) : b.rgb, y + 2 < height))
+                            y + 2 < height ? to_encoded(luts, load_px(src, i + 2 * width)) : b.rgb, y + 2 < height)
+                && differs(luts, &c, &b, threshold))
                 e |= EDGE_BOTTOM;
         }
         if (x + 1 < width) {
             Colour r = colour_at(src, luts, i + 1);
-            if (!same_px(src, i, i + 1) && differs(luts, &c, &r, threshold)
+            if (!same_px(src, i, i + 1) && may_differ(&c, &r, threshold)
                 && !is_ramp(x > 0 ? to_encoded(luts, load_px(src, i - 1)) : c.rgb, x > 0, c.rgb, r.rgb,
-                            x + 2 < width ? to_encoded(luts, load_px(src, i + 2)) : r.rgb, x + 2 < width))
+                            x + 2 < width ? to_encoded(luts, load_px(src, i + 2)) : r.rgb, x + 2 < width)
+                && differs(luts, &c, &r, threshold))
                 e |= EDGE_RIGHT;
             c = r;
         }

@@ -75,7 +75,7 @@ inline void line_areas(__global const float *table, int d0, int d1, int s0, int 
 // a crossing on side a, the pixel past it (pa) is closer in colour to the line's side-b pixel B
 // than to its side-a pixel A (and the reverse for side b). Texture next to a straight border
 // (a photograph under a frame) crosses the border without turning it and must not bend it.
-inline float dist2(float4 p, float4 q) { float3 d = p.xyz - q.xyz; return dot(d, d); }
+inline float dist2(float4 p, float4 q) { float4 d = p - q; return d.x * d.x + d.y * d.y + d.z * d.z; }
 
 inline int end_type(__global const PIXEL_T *src, int a, int b, int a2, int b2,
                     int pa, int pb, int iA, int iB, int *long_edge)

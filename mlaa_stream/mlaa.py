@@ -200,22 +200,50 @@ class Filter:
             self.queue.flush()
         return PendingFrame(host_out, down, np.dtype(frame.dtype), frame.shape, keep=(staging,))
 
-    def _enqueue_passes(self, bufs: _FrameBuffers, src, dst, after: list):
+    def _enqueue_passes(self, bufs: _FrameBuffers, src, dst, after: list, queue=None,
+                        events: dict | None = None):
+        """Enqueue every pass of one frame after the events `after`; returns the last event.
+        `events`, when given, receives each pass's event (for profiling)."""
         w, h = bufs.fmt.width, bufs.fmt.height
         W, H = np.int32(w), np.int32(h)
-        q, g2 = self.queue, (-(-w // SEGMENT), h)  # one work item per SEGMENT pixels of a row
+        q, g2 = queue or self.queue, (-(-w // SEGMENT), h)  # one work item per SEGMENT pixels of a row
+        ev: dict = {} if events is None else events
         if self._reconstructor is not None:
-            ev = self._reconstructor.enqueue(q, src, self._recon_buf, self._luts, wait_for=after)
-            src, after = self._recon_buf, [ev]
-        e_edges = self._k_edges(q, g2, None, src, self._luts, bufs.edges, W, H,
-                                np.float32(self.options.threshold), wait_for=after)
-        e_h = self._k_hdist(q, (max(h - 1, 1),), None, bufs.edges, bufs.hdist, W, H, wait_for=[e_edges])
-        e_v = self._k_vdist(q, (max(w - 1, 1),), None, bufs.edges, bufs.vdist, W, H, wait_for=[e_edges])
-        e_w = self._k_weights(q, g2, None, src, bufs.edges, bufs.hdist, bufs.vdist, self._table,
-                              bufs.weights, W, H, wait_for=[e_h, e_v])
-        e_copy = cl.enqueue_copy(q, dst, src, byte_count=bufs.fmt.nbytes, wait_for=after)
-        return self._k_blend(q, g2, None, src, bufs.edges, bufs.weights, self._luts, dst, W, H,
-                             wait_for=[e_w, e_copy])
+            ev["reconstruct"] = self._reconstructor.enqueue(q, src, self._recon_buf, self._luts, wait_for=after)
+            src, after = self._recon_buf, [ev["reconstruct"]]
+        ev["edges"] = self._k_edges(q, g2, None, src, self._luts, bufs.edges, W, H,
+                                    np.float32(self.options.threshold), wait_for=after)
+        ev["hlines"] = self._k_hdist(q, (max(h - 1, 1),), None, bufs.edges, bufs.hdist, W, H,
+                                     wait_for=[ev["edges"]])
+        ev["vlines"] = self._k_vdist(q, (-(-w // SEGMENT),), None, bufs.edges, bufs.vdist, W, H,
+                                     wait_for=[ev["edges"]])
+        ev["weights"] = self._k_weights(q, g2, None, src, bufs.edges, bufs.hdist, bufs.vdist, self._table,
+                                        bufs.weights, W, H, wait_for=[ev["hlines"], ev["vlines"]])
+        ev["copy"] = cl.enqueue_copy(q, dst, src, byte_count=bufs.fmt.nbytes, wait_for=after)
+        ev["blend"] = self._k_blend(q, g2, None, src, bufs.edges, bufs.weights, self._luts, dst, W, H,
+                                    wait_for=[ev["weights"], ev["copy"]])
+        return ev["blend"]
+
+    def profile(self, frame: np.ndarray, runs: int = 20, warmup: int = 3) -> dict[str, float]:
+        """Median device milliseconds of each pass (and of upload/download) over `runs` frames,
+        serialised on a profiling queue: for the benchmark, never for unit tests."""
+        fmt = frame_format(frame, self.bgr)
+        self.finish()
+        bufs = self._prepare(fmt)
+        q = cl.CommandQueue(self.context.ctx, self.context.device,
+                            properties=cl.command_queue_properties.PROFILING_ENABLE)
+        host = np.ascontiguousarray(frame, dtype=fmt.dtype)
+        out = np.empty_like(host)
+        times: dict[str, list[float]] = {}
+        for k in range(warmup + runs):
+            ev = {"upload": cl.enqueue_copy(q, bufs.src[0], host)}
+            self._enqueue_passes(bufs, bufs.src[0], bufs.dst[0], [ev["upload"]], queue=q, events=ev)
+            ev["download"] = cl.enqueue_copy(q, out, bufs.dst[0])
+            q.finish()
+            if k >= warmup:
+                for name, e in ev.items():
+                    times.setdefault(name, []).append((e.profile.end - e.profile.start) * 1e-6)
+        return {name: float(np.median(v)) for name, v in times.items()}
 
     def process(self, frame: np.ndarray) -> np.ndarray:
         """Filter one frame and return it (same shape and dtype)."""
