@@ -1,10 +1,478 @@
-"""`mlaa-stream INPUT -o OUTPUT` -- placeholder, owned by the streaming work."""
+"""`mlaa-stream INPUT -o OUTPUT`: filter an image, a folder of images, a frame sequence or a video."""
+from __future__ import annotations
+
+import os
+import sys
+import tempfile
+
 import click
 
+from ..mlaa import PRESETS
+from .options import configure_logging, device_option, verbosity_options
 
-@click.command("filter")
-@click.argument("input_path")
-@click.option("-o", "--output", required=True)
-def filter_command(input_path, output):
-    """Filter an image, a folder of images or a video."""
-    raise click.ClickException("not implemented yet")
+EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_NO_DEVICE, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
+
+EPILOG = """\b
+Examples:
+  mlaa-stream shot.png -o clean.png                  one image (format from the name)
+  mlaa-stream renders/ -o clean/                     every image of a folder, same names
+  mlaa-stream 'shot/%04d.exr' --frames 1001-1100 -o clean/   a numbered sequence
+  mlaa-stream 'shot/%04d.exr' -o 'clean/%04d.exr' --resume  go on after an interruption
+  mlaa-stream in.mp4 -o out.mp4                      H.264, CRF 18, preset veryfast, audio copied
+  mlaa-stream in.mov -o mid.mkv --codec ffv1         lossless intermediate (also: libx264rgb --crf 0)
+  mlaa-stream in.mp4 -o out.mp4 --preset sharp --metric luma --threshold 0.08
+
+\b
+Images and sequences go through OpenImageIO: bit depth (8/16-bit, half, float), channels, alpha
+(passed through unchanged) and metadata are kept; palette PNGs come out as RGB(A). EXRs tagged
+linear (and untagged float images) are taken as linear light, others as sRGB-encoded. In a folder,
+files that are not images by their extension are skipped with a warning; a file that cannot be
+read or written is reported and the others are still processed. A sequence (%04d pattern) must keep
+one size, channel count and sample type; the first frame that differs stops it. Gaps in the
+numbering are reported. Every output is written under a temporary name beside it and renamed when
+complete: an existing output is complete, and --resume skips it.
+
+\b
+Video goes through PyAV (FFmpeg): frame rate, timestamps, resolution, colour tags and audio are
+kept; a source with more than 8 bits per sample stays 10/12/16-bit where the codec allows it. If
+the input is truncated or corrupt, the frames that decode are filtered and the output is kept as a
+valid shorter file; the exit code is 1 and the message says at which frame decoding stopped.
+
+\b
+Exit codes: 0 all done; 1 some inputs failed (the others were processed); 2 usage error
+(nothing done: bad option, missing input, output would overwrite); 3 no OpenCL device;
+130 interrupted (Ctrl-C; outputs in progress are removed).
+"""
+
+
+class Console:
+    """Messages on stderr, prefixed; warnings and details follow -q / -v."""
+
+    def __init__(self, verbose: int, quiet: bool):
+        self.verbose, self.quiet = verbose, quiet
+
+    def error(self, msg: str) -> None:
+        click.echo(f"mlaa-stream: error: {msg}", err=True)
+
+    def warn(self, msg: str) -> None:
+        if not self.quiet:
+            click.echo(f"mlaa-stream: warning: {msg}", err=True)
+
+    def info(self, msg: str) -> None:
+        if self.verbose and not self.quiet:
+            click.echo(f"mlaa-stream: {msg}", err=True)
+
+
+class Usage(Exception):
+    """Refused before doing anything (exit 2)."""
+
+
+class Failed(Exception):
+    """The input cannot be processed at all (exit 1)."""
+
+
+def _filter_kwargs(ctx: click.Context, preset: str | None, threshold, metric, display_space,
+                   reconstruct) -> dict:
+    """The preset's settings, overridden by options given on the command line."""
+    kwargs = dict(PRESETS.get(preset or "default", {}))
+    if threshold is not None:
+        kwargs["threshold"] = threshold
+    if metric is not None:
+        kwargs["metric"] = metric
+    if ctx.get_parameter_source("display_space") == click.core.ParameterSource.COMMANDLINE:
+        kwargs["linear"] = not display_space
+    if reconstruct is not None:
+        kwargs["reconstruct"] = reconstruct
+    return kwargs
+
+
+def _check_writable(folder: str) -> None:
+    """Create and remove a file in `folder`: the only test that holds for root, ACLs, read-only mounts."""
+    try:
+        with tempfile.NamedTemporaryFile(dir=folder, prefix=".mlaa-tmp-probe"):
+            pass
+    except OSError as exc:
+        raise OSError(exc.errno, f"{folder}: cannot write in this folder ({exc.strerror})") from exc
+
+
+def _load_post_hooks(overlay: str | None, device: str | None) -> list:
+    """The --overlay hook: our frames are RGB (decoded video, OpenImageIO), not cv2's BGR."""
+    if overlay is None:
+        return []
+    try:
+        from ..overlay import load_overlay
+    except ImportError as exc:
+        raise Usage(f"--overlay: this build has no overlay support ({exc})") from exc
+    try:
+        return [load_overlay(overlay, bgr=False, device=device)]
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise Usage(f"--overlay {overlay}: expected JSON/GeoJSON polylines, got: {exc}") from exc
+
+
+def _kind_of(path: str) -> str:
+    """'pattern', 'folder', 'video' or 'image' by name; an unknown extension is tried as both."""
+    from ..image_io import is_image_path
+    from ..sequence import is_pattern
+    from ..video_io import is_video_path
+
+    if is_pattern(path) and not os.path.exists(path):
+        return "pattern"
+    if not os.path.exists(path):
+        raise Usage(f"{path}: no such file or directory")
+    if os.path.isdir(path):
+        return "folder"
+    if is_video_path(path):
+        return "video"
+    if is_image_path(path):
+        return "image"
+    import OpenImageIO as oiio
+
+    inp = oiio.ImageInput.open(path)
+    if inp is not None:
+        inp.close()
+        return "image"
+    return "video"  # probe_video says so if it is not one either
+
+
+@click.command("filter", epilog=EPILOG, context_settings={"max_content_width": 100})
+@click.argument("input_path", metavar="INPUT")
+@click.option("-o", "--output", required=True, metavar="OUTPUT",
+              help="Output file, folder (same names as the inputs) or frame pattern (clean/%04d.png).")
+@click.option("--overwrite", is_flag=True, help="Replace outputs that exist (never an input).")
+@click.option("--resume", is_flag=True,
+              help="Skip inputs whose output exists already (folders and sequences).")
+@click.option("--frames", metavar="A-B", help="Frame numbers of a %04d pattern, e.g. 1001-1100 "
+              "(default: every number found; gaps are reported).")
+@click.option("--preset", type=click.Choice(sorted(PRESETS)), default=None,
+              help="Named filter settings; the options below override them.")
+@click.option("--threshold", type=click.FloatRange(min=0, min_open=True), default=None,
+              help="Edge threshold: CIELAB ΔE for --metric lab (default 8), a fraction of full "
+                   "scale for luma/rgb (default 0.06).")
+@click.option("--metric", type=click.Choice(["lab", "luma", "rgb"]), default=None,
+              help="Colour difference that finds edges (default: lab).")
+@click.option("--display-space", "display_space", is_flag=True,
+              help="Blend in display (sRGB-encoded) values instead of linear light.")
+@click.option("--reconstruct/--no-reconstruct", default=None,
+              help="Topological reconstruction of thin features before edge detection.")
+@click.option("--codec", default="libx264", show_default=True,
+              help="Video encoder: libx264, libx265, ffv1 / libx264rgb (lossless intermediates), "
+                   "prores_ks ...")
+@click.option("--crf", type=click.IntRange(0, 63), default=18, show_default=True,
+              help="Constant rate factor for x264/x265/VP9/AV1 (0 = lossless with libx264rgb).")
+@click.option("--encoder-preset", default="veryfast", show_default=True,
+              help="x264/x265 speed preset (ultrafast ... veryslow).")
+@click.option("--pix-fmt", default=None, help="Encoder pixel format (default: the closest to the source).")
+@click.option("--video-backend", type=click.Choice(["pyav", "opencv"]), default="pyav",
+              show_default=True, help="opencv: the fallback (8-bit, mp4v, no audio).")
+@click.option("--overlay", type=click.Path(dir_okay=False), default=None,
+              help="Draw antialiased polylines from a JSON/GeoJSON file on every frame.")
+@click.option("--in-flight", type=click.IntRange(1, 3), default=2, show_default=True,
+              help="Frames submitted to the device before the oldest is collected (1 = serialized).")
+@device_option
+@verbosity_options
+@click.pass_context
+def filter_command(ctx: click.Context, input_path: str, output: str, overwrite: bool, resume: bool,
+                   frames: str | None, preset: str | None, threshold: float | None,
+                   metric: str | None, display_space: bool, reconstruct: bool | None, codec: str,
+                   crf: int, encoder_preset: str, pix_fmt: str | None, video_backend: str,
+                   overlay: str | None, in_flight: int, device: str | None, verbose: int,
+                   quiet: bool) -> None:
+    """Remove jaggies from an image, a folder of images, a frame sequence or a video.
+
+    INPUT is an image, a folder (its images in name order), a printf frame pattern such as
+    'shot/%04d.exr', or a video. OUTPUT gets the same file names and formats.
+    """
+    configure_logging(verbose, quiet)
+    con = Console(verbose, quiet)
+    try:
+        code = _filter(ctx, con, input_path, output, overwrite=overwrite, resume=resume,
+                       frames=frames, preset=preset, threshold=threshold, metric=metric,
+                       display_space=display_space, reconstruct=reconstruct, codec=codec, crf=crf,
+                       encoder_preset=encoder_preset, pix_fmt=pix_fmt, video_backend=video_backend,
+                       overlay=overlay, in_flight=in_flight, device=device)
+    except KeyboardInterrupt:
+        con.error("interrupted; complete outputs are kept, the one in progress was removed")
+        code = EXIT_INTERRUPTED
+    sys.exit(code)
+
+
+def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, overwrite: bool,
+            resume: bool, frames: str | None, preset: str | None, threshold, metric, display_space,
+            reconstruct, codec: str, crf: int, encoder_preset: str, pix_fmt: str | None,
+            video_backend: str, overlay: str | None, in_flight: int, device: str | None) -> int:
+    """Check everything that can be checked without a device, then build the filter and run."""
+    if overwrite and resume:
+        con.error("--overwrite and --resume contradict each other: choose one")
+        return EXIT_USAGE
+    kwargs = _filter_kwargs(ctx, preset, threshold, metric, display_space, reconstruct)
+    try:
+        kind = _kind_of(input_path)
+        if frames is not None and kind != "pattern":
+            raise Usage(f"--frames needs a frame pattern like shot/%04d.exr, got {input_path}")
+        post_hooks = _load_post_hooks(overlay, device)
+        job = _VideoJob if kind == "video" else _ImageJob
+        runner = job(input_path, output, kind, con, overwrite=overwrite, resume=resume,
+                     frames=frames, codec=codec, crf=crf, encoder_preset=encoder_preset,
+                     pix_fmt=pix_fmt, video_backend=video_backend, filter_kwargs=kwargs)
+        runner.prepare()
+    except Usage as exc:
+        con.error(str(exc))
+        return EXIT_USAGE
+    except Failed as exc:
+        con.error(str(exc))
+        return EXIT_FAILED
+    except OSError as exc:
+        con.error(exc.strerror if exc.filename is None else f"{exc.filename}: {exc.strerror}")
+        return EXIT_FAILED
+    if runner.nothing_to_do():
+        con.info("nothing to do: every output exists")
+        return EXIT_FAILED if runner.failed_early else EXIT_OK
+
+    from ..device import DeviceError, KernelBuildError
+    from ..mlaa import Filter
+    from ..pipeline import StageTimes
+
+    try:
+        try:
+            filt = Filter(device, bgr=False, **kwargs)
+        except DeviceError as exc:
+            con.error(str(exc))
+            return EXIT_NO_DEVICE
+        except (ValueError, KernelBuildError) as exc:
+            con.error(str(exc))
+            return EXIT_USAGE if isinstance(exc, ValueError) else EXIT_FAILED
+        con.info(f"device: {filt.device_name}")
+        times = StageTimes()
+        with filt:
+            code = runner.run(filt, post_hooks, in_flight, times)
+    finally:
+        runner.abort()  # no-op after a commit; removes a video in progress on errors and Ctrl-C
+    if con.verbose and not con.quiet:
+        click.echo(times.report(), err=True)
+    if runner.failed_early and code == EXIT_OK:
+        code = EXIT_FAILED
+    return code
+
+
+class _Job:
+    def __init__(self, input_path: str, output: str, kind: str, con: Console, **opts):
+        self.input, self.output, self.kind, self.con, self.opts = input_path, output, kind, con, opts
+        self.written = 0
+        self.failed_early = False
+
+    def _progress(self, total: int | None):
+        from ..progress import Progress
+
+        return Progress(total, label=os.path.basename(self.input.rstrip("/")) or self.input,
+                        enabled=None if not self.con.quiet else False)
+
+
+class _ImageJob(_Job):
+    """An image, a folder of images or a numbered sequence."""
+
+    def prepare(self) -> None:
+        from ..sequence import (Report, expand_pattern, format_ranges, is_pattern, list_folder,
+                                parse_frames, plan_images, same_file)
+
+        o, con = self.opts, self.con
+        self.strict = self.kind == "pattern"
+        self.report = Report(say=con.error)
+        numbers = None
+        if self.kind == "image":
+            srcs = [self.input]
+        elif self.kind == "folder":
+            srcs, others = list_folder(self.input)
+            for path in others:
+                con.warn(f"{path}: skipped (not an image file by its extension)")
+            if same_file(self.input, self.output):
+                raise Usage(f"{self.output}: is the input folder; choose another output folder")
+            if not srcs:
+                raise Failed(f"{self.input}: expected image files, found none")
+        else:
+            rng = None
+            if o["frames"] is not None:
+                try:
+                    rng = parse_frames(o["frames"])
+                except ValueError as exc:
+                    raise Usage(str(exc)) from exc
+            found, missing = expand_pattern(self.input, rng)
+            if not found:
+                raise Usage(f"{self.input}: no files match this frame pattern"
+                            + (f" for frames {o['frames']}" if rng else ""))
+            if missing:
+                msg = f"{self.input}: missing frames {format_ranges(missing)}"
+                if rng is not None:
+                    self.report.fail(msg)  # frames asked for by --frames that are not there
+                    self.failed_early = True
+                else:
+                    con.warn(msg + " (gap in the numbering)")
+            numbers = [n for n, _ in found]
+            srcs = [p for _, p in found]
+        if self.kind != "image" and not is_pattern(self.output):
+            if os.path.exists(self.output) and not os.path.isdir(self.output):
+                raise Usage(f"{self.output}: expected a folder (or a %04d pattern) for "
+                            f"{'a folder' if self.kind == 'folder' else 'a sequence'}, got a file")
+            self.output = os.path.join(self.output, "")  # a folder, created below
+        self.plan = plan_images(srcs, self.output, numbers)
+        for ff in self.plan:
+            if same_file(ff.src, ff.dst):
+                raise Usage(f"{ff.dst}: output is the input {ff.src}; choose another output")
+        dst_dirs = sorted({os.path.dirname(os.path.abspath(ff.dst)) for ff in self.plan})
+        if self.kind != "image":
+            for d in dst_dirs:
+                try:
+                    os.makedirs(d, exist_ok=True)
+                except OSError as exc:
+                    raise OSError(exc.errno, f"cannot create the output folder ({exc.strerror})",
+                                  d) from exc
+        existing = [ff for ff in self.plan if os.path.exists(ff.dst)]
+        if existing and o["resume"]:
+            self.report.skipped.extend(ff.dst for ff in existing)
+            con.info(f"--resume: {len(existing)} outputs exist and are skipped")
+            self.plan = [ff for ff in self.plan if ff not in existing]
+        elif existing and not o["overwrite"]:
+            more = f" (and {len(existing) - 1} more)" if len(existing) > 1 else ""
+            raise Usage(f"{existing[0].dst}: exists{more}; use --overwrite to replace "
+                        f"or --resume to skip existing outputs")
+        for d in dst_dirs:
+            if not os.path.isdir(d):
+                raise Failed(f"{d}: the output folder does not exist")
+            _check_writable(d)
+
+    def nothing_to_do(self) -> bool:
+        return not self.plan
+
+    def run(self, filt, post_hooks, in_flight, times) -> int:
+        from ..mlaa import Filter
+        from ..pipeline import PipelineError, run_pipeline
+        from ..sequence import FilterSet, image_sink, image_source
+
+        encoded = filt
+
+        def make_linear():
+            """Linear-light inputs (EXR, untagged float) are not sRGB-decoded before blending."""
+            kwargs = dict(self.opts["filter_kwargs"], linear_input=True)
+            try:
+                return Filter(context=encoded.context, bgr=False, **kwargs)
+            except TypeError as exc:  # a Filter without linear_input: treat them as encoded
+                self.con.warn(f"linear-light inputs filtered as display-encoded ({exc})")
+                return encoded
+
+        filt = FilterSet(encoded, make_linear)
+        progress = self._progress(len(self.plan))
+        say = self.report.say
+        self.report.say = lambda msg: (progress.clear(), say(msg))
+        sink = image_sink(self.report, overwrite=self.opts["overwrite"], strict=self.strict)
+        try:
+            run_pipeline(image_source(self.plan, self.report, strict=self.strict), filt, sink,
+                         in_flight=in_flight, post_hooks=post_hooks, times=times,
+                         on_frame=progress.update)
+            stopped = None
+        except PipelineError as exc:
+            stopped = exc
+        finally:
+            progress.close()
+            filt.close()
+            self.written = len(self.report.written)
+        if stopped is not None:
+            ff = stopped.meta[0] if stopped.meta else None
+            cause = str(stopped.cause)
+            named = ff is not None and (ff.src in cause or ff.dst in cause)
+            if ff is None and self.strict and stopped.stage == "read":
+                named = True  # a sequence's read errors name their file or frame themselves
+            self.con.error(cause if named else f"{ff.label if ff else f'frame {stopped.index}'}: "
+                           f"{stopped.stage} failed: {cause}")
+            self.con.error(f"stopped: {self.written} of {len(self.plan)} outputs written")
+            return EXIT_FAILED
+        if self.report.failed:
+            self.con.error(f"{len(self.report.failed)} failed, {self.written} written")
+            return EXIT_FAILED
+        self.con.info(f"{self.written} written, {len(self.report.skipped)} skipped")
+        return EXIT_OK
+
+    def abort(self) -> None:
+        pass
+
+
+class _VideoJob(_Job):
+    """A video file in, a video file out."""
+
+    def prepare(self) -> None:
+        from ..sequence import same_file
+        from ..video_io import (CvVideoWriter, VideoError, VideoWriter, probe_video,
+                                probe_video_cv)
+
+        o = self.opts
+        out = self.output
+        if os.path.isdir(out) or out.endswith(("/", os.sep)):
+            out = os.path.join(out, os.path.basename(self.input))
+        self.output = out
+        if same_file(self.input, out):
+            raise Usage(f"{out}: output is the input; choose another output")
+        if o["resume"]:
+            self.con.warn("--resume applies to folders and sequences; a video is redone")
+        if os.path.exists(out) and not o["overwrite"]:
+            raise Usage(f"{out}: exists; use --overwrite to replace it")
+        folder = os.path.dirname(os.path.abspath(out))
+        if not os.path.isdir(folder):
+            raise Failed(f"{folder}: the output folder does not exist")
+        _check_writable(folder)
+        try:
+            self.info = (probe_video_cv if o["video_backend"] == "opencv" else probe_video)(self.input)
+        except VideoError as exc:
+            raise Failed(str(exc)) from exc
+        self.con.info(f"{self.input}: {self.info.width}x{self.info.height} {self.info.pix_fmt} "
+                      f"{self.info.bits}-bit, {self.info.fps} fps, {self.info.frames or '?'} frames, "
+                      f"{self.info.audio_streams} audio streams")
+        try:
+            if o["video_backend"] == "opencv":
+                self.writer = CvVideoWriter(out, self.info, overwrite=o["overwrite"])
+            else:
+                self.writer = VideoWriter(out, self.info, codec=o["codec"], crf=o["crf"],
+                                          preset=o["encoder_preset"], pix_fmt=o["pix_fmt"],
+                                          overwrite=o["overwrite"])
+        except VideoError as exc:
+            raise Failed(str(exc)) from exc
+        self.con.info(f"encoding {getattr(self.writer, 'codec', 'mp4v')} "
+                      f"{getattr(self.writer, 'pix_fmt', 'bgr24')} to {out}")
+
+    def nothing_to_do(self) -> bool:
+        return False
+
+    def abort(self) -> None:
+        writer = getattr(self, "writer", None)
+        if writer is not None and not getattr(self, "_finished", False):
+            writer.abort()
+
+    def run(self, filt, post_hooks, in_flight, times) -> int:
+        from ..pipeline import PipelineError
+        from ..video_io import VideoReadError, filter_video, read_video_cv
+
+        source = read_video_cv(self.info) if self.opts["video_backend"] == "opencv" else None
+        progress = self._progress(self.info.frames)
+        try:
+            filter_video(self.info, self.writer, filt, source=source, post_hooks=post_hooks,
+                         in_flight=in_flight, times=times, on_frame=progress.update)
+            stopped = None
+            self._finished = True
+        except PipelineError as exc:
+            stopped = exc
+            self._finished = True  # filter_video kept the shorter file or removed it
+        finally:
+            progress.close()
+            self.written = self.writer.frames_written
+            for w in dict.fromkeys(self.writer.warnings):
+                self.con.warn(w)
+        if stopped is None:
+            self.con.info(f"{self.output}: {self.written} frames")
+            return EXIT_OK
+        if stopped.stage == "read" and isinstance(stopped.cause, VideoReadError):
+            self.con.error(str(stopped.cause))
+            if self.written:
+                self.con.error(f"{self.output}: kept as a valid shorter video with the "
+                               f"{self.written} frames before it")
+            else:
+                self.con.error(f"{self.output}: not written (no frame decoded)")
+        else:
+            self.con.error(f"{self.input}: {stopped}; {self.output} not written")
+        return EXIT_FAILED

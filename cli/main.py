@@ -8,6 +8,8 @@ from __future__ import annotations
 import click
 
 from . import devices_cmd, filter_cmd
+from . import overlay_cmd
+from . import bench_cmd, compare_cmd, scenes_cmd
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_NO_DEVICE, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
 
@@ -37,3 +39,7 @@ def main() -> None:
 
 main.add_command(filter_cmd.filter_command)
 main.add_command(devices_cmd.devices_command)
+main.add_command(overlay_cmd.overlay_command)
+main.add_command(scenes_cmd.scenes_command)
+main.add_command(bench_cmd.bench_command)
+main.add_command(compare_cmd.compare_command)

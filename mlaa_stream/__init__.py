@@ -9,6 +9,7 @@ if (_root / "pyproject.toml").is_file() and (_root / "kernels" / "common.cl").is
 
 from .device import DeviceError, KernelBuildError, list_devices  # noqa: E402
 from .mlaa import PRESETS, Filter  # noqa: E402
+from .antialiaser import Antialiaser  # noqa: E402
 
-__all__ = ["DeviceError", "Filter", "KernelBuildError", "PRESETS", "list_devices"]
+__all__ = ["Antialiaser", "DeviceError", "Filter", "KernelBuildError", "PRESETS", "list_devices"]
 __version__ = "0.1.0"

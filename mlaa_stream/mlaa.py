@@ -33,10 +33,10 @@ SEGMENT = 64  # pixels of a row per work item in the per-pixel passes (kernels/c
 
 # Named quality presets -> Filter keyword arguments (the CLI's --preset).
 PRESETS: dict[str, dict] = {
-    "default": {},
-    "sharp": {"threshold": 12.0},
-    "luma": {"metric": "luma"},
-    "reconstruct": {"reconstruct": True},
+    "default": {},                        # corners kept sharp, CIELAB edges, linear-light blending
+    "soft": {"rounding": 0.25},           # corners rounded by seed 002's factor r: smoother text and wires
+    "luma": {"metric": "luma"},           # luma edges (SMAA/FXAA-like), for comparison
+    "reconstruct": {"reconstruct": True},  # + topological reconstruction of thin features (seed 000 §4)
 }
 
 

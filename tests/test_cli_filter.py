@@ -16,7 +16,6 @@ import zlib
 
 import av
 import numpy as np
-import OpenImageIO as oiio
 import pytest
 from click.testing import CliRunner
 
@@ -444,7 +443,8 @@ def test_opencv_backend(tmp_path):
 def test_overlay_option_calls_load_overlay_lazily(tmp_path, monkeypatch):
     calls = []
 
-    def load_overlay(path):
+    def load_overlay(path, bgr=True, device=None):
+        assert bgr is False  # the CLI's frames are RGB
         calls.append(("load", path))
 
         def hook(frame, index):
@@ -462,6 +462,20 @@ def test_overlay_option_calls_load_overlay_lazily(tmp_path, monkeypatch):
             "--codec", "ffv1")
     assert r.exit_code == 0, stderr(r)
     assert calls[0] == ("load", str(geo)) and [c[1] for c in calls[1:]] == list(range(10))
+
+
+def test_overlay_with_the_real_overlay_module_draws_in_rgb(tmp_path):
+    pytest.importorskip("mlaa_stream.overlay")
+    geo = tmp_path / "road.geojson"
+    geo.write_text('{"type": "Feature", "geometry": {"type": "LineString", '
+                   '"coordinates": [[2, 12], [30, 12]]}, "properties": {"width": 5, "color": "#ff0000"}}')
+    src = tmp_path / "in.png"
+    write_png(src, staircase())
+    r = run(src, "-o", tmp_path / "o.png", "--overlay", geo)
+    assert r.exit_code == 0, stderr(r)
+    np.testing.assert_array_equal(read_image(str(tmp_path / "o.png")).pixels[12, 16], [255, 0, 0])
+    r = run(src, "-o", tmp_path / "o2.png", "--overlay", tmp_path / "missing.json")
+    assert r.exit_code == 2 and "missing.json" in stderr(r)
 
 
 def test_bad_options_are_usage_errors(tmp_path):

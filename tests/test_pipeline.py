@@ -254,3 +254,29 @@ def test_real_filter_through_the_pipeline_matches_process():
             for e, it in zip(expected, out):
                 np.testing.assert_array_equal(it.frame, e)
     assert all(not np.array_equal(e, x) for e, x in zip(expected, src))
+
+
+def test_progress_shows_frames_fps_and_time_left_only_on_a_terminal():
+    import io
+
+    from mlaa_stream.progress import Progress
+
+    p = Progress(100, label="clip.mp4", stream=io.StringIO(), enabled=True, interval=0)
+    p.started -= 2.0  # two seconds ago
+    line = p.line(50)
+    assert line.startswith("clip.mp4  50/100 frames  ")
+    fps = float(line.split("frames  ")[1].split(" fps")[0])
+    assert 24.0 < fps <= 25.0 and "0:02 left" in line
+    p.update(50)
+    p.close()
+    assert p.stream.getvalue().startswith("\rclip.mp4  50/100") and p.stream.getvalue().endswith("\n")
+
+    class NotATerminal(io.StringIO):
+        def isatty(self):
+            return False
+
+    quiet = Progress(10, stream=NotATerminal())
+    quiet.update(5)
+    quiet.close()
+    assert quiet.enabled is False and quiet.stream.getvalue() == ""
+    assert "7 frames" in Progress(None, enabled=False).line(7)

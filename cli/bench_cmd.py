@@ -1,0 +1,63 @@
+"""`mlaa-stream bench`: every method and preset over the scenes; writes docs/bench/.
+
+Exit codes: 0 done (methods that failed are listed in the outputs); 1 every method failed;
+2 usage error; 3 no OpenCL device.
+"""
+from __future__ import annotations
+
+import shlex
+import sys
+
+import click
+
+from ..device import DeviceError
+from .options import device_option
+
+
+@click.command("bench")
+@click.option("--quick", is_flag=True, help="CI-sized: small scenes, 5 timed frames, no FLIP (< 1 minute).")
+@click.option("--out", "out_dir", default="docs/bench", show_default=True, type=click.Path(file_okay=False),
+              help="Folder for results.csv, README.md and speed_vs_accuracy.png (replaced on each run).")
+@click.option("--methods", default=None, metavar="A,B",
+              help="Comma-separated subset of methods (default: all; see --list).")
+@click.option("--frames", type=click.IntRange(1, 10000), default=None,
+              help="Timed 1080p frames per method (default 20, quick 5).")
+@click.option("--flip/--no-flip", default=None, help="Score FLIP (default: on for full runs when installed).")
+@click.option("--seed", type=int, default=0, show_default=True, help="Scene seed.")
+@click.option("--scenes", "scene_names", default=None, metavar="A,B",
+              help="Comma-separated scene groups (default: all; see 'mlaa-stream scenes --help').")
+@click.option("--list", "list_methods", is_flag=True, help="List the methods and exit.")
+@device_option
+def bench_command(quick, out_dir, methods, frames, flip, seed, scene_names, list_methods, device) -> None:
+    """Measure speed against accuracy for every method on the generated scenes."""
+    from .. import bench as B
+
+    if list_methods:
+        for name in [*B.METHODS, B.TRUTH]:
+            click.echo(name)
+        return
+    names = None if methods is None else [m.strip() for m in methods.split(",") if m.strip()]
+    groups = None if scene_names is None else [m.strip() for m in scene_names.split(",") if m.strip()]
+    command = "mlaa-stream " + " ".join(shlex.quote(a) for a in ["bench", *sys.argv[2:]]) \
+        if len(sys.argv) > 1 and sys.argv[1] == "bench" else "mlaa-stream bench" + (" --quick" if quick else "")
+    try:
+        res = B.bench(out_dir, quick=quick, device=device, method_names=names, frames=frames, flip=flip,
+                      seed=seed, scene_names=groups, log=lambda m: click.echo(m, err=True), command=command)
+    except DeviceError as exc:
+        click.echo(f"mlaa-stream: {exc}", err=True)
+        sys.exit(3)
+    except ValueError as exc:
+        raise click.UsageError(str(exc)) from exc
+    summ = B.summary(res)
+    click.echo(f"device: {res.device}")
+    click.echo(f"{'method':<18}{'ms/1080p':>10}{'err removed':>13}{'edge err':>10}{'damage':>8}"
+               f"{'wires':>8}{'temporal':>10}{'flicker':>9}")
+    for m, v in summ.items():
+        click.echo(f"{m:<18}{B._num(v['ms'], 1):>10}{B._pct(v['error_removed']):>13}"
+                   f"{B._pct(v['edge_error_removed']):>10}{B._num(v['damage']):>8}"
+                   f"{B._pct(v['broken_wires']):>8}{B._num(v['temporal_error']):>10}{B._num(v['flicker']):>9}")
+    for m, e in res.failures.items():
+        click.echo(f"{m}: FAILED {e}", err=True)
+    click.echo(f"wrote {out_dir}/results.csv, README.md, speed_vs_accuracy.png", err=True)
+    if res.failures and len(res.failures) == len([m for m in res.methods if m != B.TRUTH]):
+        sys.exit(1)

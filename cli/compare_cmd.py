@@ -1,0 +1,85 @@
+"""`mlaa-stream compare OUT TRUTH [--input IN]`: the benchmark's numbers for your own images.
+
+Exit codes: 0 compared; 1 an image could not be read or sizes differ; 2 usage error.
+"""
+from __future__ import annotations
+
+import math
+
+import click
+import numpy as np
+
+
+def read_image(path: str) -> np.ndarray:
+    """An image as float32 (H, W, 3), 0..1 for integer files; alpha dropped, grey repeated."""
+    import OpenImageIO as oiio
+
+    inp = oiio.ImageInput.open(path)
+    if inp is None:
+        raise click.ClickException(f"{path}: cannot open ({oiio.geterror()})")
+    try:
+        arr = inp.read_image(format="float")
+        if arr is None:
+            raise click.ClickException(f"{path}: cannot read pixels ({inp.geterror()})")
+    finally:
+        inp.close()
+    arr = np.asarray(arr, np.float32)
+    if arr.ndim == 2:
+        arr = arr[..., None]
+    if arr.shape[2] < 3:
+        arr = np.repeat(arr[..., :1], 3, axis=2)
+    return np.ascontiguousarray(arr[..., :3])
+
+
+def compare_numbers(out: np.ndarray, truth: np.ndarray, inp: np.ndarray | None,
+                    with_flip: bool) -> dict[str, float]:
+    """The numbers `compare` prints; those that need the input are NaN without it."""
+    from .. import metrics as M
+
+    res = {"rmse": math.sqrt(M.mse(out, truth)), "flip": M.flip(out, truth) if with_flip else math.nan}
+    if inp is not None:
+        edges = ~M.near_mask(inp, truth, 3.0)
+        res.update(rmse_input=math.sqrt(M.mse(inp, truth)),
+                   error_removed=M.error_removed(out, inp, truth),
+                   edge_error_removed=M.error_removed(out, inp, truth, edges),
+                   edge_pixels=float(edges.sum()),
+                   damage=M.damage(out, inp, truth, edges),
+                   flip_input=M.flip(inp, truth) if with_flip else math.nan)
+    return res
+
+
+def _f(v: float, fmt: str) -> str:
+    return "n/a" if v is None or math.isnan(v) else format(v, fmt)
+
+
+@click.command("compare")
+@click.argument("out_path", metavar="OUT")
+@click.argument("truth_path", metavar="TRUTH")
+@click.option("--input", "input_path", default=None, metavar="IN",
+              help="The aliased input, for error removed, edge error removed and damage.")
+@click.option("--flip/--no-flip", default=True, show_default=True,
+              help="Also score NVIDIA FLIP (needs 'pip install flip-evaluator'; centre crop <= 256x256).")
+def compare_command(out_path, truth_path, input_path, flip) -> None:
+    """Score a filtered image OUT against a reference TRUTH (and the input IN)."""
+    from .. import metrics as M
+
+    out, truth = read_image(out_path), read_image(truth_path)
+    inp = read_image(input_path) if input_path else None
+    for name, img in ((out_path, out), (input_path, inp)):
+        if img is not None and img.shape != truth.shape:
+            raise click.ClickException(f"{name}: expected {truth.shape[1]}x{truth.shape[0]} like "
+                                       f"{truth_path}, got {img.shape[1]}x{img.shape[0]}")
+    with_flip = flip and M.flip_available()
+    r = compare_numbers(out, truth, inp, with_flip)
+    click.echo(f"RMSE vs truth (8-bit levels): out {_f(r['rmse'], '.3f')}"
+               + (f", input {_f(r['rmse_input'], '.3f')}" if inp is not None else ""))
+    if inp is not None:
+        click.echo(f"error removed:      {_f(100 * r['error_removed'], '.1f')} %")
+        click.echo(f"edge error removed: {_f(100 * r['edge_error_removed'], '.1f')} % "
+                   f"({int(r['edge_pixels'])} edge pixels)")
+        click.echo(f"damage away from edges (RMSE, levels): {_f(r['damage'], '.3f')}")
+    if with_flip:
+        click.echo(f"FLIP: out {_f(r['flip'], '.4f')}"
+                   + (f", input {_f(r['flip_input'], '.4f')}" if inp is not None else ""))
+    elif flip:
+        click.echo("FLIP: n/a (pip install flip-evaluator)")

@@ -1,0 +1,81 @@
+"""`mlaa-stream scenes OUT_DIR`: write the benchmark scenes as PNG (input, truth, masks) + index.
+
+Exit codes: 0 written; 1 a file could not be written; 2 usage error (also: files exist and
+--overwrite was not given).
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+import numpy as np
+
+
+def write_png(path: Path, img: np.ndarray) -> None:
+    """Write an 8-bit image with OpenImageIO; raises OSError naming the file."""
+    import OpenImageIO as oiio
+
+    a = np.ascontiguousarray(img)
+    if a.ndim == 2:
+        a = a[..., None]
+    spec = oiio.ImageSpec(a.shape[1], a.shape[0], a.shape[2], oiio.UINT8)
+    out = oiio.ImageOutput.create(str(path))
+    if out is None or not out.open(str(path), spec):
+        raise OSError(f"{path}: cannot write ({oiio.geterror()})")
+    try:
+        if not out.write_image(a):
+            raise OSError(f"{path}: cannot write ({out.geterror()})")
+    finally:
+        out.close()
+
+
+def scene_files(scene) -> dict[str, np.ndarray]:
+    """File name -> image for every frame of a scene."""
+    files = {}
+    for t in range(scene.frames):
+        stem = f"{scene.name}_{t:02d}"
+        files[f"{stem}_input.png"] = scene.inputs[t]
+        files[f"{stem}_truth.png"] = scene.truths[t]
+        files[f"{stem}_edges.png"] = scene.edges[t].astype(np.uint8) * 255
+        if scene.wires is not None:
+            files[f"{stem}_wires.png"] = scene.wires[t].astype(np.uint8) * 255
+        if scene.sharp is not None:
+            files[f"{stem}_sharp.png"] = scene.sharp[t].astype(np.uint8) * 255
+    return files
+
+
+@click.command("scenes")
+@click.argument("out_dir", type=click.Path(file_okay=False))
+@click.option("--small", is_flag=True, help="The small variants used by the tests and bench --quick.")
+@click.option("--seed", type=int, default=0, show_default=True, help="Random seed (same seed, same pixels).")
+@click.option("--only", default=None, metavar="A,B", help="Comma-separated scene groups (default: all).")
+@click.option("--overwrite", is_flag=True, help="Replace files that already exist.")
+def scenes_command(out_dir, small, seed, only, overwrite) -> None:
+    """Render the test scenes (1-spp input and 8x8-spp truth) into OUT_DIR as PNG files."""
+    from ..scenes import generate_scenes
+
+    names = None if only is None else [n.strip() for n in only.split(",") if n.strip()]
+    try:
+        scenes = generate_scenes(small=small, seed=seed, names=names)
+    except ValueError as exc:
+        raise click.UsageError(str(exc)) from exc
+    out = Path(out_dir)
+    plan = {name: img for s in scenes for name, img in scene_files(s).items()}
+    plan_names = [*plan, "scenes.json"]
+    existing = [n for n in plan_names if (out / n).exists()]
+    if existing and not overwrite:
+        raise click.UsageError(f"{out / existing[0]} exists ({len(existing)} files would be replaced); "
+                               "pass --overwrite to replace them")
+    out.mkdir(parents=True, exist_ok=True)
+    try:
+        for name, img in plan.items():
+            write_png(out / name, img)
+    except OSError as exc:
+        click.echo(f"mlaa-stream: {exc}", err=True)
+        raise SystemExit(1) from exc
+    index = [{"name": s.name, "category": s.category, "width": s.size[0], "height": s.size[1],
+              "frames": s.frames, "notes": s.notes, "edge_pixels": int(s.edges.sum()),
+              "wire_pixels": None if s.wires is None else int(s.wires.sum())} for s in scenes]
+    (out / "scenes.json").write_text(json.dumps({"seed": seed, "small": small, "scenes": index}, indent=1))
+    click.echo(f"wrote {len(plan)} images of {len(scenes)} scenes to {out}", err=True)

@@ -1,0 +1,101 @@
+"""`Antialiaser`: the filter for OpenCV capture loops, on BGR numpy frames.
+
+    with mlaa_stream.Antialiaser() as aa:
+        out = aa(frame)                       # one frame at a time, state kept between calls
+        for out in aa.stream(cv2.VideoCapture("in.mp4")):   # or any iterable of frames
+            ...                               # decoding, filtering and your loop overlap
+
+Both paths run the same stages as the command line (filter, temporal hook, post hooks); `stream`
+also overlaps decoding (a reader thread) and device transfers (frames in flight) with your loop.
+"""
+from __future__ import annotations
+
+from typing import Any, Iterable, Iterator, Sequence
+
+import numpy as np
+
+from .mlaa import PRESETS, Filter
+from .pipeline import PostHook, Temporal, stream_items
+
+
+def _capture_frames(cap: Any) -> Iterator[np.ndarray]:
+    """Frames of a cv2.VideoCapture until it has no more (the capture is not released here)."""
+    while True:
+        ok, frame = cap.read()
+        if not ok or frame is None:
+            return
+        yield frame
+
+
+class Antialiaser:
+    """Antialias BGR(A) frames (uint8 as OpenCV delivers them; uint16/float also work).
+
+    Options are the Filter's (`preset` first, explicit keywords override it). `temporal` is an
+    optional `(frame_in, frame_filtered, index) -> frame` stage and `post_hooks` a list of
+    `(frame, index) -> frame` callables (overlays), applied in order after it.
+    """
+
+    def __init__(self, device: str | int | None = None, *, preset: str | None = None,
+                 threshold: float | None = None, metric: str | None = None, linear: bool | None = None,
+                 reconstruct: bool | None = None, temporal: Temporal | None = None,
+                 post_hooks: Sequence[PostHook] = (), in_flight: int = 2):
+        if preset is not None and preset not in PRESETS:
+            raise ValueError(f"expected a preset among {', '.join(sorted(PRESETS))}, got {preset!r}")
+        kwargs = dict(PRESETS.get(preset or "default", {}))
+        for key, value in (("threshold", threshold), ("metric", metric), ("linear", linear),
+                           ("reconstruct", reconstruct)):
+            if value is not None:
+                kwargs[key] = value
+        self._filter = Filter(device, bgr=True, **kwargs)
+        self.device_name: str = self._filter.device_name
+        self.temporal = temporal
+        self.post_hooks = list(post_hooks)
+        self.in_flight = in_flight
+        self.index = 0  # frames processed so far, across calls and streams
+        self._closed = False
+
+    def __call__(self, frame: np.ndarray) -> np.ndarray:
+        """Antialias one frame (blocking); returns a new array of the same shape and dtype."""
+        self._check_open()
+        out = self._filter.process(frame)
+        if self.temporal is not None:
+            out = self.temporal(frame, out, self.index)
+        for hook in self.post_hooks:
+            out = hook(out, self.index)
+        self.index += 1
+        return out
+
+    def stream(self, source: Any | Iterable[np.ndarray]) -> Iterator[np.ndarray]:
+        """Yield the antialiased frames of a cv2.VideoCapture (read until it ends) or an iterable.
+
+        Decoding runs in a reader thread and frames overlap on the device; leaving the loop early
+        (break) stops the reader. Errors are raised as PipelineError naming the frame index.
+        """
+        self._check_open()
+        frames = _capture_frames(source) if hasattr(source, "read") and hasattr(source, "isOpened") else source
+        base = self.index
+        temporal = None
+        if self.temporal is not None:
+            user_temporal = self.temporal
+            temporal = lambda a, b, i: user_temporal(a, b, base + i)  # noqa: E731
+        hooks = [(lambda h: (lambda f, i: h(f, base + i)))(h) for h in self.post_hooks]
+        for item in stream_items(frames, self._filter, in_flight=self.in_flight,
+                                 temporal=temporal, post_hooks=hooks):
+            self.index = base + item.index + 1
+            yield item.frame
+
+    def _check_open(self) -> None:
+        if self._closed:
+            raise RuntimeError("this Antialiaser is closed")
+
+    def close(self) -> None:
+        """Free the device buffers; the object cannot be used afterwards."""
+        if not self._closed:
+            self._closed = True
+            self._filter.close()
+
+    def __enter__(self) -> "Antialiaser":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

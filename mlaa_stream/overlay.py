@@ -1,0 +1,697 @@
+"""GRLAA overlays (seed 001): antialiased polylines with an outline, drawn over numpy frames.
+
+`draw_polylines` for one call, `OverlayRenderer` to keep the kernel and buffers between frames of a
+capture loop, `load_overlay` for a JSON/GeoJSON file (format in docs/grlaa.md), and
+`reference_draw_polylines`, the plain numpy reference of kernels/grlaa.cl.
+Coordinates are pixels, x right, y down, pixel centres at integers (as cv2 with `shift`).
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from .colour import LUMA, device_luts, linear_to_srgb, lut_read, srgb_to_linear
+from .formats import LUT_SIZE, FrameFormat, defines_for, frame_format
+
+CAPS = {"round": 0, "butt": 3, "square": 7}  # seg_meta flag bits of kernels/grlaa.cl
+DEFAULT_TILE = 16
+_FOOTPRINT_HALF_DIAGONAL = math.sqrt(0.5)
+
+# --------------------------------------------------------------------------------------- styles
+
+def parse_color(value, what: str = "color") -> tuple[float, float, float]:
+    """A colour as sRGB in [0, 1], in the order given: '#rrggbb' (always RGB) or 3 numbers 0..255."""
+    if isinstance(value, str):
+        s = value.strip().lstrip("#")
+        if len(s) == 3:
+            s = "".join(ch * 2 for ch in s)
+        try:
+            if len(s) != 6:
+                raise ValueError
+            return tuple(int(s[i:i + 2], 16) / 255.0 for i in (0, 2, 4))  # type: ignore[return-value]
+        except ValueError:
+            raise ValueError(f"{what}: expected '#rrggbb', got {value!r}") from None
+    try:
+        vals = [float(v) for v in value]
+    except (TypeError, ValueError):
+        raise ValueError(f"{what}: expected '#rrggbb' or 3 numbers 0..255, got {value!r}") from None
+    if len(vals) == 1:
+        vals = vals * 3
+    if len(vals) != 3 or not all(0.0 <= v <= 255.0 for v in vals):
+        raise ValueError(f"{what}: expected 3 numbers 0..255, got {value!r}")
+    return tuple(v / 255.0 for v in vals)  # type: ignore[return-value]
+
+
+@dataclass(frozen=True)
+class LineStyle:
+    """How one polyline is drawn; colours are sRGB in [0, 1], RGB order; lengths in pixels.
+
+    `width` is the whole stroke, outline included: the outline is the band of `outline_width`
+    along the inside of the stroke's edge (seed 001's OUTLINE_WIDTH, here in pixels).
+    """
+
+    width: float = 2.0
+    color: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    outline: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    outline_width: float = 0.0
+    opacity: float = 1.0
+    cap: str = "round"
+
+    def check(self, what: str) -> None:
+        if not (math.isfinite(self.width) and self.width > 0):
+            raise ValueError(f"{what}: expected width > 0 pixels, got {self.width}")
+        if not (math.isfinite(self.outline_width) and self.outline_width >= 0):
+            raise ValueError(f"{what}: expected outline_width >= 0 pixels, got {self.outline_width}")
+        if not (0.0 <= self.opacity <= 1.0):
+            raise ValueError(f"{what}: expected opacity in [0, 1], got {self.opacity}")
+        if self.cap not in CAPS:
+            raise ValueError(f"{what}: expected cap one of {sorted(CAPS)}, got {self.cap!r}")
+
+
+def _is_one_color(v) -> bool:
+    return isinstance(v, str) or (np.ndim(v) == 1 and len(v) in (1, 3)
+                                  and not isinstance(v[0], (str, list, tuple, np.ndarray)))
+
+
+def _per_line(value, n: int, name: str, is_one: Callable[[object], bool]) -> list:
+    if is_one(value):
+        return [value] * n
+    vals = list(value)
+    if len(vals) != n:
+        raise ValueError(f"{name}: expected one value or {n} (one per line), got {len(vals)}")
+    return vals
+
+
+def make_styles(n: int, width=2.0, color="#ffffff", outline="#000000", outline_width=0.0,
+                opacity=1.0, cap="round", bgr: bool = True) -> list[LineStyle]:
+    """Per-line styles from scalars or per-line sequences; tuple colours are in the frame's order
+    (BGR when `bgr`, as cv2), '#rrggbb' strings are RGB."""
+    def scalar(v):
+        return np.ndim(v) == 0
+
+    parsed: dict = {}
+
+    def to_rgb(c, what):
+        key = c if isinstance(c, str) else tuple(np.ravel(c).tolist())
+        if key not in parsed:
+            rgb = parse_color(c, what)
+            parsed[key] = rgb[::-1] if (bgr and not isinstance(c, str)) else rgb
+        return parsed[key]
+
+    ws = _per_line(width, n, "width", scalar)
+    cs = _per_line(color, n, "color", _is_one_color)
+    os_ = _per_line(outline, n, "outline", _is_one_color)
+    ows = _per_line(outline_width, n, "outline_width", scalar)
+    ops = _per_line(opacity, n, "opacity", scalar)
+    caps = _per_line(cap, n, "cap", lambda v: isinstance(v, str))
+    styles, made = [], {}
+    for i in range(n):
+        st = LineStyle(float(ws[i]), to_rgb(cs[i], f"line {i}: color"),
+                       to_rgb(os_[i], f"line {i}: outline"), float(ows[i]), float(ops[i]), str(caps[i]))
+        if st not in made:  # equal styles are checked once
+            st.check(f"line {i}")
+            made[st] = st
+        styles.append(made[st])
+    return styles
+
+
+def as_lines(lines) -> list[np.ndarray]:
+    """Polylines as float64 (N, 2) arrays: one (N, 2) array, an (L, N, 2) array or a list of them."""
+    if isinstance(lines, np.ndarray) and lines.ndim == 2:
+        lines = [lines]
+    out = []
+    for i, ln in enumerate(lines):
+        a = np.asarray(ln, dtype=np.float64)
+        if a.ndim == 3 and a.shape[1] == 1:  # cv2's (N, 1, 2) point arrays
+            a = a[:, 0]
+        if a.ndim != 2 or a.shape[1] < 2 or a.shape[0] < 1:
+            raise ValueError(f"line {i}: expected points of shape (N, 2), got {a.shape}")
+        a = a[:, :2]
+        if not np.isfinite(a).all():
+            raise ValueError(f"line {i}: expected finite coordinates, got NaN or infinity")
+        out.append(a)
+    return out
+
+
+# ------------------------------------------------------------------------------- segment tables
+
+@dataclass
+class SegmentTables:
+    """What kernels/grlaa.cl reads: segments, their flags, and per-polyline parameters."""
+
+    ends: np.ndarray   # (S, 4) float64 x0, y0, x1, y1 (binning and the numpy reference)
+    segs: np.ndarray   # (S, 8) float32 x0, y0, tx, ty, length, r, r_inner, reach (the kernel)
+    meta: np.ndarray   # (S,) int32 (polyline << 3) | cap flags
+    reach: np.ndarray  # (S,) float64 farthest distance from the segment a pixel centre can be touched
+    polys: np.ndarray  # (P, 5, 4) float32
+
+
+def segment_tables(lines: list[np.ndarray], styles: list[LineStyle], channels: int,
+                   linear_frame: bool = False, strength: float = 1.0,
+                   clip: tuple[int, int] | None = None) -> SegmentTables:
+    """Flatten polylines into the kernel's tables (same for the kernel and the numpy reference).
+
+    With clip=(width, height), segments are cut to the frame grown by their reach (what lies
+    beyond touches no pixel) so float32 stays precise and far-off lines cost nothing."""
+    nl = len(lines)
+    polys = np.zeros((nl, 5, 4), np.float32)
+    if nl == 0:
+        return SegmentTables(np.zeros((0, 4)), np.zeros((0, 8), np.float32), np.zeros(0, np.int32),
+                             np.zeros(0), polys)
+    r = 0.5 * np.array([st.width for st in styles])
+    ri = np.maximum(r - np.array([st.outline_width for st in styles]), 0.0)
+    fill = np.array([st.color for st in styles], np.float64)
+    outl = np.array([st.outline for st in styles], np.float64)
+    fill_lin, out_lin = srgb_to_linear(fill), srgb_to_linear(outl)
+    if channels < 3:  # grey frames: the colours' luminance, in linear light
+        fill_lin = np.repeat(fill_lin @ LUMA[:, None], 3, axis=1)
+        out_lin = np.repeat(out_lin @ LUMA[:, None], 3, axis=1)
+        fill, outl = linear_to_srgb(fill_lin), linear_to_srgb(out_lin)
+    polys[:, 0, 0], polys[:, 0, 1] = r, ri
+    polys[:, 0, 2] = [st.opacity for st in styles]
+    polys[:, 1, :3], polys[:, 2, :3] = fill_lin, out_lin
+    polys[:, 3, :3] = fill_lin if linear_frame else fill
+    polys[:, 4, :3] = out_lin if linear_frame else outl
+
+    counts = np.array([len(p) for p in lines])
+    nseg = np.maximum(counts - 1, 1)  # a single point is a zero-length segment (a dot)
+    allp = np.concatenate(lines)
+    line_of = np.repeat(np.arange(nl), nseg)
+    first = np.cumsum(nseg) - nseg
+    ia = (np.cumsum(counts) - counts)[line_of] + np.arange(len(line_of)) - first[line_of]
+    ib = ia + (counts[line_of] > 1)
+    ends = np.concatenate([allp[ia], allp[ib]], axis=1)
+    caps = np.array([CAPS[st.cap] for st in styles], np.int32)
+    flags = np.zeros(len(ends), np.int32)
+    last = first + nseg - 1
+    np.bitwise_or.at(flags, first, np.where(caps > 0, 1 | (caps & 4), 0))
+    np.bitwise_or.at(flags, last, np.where(caps > 0, 2 | (caps & 4), 0))
+    meta = (line_of.astype(np.int32) << 3) | flags
+    # square caps reach r*sqrt(2) past the end point (the corners); + half the footprint diagonal
+    rr = r * np.where(caps & 4, math.sqrt(2.0), 1.0)
+    reach = (rr + _FOOTPRINT_HALF_DIAGONAL * strength + 1e-3)[line_of]
+    if clip is not None:
+        keep, ends = _clip_segments(ends, reach, *clip)
+        meta, reach, line_of = meta[keep], reach[keep], line_of[keep]
+    d = ends[:, 2:] - ends[:, :2]
+    length = np.hypot(d[:, 0], d[:, 1])
+    tang = np.where(length[:, None] > 0, d / np.where(length > 0, length, 1)[:, None], [1.0, 0.0])
+    segs = np.concatenate([ends[:, :2], tang, length[:, None], r[line_of, None], ri[line_of, None],
+                           reach[:, None]], axis=1).astype(np.float32)
+    return SegmentTables(ends, segs, meta, reach, polys)
+
+
+def _clip_segments(ends: np.ndarray, reach: np.ndarray, width: int, height: int):
+    """Liang-Barsky: segments cut to [-m, width-1+m] x [-m, height-1+m], m = reach + 1; returns
+    (kept mask, cut ends). A cut end lies over `reach` outside the frame, so its cap shows nowhere."""
+    m = reach + 1.0
+    x0, y0 = ends[:, 0], ends[:, 1]
+    dx, dy = ends[:, 2] - x0, ends[:, 3] - y0
+    t0, t1 = np.zeros(len(ends)), np.ones(len(ends))
+    keep = np.ones(len(ends), bool)
+    for p, q in ((-dx, x0 + m), (dx, width - 1 + m - x0), (-dy, y0 + m), (dy, height - 1 + m - y0)):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            r = q / p
+        keep &= ~((p == 0) & (q < 0))
+        t0 = np.where(p < 0, np.maximum(t0, r), t0)
+        t1 = np.where(p > 0, np.minimum(t1, r), t1)
+    keep &= t0 <= t1
+    cut = np.stack([x0 + t0 * dx, y0 + t0 * dy, x0 + t1 * dx, y0 + t1 * dy], axis=1)
+    return keep, cut[keep]
+
+
+def bin_segments(tables: SegmentTables, width: int, height: int, tile: int = DEFAULT_TILE):
+    """Screen tiles each segment can touch: (entries int32, tiles (T, 4) int32 x, y, first, count),
+    entries grouped by tile and in drawing order within a tile."""
+    ends = tables.ends
+    nseg = len(ends)
+    tiles_x, tiles_y = -(-width // tile), -(-height // tile)
+    empty = np.zeros(0, np.int32), np.zeros((0, 4), np.int32)
+    if nseg == 0:
+        return empty
+    reach = tables.reach
+    inv = 1.0 / tile
+    lo_x = np.maximum(np.floor((np.minimum(ends[:, 0], ends[:, 2]) - reach) * inv), 0)
+    hi_x = np.minimum(np.floor((np.maximum(ends[:, 0], ends[:, 2]) + reach) * inv), tiles_x - 1)
+    lo_y = np.maximum(np.floor((np.minimum(ends[:, 1], ends[:, 3]) - reach) * inv), 0)
+    hi_y = np.minimum(np.floor((np.maximum(ends[:, 1], ends[:, 3]) + reach) * inv), tiles_y - 1)
+    nx = np.maximum(hi_x - lo_x + 1, 0).astype(np.int32)
+    ny = np.maximum(hi_y - lo_y + 1, 0).astype(np.int32)
+    cnt = nx * ny
+    total = int(cnt.sum())
+    if total == 0:
+        return empty
+    seg = np.repeat(np.arange(nseg, dtype=np.int32), cnt)
+    off = np.arange(total, dtype=np.int32) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+    nxs = nx[seg]
+    ty, tx = np.divmod(off, nxs)
+    tx += lo_x.astype(np.int32)[seg]
+    ty += lo_y.astype(np.int32)[seg]
+    if total > nseg:  # cull box tiles whose centre is farther than reach + half-diagonal
+        half = 0.5 * (tile - 1)
+        a = ends[:, :2].astype(np.float32)
+        d = (ends[:, 2:] - ends[:, :2]).astype(np.float32)
+        l2 = (d * d).sum(1)
+        il2 = np.where(l2 > 0, 1.0 / np.where(l2 > 0, l2, 1), 0).astype(np.float32)
+        px = tx.astype(np.float32) * tile + half - a[seg, 0]
+        py = ty.astype(np.float32) * tile + half - a[seg, 1]
+        dx, dy = d[seg, 0], d[seg, 1]
+        t = np.clip((px * dx + py * dy) * il2[seg], 0, 1)
+        px -= t * dx
+        py -= t * dy
+        lim = (reach + half * math.sqrt(2.0) + 0.01).astype(np.float32)[seg]
+        keep = px * px + py * py <= lim * lim
+        seg, tx, ty = seg[keep], tx[keep], ty[keep]
+    tid = ty * np.int32(tiles_x) + tx
+    order = np.argsort(tid, kind="stable")  # stable: segments stay in drawing order in a tile
+    tid, entries = tid[order], seg[order]
+    first = np.flatnonzero(np.r_[True, tid[1:] != tid[:-1]])
+    counts = np.diff(np.r_[first, len(tid)])
+    t = tid[first]
+    tiles = np.stack([t % tiles_x, t // tiles_x, first, counts], axis=1).astype(np.int32)
+    return entries, tiles
+
+
+# ----------------------------------------------------------------------------- OpenCL renderer
+
+class OverlayRenderer:
+    """Draws GRLAA polylines on frames; keeps the program, kernel and buffers between frames.
+
+    Not thread-safe: use one renderer per thread.
+    """
+
+    def __init__(self, device: str | int | None = None, strength: float = 1.0,
+                 tile: int = DEFAULT_TILE, linear: bool = False):
+        """`strength` is seed 001's ANTIALIAS_STRENGTH in pixels (1 = exact box-filter coverage);
+        `linear` says frames hold linear light instead of sRGB."""
+        from .device import default_context
+        import pyopencl as cl
+
+        if not (math.isfinite(strength) and strength > 0):
+            raise ValueError(f"strength: expected > 0 pixels, got {strength}")
+        if tile not in (8, 16, 32):
+            raise ValueError(f"tile: expected 8, 16 or 32, got {tile}")
+        self._cl = cl
+        self._ctx = default_context(device)
+        # One work-item per tile. On a CPU device work-items of a group run one after another, so
+        # groups of one are simplest; a GPU wants wider groups. Fixed per device: no recompiles.
+        self._local = 1 if self._ctx.device.type & cl.device_type.CPU else 32
+        self.strength = float(strength)
+        self.tile = int(tile)
+        self.linear = bool(linear)
+        luts = device_luts()
+        self._luts = self._ctx.buffer(luts.nbytes, cl.mem_flags.READ_ONLY)
+        cl.enqueue_copy(self._ctx.queue, self._luts, luts)
+        self._fmt: FrameFormat | None = None
+        self._frame_buf = None
+        self._kernel = None
+        self._bufs: dict[str, tuple[object, int]] = {}
+
+    @property
+    def device_name(self) -> str:
+        return self._ctx.name
+
+    def _grow(self, name: str, host: np.ndarray):
+        """A buffer of at least host.nbytes, reused across frames; grows by doubling only."""
+        buf, cap = self._bufs.get(name, (None, 0))
+        if host.nbytes > cap:
+            cap = max(host.nbytes, 2 * cap, 4096)
+            buf = self._ctx.buffer(cap, self._cl.mem_flags.READ_ONLY)
+            self._bufs[name] = (buf, cap)
+        if host.nbytes:
+            self._cl.enqueue_copy(self._ctx.queue, buf, host, is_blocking=False)
+        return buf
+
+    def _setup(self, fmt: FrameFormat) -> None:
+        if fmt == self._fmt:
+            return
+        defines = defines_for(fmt, TILE=self.tile, LINEAR_FRAME=int(self.linear))
+        self._kernel = self._ctx.kernel("grlaa", "grlaa_draw", defines)
+        self._frame_buf = self._ctx.buffer(fmt.nbytes)
+        self._fmt = fmt
+
+    def draw(self, frame: np.ndarray, lines, width=2.0, color="#ffffff", outline="#000000",
+             outline_width=0.0, opacity=1.0, cap="round", bgr: bool = True,
+             inplace: bool = False, what: str = "frame") -> np.ndarray:
+        """Draw `lines` over `frame`; returns a new frame of the same shape and dtype, or `frame`
+        itself (drawn into) with `inplace`. Style arguments: one value or one per line."""
+        pts = as_lines(lines)
+        styles = make_styles(len(pts), width, color, outline, outline_width, opacity, cap, bgr)
+        return self.draw_styled(frame, pts, styles, bgr=bgr, inplace=inplace, what=what)
+
+    def draw_styled(self, frame: np.ndarray, lines: list[np.ndarray], styles: list[LineStyle],
+                    bgr: bool = True, inplace: bool = False, what: str = "frame") -> np.ndarray:
+        """`draw` with checked lines (as_lines) and one LineStyle per line."""
+        cl = self._cl
+        fmt = frame_format(frame, bgr=bgr, what=what)
+        if inplace and not frame.flags.writeable:
+            raise ValueError(f"{what}: expected a writeable array for inplace drawing, got a read-only one")
+        tables = segment_tables(lines, styles, fmt.channels, self.linear, self.strength,
+                                clip=(fmt.width, fmt.height))
+        entries, tiles = bin_segments(tables, fmt.width, fmt.height, self.tile)
+        if len(tiles) == 0:
+            return frame if inplace else frame.copy()
+        self._setup(fmt)
+        q = self._ctx.queue
+        src = frame if (frame.dtype == fmt.dtype and frame.flags.c_contiguous) else \
+            np.ascontiguousarray(frame, dtype=fmt.dtype)
+        cl.enqueue_copy(q, self._frame_buf, src, is_blocking=False)
+        bufs = [self._grow("segs", tables.segs), self._grow("meta", tables.meta),
+                self._grow("entries", entries), self._grow("tiles", tiles),
+                self._grow("polys", tables.polys)]
+        k = self._kernel
+        k.set_args(self._frame_buf, self._luts, *bufs, np.int32(fmt.width), np.int32(fmt.height),
+                   np.float32(self.strength), np.int32(len(tiles)))
+        # one work-item per tile; a fixed local size, so no new compile as the tile count changes
+        n = -(-len(tiles) // self._local) * self._local
+        cl.enqueue_nd_range_kernel(q, k, (n,), (self._local,))
+        dst = frame if (inplace and src is frame) else np.empty(src.shape, fmt.dtype)
+        cl.enqueue_copy(q, dst, self._frame_buf, is_blocking=True)
+        if dst.dtype != frame.dtype:
+            dst = dst.astype(frame.dtype)
+        if inplace and dst is not frame:
+            frame[...] = dst
+            return frame
+        return dst
+
+    __call__ = draw
+
+
+_renderers: dict[tuple, OverlayRenderer] = {}
+
+
+def draw_polylines(frame: np.ndarray, lines, width=2.0, color="#ffffff", outline="#000000",
+                   outline_width=0.0, opacity=1.0, cap="round", bgr: bool = True,
+                   device: str | int | None = None, strength: float = 1.0,
+                   inplace: bool = False) -> np.ndarray:
+    """Draw antialiased polylines (GRLAA, seed 001) over a numpy frame; returns the drawn frame.
+
+    Tuple colours are 0..255 in the frame's channel order (BGR when `bgr`, as cv2); '#rrggbb' is RGB.
+    A renderer per (device, strength) is kept, so calling this per frame builds nothing twice.
+    """
+    key = (None if device is None else str(device), float(strength))
+    r = _renderers.get(key)
+    if r is None:
+        r = _renderers[key] = OverlayRenderer(device, strength)
+    return r.draw(frame, lines, width, color, outline, outline_width, opacity, cap, bgr, inplace)
+
+
+# ------------------------------------------------------------------------------- overlay files
+
+@dataclass
+class OverlayFeature:
+    """One feature of an overlay file: a style, fixed lines and/or lines per frame index."""
+
+    style: LineStyle
+    lines: list[np.ndarray] | None
+    frames: dict[int, list[np.ndarray]]
+    first_frame: int | None = None
+    last_frame: int | None = None
+
+    def lines_at(self, index: int) -> list[np.ndarray]:
+        if index in self.frames:
+            return self.frames[index]
+        if self.lines is None:
+            return []
+        if (self.first_frame is not None and index < self.first_frame) or \
+                (self.last_frame is not None and index > self.last_frame):
+            return []
+        return self.lines
+
+
+def _geometry_lines(geom, where: str) -> list[np.ndarray] | None:
+    if geom is None:
+        return None
+    if not isinstance(geom, dict) or "type" not in geom:
+        raise ValueError(f"{where}: expected a GeoJSON geometry object, got {type(geom).__name__}")
+    kind = geom["type"]
+    coords = geom.get("coordinates")
+    if kind == "LineString":
+        return _coords_lines(coords, where, multi=False)
+    if kind == "MultiLineString":
+        return _coords_lines(coords, where, multi=True)
+    raise ValueError(f"{where}: expected a LineString or MultiLineString geometry, got {kind!r}")
+
+
+def _coords_lines(coords, where: str, multi: bool | None = None) -> list[np.ndarray]:
+    """LineString ([[x, y], ...]) or MultiLineString ([[[x, y], ...], ...]) coordinates."""
+    try:
+        a = [np.asarray(c, dtype=np.float64) for c in coords] if coords is not None else None
+    except (TypeError, ValueError):
+        a = None
+    if a is None or len(a) == 0:
+        raise ValueError(f"{where}: expected coordinates [[x, y], ...], got {coords!r:.60}")
+    if multi is None:
+        multi = a[0].ndim == 2
+    parts = a if multi else [np.asarray(coords, dtype=np.float64)]
+    out = []
+    for j, p in enumerate(parts):
+        if p.ndim != 2 or p.shape[1] < 2 or len(p) < 1:
+            raise ValueError(f"{where}: line {j}: expected positions [[x, y], ...], got shape {p.shape}")
+        if not np.isfinite(p[:, :2]).all():
+            raise ValueError(f"{where}: line {j}: expected finite coordinates, got NaN or infinity")
+        out.append(np.ascontiguousarray(p[:, :2]))
+    return out
+
+
+def _style_from(props: dict, where: str) -> LineStyle:
+    d = LineStyle()
+    try:
+        st = LineStyle(
+            width=float(props.get("width", d.width)),
+            color=parse_color(props.get("color", "#ffffff"), f"{where}: color"),
+            outline=parse_color(props.get("outline", "#000000"), f"{where}: outline"),
+            outline_width=float(props.get("outline_width", d.outline_width)),
+            opacity=float(props.get("opacity", d.opacity)),
+            cap=str(props.get("cap", d.cap)))
+    except (TypeError, ValueError) as exc:
+        if str(exc).startswith(where):
+            raise
+        raise ValueError(f"{where}: expected numbers for width, outline_width and opacity ({exc})") from None
+    st.check(where)
+    return st
+
+
+def _frame_range(props: dict, key: str, where: str) -> int | None:
+    v = props.get(key)
+    if v is None:
+        return None
+    if not isinstance(v, int) or isinstance(v, bool) or v < 0:
+        raise ValueError(f"{where}: expected {key} to be a frame index >= 0, got {v!r}")
+    return v
+
+
+def parse_overlay(doc: dict, name: str = "overlay") -> list[OverlayFeature]:
+    """Features of an overlay document (GeoJSON FeatureCollection, Feature or line geometry)."""
+    if not isinstance(doc, dict) or "type" not in doc:
+        raise ValueError(f"{name}: expected a GeoJSON object with a 'type', got {type(doc).__name__}")
+    if doc["type"] == "FeatureCollection":
+        feats = doc.get("features")
+        if not isinstance(feats, list):
+            raise ValueError(f"{name}: expected 'features' to be a list, got {type(feats).__name__}")
+    elif doc["type"] == "Feature":
+        feats = [doc]
+    else:
+        feats = [{"type": "Feature", "geometry": doc, "properties": {}}]
+    out = []
+    for i, f in enumerate(feats):
+        where = f"{name}: feature {i}"
+        if not isinstance(f, dict) or f.get("type") != "Feature":
+            raise ValueError(f"{where}: expected a GeoJSON Feature, got {str(f)[:60]}")
+        props = f.get("properties") or {}
+        if not isinstance(props, dict):
+            raise ValueError(f"{where}: expected 'properties' to be an object, got {type(props).__name__}")
+        style = _style_from(props, where)
+        lines = _geometry_lines(f.get("geometry"), where)
+        frames: dict[int, list[np.ndarray]] = {}
+        raw = props.get("frames") or {}
+        if not isinstance(raw, dict):
+            raise ValueError(f"{where}: expected 'frames' to map frame indices to coordinates, "
+                             f"got {type(raw).__name__}")
+        for key, coords in raw.items():
+            try:
+                idx = int(key)
+                if idx < 0 or str(idx) != str(key).strip():
+                    raise ValueError
+            except ValueError:
+                raise ValueError(f"{where}: expected frame indices >= 0 as keys of 'frames', "
+                                 f"got {key!r}") from None
+            frames[idx] = _coords_lines(coords, f"{where}: frame {idx}")
+        if lines is None and not frames:
+            raise ValueError(f"{where}: expected a geometry or 'frames', got neither")
+        out.append(OverlayFeature(style, lines, frames, _frame_range(props, "first_frame", where),
+                                  _frame_range(props, "last_frame", where)))
+    return out
+
+
+def read_overlay(path: str) -> list[OverlayFeature]:
+    """Parse an overlay file (JSON/GeoJSON, docs/grlaa.md); errors name the file and feature."""
+    try:
+        with open(path, encoding="utf-8") as fh:
+            doc = json.load(fh)
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot read ({exc.strerror})") from exc
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{path}: expected JSON, got an error at line {exc.lineno} "
+                         f"column {exc.colno}: {exc.msg}") from exc
+    return parse_overlay(doc, os.fspath(path))
+
+
+def load_overlay(path: str, bgr: bool = True, device: str | int | None = None,
+                 strength: float = 1.0, linear: bool = False,
+                 inplace: bool = False) -> Callable[[np.ndarray, int], np.ndarray]:
+    """Read an overlay file once; returns draw(frame, index) -> frame with that frame's lines drawn.
+
+    `bgr` is the channel order of the frames it will get (file colours are always RGB).
+    """
+    features = read_overlay(path)
+    renderer: list[OverlayRenderer] = []
+
+    def draw(frame: np.ndarray, index: int) -> np.ndarray:
+        lines, styles = [], []
+        for f in features:
+            for ln in f.lines_at(int(index)):
+                lines.append(ln)
+                styles.append(f.style)
+        if not lines:
+            return frame if inplace else frame.copy()
+        if not renderer:
+            renderer.append(OverlayRenderer(device, strength, linear=linear))
+        return renderer[0].draw_styled(frame, lines, styles, bgr=bgr, inplace=inplace,
+                                       what=f"frame {index}")
+
+    draw.features = features  # type: ignore[attr-defined]
+    return draw
+
+
+# ---------------------------------------------------------------------------- numpy reference
+
+def footprint_cdf(s: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Coverage of the half-plane {u <= s} by a box pixel whose projected footprint on the
+    normal is U(a) + U(b), a >= b (reference of kernels/grlaa.cl footprint_cdf)."""
+    s, a, b = np.broadcast_arrays(*(np.asarray(v, np.float64) for v in (s, a, b)))
+    x = s + 0.5 * (a + b)
+    ab2 = np.where(a * b > 0, 2 * a * b, 1.0)
+    y = a + b - x
+    out = np.where(x < b, x * x / ab2,
+                   np.where(x <= a, (x - 0.5 * b) / np.where(a > 0, a, 1.0), 1.0 - y * y / ab2))
+    return np.where(x <= 0, 0.0, np.where(x >= a + b, 1.0, out))
+
+
+def _segment_cover(px, py, seg, meta, r, ri, strength):
+    """(outer, inner) coverage of one segment's stroke at pixel centres (px, py)."""
+    ax, ay, bx, by = (float(v) for v in seg)
+    dx, dy = bx - ax, by - ay
+    ln = math.hypot(dx, dy)
+    tx, ty = (dx / ln, dy / ln) if ln > 0 else (1.0, 0.0)
+    apx, apy = px - ax, py - ay
+    along = apx * tx + apy * ty
+    round_ = ((ln <= 0) & (not meta & 3)) | ((along < 0) & (not meta & 1)) | \
+        ((along > ln) & (not meta & 2))
+    vx = np.where(along < 0, apx, px - bx)
+    vy = np.where(along < 0, apy, py - by)
+    vd = np.hypot(vx, vy)
+    safe = round_ & (vd > 1e-6)
+    nx = np.where(safe, vx / np.where(safe, vd, 1), -ty)
+    ny = np.where(safe, vy / np.where(safe, vd, 1), tx)
+    dist = np.where(round_, vd, np.abs(tx * apy - ty * apx))
+    na, nb = np.abs(nx) * strength, np.abs(ny) * strength
+    fa, fb = np.maximum(na, nb), np.minimum(na, nb)
+    co = footprint_cdf(r - dist, fa, fb) - footprint_cdf(-r - dist, fa, fb)
+    ci = (footprint_cdf(ri - dist, fa, fb) - footprint_cdf(-ri - dist, fa, fb)) if ri > 0 \
+        else np.zeros_like(co)
+    if meta & 3:
+        ta, tb = max(abs(tx), abs(ty)) * strength, min(abs(tx), abs(ty)) * strength
+        ext = r if meta & 4 else 0.0
+        ext_i = ext - (r - ri)
+        if meta & 1:
+            co = co * footprint_cdf(along + ext, ta, tb)
+            ci = ci * footprint_cdf(along + ext_i, ta, tb)
+        if meta & 2:
+            co = co * footprint_cdf(ln - along + ext, ta, tb)
+            ci = ci * footprint_cdf(ln - along + ext_i, ta, tb)
+    return co, ci
+
+
+def polyline_coverage(tables: SegmentTables, k: int, height: int, width: int,
+                      strength: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """(outer, inner) coverage of polyline k over a height x width frame (max over its segments)."""
+    a_out = np.zeros((height, width))
+    a_in = np.zeros((height, width))
+    r, ri = float(tables.polys[k, 0, 0]), float(tables.polys[k, 0, 1])
+    for s in np.flatnonzero((tables.meta >> 3) == k):
+        seg = tables.ends[s]
+        pad = tables.reach[s]
+        x0 = max(int(math.floor(min(seg[0], seg[2]) - pad)), 0)
+        x1 = min(int(math.ceil(max(seg[0], seg[2]) + pad)) + 1, width)
+        y0 = max(int(math.floor(min(seg[1], seg[3]) - pad)), 0)
+        y1 = min(int(math.ceil(max(seg[1], seg[3]) + pad)) + 1, height)
+        if x0 >= x1 or y0 >= y1:
+            continue
+        py, px = np.mgrid[y0:y1, x0:x1].astype(np.float64)
+        co, ci = _segment_cover(px, py, seg, int(tables.meta[s]), r, ri, strength)
+        np.maximum(a_out[y0:y1, x0:x1], co, out=a_out[y0:y1, x0:x1])
+        np.maximum(a_in[y0:y1, x0:x1], ci, out=a_in[y0:y1, x0:x1])
+    return a_out, a_in
+
+
+def reference_draw_polylines(frame: np.ndarray, lines, width=2.0, color="#ffffff",
+                             outline="#000000", outline_width=0.0, opacity=1.0, cap="round",
+                             bgr: bool = True, strength: float = 1.0,
+                             linear: bool = False) -> np.ndarray:
+    """Plain numpy version of kernels/grlaa.cl (no tiles: every pixel tests every segment)."""
+    fmt = frame_format(frame, bgr=bgr)
+    pts = as_lines(lines)
+    styles = make_styles(len(pts), width, color, outline, outline_width, opacity, cap, bgr)
+    tables = segment_tables(pts, styles, fmt.channels, linear, strength)
+    h, w, c = fmt.height, fmt.width, fmt.channels
+    pmax = {np.dtype(np.uint8): 255.0, np.dtype(np.uint16): 65535.0}.get(fmt.dtype, 1.0)
+    px = np.asarray(frame, dtype=np.float64).reshape(h, w, c) / pmax
+    rgb = px[..., :3] if c >= 3 else np.repeat(px[..., :1], 3, axis=2)
+    if fmt.bgr:
+        rgb = rgb[..., ::-1]
+    alpha = px[..., 3].copy() if c == 4 else np.ones((h, w))
+    luts = device_luts()
+    enc = luts[2 * (LUT_SIZE + 1):]
+    lin = rgb.copy() if linear else np.where(rgb > 1, ((rgb + 0.055) / 1.055) ** 2.4, lut_read(luts, rgb))
+    touched = np.zeros((h, w), bool)
+    exact = np.zeros((h, w), np.int64)
+    for k in range(len(pts)):
+        a_out, a_in = polyline_coverage(tables, k, h, w, strength)
+        m = a_out > 0
+        if not m.any():
+            continue
+        op = float(tables.polys[k, 0, 2])
+        A = a_out * op
+        col = op * (a_in[..., None] * tables.polys[k, 1, :3] +
+                    (a_out - a_in)[..., None] * tables.polys[k, 2, :3])
+        if c == 4:
+            na = A + (1 - A) * alpha
+            new = np.where(na[..., None] > 0, (col + ((1 - A) * alpha)[..., None] * lin)
+                           / np.where(na > 0, na, 1)[..., None], 0.0)
+            alpha = np.where(m, na, alpha)
+        else:
+            new = col + (1 - A)[..., None] * lin
+        lin = np.where(m[..., None], new, lin)
+        ex = np.where((A >= 1) & (a_in >= 1), 1 + 2 * k, np.where((A >= 1) & (a_in <= 0), 2 + 2 * k, 0))
+        exact = np.where(m, ex, exact)
+        touched |= m
+    out_rgb = lin if linear else np.where(lin > 1, 1.055 * np.abs(lin) ** (1 / 2.4) - 0.055,
+                                          lut_read(enc, lin))
+    for k in range(len(pts)):
+        for j, sel in ((0, exact == 1 + 2 * k), (1, exact == 2 + 2 * k)):
+            out_rgb[sel] = tables.polys[k, 3 + j, :3]
+    alpha = np.where(exact > 0, 1.0, alpha)
+    if fmt.bgr:
+        out_rgb = out_rgb[..., ::-1]
+    res = np.concatenate([out_rgb, alpha[..., None]], axis=2)[..., :c] if c >= 3 else out_rgb[..., :1]
+    if pmax != 1.0:
+        res = np.clip(np.rint(res * pmax), 0, pmax)
+    out = np.asarray(frame).reshape(h, w, c).copy()
+    out[touched] = res[touched].astype(out.dtype)
+    return out.reshape(np.shape(frame))

@@ -1,0 +1,150 @@
+"""End-to-end streaming benchmark: `python -m mlaa_stream.pipeline_bench [--frames N] [--sizes ...]`.
+
+For each size (default 1080p and 720p) it writes a synthetic aliased clip (H.264), then measures
+in one run, as frames per second and as ratios:
+  transcode    decode + encode through the same pipeline with an identity filter;
+  filter       the Filter alone on frames already in memory (2 in flight, and serialized);
+  end-to-end   decode + filter + encode (2 in flight, and serialized: submit then result at once).
+Machines here are noisy: rows are measured in interleaved rounds and the median is shown; compare
+the rows of one run, not runs with each other.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import tempfile
+import time
+from fractions import Fraction
+
+import numpy as np
+
+from .pipeline import StageTimes
+from .video_io import VideoWriter, filter_video, probe_video, read_video
+
+SIZES = {"2160p": (3840, 2160), "1080p": (1920, 1080), "720p": (1280, 720), "480p": (854, 480)}
+
+
+class _Identity:
+    """A 'filter' that returns the frame: what the pipeline costs without the device."""
+
+    class _Done:
+        def __init__(self, frame):
+            self.frame = frame
+
+        def result(self):
+            return self.frame
+
+    def submit(self, frame):
+        return self._Done(frame)
+
+
+def synthetic_clip(path: str, width: int, height: int, frames: int) -> None:
+    """An aliased scene (hard-edged rotated bars, 1 sample per pixel) panning a pixel per frame."""
+    import av
+
+    y, x = np.mgrid[0:height, 0:width + frames].astype(np.float32)
+    bands = (np.floor((x * 0.3 + y * 0.9) / 40) % 2).astype(bool)
+    base = np.where(bands[:, :, None], np.uint8([230, 180, 40]), np.uint8([30, 50, 120]))
+    with av.open(path, "w") as out:
+        s = out.add_stream("libx264", rate=30, options={"crf": "18", "preset": "ultrafast"})
+        s.width, s.height, s.pix_fmt = width, height, "yuv420p"
+        for i in range(frames):
+            f = av.VideoFrame.from_ndarray(np.ascontiguousarray(base[:, i:i + width]), format="rgb24")
+            f.pts, f.time_base = i, Fraction(1, 30)
+            for p in s.encode(f):
+                out.mux(p)
+        for p in s.encode():
+            out.mux(p)
+
+
+def _fps(frames: int, seconds: float) -> float:
+    return frames / seconds if seconds > 0 else float("inf")
+
+
+def bench_size(name: str, width: int, height: int, frames: int, filt, folder: str,
+               codec: str, preset: str, repeat: int = 3) -> dict[str, float]:
+    """All measurements for one frame size; returns the median fps of `repeat` rounds per row."""
+    clip = os.path.join(folder, f"{name}.mp4")
+    synthetic_clip(clip, width, height, frames)
+    info = probe_video(clip)
+    rows: dict[str, float] = {}
+
+    decoded = [it.frame for it in read_video(info)]
+    # warm-up: kernels for this frame format built, buffers allocated
+    for f in decoded[:2]:
+        filt.process(f)
+
+    def end_to_end(f, in_flight):
+        out = os.path.join(folder, f"{name}_out.mp4")
+        w = VideoWriter(out, info, codec=codec, preset=preset, overwrite=True)
+        t0 = time.perf_counter()
+        n = filter_video(info, w, f, in_flight=in_flight, times=StageTimes())
+        return _fps(n, time.perf_counter() - t0)
+
+    def filter_alone(in_flight):
+        t0 = time.perf_counter()
+        pending = []
+        for f in decoded:
+            pending.append(filt.submit(f))
+            if len(pending) >= in_flight:
+                pending.pop(0).result()
+        for p in pending:
+            p.result()
+        return _fps(len(decoded), time.perf_counter() - t0)
+
+    runs = {
+        "decode only": lambda: _fps(len(decoded), _time_decode(info)),
+        "transcode (decode+encode)": lambda: end_to_end(_Identity(), 2),
+        "filter alone, 2 in flight": lambda: filter_alone(2),
+        "filter alone, serialized": lambda: filter_alone(1),
+        "end-to-end, 2 in flight": lambda: end_to_end(filt, 2),
+        "end-to-end, serialized": lambda: end_to_end(filt, 1),
+    }
+    samples: dict[str, list[float]] = {k: [] for k in runs}
+    for _ in range(repeat):  # rounds interleave the rows, so load changes hit them all alike
+        for label, fn in runs.items():
+            samples[label].append(fn())
+    rows.update({k: float(np.median(v)) for k, v in samples.items()})
+    return rows
+
+
+def _time_decode(info) -> float:
+    t0 = time.perf_counter()
+    for _ in read_video(info):
+        pass
+    return time.perf_counter() - t0
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--frames", type=int, default=30, help="frames per clip (default 30)")
+    ap.add_argument("--sizes", default="1080p,720p", help=f"comma list of {', '.join(SIZES)}")
+    ap.add_argument("--device", default=None, help="OpenCL device (index or name part)")
+    ap.add_argument("--repeat", type=int, default=3, help="rounds per row; the median is shown")
+    ap.add_argument("--codec", default="libx264")
+    ap.add_argument("--encoder-preset", default="veryfast")
+    args = ap.parse_args(argv)
+
+    from .mlaa import Filter
+
+    with Filter(args.device) as filt, tempfile.TemporaryDirectory(prefix="mlaa-bench-") as folder:
+        device = filt.device_name
+        print(f"device: {device}" + ("  (STAND-IN filter: returns a copy)" if device == "stand-in" else ""))
+        print(f"encoder: {args.codec} preset {args.encoder_preset}, {args.frames} frames per clip, "
+              f"median of {args.repeat} interleaved rounds, {os.cpu_count()} CPUs visible")
+        for name in args.sizes.split(","):
+            w, h = SIZES[name.strip()]
+            rows = bench_size(name.strip(), w, h, args.frames, filt, folder, args.codec,
+                              args.encoder_preset, args.repeat)
+            e2e = rows["end-to-end, 2 in flight"]
+            print(f"\n{name} ({w}x{h})")
+            for label, fps in rows.items():
+                print(f"  {label:<28} {fps:8.2f} fps  {1000 / fps:8.1f} ms/frame  "
+                      f"x{fps / e2e:5.2f} of end-to-end")
+            print(f"  overlap gain (2 in flight / serialized): end-to-end "
+                  f"x{e2e / rows['end-to-end, serialized']:.2f}, filter alone "
+                  f"x{rows['filter alone, 2 in flight'] / rows['filter alone, serialized']:.2f}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,255 @@
+"""Image folders and numbered frame sequences: which files, in which order, where each output goes,
+and the pipeline's source and sink for them (through OpenImageIO, see image_io).
+
+A folder holds independent images: a file that cannot be read or written is reported and the
+others go on. A printf pattern (`shot/%04d.exr`, with `--frames A-B` or every number found) is one
+sequence: its frames must agree in size, channels and sample type, and the first bad frame stops it.
+Outputs are written under temporary names and renamed, so with `resume` an existing output is a
+complete one and is skipped.
+"""
+from __future__ import annotations
+
+import errno
+import os
+import re
+from dataclasses import dataclass, field
+from typing import Callable, Iterator
+
+from .image_io import (Image, ImageReadError, ImageWriteError, is_image_path, is_temp_path,
+                       read_image, split_for_filter, write_image)
+from .pipeline import Item
+
+_PRINTF = re.compile(r"%(0?)(\d*)d")
+_FATAL_ERRNOS = {errno.ENOSPC, errno.EDQUOT, errno.EROFS}
+
+
+@dataclass(frozen=True)
+class FrameFile:
+    """One input file and its output; `number` is the frame number for patterns, else None."""
+
+    src: str
+    dst: str
+    number: int | None = None
+
+    @property
+    def label(self) -> str:
+        return self.src if self.number is None else f"frame {self.number} ({self.src})"
+
+
+@dataclass
+class Report:
+    """What happened to each file: messages are also passed to `say` as they happen."""
+
+    say: Callable[[str], None] = lambda msg: None
+    written: list[str] = field(default_factory=list)
+    skipped: list[str] = field(default_factory=list)  # resume: outputs already complete
+    failed: list[str] = field(default_factory=list)  # messages naming the file
+    warnings: list[str] = field(default_factory=list)
+
+    def fail(self, msg: str) -> None:
+        self.failed.append(msg)
+        self.say(msg)
+
+    def warn(self, msg: str) -> None:
+        self.warnings.append(msg)
+        self.say(msg)
+
+
+def is_linear(image: Image) -> bool:
+    """True when the pixels are linear light: a colour space tagged linear/ACES, or untagged float."""
+    cs = image.spec.get_string_attribute("oiio:ColorSpace", "").lower()
+    if any(k in cs for k in ("lin", "aces", "scene_linear", "raw")):
+        return True
+    if cs:
+        return False
+    return image.pixels.dtype.kind == "f"
+
+
+class FilterSet:
+    """The filter for display-encoded images and, made on first need, one for linear-light images
+    (`linear_input=True`): EXRs and sRGB PNGs can share a folder."""
+
+    def __init__(self, encoded, make_linear: Callable[[], object]):
+        self.encoded, self._make_linear, self.linear = encoded, make_linear, None
+
+    def for_item(self, item: Item):
+        if not is_linear(item.meta[1]):
+            return self.encoded
+        if self.linear is None:
+            self.linear = self._make_linear()
+        return self.linear
+
+    def close(self) -> None:
+        if self.linear is not None and self.linear is not self.encoded:
+            self.linear.close()
+
+
+class SequenceError(ValueError):
+    """A frame does not fit the sequence (size, channels, sample type); names the frame."""
+
+
+def is_pattern(path: str) -> bool:
+    """True when the file name holds a printf frame number like %04d."""
+    return bool(_PRINTF.search(os.path.basename(path)))
+
+
+def frame_path(pattern: str, number: int) -> str:
+    """The file name of frame `number`: the first %d / %0Nd of the file name replaced."""
+    folder, base = os.path.split(pattern)
+    m = _PRINTF.search(base)
+    if m is None:
+        raise ValueError(f"expected a frame pattern like shot/%04d.exr, got {pattern!r}")
+    digits = f"{number:0{m.group(2)}d}" if m.group(1) == "0" and m.group(2) else str(number)
+    return os.path.join(folder, base[:m.start()] + digits + base[m.end():])
+
+
+def parse_frames(text: str) -> tuple[int, int]:
+    """'A-B' (or a single 'A') -> (A, B) with A <= B."""
+    m = re.fullmatch(r"\s*(\d+)\s*(?:[-:]\s*(\d+)\s*)?", text or "")
+    if not m:
+        raise ValueError(f"expected --frames A-B with whole numbers (e.g. 1001-1100), got {text!r}")
+    a = int(m.group(1))
+    b = int(m.group(2)) if m.group(2) is not None else a
+    if b < a:
+        raise ValueError(f"expected --frames A-B with A <= B, got {text!r}")
+    return a, b
+
+
+def _pattern_regex(basename: str) -> re.Pattern:
+    m = _PRINTF.search(basename)
+    width = int(m.group(2)) if m.group(2) else 1
+    digits = rf"(\d{{{width},}})" if m.group(1) == "0" else r"(\d+)"
+    return re.compile(re.escape(basename[:m.start()]) + digits + re.escape(basename[m.end():]) + r"\Z")
+
+
+def format_ranges(numbers: list[int]) -> str:
+    """[3, 4, 5, 9] -> '3-5, 9'."""
+    parts = []
+    for n in sorted(numbers):
+        if parts and n == parts[-1][1] + 1:
+            parts[-1][1] = n
+        else:
+            parts.append([n, n])
+    return ", ".join(str(a) if a == b else f"{a}-{b}" for a, b in parts)
+
+
+def expand_pattern(pattern: str, frames: tuple[int, int] | None = None) -> tuple[list[tuple[int, str]], list[int]]:
+    """The existing frames of a printf pattern, in order, and the missing numbers (gaps).
+
+    With `frames` the numbers A..B are expected; without, every number found in the folder, and
+    the gaps between the first and last.
+    """
+    folder, base = os.path.split(pattern)
+    folder = folder or "."
+    if frames is not None:
+        found, missing = [], []
+        for n in range(frames[0], frames[1] + 1):
+            path = frame_path(pattern, n)
+            (found.append((n, path)) if os.path.isfile(path) else missing.append(n))
+        return found, missing
+    rx = _pattern_regex(base)
+    numbers: dict[int, str] = {}
+    try:
+        names = os.listdir(folder)
+    except OSError:
+        return [], []
+    for name in names:
+        m = rx.match(name)
+        if m and not is_temp_path(name):
+            numbers.setdefault(int(m.group(1)), os.path.join(folder, name) if folder != "." else name)
+    found = sorted(numbers.items())
+    if not found:
+        return [], []
+    have = set(numbers)
+    missing = [n for n in range(found[0][0], found[-1][0] + 1) if n not in have]
+    return found, missing
+
+
+def list_folder(folder: str) -> tuple[list[str], list[str]]:
+    """Image files of `folder` in name order, and the other files (not images by extension).
+
+    Hidden files, our own temporary files and sub-folders are left out.
+    """
+    images, others = [], []
+    for name in sorted(os.listdir(folder)):
+        path = os.path.join(folder, name)
+        if name.startswith(".") or is_temp_path(name) or not os.path.isfile(path):
+            continue
+        (images if is_image_path(name) else others).append(path)
+    return images, others
+
+
+def output_path(src: str, output: str, number: int | None = None) -> str:
+    """Where the output of `src` goes: `output` as a printf pattern, a folder, or the file itself."""
+    if number is not None and is_pattern(output):
+        return frame_path(output, number)
+    if os.path.isdir(output) or output.endswith(("/", os.sep)):
+        return os.path.join(output, os.path.basename(src))
+    return output
+
+
+def same_file(a: str, b: str) -> bool:
+    """True when the paths name the same file (also through links), existing or not."""
+    if os.path.realpath(a) == os.path.realpath(b):
+        return True
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def image_source(files: list[FrameFile], report: Report, *, strict: bool) -> Iterator[Item]:
+    """Read each file; Item.meta = (FrameFile, Image, merge). Folder mode (not strict) reports a bad
+    file and goes on; strict (a sequence) raises at the first unreadable or mismatched frame."""
+    first: tuple | None = None
+    for ff in files:
+        try:
+            image = read_image(ff.src)
+            frame, merge = split_for_filter(image)
+        except ImageReadError as exc:
+            if strict:
+                raise
+            report.fail(str(exc))
+            continue
+        if strict:
+            shape = (image.pixels.shape, image.pixels.dtype)
+            if first is None:
+                first = (shape, ff)
+            elif shape != first[0]:
+                (s0, d0), (s1, d1) = first[0], shape
+                raise SequenceError(
+                    f"{ff.label}: expected {s0[1]}x{s0[0]} with {s0[2]} channels of {d0} like "
+                    f"{first[1].src}, got {s1[1]}x{s1[0]} with {s1[2]} channels of {d1}")
+        yield Item(frame, (ff, image, merge))
+
+
+def image_sink(report: Report, *, overwrite: bool, strict: bool) -> Callable[[Item], None]:
+    """Write each filtered frame back in its source's format and metadata, atomically.
+
+    A full disk (or a read-only file system) always stops the run; other write failures stop a
+    sequence (strict) but only skip the file in a folder.
+    """
+    def sink(item: Item) -> None:
+        ff, image, merge = item.meta
+        try:
+            write_image(ff.dst, merge(item.frame), image.spec, overwrite=overwrite)
+        except ImageWriteError as exc:
+            if strict:
+                raise
+            report.fail(str(exc))
+            return
+        except OSError as exc:
+            if strict or exc.errno in _FATAL_ERRNOS:
+                raise
+            report.fail(f"{ff.dst}: cannot write: {exc.strerror or exc}")
+            return
+        report.written.append(ff.dst)
+
+    return sink
+
+
+def plan_images(src_paths: list[str], output: str, numbers: list[int | None] | None = None) -> list[FrameFile]:
+    """Pair each input with its output path."""
+    numbers = numbers or [None] * len(src_paths)
+    return [FrameFile(src, output_path(src, output, n), n) for src, n in zip(src_paths, numbers)]
+

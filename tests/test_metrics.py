@@ -1,0 +1,190 @@
+"""Metrics on hand-made cases with known values, the bench's outputs, and the `compare` command."""
+from __future__ import annotations
+
+import csv
+import math
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from mlaa_stream import bench as B
+from mlaa_stream import metrics as M
+from mlaa_stream import scenes as S
+from mlaa_stream.cli.main import main
+
+
+def _pair(seed=0, shape=(20, 30, 3)):
+    rng = np.random.default_rng(seed)
+    truth = rng.integers(20, 216, shape).astype(np.uint8)
+    inp = truth.copy()
+    inp[5:9, 4:20] += 12  # an "aliased" band: 12 levels off in every channel
+    return inp, truth
+
+
+def test_levels_of_each_sample_type():
+    assert M.levels(np.array([255], np.uint8))[0] == 255
+    assert M.levels(np.array([65535], np.uint16))[0] == pytest.approx(255)
+    assert M.levels(np.array([0.5], np.float32))[0] == pytest.approx(127.5)
+    with pytest.raises(TypeError, match="expected uint8"):
+        M.levels(np.array([1], np.int32))
+
+
+def test_mse_and_error_removed_known_values():
+    inp, truth = _pair()
+    band = np.zeros(truth.shape[:2], bool)
+    band[5:9, 4:20] = True
+    assert M.mse(inp, truth) == pytest.approx(144 * band.mean())
+    assert M.mse(inp, truth, band) == pytest.approx(144)
+    half = truth.copy()
+    half[5:9, 4:20] += 6  # half the error left -> a quarter of the squared error
+    assert M.error_removed(half, inp, truth) == pytest.approx(0.75)
+    assert M.error_removed(truth, inp, truth) == 1.0
+    assert M.error_removed(inp, inp, truth) == 0.0
+    worse = inp.copy()
+    worse[5:9, 4:20] += 12
+    assert M.error_removed(worse, inp, truth) == pytest.approx(-3.0)
+    assert math.isnan(M.error_removed(truth, truth, truth))
+    with pytest.raises(ValueError, match="expected equal shapes"):
+        M.mse(inp, truth[:5])
+
+
+def test_damage_counts_only_pixels_away_from_edges():
+    inp, truth = _pair(1)
+    edges = ~M.near_mask(inp, truth, 3.0)
+    assert edges.sum() == 4 * 16
+    out = truth.copy()
+    out[4, 10] = out[4, 10] + 50  # next to the band: not counted as damage
+    assert M.damage(out, inp, truth, edges) == 0.0
+    out[15, 25] = out[15, 25] + 10  # far away: counted
+    n = M.damage_mask(inp, truth, edges).sum()
+    assert n == 20 * 30 - 6 * 18
+    assert M.damage(out, inp, truth, edges) == pytest.approx(math.sqrt(100 / n))
+
+
+def test_dilate_matches_a_direct_loop():
+    rng = np.random.default_rng(3)
+    m = rng.random((2, 9, 11)) > 0.9
+    ref = np.zeros_like(m)
+    for t, y, x in zip(*np.nonzero(m)):
+        ref[t, max(0, y - 1):y + 2, max(0, x - 1):x + 2] = True
+    assert np.array_equal(M.dilate(m, 1), ref)
+
+
+def test_broken_wires_known_share():
+    bg = np.full((4, 10, 3), 200, np.uint8)
+    truth = bg.copy()
+    truth[1, :] = 140  # a wire with contrast 60
+    wires = np.zeros((4, 10), bool)
+    wires[1, :] = True
+    out = truth.copy()
+    out[1, :3] = 185  # contrast 15 < 20: broken
+    out[1, 3:5] = 179  # contrast 21 >= 20: kept
+    assert M.broken_wires(out, truth, bg, wires) == pytest.approx(0.3)
+    assert M.broken_wires(truth, truth, bg, wires) == 0.0
+    assert math.isnan(M.broken_wires(out, truth, bg, np.zeros_like(wires)))
+
+
+def test_temporal_error_and_flicker_known_values():
+    rng = np.random.default_rng(5)
+    truth = rng.integers(50, 200, (4, 6, 8, 3)).astype(np.uint8)
+    inp = truth.copy()
+    inp[1::2] += 10  # flickers: every other frame 10 levels off
+    assert M.temporal_error(truth, inp, truth) == 0.0
+    assert M.temporal_error(inp, inp, truth) == 1.0
+    half = truth.copy()
+    half[1::2] += 5
+    assert M.temporal_error(half, inp, truth) == pytest.approx(0.5)
+    assert M.flicker_ratio(truth, truth) == 1.0
+    frozen = np.repeat(truth[:1], 4, axis=0)  # smears all motion away
+    assert M.flicker_ratio(frozen, truth) == 0.0
+    assert M.flicker_ratio(inp, truth) > 1.0
+    assert math.isnan(M.temporal_error(truth[:1], inp[:1], truth[:1]))
+
+
+def test_flip_optional():
+    inp, truth = _pair(2, (40, 40, 3))
+    if not M.flip_available():
+        assert math.isnan(M.flip(inp, truth))
+        pytest.skip("flip-evaluator not installed: metric returns NaN, as documented")
+    assert M.flip(truth, truth) == pytest.approx(0.0, abs=1e-6)
+    assert M.flip(inp, truth) > 0.0
+
+
+def test_score_of_input_and_truth_on_a_scene():
+    s = S.generate_scenes(small=True, names=["rotation"])[0]
+    none = M.score(s.inputs, s.inputs, s.truths, s.edges, s.wires, s.backgrounds)
+    perfect = M.score(s.truths, s.inputs, s.truths, s.edges, s.wires, s.backgrounds)
+    assert none["error_removed"] == 0.0 and none["temporal_error"] == 1.0 and none["damage"] == 0.0
+    assert perfect["error_removed"] == 1.0 and perfect["temporal_error"] == 0.0
+    assert perfect["flicker"] == 1.0 and perfect["broken_wires"] == 0.0
+    assert none["broken_wires"] > 0.1
+
+
+def test_registry_holds_baselines_and_every_preset():
+    from mlaa_stream.mlaa import PRESETS
+
+    assert {"none", "fxaa", "mlaa"} <= set(B.METHODS)
+    for name, kw in PRESETS.items():
+        assert (f"mlaa:{name}" in B.METHODS) == bool(kw)
+
+
+def test_bench_outputs(tmp_path):
+    scenes = S.generate_scenes(small=True, names=["diagonals", "photo", "pan"])
+    res = B.run_bench(scenes, ["none", "fxaa"], timed_frames=2, warmup=1, command="test")
+    assert set(res.timings) == {"none", "fxaa"} and not res.failures
+    assert all(t.median_ms > 0 for t in res.timings.values())
+    paths = B.write_outputs(res, tmp_path, scenes)
+    rows = list(csv.DictReader(open(paths[0])))
+    assert {r["method"] for r in rows} == {"none", "fxaa", "truth"} and len(rows) == 9
+    by = {(r["method"], r["scene"]): r for r in rows}
+    assert float(by["none", "diagonals"]["error_removed"]) == 0.0
+    assert float(by["truth", "pan"]["temporal_error"]) == 0.0
+    text = paths[1].read_text()
+    assert "## diagonals" in text and "## pan" in text and res.device in text and "test" in text
+    assert paths[2].stat().st_size > 10_000
+
+
+def test_bench_records_a_failing_method(monkeypatch):
+    def broken(device):
+        raise RuntimeError("kernel exploded")
+
+    monkeypatch.setitem(B.METHODS, "broken", broken)
+    scenes = S.generate_scenes(small=True, names=["diagonals"])
+    res = B.run_bench(scenes, ["none", "broken"], timed_frames=0)
+    assert "kernel exploded" in res.failures["broken"]
+    assert {r["method"] for r in res.rows} == {"none", "truth"}
+
+
+def test_bench_command_small(tmp_path):
+    out = tmp_path / "bench"
+    r = CliRunner().invoke(main, ["bench", "--quick", "--methods", "none", "--scenes", "diagonals",
+                                  "--frames", "1", "--out", str(out)])
+    assert r.exit_code == 0, r.output
+    assert "none" in r.output and (out / "README.md").exists() and (out / "speed_vs_accuracy.png").exists()
+    r = CliRunner().invoke(main, ["bench", "--methods", "nope", "--out", str(out)])
+    assert r.exit_code == 2 and "expected methods" in r.output
+    r = CliRunner().invoke(main, ["bench", "--list"])
+    assert r.exit_code == 0 and "fxaa" in r.output.split()
+
+
+def _write(path, img):
+    from mlaa_stream.cli.scenes_cmd import write_png
+    write_png(path, img)
+
+
+def test_compare_command(tmp_path):
+    inp, truth = _pair(4, (32, 48, 3))
+    half = truth.copy()
+    half[5:9, 4:20] += 6
+    for name, img in (("in.png", inp), ("truth.png", truth), ("half.png", half)):
+        _write(tmp_path / name, img)
+    r = CliRunner().invoke(main, ["compare", str(tmp_path / "half.png"), str(tmp_path / "truth.png"),
+                                  "--input", str(tmp_path / "in.png"), "--no-flip"])
+    assert r.exit_code == 0, r.output
+    assert "error removed:      75.0 %" in r.output and "64 edge pixels" in r.output
+    _write(tmp_path / "small.png", truth[:10])
+    r = CliRunner().invoke(main, ["compare", str(tmp_path / "small.png"), str(tmp_path / "truth.png")])
+    assert r.exit_code == 1 and "expected 48x32" in r.output
+    r = CliRunner().invoke(main, ["compare", str(tmp_path / "missing.png"), str(tmp_path / "truth.png")])
+    assert r.exit_code == 1 and "missing.png" in r.output

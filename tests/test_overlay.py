@@ -1,0 +1,367 @@
+"""GRLAA overlays (kernels/grlaa.cl) against the numpy reference, known answers and a supersampled truth.
+
+Tolerances (kernel vs reference, same float32 tables; the kernel computes in float32, the
+reference in float64): uint8 within 1 level on <= 0.1% of samples; uint16 within 8 codes on <= 2%;
+float32 within 1e-4; float16 within 1e-3 (one ulp near 1). Known answers: axis-aligned coverage is
+exact (linear ramp), so edge rows match the analytic value within 1e-3 (LUT encode) and fully
+covered rows are bit-exact; tilted half-planes match the exact pixel-square area within 5e-5
+(float32 arithmetic at coordinates of a few hundred pixels).
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+
+import numpy as np
+import pytest
+
+from mlaa_stream.colour import linear_to_srgb, srgb_to_linear
+from mlaa_stream.device import DeviceError
+from mlaa_stream.overlay import (OverlayRenderer, draw_polylines, footprint_cdf, load_overlay,
+                                 parse_color, parse_overlay, reference_draw_polylines)
+
+
+@pytest.fixture(scope="module")
+def renderer():
+    try:
+        return OverlayRenderer()
+    except DeviceError as exc:  # host-only tests below still run
+        pytest.skip(f"no OpenCL device: {exc}")
+
+
+def random_scene(seed: int, h: int = 72, w: int = 96, n: int = 10):
+    """Random polylines (1..8 points, some off-frame) and random styles of every kind."""
+    rng = np.random.default_rng(seed)
+    lines = [rng.uniform([-8, -8], [w + 8, h + 8], (int(rng.integers(1, 9)), 2)) for _ in range(n)]
+    kw = dict(
+        width=rng.uniform(0.3, 24, n).tolist(),
+        color=[tuple(rng.integers(0, 256, 3).tolist()) for _ in range(n)],
+        outline=[tuple(rng.integers(0, 256, 3).tolist()) for _ in range(n)],
+        outline_width=(rng.uniform(0, 4, n) * (rng.random(n) < 0.6)).tolist(),
+        opacity=np.where(rng.random(n) < 0.5, 1.0, rng.uniform(0.2, 1, n)).tolist(),
+        cap=[("round", "butt", "square")[i] for i in rng.integers(0, 3, n)])
+    return rng, lines, kw
+
+
+CASES = [  # dtype, shape, bgr, max abs diff, max share of differing samples
+    (np.uint8, (72, 96, 3), True, 1, 1e-3),
+    (np.uint16, (72, 96, 4), False, 8, 2e-2),
+    (np.float32, (72, 96), True, 1e-4, 1.0),
+    (np.float16, (72, 96, 3), False, 1e-3, 1.0),
+    (np.float32, (72, 96, 4), True, 1e-4, 1.0),
+]
+
+
+@pytest.mark.parametrize("dtype,shape,bgr,tol,share", CASES)
+@pytest.mark.parametrize("seed", [0, 1])
+def test_kernel_matches_reference(renderer, dtype, shape, bgr, tol, share, seed):
+    rng, lines, kw = random_scene(seed)
+    if np.issubdtype(dtype, np.integer):
+        frame = rng.integers(0, np.iinfo(dtype).max + 1, shape).astype(dtype)
+    else:
+        frame = rng.random(shape).astype(dtype)
+    out = renderer.draw(frame, lines, bgr=bgr, **kw)
+    ref = reference_draw_polylines(frame, lines, bgr=bgr, **kw)
+    assert out.dtype == frame.dtype and out.shape == frame.shape
+    d = np.abs(out.astype(np.float64) - ref.astype(np.float64))
+    assert d.max() <= tol
+    assert (d > 0).mean() <= share
+    assert (out != frame).mean() > 0.3  # the scene draws over much of the frame
+
+
+def test_pixels_beyond_reach_are_untouched(renderer):
+    rng = np.random.default_rng(3)
+    frame = rng.integers(0, 256, (64, 80, 3)).astype(np.uint8)
+    line = np.array([[10.0, 20.0], [70.0, 40.0]])
+    out = renderer.draw(frame, [line], width=5, color=(0, 0, 255))
+    yy, xx = np.mgrid[0:64, 0:80]
+    t = np.clip(((xx - 10) * 60 + (yy - 20) * 20) / (60 ** 2 + 20 ** 2), 0, 1)
+    dist = np.hypot(xx - 10 - 60 * t, yy - 20 - 20 * t)
+    far = dist > 2.5 + math.sqrt(0.5) + 1e-3
+    assert np.array_equal(out[far], frame[far])
+    assert (out[dist < 2.5 - math.sqrt(0.5)] == (0, 0, 255)).all()  # BGR tuple, as cv2
+
+
+# ------------------------------------------------------------------------- known answers
+
+BG8, FILL8, OUT8 = (90, 90, 90), (250, 200, 40), (10, 20, 160)
+
+
+def _expected(cov: float, fg=FILL8, bg=BG8) -> np.ndarray:
+    lin = cov * srgb_to_linear(np.array(fg) / 255) + (1 - cov) * srgb_to_linear(np.array(bg) / 255)
+    return linear_to_srgb(lin)
+
+
+@pytest.mark.parametrize("impl", ["kernel", "reference"])
+def test_horizontal_road_width_4(renderer, impl):
+    """Centre y = 10.3, width 4: edges at 8.3 and 12.3, so rows 9..11 are inside, row 8 is covered
+    0.2, row 12 0.8, rows 7 and 13 are untouched (away from the caps)."""
+    frame = np.empty((24, 64, 3), np.float32)
+    frame[:] = np.array(BG8) / 255
+    line = np.array([[-20.0, 10.3], [90.0, 10.3]])
+    kw = dict(width=4.0, color="#%02x%02x%02x" % FILL8, bgr=False)
+    out = renderer.draw(frame, [line], **kw) if impl == "kernel" else \
+        reference_draw_polylines(frame, [line], **kw)
+    mid = out[:, 8:56]
+    assert np.array_equal(mid[9:12], np.broadcast_to(np.float32(np.array(FILL8) / 255), mid[9:12].shape))
+    assert np.array_equal(mid[:8], frame[:8, 8:56]) and np.array_equal(mid[13:], frame[13:, 8:56])
+    np.testing.assert_allclose(mid[8], np.broadcast_to(_expected(0.2), mid[8].shape), atol=1e-3)
+    np.testing.assert_allclose(mid[12], np.broadcast_to(_expected(0.8), mid[12].shape), atol=1e-3)
+
+
+@pytest.mark.parametrize("impl", ["kernel", "reference"])
+def test_outline_band(renderer, impl):
+    """Width 8, outline 2 at y = 20: outline over [16, 18] and [22, 24], fill over [18, 22]."""
+    frame = np.empty((40, 64, 3), np.uint8)
+    frame[:] = BG8
+    line = np.array([[-20.0, 20.0], [90.0, 20.0]])
+    kw = dict(width=8.0, color=FILL8, outline=OUT8, outline_width=2.0, bgr=False)
+    out = renderer.draw(frame, [line], **kw) if impl == "kernel" else \
+        reference_draw_polylines(frame, [line], **kw)
+    mid = out[:, 8:56].astype(int)
+    assert (mid[17] == OUT8).all() and (mid[23] == OUT8).all()
+    assert (mid[19:22] == FILL8).all()
+    assert np.array_equal(mid[:15], frame[:15, 8:56]) and np.array_equal(mid[26:], frame[26:, 8:56])
+    # row 18 straddles the outline/fill border: half of each, mixed in linear light
+    half = linear_to_srgb(0.5 * srgb_to_linear(np.array(FILL8) / 255)
+                          + 0.5 * srgb_to_linear(np.array(OUT8) / 255)) * 255
+    assert np.abs(mid[18] - half).max() <= 1
+    assert np.abs(mid[16] - _expected(0.5, OUT8) * 255).max() <= 1  # outer edge: half covered
+
+
+def _square_area_below(nx: float, ny: float, c: float, px: float, py: float) -> float:
+    """Exact area of the pixel square around (px, py) where nx*x + ny*y <= c (polygon clipping)."""
+    poly = [(px - .5, py - .5), (px + .5, py - .5), (px + .5, py + .5), (px - .5, py + .5)]
+    out = []
+    for i in range(4):
+        a, b = poly[i], poly[(i + 1) % 4]
+        fa, fb = nx * a[0] + ny * a[1] - c, nx * b[0] + ny * b[1] - c
+        if fa <= 0:
+            out.append(a)
+        if (fa < 0) != (fb < 0) and fa != fb:
+            t = fa / (fa - fb)
+            out.append((a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])))
+    if len(out) < 3:
+        return 0.0
+    nxt = out[1:] + out[:1]
+    return 0.5 * abs(sum(a[0] * b[1] - b[0] * a[1] for a, b in zip(out, nxt)))
+
+
+@pytest.mark.parametrize("angle", [0.0, 17.0, 30.0, 45.0, 71.0])
+def test_tilted_edge_is_exact_box_coverage(renderer, angle):
+    """A 200-px road at an angle, linear float frame, black under white: each pixel's value is its
+    coverage, which must equal the exact area of the pixel square on the road's side of the edge."""
+    a = math.radians(angle)
+    t = np.array([math.cos(a), math.sin(a)])
+    n = np.array([-t[1], t[0]])
+    m = np.array([32.2, 32.7])  # the edge passes here; the road's other edge is 200 px away
+    c = m - 100 * n
+    line = np.array([c - 400 * t, c + 400 * t])
+    frame = np.zeros((64, 64, 3), np.float32)
+    r2 = OverlayRenderer(linear=True)
+    out = r2.draw(frame, [line], width=200.0, color="#ffffff", bgr=False)[..., 0]
+    edge = n @ m  # the road is n.x <= edge inside the frame
+    exact = np.array([[_square_area_below(n[0], n[1], edge, x, y) for x in range(64)] for y in range(64)])
+    np.testing.assert_allclose(out, exact, atol=5e-5)  # float32 at coordinates ~400 px
+    assert ((exact > 0) & (exact < 1)).sum() > 40  # the edge crosses the frame
+
+
+def test_footprint_cdf_is_the_box_coverage():
+    """Reference of the kernel's ramp: a = b = 1/sqrt(2) is a 45-degree edge; b = 0 the seed's ramp."""
+    s = np.linspace(-1, 1, 41)
+    np.testing.assert_allclose(footprint_cdf(s, 1.0, 0.0), np.clip(s + 0.5, 0, 1))
+    k = math.sqrt(0.5)
+    exact = [_square_area_below(k, k, v, 0.0, 0.0) for v in s]
+    np.testing.assert_allclose(footprint_cdf(s, k, k), exact, atol=1e-12)
+
+
+def test_error_against_supersampled_truth_is_small(renderer):
+    """Random polylines of widths 1..12 against 8x8 point samples resolved in linear light."""
+    from mlaa_stream.overlay_bench import draw_grlaa, random_lines, truth_image
+    rng = np.random.default_rng(11)
+    h, w = 90, 120
+    lines = random_lines(rng, 8, h, w, margin=8)
+    widths = [1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 9.0, 12.0]
+    truth = truth_image(lines, widths, h, w)
+    ours = draw_grlaa(renderer, lines, widths, h, w).astype(np.float64) / 255
+    bg = truth[0, 0]
+    near = (np.abs(truth - bg).max(-1) > 0.5 / 255) | (np.abs(ours - bg).max(-1) > 0.5 / 255)
+    err = np.abs(ours - truth).max(-1)[near] * 255
+    assert near.sum() > 2000
+    # 8-bit levels; measured 0.89 and 10.3. The largest errors sit where a polyline crosses
+    # itself (its segments merge by max, the truth by union). cv2 LINE_AA: docs/grlaa_bench.md.
+    assert err.mean() < 1.2
+    assert np.quantile(err, 0.99) < 14
+
+
+# ------------------------------------------------------------------------------- API
+
+def test_inplace_and_copy(renderer):
+    frame = np.full((20, 30, 3), 7, np.uint8)
+    line = np.array([[2.0, 10.0], [28.0, 10.0]])
+    out = renderer.draw(frame, [line], width=3)
+    assert out is not frame and (frame == 7).all() and (out != 7).any()
+    same = renderer.draw(frame, [line], width=3, inplace=True)
+    assert same is frame and np.array_equal(frame, out)
+    ro = np.full((20, 30, 3), 7, np.uint8)
+    ro.flags.writeable = False
+    with pytest.raises(ValueError, match="expected a writeable array"):
+        renderer.draw(ro, [line], inplace=True)
+
+
+def test_buffers_kept_between_frames(renderer):
+    r = OverlayRenderer()
+    f = np.zeros((30, 40, 3), np.uint8)
+    r.draw(f, [np.array([[1.0, 1.0], [30.0, 20.0]])])
+    buf, kern = r._frame_buf, r._kernel
+    r.draw(f, [np.array([[5.0, 1.0], [35.0, 25.0]])], width=4)
+    assert r._frame_buf is buf and r._kernel is kern
+
+
+def test_noncontiguous_and_float16_frames(renderer):
+    rng = np.random.default_rng(5)
+    base = rng.random((40, 50, 3)).astype(np.float16)
+    view = base[:, ::-1]  # not C-contiguous
+    line = [np.array([[3.0, 3.0], [45.0, 30.0], [10.0, 35.0]])]
+    out = renderer.draw(view, line, width=3, outline_width=1)
+    ref = reference_draw_polylines(np.ascontiguousarray(view), line, width=3, outline_width=1)
+    assert out.dtype == np.float16
+    assert np.abs(out.astype(np.float64) - ref.astype(np.float64)).max() <= 1e-3
+
+
+def test_lines_off_frame_and_empty(renderer):
+    frame = np.random.default_rng(2).integers(0, 256, (16, 16, 3)).astype(np.uint8)
+    assert np.array_equal(renderer.draw(frame, [np.array([[-50.0, -50.0], [-20.0, -30.0]])]), frame)
+    assert np.array_equal(renderer.draw(frame, []), frame)
+
+
+def test_huge_coordinates_are_clipped_exactly(renderer):
+    frame = np.full((40, 60, 3), 50, np.uint8)
+    lines = [np.array([[-1e7, -0.5e7], [1e7, 0.5e7 + 10]]), np.array([[-100.0, 30.0], [1e5, 30.3]])]
+    out = renderer.draw(frame, lines, width=3, cap="butt")
+    ref = reference_draw_polylines(frame, lines, width=3, cap="butt")
+    assert np.abs(out.astype(int) - ref.astype(int)).max() <= 1 and (out != frame).any()
+
+
+@pytest.mark.parametrize("bad,match", [
+    (dict(lines=[np.array([[0.0, np.nan], [3.0, 4.0]])]), "line 0: expected finite coordinates"),
+    (dict(width=0.0), "expected width > 0"),
+    (dict(color="#12345"), "expected '#rrggbb'"),
+    (dict(color=(300, 0, 0)), "expected 3 numbers 0..255"),
+    (dict(cap="arrow"), "expected cap one of"),
+    (dict(opacity=1.5), "expected opacity in"),
+    (dict(width=[1.0, 2.0]), "expected one value or 1"),
+])
+def test_bad_arguments(renderer, bad, match):
+    kw = dict(lines=[np.array([[0.0, 0.0], [3.0, 4.0]])])
+    kw.update(bad)
+    with pytest.raises(ValueError, match=match):
+        renderer.draw(np.zeros((8, 8, 3), np.uint8), **kw)
+
+
+def test_bad_frame(renderer):
+    with pytest.raises(ValueError, match=r"expected shape \(H, W\) or \(H, W, 1\|3\|4\)"):
+        draw_polylines(np.zeros((8, 8, 2), np.uint8), [np.array([[0.0, 0.0], [1.0, 1.0]])])
+
+
+def test_parse_color():
+    assert parse_color("#ff8000") == (1.0, 128 / 255, 0.0)
+    assert parse_color([0, 255, 51]) == (0.0, 1.0, 0.2)
+
+
+# ------------------------------------------------------------------------- overlay files
+
+def _write(tmp_path, doc, name="ov.geojson"):
+    p = tmp_path / name
+    p.write_text(json.dumps(doc))
+    return str(p)
+
+
+def test_load_overlay_fixed_and_per_frame(renderer, tmp_path):
+    doc = {"type": "FeatureCollection", "features": [
+        {"type": "Feature", "geometry": {"type": "LineString", "coordinates": [[2, 5], [28, 5]]},
+         "properties": {"width": 3, "color": "#ff0000"}},
+        {"type": "Feature", "geometry": None,
+         "properties": {"width": 2, "color": [0, 0, 255],
+                        "frames": {"1": [[2, 15], [28, 15]],
+                                   "2": [[[2, 12], [10, 12]], [[20, 18], [28, 18]]]}}},
+        {"type": "Feature", "properties": {"first_frame": 2, "color": "#00ff00"},
+         "geometry": {"type": "MultiLineString", "coordinates": [[[15, 0], [15, 19]]]}},
+    ]}
+    draw = load_overlay(_write(tmp_path, doc), bgr=True)
+    f = np.zeros((20, 30, 3), np.uint8)
+    o0, o1, o2 = draw(f, 0), draw(f, 1), draw(f, 2)
+    assert (o0[5, 10] == (0, 0, 255)).all()           # file colours are RGB; frames BGR
+    assert (o0[15] == 0).all() and (o1[15, 10] == (255, 0, 0)).all()
+    assert (o2[12, 5] == (255, 0, 0)).all() and (o2[18, 25] == (255, 0, 0)).all()
+    assert (o0[10, 15] == 0).all() and (o2[10, 15] == (0, 255, 0)).all()
+    assert (f == 0).all()  # not drawn in place by default
+
+
+@pytest.mark.parametrize("doc,match", [
+    ({"type": "FeatureCollection", "features": [{"type": "Feature", "properties": {},
+      "geometry": {"type": "Point", "coordinates": [1, 2]}}]}, "feature 0: expected a LineString"),
+    ({"type": "FeatureCollection", "features": [{"type": "Feature", "properties": {"width": -1},
+      "geometry": {"type": "LineString", "coordinates": [[1, 2], [3, 4]]}}]},
+     "feature 0: expected width > 0"),
+    ({"type": "Feature", "geometry": None, "properties": {"frames": {"x": [[1, 2]]}}},
+     "expected frame indices >= 0"),
+    ({"type": "Feature", "geometry": None, "properties": {}}, "expected a geometry or 'frames'"),
+    ({"features": []}, "expected a GeoJSON object with a 'type'"),
+])
+def test_overlay_file_errors_name_file_and_feature(tmp_path, doc, match):
+    path = _write(tmp_path, doc)
+    with pytest.raises(ValueError, match=match) as info:
+        load_overlay(path)
+    assert path in str(info.value)
+
+
+def test_overlay_file_not_json(tmp_path):
+    p = tmp_path / "bad.json"
+    p.write_text("{ nope")
+    with pytest.raises(ValueError, match=r"bad.json: expected JSON, got an error at line 1"):
+        load_overlay(str(p))
+
+
+def test_parse_bare_geometry():
+    feats = parse_overlay({"type": "LineString", "coordinates": [[0, 0], [1, 1], [2, 0]]})
+    assert len(feats) == 1 and feats[0].lines_at(5)[0].shape == (3, 2)
+
+
+# ---------------------------------------------------------------------------------- CLI
+
+def _png(path, pixels):
+    import OpenImageIO as oiio
+    out = oiio.ImageOutput.create(path)
+    fmt = "uint16" if pixels.dtype == np.uint16 else "uint8"
+    assert out.open(path, oiio.ImageSpec(pixels.shape[1], pixels.shape[0], pixels.shape[2], fmt))
+    assert out.write_image(pixels)
+    out.close()
+
+
+def test_cli_overlay(renderer, tmp_path):
+    from click.testing import CliRunner
+    from mlaa_stream.cli.main import main
+    src = str(tmp_path / "in.png")
+    _png(src, np.full((30, 40, 3), 20000, np.uint16))
+    lines = _write(tmp_path, {"type": "Feature", "properties": {"width": 4, "color": "#ffffff"},
+                              "geometry": {"type": "LineString", "coordinates": [[3, 15], [37, 15]]}})
+    dst = str(tmp_path / "out.png")
+    run = CliRunner().invoke
+    r = run(main, ["overlay", src, "-o", dst, "--lines", lines])
+    assert r.exit_code == 0, r.output
+    from mlaa_stream.image_io import read_image
+    img = read_image(dst).pixels
+    assert img.dtype == np.uint16 and (img[15, 20] == 65535).all() and (img[2, 2] == 20000).all()
+    r = run(main, ["overlay", src, "-o", dst, "--lines", lines])
+    assert r.exit_code == 2 and "exists; use --overwrite" in r.output
+    assert run(main, ["overlay", src, "-o", dst, "--lines", lines, "--overwrite"]).exit_code == 0
+    r = run(main, ["overlay", src, "-o", src, "--lines", lines, "--overwrite"])
+    assert r.exit_code == 2 and "is the input" in r.output
+    bad = tmp_path / "bad.json"
+    bad.write_text("[]")
+    r = run(main, ["overlay", src, "-o", str(tmp_path / "o2.png"), "--lines", str(bad)])
+    assert r.exit_code == 1 and "bad.json" in r.output
+    assert not os.path.exists(tmp_path / "o2.png")
+    assert not [p for p in os.listdir(tmp_path) if "tmp" in p]
