@@ -20,7 +20,7 @@ Examples:
   mlaa-stream 'shot/%04d.exr' -o 'clean/%04d.exr' --resume  go on after an interruption
   mlaa-stream in.mp4 -o out.mp4                      H.264, CRF 18, preset veryfast, audio copied
   mlaa-stream in.mov -o mid.mkv --codec ffv1         lossless intermediate (also: libx264rgb --crf 0)
-  mlaa-stream in.mp4 -o out.mp4 --preset sharp --metric luma --threshold 0.08
+  mlaa-stream in.mp4 -o out.mp4 --preset soft --metric luma --threshold 0.08
 
 \b
 Images and sequences go through OpenImageIO: bit depth (8/16-bit, half, float), channels, alpha

@@ -1,0 +1,81 @@
+"""Per-pass timings of the spatial filter on 1920x1080 frames: `python -m mlaa_stream.mlaa_profile`.
+
+Three frames: the yardstick's mixed timing frame (edges, UI text, checkerboard, photo, wires), a
+whole-frame photograph (every pixel differs from its neighbours: the worst case for edge
+detection) and a flat frame (the floor). For each: the median of >= 20 frames after warm-up of
+`Filter.process` (host to host), and each pass's device time on a profiling queue. Writes
+docs/performance.md. A benchmark, never a unit test; machines here are noisy.
+"""
+from __future__ import annotations
+
+import argparse
+import datetime
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .mlaa import Filter
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def frames() -> dict[str, np.ndarray]:
+    import cv2
+    import matplotlib.image
+    from matplotlib import cbook
+
+    from .scenes import timing_frame
+    photo = matplotlib.image.imread(cbook.get_sample_data("grace_hopper.jpg", asfileobj=False))
+    photo = cv2.resize(np.ascontiguousarray(photo[..., :3]), (1920, 1080), interpolation=cv2.INTER_CUBIC)
+    return {"mixed (yardstick timing frame)": timing_frame(),
+            "photograph": np.ascontiguousarray(photo, dtype=np.uint8),
+            "flat": np.full((1080, 1920, 3), 90, np.uint8)}
+
+
+def measure(f: Filter, frame: np.ndarray, runs: int) -> tuple[float, dict[str, float]]:
+    for _ in range(3):
+        f.process(frame)
+    times = []
+    for _ in range(runs):
+        t = time.perf_counter()
+        f.process(frame)
+        times.append((time.perf_counter() - t) * 1e3)
+    return float(np.median(times)), f.profile(frame, runs=runs)
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--runs", type=int, default=20)
+    ap.add_argument("--preset", default="default")
+    ap.add_argument("--out", default=str(ROOT / "docs" / "performance.md"))
+    args = ap.parse_args(argv)
+    from .mlaa import PRESETS
+    lines = []
+    with Filter(**PRESETS[args.preset]) as f:
+        for name, frame in frames().items():
+            total, passes = measure(f, frame, args.runs)
+            kernel_sum = sum(passes.values())
+            shares = ", ".join(f"{k} {v:.1f} ms ({100 * v / kernel_sum:.0f} %)" for k, v in passes.items())
+            lines.append(f"| {name} | {total:.1f} | {kernel_sum:.1f} | {shares} |")
+            print(f"{name}: process {total:.1f} ms; passes {shares}")
+        device, bpp = f.device_name, f.device_bytes_per_pixel()
+    text = "\n".join([
+        "# Spatial filter: time per 1920x1080 frame",
+        "",
+        f"- command: `python -m mlaa_stream.mlaa_profile --runs {args.runs} --preset {args.preset}`",
+        f"- date: {datetime.datetime.now():%Y-%m-%d %H:%M}",
+        f"- device: {device}",
+        f"- device memory: {bpp:.1f} bytes per pixel (8-bit RGB), allocated once per frame format",
+        f"- median of {args.runs} frames after 3 warm-up frames; `process` is host to host (upload, passes,"
+        " download); pass times are device times on a serialised profiling queue",
+        "",
+        "| frame | process (ms) | sum of passes (ms) | passes (share) |",
+        "| --- | --- | --- | --- |",
+        *lines, ""])
+    Path(args.out).write_text(text)
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
