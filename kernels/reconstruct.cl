@@ -1,9 +1,19 @@
 // reconstruct.cl -- topological reconstruction of sub-pixel features (seed 000 §4), plus two rules
 // beyond the paper (docs/reconstruct.md). Runs before edge detection. dst must hold a copy of src (the host
-// enqueues it): the kernel writes reconstructed pixels only.
+// enqueues it): the kernels write reconstructed pixels only.
 // The numpy reference is mlaa_stream.reconstruct.reconstruct_reference; this file mirrors it rule for rule.
+//
+// Three passes, each one work item per SEGMENT pixels of a row that skips GROUP pixels at a time where
+// nothing can happen (PoCL CPU runs branchy per-pixel kernels slowly, and CIELAB costs ~25 ns a pixel):
+//   reconstruct_candidates  RGB only: mask[i] = the ring neighbours that may differ from A in ΔE (Lipschitz
+//                           bound) when the rules may fire at A, else 0
+//   reconstruct_lab         lab[i] = CIELAB of every pixel a candidate will read (itself, its maybe-ring)
+//   reconstruct             the rules, at candidates only
 // Defines (mlaa_stream.reconstruct.Reconstructor):
-//   CHEAP_BOUND      max-channel difference below which ΔE76 cannot exceed the threshold (host Lipschitz bound)
+//   CHEAP_BOUND      max-channel difference (normalised) below which ΔE76 cannot exceed the threshold
+//   CHEAP_LEVELS     integer frames: the smallest difference in stored levels over CHEAP_BOUND * PIXEL_MAX
+//   FAR_LEVELS       the same for 2 * CHEAP_BOUND (the extended rules' line contrast)
+//   SAMPLE_BYTES     1, 2 or 4: bytes of a stored sample (uchar, ushort, float), for the quiet-group test
 //   EXTENDED         1: also the rules beyond the paper (line-relative X, two-pixel gaps)
 //   LINEAR_INPUT     1 when samples are linear light: encoded to sRGB (table) before the Lab comparison
 //   MAX_LINE_PIXELS  line-coloured pixels a 5x5 window around a gap may hold
@@ -21,6 +31,12 @@
 #ifndef CHEAP_BOUND
 #define CHEAP_BOUND 0.0f
 #endif
+#ifndef CHEAP_LEVELS
+#define CHEAP_LEVELS 0
+#endif
+#ifndef FAR_LEVELS
+#define FAR_LEVELS 0
+#endif
 #ifndef MAX_LINE_PIXELS
 #define MAX_LINE_PIXELS 8
 #endif
@@ -35,6 +51,44 @@
 __constant int RX[8] = {-1, 0, 1, 1, 1, 0, -1, -1};
 __constant int RY[8] = {-1, -1, -1, 0, 1, 1, 1, 0};
 
+// ---- the cheap test, in stored values: integer levels for 8/16-bit frames, normalised floats otherwise.
+// Max-channel differences of integer samples are exact: d >= CHEAP_LEVELS is d > CHEAP_BOUND * PIXEL_MAX,
+// which every pair with ΔE over the threshold meets (ΔE <= Lipschitz * max-channel difference).
+#ifdef PIXEL_IS_FLOAT
+typedef float4 rawpx;
+typedef float rawdiff;
+#define NEAR_LIMIT CHEAP_BOUND
+#define FAR_LIMIT (2.0f * CHEAP_BOUND)
+inline rawpx raw_px(__global const PIXEL_T *src, int i) { return load_px(src, i); }
+#else
+typedef int4 rawpx;
+typedef int rawdiff;
+#define NEAR_LIMIT CHEAP_LEVELS
+#define FAR_LIMIT FAR_LEVELS
+inline rawpx raw_px(__global const PIXEL_T *src, int i)
+{
+#if CHANNELS == 1
+    int v = src[i];
+    return (int4)(v, v, v, 0);
+#else
+    __global const PIXEL_T *p = src + (size_t)i * CHANNELS;   // channel order does not matter here
+    return (int4)(p[0], p[1], p[2], 0);
+#endif
+}
+#endif
+
+// PoCL calls fabs/fmax/min/max out of line: plain expressions in the hot path.
+inline rawdiff max_diff(rawpx a, rawpx b)
+{
+    rawpx d = a - b;
+    rawdiff x = d.x < 0 ? -d.x : d.x, y = d.y < 0 ? -d.y : d.y, z = d.z < 0 ? -d.z : d.z;
+    rawdiff m = x > y ? x : y;
+    return m > z ? m : z;
+}
+
+// ---- CIELAB, the same numbers as common.cl's rgb_to_lab (after the LINEAR_INPUT encoding). Integer
+// frames read the per-level sRGB->linear values from `lin` (filled once by reconstruct_lin_table with
+// the same lut_read), which halves the cost of a conversion.
 inline float3 lab_of(__global const float *luts, float4 c)
 {
 #if LINEAR_INPUT
@@ -44,9 +98,42 @@ inline float3 lab_of(__global const float *luts, float4 c)
     return rgb_to_lab(luts, c);
 }
 
-inline float3 lab_at(__global const PIXEL_T *src, __global const float *luts, int x, int y, int w)
+inline float3 lab_from_linear(__global const float *luts, float r, float g, float b)
 {
-    return lab_of(luts, load_px(src, IDX(x, y, w)));
+    __global const float *f = luts + LUT_SIZE + 1;
+    float X = (0.4124564f * r + 0.3575761f * g + 0.1804375f * b) * (1.0f / 0.95047f);
+    float Y = 0.2126729f * r + 0.7151522f * g + 0.0721750f * b;
+    float Z = (0.0193339f * r + 0.1191920f * g + 0.9503041f * b) * (1.0f / 1.08883f);
+    float fx = lut_read(f, X), fy = lut_read(f, Y), fz = lut_read(f, Z);
+    return (float3)(116.0f * fy - 16.0f, 500.0f * (fx - fy), 200.0f * (fy - fz));
+}
+
+inline float3 lab_px(__global const PIXEL_T *src, __global const float *luts, __global const float *lin, int i)
+{
+#ifdef PIXEL_IS_FLOAT
+    return lab_of(luts, load_px(src, i));
+#elif CHANNELS == 1
+    float v = lin[src[i]];
+    return lab_from_linear(luts, v, v, v);
+#else
+    __global const PIXEL_T *p = src + (size_t)i * CHANNELS;
+#if ORDER_BGR
+    return lab_from_linear(luts, lin[p[2]], lin[p[1]], lin[p[0]]);
+#else
+    return lab_from_linear(luts, lin[p[0]], lin[p[1]], lin[p[2]]);
+#endif
+#endif
+}
+
+// lin[v] = what rgb_to_lab reads from the sRGB->linear table for the stored level v (load_px's scaling).
+__kernel void reconstruct_lin_table(__global const float *luts, __global float *lin)
+{
+    const int v = get_global_id(0);
+    float c = (float)v * (1.0f / PIXEL_MAX);
+#if LINEAR_INPUT
+    c = lut_read(luts + 2 * (LUT_SIZE + 1), c);
+#endif
+    lin[v] = lut_read(luts, c);
 }
 
 inline float d2(float3 a, float3 b)
@@ -76,8 +163,8 @@ inline int one_colour(const float3 *n, uint mask, float t2, float3 *mean)
 // or background (within it of A; `relaxed`: nearer to A than to c and within 2 thresholds of A), at most
 // MAX_LINE_PIXELS are line-coloured, each piece of the shape continues outward and aims at A, and the
 // lines through the two pieces are at most MAX_OFFSET apart (one line, not two parallel strokes).
-inline int thin_gap(__global const PIXEL_T *src, __global const float *luts, int x, int y, int w, int h,
-                    float3 a, float3 c, uint mask, uint comp1, float t2, int relaxed)
+inline int thin_gap(__global const PIXEL_T *src, __global const float *luts, __global const float *lin, int x, int y,
+                    int w, int h, float3 a, float3 c, uint mask, uint comp1, float t2, int relaxed)
 {
     int line = 0;
     float ox[2] = {0.0f, 0.0f}, oy[2] = {0.0f, 0.0f};
@@ -85,7 +172,7 @@ inline int thin_gap(__global const PIXEL_T *src, __global const float *luts, int
     for (int dy = -2; dy <= 2; ++dy) {
         for (int dx = -2; dx <= 2; ++dx) {
             if ((dx == 0 && dy == 0) || !inside(x + dx, y + dy, w, h)) continue;
-            float3 q = lab_at(src, luts, x + dx, y + dy, w);
+            float3 q = lab_px(src, luts, lin, IDX(x + dx, y + dy, w));
             float dc = d2(q, c), da = d2(q, a);
             if (dc <= t2) {
                 ++line;
@@ -137,69 +224,178 @@ inline void store_mean(__global const PIXEL_T *src, __global PIXEL_T *dst, int x
     store_px(dst, IDX(x, y, w), m);
 }
 
-__kernel void reconstruct(__global const PIXEL_T *src, __global PIXEL_T *dst, __global const float *luts,
-                          __global const uint *table, const int width, const int height, const float t2)
+
+// ---- pass 1: candidates, from RGB alone.
+// Quiet group: none of the GROUP pixels has a ring neighbour at the cheap bound or beyond in any channel, so
+// every mask is 0 -- exactly the per-pixel result. Tested on the raw sample stream (channel order does not
+// matter: a pixel's samples are compared with the same samples of its neighbours); flat and smooth areas
+// cost just this. Interior groups only (the caller checks). Alpha samples take part (a stricter test).
+// Plain byte/sample loops: PoCL runs them 2-3x faster than vload8 words here (docs/reconstruct.md).
+inline int same_bytes(__global const uchar *a, __global const uchar *b, int n)
 {
-    const int x = get_global_id(0), y = get_global_id(1);
-    if (x >= width || y >= height) return;
-    const int i = IDX(x, y, width);
+    int same = 1;
+    for (int o = 0; o < n; ++o) same &= a[o] == b[o];
+    return same;
+}
 
-    // cheap RGB test: no neighbour far enough from A in any channel to reach the ΔE threshold.
-    // dst already holds a copy of src (Reconstructor.enqueue): pixels that stay need no write.
-    float4 ca = load_px(src, i);
-    float near;
-    if (x > 0 && y > 0 && x < width - 1 && y < height - 1) {
-        float4 d = fmax(fmax(fmax(fabs(load_px(src, i - width - 1) - ca), fabs(load_px(src, i - width) - ca)),
-                             fmax(fabs(load_px(src, i - width + 1) - ca), fabs(load_px(src, i - 1) - ca))),
-                        fmax(fmax(fabs(load_px(src, i + 1) - ca), fabs(load_px(src, i + width - 1) - ca)),
-                             fmax(fabs(load_px(src, i + width) - ca), fabs(load_px(src, i + width + 1) - ca))));
-        near = fmax(fmax(d.x, d.y), d.z);
-    } else {
-        near = 0.0f;
-        for (int k = 0; k < 8; ++k) {
-            if (inside(x + RX[k], y + RY[k], width, height)) {
-                float4 d = fabs(load_px(src, IDX(x + RX[k], y + RY[k], width)) - ca);
-                near = fmax(near, fmax(fmax(d.x, d.y), d.z));
-            }
-        }
-    }
-    if (near < CHEAP_BOUND) return;
-    // second cheap test, per neighbour: X lies within `maybe` (ΔE <= Lipschitz * max-channel difference),
-    // so the paper's rule needs a gap mask inside it (table bit 1); the extended rules need a neighbour
-    // more than 2 thresholds away in ΔE (their line contrast), so more than 2 * CHEAP_BOUND in RGB.
-    int valid[8];
-    uint maybe = 0;
-    float far = 0.0f;
+inline int quiet_group(__global const PIXEL_T *src, int i, int width)
+{
+    // bit-identical 3x(GROUP+2) window first (rendered flat areas): rows above and below equal this row
+    // over x-1..x+GROUP, and this row equal to itself shifted by a pixel
+    const int px = CHANNELS * SAMPLE_BYTES, row = width * px;
+    __global const uchar *p = (__global const uchar *)src + (size_t)(i - 1) * px;
+    if (same_bytes(p, p - row, (GROUP + 2) * px) && same_bytes(p, p + row, (GROUP + 2) * px) &&
+        same_bytes(p, p + px, (GROUP + 1) * px))
+        return 1;
+    // else every sample against the same sample of its 8 neighbours (smooth areas)
+    __global const PIXEL_T *q = src + (size_t)i * CHANNELS;
+    const int rs = width * CHANNELS;
+    int hit = 0;
     for (int k = 0; k < 8; ++k) {
-        valid[k] = inside(x + RX[k], y + RY[k], width, height);
-        if (valid[k]) {
-            float4 d = fabs(load_px(src, IDX(x + RX[k], y + RY[k], width)) - ca);
-            float m = fmax(fmax(d.x, d.y), d.z);
-            if (m >= CHEAP_BOUND) maybe |= 1u << k;
-            far = fmax(far, m);
+        const int off = RY[k] * rs + RX[k] * CHANNELS;
+        for (int t = 0; t < GROUP * CHANNELS; ++t) {
+            rawdiff u = q[t], v = q[t + off];
+            hit |= (u > v ? u - v : v - u) >= NEAR_LIMIT;
         }
     }
-#if EXTENDED
-    if (!(table[maybe] & 2u) && far < 2.0f * CHEAP_BOUND) return;
-#else
-    if (!(table[maybe] & 2u)) return;
-#endif
+    return !hit;
+}
 
-    float3 a = lab_of(luts, ca);
+// Ring bits whose neighbour lies inside the frame.
+inline uint valid_ring(int x, int y, int width, int height)
+{
+    uint v = 0xffu;
+    if (x == 0) v &= ~0xc1u;            // NW, SW, W
+    if (x == width - 1) v &= ~0x1cu;    // NE, E, SE
+    if (y == 0) v &= ~0x07u;            // NW, N, NE
+    if (y == height - 1) v &= ~0x70u;   // SE, S, SW
+    return v;
+}
+
+// Necessary conditions of the two-pixel rule along ring direction k, in RGB: q1 q2 (ahead) and q3 q4 (behind
+// B) all more than 2 thresholds from A in ΔE (each is within one threshold of the line's mean, which is more
+// than 3 from A), so at least 2 * CHEAP_BOUND from A in some channel; all inside the frame.
+inline int two_gap_possible(__global const PIXEL_T *src, rawpx a, int x, int y, int k, int width, int height)
+{
+    const int dx = RX[k], dy = RY[k];
+    if (!inside(x + 2 * dx, y + 2 * dy, width, height) || !inside(x - 3 * dx, y - 3 * dy, width, height))
+        return 0;
+    return max_diff(raw_px(src, IDX(x + 2 * dx, y + 2 * dy, width)), a) >= FAR_LIMIT &&
+           max_diff(raw_px(src, IDX(x - 2 * dx, y - 2 * dy, width)), a) >= FAR_LIMIT &&
+           max_diff(raw_px(src, IDX(x - 3 * dx, y - 3 * dy, width)), a) >= FAR_LIMIT;
+}
+
+// mask[i] = `maybe` (ring bits that may be in X: max-channel difference >= the cheap bound, so ΔE may exceed
+// the threshold) where a rule may fire at i, else 0. The paper's rule and the line-relative rule need a gap
+// among the sub-masks of X, so of `maybe` (table bit 1); the two-pixel rule needs two_gap_possible.
+__kernel void reconstruct_candidates(__global const PIXEL_T *src, __global uchar *mask, __global const uint *table,
+                                     const int width, const int height)
+{
+    const int x0 = get_global_id(0) * SEGMENT, y = get_global_id(1);
+    if (x0 >= width || y >= height) return;
+    const int x1 = x0 + SEGMENT < width ? x0 + SEGMENT : width;
+    const int ya = y > 0 ? y - 1 : 0, yb = y + 1 < height ? y + 1 : height - 1;
+    for (int g = x0; g < x1; g += GROUP) {
+        const int ge = g + GROUP < x1 ? g + GROUP : x1;
+        if (ge - g == GROUP && g > 0 && g + GROUP < width && y > 0 && y + 1 < height &&
+            quiet_group(src, IDX(g, y, width), width)) {
+            vstore8((uchar8)(0), 0, mask + IDX(g, y, width));
+            continue;
+        }
+        // a sliding 3x3 window: columns l (x-1), m (x), r (x+1); rows 0 (y-1), 1 (y), 2 (y+1); clamped reads,
+        // out-of-frame neighbours removed by valid_ring
+        int xl = g > 0 ? g - 1 : 0;
+        rawpx l0 = raw_px(src, IDX(xl, ya, width)), l1 = raw_px(src, IDX(xl, y, width)),
+              l2 = raw_px(src, IDX(xl, yb, width));
+        rawpx m0 = raw_px(src, IDX(g, ya, width)), m1 = raw_px(src, IDX(g, y, width)),
+              m2 = raw_px(src, IDX(g, yb, width));
+        for (int x = g; x < ge; ++x) {
+            const int xr = x + 1 < width ? x + 1 : width - 1;
+            rawpx r0 = raw_px(src, IDX(xr, ya, width)), r1 = raw_px(src, IDX(xr, y, width)),
+                  r2 = raw_px(src, IDX(xr, yb, width));
+            rawdiff d[8] = {max_diff(l0, m1), max_diff(m0, m1), max_diff(r0, m1), max_diff(r1, m1),
+                            max_diff(r2, m1), max_diff(m2, m1), max_diff(l2, m1), max_diff(l1, m1)};
+            const uint valid = valid_ring(x, y, width, height);
+            uint maybe = 0, far = 0;
+            for (int k = 0; k < 8; ++k) {
+                maybe |= (uint)(d[k] >= NEAR_LIMIT) << k;
+                far |= (uint)(d[k] >= FAR_LIMIT) << k;
+            }
+            maybe &= valid;
+            far &= valid;
+            int cand = (table[maybe] & 2u) != 0;
+#if EXTENDED
+            for (int k = 0; k < 8 && !cand; ++k)
+                if (far >> k & 1u) cand = two_gap_possible(src, m1, x, y, k, width, height);
+#endif
+            mask[IDX(x, y, width)] = cand ? (uchar)maybe : (uchar)0;
+            l0 = m0; l1 = m1; l2 = m2;
+            m0 = r0; m1 = r1; m2 = r2;
+        }
+    }
+}
+
+// ---- pass 2: CIELAB of every pixel a candidate reads in its 3x3: the candidate itself and the ring
+// neighbours in its mask (the others cannot be in X). Each pixel is converted once.
+__kernel void reconstruct_lab(__global const PIXEL_T *src, __global const uchar *mask, __global const float *luts,
+                              __global const float *lin, __global float4 *lab, const int width, const int height)
+{
+    const int x0 = get_global_id(0) * SEGMENT, y = get_global_id(1);
+    if (x0 >= width || y >= height) return;
+    const int x1 = x0 + SEGMENT < width ? x0 + SEGMENT : width;
+    for (int g = x0; g < x1; g += GROUP) {
+        const int ge = g + GROUP < x1 ? g + GROUP : x1;
+        if (ge - g == GROUP && g > 0 && g + GROUP < width) {
+            // no candidate in the 3x(GROUP+2) window: nothing here is read
+            __global const uchar *m = mask + IDX(g - 1, y > 0 ? y - 1 : y, width);
+            const int rows = (y > 0) + 1 + (y + 1 < height);
+            uint any = 0;
+            for (int r = 0; r < rows; ++r, m += width)
+                for (int t = 0; t < GROUP + 2; ++t) any |= m[t];
+            if (any == 0) continue;
+        }
+        for (int x = g; x < ge; ++x) {
+            const int i = IDX(x, y, width);
+            const uint valid = valid_ring(x, y, width, height);
+            uint need = mask[i];
+            for (int k = 0; k < 8; ++k)   // neighbour k reads this pixel when its bit (k + 4) & 7 is set
+                if (valid >> k & 1u) need |= mask[IDX(x + RX[k], y + RY[k], width)] >> ((k + 4) & 7) & 1u;
+            if (need) lab[i] = (float4)(lab_px(src, luts, lin, i), 0.0f);
+        }
+    }
+}
+
+
+// The rules at pixel (x, y), a candidate of pass 1 with ring bits `maybe`; writes dst[i] when one fires.
+inline void reconstruct_at(__global const PIXEL_T *src, __global PIXEL_T *dst, __global const float *luts,
+                           __global const float *lin, __global const float4 *lab, __global const uint *table,
+                           const int x, const int y, const int width, const int height, const float t2,
+                           const uint maybe)
+{
+    const int i = IDX(x, y, width);
+    // X from the Lab of pass 2: a ring pixel outside `maybe` is within the threshold of A (the cheap bound),
+    // so its da stays 0 here and its Lab is read only if the two-pixel rule needs it (as B).
+    float3 a = lab[i].xyz;
     float3 n[8];
     float da[8];
+    int valid[8];
     uint X = 0;
     for (int k = 0; k < 8; ++k) {
-        n[k] = valid[k] ? lab_at(src, luts, x + RX[k], y + RY[k], width) : a;
-        da[k] = d2(n[k], a);
-        if (valid[k] && da[k] > t2) X |= 1u << k;
+        valid[k] = inside(x + RX[k], y + RY[k], width, height);
+        n[k] = a;
+        da[k] = 0.0f;
+        if (maybe >> k & 1u) {
+            n[k] = lab[IDX(x + RX[k], y + RY[k], width)].xyz;
+            da[k] = d2(n[k], a);
+            if (da[k] > t2) X |= 1u << k;
+        }
     }
     if (X == 0) return;
 
     // seed 000 §4.2-4.3: T8(A, X) = 2 and T8(A, X-bar) = 1 (table), X of one colour; plus the 5x5 checks
     float3 c;
     uint e = table[X];
-    if ((e & 1u) && one_colour(n, X, t2, &c) && thin_gap(src, luts, x, y, width, height, a, c, X, e >> 8, t2, 0)) {
+    if ((e & 1u) && one_colour(n, X, t2, &c) && thin_gap(src, luts, lin, x, y, width, height, a, c, X, e >> 8, t2, 0)) {
         store_mean(src, dst, x, y, width, X);
         return;
     }
@@ -212,37 +408,37 @@ __kernel void reconstruct(__global const PIXEL_T *src, __global PIXEL_T *dst, __
             if ((X >> j & 1u) && d2(n[j], n[k]) < da[j]) xk |= 1u << j;
         uint ek = table[xk];
         if (xk != X && (ek & 1u) && one_colour(n, xk, t2, &c) && d2(c, a) > 9.0f * t2 &&
-            thin_gap(src, luts, x, y, width, height, a, c, xk, ek >> 8, t2, 1)) {
+            thin_gap(src, luts, lin, x, y, width, height, a, c, xk, ek >> 8, t2, 1)) {
             store_mean(src, dst, x, y, width, xk);
             return;
         }
     }
     // beyond the paper (2): a gap of two pixels, A and B, in a straight line q2 q1 A B q3 q4
+    rawpx ca = raw_px(src, i);
     for (int k = 0; k < 8; ++k) {
         if (!(X >> k & 1u)) continue;
         // necessary conditions from the ring alone first (implied by the full test below): B = the
-        // opposite neighbour is A's colour, q1 is more than 2 thresholds away, the rest of the ring is
-        // background (within the threshold of A or B)
+        // opposite neighbour is A's colour, q1 is more than 2 thresholds away, q2..q4 may be (RGB), the rest
+        // of the ring is background (within the threshold of A or B)
         const int kb = (k + 4) & 7;
         if (!valid[kb] || da[kb] > t2 || da[k] <= 4.0f * t2) continue;
-        int plain = 1;
-        for (int j = 0; j < 8; ++j)
-            if (j != k && j != kb && valid[j] && da[j] > t2 && d2(n[j], n[kb]) > t2) plain = 0;
-        if (!plain) continue;
+        if (!two_gap_possible(src, ca, x, y, k, width, height)) continue;
         const int dx = RX[k], dy = RY[k];
         const int bx = x - dx, by = y - dy;
+        float3 b = (maybe >> kb & 1u) ? n[kb] : lab_px(src, luts, lin, IDX(bx, by, width));
+        int plain = 1;
+        for (int j = 0; j < 8; ++j)
+            if (j != k && j != kb && valid[j] && da[j] > t2 && d2(n[j], b) > t2) plain = 0;
+        if (!plain) continue;
         int qx[4] = {x + dx, x + 2 * dx, x - 2 * dx, x - 3 * dx};
         int qy[4] = {y + dy, y + 2 * dy, y - 2 * dy, y - 3 * dy};
-        int ok = inside(bx, by, width, height);
-        for (int q = 0; q < 4; ++q) ok = ok && inside(qx[q], qy[q], width, height);
-        if (!ok) continue;
+        int ok = 1;
         float3 l[4];
         float3 m = (float3)(0.0f);
-        for (int q = 0; q < 4; ++q) { l[q] = lab_at(src, luts, qx[q], qy[q], width); m += l[q]; }
+        for (int q = 0; q < 4; ++q) { l[q] = lab_px(src, luts, lin, IDX(qx[q], qy[q], width)); m += l[q]; }
         m /= 4.0f;
         for (int q = 0; q < 4; ++q) ok = ok && d2(l[q], m) <= t2;
         if (!ok) continue;
-        float3 b = lab_at(src, luts, bx, by, width);
         if (!(d2(a, b) <= t2 && d2(a, m) > 9.0f * t2 && d2(b, m) > 9.0f * t2)) continue;
         // thin, on a plain background: every other pixel around A or B is background, none line-coloured
         for (int s = 0; s < 2 && ok; ++s) {
@@ -252,7 +448,7 @@ __kernel void reconstruct(__global const PIXEL_T *src, __global PIXEL_T *dst, __
                 if (!inside(px, py, width, height) || (px == x && py == y) || (px == bx && py == by) ||
                     (px == qx[0] && py == qy[0]) || (px == qx[2] && py == qy[2]))
                     continue;
-                float3 q = lab_at(src, luts, px, py, width);
+                float3 q = lab_px(src, luts, lin, IDX(px, py, width));
                 ok = d2(q, m) > t2 && fmin(d2(q, a), d2(q, b)) <= t2;
             }
         }
@@ -260,9 +456,29 @@ __kernel void reconstruct(__global const PIXEL_T *src, __global PIXEL_T *dst, __
         float4 sum = (float4)(0.0f);
         for (int q = 0; q < 4; ++q) sum += load_px(src, IDX(qx[q], qy[q], width));
         sum *= 0.25f;
-        sum.w = ca.w;
+        sum.w = load_px(src, i).w;
         store_px(dst, i, sum);
         return;
     }
 #endif
+}
+
+// ---- pass 3: the rules, at the candidates of pass 1.
+__kernel void reconstruct(__global const PIXEL_T *src, __global PIXEL_T *dst, __global const float *luts,
+                          __global const float *lin, __global const float4 *lab, __global const uchar *mask,
+                          __global const uint *table, const int width, const int height, const float t2)
+{
+    const int x0 = get_global_id(0) * SEGMENT, y = get_global_id(1);
+    if (x0 >= width || y >= height) return;
+    const int x1 = x0 + SEGMENT < width ? x0 + SEGMENT : width;
+    for (int x = x0; x < x1; ++x) {
+        const int i = IDX(x, y, width);
+        if (x + GROUP <= x1) {
+            uint any = 0;
+            for (int t = 0; t < GROUP; ++t) any |= mask[i + t];
+            if (any == 0) { x += GROUP - 1; continue; }
+        }
+        const uint maybe = mask[i];
+        if (maybe) reconstruct_at(src, dst, luts, lin, lab, table, x, y, width, height, t2, maybe);
+    }
 }

@@ -334,9 +334,20 @@ def _device_table() -> np.ndarray:
     return table
 
 
+SEGMENT = 64  # pixels of a row per work item (kernels/common.cl), as in the core filter's passes
+
+
+def cheap_levels(threshold: float, pixel_max: float, linear_input: bool = False) -> tuple[int, int]:
+    """For integer frames: the smallest max-channel differences, in stored levels, at which ΔE76 may exceed
+    `threshold` and 2 * `threshold` (cheap_bound: ΔE <= Lipschitz * difference)."""
+    bound = cheap_bound(threshold, linear_input) * float(pixel_max)
+    return int(np.floor(bound)) + 1, int(np.floor(2.0 * bound)) + 1
+
+
 class Reconstructor:
-    """The reconstruction pass for one frame format: program built and table uploaded once, then
-    `enqueue` per frame (src -> dst, laid out like the frame)."""
+    """The reconstruction pass for one frame format: programs built, tables and work buffers allocated once,
+    then `enqueue` per frame (src -> dst, laid out like the frame). Three kernels (kernels/reconstruct.cl):
+    candidates from RGB, CIELAB where candidates read it, the rules at the candidates."""
 
     def __init__(self, context: Context, fmt: FrameFormat, *, threshold: float = DEFAULT_THRESHOLD,
                  extended: bool = True, linear_input: bool = False):
@@ -344,17 +355,36 @@ class Reconstructor:
             raise ValueError(f"reconstruct: expected a ΔE threshold > 0, got {threshold}")
         self.context, self.fmt = context, fmt
         self.threshold, self.extended = float(threshold), bool(extended)
-        defines = defines_for(fmt, CHEAP_BOUND=cheap_bound(threshold, linear_input), EXTENDED=int(extended),
-                              LINEAR_INPUT=int(linear_input), MAX_LINE_PIXELS=MAX_LINE_PIXELS,
-                              MIN_AIM=float(MIN_AIM), MAX_OFFSET=float(MAX_OFFSET))
-        self._kernel = context.kernel("reconstruct", "reconstruct", defines)
-        table = _device_table()
-        self._table = cl.Buffer(context.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=table)
+        integer = fmt.dtype.kind != "f"
+        pmax = float(np.iinfo(fmt.dtype).max) if integer else 1.0
+        near, far = cheap_levels(threshold, pmax, linear_input) if integer else (0, 0)
+        defines = defines_for(fmt, CHEAP_BOUND=cheap_bound(threshold, linear_input), CHEAP_LEVELS=near,
+                              FAR_LEVELS=far, EXTENDED=int(extended), LINEAR_INPUT=int(linear_input),
+                              MAX_LINE_PIXELS=MAX_LINE_PIXELS, MIN_AIM=float(MIN_AIM),
+                              MAX_OFFSET=float(MAX_OFFSET), SEGMENT=SEGMENT,
+                              SAMPLE_BYTES=fmt.dtype.itemsize)
+        k = context.kernel
+        self._k_candidates = k("reconstruct", "reconstruct_candidates", defines)
+        self._k_lab = k("reconstruct", "reconstruct_lab", defines)
+        self._k_rules = k("reconstruct", "reconstruct", defines)
+        mf = cl.mem_flags
+        self._table = cl.Buffer(context.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=_device_table())
         self._t2 = np.float32(np.float32(threshold) * np.float32(threshold))
+        # per-frame work buffers: the candidates' ring masks (1 byte a pixel) and CIELAB (float4 a pixel)
+        self._mask = context.buffer(fmt.pixels)
+        self._lab = context.buffer(16 * fmt.pixels)
+        # integer frames: sRGB->linear per stored level, filled once on the device with common.cl's lut_read
+        self._lin = context.buffer(4 * (int(pmax) + 1) if integer else 4)
+        if integer:
+            luts = cl.Buffer(context.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=device_luts())
+            k("reconstruct", "reconstruct_lin_table", defines)(context.queue, (int(pmax) + 1,), None,
+                                                               luts, self._lin).wait()
+        self._last = None  # this pass's previous frame: its work buffers are reused
+        self._global = (-(-fmt.width // SEGMENT), fmt.height)
 
     def enqueue(self, queue: "cl.CommandQueue", src: "cl.Buffer", dst: "cl.Buffer", luts: "cl.Buffer",
                 wait_for: list | None = None) -> "cl.Event":
-        """Enqueue the pass on `queue`: dst = src except reconstructed pixels; returns the kernel's event."""
+        """Enqueue the pass on `queue`: dst = src except reconstructed pixels; returns the last kernel's event."""
         if src is dst or (src.int_ptr == dst.int_ptr):
             raise ValueError("reconstruct: expected dst to be a different buffer from src, got the same one")
         need = self.fmt.nbytes
@@ -362,12 +392,16 @@ class Reconstructor:
             if buf.size < need:
                 raise ValueError(f"reconstruct: expected {what} of at least {need} bytes for a "
                                  f"{self.fmt.width}x{self.fmt.height}x{self.fmt.channels} frame, got {buf.size}")
-        # dst = src first (a device copy, ~0.3 ms at 1080p); the kernel then writes changed pixels only
-        copied = cl.enqueue_copy(queue, dst, src, byte_count=need, wait_for=wait_for)
-        self._kernel.set_args(src, dst, luts, self._table, np.int32(self.fmt.width), np.int32(self.fmt.height),
-                              self._t2)
-        return cl.enqueue_nd_range_kernel(queue, self._kernel, (self.fmt.width, self.fmt.height), None,
-                                          wait_for=[copied])
+        W, H = np.int32(self.fmt.width), np.int32(self.fmt.height)
+        after = list(wait_for or []) + ([self._last] if self._last is not None else [])
+        # dst = src first (a device copy, ~0.3 ms at 1080p); the rules then write changed pixels only
+        copied = cl.enqueue_copy(queue, dst, src, byte_count=need, wait_for=after)
+        cand = self._k_candidates(queue, self._global, None, src, self._mask, self._table, W, H, wait_for=after)
+        lab = self._k_lab(queue, self._global, None, src, self._mask, luts, self._lin, self._lab, W, H,
+                          wait_for=[cand])
+        self._last = self._k_rules(queue, self._global, None, src, dst, luts, self._lin, self._lab, self._mask,
+                                   self._table, W, H, self._t2, wait_for=[copied, lab])
+        return self._last
 
 
 def reconstruct(frame: np.ndarray, *, threshold: float = DEFAULT_THRESHOLD, extended: bool = True,
@@ -402,9 +436,10 @@ def _centre_line(truth: np.ndarray, background: np.ndarray, wires: np.ndarray) -
 
 
 def bench_reconstruct(device=None, runs: int = 20, small: bool = False) -> dict:
-    """Accuracy on the yardstick scenes (wires, text_ui, photo) and ms per 1920x1080 frame of the pass alone."""
+    """Accuracy on the yardstick scenes (wires, text_ui, photo); ms per 1920x1080 frame of the pass alone and
+    of the core filter, on the frames of timing_frames()."""
     from .metrics import broken_wires, damage
-    from .scenes import generate_scenes, timing_frame
+    from .scenes import generate_scenes
 
     report: dict = {}
     for scene in generate_scenes(small=small, names=["wires", "text_ui", "photo"]):
@@ -425,35 +460,60 @@ def bench_reconstruct(device=None, runs: int = 20, small: bool = False) -> dict:
                 r["broken_centre"] = broken_wires(out, truth, bg, _centre_line(truth, bg, w))
             row[name] = r
         report[scene.name] = row
-    frame = timing_frame()
     ctx = default_context(device)
-    fmt = frame_format(frame)
-    mf = cl.mem_flags
-    src = cl.Buffer(ctx.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(frame))
-    dst = ctx.buffer(fmt.nbytes)
-    luts = cl.Buffer(ctx.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=device_luts())
     report["device"] = ctx.name
+    luts = cl.Buffer(ctx.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=device_luts())
+    for name, frame in timing_frames().items():
+        report[f"ms_1080p_{name}"] = _time_frame(ctx, frame, luts, runs, device)
+    return report
+
+
+def timing_frames() -> dict[str, np.ndarray]:
+    """1920x1080 uint8 RGB frames for the speed measurement: the mixed timing frame, a photograph
+    (matplotlib's grace_hopper sample, resized) and a mostly flat render (the wires scene on a plain canvas)."""
+    import cv2
+    from .scenes import generate_scenes, timing_frame
+    frames = {"timing": timing_frame()}
+    try:
+        from matplotlib import cbook
+        with cbook.get_sample_data("grace_hopper.jpg") as f:
+            photo = cv2.imdecode(np.frombuffer(f.read(), np.uint8), cv2.IMREAD_COLOR)[..., ::-1]
+        frames["photo"] = np.ascontiguousarray(cv2.resize(photo, (1920, 1080), interpolation=cv2.INTER_LINEAR))
+    except (ImportError, OSError, ValueError):  # pragma: no cover - matplotlib's sample data is optional
+        pass
+    wires = generate_scenes(names=["wires"])[0].inputs[0]
+    flat = np.empty((1080, 1920, 3), np.uint8)
+    flat[:] = wires[0, 0]
+    flat[:wires.shape[0], :wires.shape[1]] = wires
+    frames["flat"] = flat
+    return frames
+
+
+def _time_frame(ctx: Context, frame: np.ndarray, luts: "cl.Buffer", runs: int, device) -> dict[str, float]:
+    """Median ms of the pass (device copy + kernels) for both rule sets, and of the core filter
+    (Filter().process: upload, kernels, download) on the same frame, after 3 warm-up runs each."""
+    from .mlaa import Filter
+    fmt = frame_format(frame)
+    src = cl.Buffer(ctx.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(frame))
+    dst = ctx.buffer(fmt.nbytes)
+    out: dict[str, float] = {}
+
+    def median_ms(step) -> float:
+        for _ in range(3):
+            step()
+        times = []
+        for _ in range(runs):
+            t0 = time.perf_counter()
+            step()
+            times.append((time.perf_counter() - t0) * 1e3)
+        return round(float(np.median(times)), 2)
+
     for ext in (False, True):
         rec = Reconstructor(ctx, fmt, extended=ext)
-        for _ in range(3):
-            rec.enqueue(ctx.queue, src, dst, luts).wait()
-        times = []
-        for _ in range(runs):
-            t0 = time.perf_counter()
-            rec.enqueue(ctx.queue, src, dst, luts).wait()
-            times.append((time.perf_counter() - t0) * 1e3)
-        report[f"ms_1080p_{'extended' if ext else 'paper'}"] = float(np.median(times))
-    from .mlaa import Filter
-    with Filter(device) as f:  # the core filter, upload + kernels + download, for the ratio
-        for _ in range(3):
-            f.process(frame)
-        times = []
-        for _ in range(runs):
-            t0 = time.perf_counter()
-            f.process(frame)
-            times.append((time.perf_counter() - t0) * 1e3)
-    report["ms_1080p_core_filter"] = float(np.median(times))
-    return report
+        out["extended" if ext else "paper"] = median_ms(lambda: rec.enqueue(ctx.queue, src, dst, luts).wait())
+    with Filter(device) as f:
+        out["core_filter"] = median_ms(lambda: f.process(frame))
+    return out
 
 
 def main() -> None:

@@ -13,7 +13,7 @@ import pytest
 from mlaa_stream.colour import rgb_to_lab
 from mlaa_stream.device import DeviceError, default_context
 from mlaa_stream.formats import frame_format
-from mlaa_stream.reconstruct import (RING, Reconstructor, cheap_bound, connexity_table, gap_table,
+from mlaa_stream.reconstruct import (RING, Reconstructor, cheap_bound, cheap_levels, connexity_table, gap_table,
                                      reconstruct, reconstruct_reference)
 
 BG = (40, 90, 160)  # a non-black background
@@ -86,6 +86,16 @@ def test_cheap_bound_is_sound():
         de = np.linalg.norm(rgb_to_lab(a) - rgb_to_lab(b), axis=-1)
         assert de.max() <= thr, f"expected ΔE <= {thr} below the bound {bound}, got {de.max()}"
     assert cheap_bound(10.0) * 255 > 2  # and it is useful: more than 2 levels of 8-bit
+
+
+def test_cheap_levels_are_the_smallest_integers_over_the_bound():
+    # integer frames compare stored levels: d >= near must be exactly d > bound * pixel_max
+    for pmax in (255.0, 65535.0):
+        for linear in (False, True):
+            bound = cheap_bound(10.0, linear) * pmax
+            near, far = cheap_levels(10.0, pmax, linear)
+            assert near - 1 <= bound < near, f"pmax {pmax}: expected {bound} in [{near - 1}, {near}), got {near}"
+            assert far - 1 <= 2 * bound < far, f"pmax {pmax}: expected {2 * bound} in [{far - 1}, {far}), got {far}"
 
 
 # --- known answers --------------------------------------------------------------------------------
@@ -297,6 +307,17 @@ def test_kernel_matches_reference(device, fmt, extended):
             np.testing.assert_array_equal(out[..., 3], img[..., 3])  # alpha passes through
         changed_total += int(ch_ref.sum())
     assert changed_total >= 5, f"{fmt}: the random scenes should exercise the rules, got {changed_total} changes"
+
+
+@pytest.mark.parametrize("fmt", ["uint8", "uint16", "float32"])
+def test_kernel_matches_reference_with_linear_input(device, fmt):
+    # LINEAR_INPUT: samples are encoded to sRGB (table) before Lab; integer frames go through the per-level table
+    img = as_format(random_scene(4), fmt)
+    out = reconstruct(img, linear_input=True)
+    ref = reconstruct_reference(img, linear_input=True)
+    changed = (ref != img).reshape(img.shape[0], img.shape[1], -1).any(-1)
+    agree = ((out != img).reshape(changed.shape + (-1,)).any(-1) == changed).mean()
+    assert agree >= 0.999, f"{fmt}: expected >= 99.9% mask agreement, got {agree:.4%}"
 
 
 def test_bgr_is_rgb_reversed(device):
