@@ -4,6 +4,7 @@ from __future__ import annotations
 import os
 import sys
 import tempfile
+from dataclasses import dataclass
 
 import click
 
@@ -168,6 +169,20 @@ def _kind_of(path: str) -> str:
               help="Draw antialiased polylines from a JSON/GeoJSON file on every frame.")
 @click.option("--in-flight", type=click.IntRange(1, 3), default=2, show_default=True,
               help="Frames submitted to the device before the oldest is collected (1 = serialized).")
+@click.option("--temporal/--no-temporal", default=None,
+              help="Temporal reprojection blending along optical flow (seed 002): edges stop "
+                   "shimmering. Default: on for video, off for images and folders.")
+@click.option("--temporal-mode", type=click.Choice(["adaptive", "dense", "global", "static"]),
+              default="adaptive", show_default=True,
+              help="Motion model: adaptive picks per frame the cheapest that explains it "
+                   "(static shot, one global motion, dense flow).")
+@click.option("--temporal-k", type=click.FloatRange(min=0), default=None,
+              help="Velocity-difference strength K of seed 002 in pixel units (larger rejects "
+                   "history sooner; 0 keeps it regardless of speed).")
+@click.option("--stats", "stats_path", type=click.Path(dir_okay=False), default=None,
+              help="Write per-frame temporal statistics (motion model used, ms) to this CSV.")
+@click.option("--show", type=click.Choice(["history"]), default=None,
+              help="Debug view instead of the image: history confidence of the temporal stage.")
 @device_option
 @verbosity_options
 @click.pass_context
@@ -175,8 +190,9 @@ def filter_command(ctx: click.Context, input_path: str, output: str, overwrite: 
                    frames: str | None, preset: str | None, threshold: float | None,
                    metric: str | None, display_space: bool, reconstruct: bool | None, codec: str,
                    crf: int, encoder_preset: str, pix_fmt: str | None, video_backend: str,
-                   overlay: str | None, in_flight: int, device: str | None, verbose: int,
-                   quiet: bool) -> None:
+                   overlay: str | None, in_flight: int, temporal: bool | None, temporal_mode: str,
+                   temporal_k: float | None, stats_path: str | None, show: str | None,
+                   device: str | None, verbose: int, quiet: bool) -> None:
     """Remove jaggies from an image, a folder of images, a frame sequence or a video.
 
     INPUT is an image, a folder (its images in name order), a printf frame pattern such as
@@ -189,7 +205,8 @@ def filter_command(ctx: click.Context, input_path: str, output: str, overwrite: 
                        frames=frames, preset=preset, threshold=threshold, metric=metric,
                        display_space=display_space, reconstruct=reconstruct, codec=codec, crf=crf,
                        encoder_preset=encoder_preset, pix_fmt=pix_fmt, video_backend=video_backend,
-                       overlay=overlay, in_flight=in_flight, device=device)
+                       overlay=overlay, in_flight=in_flight, device=device,
+                       temporal=TemporalOptions(temporal, temporal_mode, temporal_k, stats_path, show))
     except KeyboardInterrupt:
         con.error("interrupted; complete outputs are kept, the one in progress was removed")
         code = EXIT_INTERRUPTED
@@ -199,8 +216,10 @@ def filter_command(ctx: click.Context, input_path: str, output: str, overwrite: 
 def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, overwrite: bool,
             resume: bool, frames: str | None, preset: str | None, threshold, metric, display_space,
             reconstruct, codec: str, crf: int, encoder_preset: str, pix_fmt: str | None,
-            video_backend: str, overlay: str | None, in_flight: int, device: str | None) -> int:
+            video_backend: str, overlay: str | None, in_flight: int, device: str | None,
+            temporal: "TemporalOptions | None" = None) -> int:
     """Check everything that can be checked without a device, then build the filter and run."""
+    temporal = temporal or TemporalOptions()
     if overwrite and resume:
         con.error("--overwrite and --resume contradict each other: choose one")
         return EXIT_USAGE
@@ -210,6 +229,9 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
         if frames is not None and kind != "pattern":
             raise Usage(f"--frames needs a frame pattern like shot/%04d.exr, got {input_path}")
         post_hooks = _load_post_hooks(overlay, device)
+        if temporal.enabled and kind != "video":
+            raise Usage("--temporal works on video input for now; image folders and sequences are "
+                        "filtered frame by frame")
         job = _VideoJob if kind == "video" else _ImageJob
         runner = job(input_path, output, kind, con, overwrite=overwrite, resume=resume,
                      frames=frames, codec=codec, crf=crf, encoder_preset=encoder_preset,
@@ -243,8 +265,13 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
             return EXIT_USAGE if isinstance(exc, ValueError) else EXIT_FAILED
         con.info(f"device: {filt.device_name}")
         times = StageTimes()
-        with filt:
-            code = runner.run(filt, post_hooks, in_flight, times)
+        stage = temporal.stage(filt) if kind == "video" else None
+        try:
+            with filt:
+                code = runner.run(filt, post_hooks, in_flight, times, stage)
+        finally:
+            if stage is not None:
+                temporal.finish(stage, con)
     finally:
         runner.abort()  # no-op after a commit; removes a video in progress on errors and Ctrl-C
     if con.verbose and not con.quiet:
@@ -252,6 +279,43 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
     if runner.failed_early and code == EXIT_OK:
         code = EXIT_FAILED
     return code
+
+
+@dataclass
+class TemporalOptions:
+    """The temporal stage's command-line settings (issue 6); on by default for video only."""
+
+    enabled: bool | None = None
+    mode: str = "adaptive"
+    k: float | None = None
+    stats_path: str | None = None
+    show: str | None = None
+
+    def stage(self, filt):
+        """A TemporalStage sharing the filter's OpenCL context, or None when off."""
+        if self.enabled is False:
+            return None
+        from ..temporal import TemporalStage
+        kw = {} if self.k is None else {"k": self.k}
+        return TemporalStage(context=filt.context, mode=self.mode, bgr=False, show=self.show, **kw)
+
+    def finish(self, stage, con: "Console") -> None:
+        """Write --stats and say which motion models were used."""
+        stats = list(stage.stats)
+        stage.close()
+        if not stats:
+            return
+        counts: dict[str, int] = {}
+        for row in stats:
+            counts[row.get("model", "?")] = counts.get(row.get("model", "?"), 0) + 1
+        con.info("temporal models: " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())))
+        if self.stats_path:
+            import csv
+            keys = sorted({k for row in stats for k in row})
+            with open(self.stats_path, "w", newline="") as fh:
+                w = csv.DictWriter(fh, fieldnames=keys)
+                w.writeheader()
+                w.writerows(stats)
 
 
 class _Job:
@@ -342,7 +406,7 @@ class _ImageJob(_Job):
     def nothing_to_do(self) -> bool:
         return not self.plan
 
-    def run(self, filt, post_hooks, in_flight, times) -> int:
+    def run(self, filt, post_hooks, in_flight, times, temporal=None) -> int:
         from ..mlaa import Filter
         from ..pipeline import PipelineError, run_pipeline
         from ..sequence import FilterSet, image_sink, image_source
@@ -444,7 +508,7 @@ class _VideoJob(_Job):
         if writer is not None and not getattr(self, "_finished", False):
             writer.abort()
 
-    def run(self, filt, post_hooks, in_flight, times) -> int:
+    def run(self, filt, post_hooks, in_flight, times, temporal=None) -> int:
         from ..pipeline import PipelineError
         from ..video_io import VideoReadError, filter_video, read_video_cv
 
@@ -452,6 +516,7 @@ class _VideoJob(_Job):
         progress = self._progress(self.info.frames)
         try:
             filter_video(self.info, self.writer, filt, source=source, post_hooks=post_hooks,
+                         temporal=temporal,
                          in_flight=in_flight, times=times, on_frame=progress.update)
             stopped = None
             self._finished = True

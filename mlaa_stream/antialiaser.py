@@ -30,14 +30,15 @@ def _capture_frames(cap: Any) -> Iterator[np.ndarray]:
 class Antialiaser:
     """Antialias BGR(A) frames (uint8 as OpenCV delivers them; uint16/float also work).
 
-    Options are the Filter's (`preset` first, explicit keywords override it). `temporal` is an
-    optional `(frame_in, frame_filtered, index) -> frame` stage and `post_hooks` a list of
-    `(frame, index) -> frame` callables (overlays), applied in order after it.
+    Options are the Filter's (`preset` first, explicit keywords override it). `temporal=True`
+    adds optical-flow reprojection blending (mlaa_stream.temporal.TemporalStage; its history is
+    kept between calls), or pass any `(frame_in, frame_filtered, index) -> frame` stage.
+    `post_hooks` is a list of `(frame, index) -> frame` callables (overlays), applied after it.
     """
 
     def __init__(self, device: str | int | None = None, *, preset: str | None = None,
                  threshold: float | None = None, metric: str | None = None, linear: bool | None = None,
-                 reconstruct: bool | None = None, temporal: Temporal | None = None,
+                 reconstruct: bool | None = None, temporal: Temporal | bool | None = None,
                  post_hooks: Sequence[PostHook] = (), in_flight: int = 2):
         if preset is not None and preset not in PRESETS:
             raise ValueError(f"expected a preset among {', '.join(sorted(PRESETS))}, got {preset!r}")
@@ -48,7 +49,10 @@ class Antialiaser:
                 kwargs[key] = value
         self._filter = Filter(device, bgr=True, **kwargs)
         self.device_name: str = self._filter.device_name
-        self.temporal = temporal
+        if temporal is True:
+            from .temporal import TemporalStage
+            temporal = TemporalStage(context=self._filter.context, bgr=True)
+        self.temporal = temporal or None
         self.post_hooks = list(post_hooks)
         self.in_flight = in_flight
         self.index = 0  # frames processed so far, across calls and streams
@@ -93,6 +97,8 @@ class Antialiaser:
         if not self._closed:
             self._closed = True
             self._filter.close()
+            if hasattr(self.temporal, "close"):
+                self.temporal.close()
 
     def __enter__(self) -> "Antialiaser":
         return self

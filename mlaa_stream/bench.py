@@ -39,12 +39,38 @@ class NoAA:
         pass
 
 
+class SpatialTemporal:
+    """The spatial filter, then the temporal stage (issue 6) with its history kept across frames;
+    `reset()` starts a new shot (the bench calls it between scenes)."""
+
+    def __init__(self, device: str | None, **temporal_options):
+        from .temporal import TemporalStage
+        self.filter = Filter(device=device)
+        self.stage = TemporalStage(context=self.filter.context, bgr=False, **temporal_options)
+        self.index = 0
+
+    def process(self, frame: np.ndarray) -> np.ndarray:
+        out = self.stage(frame, self.filter.process(frame), self.index)
+        self.index += 1
+        return out
+
+    def reset(self) -> None:
+        self.stage.reset()
+        self.index = 0
+
+    def close(self) -> None:
+        self.stage.close()
+        self.filter.close()
+
+
 # name -> factory(device). One line per method; temporal methods get each scene's frames in order
 # from a fresh instance.
 METHODS: dict[str, Callable[[str | None], Processor]] = {
     "none": lambda device: NoAA(),
     "fxaa": lambda device: FXAA(device=device),
     "mlaa": lambda device: Filter(device=device),
+    "mlaa+temporal": lambda device: SpatialTemporal(device, mode="adaptive"),
+    "mlaa+temporal:dense": lambda device: SpatialTemporal(device, mode="dense"),
 }
 # Every quality preset of the MLAA filter, as "mlaa:<preset>" (one with no options is "mlaa" itself).
 METHODS.update({f"mlaa:{name}": (lambda device, kw=kw: Filter(device=device, **kw))
@@ -100,7 +126,10 @@ def _close(proc) -> None:
 
 
 def run_scene(proc: Processor, scene: Scene) -> np.ndarray:
-    """All frames of a scene through one method, in order."""
+    """All frames of a scene through one method, in order (a temporal method starts afresh)."""
+    reset = getattr(proc, "reset", None)
+    if reset is not None:
+        reset()
     return np.stack([proc.process(f) for f in scene.inputs])
 
 

@@ -124,3 +124,18 @@ def test_closed_antialiaser_refuses_work_and_presets_are_checked():
         aa(captured_frames()[0])
     with pytest.raises(ValueError, match="expected a preset among"):
         Antialiaser(preset="nonesuch")
+
+
+def test_temporal_true_keeps_history_between_calls():
+    """Antialiaser(temporal=True): the second frame of a static shot uses the history (model 'static')."""
+    import numpy as np
+    from mlaa_stream import Antialiaser
+    rng = np.random.default_rng(3)
+    frame = np.full((48, 64, 3), 30, np.uint8)
+    frame[10:30, 5:50] = rng.integers(0, 256, 3)
+    frame[np.arange(48), (np.arange(48) * 1.3).astype(int)] = 240
+    with Antialiaser(temporal=True) as aa:
+        aa(frame)
+        aa(frame)
+        models = [row["model"] for row in aa.temporal.stats]
+    assert models[0] == "reset" and models[1] != "reset"

@@ -1,0 +1,209 @@
+// temporal.cl -- temporal reprojection blending in one pass: warp the history (the previous output)
+// into the current frame by a motion model, reject it where it cannot be trusted, and blend it with
+// the spatially antialiased frame in linear light. Reference: mlaa_stream.temporal.temporal_reference.
+//
+// Per pixel x of the current frame (pixel centres at integer coordinates):
+//   v_c = motion of x back to the previous frame: an affine map (static/global models) or a dense
+//         flow field sampled bilinearly (stored at 1/FLOW_SCALE of the frame size, in its pixels)
+//   q   = x + v_c, where x was in the previous frame; outside the frame -> no history
+//   fb  = forward-backward consistency |v_c + g(q)| with g the forward (previous -> current) flow:
+//         weight 1 below tol = FB_ABS + FB_REL |v_c|, falling to 0 at 2 tol (dense model only)
+//   v_p = the velocity the history had at q (previous frame's motion model); velocity weight of
+//         seed 002 ("Temporal Reprojection"), on velocity *vectors* and in pixel units:
+//         w = W_MAX * max(0, 1 - K sqrt(|v_c - v_p|)) * fb
+//   h   = history at q, Catmull-Rom in linear light, clipped toward the centre of the box
+//         [max(min, mean - GAMMA sd), min(max, mean + GAMMA sd)] of the current 3x3 neighbourhood
+//         (variance clipping, per channel, in linear light); t = how far outside the box h was, in
+//         box half-widths: w *= clamp((REJECT - t) / (REJECT - 1), 0, 1) -- history that far off is
+//         another surface (a disocclusion the flow missed), not aliasing to be averaged
+//   out = c + w (h - c), encoded back by table; where w = 0 the current pixel is copied untouched.
+// The new history (linear light, half floats RGBA) and the weight w (0..255) are written too.
+//
+// Modes (runtime ints): cur_mode 0 = reset (history := current, output untouched), 1 = affine,
+// 2 = dense; prev_mode 0 = no previous motion (v_p := v_c), 1 = affine, 2 = dense.
+// params: [0..5] current affine (x' = p0 x + p1 y + p2, y' = p3 x + p4 y + p5, current -> previous),
+//         [6..11] previous frame's affine, [12] current flow scale, [13] previous flow scale,
+//         [14] W_MAX, [15] K, [16] GAMMA, [17] FB_ABS, [18] FB_REL, [19] 1 = fb check on.
+// Defines: LINEAR_INPUT 1 when samples are already linear light (no tables); REJECT (2.0).
+#pragma OPENCL FP_CONTRACT OFF
+
+#ifndef LINEAR_INPUT
+#define LINEAR_INPUT 0
+#endif
+#ifndef REJECT
+#define REJECT 2.0f
+#endif
+// Half-width added to every clip box (linear light): a flat neighbourhood still admits history
+// that differs by rounding only (about 1.5 8-bit levels near black, far less above).
+#define EXT_FLOOR 0.0005f
+
+inline float4 to_linear(__global const float *luts, float4 c)
+{
+#if LINEAR_INPUT
+    return c;
+#else
+    return (float4)(lut_read(luts, c.x), lut_read(luts, c.y), lut_read(luts, c.z), c.w);
+#endif
+}
+
+inline float4 from_linear(__global const float *luts, float4 c)
+{
+#if LINEAR_INPUT
+    return c;
+#else
+    __global const float *enc = luts + 2 * (LUT_SIZE + 1);
+    return (float4)(lut_read(enc, c.x), lut_read(enc, c.y), lut_read(enc, c.z), c.w);
+#endif
+}
+
+// Bilinear sample of a (fh, fw, 2) flow field at full-frame position p, in full-frame pixels.
+inline float2 sample_flow(__global const float *f, int fw, int fh, float s, float2 p)
+{
+    float fx = (p.x + 0.5f) / s - 0.5f, fy = (p.y + 0.5f) / s - 0.5f;
+    fx = fx < 0.0f ? 0.0f : (fx > (float)(fw - 1) ? (float)(fw - 1) : fx);
+    fy = fy < 0.0f ? 0.0f : (fy > (float)(fh - 1) ? (float)(fh - 1) : fy);
+    int x0 = (int)fx, y0 = (int)fy;
+    int x1 = x0 + 1 < fw ? x0 + 1 : x0, y1 = y0 + 1 < fh ? y0 + 1 : y0;
+    float ax = fx - (float)x0, ay = fy - (float)y0;
+    float2 a = vload2(y0 * fw + x0, f), b = vload2(y0 * fw + x1, f);
+    float2 c = vload2(y1 * fw + x0, f), d = vload2(y1 * fw + x1, f);
+    float2 top = a + (b - a) * ax, bot = c + (d - c) * ax;
+    return (top + (bot - top) * ay) * s;
+}
+
+inline float2 affine_motion(__global const float *m, float2 p)
+{
+    return (float2)(m[0] * p.x + m[1] * p.y + m[2] - p.x, m[3] * p.x + m[4] * p.y + m[5] - p.y);
+}
+
+// Catmull-Rom weights of the four taps around a sample at fraction t (sharper than bilinear: a
+// history resampled every frame does not blur away; overshoot is removed by the clip that follows).
+inline float4 catmull_rom(float t)
+{
+    return (float4)(t * (-0.5f + t * (1.0f - 0.5f * t)), 1.0f + t * t * (-2.5f + 1.5f * t),
+                    t * (0.5f + t * (2.0f - 1.5f * t)), t * t * (-0.5f + 0.5f * t));
+}
+
+// History (linear RGBA halves) at position q, Catmull-Rom over 4x4 taps clamped to the frame.
+// (Written out without arrays or min/max built-ins: PoCL calls those out of line.)
+#define CLAMPI(v, hi) ((v) < 0 ? 0 : ((v) > (hi) ? (hi) : (v)))
+#define HROW(yy) (vload_half4((yy) * w + x0, hist) * wx.x + vload_half4((yy) * w + x1, hist) * wx.y + \
+                  vload_half4((yy) * w + x2, hist) * wx.z + vload_half4((yy) * w + x3, hist) * wx.w)
+inline float4 sample_history(__global const half *hist, int w, int h, float2 q)
+{
+    float fx = q.x < 0.0f ? 0.0f : (q.x > (float)(w - 1) ? (float)(w - 1) : q.x);
+    float fy = q.y < 0.0f ? 0.0f : (q.y > (float)(h - 1) ? (float)(h - 1) : q.y);
+    int xi = (int)fx, yi = (int)fy;
+    float4 wx = catmull_rom(fx - (float)xi), wy = catmull_rom(fy - (float)yi);
+    int x0 = CLAMPI(xi - 1, w - 1), x1 = xi, x2 = CLAMPI(xi + 1, w - 1), x3 = CLAMPI(xi + 2, w - 1);
+    int y0 = CLAMPI(yi - 1, h - 1), y2 = CLAMPI(yi + 1, h - 1), y3 = CLAMPI(yi + 2, h - 1);
+    float4 acc = HROW(y0) * wy.x;
+    acc += HROW(yi) * wy.y;
+    acc += HROW(y2) * wy.z;
+    acc += HROW(y3) * wy.w;
+    return acc;
+}
+
+#define MIN4(a, b) ((float4)((a).x < (b).x ? (a).x : (b).x, (a).y < (b).y ? (a).y : (b).y, \
+                             (a).z < (b).z ? (a).z : (b).z, (a).w < (b).w ? (a).w : (b).w))
+#define MAX4(a, b) ((float4)((a).x > (b).x ? (a).x : (b).x, (a).y > (b).y ? (a).y : (b).y, \
+                             (a).z > (b).z ? (a).z : (b).z, (a).w > (b).w ? (a).w : (b).w))
+
+__kernel void temporal_blend(__global const PIXEL_T *cur, __global const half *hist,
+                             __global half *hist_out, __global PIXEL_T *dst, __global uchar *conf,
+                             __global const float *flow_b, __global const float *flow_f,
+                             __global const float *flow_prev, __global const float *params,
+                             __global const float *luts, const int width, const int height,
+                             const int fw, const int fh, const int pfw, const int pfh,
+                             const int cur_mode, const int prev_mode)
+{
+    const int x0 = get_global_id(0) * SEGMENT, y = get_global_id(1);
+    if (x0 >= width || y >= height) return;
+    const int x1 = min(x0 + SEGMENT, width);
+    const int ya = y > 0 ? y - 1 : 0, yb = y + 1 < height ? y + 1 : height - 1;
+    const float w_max = params[14], k = params[15], gamma = params[16];
+    const float fb_abs = params[17], fb_rel = params[18];
+    const int fb_on = params[19] > 0.5f;
+
+    // Sliding 3x3 window in linear light: columns L (x-1), C (x), R (x+1), rows a (y-1), m, b (y+1).
+    int xl = x0 > 0 ? x0 - 1 : 0;
+    float4 La = to_linear(luts, load_px(cur, IDX(xl, ya, width)));
+    float4 Lm = to_linear(luts, load_px(cur, IDX(xl, y, width)));
+    float4 Lb = to_linear(luts, load_px(cur, IDX(xl, yb, width)));
+    float4 Ca = to_linear(luts, load_px(cur, IDX(x0, ya, width)));
+    float4 Cm = to_linear(luts, load_px(cur, IDX(x0, y, width)));
+    float4 Cb = to_linear(luts, load_px(cur, IDX(x0, yb, width)));
+
+    for (int x = x0; x < x1; ++x) {
+        const int xr = x + 1 < width ? x + 1 : width - 1;
+        float4 Ra = to_linear(luts, load_px(cur, IDX(xr, ya, width)));
+        float4 Rm = to_linear(luts, load_px(cur, IDX(xr, y, width)));
+        float4 Rb = to_linear(luts, load_px(cur, IDX(xr, yb, width)));
+        const int i = IDX(x, y, width);
+        float4 c = Cm;   // current pixel, linear (alpha as stored)
+        float wgt = 0.0f;
+        float4 out = c;
+        if (cur_mode != 0) {
+            float2 p = (float2)((float)x, (float)y);
+            float2 vc = cur_mode == 2 ? sample_flow(flow_b, fw, fh, params[12], p)
+                                      : affine_motion(params, p);
+            float2 q = p + vc;
+            int inside = q.x >= -0.5f && q.x <= (float)width - 0.5f &&
+                         q.y >= -0.5f && q.y <= (float)height - 0.5f;
+            if (inside) {
+                float fbw = 1.0f;
+                if (cur_mode == 2 && fb_on) {
+                    float2 g = sample_flow(flow_f, fw, fh, params[12], q);
+                    float2 eg = vc + g;
+                    float e = sqrt(eg.x * eg.x + eg.y * eg.y), tol = fb_abs + fb_rel * sqrt(vc.x * vc.x + vc.y * vc.y);
+                    fbw = 2.0f - e / tol;
+                    fbw = fbw < 0.0f ? 0.0f : (fbw > 1.0f ? 1.0f : fbw);
+                }
+                float2 vp = prev_mode == 2 ? sample_flow(flow_prev, pfw, pfh, params[13], q)
+                          : (prev_mode == 1 ? affine_motion(params + 6, q) : vc);
+                // seed 002: w = 0.5 max(0, 1 - K sqrt(|v_c - v_p|)), vectors, pixel units
+                float2 dv = vc - vp;
+                float vw = 1.0f - k * sqrt(sqrt(dv.x * dv.x + dv.y * dv.y));
+                wgt = w_max * (vw > 0.0f ? vw : 0.0f) * fbw;
+            }
+            if (wgt > 0.0f) {
+                float4 h = sample_history(hist, width, height, q);
+                // 3x3 statistics of the current frame (variance clipping, Salvi 2016)
+                float4 s = La + Lm + Lb + Ca + Cm + Cb + Ra + Rm + Rb;
+                float4 s2 = La * La + Lm * Lm + Lb * Lb + Ca * Ca + Cm * Cm + Cb * Cb +
+                            Ra * Ra + Rm * Rm + Rb * Rb;
+                float4 mn = MIN4(MIN4(MIN4(La, Lm), MIN4(Lb, Ca)), MIN4(MIN4(Cm, Cb), MIN4(MIN4(Ra, Rm), Rb)));
+                float4 mx = MAX4(MAX4(MAX4(La, Lm), MAX4(Lb, Ca)), MAX4(MAX4(Cm, Cb), MAX4(MAX4(Ra, Rm), Rb)));
+                float4 mu = s * (1.0f / 9.0f);
+                float4 var = s2 * (1.0f / 9.0f) - mu * mu;
+                float4 sd = sqrt(MAX4(var, (float4)(0.0f)));
+                float4 lo_v = mu - gamma * sd, hi_v = mu + gamma * sd;
+                float4 lo = MAX4(mn, lo_v), hi = MIN4(mx, hi_v);
+                float4 ctr = (lo + hi) * 0.5f, ext = (hi - lo) * 0.5f + EXT_FLOOR;
+                float4 d = h - ctr;
+                float tx = fabs(d.x) / ext.x, ty = fabs(d.y) / ext.y, tz = fabs(d.z) / ext.z;
+                float t = tx > ty ? (tx > tz ? tx : tz) : (ty > tz ? ty : tz);
+                if (t > 1.0f) h = ctr + d / t;
+                // history far outside the box is another surface (a disocclusion the flow missed):
+                // its weight falls from full at the box (t = 1) to none at t = REJECT
+                float keep = (REJECT - t) * (1.0f / (REJECT - 1.0f));
+                wgt *= keep < 0.0f ? 0.0f : (keep > 1.0f ? 1.0f : keep);
+                out = c + (h - c) * wgt;
+                out.w = c.w;
+            }
+        }
+        vstore_half4_rte(out, i, hist_out);
+        conf[i] = (uchar)(wgt * 255.0f + 0.5f);
+        if (wgt > 0.0f) {
+            store_px(dst, i, from_linear(luts, out));
+        } else {   // no history here: the spatial output, bit for bit
+#if CHANNELS == 1
+            dst[i] = cur[i];
+#else
+            for (int ch = 0; ch < CHANNELS; ++ch) dst[(size_t)i * CHANNELS + ch] = cur[(size_t)i * CHANNELS + ch];
+#endif
+        }
+        La = Ca; Lm = Cm; Lb = Cb;
+        Ca = Ra; Cm = Rm; Cb = Rb;
+    }
+}

@@ -1,0 +1,553 @@
+"""Temporal stability: reproject the previous output along the motion of the input, reject it where it
+cannot be trusted, blend it with the spatially antialiased frame (seed 002, "Temporal Reprojection").
+
+    stage = TemporalStage(bgr=True)
+    out = stage(frame_in, frame_filtered, index)     # per frame, in order; history kept inside
+
+Per frame the stage picks the least motion model that explains the input (`choose_model`): "static"
+(no flow; the history is used unwarped), "global" (one translation for the whole frame: coarse phase
+correlation refined by a global Lucas-Kanade step), or "dense" (DIS optical flow, forward and
+backward, at the lowest resolution that keeps sub-pixel accuracy); "reset" at the first frame,
+a scene cut, a jump in the frame index or a new frame size. kernels/temporal.cl then warps, clips
+and blends in one pass; `temporal_reference` is its numpy twin. See docs/temporal.md.
+"""
+from __future__ import annotations
+
+import math
+import threading
+import time
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+import pyopencl as cl
+
+from .colour import device_luts, lut_read
+from .device import Context, default_context
+from .formats import LUT_SIZE, FrameFormat, defines_for, frame_format
+
+MODES = ("adaptive", "dense", "global", "static", "off")
+SHOWS = (None, "history")
+
+# History weight at zero velocity difference: seed 002's 0.5. Longer histories (0.8, 0.9) were
+# measured steadier on nothing and blurrier on everything (docs/temporal.md).
+DEFAULT_STRENGTH = 0.5
+# The seed's K in pixel units: w falls to 0 at |v_c - v_p| = 1/K^2 px per frame (here 4 px). The
+# seed's velocities are in texture units (v_px / width): K_tex = K_px * sqrt(width), docs/temporal.md.
+DEFAULT_K = 0.5
+REJECT = 2.0        # history beyond this many clip-box half-widths is dropped (kernels/temporal.cl)
+EXT_FLOOR = 0.0005  # linear half-width added to every clip box (kernels/temporal.cl)
+GAMMA = 1.25        # variance clip: mean +- GAMMA * stddev of the current 3x3 neighbourhood
+FB_ABS, FB_REL = 0.5, 0.1   # forward-backward tolerance in px: FB_ABS + FB_REL * |v|
+
+# Cheap measurements that choose the model (grey levels 0..255 of the "small" frame).
+SMALL_WIDTH = 320        # measurements run on a frame at most this wide
+FLOW_WIDTH = 1024        # dense flow and the global refinement run at most this wide (1080p: half)
+CUT_HIST = 0.45          # scene cut: half the L1 distance of 32-bin grey histograms above this ...
+CUT_RESIDUAL = 24.0      # ... or mean |difference| after the best global alignment above this
+STATIC_LEVEL, STATIC_FRACTION = 3.0, 0.002   # static: under this share of pixels differ by > level
+GLOBAL_LEVEL, GLOBAL_FRACTION = 10.0, 0.005  # global accepted: blobs of residual outliers under this share
+LK_SIGMA, LK_ITERATIONS, LK_ROBUST = 1.0, 4, 64.0            # global Lucas-Kanade on Gaussian-blurred grey
+GLOBAL_MIN_SHIFT = 0.1     # px: a frame that changes but whose best translation is ~0 has local motion
+
+_PMAX = {np.dtype(np.uint8): 255.0, np.dtype(np.uint16): 65535.0, np.dtype(np.float32): 1.0}
+CUR_RESET, CUR_AFFINE, CUR_DENSE = 0, 1, 2
+PREV_NONE, PREV_AFFINE, PREV_DENSE = 0, 1, 2
+N_PARAMS = 20
+IDENTITY = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0)
+
+
+# --- cheap measurements and the model choice -------------------------------------------------------
+def grey8(frame: np.ndarray, bgr: bool) -> np.ndarray:
+    """The frame's luma as uint8 (what optical flow and the measurements run on)."""
+    f = np.asarray(frame)
+    if f.dtype == np.float16 or f.dtype == np.float64:
+        f = f.astype(np.float32)
+    if f.ndim == 3 and f.shape[2] == 1:
+        f = f[..., 0]
+    if f.ndim == 3:
+        code = {(3, True): cv2.COLOR_BGR2GRAY, (3, False): cv2.COLOR_RGB2GRAY,
+                (4, True): cv2.COLOR_BGRA2GRAY, (4, False): cv2.COLOR_RGBA2GRAY}[(f.shape[2], bool(bgr))]
+        f = cv2.cvtColor(np.ascontiguousarray(f), code)
+    if f.dtype == np.uint8:
+        return np.ascontiguousarray(f)
+    if f.dtype == np.uint16:
+        return (f >> 8).astype(np.uint8)
+    return np.clip(f * 255.0 + 0.5, 0, 255).astype(np.uint8)
+
+
+def _downscale(img: np.ndarray, factor: int) -> np.ndarray:
+    if factor <= 1:
+        return img
+    h, w = img.shape[:2]
+    return cv2.resize(img, (max(1, w // factor), max(1, h // factor)), interpolation=cv2.INTER_AREA)
+
+
+def scale_for(width: int, target: int) -> int:
+    """The smallest integer factor that brings `width` to at most `target` pixels."""
+    return max(1, -(-int(width) // int(target)))
+
+
+@dataclass
+class Pyramid:
+    """One input frame's grey levels at the two resolutions the stage measures on."""
+
+    flow: np.ndarray      # uint8, 1/flow_scale of the frame
+    small: np.ndarray     # uint8, 1/(flow_scale * small_scale)
+    flow_scale: int
+    small_scale: int
+
+    @staticmethod
+    def of(frame: np.ndarray, bgr: bool) -> "Pyramid":
+        g = grey8(frame, bgr)
+        fs = scale_for(g.shape[1], FLOW_WIDTH)
+        flow = _downscale(g, fs)
+        # at least half size: there the aliasing of 1-spp edges averages out (choose_model)
+        ss = max(scale_for(flow.shape[1], SMALL_WIDTH), 2 if min(flow.shape) >= 64 else 1)
+        return Pyramid(flow, _downscale(flow, ss), fs, ss)
+
+
+def histogram_distance(a: np.ndarray, b: np.ndarray, bins: int = 32) -> float:
+    """Half the L1 distance of the normalised grey histograms: 0 same, 1 disjoint."""
+    ha = cv2.calcHist([a], [0], None, [bins], [0, 256]).ravel()
+    hb = cv2.calcHist([b], [0], None, [bins], [0, 256]).ravel()
+    return float(0.5 * np.abs(ha / max(ha.sum(), 1) - hb / max(hb.sum(), 1)).sum())
+
+
+def changed_fraction(a: np.ndarray, b: np.ndarray, level: float) -> float:
+    """Share of pixels whose (slightly blurred) grey level differs by more than `level`."""
+    d = cv2.absdiff(cv2.GaussianBlur(a, (3, 3), 0), cv2.GaussianBlur(b, (3, 3), 0))
+    return float(np.count_nonzero(d > level)) / d.size
+
+
+def global_translation(prev: np.ndarray, cur: np.ndarray, start: tuple[float, float] = (0.0, 0.0),
+                       iterations: int = LK_ITERATIONS, sigma: float = LK_SIGMA) -> tuple[float, float]:
+    """Translation d with cur(x) ~ prev(x + d), by robust Gauss-Newton on the whole frame (global
+    Lucas-Kanade on blurred grey, residuals weighted 1 / (1 + (r / LK_ROBUST)^2) so that a mover does not
+    pull the estimate; blurring first keeps the aliasing of 1-spp frames out of the gradients)."""
+    p = cv2.GaussianBlur(prev.astype(np.float32), (0, 0), sigma)
+    c = cv2.GaussianBlur(cur.astype(np.float32), (0, 0), sigma)
+    h, w = p.shape
+    d = np.array(start, np.float64)
+    for _ in range(iterations):
+        warp = np.float32([[1, 0, d[0]], [0, 1, d[1]]])
+        pw = cv2.warpAffine(p, warp, (w, h), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                            borderMode=cv2.BORDER_REPLICATE)
+        gx = cv2.Sobel(pw, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
+        gy = cv2.Sobel(pw, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
+        r = c - pw
+        wr = 1.0 / (1.0 + (r * (1.0 / LK_ROBUST)) ** 2)
+        gxw, gyw = gx * wr, gy * wr
+        gxx, gxy, gyy = float(np.vdot(gxw, gx)), float(np.vdot(gxw, gy)), float(np.vdot(gyw, gy))
+        bx, by = float(np.vdot(gxw, r)), float(np.vdot(gyw, r))
+        det = gxx * gyy - gxy * gxy
+        if not det > 1e-6 * max(gxx * gyy, 1e-12):  # no texture to anchor a translation
+            break
+        step = ((gyy * bx - gxy * by) / det, (gxx * by - gxy * bx) / det)
+        d += step
+        if abs(step[0]) + abs(step[1]) < 1e-3:
+            break
+    return float(d[0]), float(d[1])
+
+
+def small_residual(prev: np.ndarray, cur: np.ndarray, d: tuple[float, float]) -> np.ndarray:
+    """|cur(x) - prev(x + d)| on slightly blurred grey (the aliasing of 1-spp frames averages out
+    at this scale; a region that moves otherwise does not), a 2-px border left out."""
+    p = cv2.GaussianBlur(prev.astype(np.float32), (0, 0), 1.0)
+    c = cv2.GaussianBlur(cur.astype(np.float32), (0, 0), 1.0)
+    h, w = p.shape
+    warp = np.float32([[1, 0, d[0]], [0, 1, d[1]]])
+    pw = cv2.warpAffine(p, warp, (w, h), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                        borderMode=cv2.BORDER_REPLICATE)
+    r = np.abs(c - pw)
+    b = 2 + int(math.ceil(max(abs(d[0]), abs(d[1]))))
+    return r[b:h - b, b:w - b] if h > 2 * b and w > 2 * b else r
+
+
+@dataclass
+class Decision:
+    """What `choose_model` measured and chose for one frame."""
+
+    model: str                                   # "reset" | "static" | "global" | "dense"
+    translation: tuple[float, float] = (0.0, 0.0)   # full-frame px, current -> previous
+    measures: dict = field(default_factory=dict)
+
+
+def choose_model(prev: Pyramid, cur: Pyramid, mode: str = "adaptive") -> Decision:
+    """The least motion model that explains cur from prev, from cheap measurements (docs/temporal.md)."""
+    m: dict = {}
+    m["hist_distance"] = hd = histogram_distance(prev.small, cur.small)
+    if hd > CUT_HIST:
+        return Decision("reset", measures={**m, "cut": True})
+    if mode in ("adaptive", "static"):
+        m["changed"] = ch = changed_fraction(prev.small, cur.small, STATIC_LEVEL)
+        if mode == "static" or ch <= STATIC_FRACTION:
+            return Decision("static", measures=m)
+    # Start from no motion or the phase-correlation shift of the small frames (large pans), whichever
+    # leaves the smaller residual (a periodic texture can fool phase correlation), then refine on
+    # the flow frame by global Lucas-Kanade.
+    ss, fs = cur.small_scale, cur.flow_scale
+    start = (0.0, 0.0)
+    hs, ws = prev.small.shape
+    if hs >= 16 and ws >= 16:
+        win = cv2.createHanningWindow((ws, hs), cv2.CV_32F)
+        (sx, sy), _ = cv2.phaseCorrelate(cur.small.astype(np.float32), prev.small.astype(np.float32), win)
+        shift = (float(round(sx)), float(round(sy)))
+        if shift != (0.0, 0.0) and (small_residual(prev.small, cur.small, shift).mean()
+                                    < small_residual(prev.small, cur.small, (0.0, 0.0)).mean()):
+            start = (shift[0] * ss, shift[1] * ss)
+    d = global_translation(prev.flow, cur.flow, start)
+    res = small_residual(prev.small, cur.small, (d[0] / ss, d[1] / ss))
+    m["residual_mean"] = rm = float(res.mean()) if res.size else 0.0
+    # Outliers that survive a 3x3 erosion: regions the translation does not explain (a mover), not
+    # the thin lines that the aliasing of 1-spp edges leaves along every moving edge.
+    blobs = cv2.erode((res > GLOBAL_LEVEL).astype(np.uint8), np.ones((3, 3), np.uint8))
+    m["global_outliers"] = go = float(np.count_nonzero(blobs)) / max(blobs.size, 1)
+    tr = (d[0] * fs, d[1] * fs)
+    moves = math.hypot(*tr) >= GLOBAL_MIN_SHIFT
+    if rm > CUT_RESIDUAL and hd > 0.5 * CUT_HIST:
+        return Decision("reset", measures={**m, "cut": True})
+    if mode == "global" or (mode == "adaptive" and go <= GLOBAL_FRACTION and moves):
+        return Decision("global", tr, m)
+    return Decision("dense", tr, m)
+
+
+# --- the stage ----------------------------------------------------------------------------------------
+class _Buffers:
+    """Device memory for one frame format and flow size: allocated once, reused every frame."""
+
+    def __init__(self, context: Context, fmt: FrameFormat, flow_shape: tuple[int, int]):
+        self.fmt, self.flow_shape = fmt, flow_shape
+        n, fh, fw = fmt.pixels, *flow_shape
+        self.cur = context.buffer(fmt.nbytes)
+        self.dst = context.buffer(fmt.nbytes)
+        self.hist = [context.buffer(8 * n), context.buffer(8 * n)]      # RGBA half, linear light
+        self.conf = context.buffer(n)
+        self.flow = [context.buffer(8 * fh * fw), context.buffer(8 * fh * fw)]  # backward, ping-pong
+        self.flow_f = context.buffer(8 * fh * fw)                          # forward (fb check)
+        self.params = context.buffer(4 * N_PARAMS)
+        self.host_cur = np.empty(fmt.nbytes // fmt.dtype.itemsize, fmt.dtype)
+        self.host_dst = np.empty_like(self.host_cur)
+        self.host_conf = np.empty((fmt.height, fmt.width), np.uint8)
+
+
+class TemporalStage:
+    """Temporal reprojection blending after the spatial filter: `stage(frame_in, frame_filtered, index)`.
+
+    frame_in is the raw input frame N (motion and cut detection run on it), frame_filtered the
+    spatially antialiased frame N; returns the blended frame N (same shape and dtype). `stats`
+    gets one dict per frame: index, model, flow_ms, blend_ms, history_weight_mean and measures.
+    """
+
+    def __init__(self, device: str | int | None = None, *, strength_k: float = DEFAULT_STRENGTH,
+                 mode: str = "adaptive", bgr: bool = True, show: str | None = None,
+                 context: Context | None = None, k: float = DEFAULT_K, gamma: float = GAMMA,
+                 fb_check: bool = True, linear_input: bool = False, preset: str = "fast"):
+        if mode not in MODES:
+            raise ValueError(f"mode: expected one of {', '.join(MODES)}, got {mode!r}")
+        if show not in SHOWS:
+            raise ValueError(f"show: expected None or 'history', got {show!r}")
+        if not 0.0 <= float(strength_k) < 1.0:
+            raise ValueError(f"strength_k: expected a history weight in [0, 1), got {strength_k!r}")
+        if not float(k) >= 0.0 or not float(gamma) > 0.0:
+            raise ValueError(f"k, gamma: expected k >= 0 and gamma > 0, got {k!r}, {gamma!r}")
+        if preset not in ("ultrafast", "fast"):
+            raise ValueError(f"preset: expected 'ultrafast' or 'fast', got {preset!r}")
+        self.strength, self.k, self.gamma = float(strength_k), float(k), float(gamma)
+        self.mode, self.bgr, self.show = mode, bool(bgr), show
+        self.fb_check, self.linear_input = bool(fb_check), bool(linear_input)
+        self.stats: list[dict] = []
+        self._off = mode == "off" or self.strength == 0.0
+        self.context = None if self._off else (context or default_context(device))
+        self._dis = None
+        self._dis_preset = (cv2.DISOPTICAL_FLOW_PRESET_FAST if preset == "fast"
+                            else cv2.DISOPTICAL_FLOW_PRESET_ULTRAFAST)
+        self._lock = threading.Lock()
+        self._buffers: _Buffers | None = None
+        if not self._off:
+            self.queue = cl.CommandQueue(self.context.ctx, self.context.device)
+            self._luts = cl.Buffer(self.context.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
+                                   hostbuf=device_luts())
+        self.reset()
+
+    @property
+    def device_name(self) -> str:
+        return self.context.name if self.context is not None else "none (temporal stage off)"
+
+    def reset(self) -> None:
+        """Forget the history: the next frame is passed through and starts a new one."""
+        self._prev: Pyramid | None = None
+        self._prev_index: int | None = None
+        self._prev_model = PREV_NONE
+        self._prev_affine = IDENTITY
+        self._prev_flow_scale = 1
+        self._slot = 0          # which history/flow buffer holds the previous frame's
+
+    # -- set-up, once per frame format ---------------------------------------------------------------
+    def _prepare(self, fmt: FrameFormat, pyr: Pyramid) -> _Buffers:
+        shape = pyr.flow.shape[:2]
+        if self._buffers is not None and self._buffers.fmt == fmt and self._buffers.flow_shape == shape:
+            return self._buffers
+        self.queue.finish()
+        self._buffers = _Buffers(self.context, fmt, shape)
+        self._kernel = self.context.kernel("temporal", "temporal_blend",
+                                           defines_for(fmt, LINEAR_INPUT=int(self.linear_input)))
+        self.reset()
+        return self._buffers
+
+    def _flow(self, a: np.ndarray, b: np.ndarray, start: tuple[float, float]) -> np.ndarray:
+        """DIS optical flow: flow[y, x] such that a(x) ~ b(x + flow), in a's pixels, started from the
+        global translation `start` (a flow of a's size passed in is DIS's initial flow): without it
+        DIS's coarse levels lock periodic textures onto the wrong period."""
+        if self._dis is None:
+            self._dis = cv2.DISOpticalFlow_create(self._dis_preset)
+        init = np.empty(a.shape[:2] + (2,), np.float32)
+        init[...] = start
+        return self._dis.calc(a, b, init)
+
+    # -- per frame -------------------------------------------------------------------------------------
+    def __call__(self, frame_in: np.ndarray, frame_filtered: np.ndarray, index: int) -> np.ndarray:
+        if self._off:
+            self.stats.append({"index": int(index), "model": "off", "flow_ms": 0.0, "blend_ms": 0.0,
+                               "history_weight_mean": 0.0})
+            return frame_filtered
+        what = f"frame {index}"
+        fmt = frame_format(frame_filtered, self.bgr, what=f"{what} (filtered)")
+        fin = frame_format(frame_in, self.bgr, what=f"{what} (input)")
+        if (fin.height, fin.width) != (fmt.height, fmt.width):
+            raise ValueError(f"{what}: expected the input and filtered frames to be the same size, "
+                             f"got {fin.width}x{fin.height} and {fmt.width}x{fmt.height}")
+        with self._lock:
+            return self._step(frame_in, frame_filtered, int(index), fmt)
+
+    def _step(self, frame_in, frame_filtered, index: int, fmt: FrameFormat) -> np.ndarray:
+        t0 = time.perf_counter()
+        pyr = Pyramid.of(frame_in, self.bgr)
+        bufs = self._prepare(fmt, pyr)
+        fresh = self._prev is None or self._prev_index is None or index != self._prev_index + 1
+        if fresh:
+            dec = Decision("reset", measures={"cut": False})
+        else:
+            dec = choose_model(self._prev, pyr, self.mode)
+        flow_b = flow_f = None
+        if dec.model == "dense":
+            d = (dec.translation[0] / pyr.flow_scale, dec.translation[1] / pyr.flow_scale)
+            flow_b = self._flow(pyr.flow, self._prev.flow, d)                # current -> previous
+            if self.fb_check:
+                flow_f = self._flow(self._prev.flow, pyr.flow, (-d[0], -d[1]))  # previous -> current
+        t1 = time.perf_counter()
+
+        cur_mode = {"reset": CUR_RESET, "dense": CUR_DENSE}.get(dec.model, CUR_AFFINE)
+        affine = (IDENTITY if dec.model != "global" else
+                  (1.0, 0.0, dec.translation[0], 0.0, 1.0, dec.translation[1]))
+        params = make_params(affine, self._prev_affine, pyr.flow_scale, self._prev_flow_scale,
+                             self.strength, self.k, self.gamma, self.fb_check and flow_f is not None)
+        prev_slot, new_slot = self._slot, 1 - self._slot
+        np.copyto(bufs.host_cur.reshape(frame_filtered.shape), frame_filtered, casting="unsafe")
+        q = self.queue
+        cl.enqueue_copy(q, bufs.cur, bufs.host_cur, is_blocking=False)
+        cl.enqueue_copy(q, bufs.params, params, is_blocking=False)
+        if flow_b is not None:
+            cl.enqueue_copy(q, bufs.flow[new_slot], flow_b, is_blocking=False)
+            if flow_f is not None:
+                cl.enqueue_copy(q, bufs.flow_f, flow_f, is_blocking=False)
+        fh, fw = bufs.flow_shape
+        self._kernel(q, (-(-fmt.width // SEGMENT), fmt.height), None, bufs.cur, bufs.hist[prev_slot],
+                     bufs.hist[new_slot], bufs.dst, bufs.conf, bufs.flow[new_slot], bufs.flow_f,
+                     bufs.flow[prev_slot], bufs.params, self._luts, np.int32(fmt.width),
+                     np.int32(fmt.height), np.int32(fw), np.int32(fh), np.int32(fw), np.int32(fh),
+                     np.int32(cur_mode), np.int32(self._prev_model if cur_mode != CUR_RESET else PREV_NONE))
+        if cur_mode == CUR_RESET:
+            out = frame_filtered
+            cl.enqueue_copy(q, bufs.host_conf, bufs.conf, is_blocking=True) if self.show else q.finish()
+        else:
+            cl.enqueue_copy(q, bufs.host_dst, bufs.dst, is_blocking=False)
+            cl.enqueue_copy(q, bufs.host_conf, bufs.conf, is_blocking=True)
+            out = bufs.host_dst.reshape(frame_filtered.shape)
+            out = out.astype(frame_filtered.dtype) if out.dtype != frame_filtered.dtype else out.copy()
+        t2 = time.perf_counter()
+
+        weight = 0.0 if cur_mode == CUR_RESET else cv2.mean(bufs.host_conf)[0] / 255.0
+        self._prev, self._prev_index, self._slot = pyr, index, new_slot
+        self._prev_model = {"reset": PREV_NONE, "dense": PREV_DENSE}.get(dec.model, PREV_AFFINE)
+        self._prev_affine, self._prev_flow_scale = affine, pyr.flow_scale
+        self.stats.append({"index": index, "model": dec.model, "flow_ms": (t1 - t0) * 1e3,
+                           "blend_ms": (t2 - t1) * 1e3, "history_weight_mean": weight,
+                           "translation": dec.translation, "flow_scale": pyr.flow_scale,
+                           **dec.measures})
+        if self.show == "history":
+            return history_view(bufs.host_conf, out, self.strength, self.bgr)
+        return out
+
+    def finish(self) -> None:
+        if not self._off:
+            self.queue.finish()
+
+    def close(self) -> None:
+        """Wait for work in flight and free the device buffers."""
+        try:
+            self.finish()
+        finally:
+            self._buffers = None
+            self.reset()
+
+    def __enter__(self) -> "TemporalStage":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+SEGMENT = 64  # pixels of a row per work item (kernels/common.cl)
+
+
+def make_params(affine, prev_affine, flow_scale: float, prev_flow_scale: float, strength: float,
+                k: float, gamma: float, fb_on: bool) -> np.ndarray:
+    """The kernel's `params` array (layout in kernels/temporal.cl)."""
+    p = np.zeros(N_PARAMS, np.float32)
+    p[0:6], p[6:12] = affine, prev_affine
+    p[12], p[13] = flow_scale, prev_flow_scale
+    p[14], p[15], p[16], p[17], p[18], p[19] = strength, k, gamma, FB_ABS, FB_REL, float(fb_on)
+    return p
+
+
+def history_view(conf: np.ndarray, out: np.ndarray, strength: float, bgr: bool) -> np.ndarray:
+    """Debug view: green = history used (weight / strength), red = history rejected, over the
+    frame's grey at 40 %; same shape and dtype as `out`."""
+    pmax = _PMAX.get(np.dtype(out.dtype), 1.0)
+    used = np.clip(conf.astype(np.float32) / (255.0 * max(strength, 1e-6)), 0, 1)
+    g = grey8(out, bgr).astype(np.float32) / 255.0 * 0.4
+    if out.ndim == 2 or out.shape[2] == 1:
+        vis = used.reshape(out.shape)
+    else:
+        r, gr = g + 0.6 * (1 - used), g + 0.6 * used
+        chans = [g, gr, r] if bgr else [r, gr, g]
+        if out.shape[2] == 4:
+            chans.append(np.ones_like(g))
+        vis = np.stack(chans, -1)
+    vis = np.clip(vis, 0, 1) * pmax
+    if np.issubdtype(out.dtype, np.integer):
+        vis = vis + 0.5
+    return vis.astype(out.dtype)
+
+
+# --- numpy reference ----------------------------------------------------------------------------------
+def _catmull_rom(t: np.ndarray) -> list[np.ndarray]:
+    """The four Catmull-Rom tap weights, as kernels/temporal.cl's catmull_rom (float32)."""
+    f32 = np.float32
+    t = t.astype(f32)
+    return [t * (f32(-0.5) + t * (f32(1.0) - f32(0.5) * t)), f32(1.0) + t * t * (f32(-2.5) + f32(1.5) * t),
+            t * (f32(0.5) + t * (f32(2.0) - f32(1.5) * t)), t * t * (f32(-0.5) + f32(0.5) * t)]
+
+
+def temporal_reference(cur: np.ndarray, hist: np.ndarray, params: np.ndarray, cur_mode: int,
+                       prev_mode: int, flow_b: np.ndarray | None = None, flow_f: np.ndarray | None = None,
+                       flow_prev: np.ndarray | None = None, bgr: bool = False,
+                       linear_input: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """What kernels/temporal.cl computes, in float32 numpy (slow, plain): returns (out frame,
+    new history (H, W, 4) float16, weight (H, W) uint8). `hist` is (H, W, 4) float16 linear RGBA."""
+    f32 = np.float32
+    fmt = frame_format(cur, bgr)
+    h, w = fmt.height, fmt.width
+    pmax = f32(_PMAX[fmt.dtype])
+    luts = device_luts()
+    raw = np.asarray(cur).reshape(h, w, fmt.channels)
+    a = raw.astype(f32) * (f32(1.0) / pmax)
+    if fmt.channels == 1:
+        c = np.concatenate([np.repeat(a, 3, -1), np.ones((h, w, 1), f32)], -1)
+    else:
+        rgb = a[..., 2::-1] if fmt.bgr else a[..., :3]
+        alpha = a[..., 3:4] if fmt.channels == 4 else np.ones((h, w, 1), f32)
+        c = np.concatenate([rgb, alpha], -1)
+    lin = c.copy()
+    if not linear_input:
+        lin[..., :3] = lut_read(luts, c[..., :3])
+    p = params.astype(f32)
+    ys, xs = np.mgrid[0:h, 0:w].astype(f32)
+
+    def sample_flow(f, s, px, py):
+        fh_, fw_ = f.shape[:2]
+        fx = np.clip((px + f32(0.5)) / f32(s) - f32(0.5), 0, fw_ - 1).astype(f32)
+        fy = np.clip((py + f32(0.5)) / f32(s) - f32(0.5), 0, fh_ - 1).astype(f32)
+        x0, y0 = fx.astype(np.int64), fy.astype(np.int64)
+        x1, y1 = np.minimum(x0 + 1, fw_ - 1), np.minimum(y0 + 1, fh_ - 1)
+        ax, ay = (fx - x0)[..., None], (fy - y0)[..., None]
+        top = f[y0, x0] + (f[y0, x1] - f[y0, x0]) * ax
+        bot = f[y1, x0] + (f[y1, x1] - f[y1, x0]) * ax
+        return ((top + (bot - top) * ay) * f32(s)).astype(f32)
+
+    def affine(m, px, py):
+        return np.stack([m[0] * px + m[1] * py + m[2] - px, m[3] * px + m[4] * py + m[5] - py], -1)
+
+    def norm(v):
+        return np.sqrt(v[..., 0] * v[..., 0] + v[..., 1] * v[..., 1])
+
+    wgt = np.zeros((h, w), f32)
+    out_lin = lin.copy()
+    if cur_mode != CUR_RESET:
+        vc = sample_flow(flow_b, p[12], xs, ys) if cur_mode == CUR_DENSE else affine(p[0:6], xs, ys)
+        qx, qy = xs + vc[..., 0], ys + vc[..., 1]
+        inside = (qx >= -0.5) & (qx <= w - 0.5) & (qy >= -0.5) & (qy <= h - 0.5)
+        fbw = np.ones((h, w), f32)
+        if cur_mode == CUR_DENSE and p[19] > 0.5:
+            g = sample_flow(flow_f, p[12], qx, qy)
+            e, tol = norm(vc + g), p[17] + p[18] * norm(vc)
+            fbw = np.clip(f32(2.0) - e / tol, 0, 1)
+        if prev_mode == PREV_DENSE:
+            vp = sample_flow(flow_prev, p[13], qx, qy)
+        elif prev_mode == PREV_AFFINE:
+            vp = affine(p[6:12], qx, qy)
+        else:
+            vp = vc
+        # seed 002: w = 0.5 max(0, 1 - K sqrt(|v_c - v_p|)), on vectors, in pixel units
+        vw = f32(1.0) - p[15] * np.sqrt(norm(vc - vp))
+        wgt = np.where(inside, p[14] * np.maximum(vw, 0) * fbw, 0).astype(f32)
+        # history at q, Catmull-Rom over 4x4 taps clamped to the frame
+        hf = hist.astype(f32)
+        fx, fy = np.clip(qx, 0, w - 1).astype(f32), np.clip(qy, 0, h - 1).astype(f32)
+        xi, yi = fx.astype(np.int64), fy.astype(np.int64)
+        wx, wy = _catmull_rom(fx - xi), _catmull_rom(fy - yi)
+        hs = np.zeros((h, w, 4), f32)
+        for j in range(4):
+            yy = np.clip(yi - 1 + j, 0, h - 1)
+            row = np.zeros((h, w, 4), f32)
+            for kk in range(4):
+                row = row + hf[yy, np.clip(xi - 1 + kk, 0, w - 1)] * wx[kk][..., None]
+            hs = hs + row * wy[j][..., None]
+        # variance clip against the current 3x3 neighbourhood (edges replicated)
+        pad = np.pad(lin, ((1, 1), (1, 1), (0, 0)), mode="edge")
+        taps = [pad[1 + dy:1 + dy + h, 1 + dx:1 + dx + w] for dx in (-1, 0, 1) for dy in (-1, 0, 1)]
+        s = taps[0]
+        s2 = taps[0] * taps[0]
+        for t in taps[1:]:
+            s = s + t
+            s2 = s2 + t * t
+        mn, mx = np.minimum.reduce(taps), np.maximum.reduce(taps)
+        mu = s * f32(1.0 / 9.0)
+        sd = np.sqrt(np.maximum(s2 * f32(1.0 / 9.0) - mu * mu, 0)).astype(f32)
+        lo, hi = np.maximum(mn, mu - p[16] * sd), np.minimum(mx, mu + p[16] * sd)
+        ctr, ext = (lo + hi) * f32(0.5), (hi - lo) * f32(0.5) + f32(EXT_FLOOR)
+        d = hs - ctr
+        t = np.max(np.abs(d[..., :3]) / ext[..., :3], axis=-1)
+        clipped = np.where((t > 1)[..., None], ctr + d / np.maximum(t, 1)[..., None], hs)
+        keep = (f32(REJECT) - t) * (f32(1.0) / (f32(REJECT) - f32(1.0)))
+        wgt = np.where(wgt > 0, wgt * np.clip(keep, 0, 1), wgt).astype(f32)
+        blended = lin + (clipped - lin) * wgt[..., None]
+        blended[..., 3] = lin[..., 3]
+        out_lin = np.where((wgt > 0)[..., None], blended, lin).astype(f32)
+    hist_out = out_lin.astype(np.float16)
+    conf = (wgt * f32(255.0) + f32(0.5)).astype(np.uint8)
+    enc = out_lin.copy()
+    if not linear_input:
+        enc[..., :3] = lut_read(luts[2 * (LUT_SIZE + 1):], out_lin[..., :3])
+    if np.issubdtype(fmt.dtype, np.integer):
+        stored = np.floor(np.clip(enc * pmax + f32(0.5), 0, pmax)).astype(fmt.dtype)
+    else:
+        stored = enc.astype(f32)
+    if fmt.channels == 1:
+        px = stored[..., :1]
+    else:
+        px = np.concatenate([stored[..., 2::-1] if fmt.bgr else stored[..., :3],
+                             stored[..., 3:4]], -1)[..., :fmt.channels]
+    out = np.where((wgt > 0)[..., None], px, raw.astype(fmt.dtype)).reshape(np.shape(cur))
+    return out.astype(np.asarray(cur).dtype), hist_out, conf
