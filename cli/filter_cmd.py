@@ -170,8 +170,9 @@ def _kind_of(path: str) -> str:
 @click.option("--in-flight", type=click.IntRange(1, 3), default=2, show_default=True,
               help="Frames submitted to the device before the oldest is collected (1 = serialized).")
 @click.option("--temporal/--no-temporal", default=None,
-              help="Temporal reprojection blending along optical flow (seed 002): edges stop "
-                   "shimmering. Default: on for video, off for images and folders.")
+              help="Temporal reprojection blending along optical flow (seed 002) for video: "
+                   "steadier edges, but about 150-250 ms per 1080p frame on a CPU today, so off "
+                   "by default.")
 @click.option("--temporal-mode", type=click.Choice(["adaptive", "dense", "global", "static"]),
               default="adaptive", show_default=True,
               help="Motion model: adaptive picks per frame the cheapest that explains it "
@@ -229,7 +230,7 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
         if frames is not None and kind != "pattern":
             raise Usage(f"--frames needs a frame pattern like shot/%04d.exr, got {input_path}")
         post_hooks = _load_post_hooks(overlay, device)
-        if temporal.enabled and kind != "video":
+        if (temporal.enabled or temporal.show or temporal.stats_path) and kind != "video":
             raise Usage("--temporal works on video input for now; image folders and sequences are "
                         "filtered frame by frame")
         job = _VideoJob if kind == "video" else _ImageJob
@@ -283,7 +284,8 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
 
 @dataclass
 class TemporalOptions:
-    """The temporal stage's command-line settings (issue 6); on by default for video only."""
+    """The temporal stage's command-line settings (issue 6); off unless --temporal (its kernel
+    costs 150-250 ms per 1080p frame on PoCL, see docs/temporal.md)."""
 
     enabled: bool | None = None
     mode: str = "adaptive"
@@ -293,8 +295,8 @@ class TemporalOptions:
 
     def stage(self, filt):
         """A TemporalStage sharing the filter's OpenCL context, or None when off."""
-        if self.enabled is False:
-            return None
+        if self.enabled is False or (self.enabled is None and not (self.show or self.stats_path)):
+            return None  # off unless asked for; --show history and --stats imply it
         from ..temporal import TemporalStage
         kw = {} if self.k is None else {"k": self.k}
         return TemporalStage(context=filt.context, mode=self.mode, bgr=False, show=self.show, **kw)

@@ -1,4 +1,4 @@
-"""The temporal options of the filter command: on by default for video, --stats, refusal elsewhere."""
+"""The temporal options of the filter command: --temporal on video, --stats, refusal elsewhere."""
 from __future__ import annotations
 
 import csv
@@ -13,19 +13,26 @@ DEMO = Path(__file__).resolve().parent.parent / "fixtures" / "demo"
 
 def test_video_gets_the_temporal_stage_and_stats(tmp_path):
     out, stats = tmp_path / "out.mp4", tmp_path / "stats.csv"
-    res = CliRunner().invoke(main, [str(DEMO / "clip.mp4"), "-o", str(out), "--stats", str(stats), "-q"])
+    res = CliRunner().invoke(main, [str(DEMO / "clip.mp4"), "-o", str(out), "--temporal",
+                                    "--stats", str(stats), "-q"])
     assert res.exit_code == 0, res.output
     rows = list(csv.DictReader(stats.open()))
     assert len(rows) == 10 and rows[0]["model"] == "reset"
     assert {r["model"] for r in rows[1:]} <= {"static", "global", "dense"}
 
 
-def test_no_temporal_writes_no_stats(tmp_path):
-    out, stats = tmp_path / "out.mp4", tmp_path / "stats.csv"
-    res = CliRunner().invoke(main, [str(DEMO / "clip.mp4"), "-o", str(out), "--no-temporal",
-                                    "--stats", str(stats), "-q"])
+def test_temporal_is_off_by_default_and_stats_imply_it(tmp_path):
+    out = tmp_path / "out.mp4"
+    res = CliRunner().invoke(main, [str(DEMO / "clip.mp4"), "-o", str(out), "-v"])
     assert res.exit_code == 0, res.output
-    assert out.exists() and not stats.exists()
+    assert out.exists() and "temporal models" not in res.output
+    stats = tmp_path / "stats.csv"
+    res = CliRunner().invoke(main, [str(DEMO / "clip.mp4"), "-o", str(tmp_path / "b.mp4"),
+                                    "--stats", str(stats), "-q"])
+    assert res.exit_code == 0 and stats.exists()
+    res = CliRunner().invoke(main, [str(DEMO / "clip.mp4"), "-o", str(tmp_path / "c.mp4"),
+                                    "--no-temporal", "--stats", str(tmp_path / "none.csv"), "-q"])
+    assert res.exit_code == 0 and not (tmp_path / "none.csv").exists()
 
 
 def test_temporal_on_a_folder_is_refused(tmp_path):
