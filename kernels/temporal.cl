@@ -17,6 +17,11 @@
 //         box half-widths: w *= clamp((REJECT - t) / (REJECT - 1), 0, 1) -- history that far off is
 //         another surface (a disocclusion the flow missed), not aliasing to be averaged
 //   out = c + w (h - c), encoded back by table; where w = 0 the current pixel is copied untouched.
+//   FLAT rule (any mode, before everything above): where all 9 samples of the pixel's 3x3 neighbourhood
+//   (edges replicated) are bit-identical in the frame's own type, the clip box is [c - EXT_FLOOR,
+//   c + EXT_FLOOR] and the blend could move the pixel by a rounding level at most, so it is skipped:
+//   out = c untouched, new history = c in linear light (as on a reset), w = 0, no history taps.
+//   Checked in groups of GROUP pixels of a row (rows y-1, y, y+1 compared byte for byte), then per pixel.
 // The new history (linear light, half floats RGBA) and the weight w (0..255) are written too.
 //
 // Modes (runtime ints): cur_mode 0 = reset (history := current, output untouched), 1 = affine,
@@ -87,13 +92,29 @@ inline float4 catmull_rom(float t)
 // History (linear RGBA halves) at position q, Catmull-Rom over 4x4 taps clamped to the frame.
 // (Written out without arrays or min/max built-ins: PoCL calls those out of line.)
 #define CLAMPI(v, hi) ((v) < 0 ? 0 : ((v) > (hi) ? (hi) : (v)))
-#define HROW(yy) (vload_half4((yy) * w + x0, hist) * wx.x + vload_half4((yy) * w + x1, hist) * wx.y + \
-                  vload_half4((yy) * w + x2, hist) * wx.z + vload_half4((yy) * w + x3, hist) * wx.w)
+// Half -> float by bit manipulation, exact for finite halves (vload_half is a call on PoCL): normals
+// by re-biasing the exponent (+112), subnormals as (1 + m 2^-10) 2^-14 - 2^-14; alpha is never used
+// (the output keeps the current pixel's), so a texel's colour only.
+inline float4 htex(__global const ushort *hb, int i)
+{
+    __global const ushort *p = hb + 4 * i;
+    uint4 v = (uint4)(p[0], p[1], p[2], 0u);
+    uint4 m = v & 0x7fffu;
+    float4 nrm = as_float4((m << 13) + (112u << 23));
+    float4 sub = as_float4((m << 13) + (113u << 23)) - 0x1p-14f;
+    float4 f = m < (uint4)0x400u ? sub : nrm;
+    return as_float4(as_uint4(f) | ((v & 0x8000u) << 16));
+}
+#define HROW(yy) (htex(hb, (yy) * w + x0) * wx.x + htex(hb, (yy) * w + x1) * wx.y + \
+                  htex(hb, (yy) * w + x2) * wx.z + htex(hb, (yy) * w + x3) * wx.w)
 inline float4 sample_history(__global const half *hist, int w, int h, float2 q)
 {
     float fx = q.x < 0.0f ? 0.0f : (q.x > (float)(w - 1) ? (float)(w - 1) : q.x);
     float fy = q.y < 0.0f ? 0.0f : (q.y > (float)(h - 1) ? (float)(h - 1) : q.y);
     int xi = (int)fx, yi = (int)fy;
+    __global const ushort *hb = (__global const ushort *)hist;
+    // on a texel (a static shot, a whole-pixel shift) the weights are (0, 1, 0, 0): the texel exactly
+    if (fx == (float)xi && fy == (float)yi) return htex(hb, yi * w + xi);
     float4 wx = catmull_rom(fx - (float)xi), wy = catmull_rom(fy - (float)yi);
     int x0 = CLAMPI(xi - 1, w - 1), x1 = xi, x2 = CLAMPI(xi + 1, w - 1), x3 = CLAMPI(xi + 2, w - 1);
     int y0 = CLAMPI(yi - 1, h - 1), y2 = CLAMPI(yi + 1, h - 1), y3 = CLAMPI(yi + 2, h - 1);
@@ -102,6 +123,54 @@ inline float4 sample_history(__global const half *hist, int w, int h, float2 q)
     acc += HROW(y2) * wy.z;
     acc += HROW(y3) * wy.w;
     return acc;
+}
+
+// Flatness, byte for byte in the frame's own type (plain loops: faster than vload8 on PoCL).
+#define PXB (CHANNELS * (int)sizeof(PIXEL_T))
+inline int bytes_equal(__global const uchar *a, __global const uchar *b, int n)
+{
+    uchar d = 0;
+    for (int k = 0; k < n; ++k) d |= a[k] ^ b[k];
+    return d == 0;
+}
+
+// Pixels [gx, gx + GROUP) all flat: row y constant over [gx - 1, gx + GROUP], rows y-1 and y+1 equal
+// to it there. Needs 1 <= gx and gx + GROUP < width.
+inline int group_flat(__global const uchar *ra, __global const uchar *rm, __global const uchar *rb, int gx)
+{
+    __global const uchar *m = rm + (gx - 1) * PXB;
+    return bytes_equal(m, m + PXB, (GROUP + 1) * PXB) &&
+           bytes_equal(ra + (gx - 1) * PXB, m, (GROUP + 2) * PXB) &&
+           bytes_equal(rb + (gx - 1) * PXB, m, (GROUP + 2) * PXB);
+}
+
+// One pixel flat: its 8 neighbours (xl, xr, ya, yb clamped) equal the centre.
+inline int pixel_flat(__global const uchar *ra, __global const uchar *rm, __global const uchar *rb,
+                      int xl, int x, int xr)
+{
+    __global const uchar *c = rm + x * PXB;
+    return bytes_equal(rm + xl * PXB, c, PXB) && bytes_equal(rm + xr * PXB, c, PXB) &&
+           bytes_equal(ra + xl * PXB, c, PXB) && bytes_equal(ra + x * PXB, c, PXB) &&
+           bytes_equal(ra + xr * PXB, c, PXB) && bytes_equal(rb + xl * PXB, c, PXB) &&
+           bytes_equal(rb + x * PXB, c, PXB) && bytes_equal(rb + xr * PXB, c, PXB);
+}
+
+// The flat rule's output for pixels [xa, xb) that all hold the value at xa: the current pixel untouched,
+// history = `bits` (that value in linear light as 4 halves), weight 0. Fixed-length loops when whole.
+inline void pass_flat(__global const PIXEL_T *cur, __global half *hist_out, __global PIXEL_T *dst,
+                      __global uchar *conf, ulong bits, int row, int xa, int xb)
+{
+    __global ulong *ho = (__global ulong *)hist_out + row + xa;
+    __global uchar *cf = conf + row + xa;
+    __global const uchar *src = (__global const uchar *)cur + (size_t)(row + xa) * PXB;
+    __global uchar *out = (__global uchar *)dst + (size_t)(row + xa) * PXB;
+    if (xb - xa == GROUP) {
+        for (int k = 0; k < GROUP; ++k) { ho[k] = bits; cf[k] = 0; }
+        for (int k = 0; k < GROUP * PXB; ++k) out[k] = src[k];
+    } else {
+        for (int k = 0; k < xb - xa; ++k) { ho[k] = bits; cf[k] = 0; }
+        for (int k = 0; k < (xb - xa) * PXB; ++k) out[k] = src[k];
+    }
 }
 
 #define MIN4(a, b) ((float4)((a).x < (b).x ? (a).x : (b).x, (a).y < (b).y ? (a).y : (b).y, \
@@ -125,85 +194,107 @@ __kernel void temporal_blend(__global const PIXEL_T *cur, __global const half *h
     const float fb_abs = params[17], fb_rel = params[18];
     const int fb_on = params[19] > 0.5f;
 
-    // Sliding 3x3 window in linear light: columns L (x-1), C (x), R (x+1), rows a (y-1), m, b (y+1).
-    int xl = x0 > 0 ? x0 - 1 : 0;
-    float4 La = to_linear(luts, load_px(cur, IDX(xl, ya, width)));
-    float4 Lm = to_linear(luts, load_px(cur, IDX(xl, y, width)));
-    float4 Lb = to_linear(luts, load_px(cur, IDX(xl, yb, width)));
-    float4 Ca = to_linear(luts, load_px(cur, IDX(x0, ya, width)));
-    float4 Cm = to_linear(luts, load_px(cur, IDX(x0, y, width)));
-    float4 Cb = to_linear(luts, load_px(cur, IDX(x0, yb, width)));
+    __global const uchar *ra = (__global const uchar *)cur + (size_t)ya * width * PXB;
+    __global const uchar *rm = (__global const uchar *)cur + (size_t)y * width * PXB;
+    __global const uchar *rb = (__global const uchar *)cur + (size_t)yb * width * PXB;
+    const int row = y * width;
 
-    for (int x = x0; x < x1; ++x) {
-        const int xr = x + 1 < width ? x + 1 : width - 1;
-        float4 Ra = to_linear(luts, load_px(cur, IDX(xr, ya, width)));
-        float4 Rm = to_linear(luts, load_px(cur, IDX(xr, y, width)));
-        float4 Rb = to_linear(luts, load_px(cur, IDX(xr, yb, width)));
-        const int i = IDX(x, y, width);
-        float4 c = Cm;   // current pixel, linear (alpha as stored)
-        float wgt = 0.0f;
-        float4 out = c;
-        if (cur_mode != 0) {
-            float2 p = (float2)((float)x, (float)y);
-            float2 vc = cur_mode == 2 ? sample_flow(flow_b, fw, fh, params[12], p)
-                                      : affine_motion(params, p);
-            float2 q = p + vc;
-            int inside = q.x >= -0.5f && q.x <= (float)width - 0.5f &&
-                         q.y >= -0.5f && q.y <= (float)height - 0.5f;
-            if (inside) {
-                float fbw = 1.0f;
-                if (cur_mode == 2 && fb_on) {
-                    float2 g = sample_flow(flow_f, fw, fh, params[12], q);
-                    float2 eg = vc + g;
-                    float e = sqrt(eg.x * eg.x + eg.y * eg.y), tol = fb_abs + fb_rel * sqrt(vc.x * vc.x + vc.y * vc.y);
-                    fbw = 2.0f - e / tol;
-                    fbw = fbw < 0.0f ? 0.0f : (fbw > 1.0f ? 1.0f : fbw);
+    ulong bits = 0;     // the flat run's history value; consecutive flat groups share their value
+    int run = 0;
+    for (int gx = x0; gx < x1; gx += GROUP) {
+        const int gend = gx + GROUP < x1 ? gx + GROUP : x1;
+        if (gx >= 1 && gx + GROUP < width && group_flat(ra, rm, rb, gx)) {   // the flat rule, 8 at once
+            if (!run) vstore_half4_rte(to_linear(luts, load_px(cur, row + gx)), 0, (half *)&bits);
+            run = 1;
+            pass_flat(cur, hist_out, dst, conf, bits, row, gx, gend);
+            continue;
+        }
+        run = 0;
+        // Sliding 3x3 window in linear light: columns L (x-1), C (x), R (x+1), rows a (y-1), m, b (y+1).
+        int xl = gx > 0 ? gx - 1 : 0;
+        float4 La = to_linear(luts, load_px(cur, IDX(xl, ya, width)));
+        float4 Lm = to_linear(luts, load_px(cur, IDX(xl, y, width)));
+        float4 Lb = to_linear(luts, load_px(cur, IDX(xl, yb, width)));
+        float4 Ca = to_linear(luts, load_px(cur, IDX(gx, ya, width)));
+        float4 Cm = to_linear(luts, load_px(cur, IDX(gx, y, width)));
+        float4 Cb = to_linear(luts, load_px(cur, IDX(gx, yb, width)));
+
+        for (int x = gx; x < gend; ++x) {
+            const int xr = x + 1 < width ? x + 1 : width - 1;
+            float4 Ra = to_linear(luts, load_px(cur, IDX(xr, ya, width)));
+            float4 Rm = to_linear(luts, load_px(cur, IDX(xr, y, width)));
+            float4 Rb = to_linear(luts, load_px(cur, IDX(xr, yb, width)));
+            const int i = IDX(x, y, width);
+            float4 c = Cm;   // current pixel, linear (alpha as stored)
+            float wgt = 0.0f;
+            float4 out = c;
+            if (cur_mode != 0 && !pixel_flat(ra, rm, rb, x > 0 ? x - 1 : 0, x, xr)) {   // the flat rule
+                float2 p = (float2)((float)x, (float)y);
+                float2 vc = cur_mode == 2 ? sample_flow(flow_b, fw, fh, params[12], p)
+                                          : affine_motion(params, p);
+                float2 q = p + vc;
+                int inside = q.x >= -0.5f && q.x <= (float)width - 0.5f &&
+                             q.y >= -0.5f && q.y <= (float)height - 0.5f;
+                if (inside) {
+                    float fbw = 1.0f;
+                    if (cur_mode == 2 && fb_on) {
+                        float2 g = sample_flow(flow_f, fw, fh, params[12], q);
+                        float2 eg = vc + g;
+                        float e = sqrt(eg.x * eg.x + eg.y * eg.y);
+                        float tol = fb_abs + fb_rel * sqrt(vc.x * vc.x + vc.y * vc.y);
+                        fbw = 2.0f - e / tol;
+                        fbw = fbw < 0.0f ? 0.0f : (fbw > 1.0f ? 1.0f : fbw);
+                    }
+                    float2 vp = prev_mode == 2 ? sample_flow(flow_prev, pfw, pfh, params[13], q)
+                              : (prev_mode == 1 ? affine_motion(params + 6, q) : vc);
+                    // seed 002: w = 0.5 max(0, 1 - K sqrt(|v_c - v_p|)), vectors, pixel units
+                    float2 dv = vc - vp;
+                    float vw = 1.0f - k * sqrt(sqrt(dv.x * dv.x + dv.y * dv.y));
+                    wgt = w_max * (vw > 0.0f ? vw : 0.0f) * fbw;
                 }
-                float2 vp = prev_mode == 2 ? sample_flow(flow_prev, pfw, pfh, params[13], q)
-                          : (prev_mode == 1 ? affine_motion(params + 6, q) : vc);
-                // seed 002: w = 0.5 max(0, 1 - K sqrt(|v_c - v_p|)), vectors, pixel units
-                float2 dv = vc - vp;
-                float vw = 1.0f - k * sqrt(sqrt(dv.x * dv.x + dv.y * dv.y));
-                wgt = w_max * (vw > 0.0f ? vw : 0.0f) * fbw;
+                if (wgt > 0.0f) {
+                    float4 h = sample_history(hist, width, height, q);
+                    // 3x3 statistics of the current frame (variance clipping, Salvi 2016)
+                    float4 s = La + Lm + Lb + Ca + Cm + Cb + Ra + Rm + Rb;
+                    float4 s2 = La * La + Lm * Lm + Lb * Lb + Ca * Ca + Cm * Cm + Cb * Cb +
+                                Ra * Ra + Rm * Rm + Rb * Rb;
+                    float4 mn = MIN4(MIN4(MIN4(La, Lm), MIN4(Lb, Ca)),
+                                     MIN4(MIN4(Cm, Cb), MIN4(MIN4(Ra, Rm), Rb)));
+                    float4 mx = MAX4(MAX4(MAX4(La, Lm), MAX4(Lb, Ca)),
+                                     MAX4(MAX4(Cm, Cb), MAX4(MAX4(Ra, Rm), Rb)));
+                    float4 mu = s * (1.0f / 9.0f);
+                    float4 var = s2 * (1.0f / 9.0f) - mu * mu;
+                    float4 sd = sqrt(MAX4(var, (float4)(0.0f)));
+                    float4 lo_v = mu - gamma * sd, hi_v = mu + gamma * sd;
+                    float4 lo = MAX4(mn, lo_v), hi = MIN4(mx, hi_v);
+                    float4 ctr = (lo + hi) * 0.5f, ext = (hi - lo) * 0.5f + EXT_FLOOR;
+                    float4 d = h - ctr;
+                    float tx = (d.x < 0.0f ? -d.x : d.x) / ext.x, ty = (d.y < 0.0f ? -d.y : d.y) / ext.y;
+                    float tz = (d.z < 0.0f ? -d.z : d.z) / ext.z;
+                    float t = tx > ty ? (tx > tz ? tx : tz) : (ty > tz ? ty : tz);
+                    if (t > 1.0f) h = ctr + d / t;
+                    // history far outside the box is another surface (a disocclusion the flow missed):
+                    // its weight falls from full at the box (t = 1) to none at t = REJECT
+                    float keep = (REJECT - t) * (1.0f / (REJECT - 1.0f));
+                    wgt *= keep < 0.0f ? 0.0f : (keep > 1.0f ? 1.0f : keep);
+                    out = c + (h - c) * wgt;
+                    out.w = c.w;
+                }
             }
+            vstore_half4_rte(out, i, hist_out);
+            conf[i] = (uchar)(wgt * 255.0f + 0.5f);
             if (wgt > 0.0f) {
-                float4 h = sample_history(hist, width, height, q);
-                // 3x3 statistics of the current frame (variance clipping, Salvi 2016)
-                float4 s = La + Lm + Lb + Ca + Cm + Cb + Ra + Rm + Rb;
-                float4 s2 = La * La + Lm * Lm + Lb * Lb + Ca * Ca + Cm * Cm + Cb * Cb +
-                            Ra * Ra + Rm * Rm + Rb * Rb;
-                float4 mn = MIN4(MIN4(MIN4(La, Lm), MIN4(Lb, Ca)), MIN4(MIN4(Cm, Cb), MIN4(MIN4(Ra, Rm), Rb)));
-                float4 mx = MAX4(MAX4(MAX4(La, Lm), MAX4(Lb, Ca)), MAX4(MAX4(Cm, Cb), MAX4(MAX4(Ra, Rm), Rb)));
-                float4 mu = s * (1.0f / 9.0f);
-                float4 var = s2 * (1.0f / 9.0f) - mu * mu;
-                float4 sd = sqrt(MAX4(var, (float4)(0.0f)));
-                float4 lo_v = mu - gamma * sd, hi_v = mu + gamma * sd;
-                float4 lo = MAX4(mn, lo_v), hi = MIN4(mx, hi_v);
-                float4 ctr = (lo + hi) * 0.5f, ext = (hi - lo) * 0.5f + EXT_FLOOR;
-                float4 d = h - ctr;
-                float tx = fabs(d.x) / ext.x, ty = fabs(d.y) / ext.y, tz = fabs(d.z) / ext.z;
-                float t = tx > ty ? (tx > tz ? tx : tz) : (ty > tz ? ty : tz);
-                if (t > 1.0f) h = ctr + d / t;
-                // history far outside the box is another surface (a disocclusion the flow missed):
-                // its weight falls from full at the box (t = 1) to none at t = REJECT
-                float keep = (REJECT - t) * (1.0f / (REJECT - 1.0f));
-                wgt *= keep < 0.0f ? 0.0f : (keep > 1.0f ? 1.0f : keep);
-                out = c + (h - c) * wgt;
-                out.w = c.w;
+                store_px(dst, i, from_linear(luts, out));
+            } else {   // no history here: the spatial output, bit for bit
+    #if CHANNELS == 1
+                dst[i] = cur[i];
+    #else
+                for (int ch = 0; ch < CHANNELS; ++ch)
+                    dst[(size_t)i * CHANNELS + ch] = cur[(size_t)i * CHANNELS + ch];
+    #endif
             }
+            La = Ca; Lm = Cm; Lb = Cb;
+            Ca = Ra; Cm = Rm; Cb = Rb;
         }
-        vstore_half4_rte(out, i, hist_out);
-        conf[i] = (uchar)(wgt * 255.0f + 0.5f);
-        if (wgt > 0.0f) {
-            store_px(dst, i, from_linear(luts, out));
-        } else {   // no history here: the spatial output, bit for bit
-#if CHANNELS == 1
-            dst[i] = cur[i];
-#else
-            for (int ch = 0; ch < CHANNELS; ++ch) dst[(size_t)i * CHANNELS + ch] = cur[(size_t)i * CHANNELS + ch];
-#endif
-        }
-        La = Ca; Lm = Cm; Lb = Cb;
-        Ca = Ra; Cm = Rm; Cb = Rb;
     }
 }

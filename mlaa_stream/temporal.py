@@ -361,10 +361,11 @@ class TemporalStage:
             out = frame_filtered
             cl.enqueue_copy(q, bufs.host_conf, bufs.conf, is_blocking=True) if self.show else q.finish()
         else:
-            cl.enqueue_copy(q, bufs.host_dst, bufs.dst, is_blocking=False)
+            same = frame_filtered.dtype == fmt.dtype   # download straight into the frame returned
+            out = np.empty(frame_filtered.shape, fmt.dtype) if same else bufs.host_dst
+            cl.enqueue_copy(q, out, bufs.dst, is_blocking=False)
             cl.enqueue_copy(q, bufs.host_conf, bufs.conf, is_blocking=True)
-            out = bufs.host_dst.reshape(frame_filtered.shape)
-            out = out.astype(frame_filtered.dtype) if out.dtype != frame_filtered.dtype else out.copy()
+            out = out if same else out.reshape(frame_filtered.shape).astype(frame_filtered.dtype)
         t2 = time.perf_counter()
 
         weight = 0.0 if cur_mode == CUR_RESET else cv2.mean(bufs.host_conf)[0] / 255.0
@@ -438,6 +439,19 @@ def _catmull_rom(t: np.ndarray) -> list[np.ndarray]:
     t = t.astype(f32)
     return [t * (f32(-0.5) + t * (f32(1.0) - f32(0.5) * t)), f32(1.0) + t * t * (f32(-2.5) + f32(1.5) * t),
             t * (f32(0.5) + t * (f32(2.0) - f32(1.5) * t)), t * t * (f32(-0.5) + f32(0.5) * t)]
+
+
+def flat_3x3(raw: np.ndarray) -> np.ndarray:
+    """(H, W) bool: all 9 samples of each pixel's 3x3 neighbourhood (edges replicated) bit-identical
+    in the frame's own type -- where kernels/temporal.cl skips the blend (the flat rule)."""
+    h, w = raw.shape[:2]
+    b = np.ascontiguousarray(raw).reshape(h, w, -1).view(np.uint8)
+    pad = np.pad(b, ((1, 1), (1, 1), (0, 0)), mode="edge")
+    flat = np.ones((h, w), bool)
+    for dy in range(3):
+        for dx in range(3):
+            flat &= (pad[dy:dy + h, dx:dx + w] == b).all(-1)
+    return flat
 
 
 def temporal_reference(cur: np.ndarray, hist: np.ndarray, params: np.ndarray, cur_mode: int,
@@ -532,6 +546,10 @@ def temporal_reference(cur: np.ndarray, hist: np.ndarray, params: np.ndarray, cu
         clipped = np.where((t > 1)[..., None], ctr + d / np.maximum(t, 1)[..., None], hs)
         keep = (f32(REJECT) - t) * (f32(1.0) / (f32(REJECT) - f32(1.0)))
         wgt = np.where(wgt > 0, wgt * np.clip(keep, 0, 1), wgt).astype(f32)
+        # the flat rule (kernels/temporal.cl): a 3x3 neighbourhood bit-identical in the frame's own
+        # type bounds the clip box to c +- EXT_FLOOR, so the blend is skipped there: w = 0 gives
+        # out = c untouched and history = c in linear light, as on a reset
+        wgt = np.where(flat_3x3(raw.astype(fmt.dtype)), f32(0), wgt).astype(f32)
         blended = lin + (clipped - lin) * wgt[..., None]
         blended[..., 3] = lin[..., 3]
         out_lin = np.where((wgt > 0)[..., None], blended, lin).astype(f32)

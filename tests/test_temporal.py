@@ -20,7 +20,7 @@ from mlaa_stream.device import default_context
 from mlaa_stream.formats import defines_for, frame_format
 from mlaa_stream.mlaa import Filter
 from mlaa_stream.temporal import (CUR_AFFINE, CUR_DENSE, CUR_RESET, PREV_AFFINE, PREV_DENSE, PREV_NONE,
-                                  SEGMENT, TemporalStage, make_params, temporal_reference)
+                                  SEGMENT, TemporalStage, flat_3x3, make_params, temporal_reference)
 from mlaa_stream.temporal_bench import _pan_layers
 
 
@@ -102,6 +102,18 @@ def test_kernel_matches_reference_formats(channels, dtype, flow_scale):
         assert np.array_equal(got[0][..., 3], cur[..., 3])  # alpha is the current frame's
 
 
+@pytest.mark.parametrize("shift", [(0.0, 0.0), (2.0, -1.0)])
+def test_kernel_matches_reference_on_texels(shift):
+    """Static and whole-pixel motion: every history position is a texel (the kernel's one-tap path)."""
+    cur, hist, _, fb, ff, fp = random_case(5, 31, 66, 3, np.uint8)
+    m = (1, 0, shift[0], 0, 1, shift[1])
+    params = make_params(m, m, 1, 1, 0.5, 0.5, 1.25, False)
+    got = run_kernel(cur, hist, params, CUR_AFFINE, PREV_AFFINE, fb, ff, fp, bgr=True)
+    ref = temporal_reference(cur, hist, params, CUR_AFFINE, PREV_AFFINE, fb, ff, fp, bgr=True)
+    assert 0.05 < (ref[2] > 0).mean() < 1.0
+    assert_close(got[0], ref[0], got[1], ref[1], got[2], ref[2])
+
+
 def test_kernel_known_answer_checkerboard():
     """Checkerboard of two greys; history a flat grey between them (inside every 3x3 box, so not
     clipped); static model, w = strength: out = encode(lin(c) + 0.5 (m - lin(c)))."""
@@ -118,6 +130,53 @@ def test_kernel_known_answer_checkerboard():
     expect = np.round(linear_to_srgb(lin + 0.5 * (float(np.float16(m)) - lin)) * 255)
     assert np.abs(out.astype(int) - expect).max() <= 1
     assert (conf == 128).all()  # 0.5 * 255 + 0.5
+
+
+def flat_case(seed, h, w, channels, dtype):
+    """Blocks of random colours (flat interiors, group-wide and narrower, touching the frame's edges)
+    over a noisy band; a random history and a small affine motion, so history is used elsewhere."""
+    rng = np.random.default_rng(seed)
+    hi = {np.uint8: 256, np.uint16: 65536}.get(dtype)
+    shape = (h, w) if channels == 1 else (h, w, channels)
+    big = rng.integers(0, hi, shape) if hi else rng.random(shape)
+    cur = np.empty(shape, dtype)
+    x = 0
+    while x < w:
+        bw = int(rng.integers(2, 15))
+        cur[:, x:x + bw] = big[0:1, x:x + 1]
+        x += bw
+    cur[h // 2:, : w // 3] = big[h // 2:, : w // 3]             # noise: nothing flat there
+    cur[: h // 3, w // 2:] = big[0, w // 2]                    # a wide flat block at the top edge
+    hist = rng.random((h, w, 4)).astype(np.float16)
+    zero = np.zeros((h, w, 2), np.float32)
+    params = make_params((1, 0, 0.3, 0, 1, -0.2), (1, 0, 0.3, 0, 1, -0.2), 1, 1, 0.5, 0.5, 1.25, False)
+    return cur, hist, params, zero
+
+
+@pytest.mark.parametrize("channels,dtype", [(3, np.uint8), (4, np.uint16), (1, np.float32)])
+def test_flat_neighbourhood_passes_through(channels, dtype):
+    """The flat rule: where all 9 samples of the 3x3 neighbourhood (edges replicated) are identical,
+    the pixel is copied exactly, its history is the pixel in linear light and its weight is 0 --
+    whatever the history says; the kernel still matches the reference everywhere."""
+    h, w = 23, 75
+    cur, hist, params, zero = flat_case(11 + channels, h, w, channels, dtype)
+    got = run_kernel(cur, hist, params, CUR_AFFINE, PREV_AFFINE, zero, zero, zero, bgr=channels == 3)
+    ref = temporal_reference(cur, hist, params, CUR_AFFINE, PREV_AFFINE, zero, zero, zero, bgr=channels == 3)
+    assert_close(got[0], ref[0], got[1], ref[1], got[2], ref[2])
+    px = cur.reshape(h, w, -1)
+    flat = np.zeros((h, w), bool)
+    for y in range(h):   # plain loops: an independent statement of "flat"
+        for x in range(w):
+            ys, xs = [max(y - 1, 0), y, min(y + 1, h - 1)], [max(x - 1, 0), x, min(x + 1, w - 1)]
+            flat[y, x] = all(np.array_equal(px[yy, xx], px[y, x]) for yy in ys for xx in xs)
+    assert 0.3 < flat.mean() < 0.9
+    out = got[0].reshape(h, w, -1)
+    assert np.array_equal(out[flat], px[flat])
+    assert (got[2][flat] == 0).all()
+    assert (got[2][~flat] > 0).mean() > 0.3            # elsewhere history is used
+    _, rhist, _ = temporal_reference(cur, hist, params, CUR_RESET, PREV_NONE, zero, zero, zero,
+                                     bgr=channels == 3)
+    assert np.array_equal(got[1][flat], rhist[flat])     # the history as on a reset
 
 
 # --- the stage on sequences ---------------------------------------------------------------------------
@@ -155,13 +214,15 @@ def test_subpixel_pan_uses_global_model(spatial):
     w, h = 320, 180
     frames = [S.encode8(S.render(_pan_layers(w, h, 0.35 * t, 0.15 * t), w, h, 1)) for t in range(5)]
     with TemporalStage(bgr=False) as st:
-        run(st, frames, spatial)
+        _, sp = run(st, frames, spatial)
         stats = st.stats
     assert [r["model"] for r in stats] == ["reset"] + ["global"] * 4
     tr = np.array([r["translation"] for r in stats[1:]])  # current -> previous: (-0.35, -0.15)
     # aliasing of 1-spp edges biases single frames by up to ~0.25 px; the mean is close
     assert np.abs(tr - (-0.35, -0.15)).max() < 0.3 and np.abs(tr.mean(0) - (-0.35, -0.15)).max() < 0.1, tr
-    assert all(r["history_weight_mean"] > 0.2 for r in stats[1:])
+    # history is used (mean weight > 0.2) wherever the flat rule does not pass the pixel through
+    busy = [1.0 - flat_3x3(f).mean() for f in sp[1:]]
+    assert all(r["history_weight_mean"] > 0.2 * b for r, b in zip(stats[1:], busy)), (stats, busy)
 
 
 def test_fast_mover_leaves_no_ghost(spatial):
