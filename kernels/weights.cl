@@ -5,8 +5,10 @@
 // is covered by the trapezoid A = 1/2 (1 - (2p+1)/L) (seed 000 eq. 2), or the triangle 1/(8L) on
 // the middle pixel when L is odd; the covered pixel takes A of its neighbour across the line.
 // Areas come from a host-built table for L <= AREA_TABLE_L and from the same formula beyond.
-// Corners (seed 002): a crossing edge two pixels long marks a real corner, not a jaggy: its
-// area is scaled by ROUNDING (0 keeps corners sharp). U shapes (both ends to the same side: a bump,
+// Corners (seed 002): a crossing edge three or more pixels long marks a real corner, not a jaggy:
+// its area is scaled by ROUNDING (0 keeps corners sharp). One exactly two pixels long is ambiguous
+// (a 2-px stroke's corner, or a thin feature's step): scaled by SHORT_CORNER (0.75: measured on
+// the yardstick, docs/bench), and not blended at all on a line of length 1 (a steep staircase). U shapes (both ends to the same side: a bump,
 // or the side of a box when a crossing is long) are blended only when BLEND_U is 1 and not a box side. An end crossed on both sides (a thin
 // line stepping across this one) continues the silhouette opposite to the other end, which makes
 // a Z shape (as SMAA's area patterns do); with no single crossing at the other end it stays unblended.
@@ -25,6 +27,10 @@
 #ifndef BLEND_U
 #define BLEND_U 1
 #endif
+#ifndef SHORT_CORNER
+#define SHORT_CORNER 0.75f
+#endif
+#define IMAX(a, b) ((a) > (b) ? (a) : (b))
 #ifndef VALIDATE_CROSSINGS
 #define VALIDATE_CROSSINGS 1
 #endif
@@ -40,19 +46,22 @@ inline float trapezoid_area(__global const float *table, int p, int L)
 inline ushort to_u16(float a) { return (ushort)clamp(rint(a * 65535.0f), 0.0f, 65535.0f); }
 
 // Crossing at one end of a line: `a`/`b` say whether an edge crosses on side a (up/left) or side b
-// (down/right); `a2`/`b2` whether that crossing edge continues a second pixel (*long_edge: a corner).
+// (down/right); `a2`/`b2` how far that crossing edge continues: 0 one pixel, 1 two, 2 three or more
+// (run2 below); *long_edge gets the longer one's code for the side(s) crossed.
 // Returns +1 for side a, -1 for side b, 0 for none, BOTH for both.
 #define BOTH 2
+#define run2(e2, e3) ((e2) ? 1 + (e3) : 0)
 inline int crossing(int a, int b, int a2, int b2, int *long_edge)
 {
-    *long_edge = (a && a2) || (b && b2);
+    *long_edge = IMAX(a ? a2 : 0, b ? b2 : 0);
     if (a && b) return BOTH;
     return a ? 1 : (b ? -1 : 0);
 }
 
 // Areas for the pixel at distances (d0, d1) from the two ends with crossings s0, s1: *ta = area
-// taken by the side-a pixel from side b, *tb = the reverse. Long crossing edges mark corners
-// (seed 002): a U shape with one (the side of a box) is left sharp, other shapes are scaled by ROUNDING.
+// taken by the side-a pixel from side b, *tb = the reverse. Crossing edges of 2+ pixels mark corners
+// (seed 002): a U shape with one (the side of a box) is left sharp, other shapes are scaled by
+// SHORT_CORNER (2 px) or ROUNDING (3+ px).
 inline void line_areas(__global const float *table, int d0, int d1, int s0, int s1,
                        int long0, int long1, float *ta, float *tb)
 {
@@ -62,11 +71,15 @@ inline void line_areas(__global const float *table, int d0, int d1, int s0, int 
     if (s0 == BOTH) s0 = 0;
     if (s1 == BOTH) s1 = 0;
     if (s0 == 0 && s1 == 0) return;
-    float k0 = long0 ? ROUNDING : 1.0f, k1 = long1 ? ROUNDING : 1.0f;
+    float k0 = long0 == 2 ? ROUNDING : (long0 == 1 ? SHORT_CORNER : 1.0f);
+    float k1 = long1 == 2 ? ROUNDING : (long1 == 1 ? SHORT_CORNER : 1.0f);
     if (s0 == s1) {
         if (!BLEND_U || long0 || long1) return;
     }
     int L = d0 + d1 + 1;
+    // A line of length 1 between crossing edges two pixels long is a step of a steep staircase
+    // (slope 2): the perpendicular lines blend it; blending it here too over-smooths (measured).
+    if (L == 1) { if (long0 == 1) k0 = 0.0f; if (long1 == 1) k1 = 0.0f; }
     if (s0 != 0) { float a = k0 * trapezoid_area(table, d0, L); if (s0 > 0) *ta += a; else *tb += a; }
     if (s1 != 0) { float a = k1 * trapezoid_area(table, d1, L); if (s1 > 0) *ta += a; else *tb += a; }
 }
@@ -109,14 +122,14 @@ inline void pixel_weights(__global const PIXEL_T *src, __global const uchar *edg
         int k0, k1;
         int s0 = end_type(src, has(edges, x0 - 1, y, width, height, EDGE_RIGHT),
                           has(edges, x0 - 1, y + 1, width, height, EDGE_RIGHT),
-                          has(edges, x0 - 1, y - 1, width, height, EDGE_RIGHT),
-                          has(edges, x0 - 1, y + 2, width, height, EDGE_RIGHT),
+                          run2(has(edges, x0 - 1, y - 1, width, height, EDGE_RIGHT), has(edges, x0 - 1, y - 2, width, height, EDGE_RIGHT)),
+                          run2(has(edges, x0 - 1, y + 2, width, height, EDGE_RIGHT), has(edges, x0 - 1, y + 3, width, height, EDGE_RIGHT)),
                           IDX(x0 - 1, y, width), IDX(x0 - 1, y + 1, width),
                           IDX(x0, y, width), IDX(x0, y + 1, width), &k0);
         int s1 = end_type(src, has(edges, x1, y, width, height, EDGE_RIGHT),
                           has(edges, x1, y + 1, width, height, EDGE_RIGHT),
-                          has(edges, x1, y - 1, width, height, EDGE_RIGHT),
-                          has(edges, x1, y + 2, width, height, EDGE_RIGHT),
+                          run2(has(edges, x1, y - 1, width, height, EDGE_RIGHT), has(edges, x1, y - 2, width, height, EDGE_RIGHT)),
+                          run2(has(edges, x1, y + 2, width, height, EDGE_RIGHT), has(edges, x1, y + 3, width, height, EDGE_RIGHT)),
                           IDX(x1 + 1, y, width), IDX(x1 + 1, y + 1, width),
                           IDX(x1, y, width), IDX(x1, y + 1, width), &k1);
         line_areas(table, d.x, d.y, s0, s1, k0, k1, &up, &down);
@@ -127,14 +140,14 @@ inline void pixel_weights(__global const PIXEL_T *src, __global const uchar *edg
         int k0, k1;
         int s0 = end_type(src, has(edges, x, y0 - 1, width, height, EDGE_BOTTOM),
                           has(edges, x + 1, y0 - 1, width, height, EDGE_BOTTOM),
-                          has(edges, x - 1, y0 - 1, width, height, EDGE_BOTTOM),
-                          has(edges, x + 2, y0 - 1, width, height, EDGE_BOTTOM),
+                          run2(has(edges, x - 1, y0 - 1, width, height, EDGE_BOTTOM), has(edges, x - 2, y0 - 1, width, height, EDGE_BOTTOM)),
+                          run2(has(edges, x + 2, y0 - 1, width, height, EDGE_BOTTOM), has(edges, x + 3, y0 - 1, width, height, EDGE_BOTTOM)),
                           IDX(x, y0 - 1, width), IDX(x + 1, y0 - 1, width),
                           IDX(x, y0, width), IDX(x + 1, y0, width), &k0);
         int s1 = end_type(src, has(edges, x, y1, width, height, EDGE_BOTTOM),
                           has(edges, x + 1, y1, width, height, EDGE_BOTTOM),
-                          has(edges, x - 1, y1, width, height, EDGE_BOTTOM),
-                          has(edges, x + 2, y1, width, height, EDGE_BOTTOM),
+                          run2(has(edges, x - 1, y1, width, height, EDGE_BOTTOM), has(edges, x - 2, y1, width, height, EDGE_BOTTOM)),
+                          run2(has(edges, x + 2, y1, width, height, EDGE_BOTTOM), has(edges, x + 3, y1, width, height, EDGE_BOTTOM)),
                           IDX(x, y1 + 1, width), IDX(x + 1, y1 + 1, width),
                           IDX(x, y1, width), IDX(x + 1, y1, width), &k1);
         line_areas(table, d.x, d.y, s0, s1, k0, k1, &left, &right);

@@ -29,6 +29,9 @@ DEFAULT_THRESHOLDS = {"lab": 8.0, "luma": 0.06, "rgb": 0.06}
 # every channel cannot be an edge and skip the CIELAB conversion.
 LAB_LIPSCHITZ = 520.0
 AREA_TABLE_L = 64
+# Area factor for a line ending in a crossing edge exactly two pixels long (kernels/weights.cl):
+# 1 treats it as a jaggy, 0 as a corner; 0.75 was best on the yardstick (wires, text, rotation).
+SHORT_CORNER = 0.75
 SEGMENT = 64  # pixels of a row per work item in the per-pixel passes (kernels/common.cl)
 
 # Named quality presets -> Filter keyword arguments (the CLI's --preset).
@@ -71,6 +74,7 @@ class FilterOptions:
     rounding: float
     blend_u: bool
     ramp: float
+    short_corner: float = SHORT_CORNER
 
     def pass_defines(self) -> dict[str, object]:
         return {
@@ -81,6 +85,7 @@ class FilterOptions:
             "AREA_TABLE_L": AREA_TABLE_L,
             "ROUNDING": float(self.rounding),
             "BLEND_U": int(self.blend_u),
+            "SHORT_CORNER": float(self.short_corner),
             "SEGMENT": SEGMENT,
             "RAMP_TEST": int(self.ramp > 0),
             "RAMP": float(self.ramp),
@@ -128,14 +133,17 @@ class Filter:
     def __init__(self, device: str | int | None = None, *, threshold: float | None = None,
                  metric: str = "lab", linear: bool = True, reconstruct: bool = False,
                  bgr: bool = False, linear_input: bool = False, rounding: float = 0.0,
-                 blend_u: bool = True, ramp: float = 0.35, context: Context | None = None):
+                 blend_u: bool = True, ramp: float = 0.35, short_corner: float = SHORT_CORNER,
+                 context: Context | None = None):
         if metric not in METRICS:
             raise ValueError(f"metric: expected one of {', '.join(METRICS)}, got {metric!r}")
         thr = DEFAULT_THRESHOLDS[metric] if threshold is None else float(threshold)
         if not thr > 0:
             raise ValueError(f"threshold: expected a positive number, got {threshold!r}")
+        if not 0.0 <= float(short_corner) <= 1.0:
+            raise ValueError(f"short_corner: expected a factor in [0, 1], got {short_corner!r}")
         self.options = FilterOptions(thr, metric, bool(linear), bool(linear_input),
-                                     float(rounding), bool(blend_u), float(ramp))
+                                     float(rounding), bool(blend_u), float(ramp), float(short_corner))
         self.bgr = bool(bgr)
         self.reconstruct = bool(reconstruct)
         self.context = context or default_context(device)

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from .colour import LUMA, linear_to_srgb, rgb_to_lab, srgb_to_linear
-from .mlaa import DEFAULT_THRESHOLDS, trapezoid_area
+from .mlaa import DEFAULT_THRESHOLDS, SHORT_CORNER, trapezoid_area
 
 BOTTOM, RIGHT = 1, 2
 BOTH = 2  # an end crossed on both sides
@@ -108,7 +108,7 @@ def distances_reference(edges: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def weights_reference(edges: np.ndarray, hdist: np.ndarray, vdist: np.ndarray,
                       rounding: float = 0.0, blend_u: bool = True,
-                      frame: np.ndarray | None = None) -> np.ndarray:
+                      frame: np.ndarray | None = None, short_corner: float = SHORT_CORNER) -> np.ndarray:
     """(top, bottom, left, right) fractions each pixel takes from its neighbours (seed 000 eq. 2).
     With `frame`, a crossing edge counts only if the pixel beyond it has the other side's colour."""
     h, w = edges.shape
@@ -125,12 +125,16 @@ def weights_reference(edges: np.ndarray, hdist: np.ndarray, vdist: np.ndarray,
     def has(x: int, y: int, bit: int) -> bool:
         return 0 <= x < w and 0 <= y < h and bool(edges[y, x] & bit)
 
-    def crossing(a: bool, b: bool, a2: bool, b2: bool) -> tuple[int, bool]:
-        """(side: +1 a, -1 b, 0 none, BOTH; whether the crossing edge is two pixels long)."""
-        long_edge = (a and a2) or (b and b2)
+    def run(x: int, y: int, bit: int, dx: int, dy: int) -> int:
+        """How far a crossing edge continues past its first pixel: 0, 1 or 2 (= 2 or more)."""
+        return 0 if not has(x, y, bit) else 1 + int(has(x + dx, y + dy, bit))
+
+    def crossing(a: bool, b: bool, a2: int, b2: int) -> tuple[int, int]:
+        """(side: +1 a, -1 b, 0 none, BOTH; corner code: 0 crossing edge 1 px, 1 two, 2 three+)."""
+        long_edge = max(a2 if a else 0, b2 if b else 0)
         return (BOTH if a and b else 1 if a else -1 if b else 0), long_edge
 
-    def areas(d0: int, d1: int, s0: int, long0: bool, s1: int, long1: bool) -> tuple[float, float]:
+    def areas(d0: int, d1: int, s0: int, long0: int, s1: int, long1: int) -> tuple[float, float]:
         ta = tb = 0.0
         if s0 == BOTH and s1 != BOTH:  # a thin line crossing: continue opposite to the other end (Z)
             s0 = -s1
@@ -144,7 +148,10 @@ def weights_reference(edges: np.ndarray, hdist: np.ndarray, vdist: np.ndarray,
         length = d0 + d1 + 1
         for s, long_edge, d in ((s0, long0, d0), (s1, long1, d1)):
             if s:
-                a = (rounding if long_edge else 1.0) * trapezoid_area(d, length)
+                # 3+ px crossing: a corner (rounding); 2 px: short_corner, none on a 1-px line
+                k = (rounding if long_edge == 2 else
+                     (0.0 if length == 1 else short_corner) if long_edge == 1 else 1.0)
+                a = k * trapezoid_area(d, length)
                 if s > 0:
                     ta += a
                 else:
@@ -160,8 +167,8 @@ def weights_reference(edges: np.ndarray, hdist: np.ndarray, vdist: np.ndarray,
                 b0 = has(x0 - 1, y + 1, RIGHT) and turns((y + 1, x0 - 1), (y, x0), (y + 1, x0))
                 a1 = has(x1, y, RIGHT) and turns((y, x1 + 1), (y + 1, x1), (y, x1))
                 b1 = has(x1, y + 1, RIGHT) and turns((y + 1, x1 + 1), (y, x1), (y + 1, x1))
-                s0, k0 = crossing(a0, b0, has(x0 - 1, y - 1, RIGHT), has(x0 - 1, y + 2, RIGHT))
-                s1, k1 = crossing(a1, b1, has(x1, y - 1, RIGHT), has(x1, y + 2, RIGHT))
+                s0, k0 = crossing(a0, b0, run(x0 - 1, y - 1, RIGHT, 0, -1), run(x0 - 1, y + 2, RIGHT, 0, 1))
+                s1, k1 = crossing(a1, b1, run(x1, y - 1, RIGHT, 0, -1), run(x1, y + 2, RIGHT, 0, 1))
                 up, down = areas(dl, dr, s0, k0, s1, k1)
                 out[y, x, 1] = up
                 out[y + 1, x, 0] = down
@@ -172,8 +179,8 @@ def weights_reference(edges: np.ndarray, hdist: np.ndarray, vdist: np.ndarray,
                 b0 = has(x + 1, y0 - 1, BOTTOM) and turns((y0 - 1, x + 1), (y0, x), (y0, x + 1))
                 a1 = has(x, y1, BOTTOM) and turns((y1 + 1, x), (y1, x + 1), (y1, x))
                 b1 = has(x + 1, y1, BOTTOM) and turns((y1 + 1, x + 1), (y1, x), (y1, x + 1))
-                s0, k0 = crossing(a0, b0, has(x - 1, y0 - 1, BOTTOM), has(x + 2, y0 - 1, BOTTOM))
-                s1, k1 = crossing(a1, b1, has(x - 1, y1, BOTTOM), has(x + 2, y1, BOTTOM))
+                s0, k0 = crossing(a0, b0, run(x - 1, y0 - 1, BOTTOM, -1, 0), run(x + 2, y0 - 1, BOTTOM, 1, 0))
+                s1, k1 = crossing(a1, b1, run(x - 1, y1, BOTTOM, -1, 0), run(x + 2, y1, BOTTOM, 1, 0))
                 left, right = areas(du, dd, s0, k0, s1, k1)
                 out[y, x, 3] = left
                 out[y, x + 1, 2] = right
@@ -212,9 +219,10 @@ def _to_dtype(rgb: np.ndarray, alpha: np.ndarray | None, like: np.ndarray) -> np
 
 def mlaa_reference(frame: np.ndarray, threshold: float | None = None, metric: str = "lab",
                    linear: bool = True, bgr: bool = False, linear_input: bool = False,
-                   rounding: float = 0.0, blend_u: bool = True, ramp: float = 0.35) -> np.ndarray:
+                   rounding: float = 0.0, blend_u: bool = True, ramp: float = 0.35,
+                   short_corner: float = SHORT_CORNER) -> np.ndarray:
     """The whole spatial filter, pass after pass."""
     e = edges_reference(frame, threshold, metric, bgr, linear_input, ramp)
     hd, vd = distances_reference(e)
-    wts = weights_reference(e, hd, vd, rounding, blend_u, frame)
+    wts = weights_reference(e, hd, vd, rounding, blend_u, frame, short_corner)
     return blend_reference(frame, wts, linear, linear_input, bgr)

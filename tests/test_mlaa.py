@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from mlaa_stream.colour import rgb_to_lab
-from mlaa_stream.mlaa import Filter, area_table, trapezoid_area
+from mlaa_stream.mlaa import SHORT_CORNER, Filter, area_table, trapezoid_area
 from mlaa_stream.reference import (distances_reference, edges_reference, mlaa_reference,
                                    normalised_rgb, weights_reference)
 
@@ -158,6 +158,41 @@ def test_staircase_weights_follow_eq2(filt, L):
             # ... right end: it goes down, so the lower row takes from above
             assert wts[y_line + 1, x0 + L - 1 - p, 0] == pytest.approx(want, abs=1e-4)
         assert wts[y_line, x0 + L - 1, 1] == 0.0 and wts[y_line + 1, x0, 0] == 0.0
+
+
+@pytest.mark.parametrize("step, factor", [(1, 1.0), (2, SHORT_CORNER), (3, 0.0), (5, 0.0)])
+def test_step_height_decides_jaggy_or_corner(filt, step, factor):
+    """A horizontal border that steps up by `step` rows: a 1-px step is a jaggy (eq. 2's full area),
+    a 3+ px step a corner (sharp at rounding 0), a 2-px step in between (SHORT_CORNER x area)."""
+    L, h = 12, 24
+    img = np.full((h, 2 * L, 3), 30, np.uint8)
+    img[12:, :L] = 220
+    img[12 - step:, L:] = 220
+    wts = filt.intermediates(img)["weights"] / 65535.0
+    # the line between rows 11 and 12 over x = 0 .. L-1 ends at x = L-1 in a crossing edge going
+    # up `step` pixels: the pixels above the line take from below, counted from that end
+    for p in range(L // 2):
+        want = factor * trapezoid_area(p, L)
+        assert wts[11, L - 1 - p, 1] == pytest.approx(want, abs=1e-4)
+    assert np.all(wts[12, :L, 0] == 0.0)
+
+
+def test_steep_staircase_blends_along_its_long_runs_only(filt):
+    """Slope 2 (runs of 2 rows, 1 column): the 1-px horizontal lines between 2-px crossing edges
+    are not blended; the vertical lines of length 2 are (eq. 2 with L = 2: 1/4 at each end)."""
+    h, w = 40, 16
+    img = np.full((h, w, 3), 30, np.uint8)
+    for x in range(w):
+        img[2 * x + 4:, x] = 220
+    wts = filt.intermediates(img)["weights"] / 65535.0
+    for x in range(3, 12):
+        assert wts[2 * x + 3, x, 1] == 0.0 and wts[2 * x + 4, x, 0] == 0.0   # horizontal steps
+    # vertical line between columns x and x+1 over rows 2x+4, 2x+5 (left pixels light): its top end
+    # crosses on the left, its bottom end on the right (a Z): eq. (2) with L = 2 gives 1/4 at each
+    for x in range(3, 12):
+        assert wts[2 * x + 4, x, 3] == pytest.approx(trapezoid_area(0, 2), abs=1e-4)
+        assert wts[2 * x + 5, x + 1, 2] == pytest.approx(trapezoid_area(0, 2), abs=1e-4)
+        assert wts[2 * x + 4, x + 1, 2] == 0.0 and wts[2 * x + 5, x, 3] == 0.0
 
 
 def test_long_edge_is_blended_along_its_whole_length(filt):
