@@ -103,6 +103,12 @@ def make_styles(n: int, width=2.0, color="#ffffff", outline="#000000", outline_w
             parsed[key] = rgb[::-1] if (bgr and not isinstance(c, str)) else rgb
         return parsed[key]
 
+    if scalar(width) and _is_one_color(color) and _is_one_color(outline) and scalar(outline_width) \
+            and scalar(opacity) and isinstance(cap, str):  # one style for all lines: build it once
+        st = LineStyle(float(width), to_rgb(color, "line 0: color"), to_rgb(outline, "line 0: outline"),
+                       float(outline_width), float(opacity), cap)
+        st.check("line 0")
+        return [st] * n
     ws = _per_line(width, n, "width", scalar)
     cs = _per_line(color, n, "color", _is_one_color)
     os_ = _per_line(outline, n, "outline", _is_one_color)
@@ -131,10 +137,10 @@ def as_lines(lines) -> list[np.ndarray]:
             a = a[:, 0]
         if a.ndim != 2 or a.shape[1] < 2 or a.shape[0] < 1:
             raise ValueError(f"line {i}: expected points of shape (N, 2), got {a.shape}")
-        a = a[:, :2]
-        if not np.isfinite(a).all():
-            raise ValueError(f"line {i}: expected finite coordinates, got NaN or infinity")
-        out.append(a)
+        out.append(a[:, :2])
+    if out and not np.isfinite(np.concatenate(out)).all():  # one test; then find the line
+        i = next(i for i, a in enumerate(out) if not np.isfinite(a).all())
+        raise ValueError(f"line {i}: expected finite coordinates, got NaN or infinity")
     return out
 
 
@@ -178,56 +184,89 @@ def segment_tables(lines: list[np.ndarray], styles: list[LineStyle], channels: i
     polys[:, 3, :3] = fill_lin if linear_frame else fill
     polys[:, 4, :3] = out_lin if linear_frame else outl
 
-    counts = np.array([len(p) for p in lines])
+    counts = np.fromiter(map(len, lines), np.intp, nl)
     nseg = np.maximum(counts - 1, 1)  # a single point is a zero-length segment (a dot)
     allp = np.concatenate(lines)
-    line_of = np.repeat(np.arange(nl), nseg)
+    line_of = np.repeat(np.arange(nl, dtype=np.int32), nseg)
     first = np.cumsum(nseg) - nseg
-    ia = (np.cumsum(counts) - counts)[line_of] + np.arange(len(line_of)) - first[line_of]
-    ib = ia + (counts[line_of] > 1)
-    ends = np.concatenate([allp[ia], allp[ib]], axis=1)
-    caps = np.array([CAPS[st.cap] for st in styles], np.int32)
-    flags = np.zeros(len(ends), np.int32)
     last = first + nseg - 1
+    # segment starts: every point but the last of each line of 2 or more points
+    is_start = np.ones(len(allp), bool)
+    is_start[(np.cumsum(counts) - 1)[counts > 1]] = False
+    ia = np.flatnonzero(is_start)
+    ib = ia + 1
+    ib[first[counts == 1]] -= 1  # a dot ends where it starts
+    # 1-D columns throughout (numpy is much slower on short 2-D rows)
+    px, py = allp[:, 0], allp[:, 1]
+    cols = [np.take(px, ia), np.take(py, ia), np.take(px, ib), np.take(py, ib)]
+    caps = np.array([CAPS[st.cap] for st in styles], np.int32)
+    flags = np.zeros(len(ia), np.int32)
     np.bitwise_or.at(flags, first, np.where(caps > 0, 1 | (caps & 4), 0))
     np.bitwise_or.at(flags, last, np.where(caps > 0, 2 | (caps & 4), 0))
-    meta = (line_of.astype(np.int32) << 3) | flags
+    meta = (line_of << 3) | flags
     # square caps reach r*sqrt(2) past the end point (the corners); + half the footprint diagonal
     rr = r * np.where(caps & 4, math.sqrt(2.0), 1.0)
-    reach = (rr + _FOOTPRINT_HALF_DIAGONAL * strength + 1e-3)[line_of]
+    reach = np.take(rr + _FOOTPRINT_HALF_DIAGONAL * strength + 1e-3, line_of)
     if clip is not None:
-        keep, ends = _clip_segments(ends, reach, *clip)
-        meta, reach, line_of = meta[keep], reach[keep], line_of[keep]
-    d = ends[:, 2:] - ends[:, :2]
-    length = np.hypot(d[:, 0], d[:, 1])
-    tang = np.where(length[:, None] > 0, d / np.where(length > 0, length, 1)[:, None], [1.0, 0.0])
-    segs = np.concatenate([ends[:, :2], tang, length[:, None], r[line_of, None], ri[line_of, None],
-                           reach[:, None]], axis=1).astype(np.float32)
+        keep, cols = _clip_segments(cols, reach, *clip)
+        if keep is not None:
+            meta, reach, line_of = meta[keep], reach[keep], line_of[keep]
+    x0, y0, x1, y1 = cols
+    dx, dy = x1 - x0, y1 - y0
+    length = np.sqrt(dx * dx + dy * dy)
+    n = len(x0)
+    ends = np.empty((n, 4))
+    segs = np.empty((n, 8), np.float32)
+    for c, v in enumerate(cols):
+        ends[:, c] = v
+    segs[:, 0], segs[:, 1] = x0, y0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        segs[:, 2] = np.where(length > 0, dx / length, 1.0)
+        segs[:, 3] = np.where(length > 0, dy / length, 0.0)
+    segs[:, 4], segs[:, 5], segs[:, 6], segs[:, 7] = length, np.take(r, line_of), np.take(ri, line_of), reach
     return SegmentTables(ends, segs, meta, reach, polys)
 
 
-def _clip_segments(ends: np.ndarray, reach: np.ndarray, width: int, height: int):
-    """Liang-Barsky: segments cut to [-m, width-1+m] x [-m, height-1+m], m = reach + 1; returns
-    (kept mask, cut ends). A cut end lies over `reach` outside the frame, so its cap shows nowhere."""
+def _clip_segments(cols: list[np.ndarray], reach: np.ndarray, width: int, height: int):
+    """Liang-Barsky: segments (columns x0, y0, x1, y1) cut to [-m, width-1+m] x [-m, height-1+m],
+    m = reach + 1; returns (kept mask or None when all are kept, cut columns). A cut end lies over
+    `reach` outside the frame, so its cap shows nowhere. Only segments with an end outside that box
+    are cut."""
     m = reach + 1.0
-    x0, y0 = ends[:, 0], ends[:, 1]
-    dx, dy = ends[:, 2] - x0, ends[:, 3] - y0
-    t0, t1 = np.zeros(len(ends)), np.ones(len(ends))
-    keep = np.ones(len(ends), bool)
-    for p, q in ((-dx, x0 + m), (dx, width - 1 + m - x0), (-dy, y0 + m), (dy, height - 1 + m - y0)):
+    x0, y0, x1, y1 = cols
+    out = np.flatnonzero((np.minimum(x0, x1) < -m) | (np.maximum(x0, x1) > width - 1 + m) |
+                         (np.minimum(y0, y1) < -m) | (np.maximum(y0, y1) > height - 1 + m))
+    if len(out) == 0:
+        return None, cols
+    m = m[out]
+    ox, oy = x0[out], y0[out]
+    dx, dy = x1[out] - ox, y1[out] - oy
+    t0, t1 = np.zeros(len(out)), np.ones(len(out))
+    ok = np.ones(len(out), bool)
+    for p, q in ((-dx, ox + m), (dx, width - 1 + m - ox), (-dy, oy + m), (dy, height - 1 + m - oy)):
         with np.errstate(divide="ignore", invalid="ignore"):
             r = q / p
-        keep &= ~((p == 0) & (q < 0))
+        ok &= ~((p == 0) & (q < 0))
         t0 = np.where(p < 0, np.maximum(t0, r), t0)
         t1 = np.where(p > 0, np.minimum(t1, r), t1)
-    keep &= t0 <= t1
-    cut = np.stack([x0 + t0 * dx, y0 + t0 * dy, x0 + t1 * dx, y0 + t1 * dy], axis=1)
-    return keep, cut[keep]
+    ok &= t0 <= t1
+    keep = np.ones(len(x0), bool)
+    keep[out] = ok
+    cut = []
+    for v, o, d, t in ((x0, ox, dx, t0), (y0, oy, dy, t0), (x1, ox, dx, t1), (y1, oy, dy, t1)):
+        v = v.copy()
+        v[out] = o + t * d
+        cut.append(v[keep])
+    return keep, cut
 
 
 def bin_segments(tables: SegmentTables, width: int, height: int, tile: int = DEFAULT_TILE):
     """Screen tiles each segment can touch: (entries int32, tiles (T, 4) int32 x, y, first, count),
-    entries grouped by tile and in drawing order within a tile."""
+    entries grouped by tile and in drawing order within a tile.
+
+    Per row of tiles, the segment is cut to the rows' pixel centres grown by its reach; the tiles
+    whose columns meet that piece's x-range grown by the reach are listed: every pixel within reach
+    of the segment lies in a listed tile (a few listed tiles may have none)."""
     ends = tables.ends
     nseg = len(ends)
     tiles_x, tiles_y = -(-width // tile), -(-height // tile)
@@ -235,41 +274,40 @@ def bin_segments(tables: SegmentTables, width: int, height: int, tile: int = DEF
     if nseg == 0:
         return empty
     reach = tables.reach
+    x0, y0, x1, y1 = ends.T
     inv = 1.0 / tile
-    lo_x = np.maximum(np.floor((np.minimum(ends[:, 0], ends[:, 2]) - reach) * inv), 0)
-    hi_x = np.minimum(np.floor((np.maximum(ends[:, 0], ends[:, 2]) + reach) * inv), tiles_x - 1)
-    lo_y = np.maximum(np.floor((np.minimum(ends[:, 1], ends[:, 3]) - reach) * inv), 0)
-    hi_y = np.minimum(np.floor((np.maximum(ends[:, 1], ends[:, 3]) + reach) * inv), tiles_y - 1)
-    nx = np.maximum(hi_x - lo_x + 1, 0).astype(np.int32)
-    ny = np.maximum(hi_y - lo_y + 1, 0).astype(np.int32)
-    cnt = nx * ny
-    total = int(cnt.sum())
+    r0 = np.maximum(np.floor((np.minimum(y0, y1) - reach) * inv), 0).astype(np.int32)
+    r1 = np.minimum(np.floor((np.maximum(y0, y1) + reach) * inv), tiles_y - 1).astype(np.int32)
+    nr = np.maximum(r1 - r0 + 1, 0)
+    total = int(nr.sum())
     if total == 0:
         return empty
-    seg = np.repeat(np.arange(nseg, dtype=np.int32), cnt)
-    off = np.arange(total, dtype=np.int32) - np.repeat(np.cumsum(cnt) - cnt, cnt)
-    nxs = nx[seg]
-    ty, tx = np.divmod(off, nxs)
-    tx += lo_x.astype(np.int32)[seg]
-    ty += lo_y.astype(np.int32)[seg]
-    if total > nseg:  # cull box tiles whose centre is farther than reach + half-diagonal
-        half = 0.5 * (tile - 1)
-        a = ends[:, :2].astype(np.float32)
-        d = (ends[:, 2:] - ends[:, :2]).astype(np.float32)
-        l2 = (d * d).sum(1)
-        il2 = np.where(l2 > 0, 1.0 / np.where(l2 > 0, l2, 1), 0).astype(np.float32)
-        px = tx.astype(np.float32) * tile + half - a[seg, 0]
-        py = ty.astype(np.float32) * tile + half - a[seg, 1]
-        dx, dy = d[seg, 0], d[seg, 1]
-        t = np.clip((px * dx + py * dy) * il2[seg], 0, 1)
-        px -= t * dx
-        py -= t * dy
-        lim = (reach + half * math.sqrt(2.0) + 0.01).astype(np.float32)[seg]
-        keep = px * px + py * py <= lim * lim
-        seg, tx, ty = seg[keep], tx[keep], ty[keep]
+    # (segment, row of tiles) pairs
+    seg = np.repeat(np.arange(nseg, dtype=np.int32), nr)
+    row = np.arange(total, dtype=np.int32) - np.repeat(np.cumsum(nr, dtype=np.int32) - nr - r0, nr)
+    R, ax, ay = np.take(reach, seg), np.take(x0, seg), np.take(y0, seg)
+    dx, dy = np.take(x1, seg) - ax, np.take(y1, seg) - ay
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ta = (row * float(tile) - R - ay) / dy
+        tb = (row * float(tile) + (tile - 1) + R - ay) / dy
+    flat = dy == 0  # a horizontal segment lies in every row band it was listed for
+    tlo = np.where(flat, 0.0, np.clip(np.minimum(ta, tb), 0.0, 1.0))
+    thi = np.where(flat, 1.0, np.clip(np.maximum(ta, tb), 0.0, 1.0))
+    xa, xb = ax + tlo * dx, ax + thi * dx
+    c0 = np.maximum(np.floor((np.minimum(xa, xb) - R) * inv), 0).astype(np.int32)
+    c1 = np.minimum(np.floor((np.maximum(xa, xb) + R) * inv), tiles_x - 1).astype(np.int32)
+    nc = np.maximum(c1 - c0 + 1, 0)
+    n = int(nc.sum())
+    if n == 0:
+        return empty
+    pair = np.repeat(np.arange(total, dtype=np.int32), nc)
+    tx = np.arange(n, dtype=np.int32) - np.repeat(np.cumsum(nc, dtype=np.int32) - nc - c0, nc)
+    ty, seg = np.take(row, pair), np.take(seg, pair)
     tid = ty * np.int32(tiles_x) + tx
+    if tiles_x * tiles_y <= 65536:  # a stable sort of 16-bit keys is a radix sort
+        tid = tid.astype(np.uint16)
     order = np.argsort(tid, kind="stable")  # stable: segments stay in drawing order in a tile
-    tid, entries = tid[order], seg[order]
+    tid, entries = np.take(tid, order), np.take(seg, order)
     first = np.flatnonzero(np.r_[True, tid[1:] != tid[:-1]])
     counts = np.diff(np.r_[first, len(tid)])
     t = tid[first]
@@ -286,9 +324,11 @@ class OverlayRenderer:
     """
 
     def __init__(self, device: str | int | None = None, strength: float = 1.0,
-                 tile: int = DEFAULT_TILE, linear: bool = False):
+                 tile: int = DEFAULT_TILE, linear: bool = False, zero_copy: bool | None = None):
         """`strength` is seed 001's ANTIALIAS_STRENGTH in pixels (1 = exact box-filter coverage);
-        `linear` says frames hold linear light instead of sRGB."""
+        `linear` says frames hold linear light instead of sRGB. `zero_copy`: the kernel draws
+        straight into the numpy frame (wrapped, not copied); default: on devices that share host
+        memory (CPU). Otherwise the frame goes through a device buffer kept per frame size."""
         from .device import default_context
         import pyopencl as cl
 
@@ -301,12 +341,19 @@ class OverlayRenderer:
         # One work-item per tile. On a CPU device work-items of a group run one after another, so
         # groups of one are simplest; a GPU wants wider groups. Fixed per device: no recompiles.
         self._local = 1 if self._ctx.device.type & cl.device_type.CPU else 32
+        is_cpu = bool(self._ctx.device.type & cl.device_type.CPU)
+        self.zero_copy = bool(is_cpu and self._ctx.device.host_unified_memory) if zero_copy is None \
+            else bool(zero_copy)
         self.strength = float(strength)
         self.tile = int(tile)
         self.linear = bool(linear)
         luts = device_luts()
         self._luts = self._ctx.buffer(luts.nbytes, cl.mem_flags.READ_ONLY)
         cl.enqueue_copy(self._ctx.queue, self._luts, luts)
+        # uint8 sRGB frames decode through a 256-entry table (the same LUT read, done once here)
+        dec8 = lut_read(luts, np.arange(256) / 255.0).astype(np.float32)
+        self._dec8 = self._ctx.buffer(dec8.nbytes, cl.mem_flags.READ_ONLY)
+        cl.enqueue_copy(self._ctx.queue, self._dec8, dec8)
         self._fmt: FrameFormat | None = None
         self._frame_buf = None
         self._kernel = None
@@ -330,9 +377,10 @@ class OverlayRenderer:
     def _setup(self, fmt: FrameFormat) -> None:
         if fmt == self._fmt:
             return
-        defines = defines_for(fmt, TILE=self.tile, LINEAR_FRAME=int(self.linear))
+        decode8 = int(fmt.dtype == np.uint8 and not self.linear)
+        defines = defines_for(fmt, TILE=self.tile, LINEAR_FRAME=int(self.linear), DECODE8=decode8)
         self._kernel = self._ctx.kernel("grlaa", "grlaa_draw", defines)
-        self._frame_buf = self._ctx.buffer(fmt.nbytes)
+        self._frame_buf = None if self.zero_copy else self._ctx.buffer(fmt.nbytes)
         self._fmt = fmt
 
     def draw(self, frame: np.ndarray, lines, width=2.0, color="#ffffff", outline="#000000",
@@ -358,20 +406,33 @@ class OverlayRenderer:
             return frame if inplace else frame.copy()
         self._setup(fmt)
         q = self._ctx.queue
-        src = frame if (frame.dtype == fmt.dtype and frame.flags.c_contiguous) else \
-            np.ascontiguousarray(frame, dtype=fmt.dtype)
-        cl.enqueue_copy(q, self._frame_buf, src, is_blocking=False)
+        mf = cl.mem_flags
+        same = frame.dtype == fmt.dtype and frame.flags.c_contiguous
+        if self.zero_copy:  # draw into the output array itself: no frame transfers
+            dst = frame if (inplace and same) else np.array(frame, dtype=fmt.dtype, order="C")
+            fbuf = cl.Buffer(self._ctx.ctx, mf.READ_WRITE | mf.USE_HOST_PTR, hostbuf=dst)
+        else:
+            src = frame if same else np.ascontiguousarray(frame, dtype=fmt.dtype)
+            dst = frame if (inplace and same) else np.empty(src.shape, fmt.dtype)
+            fbuf = self._frame_buf
+            cl.enqueue_copy(q, fbuf, src, is_blocking=False)
         bufs = [self._grow("segs", tables.segs), self._grow("meta", tables.meta),
                 self._grow("entries", entries), self._grow("tiles", tiles),
                 self._grow("polys", tables.polys)]
         k = self._kernel
-        k.set_args(self._frame_buf, self._luts, *bufs, np.int32(fmt.width), np.int32(fmt.height),
+        k.set_args(fbuf, self._luts, self._dec8, *bufs, np.int32(fmt.width), np.int32(fmt.height),
                    np.float32(self.strength), np.int32(len(tiles)))
         # one work-item per tile; a fixed local size, so no new compile as the tile count changes
         n = -(-len(tiles) // self._local) * self._local
         cl.enqueue_nd_range_kernel(q, k, (n,), (self._local,))
-        dst = frame if (inplace and src is frame) else np.empty(src.shape, fmt.dtype)
-        cl.enqueue_copy(q, dst, self._frame_buf, is_blocking=True)
+        if self.zero_copy:  # mapping makes the host array current (a no-op on shared memory)
+            view, _ = cl.enqueue_map_buffer(q, fbuf, cl.map_flags.READ, 0, dst.shape, dst.dtype,
+                                            is_blocking=True)
+            view.base.release(q)
+            q.finish()
+            fbuf.release()
+        else:
+            cl.enqueue_copy(q, dst, fbuf, is_blocking=True)
         if dst.dtype != frame.dtype:
             dst = dst.astype(frame.dtype)
         if inplace and dst is not frame:

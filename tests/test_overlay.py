@@ -18,7 +18,9 @@ import pytest
 
 from mlaa_stream.colour import linear_to_srgb, srgb_to_linear
 from mlaa_stream.device import DeviceError
-from mlaa_stream.overlay import (OverlayRenderer, draw_polylines, footprint_cdf, load_overlay,
+from mlaa_stream.overlay import (OverlayRenderer, _segment_cover, as_lines, bin_segments,
+                                 draw_polylines, footprint_cdf, load_overlay, make_styles,
+                                 segment_tables,
                                  parse_color, parse_overlay, reference_draw_polylines)
 
 
@@ -211,12 +213,56 @@ def test_inplace_and_copy(renderer):
 
 
 def test_buffers_kept_between_frames(renderer):
-    r = OverlayRenderer()
+    r = OverlayRenderer(zero_copy=False)
     f = np.zeros((30, 40, 3), np.uint8)
     r.draw(f, [np.array([[1.0, 1.0], [30.0, 20.0]])])
     buf, kern = r._frame_buf, r._kernel
     r.draw(f, [np.array([[5.0, 1.0], [35.0, 25.0]])], width=4)
-    assert r._frame_buf is buf and r._kernel is kern
+    assert buf is not None and r._frame_buf is buf and r._kernel is kern
+
+
+@pytest.mark.parametrize("dtype,shape", [(np.uint8, (72, 96, 3)), (np.float32, (72, 96, 4)),
+                                         (np.float16, (72, 96))])
+def test_zero_copy_and_device_buffer_paths_agree(renderer, dtype, shape):
+    """Drawing straight into the numpy frame and through a device buffer give the same bits."""
+    rng, lines, kw = random_scene(3)
+    frame = (rng.random(shape) * (255 if dtype == np.uint8 else 1)).astype(dtype)
+    outs = []
+    for zc in (True, False):
+        r = OverlayRenderer(zero_copy=zc)
+        copy = r.draw(frame, lines, **kw)
+        f = frame.copy()
+        assert r.draw(f, lines, inplace=True, **kw) is f
+        assert np.array_equal(copy, f) and copy.dtype == frame.dtype
+        outs.append(copy)
+    assert np.array_equal(outs[0], outs[1])
+    assert (outs[0] != frame).mean() > 0.3
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_binning_lists_every_touched_tile(seed):
+    """Every pixel a segment covers (numpy reference) lies in a tile that lists the segment."""
+    rng, lines, kw = random_scene(seed, h=90, w=120, n=12)
+    pts = as_lines(lines)
+    styles = make_styles(len(pts), kw["width"], kw["color"], kw["outline"], kw["outline_width"],
+                         kw["opacity"], kw["cap"])
+    tables = segment_tables(pts, styles, 3, clip=(120, 90))
+    for tile in (8, 16, 32):
+        entries, tiles = bin_segments(tables, 120, 90, tile)
+        listed = set(zip(np.repeat(tiles[:, 0] + 1000 * tiles[:, 1], tiles[:, 3]).tolist(),
+                         entries.tolist()))
+        # drawing order within each tile
+        for t in tiles:
+            e = entries[t[2]:t[2] + t[3]]
+            assert (np.diff(e) > 0).all()
+        py, px = np.mgrid[0:90, 0:120].astype(np.float64)
+        for s in range(len(tables.ends)):
+            k = int(tables.meta[s]) >> 3
+            co, _ = _segment_cover(px, py, tables.ends[s], int(tables.meta[s]),
+                                   float(tables.polys[k, 0, 0]), float(tables.polys[k, 0, 1]), 1.0)
+            ys, xs = np.nonzero(co > 0)
+            need = set((xs // tile + 1000 * (ys // tile)).tolist())
+            assert all((t, s) in listed for t in need), (tile, s)
 
 
 def test_noncontiguous_and_float16_frames(renderer):
