@@ -173,6 +173,12 @@ inline void pass_flat(__global const PIXEL_T *cur, __global half *hist_out, __gl
     }
 }
 
+// Vertical Catmull-Rom of texel column cx over rows r0..r3 (clamped): one column of the 4x4 taps.
+#define VCOL(cx) (htex(hb, r0 * width + CLAMPI(cx, width - 1)) * wy.x + \
+                  htex(hb, r1 * width + CLAMPI(cx, width - 1)) * wy.y + \
+                  htex(hb, r2 * width + CLAMPI(cx, width - 1)) * wy.z + \
+                  htex(hb, r3 * width + CLAMPI(cx, width - 1)) * wy.w)
+
 #define MIN4(a, b) ((float4)((a).x < (b).x ? (a).x : (b).x, (a).y < (b).y ? (a).y : (b).y, \
                              (a).z < (b).z ? (a).z : (b).z, (a).w < (b).w ? (a).w : (b).w))
 #define MAX4(a, b) ((float4)((a).x > (b).x ? (a).x : (b).x, (a).y > (b).y ? (a).y : (b).y, \
@@ -201,6 +207,21 @@ __kernel void temporal_blend(__global const PIXEL_T *cur, __global const half *h
 
     ulong bits = 0;     // the flat run's history value; consecutive flat groups share their value
     int run = 0;
+    // A pure translation (static / global models) samples every pixel of this row at the same
+    // fraction and rows: the vertically filtered texel columns are shared by neighbouring pixels,
+    // so a sliding window of 4 columns needs 4 new taps per pixel instead of 16.
+    const int translation = cur_mode == 1 && params[0] == 1.0f && params[1] == 0.0f &&
+                            params[3] == 0.0f && params[4] == 1.0f;
+    __global const ushort *hb = (__global const ushort *)hist;
+    float4 wy = (float4)(0.0f), k0 = (float4)(0.0f), k1 = k0, k2 = k0, k3 = k0;
+    int r0 = 0, r1 = 0, r2 = 0, r3 = 0, cached = -3;   // k0..k3 = columns cached-1 .. cached+2
+    if (translation) {
+        float fy = (float)y + affine_motion(params, (float2)(0.0f, (float)y)).y;
+        fy = fy < 0.0f ? 0.0f : (fy > (float)(height - 1) ? (float)(height - 1) : fy);
+        r1 = (int)fy;
+        wy = catmull_rom(fy - (float)r1);
+        r0 = CLAMPI(r1 - 1, height - 1); r2 = CLAMPI(r1 + 1, height - 1); r3 = CLAMPI(r1 + 2, height - 1);
+    }
     for (int gx = x0; gx < x1; gx += GROUP) {
         const int gend = gx + GROUP < x1 ? gx + GROUP : x1;
         if (gx >= 1 && gx + GROUP < width && group_flat(ra, rm, rb, gx)) {   // the flat rule, 8 at once
@@ -253,7 +274,21 @@ __kernel void temporal_blend(__global const PIXEL_T *cur, __global const half *h
                     wgt = w_max * (vw > 0.0f ? vw : 0.0f) * fbw;
                 }
                 if (wgt > 0.0f) {
-                    float4 h = sample_history(hist, width, height, q);
+                    float4 h;
+                    if (translation) {
+                        float fx = q.x < 0.0f ? 0.0f : (q.x > (float)(width - 1) ? (float)(width - 1) : q.x);
+                        int xi = (int)fx;
+                        if (xi == cached + 1) {
+                            k0 = k1; k1 = k2; k2 = k3; k3 = VCOL(xi + 2);
+                        } else if (xi != cached) {
+                            k0 = VCOL(xi - 1); k1 = VCOL(xi); k2 = VCOL(xi + 1); k3 = VCOL(xi + 2);
+                        }
+                        cached = xi;
+                        float4 wx = catmull_rom(fx - (float)xi);
+                        h = k0 * wx.x + k1 * wx.y + k2 * wx.z + k3 * wx.w;
+                    } else {
+                        h = sample_history(hist, width, height, q);
+                    }
                     // 3x3 statistics of the current frame (variance clipping, Salvi 2016)
                     float4 s = La + Lm + Lb + Ca + Cm + Cb + Ra + Rm + Rb;
                     float4 s2 = La * La + Lm * Lm + Lb * Lb + Ca * Ca + Cm * Cm + Cb * Cb +

@@ -48,6 +48,8 @@ CUT_RESIDUAL = 24.0      # ... or mean |difference| after the best global alignm
 STATIC_LEVEL, STATIC_FRACTION = 3.0, 0.002   # static: under this share of pixels differ by > level
 GLOBAL_LEVEL, GLOBAL_FRACTION = 10.0, 0.005  # global accepted: blobs of residual outliers under this share
 LK_SIGMA, LK_ITERATIONS, LK_ROBUST = 1.0, 4, 64.0            # global Lucas-Kanade on Gaussian-blurred grey
+LK_TOL = 0.01              # px: a Gauss-Newton step under this ends the refinement
+LK_FINE_ITERATIONS = 1     # on the flow frame, after converging on the small one
 GLOBAL_MIN_SHIFT = 0.1     # px: a frame that changes but whose best translation is ~0 has local motion
 
 _PMAX = {np.dtype(np.uint8): 255.0, np.dtype(np.uint16): 65535.0, np.dtype(np.float32): 1.0}
@@ -96,15 +98,24 @@ class Pyramid:
     small: np.ndarray     # uint8, 1/(flow_scale * small_scale)
     flow_scale: int
     small_scale: int
+    grey: np.ndarray | None = None   # uint8, full size (the identical-frame test)
 
     @staticmethod
-    def of(frame: np.ndarray, bgr: bool) -> "Pyramid":
-        g = grey8(frame, bgr)
+    def of(frame: np.ndarray, bgr: bool, grey: np.ndarray | None = None) -> "Pyramid":
+        g = grey8(frame, bgr) if grey is None else grey
         fs = scale_for(g.shape[1], FLOW_WIDTH)
         flow = _downscale(g, fs)
         # at least half size: there the aliasing of 1-spp edges averages out (choose_model)
         ss = max(scale_for(flow.shape[1], SMALL_WIDTH), 2 if min(flow.shape) >= 64 else 1)
-        return Pyramid(flow, _downscale(flow, ss), fs, ss)
+        return Pyramid(flow, _downscale(flow, ss), fs, ss, g)
+
+    def blurred(self, level: str) -> np.ndarray:
+        """The "flow" or "small" grey as float32 blurred by LK_SIGMA, computed once per frame (a
+        frame is the current one, then the previous one)."""
+        cache = self.__dict__.setdefault("_blurred", {})
+        if level not in cache:
+            cache[level] = cv2.GaussianBlur(getattr(self, level).astype(np.float32), (0, 0), LK_SIGMA)
+        return cache[level]
 
 
 def histogram_distance(a: np.ndarray, b: np.ndarray, bins: int = 32) -> float:
@@ -121,31 +132,40 @@ def changed_fraction(a: np.ndarray, b: np.ndarray, level: float) -> float:
 
 
 def global_translation(prev: np.ndarray, cur: np.ndarray, start: tuple[float, float] = (0.0, 0.0),
-                       iterations: int = LK_ITERATIONS, sigma: float = LK_SIGMA) -> tuple[float, float]:
+                       iterations: int = LK_ITERATIONS, sigma: float | None = LK_SIGMA,
+                       tol: float = LK_TOL) -> tuple[float, float]:
     """Translation d with cur(x) ~ prev(x + d), by robust Gauss-Newton on the whole frame (global
     Lucas-Kanade on blurred grey, residuals weighted 1 / (1 + (r / LK_ROBUST)^2) so that a mover does not
-    pull the estimate; blurring first keeps the aliasing of 1-spp frames out of the gradients)."""
-    p = cv2.GaussianBlur(prev.astype(np.float32), (0, 0), sigma)
-    c = cv2.GaussianBlur(cur.astype(np.float32), (0, 0), sigma)
+    pull the estimate; blurring first keeps the aliasing of 1-spp frames out of the gradients).
+    The gradients are the current frame's, computed once (inverse-additive form: at the solution
+    the warped previous frame matches the current one); stops when a step is under `tol` px.
+    sigma=None: prev and cur are float32 frames already blurred (Pyramid.blurred)."""
+    if sigma is None:
+        p, c = prev, cur
+    else:
+        p = cv2.GaussianBlur(prev.astype(np.float32), (0, 0), sigma)
+        c = cv2.GaussianBlur(cur.astype(np.float32), (0, 0), sigma)
     h, w = p.shape
+    gx = cv2.Sobel(c, cv2.CV_32F, 1, 0, ksize=3, scale=0.125).ravel()
+    gy = cv2.Sobel(c, cv2.CV_32F, 0, 1, ksize=3, scale=0.125).ravel()
+    gxx, gxy, gyy = gx * gx, gx * gy, gy * gy
     d = np.array(start, np.float64)
+    inv_r2 = 1.0 / (LK_ROBUST * LK_ROBUST)
     for _ in range(iterations):
         warp = np.float32([[1, 0, d[0]], [0, 1, d[1]]])
         pw = cv2.warpAffine(p, warp, (w, h), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
                             borderMode=cv2.BORDER_REPLICATE)
-        gx = cv2.Sobel(pw, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
-        gy = cv2.Sobel(pw, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
-        r = c - pw
-        wr = 1.0 / (1.0 + (r * (1.0 / LK_ROBUST)) ** 2)
-        gxw, gyw = gx * wr, gy * wr
-        gxx, gxy, gyy = float(np.vdot(gxw, gx)), float(np.vdot(gxw, gy)), float(np.vdot(gyw, gy))
-        bx, by = float(np.vdot(gxw, r)), float(np.vdot(gyw, r))
-        det = gxx * gyy - gxy * gxy
-        if not det > 1e-6 * max(gxx * gyy, 1e-12):  # no texture to anchor a translation
+        r = cv2.subtract(c, pw).ravel()
+        wr = 1.0 / (1.0 + inv_r2 * (r * r))
+        a, b_, e = float(np.dot(wr, gxx)), float(np.dot(wr, gxy)), float(np.dot(wr, gyy))
+        wrr = wr * r
+        bx, by = float(np.dot(wrr, gx)), float(np.dot(wrr, gy))
+        det = a * e - b_ * b_
+        if not det > 1e-6 * max(a * e, 1e-12):  # no texture to anchor a translation
             break
-        step = ((gyy * bx - gxy * by) / det, (gxx * by - gxy * bx) / det)
+        step = ((e * bx - b_ * by) / det, (a * by - b_ * bx) / det)
         d += step
-        if abs(step[0]) + abs(step[1]) < 1e-3:
+        if abs(step[0]) + abs(step[1]) < tol:
             break
     return float(d[0]), float(d[1])
 
@@ -196,7 +216,11 @@ def choose_model(prev: Pyramid, cur: Pyramid, mode: str = "adaptive") -> Decisio
         if shift != (0.0, 0.0) and (small_residual(prev.small, cur.small, shift).mean()
                                     < small_residual(prev.small, cur.small, (0.0, 0.0)).mean()):
             start = (shift[0] * ss, shift[1] * ss)
-    d = global_translation(prev.flow, cur.flow, start)
+    # coarse to fine: converge on the small frames (a ninth of the work at 1080p), then refine
+    ds = global_translation(prev.blurred("small"), cur.blurred("small"), (start[0] / ss, start[1] / ss),
+                            sigma=None)
+    d = global_translation(prev.blurred("flow"), cur.blurred("flow"), (ds[0] * ss, ds[1] * ss),
+                           iterations=LK_FINE_ITERATIONS, sigma=None)
     res = small_residual(prev.small, cur.small, (d[0] / ss, d[1] / ss))
     m["residual_mean"] = rm = float(res.mean()) if res.size else 0.0
     # Outliers that survive a 3x3 erosion: regions the translation does not explain (a mover), not
@@ -282,6 +306,7 @@ class TemporalStage:
         self._prev_affine = IDENTITY
         self._prev_flow_scale = 1
         self._slot = 0          # which history/flow buffer holds the previous frame's
+        self._last_weight = 0.0
 
     # -- set-up, once per frame format ---------------------------------------------------------------
     def _prepare(self, fmt: FrameFormat, pyr: Pyramid) -> _Buffers:
@@ -322,9 +347,14 @@ class TemporalStage:
 
     def _step(self, frame_in, frame_filtered, index: int, fmt: FrameFormat) -> np.ndarray:
         t0 = time.perf_counter()
-        pyr = Pyramid.of(frame_in, self.bgr)
-        bufs = self._prepare(fmt, pyr)
+        grey = grey8(frame_in, self.bgr)
         fresh = self._prev is None or self._prev_index is None or index != self._prev_index + 1
+        if (not fresh and self._buffers is not None and self._buffers.fmt == fmt
+                and np.array_equal(grey, self._prev.grey)):
+            return self._repeat(frame_filtered, index, t0)
+        pyr = Pyramid.of(frame_in, self.bgr, grey)
+        bufs = self._prepare(fmt, pyr)
+        fresh = fresh or self._prev is None   # _prepare resets on a new format
         if fresh:
             dec = Decision("reset", measures={"cut": False})
         else:
@@ -369,6 +399,7 @@ class TemporalStage:
         t2 = time.perf_counter()
 
         weight = 0.0 if cur_mode == CUR_RESET else cv2.mean(bufs.host_conf)[0] / 255.0
+        self._last_weight = weight
         self._prev, self._prev_index, self._slot = pyr, index, new_slot
         self._prev_model = {"reset": PREV_NONE, "dense": PREV_DENSE}.get(dec.model, PREV_AFFINE)
         self._prev_affine, self._prev_flow_scale = affine, pyr.flow_scale
@@ -376,6 +407,26 @@ class TemporalStage:
                            "blend_ms": (t2 - t1) * 1e3, "history_weight_mean": weight,
                            "translation": dec.translation, "flow_scale": pyr.flow_scale,
                            **dec.measures})
+        if self.show == "history":
+            return history_view(bufs.host_conf, out, self.strength, self.bgr)
+        return out
+
+    def _repeat(self, frame_filtered: np.ndarray, index: int, t0: float) -> np.ndarray:
+        """A frame whose grey levels equal the previous input's (a still shot, a repeated frame):
+        nothing moved and nothing new can shimmer, so the previous output (still in the device's
+        output buffer) is returned again; no flow, no kernel, the history is kept as it is."""
+        bufs = self._buffers
+        same = frame_filtered.dtype == bufs.fmt.dtype
+        out = np.empty(frame_filtered.shape, bufs.fmt.dtype) if same else bufs.host_dst
+        cl.enqueue_copy(self.queue, out, bufs.dst, is_blocking=True)
+        out = out if same else out.reshape(frame_filtered.shape).astype(frame_filtered.dtype)
+        t1 = time.perf_counter()
+        self._prev_index = index
+        self._prev_model, self._prev_affine = PREV_AFFINE, IDENTITY   # v_p = 0 for the next frame
+        self.stats.append({"index": index, "model": "static", "flow_ms": (t1 - t0) * 1e3,
+                           "blend_ms": 0.0, "history_weight_mean": self._last_weight,
+                           "translation": (0.0, 0.0), "flow_scale": self._prev.flow_scale,
+                           "repeat": True})
         if self.show == "history":
             return history_view(bufs.host_conf, out, self.strength, self.bgr)
         return out

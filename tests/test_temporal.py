@@ -210,6 +210,25 @@ def test_static_noisy_sequence_converges(spatial):
     assert np.abs(outs[-1].astype(float) - base).mean() < np.abs(sp[-1].astype(float) - base).mean()
 
 
+def test_repeated_frame_returns_previous_output(spatial):
+    """A frame identical to the previous input gets the previous output back (no flow, no kernel);
+    one changed pixel is enough to run the stage again."""
+    w, h = 160, 96
+    frames = [S.encode8(S.render(_pan_layers(w, h, 0.35 * t, 0.15 * t), w, h, 1)) for t in range(3)]
+    changed = frames[2].copy()
+    changed[40, 50] = 255 - changed[40, 50]
+    frames += [frames[2].copy(), frames[2].copy(), changed]
+    with TemporalStage(bgr=False) as st:
+        outs, _ = run(st, frames, spatial)
+        stats = st.stats
+    assert [r.get("repeat", False) for r in stats] == [False, False, False, True, True, False]
+    assert stats[3]["model"] == "static" and stats[3]["blend_ms"] == 0.0
+    np.testing.assert_array_equal(outs[3], outs[2])
+    np.testing.assert_array_equal(outs[4], outs[2])
+    assert outs[3] is not outs[2] and outs[3].dtype == frames[0].dtype
+    assert stats[5]["model"] != "reset" and np.any(outs[5] != outs[2])
+
+
 def test_subpixel_pan_uses_global_model(spatial):
     w, h = 320, 180
     frames = [S.encode8(S.render(_pan_layers(w, h, 0.35 * t, 0.15 * t), w, h, 1)) for t in range(5)]
