@@ -365,6 +365,14 @@ class TemporalStage:
             flow_b = self._flow(pyr.flow, self._prev.flow, d)                # current -> previous
             if self.fb_check:
                 flow_f = self._flow(self._prev.flow, pyr.flow, (-d[0], -d[1]))  # previous -> current
+            # Where the input did not change at all (3x3 neighbourhood bit-identical) nothing moved
+            # there: DIS spreads a mover's motion over the still background around it, which warps
+            # the history of still edges (measured on the mover scene); zero motion there.
+            still = cv2.erode((cv2.absdiff(pyr.flow, self._prev.flow) == 0).astype(np.uint8),
+                              np.ones((3, 3), np.uint8)).astype(bool)
+            flow_b[still] = 0.0
+            if flow_f is not None:
+                flow_f[still] = 0.0
         t1 = time.perf_counter()
 
         cur_mode = {"reset": CUR_RESET, "dense": CUR_DENSE}.get(dec.model, CUR_AFFINE)
