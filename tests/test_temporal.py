@@ -269,6 +269,29 @@ def test_fast_mover_leaves_no_ghost(spatial):
         assert d.max() <= 32 and d.mean() <= 2, (t, d.mean(), d.max())
 
 
+def test_still_background_next_to_a_mover_keeps_its_place(spatial):
+    """Slanted stripes above and below a box moving 9 px per frame: their input never changes, so
+    their motion is zero (DIS alone spreads the box's motion over them) and, as their spatial
+    output never changes either, the output there is the spatial frame's exactly."""
+    w, h = 160, 112
+    stripes = tuple(S.rotated_rect(x, y, 60.0, 3.0, 8.0) for x in np.arange(10, w, 40.0) for y in (12, 24, 88, 100))
+
+    def frame(x):
+        layers = [S.Layer(None, (210, 220, 200)), S.Layer(stripes, (90, 110, 80)),
+                  S.Layer((S.rect(x, 44, x + 30, 68),), (200, 40, 30))]
+        return S.encode8(S.render(layers, w, h, 1))
+
+    frames = [frame(10.3 + 9 * t) for t in range(6)]
+    with TemporalStage(bgr=False, mode="dense") as st:
+        outs, sp = run(st, frames, spatial)
+    still = np.ones((h, w), bool)
+    still[36:76] = False   # the box's rows with a margin
+    for t in range(1, 6):
+        np.testing.assert_array_equal(sp[t][still], sp[0][still])   # the premise
+        d = np.abs(outs[t].astype(int) - sp[t].astype(int)).max(-1)[still]
+        assert d.max() == 0, (t, d.max(), d.mean())
+
+
 def test_hard_cut_resets(spatial):
     rng = np.random.default_rng(5)
     a, b = blocks(rng, 48, 80), np.full((48, 80, 3), 20, np.uint8)
