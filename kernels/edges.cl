@@ -103,15 +103,92 @@ inline int is_ramp(float4 before, int has_before, float4 p, float4 q, float4 aft
 #endif
 }
 
-// GROUP pixels (and the one right of them) equal, sample for sample, to the row below and to their
-// right neighbours: no edge there. Flat areas (most of a rendered frame) cost just this compare.
+// is_ramp on stored integer samples (QUIET_LEVELS >= 0: 8/16-bit frames, sRGB): the same test,
+// exact, with RAMP as the fraction RAMP_NUM / RAMP_DEN (the host's; the reference uses the same), so
+// no float conversion is needed to reject the ramps of a photograph. Channels in R, G, B order.
+#ifndef RAMP_NUM
+#define RAMP_NUM 7
+#define RAMP_DEN 20
+#endif
+#if ORDER_BGR && CHANNELS >= 3
+#define CH_R 2
+#define CH_B 0
+#elif CHANNELS >= 3
+#define CH_R 0
+#define CH_B 2
+#endif
+inline int3 raw_rgb(__global const PIXEL_T *src, int i)
+{
+    __global const PIXEL_T *a = src + (size_t)i * CHANNELS;
+#if CHANNELS < 3
+    return (int3)((int)a[0]);
+#else
+    return (int3)((int)a[CH_R], (int)a[1], (int)a[CH_B]);
+#endif
+}
+inline int iabs(int v) { return v < 0 ? -v : v; }
+inline int ramp_tested(void) { return 0; }   // the float path's ramp test, already done in integers
+inline int is_ramp_int(__global const PIXEL_T *src, int ib, int has_before, int ip, int iq, int ia, int has_after)
+{
+#if RAMP_TEST
+    const int3 p = raw_rgb(src, ip), q = raw_rgb(src, iq);
+    const int3 d = q - p;
+    const int ax = iabs(d.x), ay = iabs(d.y), az = iabs(d.z);
+    const int kx = ax >= ay && ax >= az, ky = !kx && ay >= az;
+    const int d1 = kx ? d.x : (ky ? d.y : d.z);
+    const int lim = RAMP_NUM * iabs(d1);
+    if (has_before) {
+        const int3 b = raw_rgb(src, ib);
+        const int d0 = kx ? p.x - b.x : (ky ? p.y - b.y : p.z - b.z);
+        if ((d0 > 0) == (d1 > 0) && d0 != 0 && iabs(d0) * RAMP_DEN > lim) return 1;
+    }
+    if (has_after) {
+        const int3 a = raw_rgb(src, ia);
+        const int d2 = kx ? a.x - q.x : (ky ? a.y - q.y : a.z - q.z);
+        if ((d2 > 0) == (d1 > 0) && d2 != 0 && iabs(d2) * RAMP_DEN > lim) return 1;
+    }
+#endif
+    return 0;
+}
+
+// GROUP pixels whose samples differ from the same sample of the right neighbour and of the pixel
+// below by at most QUIET_LEVELS stored levels: no edge there, by the metric's cheap bound (may_differ;
+// the host derives QUIET_LEVELS from it with a margin: mlaa.quiet_levels). Flat areas (most of a
+// rendered frame) and smooth photographs cost just this compare. QUIET_LEVELS < 0 (float frames,
+// linear input): sample-for-sample equality only.
+#ifndef QUIET_LEVELS
+#define QUIET_LEVELS -1
+#endif
 inline int flat_group(__global const PIXEL_T *src, int i, int width)
 {
     __global const PIXEL_T *p = src + (size_t)i * CHANNELS, *q = p + (size_t)width * CHANNELS;
-    int same = 1;
+    int quiet = 1;
+#if QUIET_LEVELS >= 0
+    for (int k = 0; k < GROUP * CHANNELS; ++k) {
+        const int a = (int)p[k], r = (int)p[k + CHANNELS] - a, b = (int)q[k] - a;
+        quiet &= (r <= QUIET_LEVELS) & (r >= -QUIET_LEVELS) & (b <= QUIET_LEVELS) & (b >= -QUIET_LEVELS);
+    }
+#else
     for (int k = 0; k < GROUP * CHANNELS; ++k)
-        same &= (p[k] == p[k + CHANNELS]) & (p[k] == q[k]);
-    return same;
+        quiet &= (p[k] == p[k + CHANNELS]) & (p[k] == q[k]);
+#endif
+    return quiet;
+}
+
+// One pair of pixels below the metric's cheap bound (QUIET_LEVELS), or equal: cannot be an edge.
+inline int quiet_px(__global const PIXEL_T *src, int i, int j)
+{
+#if QUIET_LEVELS >= 0
+    __global const PIXEL_T *a = src + (size_t)i * CHANNELS, *b = src + (size_t)j * CHANNELS;
+    int quiet = 1;
+    for (int k = 0; k < (CHANNELS < 3 ? CHANNELS : 3); ++k) {
+        const int d = (int)b[k] - (int)a[k];
+        quiet &= (d <= QUIET_LEVELS) & (d >= -QUIET_LEVELS);
+    }
+    return quiet;
+#else
+    return same_px(src, i, j);
+#endif
 }
 
 __kernel void detect_edges(__global const PIXEL_T *src, __global const float *luts,
@@ -121,35 +198,53 @@ __kernel void detect_edges(__global const PIXEL_T *src, __global const float *lu
     const int x0 = get_global_id(0) * SEGMENT, y = get_global_id(1);
     if (x0 >= width || y >= height) return;
     const int x1 = min(x0 + SEGMENT, width);
-    Colour c = colour_at(src, luts, IDX(x0, y, width));
+    Colour c;
+    int c_valid = 0;   // c holds pixel x (converted only when some pair may be an edge)
     for (int x = x0; x < x1;) {
         const int i = IDX(x, y, width);
         if (x + GROUP < width && x + GROUP <= x1 && y + 1 < height && flat_group(src, i, width)) {
             vstore8((uchar8)(0), 0, edges + i);
             x += GROUP;
-            if (x < x1) c = colour_at(src, luts, i + GROUP);
+            c_valid = 0;
             continue;
         }
         // c is this pixel; its right neighbour becomes the next c, so each colour is converted
         // to CIELAB at most twice (as a right and as a bottom neighbour), not four times.
         uchar e = 0;
-        if (y + 1 < height && !same_px(src, i, i + width)) {
+        // Integer frames reject quiet pairs and ramps on the stored samples first (no conversion).
+#if QUIET_LEVELS >= 0
+        const int test_b = y + 1 < height && !quiet_px(src, i, i + width)
+            && !is_ramp_int(src, i - width, y > 0, i, i + width, i + 2 * width, y + 2 < height);
+        const int test_r = x + 1 < width && !quiet_px(src, i, i + 1)
+            && !is_ramp_int(src, i - 1, x > 0, i, i + 1, i + 2, x + 2 < width);
+#define FLOAT_RAMP(before, has_before, p, q, after, has_after) ramp_tested()
+#else
+        const int test_b = y + 1 < height && !same_px(src, i, i + width);
+        const int test_r = x + 1 < width && !same_px(src, i, i + 1);
+#define FLOAT_RAMP(before, has_before, p, q, after, has_after) \
+        is_ramp(before, has_before, p, q, after, has_after)
+#endif
+        if ((test_b || test_r) && !c_valid) c = colour_at(src, luts, i);
+        if (test_b) {
             Colour b = colour_at(src, luts, i + width);
             if (may_differ(&c, &b, threshold)
-                && !is_ramp(y > 0 ? to_encoded(luts, load_px(src, i - width)) : c.rgb, y > 0, c.rgb, b.rgb,
-                            y + 2 < height ? to_encoded(luts, load_px(src, i + 2 * width)) : b.rgb, y + 2 < height)
+                && !FLOAT_RAMP(y > 0 ? to_encoded(luts, load_px(src, i - width)) : c.rgb, y > 0, c.rgb, b.rgb,
+                               y + 2 < height ? to_encoded(luts, load_px(src, i + 2 * width)) : b.rgb, y + 2 < height)
                 && differs(luts, &c, &b, threshold))
                 e |= EDGE_BOTTOM;
         }
-        if (x + 1 < width) {
+        c_valid = 0;
+        if (test_r) {
             Colour r = colour_at(src, luts, i + 1);
-            if (!same_px(src, i, i + 1) && may_differ(&c, &r, threshold)
-                && !is_ramp(x > 0 ? to_encoded(luts, load_px(src, i - 1)) : c.rgb, x > 0, c.rgb, r.rgb,
-                            x + 2 < width ? to_encoded(luts, load_px(src, i + 2)) : r.rgb, x + 2 < width)
+            if (may_differ(&c, &r, threshold)
+                && !FLOAT_RAMP(x > 0 ? to_encoded(luts, load_px(src, i - 1)) : c.rgb, x > 0, c.rgb, r.rgb,
+                               x + 2 < width ? to_encoded(luts, load_px(src, i + 2)) : r.rgb, x + 2 < width)
                 && differs(luts, &c, &r, threshold))
                 e |= EDGE_RIGHT;
             c = r;
+            c_valid = 1;
         }
+#undef FLOAT_RAMP
         edges[i] = e;
         ++x;
     }

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import threading
 from dataclasses import dataclass
+from fractions import Fraction
 
 import numpy as np
 import pyopencl as cl
@@ -40,6 +41,7 @@ PRESETS: dict[str, dict] = {
     "soft": {"rounding": 0.25},           # corners rounded by seed 002's factor r: smoother text and wires
     "luma": {"metric": "luma"},           # luma edges (SMAA/FXAA-like), for comparison
     "reconstruct": {"reconstruct": True},  # + topological reconstruction of thin features (seed 000 §4)
+    "bridge": {"bridge": True},            # + bridging the dash chains of sub-pixel wires (docs/reconstruct.md)
 }
 
 
@@ -55,6 +57,26 @@ def area_table(max_len: int = AREA_TABLE_L) -> np.ndarray:
         for p in range(L):
             t[L, p] = trapezoid_area(p, L)
     return t
+
+
+def ramp_fraction(ramp: float) -> tuple[int, int]:
+    """The ramp factor as a fraction (numerator, denominator <= 1000): integer frames run the ramp
+    test exactly on stored samples (kernels/edges.cl is_ramp_int, reference.edges_reference)."""
+    f = Fraction(float(ramp)).limit_denominator(1000)
+    return f.numerator, f.denominator
+
+
+def quiet_levels(options: "FilterOptions", fmt: FrameFormat) -> int:
+    """The largest max-channel difference in stored levels that cannot be an edge by the metric's
+    cheap bound (edges.cl skips groups of pixels whose neighbours all differ by no more); -1 for
+    float frames and linear input, whose stored values are not what the metric compares."""
+    if options.linear_input or np.dtype(fmt.dtype).kind == "f":
+        return -1
+    pmax = float(np.iinfo(fmt.dtype).max)
+    # lab: no edge below CHEAP_BOUND (ΔE <= LAB_LIPSCHITZ * difference); luma and weighted RGB: no
+    # edge at or below the threshold (their weights sum to 1). A relative margin absorbs float rounding.
+    bound = options.threshold / LAB_LIPSCHITZ if options.metric == "lab" else options.threshold
+    return max(int(np.ceil(bound * pmax * (1.0 - 1e-4))) - 1, -1)
 
 
 def trapezoid_area(p: int, L: int) -> float:
@@ -89,6 +111,7 @@ class FilterOptions:
             "SEGMENT": SEGMENT,
             "RAMP_TEST": int(self.ramp > 0),
             "RAMP": float(self.ramp),
+            "RAMP_NUM": ramp_fraction(self.ramp)[0], "RAMP_DEN": ramp_fraction(self.ramp)[1],
         }
 
 
@@ -134,7 +157,7 @@ class Filter:
                  metric: str = "lab", linear: bool = True, reconstruct: bool = False,
                  bgr: bool = False, linear_input: bool = False, rounding: float = 0.0,
                  blend_u: bool = True, ramp: float = 0.35, short_corner: float = SHORT_CORNER,
-                 context: Context | None = None):
+                 bridge: bool = False, context: Context | None = None):
         if metric not in METRICS:
             raise ValueError(f"metric: expected one of {', '.join(METRICS)}, got {metric!r}")
         thr = DEFAULT_THRESHOLDS[metric] if threshold is None else float(threshold)
@@ -146,6 +169,7 @@ class Filter:
                                      float(rounding), bool(blend_u), float(ramp), float(short_corner))
         self.bgr = bool(bgr)
         self.reconstruct = bool(reconstruct)
+        self.bridge = bool(bridge)
         self.context = context or default_context(device)
         dev = self.context.device
         props = cl.command_queue_properties.OUT_OF_ORDER_EXEC_MODE_ENABLE
@@ -158,6 +182,7 @@ class Filter:
         self._buffers: _FrameBuffers | None = None
         self._reconstructor = None
         self._recon_buf = None
+        self._bridger = None
         self._frame_no = 0
         self._lock = threading.Lock()
         self._last_event = None
@@ -172,7 +197,7 @@ class Filter:
             return self._buffers
         self.finish()
         self._buffers = bufs = _FrameBuffers(self.context, fmt)
-        defs = defines_for(fmt, **self.options.pass_defines())
+        defs = defines_for(fmt, **self.options.pass_defines(), QUIET_LEVELS=quiet_levels(self.options, fmt))
         k = self.context.kernel
         self._k_edges = k("edges", "detect_edges", defs)
         self._k_hdist = k("distances", "hline_distances", defs)
@@ -183,6 +208,10 @@ class Filter:
             from .reconstruct import Reconstructor
             self._reconstructor = Reconstructor(self.context, fmt)
             self._recon_buf = self.context.buffer(fmt.nbytes)
+        if self.bridge:
+            from .bridge import BridgeOptions, Bridger
+            self._bridger = Bridger(self.context, fmt, BridgeOptions(linear=self.options.linear,
+                                                                     linear_input=self.options.linear_input))
         return bufs
 
     # -- per frame ---------------------------------------------------------------------------
@@ -230,6 +259,9 @@ class Filter:
         ev["copy"] = cl.enqueue_copy(q, dst, src, byte_count=bufs.fmt.nbytes, wait_for=after)
         ev["blend"] = self._k_blend(q, g2, None, src, bufs.edges, bufs.weights, self._luts, dst, W, H,
                                     wait_for=[ev["weights"], ev["copy"]])
+        if self._bridger is not None:  # dash chains found in src, drawn over the blended frame
+            ev["bridge"] = self._bridger.enqueue(q, src, dst, self._luts, wait_for=[ev["blend"]])
+            return ev["bridge"]
         return ev["blend"]
 
     def profile(self, frame: np.ndarray, runs: int = 20, warmup: int = 3) -> dict[str, float]:
@@ -288,6 +320,7 @@ class Filter:
             self._buffers = None
             self._recon_buf = None
             self._reconstructor = None
+            self._bridger = None
 
     def __enter__(self) -> "Filter":
         return self

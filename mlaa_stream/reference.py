@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from .colour import LUMA, linear_to_srgb, rgb_to_lab, srgb_to_linear
-from .mlaa import DEFAULT_THRESHOLDS, SHORT_CORNER, trapezoid_area
+from .mlaa import DEFAULT_THRESHOLDS, SHORT_CORNER, ramp_fraction, trapezoid_area
 
 BOTTOM, RIGHT = 1, 2
 BOTH = 2  # an end crossed on both sides
@@ -46,6 +46,18 @@ def edges_reference(frame: np.ndarray, threshold: float | None = None, metric: s
             return np.abs((a - b) @ LUMA) > thr
         return np.abs(a - b) @ LUMA > thr
 
+    # Integer frames: the ramp test runs exactly on the stored samples, with `ramp` as a fraction
+    # (as kernels/edges.cl does); float frames compare in floats.
+    exact = np.issubdtype(frame.dtype, np.integer) and not linear_input
+    num, den = ramp_fraction(ramp)
+    samples = rgb
+    if exact:
+        f = frame.astype(np.int64)
+        f = f[..., None] if f.ndim == 2 else f
+        samples = np.repeat(f, 3, axis=2) if f.shape[2] == 1 else f[..., :3]
+        if bgr and f.shape[2] >= 3:
+            samples = samples[..., ::-1]
+
     def ramp_along(c: np.ndarray) -> np.ndarray:
         """For steps c[k] -> c[k+1] along axis 0: is it part of a ramp?"""
         p, q = c[:-1], c[1:]
@@ -56,6 +68,10 @@ def edges_reference(frame: np.ndarray, threshold: float | None = None, metric: s
         after = np.concatenate([c[2:], q[-1:]])    # the pixel after q (q itself at the border)
         d0 = np.take_along_axis(p - before, k, -1)[..., 0]
         d2 = np.take_along_axis(after - q, k, -1)[..., 0]
+        if exact:
+            lim = num * np.abs(d1)
+            return (((d0 * d1 > 0) & (np.abs(d0) * den > lim)) |
+                    ((d2 * d1 > 0) & (np.abs(d2) * den > lim)))
         lim = ramp * np.abs(d1)
         return ((d0 * d1 > 0) & (np.abs(d0) > lim)) | ((d2 * d1 > 0) & (np.abs(d2) > lim))
 
@@ -63,8 +79,8 @@ def edges_reference(frame: np.ndarray, threshold: float | None = None, metric: s
     bottom = differ(rgb[:-1], rgb[1:])
     right = differ(rgb[:, :-1], rgb[:, 1:])
     if ramp > 0:
-        bottom &= ~ramp_along(rgb)
-        right &= ~ramp_along(rgb.transpose(1, 0, 2)).T
+        bottom &= ~ramp_along(samples)
+        right &= ~ramp_along(samples.transpose(1, 0, 2)).T
     e[:-1] |= BOTTOM * bottom.astype(np.uint8)
     e[:, :-1] |= RIGHT * right.astype(np.uint8)
     return e
