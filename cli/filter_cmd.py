@@ -73,7 +73,7 @@ class Failed(Exception):
 
 
 def _filter_kwargs(ctx: click.Context, preset: str | None, threshold, metric, display_space,
-                   reconstruct) -> dict:
+                   reconstruct, bridge=None) -> dict:
     """The preset's settings, overridden by options given on the command line."""
     kwargs = dict(PRESETS.get(preset or "default", {}))
     if threshold is not None:
@@ -84,6 +84,8 @@ def _filter_kwargs(ctx: click.Context, preset: str | None, threshold, metric, di
         kwargs["linear"] = not display_space
     if reconstruct is not None:
         kwargs["reconstruct"] = reconstruct
+    if bridge is not None:
+        kwargs["bridge"] = bridge
     return kwargs
 
 
@@ -155,6 +157,8 @@ def _kind_of(path: str) -> str:
               help="Blend in display (sRGB-encoded) values instead of linear light.")
 @click.option("--reconstruct/--no-reconstruct", default=None,
               help="Topological reconstruction of thin features before edge detection.")
+@click.option("--bridge/--no-bridge", default=None,
+              help="Reconnect the dashes of sub-pixel wires after blending (default: on).")
 @click.option("--codec", default="libx264", show_default=True,
               help="Video encoder: libx264, libx265, ffv1 / libx264rgb (lossless intermediates), "
                    "prores_ks ...")
@@ -189,7 +193,8 @@ def _kind_of(path: str) -> str:
 @click.pass_context
 def filter_command(ctx: click.Context, input_path: str, output: str, overwrite: bool, resume: bool,
                    frames: str | None, preset: str | None, threshold: float | None,
-                   metric: str | None, display_space: bool, reconstruct: bool | None, codec: str,
+                   metric: str | None, display_space: bool, reconstruct: bool | None,
+                   bridge: bool | None, codec: str,
                    crf: int, encoder_preset: str, pix_fmt: str | None, video_backend: str,
                    overlay: str | None, in_flight: int, temporal: bool | None, temporal_mode: str,
                    temporal_k: float | None, stats_path: str | None, show: str | None,
@@ -204,7 +209,8 @@ def filter_command(ctx: click.Context, input_path: str, output: str, overwrite: 
     try:
         code = _filter(ctx, con, input_path, output, overwrite=overwrite, resume=resume,
                        frames=frames, preset=preset, threshold=threshold, metric=metric,
-                       display_space=display_space, reconstruct=reconstruct, codec=codec, crf=crf,
+                       display_space=display_space, reconstruct=reconstruct, bridge=bridge,
+                       codec=codec, crf=crf,
                        encoder_preset=encoder_preset, pix_fmt=pix_fmt, video_backend=video_backend,
                        overlay=overlay, in_flight=in_flight, device=device,
                        temporal=TemporalOptions(temporal, temporal_mode, temporal_k, stats_path, show))
@@ -218,13 +224,13 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
             resume: bool, frames: str | None, preset: str | None, threshold, metric, display_space,
             reconstruct, codec: str, crf: int, encoder_preset: str, pix_fmt: str | None,
             video_backend: str, overlay: str | None, in_flight: int, device: str | None,
-            temporal: "TemporalOptions | None" = None) -> int:
+            temporal: "TemporalOptions | None" = None, bridge: bool | None = None) -> int:
     """Check everything that can be checked without a device, then build the filter and run."""
     temporal = temporal or TemporalOptions()
     if overwrite and resume:
         con.error("--overwrite and --resume contradict each other: choose one")
         return EXIT_USAGE
-    kwargs = _filter_kwargs(ctx, preset, threshold, metric, display_space, reconstruct)
+    kwargs = _filter_kwargs(ctx, preset, threshold, metric, display_space, reconstruct, bridge)
     try:
         kind = _kind_of(input_path)
         if frames is not None and kind != "pattern":

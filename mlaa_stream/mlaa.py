@@ -37,11 +37,11 @@ SEGMENT = 64  # pixels of a row per work item in the per-pixel passes (kernels/c
 
 # Named quality presets -> Filter keyword arguments (the CLI's --preset).
 PRESETS: dict[str, dict] = {
-    "default": {},                        # corners kept sharp, CIELAB edges, linear-light blending
+    "default": {},                        # corners kept sharp, CIELAB edges, linear-light blending, wires bridged
     "soft": {"rounding": 0.25},           # corners rounded by seed 002's factor r: smoother text and wires
     "luma": {"metric": "luma"},           # luma edges (SMAA/FXAA-like), for comparison
     "reconstruct": {"reconstruct": True},  # + topological reconstruction of thin features (seed 000 §4)
-    "bridge": {"bridge": True},            # + bridging the dash chains of sub-pixel wires (docs/reconstruct.md)
+    "no_bridge": {"bridge": False},        # without bridging the dash chains of sub-pixel wires (on by default)
 }
 
 
@@ -157,7 +157,7 @@ class Filter:
                  metric: str = "lab", linear: bool = True, reconstruct: bool = False,
                  bgr: bool = False, linear_input: bool = False, rounding: float = 0.0,
                  blend_u: bool = True, ramp: float = 0.35, short_corner: float = SHORT_CORNER,
-                 bridge: bool = False, context: Context | None = None):
+                 bridge: bool = True, context: Context | None = None):
         if metric not in METRICS:
             raise ValueError(f"metric: expected one of {', '.join(METRICS)}, got {metric!r}")
         thr = DEFAULT_THRESHOLDS[metric] if threshold is None else float(threshold)
@@ -260,8 +260,7 @@ class Filter:
         ev["blend"] = self._k_blend(q, g2, None, src, bufs.edges, bufs.weights, self._luts, dst, W, H,
                                     wait_for=[ev["weights"], ev["copy"]])
         if self._bridger is not None:  # dash chains found in src, drawn over the blended frame
-            ev["bridge"] = self._bridger.enqueue(q, src, dst, self._luts, wait_for=[ev["blend"]])
-            return ev["bridge"]
+            return self._bridger.enqueue(q, src, dst, self._luts, wait_for=[ev["blend"]], events=ev)
         return ev["blend"]
 
     def profile(self, frame: np.ndarray, runs: int = 20, warmup: int = 3) -> dict[str, float]:
@@ -307,6 +306,7 @@ class Filter:
         if self._buffers is None:
             return 0.0
         extra = self._recon_buf.size if self._recon_buf is not None else 0
+        extra += self._bridger.device_bytes() if self._bridger is not None else 0
         return (self._buffers.device_bytes() + extra) / self._buffers.fmt.pixels
 
     def finish(self) -> None:

@@ -498,6 +498,28 @@ def test_preset_and_options(tmp_path):
         assert r.exit_code == 0, (name, stderr(r))
 
 
+def test_bridge_switch_matches_the_filter(tmp_path):
+    """--no-bridge leaves the dashes of a sub-pixel wire apart, as Filter(bridge=False); the default
+    bridges them, as Filter()."""
+    import cv2
+
+    from mlaa_stream import scenes as S
+    from mlaa_stream.mlaa import Filter
+
+    wire = S.stroke(np.array([[4.0, 10.3], [120.0, 22.1]]), 0.5)
+    img = S.encode8(S.render([S.Layer(None, (228, 226, 218)), S.Layer((wire,), (24, 24, 32))], 128, 32, 1))
+    src = tmp_path / "wire.png"
+    cv2.imwrite(str(src), img[..., ::-1])
+    for flag, bridge in (("--bridge", True), ("--no-bridge", False)):
+        r = run(src, "-o", tmp_path / f"{flag}.png", flag)
+        assert r.exit_code == 0, stderr(r)
+        got = cv2.imread(str(tmp_path / f"{flag}.png"))[..., ::-1]
+        with Filter(bridge=bridge) as f:
+            np.testing.assert_array_equal(got, f.process(img))
+    a, b = (cv2.imread(str(tmp_path / f"{n}.png")) for n in ("--bridge", "--no-bridge"))
+    assert np.any(a != b)   # the wire's gaps were drawn
+
+
 def test_help_explains_with_examples():
     r = run("filter", "--help")
     assert r.exit_code == 0

@@ -242,7 +242,8 @@ def test_buffers_allocated_once_per_frame_size(filt):
     assert filt._buffers is bufs
     filt.process(blocky(31, h=20, w=30))
     assert filt._buffers is not bufs
-    assert filt.device_bytes_per_pixel() <= 32
+    # 8-bit RGB: 2 x 2 frame slots (12), edges (1), distances (8), weights (8), bridging (~9)
+    assert filt.device_bytes_per_pixel() <= 40
 
 
 def test_submit_overlaps_and_keeps_order(filt):

@@ -1,0 +1,368 @@
+// bridge.cl -- bridging the dash chains of sub-pixel wires (beyond seed 000 §4; docs/reconstruct.md).
+// A wire thinner than a pixel at a shallow angle is sampled at 1 spp as dashes: a 1-px-tall run of ink in
+// lattice row 0, a gap of background in rows 0 and d, the next run in row d = +-1. Each link found in src is
+// drawn into dst: along the steps it owns, rows 0 and d get the coverage of a straight band of width
+// W = n / (n + g) (mean dash length n, gap g) from the middle of one dash to the middle of the next.
+// Orientations (ORIENTATIONS in mlaa_stream/bridge.py): pixel (i, j) of the lattice at (x, y) is
+// (x + i*ax + j*bx, y + i*ay + j*by). bridge_find finds the links of all four at once; bridge_draw runs once
+// per orientation, in order. Within one orientation no two links own the same pixel (the window rules exclude
+// it), so work items never write the same pixel. Mirrors bridge_reference.
+// Defines: MAX_GAP, MAX_RUN (pixels), GAP_PER_RUN, GAP_SLACK (gap <= GAP_PER_RUN * mean dash + GAP_SLACK),
+// INK_MIN, BG_TOL, INK_TOL (max-channel, normalised), MIN_DASHES, BLEND_LINEAR, LINEAR_INPUT (as blend.cl).
+#pragma OPENCL FP_CONTRACT OFF
+#ifndef MAX_GAP
+#define MAX_GAP 24
+#endif
+#ifndef MAX_RUN
+#define MAX_RUN 32
+#endif
+#ifndef INK_MIN
+#define INK_MIN 0.1f
+#endif
+#ifndef BG_TOL
+#define BG_TOL 0.02f
+#endif
+#ifndef INK_TOL
+#define INK_TOL 0.1f
+#endif
+#ifndef GAP_PER_RUN
+#define GAP_PER_RUN 3
+#endif
+#ifndef GAP_SLACK
+#define GAP_SLACK 2
+#endif
+#ifndef MIN_DASHES
+#define MIN_DASHES 3
+#endif
+#ifndef BLEND_LINEAR
+#define BLEND_LINEAR 1
+#endif
+#ifndef LINEAR_INPUT
+#define LINEAR_INPUT 0
+#endif
+#define DECODE (BLEND_LINEAR && !LINEAR_INPUT)
+#ifdef PIXEL_IS_FLOAT
+#define FLAT_LEVELS INK_MIN
+#else
+#define FLAT_LEVELS ((PIXEL_T)(INK_MIN * PIXEL_MAX))
+#endif
+
+typedef struct {
+    int ax, ay, bx, by, w, h;
+} lattice;
+
+typedef struct {
+    int x, y, d, a, s, b;   // dash 1 = steps a..0 of row 0 from its end (x, y); dash 2 = steps s..b of row d
+} link_t;
+
+// Index of lattice pixel (i, j) from (x, y), or -1 outside the frame.
+inline int lat(const lattice L, int x, int y, int i, int j)
+{
+    const int px = x + i * L.ax + j * L.bx, py = y + i * L.ay + j * L.by;
+    return (px < 0 || py < 0 || px >= L.w || py >= L.h) ? -1 : IDX(px, py, L.w);
+}
+
+inline float3 rgb_at(__global const PIXEL_T *src, int i) { return load_px(src, i).xyz; }
+
+// Max-channel difference (plain expressions: PoCL's fabs/fmax are out-of-line calls).
+inline float diff3(float3 p, float3 q)
+{
+    float3 t = p - q;
+    float x = t.x < 0.0f ? -t.x : t.x, y = t.y < 0.0f ? -t.y : t.y, z = t.z < 0.0f ? -t.z : t.z;
+    float m = x > y ? x : y;
+    return m > z ? m : z;
+}
+
+inline int near_to(__global const PIXEL_T *src, const lattice L, int x, int y, int i, int j, float3 c, float tol)
+{
+    const int k = lat(L, x, y, i, j);
+    return k >= 0 && diff3(rgb_at(src, k), c) <= tol;
+}
+
+#define BG(i, j) near_to(src, L, x, y, (i), (j), bgc, BG_TOL)
+#define INK(i, j) near_to(src, L, x, y, (i), (j), ink, INK_TOL)
+
+// Lattice pixel (i, j) as 1 background, 2 ink, 0 anything else or outside the frame (one load).
+inline int classify(__global const PIXEL_T *src, const lattice L, int x, int y, int i, int j, float3 ink, float3 bgc)
+{
+    const int k = lat(L, x, y, i, j);
+    if (k < 0) return 0;
+    const float3 c = rgb_at(src, k);
+    return diff3(c, bgc) <= BG_TOL ? 1 : (diff3(c, ink) <= INK_TOL ? 2 : 0);
+}
+
+#define CLS(i, j) classify(src, L, x, y, (i), (j), ink, bgc)
+
+// The link whose dash 1 ends at (x, y): 1 and *out, or 0. Rows -d .. 2d over steps a..b hold only the two
+// dashes (one ink) and background (one colour); exactly one direction d qualifies. The predicate of
+// bridge_reference's _Scan.link, evaluated in an order that rejects early: rows -1 and 1 beside dash 1
+// (both directions need them), then per direction the outer row beside dash 1, then the gap and dash 2 one
+// step at a time with all four rows.
+inline int find_link(__global const PIXEL_T *src, const lattice L, int x, int y, link_t *out)
+{
+    const int i0 = lat(L, x, y, 0, 0), i1 = lat(L, x, y, 1, 0);
+    if (i0 < 0 || i1 < 0) return 0;
+    const float3 ink = rgb_at(src, i0), bgc = rgb_at(src, i1);
+    if (diff3(ink, bgc) < INK_MIN) return 0;
+    if (CLS(0, -1) != 1 || CLS(0, 1) != 1) return 0;
+    int a = 1;   // dash 1: ink back to a, background before it; rows -1 and 1 background beside it
+    for (int k = 1; k <= MAX_RUN; ++k) {
+        const int c = CLS(-k, 0);
+        if (c == 1) { a = 1 - k; break; }
+        if (c != 2 || CLS(-k, -1) != 1 || CLS(-k, 1) != 1) return 0;
+    }
+    if (a == 1) return 0;
+    int found = 0;
+    for (int t = 0; t < 2; ++t) {
+        const int d = t == 0 ? 1 : -1;
+        int ok = 1;
+        for (int i = a; i <= 0 && ok; ++i) ok = CLS(i, 2 * d) == 1;
+        if (!ok) continue;
+        // the gap: rows 0, -d, d, 2d background from step 1 until dash 2 starts in row d at s >= 2
+        int s = 0;
+        for (int k = 1; k <= MAX_GAP + 1; ++k) {
+            if (CLS(k, 0) != 1 || CLS(k, -d) != 1 || CLS(k, 2 * d) != 1) break;
+            const int c = CLS(k, d);
+            if (c == 1) continue;
+            if (k >= 2 && c == 2) s = k;
+            break;
+        }
+        if (s == 0) continue;
+        // dash 2: ink in row d from s to b, background after it; rows 0, -d, 2d background beside it
+        int b = 0;
+        for (int k = s; k <= s + MAX_RUN; ++k) {
+            const int c = CLS(k, d);
+            if (c == 1 && k > s) { b = k - 1; break; }
+            if (c != 2 || CLS(k, 0) != 1 || CLS(k, -d) != 1 || CLS(k, 2 * d) != 1) break;
+        }
+        if (b == 0) continue;
+        // a wire at least 1 / (GAP_PER_RUN + 1) px wide: gap <= GAP_PER_RUN * mean dash + GAP_SLACK
+        if (2 * (s - 1) > GAP_PER_RUN * (1 - a + b - s + 1) + 2 * GAP_SLACK) continue;
+        ++found;
+        out->x = x; out->y = y; out->d = d; out->a = a; out->s = s; out->b = b;
+    }
+    return found == 1;
+}
+
+// Links found by bridge_find, one ushort per pixel and orientation where its `found` bit is set: bit 0 d < 0,
+// bits 1-5 -a, bits 6-10 s, bits 11-15 b - s (MAX_RUN <= 32 and MAX_GAP <= 30: the host checks).
+inline ushort pack_link(const link_t ln)
+{
+    return (ushort)((uint)(ln.d < 0) | (uint)(-ln.a) << 1 | (uint)ln.s << 6 | (uint)(ln.b - ln.s) << 11);
+}
+
+inline link_t unpack_link(int x, int y, uint v)
+{
+    link_t ln;
+    ln.x = x; ln.y = y;
+    ln.d = (v & 1u) ? -1 : 1;
+    ln.a = -(int)(v >> 1 & 31u);
+    ln.s = (int)(v >> 6 & 31u);
+    ln.b = ln.s + (int)(v >> 11 & 31u);
+    return ln;
+}
+
+// Does a link end at dash 1 of `ln` (a dash before it, one lattice row to either side)?
+inline int incoming(__global const PIXEL_T *src, __global const uchar *found, __global const ushort *links,
+                    const lattice L, const int o, const link_t ln)
+{
+    const int x = ln.x, y = ln.y;
+    const float3 bgc = rgb_at(src, lat(L, x, y, 1, 0));
+    for (int t = 0; t < 2; ++t) {
+        const int j = t == 0 ? -1 : 1;
+        for (int k = 1; k <= MAX_GAP + 1; ++k) {
+            const int q = lat(L, x, y, ln.a - k, j);
+            if (q < 0) break;
+            if (diff3(rgb_at(src, q), bgc) <= BG_TOL) continue;
+            if (found[q] >> o & 1u) {
+                const link_t prev = unpack_link(0, 0, links[4 * q + o]);
+                if (j + prev.d == 0 && prev.s == k) return 1;
+            }
+            break;
+        }
+    }
+    return 0;
+}
+
+// Does a link start at the end of dash 2 of `ln`?
+inline int outgoing(__global const uchar *found, const lattice L, const int o, const link_t ln)
+{
+    return found[lat(L, ln.x, ln.y, ln.b, ln.d)] >> o & 1u;
+}
+
+// Does the line go on without a gap: a dash of the same ink touching dash 1 diagonally one row before it, or
+// dash 2 one row after it (background beyond it across the line, and beyond the dash it touches)?
+inline int touches(__global const PIXEL_T *src, const lattice L, const link_t ln)
+{
+    const int x = ln.x, y = ln.y, d = ln.d;
+    const float3 ink = rgb_at(src, lat(L, x, y, 0, 0)), bgc = rgb_at(src, lat(L, x, y, 1, 0));
+    if (INK(ln.a - 1, -d) && BG(ln.a - 1, -2 * d) && BG(ln.a, -2 * d)) return 1;
+    return INK(ln.b + 1, 2 * d) && BG(ln.b + 1, 3 * d) && BG(ln.b, 3 * d);
+}
+
+inline float tri_cdf(float t)
+{
+    if (t <= -1.0f) return 0.0f;
+    if (t <= 0.0f) return 0.5f * (t + 1.0f) * (t + 1.0f);
+    if (t < 1.0f) return 1.0f - 0.5f * (1.0f - t) * (1.0f - t);
+    return 1.0f;
+}
+
+// Coverage of a pixel by a band of half thickness `hw` (rows) centred `delta` rows from it: the overlap of
+// two intervals on rows and columns; on diagonal lattices the pixel's footprint across the rows is a
+// triangle of support +-1.
+inline float band_coverage(float delta, float hw, int diagonal)
+{
+    const float lo = delta - hw, hi = delta + hw;
+    if (!diagonal) {
+        const float top = hi < 0.5f ? hi : 0.5f, bot = lo > -0.5f ? lo : -0.5f;
+        return top > bot ? top - bot : 0.0f;
+    }
+    return tri_cdf(hi) - tri_cdf(lo);
+}
+
+inline float3 to_mix(__global const float *luts, float3 c)
+{
+#if DECODE
+    return (float3)(lut_read(luts, c.x), lut_read(luts, c.y), lut_read(luts, c.z));
+#else
+    return c;
+#endif
+}
+
+// RGB only: dst's alpha stays as it is.
+inline void store_rgb(__global PIXEL_T *dst, __global const float *luts, int i, float3 v)
+{
+#if DECODE
+    __global const float *enc = luts + 2 * (LUT_SIZE + 1);
+    v = (float3)(lut_read(enc, v.x), lut_read(enc, v.y), lut_read(enc, v.z));
+#endif
+#if CHANNELS == 1
+    dst[i] = to_pixel(v.x);
+#else
+    __global PIXEL_T *p = dst + (size_t)i * CHANNELS;
+#if ORDER_BGR
+    p[0] = to_pixel(v.z); p[1] = to_pixel(v.y); p[2] = to_pixel(v.x);
+#else
+    p[0] = to_pixel(v.x); p[1] = to_pixel(v.y); p[2] = to_pixel(v.z);
+#endif
+#endif
+}
+
+// Draw the link found at (x, y), if it lies in a chain: rows 0 and d over the steps it owns.
+inline void draw_link(__global const PIXEL_T *src, __global PIXEL_T *dst, __global const float *luts,
+                      __global const uchar *found, __global const ushort *links, const lattice L, const int o,
+                      int x, int y, int diagonal)
+{
+    const link_t ln = unpack_link(x, y, links[4 * IDX(x, y, L.w) + o]);
+    const int inc = incoming(src, found, links, L, o, ln), out = outgoing(found, L, o, ln);
+    if (MIN_DASHES >= 3 && !inc && !out && !touches(src, L, ln)) return;
+    // owned steps [c0, c1): from the middle of dash 1 when a link ends there, else its start; to the middle
+    // of dash 2 when a link starts there, else its end (ceil of the half-integer middles)
+    const int c0 = inc ? -((-ln.a) / 2) : ln.a;
+    const int c1 = out ? (ln.s + ln.b + 1) / 2 : ln.b + 1;
+    const int n1 = 1 - ln.a, n2 = ln.b - ln.s + 1, g = ln.s - 1;
+    const float m1 = (float)ln.a * 0.5f, m2 = (float)(ln.s + ln.b) * 0.5f;
+    const float n = (float)(n1 + n2) * 0.5f;
+    const float hw = 0.5f * n / (n + (float)g);   // W = n / (n + g) rows
+    const float3 bgc = to_mix(luts, rgb_at(src, lat(L, x, y, 1, 0)));
+    const float3 ink = (to_mix(luts, rgb_at(src, lat(L, x, y, 0, 0))) +
+                        to_mix(luts, rgb_at(src, lat(L, x, y, ln.s, ln.d)))) * 0.5f;
+    for (int i = c0; i < c1; ++i) {
+        const float u = ((float)i - m1) / (m2 - m1);   // the band's centre, rows from row 0 toward row d
+        const float cov0 = band_coverage(u, hw, diagonal), cov1 = band_coverage(u - 1.0f, hw, diagonal);
+        store_rgb(dst, luts, lat(L, x, y, i, 0), bgc + cov0 * (ink - bgc));
+        store_rgb(dst, luts, lat(L, x, y, i, ln.d), bgc + cov1 * (ink - bgc));
+    }
+}
+
+// The four orientations (ORIENTATIONS in mlaa_stream/bridge.py): along (AX, AY), across (BX, BY).
+__constant int AX[4] = {1, 0, 1, 1}, AY[4] = {0, 1, 1, -1}, BX[4] = {0, 1, 1, 1}, BY[4] = {1, 0, 0, 0};
+
+inline lattice lattice_of(int o, int width, int height)
+{
+    const lattice L = {AX[o], AY[o], BX[o], BY[o], width, height};
+    return L;
+}
+
+// Pass 1, all orientations at once: bit o of found[i] set, and links[4 i + o] = the packed link, where dash 1
+// of a link of orientation o ends at pixel i (links untouched elsewhere); segments[] = the OR of found over
+// the work item's pixels. One work item per SEGMENT pixels of a row. Every candidate differs from its right neighbour (x + 1, y) by INK_MIN or more (that pixel is P(1, 0)
+// or P(0, 1) in every orientation), so a group of GROUP pixels where no sample differs from the same sample
+// of the right neighbour by FLAT_LEVELS (<= INK_MIN * PIXEL_MAX) is settled at once, and so is a pixel.
+__kernel void bridge_find(__global const PIXEL_T *src, __global uchar *found, __global ushort *links,
+                          __global uchar *segments, const int width, const int height)
+{
+    const int x0 = get_global_id(0) * SEGMENT, y = get_global_id(1);
+    if (x0 >= width || y >= height) return;
+    const int x1 = x0 + SEGMENT < width ? x0 + SEGMENT : width;
+    const int px = CHANNELS;
+    uchar any = 0;
+    for (int g = x0; g < x1; g += GROUP) {
+        const int ge = g + GROUP < x1 ? g + GROUP : x1;
+        const int last = ge < width ? ge : width - 1;   // the right neighbour of the group's last pixel
+        __global const PIXEL_T *p = src + (size_t)IDX(g, y, width) * px;
+        const int nb = (last - g) * px;
+        int flat = 1;
+        for (int t = 0; t < nb; ++t) flat &= p[t] == p[t + px];
+        if (!flat) {
+            flat = 1;
+            for (int t = 0; t < nb; ++t) {
+                const PIXEL_T u = p[t], v = p[t + px];
+                flat &= (u > v ? u - v : v - u) < FLAT_LEVELS;
+            }
+        }
+        if (flat && ge - g == GROUP) {
+            vstore8((uchar8)(0), 0, found + IDX(g, y, width));
+            continue;
+        }
+        for (int x = g; x < ge; ++x) {
+            const int i = IDX(x, y, width);
+            int near = 1;
+            for (int t = 0; t < px && x + 1 < width; ++t) {
+                const PIXEL_T u = p[(x - g) * px + t], v = p[(x - g + 1) * px + t];
+                near &= (u > v ? u - v : v - u) < FLAT_LEVELS;
+            }
+            uchar hits = 0;
+            if (!near) {
+                const float3 c = rgb_at(src, i);
+                if (diff3(c, rgb_at(src, i + 1)) >= INK_MIN) {
+                    for (int o = 0; o < 4; ++o) {
+                        const lattice L = lattice_of(o, width, height);
+                        const int q = lat(L, x, y, 0, 1), r = lat(L, x, y, 1, 0);
+                        link_t ln;
+                        if (q >= 0 && r >= 0 && diff3(c, rgb_at(src, q)) >= INK_MIN &&
+                            diff3(c, rgb_at(src, r)) >= INK_MIN && find_link(src, L, x, y, &ln)) {
+                            links[4 * i + o] = pack_link(ln);
+                            hits |= (uchar)(1u << o);
+                        }
+                    }
+                }
+            }
+            found[i] = hits;
+            any |= hits;
+        }
+    }
+    segments[get_global_id(1) * get_global_size(0) + get_global_id(0)] = any;
+}
+
+// Pass 2, once per orientation o in order: draw every link of orientation o that lies in a chain. A segment
+// with no such link (bit o of segments[] from pass 1) returns at once; groups of GROUP pixels with none are
+// skipped with one 8-byte read.
+__kernel void bridge_draw(__global const PIXEL_T *src, __global PIXEL_T *dst, __global const float *luts,
+                          __global const uchar *found, __global const ushort *links,
+                          __global const uchar *segments, const int width, const int height, const int o)
+{
+    const int x0 = get_global_id(0) * SEGMENT, y = get_global_id(1);
+    if (x0 >= width || y >= height) return;
+    if (!(segments[get_global_id(1) * get_global_size(0) + get_global_id(0)] >> o & 1u)) return;
+    const int x1 = x0 + SEGMENT < width ? x0 + SEGMENT : width;
+    const lattice L = lattice_of(o, width, height);
+    const int diagonal = o >= 2;
+    const ulong bits = 0x0101010101010101UL << o;
+    for (int x = x0; x < x1; ++x) {
+        const int i = IDX(x, y, width);
+        if (x + GROUP <= x1 && (edge_group(found + i) & bits) == 0) { x += GROUP - 1; continue; }
+        if (found[i] >> o & 1u) draw_link(src, dst, luts, found, links, L, o, x, y, diagonal);
+    }
+}

@@ -1,0 +1,483 @@
+"""Bridging the dash chains of sub-pixel wires (beyond seed 000 §4; docs/reconstruct.md, "Bridging").
+
+A wire thinner than a pixel at a shallow angle is sampled at 1 spp as dashes: a 1-px-tall run of ink in
+row r, a gap of background in rows r and r+d, the next run in row r+d. This pass finds such links and
+redraws the columns they span, in rows r and r+d, with the coverage a straight band of the estimated
+width passing from the middle of one dash to the middle of the next would give. Steep wires are the
+transpose, wires near 45 degrees the same on the two diagonal lattices. Detection reads the input; the
+drawing writes another frame (the MLAA output: `Filter(bridge=True)`, the default).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .colour import device_luts, lut_read
+from .device import Context, default_context
+from .formats import LUT_SIZE, FrameFormat, defines_for, frame_format
+
+try:
+    import pyopencl as cl
+except ImportError:  # pragma: no cover - device.py reports broken installs
+    cl = None
+
+MAX_GAP = 24  # longest gap bridged, in pixels
+MAX_RUN = 32  # longest dash, in pixels
+INK_MIN = 0.1  # a dash differs from the background by at least this (max channel, normalised)
+BG_TOL = 0.02  # "background": within this of the background colour next to the dash end (max channel)
+INK_TOL = 0.1  # "the same ink": within this of the colour at the dash end (max channel)
+GAP_PER_RUN = 3  # gap <= GAP_PER_RUN * mean dash + GAP_SLACK: wires at least 1/4 px wide, not specks far apart
+GAP_SLACK = 2
+MIN_DASHES = 3  # a link is drawn only inside a chain of at least this many dashes (2 or 3)
+
+
+@dataclass(frozen=True)
+class BridgeOptions:
+    """The pass's thresholds (module constants above) and the blending space (as the Filter's)."""
+
+    max_gap: int = MAX_GAP
+    max_run: int = MAX_RUN
+    ink_min: float = INK_MIN
+    bg_tol: float = BG_TOL
+    ink_tol: float = INK_TOL
+    gap_per_run: int = GAP_PER_RUN
+    gap_slack: int = GAP_SLACK
+    min_dashes: int = MIN_DASHES
+    linear: bool = True
+    linear_input: bool = False
+
+    def defines(self) -> dict[str, object]:
+        return {"MAX_GAP": int(self.max_gap), "MAX_RUN": int(self.max_run), "INK_MIN": float(self.ink_min),
+                "BG_TOL": float(self.bg_tol), "INK_TOL": float(self.ink_tol),
+                "GAP_PER_RUN": int(self.gap_per_run), "GAP_SLACK": int(self.gap_slack),
+                "MIN_DASHES": int(self.min_dashes), "BLEND_LINEAR": int(self.linear),
+                "LINEAR_INPUT": int(self.linear_input)}
+
+
+# Scan orientations, in the order the passes run: (a, b) = one step along a "row" and one step across it.
+# Rows and columns see shallow and steep wires; the two diagonal lattices (a unimodular shear of the pixel
+# grid, so every rule holds unchanged in (i, j) coordinates) see wires near 45 degrees.
+ORIENTATIONS: tuple[tuple[tuple[int, int], tuple[int, int]], ...] = (
+    ((1, 0), (0, 1)), ((0, 1), (1, 0)), ((1, 1), (1, 0)), ((1, -1), (1, 0)))
+
+
+@dataclass(frozen=True)
+class Link:
+    """In lattice steps from the end (x, y) of dash 1: dash 1 = i in a..0 at j = 0, the gap, dash 2 =
+    i in s..b at j = d."""
+
+    x: int
+    y: int
+    d: int
+    a: int
+    s: int
+    b: int
+
+
+# ----------------------------------------------------------------------------------------------
+# The plain numpy reference
+# ----------------------------------------------------------------------------------------------
+
+def _diff(p: np.ndarray, q: np.ndarray) -> np.float32:
+    return np.float32(np.abs(p - q).max())
+
+
+class _Scan:
+    """The frame seen in one orientation: pixel (i, j) steps from (x, y) is (x + i a + j b)."""
+
+    def __init__(self, rgb: np.ndarray, ab, o: BridgeOptions):
+        self.rgb, self.o = rgb, o
+        # the kernel's thresholds are float literals: compare in float32 as it does
+        self.ink_min, self.bg_tol, self.ink_tol = (np.float32(v) for v in (o.ink_min, o.bg_tol, o.ink_tol))
+        (self.ax, self.ay), (self.bx, self.by) = ab
+        self.h, self.w = rgb.shape[:2]
+
+    def at(self, x: int, y: int, i: int, j: int) -> tuple[int, int]:
+        return x + i * self.ax + j * self.bx, y + i * self.ay + j * self.by
+
+    def px(self, x: int, y: int, i: int, j: int) -> np.ndarray | None:
+        px, py = self.at(x, y, i, j)
+        return self.rgb[py, px] if 0 <= px < self.w and 0 <= py < self.h else None
+
+    def link(self, x: int, y: int) -> Link | None:
+        """The link whose dash 1 ends at (x, y), or None. Lattice rows -d .. 2d over the span a..b hold only
+        the two dashes (one ink colour) and background (one colour); exactly one direction d qualifies."""
+        o, P = self.o, self.px
+        ink, bgc = P(x, y, 0, 0), P(x, y, 1, 0)
+        if ink is None or bgc is None or _diff(ink, bgc) < self.ink_min:
+            return None
+
+        def bg(i: int, j: int) -> bool:
+            p = P(x, y, i, j)
+            return p is not None and _diff(p, bgc) <= self.bg_tol
+
+        def is_ink(i: int, j: int) -> bool:
+            p = P(x, y, i, j)
+            return p is not None and _diff(p, ink) <= self.ink_tol
+
+        if not (bg(0, -1) and bg(0, 1)):
+            return None
+        a = None  # dash 1: ink back to a, background before it
+        for k in range(1, o.max_run + 1):
+            if bg(-k, 0):
+                a = 1 - k
+                break
+            if not is_ink(-k, 0):
+                return None
+        if a is None:
+            return None
+        found = []
+        for d in (1, -1):
+            s = None  # the gap in row d, then dash 2 from s
+            for k in range(1, o.max_gap + 2):
+                if bg(k, d):
+                    continue
+                if k >= 2 and is_ink(k, d):
+                    s = k
+                break
+            if s is None:
+                continue
+            b = None
+            for k in range(s + 1, s + o.max_run + 1):
+                if bg(k, d):
+                    b = k - 1
+                    break
+                if not is_ink(k, d):
+                    break
+            if b is None:
+                continue
+            if 2 * (s - 1) > o.gap_per_run * ((1 - a) + (b - s + 1)) + 2 * o.gap_slack:
+                continue  # gap <= GAP_PER_RUN * mean dash + GAP_SLACK
+            ok = all(bg(i, 0) for i in range(1, b + 1)) and all(bg(i, d) for i in range(a, 1))
+            ok = ok and all(bg(i, -d) and bg(i, 2 * d) for i in range(a, b + 1))
+            if ok:
+                found.append(Link(x, y, d, a, s, b))
+        return found[0] if len(found) == 1 else None
+
+    def incoming(self, ln: Link) -> bool:
+        """Does a link end at dash 1 of `ln` (a dash before it, one lattice row to either side)?"""
+        o, P = self.o, self.px
+        bgc = P(ln.x, ln.y, 1, 0)
+        for j in (-1, 1):
+            for k in range(1, o.max_gap + 2):
+                p = P(ln.x, ln.y, ln.a - k, j)
+                if p is None:
+                    break
+                if _diff(p, bgc) <= self.bg_tol:
+                    continue
+                ex, ey = self.at(ln.x, ln.y, ln.a - k, j)
+                prev = self.link(ex, ey)
+                if prev is not None and j + prev.d == 0 and prev.s == k:
+                    return True
+                break
+        return False
+
+    def outgoing(self, ln: Link) -> bool:
+        """Does a link start at the end of dash 2 of `ln`?"""
+        return self.link(*self.at(ln.x, ln.y, ln.b, ln.d)) is not None
+
+    def touches(self, ln: Link) -> bool:
+        """Does the line go on without a gap: a dash of the same ink touching dash 1 diagonally one row
+        before it, or dash 2 one row after it (ink with background beyond it across the line, and beyond
+        the dash it touches: the line does not turn back, as the tip of a '<' does)?"""
+        P, d = self.px, ln.d
+        ink, bgc = P(ln.x, ln.y, 0, 0), P(ln.x, ln.y, 1, 0)
+        for i, j, back, beyond in ((ln.a - 1, -d, ln.a, -2 * d), (ln.b + 1, 2 * d, ln.b, 3 * d)):
+            t, u, v = P(ln.x, ln.y, i, j), P(ln.x, ln.y, i, beyond), P(ln.x, ln.y, back, beyond)
+            if t is not None and u is not None and v is not None and _diff(t, ink) <= self.ink_tol \
+                    and _diff(u, bgc) <= self.bg_tol and _diff(v, bgc) <= self.bg_tol:
+                return True
+        return False
+
+    def _step_diff(self, dx: int, dy: int) -> np.ndarray:
+        """Max-channel difference of each pixel from the one (dx, dy) away; -1 where that is outside."""
+        h, w = self.h, self.w
+        res = np.full((h, w), -1.0, np.float32)
+        ys, xs = slice(max(0, -dy), h - max(0, dy)), slice(max(0, -dx), w - max(0, dx))
+        yt, xt = slice(max(0, dy), h - max(0, -dy)), slice(max(0, dx), w - max(0, -dx))
+        res[ys, xs] = np.abs(self.rgb[ys, xs] - self.rgb[yt, xt]).max(-1)
+        return res
+
+    def links(self) -> list[tuple[Link, int, int]]:
+        """Every drawn link with the steps it owns along the lattice row, [c0, c1)."""
+        o = self.o
+        res = []
+        # candidates: a dash end differs from the pixel after it and from the one beside it
+        cand = (self._step_diff(self.ax, self.ay) >= self.ink_min) & (self._step_diff(self.bx, self.by) >= self.ink_min)
+        for y, x in zip(*np.nonzero(cand)):
+            ln = self.link(int(x), int(y))
+            if ln is None:
+                continue
+            inc, out = self.incoming(ln), self.outgoing(ln)
+            if o.min_dashes >= 3 and not (inc or out or self.touches(ln)):
+                continue
+            c0 = math.ceil(ln.a / 2) if inc else ln.a  # the dash middles a/2 and (s + b)/2, rounded up
+            c1 = math.ceil((ln.s + ln.b) / 2) if out else ln.b + 1
+            res.append((ln, c0, c1))
+        return res
+
+
+def _coverage(delta: np.float32, half: np.float32, diagonal: bool) -> np.float32:
+    """Coverage of a pixel by a band of half thickness `half` (in lattice rows) whose centre lies `delta`
+    rows from the pixel's: rows and columns, the overlap of two intervals (the pixel spans one row);
+    diagonal lattices, the integral of the pixel's triangular footprint across the rows (support +-1)."""
+    f32 = np.float32
+    lo, hi = delta - half, delta + half
+    if not diagonal:
+        top, bot = min(hi, f32(0.5)), max(lo, f32(-0.5))
+        return f32(top - bot) if top > bot else f32(0)
+    return _tri_cdf(hi) - _tri_cdf(lo)
+
+
+def _tri_cdf(t: np.float32) -> np.float32:
+    f32 = np.float32
+    if t <= f32(-1):
+        return f32(0)
+    if t <= f32(0):
+        return f32(0.5) * (t + f32(1)) * (t + f32(1))
+    if t < f32(1):
+        return f32(1) - f32(0.5) * (f32(1) - t) * (f32(1) - t)
+    return f32(1)
+
+
+def _draw(scan: _Scan, lin: np.ndarray, out: np.ndarray, written: np.ndarray, diagonal: bool) -> None:
+    """Find the links of one orientation and write their pixels into `out` (RGB in the mixing space)."""
+    f32 = np.float32
+    for ln, c0, c1 in scan.links():
+        n1, n2, g = 1 - ln.a, ln.b - ln.s + 1, ln.s - 1
+        m1, m2 = f32(ln.a) * f32(0.5), f32(ln.s + ln.b) * f32(0.5)  # dash middles (dash 1 ends at 0)
+        n = f32(n1 + n2) * f32(0.5)
+        half = f32(0.5) * n / (n + f32(g))  # the band's half thickness: W = n / (n + g) rows
+        bx, by = scan.at(ln.x, ln.y, 1, 0)
+        sx, sy = scan.at(ln.x, ln.y, ln.s, ln.d)
+        bgc = lin[by, bx]
+        ink = (lin[ln.y, ln.x] + lin[sy, sx]) * f32(0.5)
+        for i in range(c0, c1):
+            u = (f32(i) - m1) / (m2 - m1)  # the band's centre, in rows from row 0 toward row d
+            for j, delta in ((0, u), (ln.d, u - f32(1))):
+                cov = _coverage(delta, half, diagonal)
+                px, py = scan.at(ln.x, ln.y, i, j)
+                out[py, px] = bgc + cov * (ink - bgc)
+                written[py, px] += 1
+
+
+def _to_mix(rgb: np.ndarray, o: BridgeOptions) -> np.ndarray:
+    if o.linear and not o.linear_input:
+        luts = device_luts()
+        return np.stack([lut_read(luts, rgb[..., c]) for c in range(3)], -1).astype(np.float32)
+    return rgb
+
+
+def _from_mix(v: np.ndarray, o: BridgeOptions) -> np.ndarray:
+    if o.linear and not o.linear_input:
+        enc = device_luts()[2 * (LUT_SIZE + 1):]
+        return np.stack([lut_read(enc, v[..., c]) for c in range(3)], -1).astype(np.float32)
+    return v
+
+
+def _load_rgb(frame: np.ndarray, fmt: FrameFormat) -> np.ndarray:
+    """common.cl's load_px, RGB only: float32 (H, W, 3) normalised."""
+    pmax = np.float32({np.uint8: 255.0, np.uint16: 65535.0}.get(fmt.dtype.type, 1.0))
+    a = np.asarray(frame).astype(np.float32).reshape(fmt.height, fmt.width, fmt.channels) * (np.float32(1) / pmax)
+    if fmt.channels == 1:
+        return np.repeat(a[..., :1], 3, -1)
+    return np.ascontiguousarray(a[..., 2::-1] if fmt.bgr else a[..., :3])
+
+
+def _store(v: np.ndarray, fmt: FrameFormat) -> np.ndarray:
+    """common.cl's store_px / to_pixel for RGB values (H, W, 3): round half up, clamped."""
+    if fmt.channels == 1:
+        v = v[..., :1]
+    elif fmt.bgr:
+        v = v[..., ::-1]
+    if fmt.dtype.kind == "f":
+        return v.astype(fmt.dtype)
+    pmax = np.float32(np.iinfo(fmt.dtype).max)
+    t = np.clip(v.astype(np.float32) * pmax + np.float32(0.5), 0, pmax)
+    return t.astype(fmt.dtype)
+
+
+def bridge_reference(src: np.ndarray, dst: np.ndarray | None = None, *, bgr: bool = False,
+                     options: BridgeOptions | None = None) -> np.ndarray:
+    """Plain numpy version of the pass (slow, obvious): links found in `src`, drawn into a copy of `dst`
+    (default: `src`), one orientation after the other in ORIENTATIONS' order, as kernels/bridge.cl runs them."""
+    o = options or BridgeOptions()
+    fmt = frame_format(src, bgr)
+    base = src if dst is None else dst
+    if frame_format(base, bgr) != fmt:
+        raise ValueError(f"bridge: expected dst like src {fmt}, got {frame_format(base, bgr)}")
+    rgb = _load_rgb(src, fmt)
+    lin = _to_mix(rgb, o)
+    out = np.array(base, copy=True)
+    view = out.reshape(fmt.height, fmt.width, fmt.channels)
+    for ab in ORIENTATIONS:
+        mix = np.zeros_like(lin)
+        written = np.zeros(rgb.shape[:2], np.int32)
+        _draw(_Scan(rgb, ab, o), lin, mix, written, ab[0][0] != 0 and ab[0][1] != 0)
+        if written.max(initial=0) > 1:
+            raise AssertionError("bridge: a pixel claimed by two links of one orientation")
+        sel = written > 0
+        vals = _store(_from_mix(mix[sel], o), fmt)
+        view[sel, :vals.shape[-1]] = vals
+    return out
+
+
+# ----------------------------------------------------------------------------------------------
+# The OpenCL pass
+# ----------------------------------------------------------------------------------------------
+
+SEGMENT = 64  # pixels of a row per work item (kernels/common.cl), as in the core filter's passes
+
+
+class Bridger:
+    """The bridging pass for one frame format: kernels built and work buffers allocated once, then `enqueue`
+    per frame. Links are found in src and drawn into dst (a different buffer laid out like the frame, e.g.
+    the MLAA output)."""
+
+    def __init__(self, context: Context, fmt: FrameFormat, options: BridgeOptions | None = None):
+        o = options or BridgeOptions()
+        if not (1 <= o.max_gap <= 30 and 1 <= o.max_run <= 32):  # kernels/bridge.cl packs links in 16 bits
+            raise ValueError(f"bridge: expected max_gap in 1..30 and max_run in 1..32, got {o.max_gap} "
+                             f"and {o.max_run}")
+        if o.min_dashes not in (2, 3):
+            raise ValueError(f"bridge: expected min_dashes 2 or 3, got {o.min_dashes}")
+        self.fmt, self.options = fmt, o
+        defines = defines_for(fmt, SEGMENT=SEGMENT, **o.defines())
+        self._find = context.kernel("bridge", "bridge_find", defines)
+        self._draw = context.kernel("bridge", "bridge_draw", defines)
+        # per pixel: 1 byte, bit o = "a link of orientation o ends here", and 4 packed links (2 bytes each)
+        self._found = context.buffer(fmt.pixels)
+        self._links = context.buffer(8 * fmt.pixels)
+        self._global = (-(-fmt.width // SEGMENT), fmt.height)
+        self._segments = context.buffer(self._global[0] * self._global[1])  # per work item: orientations found
+        self._last = None  # this pass's previous frame: its work buffers are reused
+
+    def device_bytes(self) -> int:
+        return self._found.size + self._links.size + self._segments.size
+
+    def enqueue(self, queue: "cl.CommandQueue", src: "cl.Buffer", dst: "cl.Buffer", luts: "cl.Buffer",
+                wait_for: list | None = None, events: dict | None = None) -> "cl.Event":
+        """Enqueue the find pass (all orientations), then the draw pass per orientation in order; returns the
+        last event. `events`, when given, receives each kernel's event (bridge_find, bridge_draw0..3)."""
+        if src.int_ptr == dst.int_ptr:
+            raise ValueError("bridge: expected dst to be a different buffer from src, got the same one")
+        need = self.fmt.nbytes
+        for what, buf in (("src", src), ("dst", dst)):
+            if buf.size < need:
+                raise ValueError(f"bridge: expected {what} of at least {need} bytes for a {self.fmt.width}x"
+                                 f"{self.fmt.height}x{self.fmt.channels} frame, got {buf.size}")
+        W, H = np.int32(self.fmt.width), np.int32(self.fmt.height)
+        ev = list(wait_for or []) + ([self._last] if self._last is not None else [])
+        rec = {} if events is None else events
+        rec["bridge_find"] = self._find(queue, self._global, None, src, self._found, self._links, self._segments,
+                                        W, H, wait_for=ev)
+        ev = [rec["bridge_find"]]
+        for o in range(len(ORIENTATIONS)):  # in order: a later orientation's pixels overwrite an earlier's
+            rec[f"bridge_draw{o}"] = self._draw(queue, self._global, None, src, dst, luts, self._found, self._links,
+                                                self._segments, W, H, np.int32(o), wait_for=ev)
+            ev = [rec[f"bridge_draw{o}"]]
+        self._last = ev[0]
+        return self._last
+
+
+def bridge(src: np.ndarray, dst: np.ndarray | None = None, *, device=None, bgr: bool = False,
+           options: BridgeOptions | None = None) -> np.ndarray:
+    """Run the pass on one frame (upload, kernels, download): links found in `src`, drawn into a copy of
+    `dst` (default: `src`); same shape and dtype as `src`."""
+    fmt = frame_format(src, bgr)
+    base = src if dst is None else dst
+    if frame_format(base, bgr) != fmt or np.shape(base) != np.shape(src):
+        raise ValueError(f"bridge: expected dst like src {np.shape(src)} {src.dtype}, "
+                         f"got {np.shape(base)} {base.dtype}")
+    ctx = default_context(device)
+    mf = cl.mem_flags
+    d_src = cl.Buffer(ctx.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(src, dtype=fmt.dtype))
+    out = np.ascontiguousarray(base, dtype=fmt.dtype).copy()
+    d_dst = cl.Buffer(ctx.ctx, mf.READ_WRITE | mf.COPY_HOST_PTR, hostbuf=out)
+    luts = cl.Buffer(ctx.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=device_luts())
+    Bridger(ctx, fmt, options).enqueue(ctx.queue, d_src, d_dst, luts)
+    cl.enqueue_copy(ctx.queue, out, d_dst)
+    return out.astype(src.dtype, copy=False).reshape(src.shape)
+
+
+# ----------------------------------------------------------------------------------------------
+# Benchmark: `python -m mlaa_stream.bridge` (timings never go in unit tests)
+# ----------------------------------------------------------------------------------------------
+
+def bench_bridge(device=None, runs: int = 25) -> dict:
+    """Per yardstick scene: error removed, damage, broken wire pixels (all and centre line) and pixels changed,
+    Filter(bridge=False) against Filter(); then median ms per 1920x1080 frame of the core filter, the filter
+    with bridging, and the pass alone (device buffers), interleaved, after 3 warm-up runs."""
+    import time
+
+    from .bench import score_scene
+    from .metrics import broken_wires
+    from .mlaa import Filter
+    from .reconstruct import _centre_line, timing_frames
+    from .scenes import generate_scenes, timing_frame
+
+    report: dict = {"device": default_context(device).name, "scenes": {}}
+    with Filter(device, bridge=False) as core, Filter(device) as bridged:
+        for s in generate_scenes():
+            row = {}
+            outs = {}
+            for name, f in (("core", core), ("core+bridge", bridged)):
+                outs[name] = out = np.stack([f.process(x) for x in s.inputs])
+                r = {k: score_scene(out, s, False)[k] for k in ("error_removed", "damage", "broken_wires")}
+                if s.wires is not None:
+                    r["broken_centre"] = float(np.mean([broken_wires(o, t, g, _centre_line(t, g, w)) for o, t, g, w
+                                                        in zip(out, s.truths, s.backgrounds, s.wires)]))
+                row[name] = r
+            row["changed"] = int((outs["core"] != outs["core+bridge"]).any(-1).sum())
+            report["scenes"][s.name] = row
+        wires = generate_scenes(names=["wires"])[0].inputs[0]
+        frames = {"timing": timing_frame(), "photo": timing_frames().get("photo"),
+                  "wires_tiled": np.ascontiguousarray(np.tile(wires, (5, 5, 1))[:1080, :1920])}
+        ctx = default_context(device)
+        mf = cl.mem_flags
+        luts = cl.Buffer(ctx.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=device_luts())
+        for name, fr in frames.items():
+            if fr is None:
+                continue
+            src = cl.Buffer(ctx.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=fr)
+            dst = cl.Buffer(ctx.ctx, mf.READ_WRITE | mf.COPY_HOST_PTR, hostbuf=fr)
+            pas = Bridger(ctx, frame_format(fr))
+            steps = {"core": lambda: core.process(fr), "core+bridge": lambda: bridged.process(fr),
+                     "pass": lambda: pas.enqueue(ctx.queue, src, dst, luts).wait()}
+            times: dict[str, list[float]] = {k: [] for k in steps}
+            for k in range(runs + 3):
+                for key, step in steps.items():
+                    t0 = time.perf_counter()
+                    step()
+                    if k >= 3:
+                        times[key].append((time.perf_counter() - t0) * 1e3)
+            report[f"ms_1080p_{name}"] = {k: round(float(np.median(v)), 2) for k, v in times.items()}
+    return report
+
+
+def main() -> None:
+    import argparse
+    ap = argparse.ArgumentParser(description=bench_bridge.__doc__)
+    ap.add_argument("--device", default=None)
+    ap.add_argument("--runs", type=int, default=25)
+    args = ap.parse_args()
+    rep = bench_bridge(args.device, args.runs)
+    print(f"device: {rep['device']}")
+    print("| scene | error removed (core / +bridge) | damage | broken | broken (centre line) | px changed |")
+    print("| --- | --- | --- | --- | --- | --- |")
+    for name, row in rep["scenes"].items():
+        a, b = row["core"], row["core+bridge"]
+        broken = (f"{100 * a['broken_wires']:.1f}% / {100 * b['broken_wires']:.1f}%"
+                  if a["broken_wires"] == a["broken_wires"] else "")
+        centre = f"{100 * a['broken_centre']:.1f}% / {100 * b['broken_centre']:.1f}%" if "broken_centre" in a else ""
+        print(f"| {name} | {100 * a['error_removed']:.1f}% / {100 * b['error_removed']:.1f}% | "
+              f"{a['damage']:.2f} / {b['damage']:.2f} | {broken} | {centre} | {row['changed']} |")
+    for key, val in rep.items():
+        if key.startswith("ms_"):
+            print(f"{key}: core {val['core']} ms, core+bridge {val['core+bridge']} ms, pass {val['pass']} ms")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,242 @@
+"""Bridging the dash chains of sub-pixel wires: kernel vs numpy reference, known answers, what must not change.
+
+Tolerances: the kernel and the reference take the same decisions in float32 from the same stored samples (the
+set of written pixels must be identical) and compute the written values with the same float32 operations and
+tables (FP_CONTRACT off), so values may differ by at most 1 stored level (8/16-bit) or 1e-6 (float32); on
+these frames they agree exactly. Known answers: the written coverage is checked against the band model
+computed here from exact sRGB formulas, within 1 level (the tables interpolate).
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mlaa_stream.bridge import BridgeOptions, Bridger, bridge, bridge_reference
+from mlaa_stream.colour import linear_to_srgb, srgb_to_linear
+from mlaa_stream.device import DeviceError, default_context
+from mlaa_stream.formats import frame_format
+from mlaa_stream.scenes import Layer, _ui_layers, encode8, rect, render, stroke, text_polygons
+
+BG = (228, 226, 218)
+INK = (24, 24, 32)
+
+
+@pytest.fixture(scope="module")
+def device():
+    """The OpenCL device tests run on; host-only tests do not ask for it."""
+    try:
+        return default_context(None)
+    except DeviceError as exc:  # pragma: no cover - only without any OpenCL platform
+        pytest.skip(f"no OpenCL device: {exc}")
+
+
+def both(src: np.ndarray, dst: np.ndarray | None = None, **kw) -> np.ndarray:
+    """Kernel output, after checking it against the reference: same pixels written, values within 1 level."""
+    out = bridge(src, dst, **kw)
+    ref = bridge_reference(src, dst, **kw)
+    base = src if dst is None else dst
+    changed_k = np.any((out != base).reshape(*src.shape[:2], -1), -1)
+    changed_r = np.any((ref != base).reshape(*src.shape[:2], -1), -1)
+    np.testing.assert_array_equal(changed_k, changed_r)
+    tol = 1e-6 if src.dtype.kind == "f" else 1
+    np.testing.assert_allclose(out.astype(np.float64), ref.astype(np.float64), rtol=0, atol=tol)
+    return out
+
+
+def canvas(h: int = 24, w: int = 48, colour=BG) -> np.ndarray:
+    img = np.empty((h, w, 3), np.uint8)
+    img[:] = colour
+    return img
+
+
+def dash_chain(img: np.ndarray, x0: int, y0: int, n: int, g: int, count: int, d: int = 1) -> list[tuple]:
+    """Dashes of n pixels with gaps of g, each one row below (d=1) the last: the 1-spp samples of a thin wire
+    of slope d/(n+g) and width n/(n+g). Returns the dashes as (row, first column, last column)."""
+    dashes = []
+    for k in range(count):
+        x, y = x0 + k * (n + g), y0 + k * d
+        img[y, x:x + n] = INK
+        dashes.append((y, x, x + n - 1))
+    return dashes
+
+
+def coverage_of(out: np.ndarray) -> np.ndarray:
+    """Ink coverage per pixel read back from an output over BG with INK, in linear light."""
+    lin = srgb_to_linear(out[..., 0] / 255.0)
+    b, i = srgb_to_linear(BG[0] / 255.0), srgb_to_linear(INK[0] / 255.0)
+    return (lin - b) / (i - b)
+
+
+# --- known answers ----------------------------------------------------------------------------------
+
+def test_dash_chain_gaps_are_filled_with_the_band_coverage(device):
+    img = canvas()
+    n, g = 3, 3
+    dashes = dash_chain(img, 4, 6, n, g, 5)
+    out = both(img)
+    # every gap pixel of the inner links, in both rows, now shows the wire
+    for (r, _, e), (r2, s, _) in zip(dashes[:-1], dashes[1:]):
+        assert (out[r, e + 1:s] != BG).any(-1).all() and (out[r2, e + 1:s] != BG).any(-1).all()
+    # the band model, computed here: W = n / (n + g) rows, centre from the middle of dash k (row r) to the
+    # middle of dash k+1 (row r+1); a pixel's coverage = overlap of [u - W/2, u + W/2] with its row
+    W = n / (n + g)
+    (r, a, e), (_, s, b) = dashes[1], dashes[2]
+    m1, m2 = (a + e) / 2, (s + b) / 2
+    for c in range(int(np.ceil(m1)), int(np.ceil(m2))):
+        u = (c - m1) / (m2 - m1)
+        for row, lo in ((r, -0.5), (r + 1, 0.5)):
+            cov = max(0.0, min(u + W / 2, lo + 1) - max(u - W / 2, lo))
+            want = linear_to_srgb(srgb_to_linear(np.array(BG) / 255) * (1 - cov) +
+                                  srgb_to_linear(np.array(INK) / 255) * cov) * 255
+            np.testing.assert_allclose(out[row, c].astype(float), want, atol=1.0, err_msg=f"row {row} col {c}")
+    # the band keeps its width: each column between the dash middles holds W of ink over the two rows
+    cols = range(int(np.ceil(m1)), int(np.ceil(m2)))
+    np.testing.assert_allclose([coverage_of(out)[r:r + 2, c].sum() for c in cols], W, atol=0.02)
+    # dashes are dimmed toward the wire's width; nothing outside rows of the chain changes
+    assert 0.4 < coverage_of(out)[r, a + 1] < 0.6
+    rows = sorted({d[0] for d in dashes})
+    untouched = np.ones(img.shape[:2], bool)
+    untouched[rows] = False
+    np.testing.assert_array_equal(out[untouched], img[untouched])
+
+
+def test_rising_and_steep_chains_are_bridged_like_their_mirror_and_transpose(device):
+    img = canvas(32, 48)
+    dash_chain(img, 3, 20, 4, 5, 5, d=-1)
+    out = both(img)
+    assert (out != img).any(-1).sum() > 20
+    flipped = both(np.ascontiguousarray(img[::-1]))
+    np.testing.assert_array_equal(flipped[::-1], out)  # the falling chain: rows mirrored
+    steep = both(np.ascontiguousarray(img.transpose(1, 0, 2)))  # columns orientation
+    np.testing.assert_array_equal(steep.transpose(1, 0, 2), out)
+
+
+def test_near_diagonal_chain_is_bridged(device):
+    # a thin wire near 40 degrees: runs along the diagonal, each next run one pixel to the right
+    img = canvas(40, 40)
+    for k in range(5):
+        for t in range(3):
+            img[4 + 5 * k + t, 4 + 6 * k + t] = INK
+    out = both(img)
+    gap = out[4 + 3, 4 + 3]  # the pixel after the first run, on its diagonal
+    assert (gap != BG).any() and coverage_of(out)[7, 7] > 0.05
+
+
+def test_ink_colour_and_channels(device):
+    img = canvas()
+    dash_chain(img, 2, 4, 3, 4, 6)
+    img[..., 2] = 0  # a yellow background: channels other than R take part
+    img[img[..., 0] < 100] = (150, 30, 30)
+    for frame, kw in ((img, {}), (img[..., ::-1].copy(), {"bgr": True}),
+                      (np.dstack([img, np.full(img.shape[:2], 77, np.uint8)]), {}),
+                      (img.astype(np.uint16) * 257, {}), (img.astype(np.float32) / 255, {}),
+                      (np.ascontiguousarray(img[..., 0]), {})):
+        out = both(frame, **kw)
+        assert (out != frame).any(), f"{frame.dtype} {frame.shape}"
+        if frame.ndim == 3 and frame.shape[2] == 4:
+            np.testing.assert_array_equal(out[..., 3], frame[..., 3])  # alpha untouched
+
+
+# --- what must not change ----------------------------------------------------------------------------
+
+def render_1spp(layers, w, h) -> np.ndarray:
+    return encode8(render([Layer(None, BG), *layers], w, h, 1))
+
+
+@pytest.mark.parametrize("case", ["same_row_dashes", "filled_rect", "rotated_rect", "dot", "line_end",
+                                  "lone_pair", "staircase", "ui_text"])
+def test_unchanged(device, case):
+    img = canvas(40, 96)
+    if case == "same_row_dashes":  # an intentionally dashed line: gaps in the same row
+        for x in range(2, 90, 7):
+            img[20, x:x + 4] = INK
+    elif case == "filled_rect":
+        img[8:30, 10:70] = INK
+    elif case == "rotated_rect":
+        img = render_1spp([Layer((stroke(np.array([[5.0, 10.0], [90.0, 16.0]]), 8.0),), INK)], 96, 40)
+    elif case == "dot":
+        img[20, 40] = INK
+    elif case == "line_end":  # a 1-px line that ends, and one a row below that starts after it
+        img[20, 5:40] = INK
+    elif case == "lone_pair":  # two dashes one row apart, nothing else: not a chain
+        img[20, 10:14] = INK
+        img[21, 18:22] = INK
+    elif case == "staircase":  # a 1-px aliased line: runs touch diagonally, no gap to bridge
+        for k in range(8):
+            img[5 + k, 4 + 6 * k:10 + 6 * k] = INK
+    elif case == "ui_text":  # the yardstick's text: DejaVu 6-20 px in boxes with 1-px borders, 1 spp
+        layers, _ = _ui_layers(160, 120, np.random.default_rng(3), False)
+        img = encode8(render(layers, 160, 120, 1))
+    out = both(img)
+    np.testing.assert_array_equal(out, img)
+
+
+def test_free_text_is_never_bridged_across_glyphs(device):
+    # Text without boxes: thin strokes of small glyphs (the diagonal of a 6-px '7', the curve of a 9-px
+    # 'C') are dash chains themselves and may be bridged; nothing may appear away from the ink (a link
+    # between specks of different glyphs or lines: what GAP_PER_RUN and the chain rule exclude).
+    img = render_1spp([Layer(text_polygons("Settings mnw Il1 -=- e", 2.0, 12.0, 7.0), INK),
+                       Layer(text_polygons("Cancel OK @% jumps", 2.0, 26.0, 9.0), INK),
+                       Layer(text_polygons("lazy dogs 4567", 2.0, 37.0, 6.0), INK)], 96, 40)
+    out = both(img)
+    changed = (out != img).any(-1)
+    ink = (img != BG).any(-1)
+    near = ink.copy()
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            near |= np.roll(np.roll(ink, dy, 0), dx, 1)
+    assert not (changed & ~near).any()
+    assert changed.sum() <= 0.005 * changed.size
+
+
+# --- kernel vs reference on seeded random frames ----------------------------------------------------
+
+def random_wires(seed: int, w: int = 96, h: int = 64) -> np.ndarray:
+    """1-spp thin wires (0.2-0.9 px, any angle) and a few filled shapes on a flat background."""
+    rng = np.random.default_rng(seed)
+    bg = tuple(int(v) for v in rng.integers(120, 250, 3))
+    layers = [Layer(None, bg)]
+    for _ in range(3):
+        x0, y0 = rng.uniform(0, w), rng.uniform(0, h)
+        layers.append(Layer((rect(x0, y0, x0 + rng.uniform(3, 15), y0 + rng.uniform(3, 15)),),
+                            tuple(int(v) for v in rng.integers(0, 255, 3))))
+    for _ in range(7):
+        ang = rng.uniform(0, np.pi)
+        c = np.array([rng.uniform(0, w), rng.uniform(0, h)])
+        d = np.array([np.cos(ang), np.sin(ang)]) * rng.uniform(20, 80)
+        layers.append(Layer((stroke(np.array([c - d, c + d]), rng.uniform(0.2, 0.9)),),
+                            tuple(int(v) for v in rng.integers(0, 100, 3))))
+    return encode8(render(layers, w, h, 1))
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_kernel_matches_reference_on_random_wires(device, seed):
+    img = random_wires(seed)
+    rng = np.random.default_rng(100 + seed)
+    other = np.clip(img.astype(np.int16) + rng.integers(-20, 21, img.shape), 0, 255).astype(np.uint8)
+    out = both(img, other)  # drawn into another frame (as over the MLAA output)
+    assert (out != other).any(), "the random wires should give some links"
+    both(img.astype(np.uint16) * 257)
+    both(img, options=BridgeOptions(min_dashes=2, max_gap=8, max_run=12, linear=False))
+
+
+def test_filter_option_draws_over_the_blended_frame(device):
+    from mlaa_stream.mlaa import PRESETS, Filter
+    img = random_wires(7)
+    with Filter(bridge=False) as core, Filter() as bridged:
+        base = core.process(img)
+        out = bridged.process(img)
+    np.testing.assert_array_equal(out, bridge_reference(img, base))
+    assert PRESETS["no_bridge"] == {"bridge": False}
+
+
+# --- host checks ------------------------------------------------------------------------------------
+
+def test_host_checks(device):
+    img = canvas()
+    with pytest.raises(ValueError, match="expected dst like src"):
+        bridge(img, img[:, :10].copy())
+    with pytest.raises(ValueError, match="max_gap in 1..30"):
+        Bridger(device, frame_format(img), BridgeOptions(max_gap=40))
+    with pytest.raises(ValueError, match="min_dashes 2 or 3"):
+        Bridger(device, frame_format(img), BridgeOptions(min_dashes=4))
