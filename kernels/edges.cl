@@ -151,6 +151,44 @@ inline int is_ramp_int(__global const PIXEL_T *src, int ib, int has_before, int 
     return 0;
 }
 
+// Already antialiased content (AA text, AA lines, downscaled images): a step between p and q whose
+// neighbours along the step hold a colour *between* p's and q's (projected on p -> q at t in
+// (AA_LO, 1 - AA_LO), off the segment by at most AA_OFF of the step) is a rendered coverage ramp,
+// not a 1-spp jaggy: it is not an edge. 1-spp renders have the two sides' colours there.
+#ifndef AA_GUARD
+#define AA_GUARD 1
+#endif
+#ifndef AA_LO
+#define AA_LO 0.1f
+#endif
+#ifndef AA_OFF
+#define AA_OFF 0.35f
+#endif   // (the host passes mlaa.AA_LO / AA_OFF)
+inline int between(float4 m, float4 p, float4 d, float dd)
+{
+    const float4 v = m - p;
+    const float t = (v.x * d.x + v.y * d.y + v.z * d.z) / dd;
+    if (t <= AA_LO || t >= 1.0f - AA_LO) return 0;
+    const float4 r = v - t * d;
+    return r.x * r.x + r.y * r.y + r.z * r.z <= AA_OFF * AA_OFF * dd;
+}
+// p at i, q at j; s = the index step along the edge (1 for a bottom edge, width for a right edge);
+// has_a / has_b: the neighbours before / after along the edge exist.
+inline int antialiased(__global const PIXEL_T *src, __global const float *luts, float4 p, float4 q,
+                       int i, int j, int s, int has_a, int has_b)
+{
+#if AA_GUARD
+    const float4 d = q - p;
+    const float dd = d.x * d.x + d.y * d.y + d.z * d.z;
+    if (!(dd > 0.0f)) return 0;
+    if (has_a && (between(to_encoded(luts, load_px(src, i - s)), p, d, dd) ||
+                  between(to_encoded(luts, load_px(src, j - s)), p, d, dd))) return 1;
+    if (has_b && (between(to_encoded(luts, load_px(src, i + s)), p, d, dd) ||
+                  between(to_encoded(luts, load_px(src, j + s)), p, d, dd))) return 1;
+#endif
+    return 0;
+}
+
 // GROUP pixels whose samples differ from the same sample of the right neighbour and of the pixel
 // below by at most QUIET_LEVELS stored levels: no edge there, by the metric's cheap bound (may_differ;
 // the host derives QUIET_LEVELS from it with a margin: mlaa.quiet_levels). Flat areas (most of a
@@ -230,7 +268,8 @@ __kernel void detect_edges(__global const PIXEL_T *src, __global const float *lu
             if (may_differ(&c, &b, threshold)
                 && !FLOAT_RAMP(y > 0 ? to_encoded(luts, load_px(src, i - width)) : c.rgb, y > 0, c.rgb, b.rgb,
                                y + 2 < height ? to_encoded(luts, load_px(src, i + 2 * width)) : b.rgb, y + 2 < height)
-                && differs(luts, &c, &b, threshold))
+                && differs(luts, &c, &b, threshold)
+                && !antialiased(src, luts, c.rgb, b.rgb, i, i + width, 1, x > 0, x + 1 < width))
                 e |= EDGE_BOTTOM;
         }
         c_valid = 0;
@@ -239,7 +278,8 @@ __kernel void detect_edges(__global const PIXEL_T *src, __global const float *lu
             if (may_differ(&c, &r, threshold)
                 && !FLOAT_RAMP(x > 0 ? to_encoded(luts, load_px(src, i - 1)) : c.rgb, x > 0, c.rgb, r.rgb,
                                x + 2 < width ? to_encoded(luts, load_px(src, i + 2)) : r.rgb, x + 2 < width)
-                && differs(luts, &c, &r, threshold))
+                && differs(luts, &c, &r, threshold)
+                && !antialiased(src, luts, c.rgb, r.rgb, i, i + 1, width, y > 0, y + 1 < height))
                 e |= EDGE_RIGHT;
             c = r;
             c_valid = 1;

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from .colour import LUMA, linear_to_srgb, rgb_to_lab, srgb_to_linear
-from .mlaa import DEFAULT_THRESHOLDS, SHORT_CORNER, ramp_fraction, trapezoid_area
+from .mlaa import AA_LO, AA_OFF, DEFAULT_THRESHOLDS, SHORT_CORNER, ramp_fraction, trapezoid_area
 
 BOTTOM, RIGHT = 1, 2
 BOTH = 2  # an end crossed on both sides
@@ -30,7 +30,8 @@ def normalised_rgb(frame: np.ndarray, bgr: bool = False) -> tuple[np.ndarray, np
 
 
 def edges_reference(frame: np.ndarray, threshold: float | None = None, metric: str = "lab",
-                    bgr: bool = False, linear_input: bool = False, ramp: float = 0.35) -> np.ndarray:
+                    bgr: bool = False, linear_input: bool = False, ramp: float = 0.35,
+                    aa_guard: bool = True) -> np.ndarray:
     """Bit 0: colour differs from the pixel below; bit 1: from the pixel to the right.
     Ramps (the colour keeps moving the same way one pixel further out, by more than `ramp` times
     the step, on the channel of the largest step) are not edges."""
@@ -75,12 +76,35 @@ def edges_reference(frame: np.ndarray, threshold: float | None = None, metric: s
         lim = ramp * np.abs(d1)
         return ((d0 * d1 > 0) & (np.abs(d0) > lim)) | ((d2 * d1 > 0) & (np.abs(d2) > lim))
 
+    def between(m: np.ndarray, p: np.ndarray, d: np.ndarray, dd: np.ndarray) -> np.ndarray:
+        v = m - p
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = (v * d).sum(-1) / dd
+        r = v - t[..., None] * d
+        return (t > AA_LO) & (t < 1.0 - AA_LO) & ((r * r).sum(-1) <= AA_OFF * AA_OFF * dd) & (dd > 0)
+
+    def antialiased_along(c: np.ndarray) -> np.ndarray:
+        """For steps c[k] -> c[k+1] along axis 0: does a neighbour along the step (axis 1) of
+        either pixel hold a colour between the two (an already antialiased edge)?"""
+        p, q = c[:-1], c[1:]
+        d = q - p
+        dd = (d * d).sum(-1)
+        out = np.zeros(dd.shape, bool)
+        for sl_m, sl_o in ((np.s_[:, :-1], np.s_[:, 1:]), (np.s_[:, 1:], np.s_[:, :-1])):
+            # neighbours at axis-1 offset -1 (for columns 1..) and +1 (for columns ..-2)
+            out[sl_o] |= between(p[sl_m], p[sl_o], d[sl_o], dd[sl_o])
+            out[sl_o] |= between(q[sl_m], p[sl_o], d[sl_o], dd[sl_o])
+        return out
+
     e = np.zeros(rgb.shape[:2], np.uint8)
     bottom = differ(rgb[:-1], rgb[1:])
     right = differ(rgb[:, :-1], rgb[:, 1:])
     if ramp > 0:
         bottom &= ~ramp_along(samples)
         right &= ~ramp_along(samples.transpose(1, 0, 2)).T
+    if aa_guard:
+        bottom &= ~antialiased_along(rgb)
+        right &= ~antialiased_along(rgb.transpose(1, 0, 2)).transpose(1, 0)
     e[:-1] |= BOTTOM * bottom.astype(np.uint8)
     e[:, :-1] |= RIGHT * right.astype(np.uint8)
     return e
@@ -236,9 +260,9 @@ def _to_dtype(rgb: np.ndarray, alpha: np.ndarray | None, like: np.ndarray) -> np
 def mlaa_reference(frame: np.ndarray, threshold: float | None = None, metric: str = "lab",
                    linear: bool = True, bgr: bool = False, linear_input: bool = False,
                    rounding: float = 0.0, blend_u: bool = True, ramp: float = 0.35,
-                   short_corner: float = SHORT_CORNER) -> np.ndarray:
-    """The whole spatial filter, pass after pass."""
-    e = edges_reference(frame, threshold, metric, bgr, linear_input, ramp)
+                   short_corner: float = SHORT_CORNER, aa_guard: bool = True) -> np.ndarray:
+    """The whole spatial filter, pass after pass (without the bridging pass: mlaa_stream.bridge)."""
+    e = edges_reference(frame, threshold, metric, bgr, linear_input, ramp, aa_guard)
     hd, vd = distances_reference(e)
     wts = weights_reference(e, hd, vd, rounding, blend_u, frame, short_corner)
     return blend_reference(frame, wts, linear, linear_input, bgr)

@@ -68,6 +68,43 @@ def test_edges_match_reference(filt, seed):
     assert want.astype(bool).mean() > 0.01  # the image really has edges
 
 
+def antialiased_scene(seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """(1-spp render, 8x8-supersampled render) of random polygons and a thin bar."""
+    from mlaa_stream import scenes as S
+
+    rng = np.random.default_rng(seed)
+    layers = [S.Layer(None, tuple(rng.integers(0, 256, 3)))]
+    for _ in range(6):
+        layers.append(S.Layer((S.rotated_rect(*rng.uniform(10, 70, 2), *rng.uniform(6, 40, 2),
+                                              rng.uniform(0, 180)),), tuple(rng.integers(0, 256, 3))))
+    layers.append(S.Layer((S.rotated_rect(40.2, 30.1, 70, 1.2, rng.uniform(0, 180)),), (20, 20, 20)))
+    return S.render_pair(layers, 80, 60)
+
+
+@pytest.mark.parametrize("seed", [11, 12])
+def test_edges_match_reference_on_antialiased_input(filt, seed):
+    """The already-antialiased guard (colour between p and q beside the step), kernel vs reference."""
+    _, aa = antialiased_scene(seed)
+    got = filt.intermediates(aa)["edges"]
+    want = edges_reference(aa, filt.options.threshold)
+    differ = (got ^ want) & ~near_threshold(aa, filt.options.threshold)
+    assert not differ.any(), f"{differ.astype(bool).sum()} edge bits differ"
+    loose = edges_reference(aa, filt.options.threshold, aa_guard=False)
+    assert (loose & ~want).any()   # the guard did reject edges here
+
+
+@pytest.mark.parametrize("angle", [10, 30, 60, 80])
+def test_antialiased_polygon_edges_are_left_alone(filt, angle):
+    """A polygon already antialiased (8x8 samples per pixel) comes out untouched; its 1-spp render
+    is still filtered."""
+    from mlaa_stream import scenes as S
+
+    layers = [S.Layer(None, (230, 225, 210)), S.Layer((S.rotated_rect(40.3, 30.2, 50, 30, angle),), (40, 60, 120))]
+    one_spp, aa = S.render_pair(layers, 80, 60)
+    np.testing.assert_array_equal(filt.process(aa), aa)
+    assert (filt.process(one_spp) != one_spp).any(-1).sum() > 100
+
+
 @pytest.mark.parametrize("metric,threshold", [("luma", 0.06), ("rgb", 0.06)])
 def test_other_metrics_match_reference(metric, threshold):
     img = blocky(7)
