@@ -268,8 +268,8 @@ __kernel void detect_edges(__global const PIXEL_T *src, __global const float *lu
             if (may_differ(&c, &b, threshold)
                 && !FLOAT_RAMP(y > 0 ? to_encoded(luts, load_px(src, i - width)) : c.rgb, y > 0, c.rgb, b.rgb,
                                y + 2 < height ? to_encoded(luts, load_px(src, i + 2 * width)) : b.rgb, y + 2 < height)
-                && differs(luts, &c, &b, threshold)
-                && !antialiased(src, luts, c.rgb, b.rgb, i, i + width, 1, x > 0, x + 1 < width))
+                && !antialiased(src, luts, c.rgb, b.rgb, i, i + width, 1, x > 0, x + 1 < width)
+                && differs(luts, &c, &b, threshold))
                 e |= EDGE_BOTTOM;
         }
         c_valid = 0;
@@ -278,8 +278,8 @@ __kernel void detect_edges(__global const PIXEL_T *src, __global const float *lu
             if (may_differ(&c, &r, threshold)
                 && !FLOAT_RAMP(x > 0 ? to_encoded(luts, load_px(src, i - 1)) : c.rgb, x > 0, c.rgb, r.rgb,
                                x + 2 < width ? to_encoded(luts, load_px(src, i + 2)) : r.rgb, x + 2 < width)
-                && differs(luts, &c, &r, threshold)
-                && !antialiased(src, luts, c.rgb, r.rgb, i, i + 1, width, y > 0, y + 1 < height))
+                && !antialiased(src, luts, c.rgb, r.rgb, i, i + 1, width, y > 0, y + 1 < height)
+                && differs(luts, &c, &r, threshold))
                 e |= EDGE_RIGHT;
             c = r;
             c_valid = 1;
