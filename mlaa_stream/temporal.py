@@ -99,6 +99,7 @@ class Pyramid:
     flow_scale: int
     small_scale: int
     grey: np.ndarray | None = None   # uint8, full size (the identical-frame test)
+    _blur: dict = field(default_factory=dict, repr=False, compare=False)   # see blurred()
 
     @staticmethod
     def of(frame: np.ndarray, bgr: bool, grey: np.ndarray | None = None) -> "Pyramid":
@@ -112,10 +113,9 @@ class Pyramid:
     def blurred(self, level: str) -> np.ndarray:
         """The "flow" or "small" grey as float32 blurred by LK_SIGMA, computed once per frame (a
         frame is the current one, then the previous one)."""
-        cache = self.__dict__.setdefault("_blurred", {})
-        if level not in cache:
-            cache[level] = cv2.GaussianBlur(getattr(self, level).astype(np.float32), (0, 0), LK_SIGMA)
-        return cache[level]
+        if level not in self._blur:
+            self._blur[level] = cv2.GaussianBlur(getattr(self, level).astype(np.float32), (0, 0), LK_SIGMA)
+        return self._blur[level]
 
 
 def histogram_distance(a: np.ndarray, b: np.ndarray, bins: int = 32) -> float:
