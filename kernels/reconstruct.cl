@@ -6,14 +6,18 @@
 // Three passes, each one work item per SEGMENT pixels of a row that skips GROUP pixels at a time where
 // nothing can happen (PoCL CPU runs branchy per-pixel kernels slowly, and CIELAB costs ~25 ns a pixel):
 //   reconstruct_candidates  RGB only: mask[i] = the ring neighbours that may differ from A in ΔE (Lipschitz
-//                           bound) when the rules may fire at A, else 0
-//   reconstruct_lab         lab[i] = CIELAB of every pixel a candidate will read (itself, its maybe-ring)
-//   reconstruct             the rules, at candidates only
+//                           bound) when the rules may fire at A, else 0; seg[] = the segment holds a
+//                           candidate. Identical segments and groups settled at once; integer frames
+//                           test a group a vector lane per pixel
+//   reconstruct_lab         lab[i] = CIELAB of every pixel a candidate will read (itself, its maybe-ring);
+//                           segments with no candidate in the 3x3 segments around skipped
+//   reconstruct             the rules, at candidates only (segments without one skipped)
 // Defines (mlaa_stream.reconstruct.Reconstructor):
 //   CHEAP_BOUND      max-channel difference (normalised) below which ΔE76 cannot exceed the threshold
 //   CHEAP_LEVELS     integer frames: the smallest difference in stored levels over CHEAP_BOUND * PIXEL_MAX
 //   FAR_LEVELS       the same for 2 * CHEAP_BOUND (the extended rules' line contrast)
-//   SAMPLE_BYTES     1, 2 or 4: bytes of a stored sample (uchar, ushort, float), for the quiet-group test
+//   SAMPLE_BYTES     1, 2 or 4: bytes of a stored sample (uchar, ushort, float), for the identical-window
+//                    tests and the 8-bit RGB loads
 //   EXTENDED         1: also the rules beyond the paper (line-relative X, two-pixel gaps)
 //   LINEAR_INPUT     1 when samples are linear light: encoded to sRGB (table) before the Lab comparison
 //   MAX_LINE_PIXELS  line-coloured pixels a 5x5 window around a gap may hold
@@ -46,6 +50,10 @@
 #ifndef MAX_OFFSET
 #define MAX_OFFSET 1.01f
 #endif
+
+// seg[]: a byte per SEGMENT pixels of a row, set by pass 1 when the segment holds a candidate.
+#define SEG_COUNT(w) (((w) + SEGMENT - 1) / SEGMENT)
+#define SEG_IDX(s, y, w) ((y) * SEG_COUNT(w) + (s))
 
 // The ring N8*(A), clockwise from the top-left: bit k of a mask is (RX[k], RY[k]).
 __constant int RX[8] = {-1, 0, 1, 1, 1, 0, -1, -1};
@@ -238,28 +246,34 @@ inline int same_bytes(__global const uchar *a, __global const uchar *b, int n)
     return same;
 }
 
-inline int quiet_group(__global const PIXEL_T *src, int i, int width)
+// Bit-identical 3x(GROUP+2) window (rendered flat areas): rows above and below equal this row over
+// x-1..x+GROUP, and this row equal to itself shifted by a pixel.
+inline int identical_window(__global const PIXEL_T *src, int i, int width)
 {
-    // bit-identical 3x(GROUP+2) window first (rendered flat areas): rows above and below equal this row
-    // over x-1..x+GROUP, and this row equal to itself shifted by a pixel
     const int px = CHANNELS * SAMPLE_BYTES, row = width * px;
     __global const uchar *p = (__global const uchar *)src + (size_t)(i - 1) * px;
-    if (same_bytes(p, p - row, (GROUP + 2) * px) && same_bytes(p, p + row, (GROUP + 2) * px) &&
-        same_bytes(p, p + px, (GROUP + 1) * px))
-        return 1;
-    // else every sample against the same sample of its 8 neighbours (smooth areas)
+    return same_bytes(p, p - row, (GROUP + 2) * px) && same_bytes(p, p + row, (GROUP + 2) * px) &&
+           same_bytes(p, p + px, (GROUP + 1) * px);
+}
+
+#ifdef PIXEL_IS_FLOAT
+// Float frames: every sample against the same sample of its 8 neighbours (smooth areas).
+inline int smooth_group(__global const PIXEL_T *src, int i, int width)
+{
     __global const PIXEL_T *q = src + (size_t)i * CHANNELS;
     const int rs = width * CHANNELS;
-    int hit = 0;
-    for (int k = 0; k < 8; ++k) {
+    for (int k = 0; k < 8; ++k) {   // a neighbour at a time: busy groups leave early
         const int off = RY[k] * rs + RX[k] * CHANNELS;
+        int hit = 0;
         for (int t = 0; t < GROUP * CHANNELS; ++t) {
             rawdiff u = q[t], v = q[t + off];
             hit |= (u > v ? u - v : v - u) >= NEAR_LIMIT;
         }
+        if (hit) return 0;
     }
-    return !hit;
+    return 1;
 }
+#endif
 
 // Ring bits whose neighbour lies inside the frame.
 inline uint valid_ring(int x, int y, int width, int height)
@@ -271,6 +285,82 @@ inline uint valid_ring(int x, int y, int width, int height)
     if (y == height - 1) v &= ~0x70u;   // SE, S, SW
     return v;
 }
+
+#ifndef PIXEL_IS_FLOAT
+// ---- integer frames: a whole group at once, a lane per pixel (OpenCL vectors: SIMD on a CPU, plain
+// registers on a GPU). A row vector holds one sample of the pixels g-1 .. g+GROUP of a row (10 lanes); a
+// neighbour column of the group is that row shifted by 0 (x-1), 1 (x) or 2 (x+1) lanes. ushort lanes hold
+// 8- and 16-bit samples, and |a - b| as the larger minus the smaller never overflows. Macros, not
+// functions, for the wide vectors (PoCL passes them to calls through memory).
+#define CH (CHANNELS < 3 ? 1 : 3)   // samples compared (gray: one; RGBA: alpha left out, as in raw_px)
+#define RGB8 (CHANNELS == 3 && SAMPLE_BYTES == 1)
+#define ROW_SAMPLE(p, c) ((ushort16)((p)[c], (p)[(c) + CHANNELS], (p)[(c) + 2 * CHANNELS],               \
+    (p)[(c) + 3 * CHANNELS], (p)[(c) + 4 * CHANNELS], (p)[(c) + 5 * CHANNELS], (p)[(c) + 6 * CHANNELS],   \
+    (p)[(c) + 7 * CHANNELS], (p)[(c) + 8 * CHANNELS], (p)[(c) + 9 * CHANNELS], 0, 0, 0, 0, 0, 0))
+#define ABS_DIFF(u, v) ((u) > (v) ? (u) - (v) : (v) - (u))
+#define RING_BITS(d0, d1, d2, d3, d4, d5, d6, d7, lim)                                                    \
+    (((d0 >= (ushort)(lim)) & (short8)1) | ((d1 >= (ushort)(lim)) & (short8)2) |                         \
+     ((d2 >= (ushort)(lim)) & (short8)4) | ((d3 >= (ushort)(lim)) & (short8)8) |                         \
+     ((d4 >= (ushort)(lim)) & (short8)16) | ((d5 >= (ushort)(lim)) & (short8)32) |                       \
+     ((d6 >= (ushort)(lim)) & (short8)64) | ((d7 >= (ushort)(lim)) & (short8)128))
+
+#if RGB8
+// 8-bit RGB: a row's 30 bytes are bytes 0-15 (lo) and 14-29 (hi) of two loads, split into samples by swizzles.
+#define SPLIT_RGB8(lo, hi, c0, c1, c2) {                                                                  \
+    c0 = convert_ushort16((uchar16)(lo.s0, lo.s3, lo.s6, lo.s9, lo.sc, lo.sf, hi.s4, hi.s7, hi.sa, hi.sd, \
+                                    0, 0, 0, 0, 0, 0));                                                   \
+    c1 = convert_ushort16((uchar16)(lo.s1, lo.s4, lo.s7, lo.sa, lo.sd, hi.s2, hi.s5, hi.s8, hi.sb, hi.se, \
+                                    0, 0, 0, 0, 0, 0));                                                   \
+    c2 = convert_ushort16((uchar16)(lo.s2, lo.s5, lo.s8, lo.sb, lo.se, hi.s3, hi.s6, hi.s9, hi.sc, hi.sf, \
+                                    0, 0, 0, 0, 0, 0)); }
+
+#endif
+
+// Ring masks of the GROUP pixels from i on (an interior group): bit k where neighbour k's max-channel
+// difference reaches NEAR_LIMIT (*maybe) or FAR_LIMIT (*far) -- the scalar path's test, a lane per pixel.
+// 8-bit RGB: lo, hi are the group's row (SPLIT_RGB8).
+inline void group_masks(__global const PIXEL_T *src, int i, int width, uchar16 lo, uchar16 hi,
+                        short8 *maybe, short8 *far)
+{
+    __global const PIXEL_T *p = src + (size_t)(i - 1) * CHANNELS;
+    const size_t rs = (size_t)width * CHANNELS;
+#if CH == 3
+    ushort16 c0, c1, c2;
+#if RGB8
+    SPLIT_RGB8(lo, hi, c0, c1, c2)
+#define LOAD_ROW(q) { const uchar16 l = vload16(0, q), h = vload16(0, (q) + 14); SPLIT_RGB8(l, h, c0, c1, c2) }
+#else
+    c0 = ROW_SAMPLE(p, 0); c1 = ROW_SAMPLE(p, 1); c2 = ROW_SAMPLE(p, 2);
+#define LOAD_ROW(q) { c0 = ROW_SAMPLE(q, 0); c1 = ROW_SAMPLE(q, 1); c2 = ROW_SAMPLE(q, 2); }
+#endif
+    const ushort8 a0 = c0.s12345678, a1 = c1.s12345678, a2 = c2.s12345678;
+#define DIFF(sw, out) {                                                                    \
+        ushort8 u = ABS_DIFF(c0.sw, a0), v = ABS_DIFF(c1.sw, a1), w = ABS_DIFF(c2.sw, a2);    \
+        u = u > v ? u : v;                                                                 \
+        out = u > w ? u : w; }
+#else
+    ushort16 c0 = ROW_SAMPLE(p, 0);
+    const ushort8 a0 = c0.s12345678;
+#define DIFF(sw, out) { out = ABS_DIFF(c0.sw, a0); }
+#define LOAD_ROW(q) { c0 = ROW_SAMPLE(q, 0); }
+#endif
+    ushort8 d0, d1, d2, d3, d4, d5, d6, d7;
+    DIFF(s01234567, d7)   // W
+    DIFF(s23456789, d3)   // E
+    LOAD_ROW(p - rs)
+    DIFF(s01234567, d0)   // NW
+    DIFF(s12345678, d1)   // N
+    DIFF(s23456789, d2)   // NE
+    LOAD_ROW(p + rs)
+    DIFF(s01234567, d6)   // SW
+    DIFF(s12345678, d5)   // S
+    DIFF(s23456789, d4)   // SE
+#undef DIFF
+#undef LOAD_ROW
+    *maybe = RING_BITS(d0, d1, d2, d3, d4, d5, d6, d7, NEAR_LIMIT);
+    *far = RING_BITS(d0, d1, d2, d3, d4, d5, d6, d7, FAR_LIMIT);
+}
+#endif
 
 // Necessary conditions of the two-pixel rule along ring direction k, in RGB: q1 q2 (ahead) and q3 q4 (behind
 // B) all more than 2 thresholds from A in ΔE (each is within one threshold of the line's mean, which is more
@@ -285,22 +375,80 @@ inline int two_gap_possible(__global const PIXEL_T *src, rawpx a, int x, int y, 
            max_diff(raw_px(src, IDX(x - 3 * dx, y - 3 * dy, width)), a) >= FAR_LIMIT;
 }
 
-// mask[i] = `maybe` (ring bits that may be in X: max-channel difference >= the cheap bound, so ΔE may exceed
-// the threshold) where a rule may fire at i, else 0. The paper's rule and the line-relative rule need a gap
-// among the sub-masks of X, so of `maybe` (table bit 1); the two-pixel rule needs two_gap_possible.
-__kernel void reconstruct_candidates(__global const PIXEL_T *src, __global uchar *mask, __global const uint *table,
-                                     const int width, const int height)
+// A rule may fire at the pixel with ring bits `maybe` (its neighbours at or over the cheap bound) and `far`
+// (at or over twice it): the paper's rule and the line-relative rule need a gap among the sub-masks of X,
+// so of `maybe` (table bit 1); the two-pixel rule needs two_gap_possible along a far direction.
+inline int candidate(__global const PIXEL_T *src, __global const uint *table, rawpx a, uint maybe, uint far,
+                     int x, int y, int width, int height)
+{
+    int cand = (table[maybe] & 2u) != 0;
+#if EXTENDED
+    for (int k = 0; far >> k && !cand; ++k)
+        if (far >> k & 1u) cand = two_gap_possible(src, a, x, y, k, width, height);
+#endif
+    return cand;
+}
+
+// mask[i] = `maybe` where a rule may fire at i (candidate()), else 0. Interior groups: a bit-identical
+// window is settled at once; else integer frames test the group a lane per pixel (group_masks), float
+// frames skip smooth groups. Borders and float frames: a sliding 3x3 window, a pixel at a time.
+__kernel void reconstruct_candidates(__global const PIXEL_T *src, __global uchar *mask, __global uchar *seg,
+                                     __global const uint *table, const int width, const int height)
 {
     const int x0 = get_global_id(0) * SEGMENT, y = get_global_id(1);
     if (x0 >= width || y >= height) return;
     const int x1 = x0 + SEGMENT < width ? x0 + SEGMENT : width;
     const int ya = y > 0 ? y - 1 : 0, yb = y + 1 < height ? y + 1 : height - 1;
+    uint any = 0;   // some candidate in this segment (seg[], read by passes 2 and 3)
+    // a whole interior segment bit-identical at once: 3 rows of x0-1..x1 equal, this row constant
+    if (x1 - x0 == SEGMENT && x0 > 0 && x1 < width && y > 0 && y + 1 < height) {
+        const int px = CHANNELS * SAMPLE_BYTES, row = width * px;
+        __global const uchar *p = (__global const uchar *)src + (size_t)(IDX(x0, y, width) - 1) * px;
+        if (same_bytes(p, p - row, (SEGMENT + 2) * px) && same_bytes(p, p + row, (SEGMENT + 2) * px) &&
+            same_bytes(p, p + px, (SEGMENT + 1) * px)) {
+            for (int g = x0; g < x1; g += GROUP) vstore8((uchar8)(0), 0, mask + IDX(g, y, width));
+            seg[SEG_IDX(get_global_id(0), y, width)] = 0;
+            return;
+        }
+    }
     for (int g = x0; g < x1; g += GROUP) {
-        const int ge = g + GROUP < x1 ? g + GROUP : x1;
-        if (ge - g == GROUP && g > 0 && g + GROUP < width && y > 0 && y + 1 < height &&
-            quiet_group(src, IDX(g, y, width), width)) {
-            vstore8((uchar8)(0), 0, mask + IDX(g, y, width));
+        const int ge = g + GROUP < x1 ? g + GROUP : x1, i = IDX(g, y, width);
+        if (ge - g == GROUP && g > 0 && g + GROUP < width && y > 0 && y + 1 < height) {
+            if (identical_window(src, i, width)) {
+                vstore8((uchar8)(0), 0, mask + i);
+                continue;
+            }
+#if RGB8
+            __global const uchar *q = src + (size_t)(i - 1) * 3;
+            const uchar16 lo = vload16(0, q), hi = vload16(0, q + 14);
+#else
+            const uchar16 lo = (uchar16)(0), hi = lo;
+#endif
+#ifndef PIXEL_IS_FLOAT
+            short8 mv, fv;
+            group_masks(src, i, width, lo, hi, &mv, &fv);
+            const short4 o = mv.lo | mv.hi;
+            if ((o.x | o.y | o.z | o.w) == 0) {
+                vstore8((uchar8)(0), 0, mask + i);
+                continue;
+            }
+            short mb[GROUP], fb[GROUP];
+            vstore8(mv, 0, mb);
+            vstore8(fv, 0, fb);
+            for (int t = 0; t < GROUP; ++t) {
+                const uint maybe = (uint)mb[t];
+                const int cand = maybe && candidate(src, table, raw_px(src, i + t), maybe, (uint)fb[t], g + t, y,
+                                                    width, height);
+                mask[i + t] = cand ? (uchar)maybe : (uchar)0;
+                any |= (uint)cand;
+            }
             continue;
+#else
+            if (smooth_group(src, i, width)) {
+                vstore8((uchar8)(0), 0, mask + i);
+                continue;
+            }
+#endif
         }
         // a sliding 3x3 window: columns l (x-1), m (x), r (x+1); rows 0 (y-1), 1 (y), 2 (y+1); clamped reads,
         // out-of-frame neighbours removed by valid_ring
@@ -323,26 +471,31 @@ __kernel void reconstruct_candidates(__global const PIXEL_T *src, __global uchar
             }
             maybe &= valid;
             far &= valid;
-            int cand = (table[maybe] & 2u) != 0;
-#if EXTENDED
-            for (int k = 0; k < 8 && !cand; ++k)
-                if (far >> k & 1u) cand = two_gap_possible(src, m1, x, y, k, width, height);
-#endif
+            const int cand = maybe && candidate(src, table, m1, maybe, far, x, y, width, height);
             mask[IDX(x, y, width)] = cand ? (uchar)maybe : (uchar)0;
+            any |= (uint)cand;
             l0 = m0; l1 = m1; l2 = m2;
             m0 = r0; m1 = r1; m2 = r2;
         }
     }
+    seg[SEG_IDX(get_global_id(0), y, width)] = (uchar)any;
 }
 
 // ---- pass 2: CIELAB of every pixel a candidate reads in its 3x3: the candidate itself and the ring
 // neighbours in its mask (the others cannot be in X). Each pixel is converted once.
-__kernel void reconstruct_lab(__global const PIXEL_T *src, __global const uchar *mask, __global const float *luts,
-                              __global const float *lin, __global float4 *lab, const int width, const int height)
+__kernel void reconstruct_lab(__global const PIXEL_T *src, __global const uchar *mask, __global const uchar *seg,
+                              __global const float *luts, __global const float *lin, __global float4 *lab,
+                              const int width, const int height)
 {
-    const int x0 = get_global_id(0) * SEGMENT, y = get_global_id(1);
+    const int s = get_global_id(0), x0 = s * SEGMENT, y = get_global_id(1);
     if (x0 >= width || y >= height) return;
     const int x1 = x0 + SEGMENT < width ? x0 + SEGMENT : width;
+    // no candidate in this segment or the 8 around it: nothing here is read
+    const int s1 = s + 1 < SEG_COUNT(width) ? s + 1 : s, sa = s > 0 ? s - 1 : 0;
+    uint around = 0;
+    for (int r = y > 0 ? y - 1 : 0; r <= y + 1 && r < height; ++r)
+        for (int t = sa; t <= s1; ++t) around |= seg[SEG_IDX(t, r, width)];
+    if (around == 0) return;
     for (int g = x0; g < x1; g += GROUP) {
         const int ge = g + GROUP < x1 ? g + GROUP : x1;
         if (ge - g == GROUP && g > 0 && g + GROUP < width) {
@@ -400,9 +553,14 @@ inline void reconstruct_at(__global const PIXEL_T *src, __global PIXEL_T *dst, _
         return;
     }
 #if EXTENDED
-    // beyond the paper (1): X relative to a line colour n[k] -- the neighbours nearer to it than to A
-    for (int k = 0; k < 8; ++k) {
-        if (!(X >> k & 1u)) continue;
+    // beyond the paper (1): X relative to a line colour n[k] -- the neighbours nearer to it than to A.
+    // Its shape xk lies within the threshold of a mean more than 3 thresholds from A, so inside
+    // far = {k : ΔE(n_k, A) > 2 thresholds}, which must hold a gap (table bit 1) and k.
+    uint far = 0;
+    for (int k = 0; k < 8; ++k) far |= (uint)(da[k] > 3.99f * t2) << k;   // 2t, less rounding slack
+    if (!(table[far] & 2u)) far = 0;
+    for (int k = 0; far >> k; ++k) {
+        if (!(far >> k & 1u)) continue;
         uint xk = 0;
         for (int j = 0; j < 8; ++j)
             if ((X >> j & 1u) && d2(n[j], n[k]) < da[j]) xk |= 1u << j;
@@ -413,10 +571,15 @@ inline void reconstruct_at(__global const PIXEL_T *src, __global PIXEL_T *dst, _
             return;
         }
     }
-    // beyond the paper (2): a gap of two pixels, A and B, in a straight line q2 q1 A B q3 q4
+    // beyond the paper (2): a gap of two pixels, A and B, in a straight line q2 q1 A B q3 q4.
+    // Every ring pixel but q1 and B is within the threshold of A or B, and B of A: within 2 thresholds of
+    // A (1% slack for rounding). So at most one ring pixel lies beyond that, and it is q1.
+    uint beyond = 0;
+    for (int k = 0; k < 8; ++k) beyond |= (uint)(da[k] > 4.04f * t2) << k;
+    const uint line = beyond & (beyond - 1u) ? 0u : (beyond ? beyond : X);
     rawpx ca = raw_px(src, i);
-    for (int k = 0; k < 8; ++k) {
-        if (!(X >> k & 1u)) continue;
+    for (int k = 0; line >> k; ++k) {
+        if (!(line >> k & 1u)) continue;
         // necessary conditions from the ring alone first (implied by the full test below): B = the
         // opposite neighbour is A's colour, q1 is more than 2 thresholds away, q2..q4 may be (RGB), the rest
         // of the ring is background (within the threshold of A or B)
@@ -466,10 +629,11 @@ inline void reconstruct_at(__global const PIXEL_T *src, __global PIXEL_T *dst, _
 // ---- pass 3: the rules, at the candidates of pass 1.
 __kernel void reconstruct(__global const PIXEL_T *src, __global PIXEL_T *dst, __global const float *luts,
                           __global const float *lin, __global const float4 *lab, __global const uchar *mask,
-                          __global const uint *table, const int width, const int height, const float t2)
+                          __global const uchar *seg, __global const uint *table, const int width, const int height,
+                          const float t2)
 {
     const int x0 = get_global_id(0) * SEGMENT, y = get_global_id(1);
-    if (x0 >= width || y >= height) return;
+    if (x0 >= width || y >= height || seg[SEG_IDX(get_global_id(0), y, width)] == 0) return;
     const int x1 = x0 + SEGMENT < width ? x0 + SEGMENT : width;
     for (int x = x0; x < x1; ++x) {
         const int i = IDX(x, y, width);

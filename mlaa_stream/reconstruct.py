@@ -370,8 +370,10 @@ class Reconstructor:
         mf = cl.mem_flags
         self._table = cl.Buffer(context.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=_device_table())
         self._t2 = np.float32(np.float32(threshold) * np.float32(threshold))
-        # per-frame work buffers: the candidates' ring masks (1 byte a pixel) and CIELAB (float4 a pixel)
+        # per-frame work buffers: the candidates' ring masks (1 byte a pixel), a byte per segment, CIELAB (float4)
         self._mask = context.buffer(fmt.pixels)
+        self._global = (-(-fmt.width // SEGMENT), fmt.height)
+        self._seg = context.buffer(self._global[0] * fmt.height)  # a byte per segment: holds a candidate
         self._lab = context.buffer(16 * fmt.pixels)
         # integer frames: sRGB->linear per stored level, filled once on the device with common.cl's lut_read
         self._lin = context.buffer(4 * (int(pmax) + 1) if integer else 4)
@@ -380,7 +382,6 @@ class Reconstructor:
             k("reconstruct", "reconstruct_lin_table", defines)(context.queue, (int(pmax) + 1,), None,
                                                                luts, self._lin).wait()
         self._last = None  # this pass's previous frame: its work buffers are reused
-        self._global = (-(-fmt.width // SEGMENT), fmt.height)
 
     def enqueue(self, queue: "cl.CommandQueue", src: "cl.Buffer", dst: "cl.Buffer", luts: "cl.Buffer",
                 wait_for: list | None = None) -> "cl.Event":
@@ -396,11 +397,12 @@ class Reconstructor:
         after = list(wait_for or []) + ([self._last] if self._last is not None else [])
         # dst = src first (a device copy, ~0.3 ms at 1080p); the rules then write changed pixels only
         copied = cl.enqueue_copy(queue, dst, src, byte_count=need, wait_for=after)
-        cand = self._k_candidates(queue, self._global, None, src, self._mask, self._table, W, H, wait_for=after)
-        lab = self._k_lab(queue, self._global, None, src, self._mask, luts, self._lin, self._lab, W, H,
-                          wait_for=[cand])
+        cand = self._k_candidates(queue, self._global, None, src, self._mask, self._seg, self._table, W, H,
+                                  wait_for=after)
+        lab = self._k_lab(queue, self._global, None, src, self._mask, self._seg, luts, self._lin, self._lab,
+                          W, H, wait_for=[cand])
         self._last = self._k_rules(queue, self._global, None, src, dst, luts, self._lin, self._lab, self._mask,
-                                   self._table, W, H, self._t2, wait_for=[copied, lab])
+                                   self._seg, self._table, W, H, self._t2, wait_for=[copied, lab])
         return self._last
 
 

@@ -139,6 +139,35 @@ def test_two_pixel_gap_closes_only_when_extended(device, direction, ink):
     np.testing.assert_array_equal(both(broken, False), broken)
 
 
+@pytest.mark.parametrize("fmt", ["uint8", "gray", "uint16", "rgba8"])
+def test_gaps_at_group_and_segment_borders_close(device, fmt):
+    # the passes work in groups of 8 and segments of 64 pixels of a row and skip flat ones: gaps at and next
+    # to those borders, on a wide flat canvas, close as the reference says (1-px gaps; the 2-px one extended)
+    h, w = 40, 3 * 64 + 13
+    bg, ink = np.array(BG) / 255, np.array(INKS[1]) / 255
+    whole = np.empty((h, w, 3), np.float64)
+    whole[:] = bg
+    cols = [8, 15, 40, 63, 68, 127, 132, 192, 199]   # vertical lines, one gap each in row 11 + 3 r
+    whole[8:h - 1, cols] = ink
+    whole[2, 1:w - 1] = ink                          # horizontal lines: 1-px gaps at group/segment borders,
+    whole[5, 1:w - 1] = ink                          # a 2-px gap across the first segment border
+    broken = whole.copy()
+    for r, c in enumerate(cols):
+        broken[11 + 3 * r, c] = bg
+    gaps_h = [16, 64, 128, 191]
+    broken[2, gaps_h] = bg
+    broken[5, 63:65] = bg
+    w_img, b_img = as_format(whole, fmt), as_format(broken, fmt)
+    for extended in (False, True):
+        out = both(b_img, extended)
+        fixed = (out != b_img).reshape(h, w, -1).any(-1)
+        assert fixed[11 + 3 * np.arange(len(cols)), cols].all(), f"{fmt}: a vertical gap stayed open"
+        assert fixed[2, gaps_h].all(), f"{fmt}: a horizontal gap stayed open"
+        assert fixed[5, 63:65].all() == extended and fixed.sum() == len(cols) + len(gaps_h) + 2 * extended
+        np.testing.assert_array_equal(out, w_img if extended else np.where(fixed[..., None] if out.ndim == 3
+                                                                           else fixed, w_img, b_img))
+
+
 def test_gap_in_line_over_gradient_closes_when_extended(device):
     # X relative to the line colour: the background differs across the gap by more than the threshold
     img = np.empty((24, 24, 3), np.uint8)
