@@ -153,8 +153,9 @@ inline int is_ramp_int(__global const PIXEL_T *src, int ib, int has_before, int 
 
 // Already antialiased content (AA text, AA lines, downscaled images): a step between p and q whose
 // neighbours along the step hold a colour *between* p's and q's (projected on p -> q at t in
-// (AA_LO, 1 - AA_LO), off the segment by at most AA_OFF of the step) is a rendered coverage ramp,
-// not a 1-spp jaggy: it is not an edge. 1-spp renders have the two sides' colours there.
+// (AA_LO, 1 - AA_LO), off the segment by at most AA_OFF of the step), or where p lies between the
+// pixel before it and q, or q between p and the pixel after it, is a rendered coverage ramp, not a
+// 1-spp jaggy: it is not an edge. 1-spp renders have the two sides' colours there.
 #ifndef AA_GUARD
 #define AA_GUARD 1
 #endif
@@ -173,14 +174,24 @@ inline int between(float4 m, float4 p, float4 d, float dd)
     return r.x * r.x + r.y * r.y + r.z * r.z <= AA_OFF * AA_OFF * dd;
 }
 // p at i, q at j; s = the index step along the edge (1 for a bottom edge, width for a right edge);
-// has_a / has_b: the neighbours before / after along the edge exist.
+// has_a / has_b: the neighbours before / after along the edge exist. Across the edge too: p between
+// the pixel before it and q, or q between p and the pixel after it (t = j - i: the step's index).
 inline int antialiased(__global const PIXEL_T *src, __global const float *luts, float4 p, float4 q,
-                       int i, int j, int s, int has_a, int has_b)
+                       int i, int j, int s, int has_a, int has_b, int has_before, int has_after)
 {
 #if AA_GUARD
     const float4 d = q - p;
     const float dd = d.x * d.x + d.y * d.y + d.z * d.z;
     if (!(dd > 0.0f)) return 0;
+    const int t = j - i;
+    if (has_before) {
+        const float4 b = to_encoded(luts, load_px(src, i - t)), db = q - b;
+        if (between(p, b, db, db.x * db.x + db.y * db.y + db.z * db.z)) return 1;
+    }
+    if (has_after) {
+        const float4 a = to_encoded(luts, load_px(src, j + t)), da = a - p;
+        if (between(q, p, da, da.x * da.x + da.y * da.y + da.z * da.z)) return 1;
+    }
     if (has_a && (between(to_encoded(luts, load_px(src, i - s)), p, d, dd) ||
                   between(to_encoded(luts, load_px(src, j - s)), p, d, dd))) return 1;
     if (has_b && (between(to_encoded(luts, load_px(src, i + s)), p, d, dd) ||
@@ -268,7 +279,7 @@ __kernel void detect_edges(__global const PIXEL_T *src, __global const float *lu
             if (may_differ(&c, &b, threshold)
                 && !FLOAT_RAMP(y > 0 ? to_encoded(luts, load_px(src, i - width)) : c.rgb, y > 0, c.rgb, b.rgb,
                                y + 2 < height ? to_encoded(luts, load_px(src, i + 2 * width)) : b.rgb, y + 2 < height)
-                && !antialiased(src, luts, c.rgb, b.rgb, i, i + width, 1, x > 0, x + 1 < width)
+                && !antialiased(src, luts, c.rgb, b.rgb, i, i + width, 1, x > 0, x + 1 < width, y > 0, y + 2 < height)
                 && differs(luts, &c, &b, threshold))
                 e |= EDGE_BOTTOM;
         }
@@ -278,7 +289,7 @@ __kernel void detect_edges(__global const PIXEL_T *src, __global const float *lu
             if (may_differ(&c, &r, threshold)
                 && !FLOAT_RAMP(x > 0 ? to_encoded(luts, load_px(src, i - 1)) : c.rgb, x > 0, c.rgb, r.rgb,
                                x + 2 < width ? to_encoded(luts, load_px(src, i + 2)) : r.rgb, x + 2 < width)
-                && !antialiased(src, luts, c.rgb, r.rgb, i, i + 1, width, y > 0, y + 1 < height)
+                && !antialiased(src, luts, c.rgb, r.rgb, i, i + 1, width, y > 0, y + 1 < height, x > 0, x + 2 < width)
                 && differs(luts, &c, &r, threshold))
                 e |= EDGE_RIGHT;
             c = r;

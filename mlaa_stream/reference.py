@@ -85,11 +85,19 @@ def edges_reference(frame: np.ndarray, threshold: float | None = None, metric: s
 
     def antialiased_along(c: np.ndarray) -> np.ndarray:
         """For steps c[k] -> c[k+1] along axis 0: does a neighbour along the step (axis 1) of
-        either pixel hold a colour between the two (an already antialiased edge)?"""
+        either pixel hold a colour between the two, or is either pixel between its neighbours
+        across the step (an already antialiased edge)?"""
         p, q = c[:-1], c[1:]
         d = q - p
         dd = (d * d).sum(-1)
         out = np.zeros(dd.shape, bool)
+        # across: p between the pixel before it and q, or q between p and the pixel after it
+        # (at the frame's border the pixel itself, which is never between)
+        before = np.concatenate([p[:1], c[:-2]])
+        after = np.concatenate([c[2:], q[-1:]])
+        db, da = q - before, after - p
+        out |= between(p, before, db, (db * db).sum(-1))
+        out |= between(q, p, da, (da * da).sum(-1))
         for sl_m, sl_o in ((np.s_[:, :-1], np.s_[:, 1:]), (np.s_[:, 1:], np.s_[:, :-1])):
             # neighbours at axis-1 offset -1 (for columns 1..) and +1 (for columns ..-2)
             out[sl_o] |= between(p[sl_m], p[sl_o], d[sl_o], dd[sl_o])

@@ -93,7 +93,7 @@ def test_edges_match_reference_on_antialiased_input(filt, seed):
     assert (loose & ~want).any()   # the guard did reject edges here
 
 
-@pytest.mark.parametrize("angle", [10, 30, 60, 80])
+@pytest.mark.parametrize("angle", [10, 30, 45, 60, 80])
 def test_antialiased_polygon_edges_are_left_alone(filt, angle):
     """A polygon already antialiased (8x8 samples per pixel) comes out untouched; its 1-spp render
     is still filtered."""
