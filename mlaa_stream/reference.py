@@ -269,7 +269,7 @@ def mlaa_reference(frame: np.ndarray, threshold: float | None = None, metric: st
                    linear: bool = True, bgr: bool = False, linear_input: bool = False,
                    rounding: float = 0.0, blend_u: bool = True, ramp: float = 0.35,
                    short_corner: float = SHORT_CORNER, aa_guard: bool = True) -> np.ndarray:
-    """The whole spatial filter, pass after pass (without the bridging pass: mlaa_stream.bridge)."""
+    """The whole spatial filter, pass after pass (without the bridging pass: mlaa_stream.bridge.bridge_reference)."""
     e = edges_reference(frame, threshold, metric, bgr, linear_input, ramp, aa_guard)
     hd, vd = distances_reference(e)
     wts = weights_reference(e, hd, vd, rounding, blend_u, frame, short_corner)
