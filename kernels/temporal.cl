@@ -144,15 +144,65 @@ inline int group_flat(__global const uchar *ra, __global const uchar *rm, __glob
            bytes_equal(rb + (gx - 1) * PXB, m, (GROUP + 2) * PXB);
 }
 
-// One pixel flat: its 8 neighbours (xl, xr, ya, yb clamped) equal the centre.
+// The near-flat rule: FLAT_LEVELS (stored units, host: temporal.flat_levels) is how far a sample of
+// the 3x3 neighbourhood may be from the centre's and still count as flat (codec noise, dithering).
+#ifndef FLAT_NEAR
+#define FLAT_NEAR 0
+#define FLAT_LEVELS 0
+#endif
+#ifdef PIXEL_IS_FLOAT
+typedef float sample_t;
+#else
+typedef int sample_t;
+#endif
+inline int samples_near(__global const PIXEL_T *a, __global const PIXEL_T *b)
+{
+    int ok = 1;
+    for (int k = 0; k < CHANNELS; ++k) {
+        const sample_t d = (sample_t)a[k] - (sample_t)b[k];
+        ok &= (d <= (sample_t)FLAT_LEVELS) & (d >= -(sample_t)FLAT_LEVELS);
+    }
+    return ok;
+}
+
+// Pixels [gx, gx + GROUP) all near-flat, sufficiently: the 3 x (GROUP + 2) window's range per channel
+// is at most FLAT_LEVELS (so every pixel's 8 neighbours are within it). Needs 1 <= gx, gx + GROUP < width.
+inline int group_near_flat(__global const PIXEL_T *ra, __global const PIXEL_T *rm, __global const PIXEL_T *rb,
+                           int gx)
+{
+    int ok = 1;
+    for (int k = 0; k < CHANNELS; ++k) {
+        sample_t lo = (sample_t)rm[(gx - 1) * CHANNELS + k], hi = lo;
+        for (int i = gx - 1; i <= gx + GROUP; ++i) {
+            const sample_t a = (sample_t)ra[i * CHANNELS + k], m = (sample_t)rm[i * CHANNELS + k];
+            const sample_t b = (sample_t)rb[i * CHANNELS + k];
+            lo = a < lo ? a : lo; hi = a > hi ? a : hi;
+            lo = m < lo ? m : lo; hi = m > hi ? m : hi;
+            lo = b < lo ? b : lo; hi = b > hi ? b : hi;
+        }
+        ok &= hi - lo <= (sample_t)FLAT_LEVELS;
+    }
+    return ok;
+}
+
+// One pixel flat: its 8 neighbours (xl, xr, ya, yb clamped) equal the centre (within FLAT_LEVELS).
 inline int pixel_flat(__global const uchar *ra, __global const uchar *rm, __global const uchar *rb,
                       int xl, int x, int xr)
 {
+#if FLAT_NEAR
+    __global const PIXEL_T *a = (__global const PIXEL_T *)ra, *m = (__global const PIXEL_T *)rm;
+    __global const PIXEL_T *b = (__global const PIXEL_T *)rb, *c = m + x * CHANNELS;
+    return samples_near(m + xl * CHANNELS, c) && samples_near(m + xr * CHANNELS, c) &&
+           samples_near(a + xl * CHANNELS, c) && samples_near(a + x * CHANNELS, c) &&
+           samples_near(a + xr * CHANNELS, c) && samples_near(b + xl * CHANNELS, c) &&
+           samples_near(b + x * CHANNELS, c) && samples_near(b + xr * CHANNELS, c);
+#else
     __global const uchar *c = rm + x * PXB;
     return bytes_equal(rm + xl * PXB, c, PXB) && bytes_equal(rm + xr * PXB, c, PXB) &&
            bytes_equal(ra + xl * PXB, c, PXB) && bytes_equal(ra + x * PXB, c, PXB) &&
            bytes_equal(ra + xr * PXB, c, PXB) && bytes_equal(rb + xl * PXB, c, PXB) &&
            bytes_equal(rb + x * PXB, c, PXB) && bytes_equal(rb + xr * PXB, c, PXB);
+#endif
 }
 
 // The flat rule's output for pixels [xa, xb) that all hold the value at xa: the current pixel untouched,
@@ -231,6 +281,22 @@ __kernel void temporal_blend(__global const PIXEL_T *cur, __global const half *h
             continue;
         }
         run = 0;
+#if FLAT_NEAR
+        if (gx >= 1 && gx + GROUP < width &&
+            group_near_flat((__global const PIXEL_T *)ra, (__global const PIXEL_T *)rm,
+                            (__global const PIXEL_T *)rb, gx)) {
+            // near-flat: each pixel untouched, its own value as the history, weight 0
+            for (int x = gx; x < gend; ++x) {
+                const int i = row + x;
+                vstore_half4_rte(to_linear(luts, load_px(cur, i)), i, hist_out);
+                conf[i] = 0;
+            }
+            __global const uchar *s8 = (__global const uchar *)cur + (size_t)(row + gx) * PXB;
+            __global uchar *d8 = (__global uchar *)dst + (size_t)(row + gx) * PXB;
+            for (int k = 0; k < GROUP * PXB; ++k) d8[k] = s8[k];
+            continue;
+        }
+#endif
         // Sliding 3x3 window in linear light: columns L (x-1), C (x), R (x+1), rows a (y-1), m, b (y+1).
         int xl = gx > 0 ? gx - 1 : 0;
         float4 La = to_linear(luts, load_px(cur, IDX(xl, ya, width)));

@@ -315,8 +315,7 @@ class TemporalStage:
             return self._buffers
         self.queue.finish()
         self._buffers = _Buffers(self.context, fmt, shape)
-        self._kernel = self.context.kernel("temporal", "temporal_blend",
-                                           defines_for(fmt, LINEAR_INPUT=int(self.linear_input)))
+        self._kernel = self.context.kernel("temporal", "temporal_blend", kernel_defines(fmt, self.linear_input))
         self.reset()
         return self._buffers
 
@@ -500,16 +499,33 @@ def _catmull_rom(t: np.ndarray) -> list[np.ndarray]:
             t * (f32(0.5) + t * (f32(2.0) - f32(1.5) * t)), t * t * (f32(-0.5) + f32(0.5) * t)]
 
 
-def flat_3x3(raw: np.ndarray) -> np.ndarray:
-    """(H, W) bool: all 9 samples of each pixel's 3x3 neighbourhood (edges replicated) bit-identical
-    in the frame's own type -- where kernels/temporal.cl skips the blend (the flat rule)."""
+def kernel_defines(fmt: FrameFormat, linear_input: bool = False) -> dict:
+    """kernels/temporal.cl's build defines for a frame format (the stage's and the tests')."""
+    return defines_for(fmt, LINEAR_INPUT=int(linear_input), FLAT_NEAR=1, FLAT_LEVELS=flat_levels(fmt.dtype))
+
+
+def flat_levels(dtype) -> int | float:
+    """How far (stored units) a 3x3 neighbour's sample may be from the centre's for the (near-)flat rule:
+    2 levels of 8 bits (codec noise, dithering: the blend could move such a pixel by ~2 levels at most)."""
+    dt = np.dtype(dtype)
+    return 2 * 257 if dt == np.uint16 else (2 if dt == np.uint8 else 2.0 / 255.0)
+
+
+def flat_3x3(raw: np.ndarray, levels: float = 0.0) -> np.ndarray:
+    """(H, W) bool: all 9 samples of each pixel's 3x3 neighbourhood (edges replicated) within `levels`
+    of the centre's in the frame's own type (0: bit-identical) -- where kernels/temporal.cl skips the
+    blend (the flat rule, with levels = flat_levels(dtype))."""
     h, w = raw.shape[:2]
-    b = np.ascontiguousarray(raw).reshape(h, w, -1).view(np.uint8)
+    if levels > 0:
+        b = np.ascontiguousarray(raw).reshape(h, w, -1).astype(np.float64)
+    else:
+        b = np.ascontiguousarray(raw).reshape(h, w, -1).view(np.uint8)
     pad = np.pad(b, ((1, 1), (1, 1), (0, 0)), mode="edge")
     flat = np.ones((h, w), bool)
     for dy in range(3):
         for dx in range(3):
-            flat &= (pad[dy:dy + h, dx:dx + w] == b).all(-1)
+            n = pad[dy:dy + h, dx:dx + w]
+            flat &= (np.abs(n - b) <= levels).all(-1) if levels > 0 else (n == b).all(-1)
     return flat
 
 
@@ -608,7 +624,7 @@ def temporal_reference(cur: np.ndarray, hist: np.ndarray, params: np.ndarray, cu
         # the flat rule (kernels/temporal.cl): a 3x3 neighbourhood bit-identical in the frame's own
         # type bounds the clip box to c +- EXT_FLOOR, so the blend is skipped there: w = 0 gives
         # out = c untouched and history = c in linear light, as on a reset
-        wgt = np.where(flat_3x3(raw.astype(fmt.dtype)), f32(0), wgt).astype(f32)
+        wgt = np.where(flat_3x3(raw.astype(fmt.dtype), flat_levels(fmt.dtype)), f32(0), wgt).astype(f32)
         blended = lin + (clipped - lin) * wgt[..., None]
         blended[..., 3] = lin[..., 3]
         out_lin = np.where((wgt > 0)[..., None], blended, lin).astype(f32)

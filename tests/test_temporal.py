@@ -17,10 +17,11 @@ import pytest
 from mlaa_stream import scenes as S
 from mlaa_stream.colour import device_luts, linear_to_srgb, srgb_to_linear
 from mlaa_stream.device import default_context
-from mlaa_stream.formats import defines_for, frame_format
+from mlaa_stream.formats import frame_format
 from mlaa_stream.mlaa import Filter
 from mlaa_stream.temporal import (CUR_AFFINE, CUR_DENSE, CUR_RESET, PREV_AFFINE, PREV_DENSE, PREV_NONE,
-                                  SEGMENT, TemporalStage, flat_3x3, make_params, temporal_reference)
+                                  SEGMENT, TemporalStage, flat_3x3, flat_levels, kernel_defines, make_params,
+                                  temporal_reference)
 from mlaa_stream.temporal_bench import _pan_layers
 
 
@@ -28,7 +29,7 @@ from mlaa_stream.temporal_bench import _pan_layers
 def run_kernel(cur, hist, params, cur_mode, prev_mode, flow_b, flow_f, flow_prev, bgr=False):
     ctx = default_context()
     fmt = frame_format(cur, bgr)
-    k = ctx.kernel("temporal", "temporal_blend", defines_for(fmt, LINEAR_INPUT=0))
+    k = ctx.kernel("temporal", "temporal_blend", kernel_defines(fmt))
     q = ctx.queue
     mf = cl.mem_flags
 
@@ -147,6 +148,11 @@ def flat_case(seed, h, w, channels, dtype):
         x += bw
     cur[h // 2:, : w // 3] = big[h // 2:, : w // 3]             # noise: nothing flat there
     cur[: h // 3, w // 2:] = big[0, w // 2]                    # a wide flat block at the top edge
+    # a near-flat block: one colour with +-1 level of noise (codec noise); +-1/255 for floats
+    nb = cur[h // 3: h // 2, w // 2:]
+    step = 1.0 / 255.0 if not hi else (257 if hi == 65536 else 1)
+    base = np.clip(big[h // 3, w // 2], 3 * step, (hi - 1 if hi else 1.0) - 3 * step)
+    nb[...] = base + rng.integers(-1, 2, nb.shape) * step
     hist = rng.random((h, w, 4)).astype(np.float16)
     zero = np.zeros((h, w, 2), np.float32)
     params = make_params((1, 0, 0.3, 0, 1, -0.2), (1, 0, 0.3, 0, 1, -0.2), 1, 1, 0.5, 0.5, 1.25, False)
@@ -155,7 +161,8 @@ def flat_case(seed, h, w, channels, dtype):
 
 @pytest.mark.parametrize("channels,dtype", [(3, np.uint8), (4, np.uint16), (1, np.float32)])
 def test_flat_neighbourhood_passes_through(channels, dtype):
-    """The flat rule: where all 9 samples of the 3x3 neighbourhood (edges replicated) are identical,
+    """The flat rule: where all 9 samples of the 3x3 neighbourhood (edges replicated) are within
+    flat_levels (2 levels of 8 bits) of the centre's,
     the pixel is copied exactly, its history is the pixel in linear light and its weight is 0 --
     whatever the history says; the kernel still matches the reference everywhere."""
     h, w = 23, 75
@@ -165,11 +172,14 @@ def test_flat_neighbourhood_passes_through(channels, dtype):
     assert_close(got[0], ref[0], got[1], ref[1], got[2], ref[2])
     px = cur.reshape(h, w, -1)
     flat = np.zeros((h, w), bool)
-    for y in range(h):   # plain loops: an independent statement of "flat"
+    lev = flat_levels(dtype)
+    for y in range(h):   # plain loops: an independent statement of "(near-)flat"
         for x in range(w):
             ys, xs = [max(y - 1, 0), y, min(y + 1, h - 1)], [max(x - 1, 0), x, min(x + 1, w - 1)]
-            flat[y, x] = all(np.array_equal(px[yy, xx], px[y, x]) for yy in ys for xx in xs)
+            flat[y, x] = all(np.abs(px[yy, xx].astype(float) - px[y, x]).max() <= lev for yy in ys for xx in xs)
     assert 0.3 < flat.mean() < 0.9
+    assert np.array_equal(flat, flat_3x3(cur, lev))
+    assert (flat & ~flat_3x3(cur)).sum() > 20   # near-flat pixels that are not exactly flat are tested
     out = got[0].reshape(h, w, -1)
     assert np.array_equal(out[flat], px[flat])
     assert (got[2][flat] == 0).all()
