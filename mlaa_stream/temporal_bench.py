@@ -189,6 +189,9 @@ def main(argv: list[str] | None = None) -> int:
             log(f"  {key:22s} temporal error {_fmt(s['temporal_error'])}  flicker {_fmt(s['flicker'])}  "
                 f"error removed {_fmt(s['error_removed'])}  models {counts}")
         results[name]["input"] = score(scene.inputs, scene)
+        # a reference point for the metric: the truth itself, slightly blurred
+        blurred = np.stack([cv2.GaussianBlur(t, (0, 0), 0.5) for t in scene.truths])
+        results[name]["truth blurred (sigma 0.5 px)"] = score(blurred, scene)
 
     speed = {}
     if args.timed > 0:
