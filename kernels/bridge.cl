@@ -290,6 +290,24 @@ inline lattice lattice_of(int o, int width, int height)
 // the work item's pixels. One work item per SEGMENT pixels of a row. Every candidate differs from its right neighbour (x + 1, y) by INK_MIN or more (that pixel is P(1, 0)
 // or P(0, 1) in every orientation), so a group of GROUP pixels where no sample differs from the same sample
 // of the right neighbour by FLAT_LEVELS (<= INK_MIN * PIXEL_MAX) is settled at once, and so is a pixel.
+// Integer frames: a necessary condition of find_link checked on stored samples first -- the pixels beside
+// the dash end across the lattice rows, (0, -1) and (0, 1), must be background, within BG_TOL of the pixel
+// after the dash end (1, 0) (CLS == 1). BG_LEVELS >= BG_TOL * PIXEL_MAX rounds up (never rejects a link the
+// float test accepts). Photographs fail it almost everywhere, before any float conversion.
+#ifndef PIXEL_IS_FLOAT
+#define BG_LEVELS ((int)(BG_TOL * PIXEL_MAX * 1.0001f) + 1)
+inline int near_int(__global const PIXEL_T *src, int i, int j)
+{
+    __global const PIXEL_T *a = src + (size_t)i * CHANNELS, *b = src + (size_t)j * CHANNELS;
+    int ok = 1;
+    for (int k = 0; k < (CHANNELS < 3 ? CHANNELS : 3); ++k) {
+        const int d = (int)a[k] - (int)b[k];
+        ok &= (d <= BG_LEVELS) & (d >= -BG_LEVELS);
+    }
+    return ok;
+}
+#endif
+
 __kernel void bridge_find(__global const PIXEL_T *src, __global uchar *found, __global ushort *links,
                           __global uchar *segments, const int width, const int height)
 {
@@ -330,6 +348,10 @@ __kernel void bridge_find(__global const PIXEL_T *src, __global uchar *found, __
                     for (int o = 0; o < 4; ++o) {
                         const lattice L = lattice_of(o, width, height);
                         const int q = lat(L, x, y, 0, 1), r = lat(L, x, y, 1, 0);
+#ifndef PIXEL_IS_FLOAT
+                        const int qm = lat(L, x, y, 0, -1);
+                        if (q < 0 || r < 0 || qm < 0 || !near_int(src, q, r) || !near_int(src, qm, r)) continue;
+#endif
                         link_t ln;
                         if (q >= 0 && r >= 0 && diff3(c, rgb_at(src, q)) >= INK_MIN &&
                             diff3(c, rgb_at(src, r)) >= INK_MIN && find_link(src, L, x, y, &ln)) {
