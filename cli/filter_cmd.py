@@ -175,7 +175,7 @@ def _kind_of(path: str) -> str:
               help="Frames submitted to the device before the oldest is collected (1 = serialized).")
 @click.option("--temporal/--no-temporal", default=None,
               help="Temporal reprojection blending along optical flow (seed 002) for video: "
-                   "steadier edges, but 30-100 ms per 1080p frame on a CPU today, so off "
+                   "steadier edges, but ~40-60 ms per 1080p frame on a CPU today, so off "
                    "by default.")
 @click.option("--temporal-mode", type=click.Choice(["adaptive", "dense", "global", "static"]),
               default="adaptive", show_default=True,
@@ -291,7 +291,7 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
 @dataclass
 class TemporalOptions:
     """The temporal stage's command-line settings (issue 6); off unless --temporal (its kernel
-    costs 30-100 ms per 1080p frame on PoCL, see docs/temporal_bench.md)."""
+    costs ~40-60 ms per 1080p pan frame on PoCL, see docs/temporal_bench.md)."""
 
     enabled: bool | None = None
     mode: str = "adaptive"
