@@ -78,7 +78,7 @@ METHODS.update({f"mlaa:{name}": (lambda device, kw=kw: Filter(device=device, **k
 TRUTH = "truth"  # a reference row: the supersampled truth itself (no timing)
 # Categories whose input already equals the truth almost everywhere: they measure damage, and their
 # (ill-conditioned) error-removed ratios stay out of the all-category means.
-DAMAGE_ONLY = {"photo"}
+DAMAGE_ONLY = {"photo", "antialiased"}
 
 METRIC_COLUMNS = ["error_removed", "edge_error_removed", "damage", "broken_wires", "flip",
                   "temporal_error", "flicker", "rmse"]

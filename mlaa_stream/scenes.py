@@ -544,12 +544,26 @@ def scene_cut(rng: np.random.Generator, small: bool) -> list[Scene]:
     return [build_scene("cut", "cut", frames, w, h, notes=f"hard cut after frame {n // 2 - 1}")]
 
 
+def scene_antialiased(rng: np.random.Generator, small: bool) -> list[Scene]:
+    """Content that is already antialiased (rendered at 8x8 samples per pixel, as an antialiasing renderer,
+    font rasteriser or downscale delivers it): UI text, thin wires, polygons. Input = truth, so a filter can
+    only damage it: the category is scored on damage (RMSE of the change) alone."""
+    out = []
+    for make in (scene_text, scene_wires, scene_diagonals):
+        for sc in make(rng, small):
+            t = sc.truths
+            out.append(Scene(f"{sc.name}_aa", "antialiased", t.copy(), t.copy(), np.zeros(t.shape[:3], bool),
+                             None, None, None, f"{sc.notes}, already antialiased: must come out untouched"))
+    return out
+
+
 SCENES: dict[str, Callable[[np.random.Generator, bool], list[Scene]]] = {
     "long_edges": scene_long_edges,
     "diagonals": scene_diagonals,
     "wires": scene_wires,
     "text_ui": scene_text,
     "photo": scene_photo,
+    "antialiased": scene_antialiased,
     "checkerboard": scene_checker,
     "noise": scene_noise,
     "rotation": scene_rotation,

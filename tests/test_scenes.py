@@ -91,10 +91,20 @@ def test_every_category_and_shapes(small):
         assert s.inputs.shape == s.truths.shape == (t, h, w, 3)
         assert s.edges.shape == (t, h, w) and s.edges.dtype == bool
         assert np.array_equal(s.edges, S.edge_mask(s.inputs, s.truths))
-        assert s.edges.any(), s.name  # every scene has some aliasing to remove
+        # every scene has some aliasing to remove, but the already-antialiased ones (input = truth)
+        assert s.edges.any() != (s.category == "antialiased"), s.name
         assert s.inputs.std() > 5, s.name  # never a blank frame
     for name in ("rotation", "pan", "mover", "cut"):
         assert small[name].frames >= 4 and small[name].animated
+
+
+def test_antialiased_scenes_are_their_own_truth(small):
+    aa = [s for s in small.values() if s.category == "antialiased"]
+    assert {s.name for s in aa} >= {"text_ui_aa", "wires_aa", "diagonals_aa"}
+    for s in aa:
+        assert np.array_equal(s.inputs, s.truths)
+        # antialiased: intermediate levels between the two colours of an edge are everywhere
+        assert len(np.unique(s.inputs.reshape(-1, 3), axis=0)) > 50, s.name
 
 
 def test_photo_truth_equals_input_inside_the_photo(small):

@@ -27,6 +27,10 @@ BLUR_MIN_GRADIENT_RATIO = 0.75
 # checkerboard / noise: MSE(out, truth) / MSE(in, truth) may not exceed 1 + this.
 # Measured: mlaa 0.63-0.67 (checker), 0.88-0.90 (noise); blur 0.62 / 1.29; FXAA 0.43 / 0.83.
 NOT_WORSE_SLACK = 0.0
+# already antialiased text, wires and polygons (input = truth): RMSE of the change, 8-bit levels.
+# Measured (small scenes): mlaa presets 0.00-0.97 (reconstruct 0.99 on wires), FXAA 3.4-24.3,
+# 3x3 box blur 8.7-34.3, no-op 0.
+AA_DAMAGE_MAX = 1.5
 # long edges (steps > 255 px): error removed floor. Measured: mlaa presets 0.891, FXAA 0.26,
 # blur -1.0, no-op 0.
 LONG_EDGE_FLOOR = 0.75
@@ -66,19 +70,25 @@ def check_long_edges(out: np.ndarray, scene: S.Scene) -> tuple[bool, float]:
     return v >= LONG_EDGE_FLOOR, v
 
 
+def check_antialiased_untouched(out: np.ndarray, scene: S.Scene) -> tuple[bool, float]:
+    v = M.damage(out, scene.inputs, scene.truths, scene.edges)
+    return v <= AA_DAMAGE_MAX, v
+
+
 CHECKS = {  # check -> the scene it runs on
     check_photo_damage: "photo",
     check_sharp_kept: "text_ui",
     check_no_blur: "text_ui",
     check_not_worse: ("checkerboard", "noise"),
     check_long_edges: "long_edges_h",
+    check_antialiased_untouched: ("text_ui_aa", "wires_aa", "diagonals_aa"),
 }
 
 
 @pytest.fixture(scope="module")
 def scenes() -> dict[str, S.Scene]:
     return {s.name: s for s in S.generate_scenes(
-        small=True, names=["photo", "text_ui", "checkerboard", "noise", "long_edges"])}
+        small=True, names=["photo", "text_ui", "checkerboard", "noise", "long_edges", "antialiased"])}
 
 
 def run(process, scene: S.Scene) -> np.ndarray:
@@ -129,6 +139,12 @@ def test_never_worse_than_input_where_mlaa_fails(method, scenes, name):
     assert ok, f"{name}: MSE ratio {v:.3f} > 1 + {NOT_WORSE_SLACK}"
 
 
+@pytest.mark.parametrize("name", ["text_ui_aa", "wires_aa", "diagonals_aa"])
+def test_antialiased_content_is_left_alone(method, scenes, name):
+    ok, v = check_antialiased_untouched(run(method, scenes[name]), scenes[name])
+    assert ok, f"{name}: already antialiased input changed by RMSE {v:.2f} levels > {AA_DAMAGE_MAX}"
+
+
 @pytest.mark.mlaa
 def test_long_edges_error_removed_floor(method, scenes):
     s = scenes["long_edges_h"]
@@ -150,7 +166,8 @@ def test_box_blur_is_rejected(scenes):
     failed = _failed_checks(box_blur, scenes)
     # blur ruins the photo, the UI borders and the text, and makes noise worse
     assert {"check_photo_damage[photo]", "check_sharp_kept[text_ui]", "check_no_blur[text_ui]",
-            "check_not_worse[noise]"} <= set(failed), failed
+            "check_not_worse[noise]", "check_antialiased_untouched[text_ui_aa]",
+            "check_antialiased_untouched[wires_aa]"} <= set(failed), failed
 
 
 def test_no_op_is_rejected(scenes):
@@ -172,4 +189,5 @@ def test_fxaa_fails_where_expected(scenes):
 
     with FXAA() as f:
         failed = _failed_checks(f.process, scenes)
-    assert {"check_photo_damage[photo]", "check_no_blur[text_ui]"} <= set(failed), failed
+    assert {"check_photo_damage[photo]", "check_no_blur[text_ui]",
+            "check_antialiased_untouched[text_ui_aa]"} <= set(failed), failed
