@@ -37,7 +37,7 @@ SHORT_CORNER = 0.75
 # projects on p -> q at t in (AA_LO, 1 - AA_LO), within AA_OFF of the step off the segment, or p (q)
 # between its neighbour across the step and q (p), marks a rendered coverage ramp. Measured by the
 # bench's "antialiased" scenes (`mlaa-stream bench --scenes antialiased`), RMSE of the change in levels:
-# text 4.28 -> 0.64, wires 1.75 -> 0.14, diagonals 0.71 -> 0.00 (aa_guard=False -> True).
+# text 4.66 -> 1.55, wires 1.76 -> 0.13, diagonals 0.74 -> 0.00 (Filter(aa_guard=False) -> Filter()).
 AA_LO, AA_OFF = 0.1, 0.35
 SEGMENT = 64  # pixels of a row per work item in the per-pixel passes (kernels/common.cl)
 
