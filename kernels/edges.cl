@@ -240,6 +240,81 @@ inline int quiet_px(__global const PIXEL_T *src, int i, int j)
 #endif
 }
 
+#if QUIET_LEVELS >= 0
+// ---- integer frames, interior groups: the quiet and integer ramp tests of GROUP pixels at once, a lane
+// per pixel (OpenCL vectors: SIMD on a CPU, registers on a GPU) -- quiet_px and is_ramp_int exactly.
+// r*: one sample of the pixels x-1 .. x+9 of row y (lanes 0..10); u*, d*, e*: of x .. x+7 of rows y-1,
+// y+1, y+2. Channels in R, G, B order (the ramp test's tie-break); grey: one channel. int lanes: the
+// ramp test's products reach 65535 * RAMP_DEN. Macros, not functions (PoCL passes wide vectors through
+// memory).
+#define VCH (CHANNELS < 3 ? 1 : 3)
+#define ROW11(p, c) ((int16)((p)[c], (p)[(c) + CHANNELS], (p)[(c) + 2 * CHANNELS], (p)[(c) + 3 * CHANNELS], \
+    (p)[(c) + 4 * CHANNELS], (p)[(c) + 5 * CHANNELS], (p)[(c) + 6 * CHANNELS], (p)[(c) + 7 * CHANNELS],     \
+    (p)[(c) + 8 * CHANNELS], (p)[(c) + 9 * CHANNELS], (p)[(c) + 10 * CHANNELS], 0, 0, 0, 0, 0))
+#define ROW8(p, c) ((int8)((p)[c], (p)[(c) + CHANNELS], (p)[(c) + 2 * CHANNELS], (p)[(c) + 3 * CHANNELS], \
+    (p)[(c) + 4 * CHANNELS], (p)[(c) + 5 * CHANNELS], (p)[(c) + 6 * CHANNELS], (p)[(c) + 7 * CHANNELS]))
+#define VABS(v) ((v) < 0 ? -(v) : (v))
+#define VQUIET(d) (((d) <= QUIET_LEVELS) & ((d) >= -QUIET_LEVELS))
+// is_ramp_int's verdict for the lanes, given the step q - p (dx, dy, dz), p - before (bx, by, bz) and
+// after - q (ax, ay, az) per channel; out: -1 where a ramp.
+#define VRAMP3(dx, dy, dz, bx, by, bz, ax, ay, az, out) {                                                \
+        const int8 m_x = VABS(dx), m_y = VABS(dy), m_z = VABS(dz);                                     \
+        const int8 k_x = (m_x >= m_y) & (m_x >= m_z), k_y = ~k_x & (m_y >= m_z);                       \
+        const int8 s_1 = k_x ? (dx) : (k_y ? (dy) : (dz)), s_0 = k_x ? (bx) : (k_y ? (by) : (bz));      \
+        const int8 s_2 = k_x ? (ax) : (k_y ? (ay) : (az));                                             \
+        VRAMP1(s_1, s_0, s_2, out) }
+#define VRAMP1(dx, bx, ax, out) {                                                                        \
+        const int8 l_m = RAMP_NUM * VABS(dx), p_1 = (dx) > 0, b_0 = (bx), a_2 = (ax);                  \
+        out = (((b_0 > 0) == p_1) & (b_0 != 0) & (VABS(b_0) * RAMP_DEN > l_m)) |                       \
+              (((a_2 > 0) == p_1) & (a_2 != 0) & (VABS(a_2) * RAMP_DEN > l_m)); }
+#if CHANNELS >= 3
+#define C0 CH_R
+#define C2 CH_B
+#else
+#define C0 0
+#define C2 0
+#endif
+#endif
+
+// The float path for pixel i (x, y) given which pairs survived the cheap tests: c holds pixel x's colour
+// when *c_valid; it becomes its right neighbour's, so each colour is converted to CIELAB at most twice
+// (as a right and as a bottom neighbour), not four times.
+inline uchar float_edges(__global const PIXEL_T *src, __global const float *luts, int i, int x, int y,
+                         int width, int height, float threshold, int test_b, int test_r, Colour *c, int *c_valid)
+{
+    uchar e = 0;
+#if QUIET_LEVELS >= 0
+#define FLOAT_RAMP(before, has_before, p, q, after, has_after) ramp_tested()
+#else
+#define FLOAT_RAMP(before, has_before, p, q, after, has_after) \
+        is_ramp(before, has_before, p, q, after, has_after)
+#endif
+    if ((test_b || test_r) && !*c_valid) *c = colour_at(src, luts, i);
+    if (test_b) {
+        Colour b = colour_at(src, luts, i + width);
+        if (may_differ(c, &b, threshold)
+            && !FLOAT_RAMP(y > 0 ? to_encoded(luts, load_px(src, i - width)) : c->rgb, y > 0, c->rgb, b.rgb,
+                           y + 2 < height ? to_encoded(luts, load_px(src, i + 2 * width)) : b.rgb, y + 2 < height)
+            && !antialiased(src, luts, c->rgb, b.rgb, i, i + width, 1, x > 0, x + 1 < width, y > 0, y + 2 < height)
+            && differs(luts, c, &b, threshold))
+            e |= EDGE_BOTTOM;
+    }
+    *c_valid = 0;
+    if (test_r) {
+        Colour r = colour_at(src, luts, i + 1);
+        if (may_differ(c, &r, threshold)
+            && !FLOAT_RAMP(x > 0 ? to_encoded(luts, load_px(src, i - 1)) : c->rgb, x > 0, c->rgb, r.rgb,
+                           x + 2 < width ? to_encoded(luts, load_px(src, i + 2)) : r.rgb, x + 2 < width)
+            && !antialiased(src, luts, c->rgb, r.rgb, i, i + 1, width, y > 0, y + 1 < height, x > 0, x + 2 < width)
+            && differs(luts, c, &r, threshold))
+            e |= EDGE_RIGHT;
+        *c = r;
+        *c_valid = 1;
+    }
+#undef FLOAT_RAMP
+    return e;
+}
+
 __kernel void detect_edges(__global const PIXEL_T *src, __global const float *luts,
                            __global uchar *edges, const int width, const int height,
                            const float threshold)
@@ -257,46 +332,62 @@ __kernel void detect_edges(__global const PIXEL_T *src, __global const float *lu
             c_valid = 0;
             continue;
         }
-        // c is this pixel; its right neighbour becomes the next c, so each colour is converted
-        // to CIELAB at most twice (as a right and as a bottom neighbour), not four times.
-        uchar e = 0;
-        // Integer frames reject quiet pairs and ramps on the stored samples first (no conversion).
 #if QUIET_LEVELS >= 0
+        // Integer frames reject quiet pairs and ramps on the stored samples first (no conversion):
+        // interior groups a lane per pixel, the others a pixel at a time.
+        if (x > 0 && x + GROUP + 1 < width && x + GROUP <= x1 && y > 0 && y + 2 < height) {
+            __global const PIXEL_T *p = src + (size_t)(i - 1) * CHANNELS;
+            const size_t rs = (size_t)width * CHANNELS;
+            int16 r0 = ROW11(p, C0);
+            int8 u0 = ROW8(p + CHANNELS - rs, C0), d0 = ROW8(p + CHANNELS + rs, C0),
+                 e0 = ROW8(p + CHANNELS + 2 * rs, C0);
+            const int8 p0 = r0.s12345678, qb0 = d0 - p0, qr0 = r0.s23456789 - p0;
+            int8 quiet_b = VQUIET(qb0), quiet_r = VQUIET(qr0), ramp_b, ramp_r;
+#if VCH == 3
+            int16 r1 = ROW11(p, 1), r2 = ROW11(p, C2);
+            int8 u1 = ROW8(p + CHANNELS - rs, 1), d1 = ROW8(p + CHANNELS + rs, 1),
+                 e1 = ROW8(p + CHANNELS + 2 * rs, 1);
+            int8 u2 = ROW8(p + CHANNELS - rs, C2), d2 = ROW8(p + CHANNELS + rs, C2),
+                 e2 = ROW8(p + CHANNELS + 2 * rs, C2);
+            const int8 p1 = r1.s12345678, p2 = r2.s12345678;
+            const int8 qb1 = d1 - p1, qb2 = d2 - p2, qr1 = r1.s23456789 - p1, qr2 = r2.s23456789 - p2;
+            quiet_b &= VQUIET(qb1) & VQUIET(qb2);
+            quiet_r &= VQUIET(qr1) & VQUIET(qr2);
+#endif
+#if RAMP_TEST && VCH == 3
+            VRAMP3(qb0, qb1, qb2, p0 - u0, p1 - u1, p2 - u2, e0 - d0, e1 - d1, e2 - d2, ramp_b)
+            VRAMP3(qr0, qr1, qr2, p0 - r0.s01234567, p1 - r1.s01234567, p2 - r2.s01234567,
+                   r0.s3456789a - r0.s23456789, r1.s3456789a - r1.s23456789, r2.s3456789a - r2.s23456789, ramp_r)
+#elif RAMP_TEST
+            VRAMP1(qb0, p0 - u0, e0 - d0, ramp_b)
+            VRAMP1(qr0, p0 - r0.s01234567, r0.s3456789a - r0.s23456789, ramp_r)
+#else
+            ramp_b = (int8)(0); ramp_r = ramp_b;
+#endif
+            const int8 need = (~quiet_b & ~ramp_b & EDGE_BOTTOM) | (~quiet_r & ~ramp_r & EDGE_RIGHT);
+            const int4 o = need.lo | need.hi;
+            if ((o.x | o.y | o.z | o.w) == 0) {
+                vstore8((uchar8)(0), 0, edges + i);
+                c_valid = 0;
+            } else {
+                uchar nb[GROUP];
+                vstore8(convert_uchar8(need), 0, nb);
+                for (int t = 0; t < GROUP; ++t)
+                    edges[i + t] = float_edges(src, luts, i + t, x + t, y, width, height, threshold,
+                                               nb[t] & EDGE_BOTTOM, nb[t] & EDGE_RIGHT, &c, &c_valid);
+            }
+            x += GROUP;
+            continue;
+        }
         const int test_b = y + 1 < height && !quiet_px(src, i, i + width)
             && !is_ramp_int(src, i - width, y > 0, i, i + width, i + 2 * width, y + 2 < height);
         const int test_r = x + 1 < width && !quiet_px(src, i, i + 1)
             && !is_ramp_int(src, i - 1, x > 0, i, i + 1, i + 2, x + 2 < width);
-#define FLOAT_RAMP(before, has_before, p, q, after, has_after) ramp_tested()
 #else
         const int test_b = y + 1 < height && !same_px(src, i, i + width);
         const int test_r = x + 1 < width && !same_px(src, i, i + 1);
-#define FLOAT_RAMP(before, has_before, p, q, after, has_after) \
-        is_ramp(before, has_before, p, q, after, has_after)
 #endif
-        if ((test_b || test_r) && !c_valid) c = colour_at(src, luts, i);
-        if (test_b) {
-            Colour b = colour_at(src, luts, i + width);
-            if (may_differ(&c, &b, threshold)
-                && !FLOAT_RAMP(y > 0 ? to_encoded(luts, load_px(src, i - width)) : c.rgb, y > 0, c.rgb, b.rgb,
-                               y + 2 < height ? to_encoded(luts, load_px(src, i + 2 * width)) : b.rgb, y + 2 < height)
-                && !antialiased(src, luts, c.rgb, b.rgb, i, i + width, 1, x > 0, x + 1 < width, y > 0, y + 2 < height)
-                && differs(luts, &c, &b, threshold))
-                e |= EDGE_BOTTOM;
-        }
-        c_valid = 0;
-        if (test_r) {
-            Colour r = colour_at(src, luts, i + 1);
-            if (may_differ(&c, &r, threshold)
-                && !FLOAT_RAMP(x > 0 ? to_encoded(luts, load_px(src, i - 1)) : c.rgb, x > 0, c.rgb, r.rgb,
-                               x + 2 < width ? to_encoded(luts, load_px(src, i + 2)) : r.rgb, x + 2 < width)
-                && !antialiased(src, luts, c.rgb, r.rgb, i, i + 1, width, y > 0, y + 1 < height, x > 0, x + 2 < width)
-                && differs(luts, &c, &r, threshold))
-                e |= EDGE_RIGHT;
-            c = r;
-            c_valid = 1;
-        }
-#undef FLOAT_RAMP
-        edges[i] = e;
+        edges[i] = float_edges(src, luts, i, x, y, width, height, threshold, test_b, test_r, &c, &c_valid);
         ++x;
     }
 }
