@@ -237,15 +237,10 @@ inline void store_rgb(__global PIXEL_T *dst, __global const float *luts, int i, 
     __global const float *enc = luts + 2 * (LUT_SIZE + 1);
     v = (float3)(lut_read(enc, v.x), lut_read(enc, v.y), lut_read(enc, v.z));
 #endif
-#if CHANNELS == 1
-    dst[i] = to_pixel(v.x);
+#if CHANNELS == 4
+    store_px(dst, i, (float4)(v, load_px(dst, i).w));   // the stored alpha round-trips exactly
 #else
-    __global PIXEL_T *p = dst + (size_t)i * CHANNELS;
-#if ORDER_BGR
-    p[0] = to_pixel(v.z); p[1] = to_pixel(v.y); p[2] = to_pixel(v.x);
-#else
-    p[0] = to_pixel(v.x); p[1] = to_pixel(v.y); p[2] = to_pixel(v.z);
-#endif
+    store_px(dst, i, (float4)(v, 1.0f));
 #endif
 }
 
