@@ -13,21 +13,11 @@ import pytest
 
 from mlaa_stream.bridge import BridgeOptions, Bridger, bridge, bridge_reference
 from mlaa_stream.colour import linear_to_srgb, srgb_to_linear
-from mlaa_stream.device import DeviceError, default_context
 from mlaa_stream.formats import frame_format
 from mlaa_stream.scenes import Layer, _ui_layers, encode8, rect, render, stroke, text_polygons
 
 BG = (228, 226, 218)
 INK = (24, 24, 32)
-
-
-@pytest.fixture(scope="module")
-def device():
-    """The OpenCL device tests run on; host-only tests do not ask for it."""
-    try:
-        return default_context(None)
-    except DeviceError as exc:  # pragma: no cover - only without any OpenCL platform
-        pytest.skip(f"no OpenCL device: {exc}")
 
 
 def both(src: np.ndarray, dst: np.ndarray | None = None, **kw) -> np.ndarray:

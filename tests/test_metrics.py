@@ -104,9 +104,9 @@ def test_temporal_error_and_flicker_known_values():
 
 def test_flip_optional():
     inp, truth = _pair(2, (40, 40, 3))
-    if not M.flip_available():
+    if not M.flip_available():  # the optional extra is absent: the metric says so with NaN
         assert math.isnan(M.flip(inp, truth))
-        pytest.skip("flip-evaluator not installed: metric returns NaN, as documented")
+        return
     assert M.flip(truth, truth) == pytest.approx(0.0, abs=1e-6)
     assert M.flip(inp, truth) > 0.0
 

@@ -11,22 +11,12 @@ import numpy as np
 import pytest
 
 from mlaa_stream.colour import rgb_to_lab
-from mlaa_stream.device import DeviceError, default_context
 from mlaa_stream.formats import frame_format
 from mlaa_stream.reconstruct import (RING, Reconstructor, cheap_bound, cheap_levels, connexity_table, gap_table,
                                      reconstruct, reconstruct_reference)
 
 BG = (40, 90, 160)  # a non-black background
 INKS = [(250, 230, 20), (235, 235, 235), (10, 10, 10), (200, 40, 40)]
-
-
-@pytest.fixture(scope="module")
-def device():
-    """The OpenCL device tests run on; host-only tests do not ask for it."""
-    try:
-        return default_context(None)
-    except DeviceError as exc:  # pragma: no cover - only without any OpenCL platform
-        pytest.skip(f"no OpenCL device: {exc}")
 
 
 def both(img: np.ndarray, extended: bool, **kw) -> np.ndarray:
