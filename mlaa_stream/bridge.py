@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .colour import device_luts, lut_read
-from .device import Context, default_context
+from .device import Context, check_pass_buffers, default_context
 from .formats import LUT_SIZE, FrameFormat, defines_for, frame_format
 
 try:
@@ -361,13 +361,7 @@ class Bridger:
                 wait_for: list | None = None, events: dict | None = None) -> "cl.Event":
         """Enqueue the find pass (all orientations), then the draw pass per orientation in order; returns the
         last event. `events`, when given, receives each kernel's event (bridge_find, bridge_draw0..3)."""
-        if src.int_ptr == dst.int_ptr:
-            raise ValueError("bridge: expected dst to be a different buffer from src, got the same one")
-        need = self.fmt.nbytes
-        for what, buf in (("src", src), ("dst", dst)):
-            if buf.size < need:
-                raise ValueError(f"bridge: expected {what} of at least {need} bytes for a {self.fmt.width}x"
-                                 f"{self.fmt.height}x{self.fmt.channels} frame, got {buf.size}")
+        check_pass_buffers("bridge", self.fmt, src, dst)
         W, H = np.int32(self.fmt.width), np.int32(self.fmt.height)
         ev = list(wait_for or []) + ([self._last] if self._last is not None else [])
         rec = {} if events is None else events

@@ -169,6 +169,16 @@ class Context:
         return cl.Buffer(self.ctx, flags or cl.mem_flags.READ_WRITE, size=max(int(nbytes), 1))
 
 
+def check_pass_buffers(what: str, fmt, src, dst) -> None:
+    """A src -> dst pass needs two distinct buffers, each holding at least one frame of `fmt`."""
+    if src is dst or src.int_ptr == dst.int_ptr:
+        raise ValueError(f"{what}: expected dst to be a different buffer from src, got the same one")
+    for name, buf in (("src", src), ("dst", dst)):
+        if buf.size < fmt.nbytes:
+            raise ValueError(f"{what}: expected {name} of at least {fmt.nbytes} bytes for a {fmt.width}x"
+                             f"{fmt.height}x{fmt.channels} frame, got {buf.size}")
+
+
 _contexts: dict[str, Context] = {}
 _contexts_lock = threading.Lock()
 

@@ -11,7 +11,7 @@ import functools
 import numpy as np
 
 from .colour import device_luts, lut_read, rgb_to_lab as _lab_exact
-from .device import Context, default_context
+from .device import Context, check_pass_buffers, default_context
 from .formats import LUT_SIZE, FrameFormat, defines_for, frame_format
 
 try:
@@ -385,13 +385,8 @@ class Reconstructor:
     def enqueue(self, queue: "cl.CommandQueue", src: "cl.Buffer", dst: "cl.Buffer", luts: "cl.Buffer",
                 wait_for: list | None = None) -> "cl.Event":
         """Enqueue the pass on `queue`: dst = src except reconstructed pixels; returns the last kernel's event."""
-        if src is dst or (src.int_ptr == dst.int_ptr):
-            raise ValueError("reconstruct: expected dst to be a different buffer from src, got the same one")
+        check_pass_buffers("reconstruct", self.fmt, src, dst)
         need = self.fmt.nbytes
-        for what, buf in (("src", src), ("dst", dst)):
-            if buf.size < need:
-                raise ValueError(f"reconstruct: expected {what} of at least {need} bytes for a "
-                                 f"{self.fmt.width}x{self.fmt.height}x{self.fmt.channels} frame, got {buf.size}")
         W, H = np.int32(self.fmt.width), np.int32(self.fmt.height)
         after = list(wait_for or []) + ([self._last] if self._last is not None else [])
         # dst = src first (a device copy, ~0.3 ms at 1080p); the rules then write changed pixels only
