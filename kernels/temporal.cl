@@ -61,6 +61,38 @@ inline float4 from_linear(__global const float *luts, float4 c)
 #endif
 }
 
+// A pixel of the current frame in linear light. Integer samples read the decode table `dec`
+// (entry v = lut_read(luts, v / PIXEL_MAX), built on the host by the same arithmetic: one load instead
+// of the interpolated table read, bit for bit the same value); float samples use the tables.
+#if !LINEAR_INPUT && !defined(PIXEL_IS_FLOAT)
+#define DECODE_TABLE 1
+#else
+#define DECODE_TABLE 0
+#endif
+inline float4 load_linear(__global const float *luts, __global const float *dec,
+                          __global const PIXEL_T *img, int i)
+{
+#if DECODE_TABLE
+#if CHANNELS == 1
+    float v = dec[img[i]];
+    return (float4)(v, v, v, 1.0f);
+#else
+    __global const PIXEL_T *p = img + (size_t)i * CHANNELS;
+#if ORDER_BGR
+    float4 c = (float4)(dec[p[2]], dec[p[1]], dec[p[0]], 1.0f);
+#else
+    float4 c = (float4)(dec[p[0]], dec[p[1]], dec[p[2]], 1.0f);
+#endif
+#if CHANNELS == 4
+    c.w = (float)p[3] * (1.0f / PIXEL_MAX);
+#endif
+    return c;
+#endif
+#else
+    return to_linear(luts, load_px(img, i));
+#endif
+}
+
 // Bilinear sample of a (fh, fw, 2) flow field at full-frame position p, in full-frame pixels.
 inline float2 sample_flow(__global const float *f, int fw, int fh, float s, float2 p)
 {
@@ -234,11 +266,23 @@ inline void pass_flat(__global const PIXEL_T *cur, __global half *hist_out, __gl
 #define MAX4(a, b) ((float4)((a).x > (b).x ? (a).x : (b).x, (a).y > (b).y ? (a).y : (b).y, \
                              (a).z > (b).z ? (a).z : (b).z, (a).w > (b).w ? (a).w : (b).w))
 
+// Statistics of column cx over rows ya, y, yb (in the kernel's scope): sum (a + m) + b, sum of
+// squares in the same order, min, max; m = the sample of row y. The 3x3 sums are the column sums
+// added left to right (temporal_reference adds in the same order).
+#define COLUMN_STATS(cx, sum, sq, lo, hi, m) do { \
+        float4 a_ = load_linear(luts, dec, cur, IDX(cx, ya, width)); \
+        m = load_linear(luts, dec, cur, IDX(cx, y, width)); \
+        float4 b_ = load_linear(luts, dec, cur, IDX(cx, yb, width)); \
+        sum = a_ + m + b_; sq = a_ * a_ + m * m + b_ * b_; \
+        lo = MIN4(MIN4(a_, m), b_); hi = MAX4(MAX4(a_, m), b_); \
+    } while (0)
+
 __kernel void temporal_blend(__global const PIXEL_T *cur, __global const half *hist,
                              __global half *hist_out, __global PIXEL_T *dst, __global uchar *conf,
                              __global const float *flow_b, __global const float *flow_f,
                              __global const float *flow_prev, __global const float *params,
-                             __global const float *luts, const int width, const int height,
+                             __global const float *luts, __global const float *dec,
+                             const int width, const int height,
                              const int fw, const int fh, const int pfw, const int pfh,
                              const int cur_mode, const int prev_mode)
 {
@@ -275,7 +319,7 @@ __kernel void temporal_blend(__global const PIXEL_T *cur, __global const half *h
     for (int gx = x0; gx < x1; gx += GROUP) {
         const int gend = gx + GROUP < x1 ? gx + GROUP : x1;
         if (gx >= 1 && gx + GROUP < width && group_flat(ra, rm, rb, gx)) {   // the flat rule, 8 at once
-            if (!run) vstore_half4_rte(to_linear(luts, load_px(cur, row + gx)), 0, (half *)&bits);
+            if (!run) vstore_half4_rte(load_linear(luts, dec, cur, row + gx), 0, (half *)&bits);
             run = 1;
             pass_flat(cur, hist_out, dst, conf, bits, row, gx, gend);
             continue;
@@ -288,7 +332,7 @@ __kernel void temporal_blend(__global const PIXEL_T *cur, __global const half *h
             // near-flat: each pixel untouched, its own value as the history, weight 0
             for (int x = gx; x < gend; ++x) {
                 const int i = row + x;
-                vstore_half4_rte(to_linear(luts, load_px(cur, i)), i, hist_out);
+                vstore_half4_rte(load_linear(luts, dec, cur, i), i, hist_out);
                 conf[i] = 0;
             }
             __global const uchar *s8 = (__global const uchar *)cur + (size_t)(row + gx) * PXB;
@@ -297,20 +341,17 @@ __kernel void temporal_blend(__global const PIXEL_T *cur, __global const half *h
             continue;
         }
 #endif
-        // Sliding 3x3 window in linear light: columns L (x-1), C (x), R (x+1), rows a (y-1), m, b (y+1).
+        // Sliding 3x3 window in linear light, kept as per-column statistics of rows y-1, y, y+1:
+        // sum, sum of squares, min, max of columns L (x-1), C (x), R (x+1); Cm = the pixel itself.
         int xl = gx > 0 ? gx - 1 : 0;
-        float4 La = to_linear(luts, load_px(cur, IDX(xl, ya, width)));
-        float4 Lm = to_linear(luts, load_px(cur, IDX(xl, y, width)));
-        float4 Lb = to_linear(luts, load_px(cur, IDX(xl, yb, width)));
-        float4 Ca = to_linear(luts, load_px(cur, IDX(gx, ya, width)));
-        float4 Cm = to_linear(luts, load_px(cur, IDX(gx, y, width)));
-        float4 Cb = to_linear(luts, load_px(cur, IDX(gx, yb, width)));
+        float4 sL, qL, nL, xL, sC, qC, nC, xC, Cm;
+        COLUMN_STATS(xl, sL, qL, nL, xL, Cm);
+        COLUMN_STATS(gx, sC, qC, nC, xC, Cm);
 
         for (int x = gx; x < gend; ++x) {
             const int xr = x + 1 < width ? x + 1 : width - 1;
-            float4 Ra = to_linear(luts, load_px(cur, IDX(xr, ya, width)));
-            float4 Rm = to_linear(luts, load_px(cur, IDX(xr, y, width)));
-            float4 Rb = to_linear(luts, load_px(cur, IDX(xr, yb, width)));
+            float4 sR, qR, nR, xR, Rm;
+            COLUMN_STATS(xr, sR, qR, nR, xR, Rm);
             const int i = IDX(x, y, width);
             float4 c = Cm;   // current pixel, linear (alpha as stored)
             float wgt = 0.0f;
@@ -356,13 +397,8 @@ __kernel void temporal_blend(__global const PIXEL_T *cur, __global const half *h
                         h = sample_history(hist, width, height, q);
                     }
                     // 3x3 statistics of the current frame (variance clipping, Salvi 2016)
-                    float4 s = La + Lm + Lb + Ca + Cm + Cb + Ra + Rm + Rb;
-                    float4 s2 = La * La + Lm * Lm + Lb * Lb + Ca * Ca + Cm * Cm + Cb * Cb +
-                                Ra * Ra + Rm * Rm + Rb * Rb;
-                    float4 mn = MIN4(MIN4(MIN4(La, Lm), MIN4(Lb, Ca)),
-                                     MIN4(MIN4(Cm, Cb), MIN4(MIN4(Ra, Rm), Rb)));
-                    float4 mx = MAX4(MAX4(MAX4(La, Lm), MAX4(Lb, Ca)),
-                                     MAX4(MAX4(Cm, Cb), MAX4(MAX4(Ra, Rm), Rb)));
+                    float4 s = sL + sC + sR, s2 = qL + qC + qR;
+                    float4 mn = MIN4(MIN4(nL, nC), nR), mx = MAX4(MAX4(xL, xC), xR);
                     float4 mu = s * (1.0f / 9.0f);
                     float4 var = s2 * (1.0f / 9.0f) - mu * mu;
                     float4 sd = sqrt(MAX4(var, (float4)(0.0f)));
@@ -394,8 +430,8 @@ __kernel void temporal_blend(__global const PIXEL_T *cur, __global const half *h
                     dst[(size_t)i * CHANNELS + ch] = cur[(size_t)i * CHANNELS + ch];
     #endif
             }
-            La = Ca; Lm = Cm; Lb = Cb;
-            Ca = Ra; Cm = Rm; Cb = Rb;
+            sL = sC; qL = qC; nL = nC; xL = xC;
+            sC = sR; qC = qR; nC = nR; xC = xR; Cm = Rm;
         }
     }
 }

@@ -240,7 +240,7 @@ def choose_model(prev: Pyramid, cur: Pyramid, mode: str = "adaptive") -> Decisio
 class _Buffers:
     """Device memory for one frame format and flow size: allocated once, reused every frame."""
 
-    def __init__(self, context: Context, fmt: FrameFormat, flow_shape: tuple[int, int]):
+    def __init__(self, context: Context, fmt: FrameFormat, flow_shape: tuple[int, int], linear_input: bool):
         self.fmt, self.flow_shape = fmt, flow_shape
         n, fh, fw = fmt.pixels, *flow_shape
         self.cur = context.buffer(fmt.nbytes)
@@ -250,6 +250,8 @@ class _Buffers:
         self.flow = [context.buffer(8 * fh * fw), context.buffer(8 * fh * fw)]  # backward, ping-pong
         self.flow_f = context.buffer(8 * fh * fw)                          # forward (fb check)
         self.params = context.buffer(4 * N_PARAMS)
+        table = decode_table(fmt, linear_input)
+        self.decode = cl.Buffer(context.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=table)
         self.host_cur = np.empty(fmt.nbytes // fmt.dtype.itemsize, fmt.dtype)
         self.host_dst = np.empty_like(self.host_cur)
         self.host_conf = np.empty((fmt.height, fmt.width), np.uint8)
@@ -314,7 +316,7 @@ class TemporalStage:
         if self._buffers is not None and self._buffers.fmt == fmt and self._buffers.flow_shape == shape:
             return self._buffers
         self.queue.finish()
-        self._buffers = _Buffers(self.context, fmt, shape)
+        self._buffers = _Buffers(self.context, fmt, shape, self.linear_input)
         self._kernel = self.context.kernel("temporal", "temporal_blend", kernel_defines(fmt, self.linear_input))
         self.reset()
         return self._buffers
@@ -391,7 +393,7 @@ class TemporalStage:
         fh, fw = bufs.flow_shape
         self._kernel(q, (-(-fmt.width // SEGMENT), fmt.height), None, bufs.cur, bufs.hist[prev_slot],
                      bufs.hist[new_slot], bufs.dst, bufs.conf, bufs.flow[new_slot], bufs.flow_f,
-                     bufs.flow[prev_slot], bufs.params, self._luts, np.int32(fmt.width),
+                     bufs.flow[prev_slot], bufs.params, self._luts, bufs.decode, np.int32(fmt.width),
                      np.int32(fmt.height), np.int32(fw), np.int32(fh), np.int32(fw), np.int32(fh),
                      np.int32(cur_mode), np.int32(self._prev_model if cur_mode != CUR_RESET else PREV_NONE))
         if cur_mode == CUR_RESET:
@@ -497,6 +499,22 @@ def _catmull_rom(t: np.ndarray) -> list[np.ndarray]:
     t = t.astype(f32)
     return [t * (f32(-0.5) + t * (f32(1.0) - f32(0.5) * t)), f32(1.0) + t * t * (f32(-2.5) + f32(1.5) * t),
             t * (f32(0.5) + t * (f32(2.0) - f32(1.5) * t)), t * t * (f32(-0.5) + f32(0.5) * t)]
+
+
+def decode_table(fmt: FrameFormat, linear_input: bool = False) -> np.ndarray:
+    """The kernel's decode table for integer samples: entry v = the linear value the tables give for
+    v / PIXEL_MAX (common.cl's lut_read, the same float32 arithmetic), so one load replaces the
+    interpolated read with the same bits. Float frames and linear input read no table (one entry)."""
+    if linear_input or not np.issubdtype(fmt.dtype, np.integer):
+        return np.zeros(1, np.float32)
+    pmax = np.float32(_PMAX[fmt.dtype])
+    codes = np.arange(int(pmax) + 1, dtype=np.float32) * (np.float32(1.0) / pmax)
+    # common.cl's lut_read in float32 throughout (colour.lut_read widens the fraction to float64)
+    lut = device_luts()
+    t = codes * np.float32(LUT_SIZE)
+    i = np.minimum(t.astype(np.int32), LUT_SIZE - 1)
+    f = t - i.astype(np.float32)
+    return np.ascontiguousarray(lut[i] + f * (lut[i + 1] - lut[i]), dtype=np.float32)
 
 
 def kernel_defines(fmt: FrameFormat, linear_input: bool = False) -> dict:
@@ -606,11 +624,10 @@ def temporal_reference(cur: np.ndarray, hist: np.ndarray, params: np.ndarray, cu
         # variance clip against the current 3x3 neighbourhood (edges replicated)
         pad = np.pad(lin, ((1, 1), (1, 1), (0, 0)), mode="edge")
         taps = [pad[1 + dy:1 + dy + h, 1 + dx:1 + dx + w] for dx in (-1, 0, 1) for dy in (-1, 0, 1)]
-        s = taps[0]
-        s2 = taps[0] * taps[0]
-        for t in taps[1:]:
-            s = s + t
-            s2 = s2 + t * t
+        cols = [taps[3 * j:3 * j + 3] for j in range(3)]   # the kernel's column sums, left to right
+        s = sum(((a + m) + b for a, m, b in cols[1:]), (cols[0][0] + cols[0][1]) + cols[0][2])
+        s2 = sum(((a * a + m * m) + b * b for a, m, b in cols[1:]),
+                 (cols[0][0] * cols[0][0] + cols[0][1] * cols[0][1]) + cols[0][2] * cols[0][2])
         mn, mx = np.minimum.reduce(taps), np.maximum.reduce(taps)
         mu = s * f32(1.0 / 9.0)
         sd = np.sqrt(np.maximum(s2 * f32(1.0 / 9.0) - mu * mu, 0)).astype(f32)

@@ -22,6 +22,7 @@ import cv2
 import numpy as np
 
 from . import metrics as M
+from .colour import linear_to_srgb, srgb_to_linear
 from .mlaa import Filter
 from .scenes import (Layer, Scene, build_scene, ellipse, rect, rotated_rect, text_polygons, timing_frame,
                      translate)
@@ -101,6 +102,32 @@ def scene_cut(n: int, w: int, h: int) -> Scene:
 
 
 SCENES = {"rotation": scene_rotation, "pan": scene_pan, "mover": scene_mover, "cut": scene_cut}
+
+
+def exact_motion(name: str, w: int, h: int) -> np.ndarray | None:
+    """The scene's true motion as a 2x3 map from a pixel of frame t to where it was in frame t-1
+    (None where the motion is not one affine map: the mover, the cut)."""
+    if name == "pan":
+        return np.float32([[1, 0, -0.35], [0, 1, -0.15]])
+    if name == "rotation":
+        a = math.radians(-0.5)
+        c, s = math.cos(a), math.sin(a)
+        cx, cy = w / 2 + 0.21, h / 2 + 0.13
+        return np.float32([[c, -s, cx - c * cx + s * cy], [s, c, cy - s * cx - c * cy]])
+    return None
+
+
+def reprojected_truth(truths: np.ndarray, motion: np.ndarray) -> np.ndarray:
+    """Frame t = the true frame t-1 warped by the exact motion (Catmull-Rom, linear light): the best
+    history any reprojection can bring, so the floor of the stage's temporal error on this metric."""
+    h, w = truths.shape[1:3]
+    lin = srgb_to_linear(truths.astype(np.float32) / 255.0).astype(np.float32)
+    outs = [truths[0]]
+    for t in range(1, len(truths)):
+        warped = cv2.warpAffine(lin[t - 1], motion, (w, h), flags=cv2.INTER_CUBIC | cv2.WARP_INVERSE_MAP,
+                                borderMode=cv2.BORDER_REPLICATE)
+        outs.append(np.clip(linear_to_srgb(warped) * 255.0 + 0.5, 0, 255).astype(np.uint8))
+    return np.stack(outs)
 
 
 # --- runs -------------------------------------------------------------------------------------------
@@ -192,6 +219,10 @@ def main(argv: list[str] | None = None) -> int:
         # a reference point for the metric: the truth itself, slightly blurred
         blurred = np.stack([cv2.GaussianBlur(t, (0, 0), 0.5) for t in scene.truths])
         results[name]["truth blurred (sigma 0.5 px)"] = score(blurred, scene)
+        motion = exact_motion(name, args.width, args.height)
+        if motion is not None:
+            results[name]["previous truth reprojected exactly"] = score(
+                reprojected_truth(np.stack(scene.truths), motion), scene)
 
     speed = {}
     if args.timed > 0:

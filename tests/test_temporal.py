@@ -20,7 +20,7 @@ from mlaa_stream.device import default_context
 from mlaa_stream.formats import frame_format
 from mlaa_stream.mlaa import Filter
 from mlaa_stream.temporal import (CUR_AFFINE, CUR_DENSE, CUR_RESET, PREV_AFFINE, PREV_DENSE, PREV_NONE,
-                                  SEGMENT, TemporalStage, flat_3x3, flat_levels, kernel_defines, make_params,
+                                  SEGMENT, TemporalStage, decode_table, flat_3x3, flat_levels, kernel_defines, make_params,
                                   temporal_reference)
 from mlaa_stream.temporal_bench import _pan_layers
 
@@ -41,7 +41,7 @@ def run_kernel(cur, hist, params, cur_mode, prev_mode, flow_b, flow_f, flow_prev
     fh, fw = flow_b.shape[:2]
     dst, hist_out, conf = ctx.buffer(host.nbytes), ctx.buffer(hist.nbytes), ctx.buffer(h * w)
     k(q, (-(-w // SEGMENT), h), None, buf(host), buf(hist), hist_out, dst, conf, buf(flow_b), buf(flow_f),
-      buf(flow_prev), buf(params), buf(device_luts()), np.int32(w), np.int32(h), np.int32(fw), np.int32(fh),
+      buf(flow_prev), buf(params), buf(device_luts()), buf(decode_table(fmt)), np.int32(w), np.int32(h), np.int32(fw), np.int32(fh),
       np.int32(fw), np.int32(fh), np.int32(cur_mode), np.int32(prev_mode))
     out, ho, co = np.empty_like(host), np.empty_like(hist), np.empty((h, w), np.uint8)
     cl.enqueue_copy(q, out, dst)
@@ -113,6 +113,24 @@ def test_kernel_matches_reference_on_texels(shift):
     ref = temporal_reference(cur, hist, params, CUR_AFFINE, PREV_AFFINE, fb, ff, fp, bgr=True)
     assert 0.05 < (ref[2] > 0).mean() < 1.0
     assert_close(got[0], ref[0], got[1], ref[1], got[2], ref[2])
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+def test_decode_table_is_the_interpolated_table_read(dtype):
+    """The kernel's per-code decode table holds what lut_read gives for v / PIXEL_MAX (within 1 float32
+    ulp of colour.lut_read, which widens to float64; the kernel output matches the reference, above);
+    known answers: 0 -> 0, max -> 1, monotone, within the table's interpolation error (2e-4) of the
+    exact sRGB decode."""
+    from mlaa_stream.colour import lut_read
+    fmt = frame_format(np.zeros((4, 4, 3), dtype), False)
+    table = decode_table(fmt)
+    pmax = np.iinfo(dtype).max
+    assert table.shape == (pmax + 1,) and table.dtype == np.float32
+    codes = np.arange(pmax + 1, dtype=np.float32) * (np.float32(1.0) / np.float32(pmax))
+    np.testing.assert_allclose(table, lut_read(device_luts(), codes), atol=6e-8, rtol=0)
+    assert table[0] == 0.0 and abs(table[-1] - 1.0) < 1e-6 and np.all(np.diff(table) >= 0)
+    np.testing.assert_allclose(table, srgb_to_linear(codes.astype(np.float64)), atol=2e-4, rtol=0)
+    assert decode_table(frame_format(np.zeros((4, 4), np.float32), False)).shape == (1,)
 
 
 def test_kernel_known_answer_checkerboard():
