@@ -11,12 +11,13 @@
 // frames, decoded through dec8, 256 entries); TILE (edge of a square screen tile in pixels).
 //
 // Host data (mlaa_stream.overlay): segments binned into TILE x TILE tiles. One work-item draws one
-// non-empty tile: for each listed segment it visits, row by row, only the pixels whose centres lie
-// within the segment's reach (an interval per row, linear in the row but for the end discs), so
-// pixels away from lines cost nothing; in the stroke's interior it writes 1 without the formula.
-// Each polyline's coverage (max over its segments) is composited once it is complete; the frame's
-// pixel is read, decoded and put under the layers only once, at write-back, and only where the
-// layers are not opaque.
+// non-empty tile: for each listed segment it visits, row by row, the 8-pixel groups (float8 lanes)
+// that meet the band |perp| <= reach cut to the segment's x-extent (linear in the row), so groups
+// away from lines cost nothing; the coverage formula runs on all 8 lanes at once, with selects
+// (lanes beyond the reach get exactly 0, the stroke's interior exactly 1). Each polyline's coverage
+// (max over its segments) is composited, 8 lanes at a time, once it is complete; the frame's pixel
+// is read, decoded and put under the layers only once, at write-back, and only where the layers
+// are not opaque.
 //   segs[2s]    float4 (x0, y0, tx, ty): start and unit tangent, in pixels (pixel centres at integers)
 //   segs[2s+1]  float4 (length, r, r_inner, reach): reach = farthest touched pixel centre
 //   seg_meta[s] (polyline << 3) | flags: 1 flat start, 2 flat end, 4 square (flat ends extended by r)
@@ -160,67 +161,65 @@ INLINE float2 segment_cover(float px, float py, float4 g, float4 h, int meta, fl
     return (float2)(co, ci);
 }
 
-// segment_cover for a segment with round ends (no flags), the common case, with what is constant
-// along the segment passed in: (fx, dy) = p - a, dy1 = p.y - b.y, (sa, sb) the footprint widths on
-// the body's normal. Same arithmetic as segment_cover.
-INLINE float2 round_cover(float fx, float dy, float dy1, float tx, float ty, float len, float r,
-                          float ri, float sa, float sb, float strength)
+// Eight pixels of a tile row at once (float8 lanes: PoCL maps them onto the CPU's vector unit).
+typedef float8 f8;
+typedef int8 i8;
+#define F8ABS(v) ((v) < 0.0f ? -(v) : (v))
+#define F8MAX(a, b) ((a) > (b) ? (a) : (b))
+
+// footprint_cdf per lane, with h = (a + b) / 2 and the inverses ia = 1 / a, i2 = 1 / (2ab) passed in
+// (i2 is not used where b = 0). Selects instead of branches: the trapezoid's piece changes from lane
+// to lane. Exactly 0 and 1 beyond the ramp, as footprint_cdf.
+INLINE f8 fcdf8(f8 s, f8 a, f8 b, f8 h, f8 ia, f8 i2)
 {
-    const float along = fx * tx + dy * ty;
-    float dist, fa = sa, fb = sb;
-    if (along < 0.0f || along > len) {
-        const float vx = along < 0.0f ? fx : fx - len * tx;
-        const float vy = along < 0.0f ? dy : dy1;
-        dist = sqrt(vx * vx + vy * vy);
-        if (dist > 1e-6f) {
-            const float na = FABS(vx) * (strength / dist), nb = FABS(vy) * (strength / dist);
-            fa = FMAX(na, nb); fb = FMIN(na, nb);
-        }
-    } else {
-        const float perp = tx * dy - ty * fx;
-        dist = FABS(perp);
-    }
-    const float co = strip_cover(dist, r, fa, fb);
-    return (float2)(co, ri >= r ? co : (ri > 0.0f ? strip_cover(dist, ri, fa, fb) : 0.0f));
+    const f8 x = s + h, ab = a + b, y = ab - x;
+    f8 q = x <= a ? (x - 0.5f * b) * ia : 1.0f - y * y * i2;
+    q = x < b ? x * x * i2 : q;
+    q = x >= ab ? (f8)1.0f : q;
+    return x <= 0.0f ? (f8)0.0f : q;
 }
 
-// The row's x-interval (relative to a.x) where pixel centres lie within Rr of the segment: the
-// capsule is convex, so the hull of the band's interval and the end discs' chords. The band is
-// 0 <= along <= len (x in dy * s_a + [a0, a1]) and |perp| <= Rr (x in dy * s_p +- w_p); ok_t / ok_n:
-// the tangent / normal has an x component (else that condition does not depend on x). Empty when
-// .x > .y.
-INLINE float2 row_span(float dy, float dy1, float tx, float ty, float len, float Rr, int ok_t,
-                       float s_a, float a0, float a1, int ok_n, float s_p, float w_p)
+// segment_cover for a segment with round ends (no flags), the common case, at 8 pixel centres of a
+// row: (fx, dy) = p - a, dy1 = p.y - b.y; (sa >= sb) the footprint widths on the body's normal.
+// Same arithmetic as segment_cover; the end discs' terms only where a lane lies beyond an end.
+INLINE void round_cover8(f8 fx, float dy, float dy1, float tx, float ty, float len, float r,
+                         float ri, float sa, float sb, float sh, float sia, float si2,
+                         float strength, f8 *co, f8 *ci)
 {
-    float blo, bhi, plo, phi;
-    if (ok_t) {
-        blo = dy * s_a + a0; bhi = dy * s_a + a1;
+    const f8 along = fx * tx + dy * ty;
+    const f8 perp = tx * dy - ty * fx;
+    f8 dist = F8ABS(perp), fa = (f8)sa, fb = (f8)sb, h = (f8)sh, ia = (f8)sia, i2 = (f8)si2;
+    const float l0 = along.s0, l7 = along.s7;  // along is linear in x: its extremes are the end lanes
+    if (FMIN(l0, l7) < 0.0f || FMAX(l0, l7) > len) {
+        const i8 st = along < 0.0f, en = along > len;
+        const f8 vx = st ? fx : fx - len * tx, vy = st ? (f8)dy : (f8)dy1;
+        const f8 dd = sqrt(vx * vx + vy * vy);
+        const i8 disc = st | en, rad = disc & (dd > 1e-6f);  // the footprint on the radial normal
+        const f8 ux = F8ABS(vx), uy = F8ABS(vy), k = strength / (rad ? dd : (f8)1.0f);
+        dist = disc ? dd : dist;
+        fa = rad ? (ux > uy ? ux : uy) * k : fa;
+        fb = rad ? (ux > uy ? uy : ux) * k : fb;
+        h = 0.5f * (fa + fb); ia = 1.0f / fa; i2 = 0.5f * ia / fb;
+    }
+    // The strip |u| <= r is F(r - d) - F(-r - d); the second term is 0 when r >= (a + b) / 2, the
+    // footprint's half extent, which is at most HALF_DIAGONAL * strength (wide strokes).
+    const float wide = HALF_DIAGONAL * strength + 1e-4f;
+    f8 o = fcdf8(r - dist, fa, fb, h, ia, i2);
+    if (r < wide) o -= fcdf8(-r - dist, fa, fb, h, ia, i2);
+    *co = o;
+    if (ri >= r) {
+        *ci = o;
+    } else if (ri > 0.0f) {
+        f8 n = fcdf8(ri - dist, fa, fb, h, ia, i2);
+        if (ri < wide) n -= fcdf8(-ri - dist, fa, fb, h, ia, i2);
+        *ci = n;
     } else {
-        const float u = dy * ty;
-        const int in = u >= 0.0f && u <= len;
-        blo = in ? -1e30f : 1e30f; bhi = -blo;
+        *ci = (f8)0.0f;
     }
-    if (ok_n) {
-        const float c = dy * s_p;
-        plo = c - w_p; phi = c + w_p;
-    } else {
-        const int in = FABS(tx * dy) <= Rr;
-        plo = in ? -1e30f : 1e30f; phi = -plo;
-    }
-    float lo = FMAX(blo, plo), hi = FMIN(bhi, phi);
-    if (lo > hi) { lo = 1e30f; hi = -1e30f; }
-    if (FABS(dy) <= Rr) {                       // disc at the start
-        const float w = sqrt(Rr * Rr - dy * dy);
-        lo = FMIN(lo, -w); hi = FMAX(hi, w);
-    }
-    if (FABS(dy1) <= Rr) {                      // disc at the end
-        const float w = sqrt(Rr * Rr - dy1 * dy1), ex = len * tx;
-        lo = FMIN(lo, ex - w); hi = FMAX(hi, ex + w);
-    }
-    return (float2)(lo, hi);
 }
 
 #define TT (TILE * TILE)
+#define CH (TILE / 8)   // float8 chunks per tile row
 
 __kernel void grlaa_draw(__global PIXEL_T *img, __global const float *luts,
                          __global const float *dec8, __global const float4 *segs,
@@ -233,17 +232,19 @@ __kernel void grlaa_draw(__global PIXEL_T *img, __global const float *luts,
     const int4 tile = tiles[gid];
     const int x0 = tile.x * TILE, y0 = tile.y * TILE;
     const int xmax = IMIN(x0 + TILE, width) - 1, ymax = IMIN(y0 + TILE, height) - 1;
-    const float inner_pad = HALF_DIAGONAL * strength + 1e-4f;
+    const f8 lane = (f8)(0.0f, 1.0f, 2.0f, 3.0f, 4.0f, 5.0f, 6.0f, 7.0f);
 
-    float cov_out[TT], cov_in[TT];      // current polyline's coverage (max over its segments)
-    // Layers so far, premultiplied "over" without the frame: colour acc, transmittance trans; the
-    // frame's pixel joins once, at write-back (valid where `touched`).
-    float acc_r[TT], acc_g[TT], acc_b[TT], trans[TT];
-    int exact[TT];                      // 1 + 2*poly (fill) or 2 + 2*poly (outline): stored as-is
-    uint touched[TILE];                 // one bit per column
-    int run_lo[TILE], run_hi[TILE];     // columns the current polyline touched, per row
-    for (int i = 0; i < TT; ++i) { cov_out[i] = 0.0f; cov_in[i] = 0.0f; }
-    for (int j = 0; j < TILE; ++j) { touched[j] = 0u; run_lo[j] = TILE; run_hi[j] = -1; }
+    f8 cov_out[TT / 8], cov_in[TT / 8];  // current polyline's coverage (max over its segments)
+    // Layers so far, premultiplied "over" without the frame: colour acc, transmittance trans (the
+    // frame's pixel joins once, at write-back); hit > 0 where some line covers the pixel.
+    f8 acc_r[TT / 8], acc_g[TT / 8], acc_b[TT / 8], trans[TT / 8], hit[TT / 8];
+    i8 exact[TT / 8];                   // 1 + 2*poly (fill) or 2 + 2*poly (outline): stored as-is
+    uint rows_cur[TILE], rows_all[TILE];  // per row, one bit per chunk: the current / any polyline
+    for (int k = 0; k < TT / 8; ++k) {
+        cov_out[k] = 0.0f; cov_in[k] = 0.0f; acc_r[k] = 0.0f; acc_g[k] = 0.0f; acc_b[k] = 0.0f;
+        trans[k] = 1.0f; hit[k] = 0.0f; exact[k] = 0;
+    }
+    for (int j = 0; j < TILE; ++j) { rows_cur[j] = 0u; rows_all[j] = 0u; }
     // The tile's rows of the frame are read at write-back: ask for them now.
     for (int j = 0; j <= ymax - y0; ++j) {
         PREFETCH(img + (size_t)IDX(x0, y0 + j, width) * CHANNELS);
@@ -261,28 +262,30 @@ __kernel void grlaa_draw(__global PIXEL_T *img, __global const float *luts,
         }
         if (poly != cur && cur >= 0) {
             // Composite the finished polyline over the layers below (linear light, alpha "over").
+            // Where it does not reach, A = 0 and the layers stay as they are.
             const float4 prm = polys[5 * cur];
             const float4 fill = polys[5 * cur + 1], outl = polys[5 * cur + 2];
             const float op = prm.z;
+            const int ef = 1 + 2 * cur, eo = 2 + 2 * cur;
             for (int j = 0; j < TILE; ++j) {
-                uint tb = touched[j];
-                for (int i = run_lo[j]; i <= run_hi[j]; ++i) {
-                    const int k = j * TILE + i;
-                    const float ao = cov_out[k], ai = cov_in[k];
-                    if (ao <= 0.0f) continue;
+                const uint bits = rows_cur[j];
+                if (!bits) continue;
+                rows_all[j] |= bits;
+                rows_cur[j] = 0u;
+                for (int c = 0; c < CH; ++c) {
+                    if (!(bits & (1u << c))) continue;
+                    const int k = j * CH + c;
+                    const f8 ao = cov_out[k], ai = cov_in[k];
                     cov_out[k] = 0.0f; cov_in[k] = 0.0f;
-                    const float A = ao * op, T = 1.0f - A;
-                    const uint bit = 1u << i;
-                    const int seen = (tb & bit) != 0u;
-                    acc_r[k] = op * (ai * fill.x + (ao - ai) * outl.x) + T * (seen ? acc_r[k] : 0.0f);
-                    acc_g[k] = op * (ai * fill.y + (ao - ai) * outl.y) + T * (seen ? acc_g[k] : 0.0f);
-                    acc_b[k] = op * (ai * fill.z + (ao - ai) * outl.z) + T * (seen ? acc_b[k] : 0.0f);
-                    trans[k] = T * (seen ? trans[k] : 1.0f);
-                    exact[k] = A >= 1.0f ? (ai >= 1.0f ? 1 + 2 * cur : (ai <= 0.0f ? 2 + 2 * cur : 0)) : 0;
-                    tb |= bit;
+                    const f8 A = ao * op, T = 1.0f - A, ae = ao - ai;
+                    acc_r[k] = op * (ai * fill.x + ae * outl.x) + T * acc_r[k];
+                    acc_g[k] = op * (ai * fill.y + ae * outl.y) + T * acc_g[k];
+                    acc_b[k] = op * (ai * fill.z + ae * outl.z) + T * acc_b[k];
+                    trans[k] = T * trans[k];
+                    hit[k] = F8MAX(hit[k], ao);
+                    const i8 ex = ai >= 1.0f ? (i8)ef : (ai <= 0.0f ? (i8)eo : (i8)0);
+                    exact[k] = A >= 1.0f ? ex : (ao > 0.0f ? (i8)0 : exact[k]);
                 }
-                touched[j] = tb;
-                run_lo[j] = TILE; run_hi[j] = -1;
             }
         }
         if (e == end) break;
@@ -294,73 +297,70 @@ __kernel void grlaa_draw(__global PIXEL_T *img, __global const float *luts,
         const float len = h.x, r = h.y, ri = h.z, R = h.w, by = ay + len * ty;
         const int ya = IMAX(y0, iceil(FMIN(ay, by) - R));
         const int yb = IMIN(ymax, ifloor(FMAX(ay, by) + R));
-        // Row spans: x - a.x = (along - dy t.y) / t.x and (t.x dy - perp) / t.y, linear in dy.
-        const int ok_t = FABS(tx) > 1e-6f, ok_n = FABS(ty) > 1e-6f;
-        const float itx = ok_t ? 1.0f / tx : 0.0f, ity = ok_n ? 1.0f / ty : 0.0f;
-        const float s_a = -ty * itx, a0 = FMIN(0.0f, len * itx), a1 = FMAX(0.0f, len * itx);
-        const float s_p = tx * ity, w_p = R * FABS(ity);
-        // Pixels within Ri of a segment with round ends are covered fully by both the stroke and
-        // its inner part (the footprint reaches HALF_DIAGONAL * strength at most): no formula.
-        const float Ri = (meta & 3) ? -1.0f : FMIN(r, ri) - inner_pad, w_pi = Ri * FABS(ity);
-        // the footprint widths on the body's normal n = (-t.y, t.x)
+        // Row spans (conservative): the band |perp| <= R, x - a.x = dy t.x / t.y +- R / |t.y|, cut to
+        // the segment's x-extent grown by R. Lanes beyond the reach get coverage 0.
+        const int ok_n = FABS(ty) > 1e-6f;
+        const float s_p = ok_n ? tx / ty : 0.0f, w_p = ok_n ? R / FABS(ty) : 1e30f;
+        const float bxl = FMIN(0.0f, len * tx) - R, bxh = FMAX(0.0f, len * tx) + R;
+        // the footprint on the body's normal n = (-t.y, t.x): widths, half sum, inverses (fcdf8)
         const float sa = FMAX(FABS(ty), FABS(tx)) * strength, sb = FMIN(FABS(ty), FABS(tx)) * strength;
+        const float sh = 0.5f * (sa + sb), sia = 1.0f / sa, si2 = 0.5f * sia / sb;
+        const f8 fx0 = ((float)x0 - ax) + lane;
         for (int y = ya; y <= yb; ++y) {
-            const float dy = (float)y - ay, dy1 = (float)y - by;
-            const float2 sp = row_span(dy, dy1, tx, ty, len, R, ok_t, s_a, a0, a1, ok_n, s_p, w_p);
-            const int xa = IMAX(x0, iceil(ax + sp.x)), xb = IMIN(xmax, ifloor(ax + sp.y));
+            const float dy = (float)y - ay, dy1 = (float)y - by, c = dy * s_p;
+            const float lo = FMAX(c - w_p, bxl), hi = FMIN(c + w_p, bxh);
+            const int xa = IMAX(x0, iceil(ax + lo)), xb = IMIN(x0 + TILE - 1, ifloor(ax + hi));
             if (xa > xb) continue;
-            const int j = y - y0;
-            run_lo[j] = IMIN(run_lo[j], xa - x0);
-            run_hi[j] = IMAX(run_hi[j], xb - x0);
-            int ia = xb + 1, ib = xb;  // the fully covered columns [ia, ib], if any
-            if (Ri > 0.0f) {
-                const float2 si = row_span(dy, dy1, tx, ty, len, Ri, ok_t, s_a, a0, a1, ok_n, s_p, w_pi);
-                if (si.x <= si.y) {
-                    ia = IMAX(xa, iceil(ax + si.x));
-                    ib = IMIN(xb, ifloor(ax + si.y));
-                    if (ia > ib) { ia = xb + 1; ib = xb; }
-                }
-            }
-            const int row = j * TILE - x0;
+            const int j = y - y0, ca = (xa - x0) >> 3, cb = (xb - x0) >> 3;
+            rows_cur[j] |= ((2u << cb) - 1u) & ~((1u << ca) - 1u);
             // One polyline is one shape: its segments' coverages merge by max, so joins are not
-            // blended twice.
-            if (meta & 3) {
-                for (int x = xa; x <= xb; ++x) {
-                    const float2 cv = segment_cover((float)x, (float)y, g, h, meta, strength);
-                    cov_out[row + x] = FMAX(cov_out[row + x], cv.x);
-                    cov_in[row + x] = FMAX(cov_in[row + x], cv.y);
+            // blended twice. Lanes beyond the segment's reach get exactly 0.
+            for (int c = ca; c <= cb; ++c) {
+                const int k = j * CH + c;
+                const f8 fx = fx0 + (float)(8 * c);
+                f8 co, ci;
+                if (meta & 3) {
+                    const float xs = (float)(x0 + 8 * c), yf = (float)y;
+                    float o[8], n[8];
+                    for (int i = 0; i < 8; ++i) {
+                        const float2 cv = segment_cover(xs + (float)i, yf, g, h, meta, strength);
+                        o[i] = cv.x; n[i] = cv.y;
+                    }
+                    co = vload8(0, o); ci = vload8(0, n);
+                } else {
+                    round_cover8(fx, dy, dy1, tx, ty, len, r, ri, sa, sb, sh, sia, si2, strength,
+                                 &co, &ci);
                 }
-                continue;
-            }
-            for (int x = xa; x < ia; ++x) {
-                const float2 cv = round_cover((float)x - ax, dy, dy1, tx, ty, len, r, ri, sa, sb, strength);
-                cov_out[row + x] = FMAX(cov_out[row + x], cv.x);
-                cov_in[row + x] = FMAX(cov_in[row + x], cv.y);
-            }
-            for (int x = ia; x <= ib; ++x) { cov_out[row + x] = 1.0f; cov_in[row + x] = 1.0f; }
-            for (int x = ib + 1; x <= xb; ++x) {
-                const float2 cv = round_cover((float)x - ax, dy, dy1, tx, ty, len, r, ri, sa, sb, strength);
-                cov_out[row + x] = FMAX(cov_out[row + x], cv.x);
-                cov_in[row + x] = FMAX(cov_in[row + x], cv.y);
+                cov_out[k] = F8MAX(cov_out[k], co);
+                cov_in[k] = F8MAX(cov_in[k], ci);
             }
         }
     }
 
     // Write back only the pixels some line covered; the others keep their exact values.
-    for (int j = 0; j < TILE; ++j) {
-        uint bits = touched[j];
-        for (int i = 0; bits; ++i, bits >>= 1) {
-            if (!(bits & 1u)) continue;
+    __private const float *hs = (__private const float *)hit;
+    __private const float *ar = (__private const float *)acc_r;
+    __private const float *ag = (__private const float *)acc_g;
+    __private const float *ab = (__private const float *)acc_b;
+    __private const float *tr = (__private const float *)trans;
+    __private const int *exs = (__private const int *)exact;
+    for (int j = 0; j <= ymax - y0; ++j) {
+        const uint bits = rows_all[j];
+        if (!bits) continue;
+        const int xe = IMIN(TILE, xmax - x0 + 1);
+        for (int i = 0; i < xe; ++i) {
+            if (!(bits & (1u << (i >> 3)))) { i |= 7; continue; }
             const int k = j * TILE + i;
+            if (!(hs[k] > 0.0f)) continue;
             const int idx = IDX(x0 + i, y0 + j, width);
             float4 outc;
-            if (exact[k]) {
-                const int q = (exact[k] - 1) >> 1;
-                outc = polys[5 * q + 3 + ((exact[k] - 1) & 1)];
+            const int ex = exs[k];
+            if (ex) {
+                outc = polys[5 * ((ex - 1) >> 1) + 3 + ((ex - 1) & 1)];
                 outc.w = 1.0f;
             } else {
-                const float T = trans[k];
-                float cr = acc_r[k], cg = acc_g[k], cb = acc_b[k], a = 1.0f;
+                const float T = tr[k];
+                float cr = ar[k], cg = ag[k], cb = ab[k], a = 1.0f;
                 if (T > 0.0f) {  // the frame shows through: decode it and put it under the layers
 #if DECODE8
                     __global const uchar *p = (__global const uchar *)img + (size_t)idx * CHANNELS;

@@ -199,14 +199,18 @@ def segment_tables(lines: list[np.ndarray], styles: list[LineStyle], channels: i
     # 1-D columns throughout (numpy is much slower on short 2-D rows)
     px, py = allp[:, 0], allp[:, 1]
     cols = [np.take(px, ia), np.take(py, ia), np.take(px, ib), np.take(py, ib)]
-    caps = np.array([CAPS[st.cap] for st in styles], np.int32)
-    flags = np.zeros(len(ia), np.int32)
-    np.bitwise_or.at(flags, first, np.where(caps > 0, 1 | (caps & 4), 0))
-    np.bitwise_or.at(flags, last, np.where(caps > 0, 2 | (caps & 4), 0))
-    meta = (line_of << 3) | flags
+    # one style for all lines (make_styles' scalar case): per-line values are broadcast scalars
+    uniform = styles.count(styles[0]) == nl
+    caps = np.array([CAPS[st.cap] for st in styles[:1 if uniform else nl]], np.int32)
+    meta = line_of << 3
+    if caps.any():  # flat caps: flags on each line's first and last segment
+        capl = np.broadcast_to(caps, (nl,))
+        meta[first] |= np.where(capl > 0, 1 | (capl & 4), 0)
+        meta[last] |= np.where(capl > 0, 2 | (capl & 4), 0)
     # square caps reach r*sqrt(2) past the end point (the corners); + half the footprint diagonal
-    rr = r * np.where(caps & 4, math.sqrt(2.0), 1.0)
-    reach = np.take(rr + _FOOTPRINT_HALF_DIAGONAL * strength + 1e-3, line_of)
+    reach_l = r[:len(caps)] * np.where(caps & 4, math.sqrt(2.0), 1.0) \
+        + (_FOOTPRINT_HALF_DIAGONAL * strength + 1e-3)
+    reach = np.full(len(ia), reach_l[0]) if uniform else np.take(reach_l, line_of)
     if clip is not None:
         keep, cols = _clip_segments(cols, reach, *clip)
         if keep is not None:
@@ -223,7 +227,8 @@ def segment_tables(lines: list[np.ndarray], styles: list[LineStyle], channels: i
     with np.errstate(divide="ignore", invalid="ignore"):
         segs[:, 2] = np.where(length > 0, dx / length, 1.0)
         segs[:, 3] = np.where(length > 0, dy / length, 0.0)
-    segs[:, 4], segs[:, 5], segs[:, 6], segs[:, 7] = length, np.take(r, line_of), np.take(ri, line_of), reach
+    segs[:, 4], segs[:, 7] = length, reach
+    segs[:, 5], segs[:, 6] = (r[0], ri[0]) if uniform else (np.take(r, line_of), np.take(ri, line_of))
     return SegmentTables(ends, segs, meta, reach, polys)
 
 

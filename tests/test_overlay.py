@@ -239,6 +239,44 @@ def test_zero_copy_and_device_buffer_paths_agree(renderer, dtype, shape):
     assert (outs[0] != frame).mean() > 0.3
 
 
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_thin_and_outlined_strokes_match_reference(renderer, seed):
+    """The kernel's 8-pixel lanes (kernels/grlaa.cl round_cover8): thin strokes (both edges' terms),
+    strokes just above and below the footprint's half diagonal (the second edge's term skipped or
+    not), outlines, opacities, at random angles, on a float32 frame whose width (45) is not a
+    multiple of 8 or of the tile, so lanes and tiles cross the frame's right edge. Tolerance 1e-4
+    (float32 kernel vs float64 reference, same tables)."""
+    rng = np.random.default_rng(100 + seed)
+    h, w, n = 40, 45, 14
+    lines = [rng.uniform([-3, -3], [w + 3, h + 3], (int(rng.integers(2, 6)), 2)) for _ in range(n)]
+    widths = rng.choice([0.3, 0.8, 1.0, 1.41, 1.42, 1.5, 2.0, 3.0], n)
+    kw = dict(width=widths.tolist(), color=[tuple(rng.integers(0, 256, 3).tolist()) for _ in range(n)],
+              outline=[tuple(rng.integers(0, 256, 3).tolist()) for _ in range(n)],
+              outline_width=(widths * rng.choice([0.0, 0.2, 0.4], n)).tolist(),
+              opacity=np.where(rng.random(n) < 0.5, 1.0, rng.uniform(0.3, 1, n)).tolist())
+    frame = rng.random((h, w, 3)).astype(np.float32)
+    out = renderer.draw(frame, lines, **kw)
+    ref = reference_draw_polylines(frame, lines, **kw)
+    assert np.abs(out.astype(np.float64) - ref).max() <= 1e-4
+    assert (out != frame).any(axis=2)[:, -1].any()  # lines reach the last column
+
+
+def test_one_pixel_line_known_answer(renderer):
+    """A horizontal 1-px line centred at y = 10.25 covers row 10 by 0.75 and row 11 by 0.25 (the
+    linear ramp, exact for an axis-aligned edge); a vertical one likewise per column; the join of
+    the two (an L) is drawn once (max), not blended twice."""
+    frame = np.zeros((24, 30), np.float32)
+    r2 = OverlayRenderer(linear=True)
+    line = np.array([[3.0, 10.25], [20.0, 10.25], [20.0, 2.0]])
+    out = r2.draw(frame, [line], width=1.0, color="#ffffff", bgr=False)
+    np.testing.assert_allclose(out[10, 5:19], 0.75, atol=1e-6)
+    np.testing.assert_allclose(out[11, 5:19], 0.25, atol=1e-6)
+    assert (out[12:] == 0).all() and (out[:9, :19] == 0).all()
+    np.testing.assert_allclose(out[3:9, 20], 1.0, atol=1e-6)  # vertical leg: column 20 fully
+    assert (out[3:9, 19] == 0).all() and (out[3:9, 21] == 0).all()
+    assert out.max() <= 1.0  # the corner is not covered twice
+
+
 @pytest.mark.parametrize("seed", range(6))
 def test_binning_lists_every_touched_tile(seed):
     """Every pixel a segment covers (numpy reference) lies in a tile that lists the segment."""
