@@ -308,13 +308,14 @@ __kernel void temporal_blend(__global const PIXEL_T *cur, __global const half *h
                             params[3] == 0.0f && params[4] == 1.0f;
     __global const ushort *hb = (__global const ushort *)hist;
     float4 wy = (float4)(0.0f), k0 = (float4)(0.0f), k1 = k0, k2 = k0, k3 = k0;
-    int r0 = 0, r1 = 0, r2 = 0, r3 = 0, cached = -3;   // k0..k3 = columns cached-1 .. cached+2
+    int r0 = 0, r1 = 0, r2 = 0, r3 = 0, cached = -3, texel_row = 0;   // k0..k3 = columns cached-1 .. cached+2
     if (translation) {
         float fy = (float)y + affine_motion(params, (float2)(0.0f, (float)y)).y;
         fy = fy < 0.0f ? 0.0f : (fy > (float)(height - 1) ? (float)(height - 1) : fy);
         r1 = (int)fy;
         wy = catmull_rom(fy - (float)r1);
         r0 = CLAMPI(r1 - 1, height - 1); r2 = CLAMPI(r1 + 1, height - 1); r3 = CLAMPI(r1 + 2, height - 1);
+        texel_row = fy == (float)r1;
     }
     for (int gx = x0; gx < x1; gx += GROUP) {
         const int gend = gx + GROUP < x1 ? gx + GROUP : x1;
@@ -385,14 +386,19 @@ __kernel void temporal_blend(__global const PIXEL_T *cur, __global const half *h
                     if (translation) {
                         float fx = q.x < 0.0f ? 0.0f : (q.x > (float)(width - 1) ? (float)(width - 1) : q.x);
                         int xi = (int)fx;
-                        if (xi == cached + 1) {
-                            k0 = k1; k1 = k2; k2 = k3; k3 = VCOL(xi + 2);
-                        } else if (xi != cached) {
-                            k0 = VCOL(xi - 1); k1 = VCOL(xi); k2 = VCOL(xi + 1); k3 = VCOL(xi + 2);
+                        if (texel_row && fx == (float)xi) {
+                            // on a texel (static shot, whole-pixel shift): weights (0, 1, 0, 0), the texel
+                            h = htex(hb, r1 * width + xi);
+                        } else {
+                            if (xi == cached + 1) {
+                                k0 = k1; k1 = k2; k2 = k3; k3 = VCOL(xi + 2);
+                            } else if (xi != cached) {
+                                k0 = VCOL(xi - 1); k1 = VCOL(xi); k2 = VCOL(xi + 1); k3 = VCOL(xi + 2);
+                            }
+                            cached = xi;
+                            float4 wx = catmull_rom(fx - (float)xi);
+                            h = k0 * wx.x + k1 * wx.y + k2 * wx.z + k3 * wx.w;
                         }
-                        cached = xi;
-                        float4 wx = catmull_rom(fx - (float)xi);
-                        h = k0 * wx.x + k1 * wx.y + k2 * wx.z + k3 * wx.w;
                     } else {
                         h = sample_history(hist, width, height, q);
                     }
