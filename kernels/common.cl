@@ -114,14 +114,32 @@ inline float lut_read(__global const float *lut, float x)
 
 inline float srgb_to_linear(__global const float *luts, float v) { return lut_read(luts, v); }
 
-// CIELAB (D65) of an sRGB colour; values above 1 (float frames) are clamped for the comparison only.
-inline float3 rgb_to_lab(__global const float *luts, float4 c)
+// CIELAB (D65) of a colour already decoded to linear light (r, g, b from the sRGB->linear table).
+inline float3 lab_from_linear(__global const float *luts, float r, float g, float b)
 {
     __global const float *f = luts + LUT_SIZE + 1;
-    float r = lut_read(luts, c.x), g = lut_read(luts, c.y), b = lut_read(luts, c.z);
     float X = (0.4124564f * r + 0.3575761f * g + 0.1804375f * b) * (1.0f / 0.95047f);
     float Y = 0.2126729f * r + 0.7151522f * g + 0.0721750f * b;
     float Z = (0.0193339f * r + 0.1191920f * g + 0.9503041f * b) * (1.0f / 1.08883f);
     float fx = lut_read(f, X), fy = lut_read(f, Y), fz = lut_read(f, Z);
     return (float3)(116.0f * fy - 16.0f, 500.0f * (fx - fy), 200.0f * (fy - fz));
+}
+
+// CIELAB (D65) of an sRGB colour; values above 1 (float frames) are clamped for the comparison only.
+inline float3 rgb_to_lab(__global const float *luts, float4 c)
+{
+    return lab_from_linear(luts, lut_read(luts, c.x), lut_read(luts, c.y), lut_read(luts, c.z));
+}
+
+// lin[v] = the linear value rgb_to_lab reads from the table for the stored level v (load_px's
+// scaling; LINEAR_INPUT frames are encoded first, as the passes do): integer frames decode a
+// sample with one load, the same number. Filled once per frame format (mlaa_stream.device).
+__kernel void linear_levels(__global const float *luts, __global float *lin)
+{
+    const int v = get_global_id(0);
+    float c = (float)v * (1.0f / PIXEL_MAX);
+#if defined(LINEAR_INPUT) && LINEAR_INPUT
+    c = lut_read(luts + 2 * (LUT_SIZE + 1), c);
+#endif
+    lin[v] = lut_read(luts, c);
 }

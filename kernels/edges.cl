@@ -43,8 +43,8 @@ inline float max_abs3(float4 d)
 }
 
 // A pixel's colour as the metric sees it: CIELAB for METRIC 0 (computed only when a cheap test
-// needs it: `has_lab`), the encoded RGB otherwise.
-typedef struct { float4 rgb; float3 lab; int has_lab; } Colour;
+// needs it: `has_lab`), the encoded RGB otherwise; i = its index (integer frames decode from it).
+typedef struct { float4 rgb; float3 lab; int has_lab; int i; } Colour;
 
 inline Colour colour_at(__global const PIXEL_T *src, __global const float *luts, int i)
 {
@@ -52,7 +52,28 @@ inline Colour colour_at(__global const PIXEL_T *src, __global const float *luts,
     c.rgb = to_encoded(luts, load_px(src, i));
     c.lab = (float3)(0.0f);
     c.has_lab = 0;
+    c.i = i;
     return c;
+}
+
+// CIELAB of pixel c: integer frames decode each stored level with one load from `lin` (common.cl's
+// linear_levels: the same numbers as rgb_to_lab's table reads), float frames through the tables.
+inline float3 lab_of(__global const PIXEL_T *src, __global const float *luts, __global const float *lin,
+                     const Colour *c)
+{
+#ifdef PIXEL_IS_FLOAT
+    return rgb_to_lab(luts, c->rgb);
+#elif CHANNELS < 3
+    const float v = lin[src[c->i]];
+    return lab_from_linear(luts, v, v, v);
+#else
+    __global const PIXEL_T *p = src + (size_t)c->i * CHANNELS;
+#if ORDER_BGR
+    return lab_from_linear(luts, lin[p[2]], lin[p[1]], lin[p[0]]);
+#else
+    return lab_from_linear(luts, lin[p[0]], lin[p[1]], lin[p[2]]);
+#endif
+#endif
 }
 
 // Could colours a and b differ by the metric? A cheap necessary test, before the ramp test and
@@ -70,11 +91,12 @@ inline int may_differ(Colour *a, Colour *b, float threshold)
 }
 
 // Do colours a and b differ (given may_differ)? Lab values are computed once and kept in the Colour.
-inline int differs(__global const float *luts, Colour *a, Colour *b, float threshold)
+inline int differs(__global const PIXEL_T *src, __global const float *luts, __global const float *lin,
+                   Colour *a, Colour *b, float threshold)
 {
 #if METRIC == 0
-    if (!a->has_lab) { a->lab = rgb_to_lab(luts, a->rgb); a->has_lab = 1; }
-    if (!b->has_lab) { b->lab = rgb_to_lab(luts, b->rgb); b->has_lab = 1; }
+    if (!a->has_lab) { a->lab = lab_of(src, luts, lin, a); a->has_lab = 1; }
+    if (!b->has_lab) { b->lab = lab_of(src, luts, lin, b); b->has_lab = 1; }
     float3 dl = a->lab - b->lab;
     return dl.x * dl.x + dl.y * dl.y + dl.z * dl.z > threshold * threshold;  // ΔE76
 #else
@@ -279,7 +301,8 @@ inline int quiet_px(__global const PIXEL_T *src, int i, int j)
 // The float path for pixel i (x, y) given which pairs survived the cheap tests: c holds pixel x's colour
 // when *c_valid; it becomes its right neighbour's, so each colour is converted to CIELAB at most twice
 // (as a right and as a bottom neighbour), not four times.
-inline uchar float_edges(__global const PIXEL_T *src, __global const float *luts, int i, int x, int y,
+inline uchar float_edges(__global const PIXEL_T *src, __global const float *luts, __global const float *lin,
+                         int i, int x, int y,
                          int width, int height, float threshold, int test_b, int test_r, Colour *c, int *c_valid)
 {
     uchar e = 0;
@@ -295,8 +318,8 @@ inline uchar float_edges(__global const PIXEL_T *src, __global const float *luts
         if (may_differ(c, &b, threshold)
             && !FLOAT_RAMP(y > 0 ? to_encoded(luts, load_px(src, i - width)) : c->rgb, y > 0, c->rgb, b.rgb,
                            y + 2 < height ? to_encoded(luts, load_px(src, i + 2 * width)) : b.rgb, y + 2 < height)
-            && !antialiased(src, luts, c->rgb, b.rgb, i, i + width, 1, x > 0, x + 1 < width, y > 0, y + 2 < height)
-            && differs(luts, c, &b, threshold))
+            && differs(src, luts, lin, c, &b, threshold)
+            && !antialiased(src, luts, c->rgb, b.rgb, i, i + width, 1, x > 0, x + 1 < width, y > 0, y + 2 < height))
             e |= EDGE_BOTTOM;
     }
     *c_valid = 0;
@@ -305,8 +328,8 @@ inline uchar float_edges(__global const PIXEL_T *src, __global const float *luts
         if (may_differ(c, &r, threshold)
             && !FLOAT_RAMP(x > 0 ? to_encoded(luts, load_px(src, i - 1)) : c->rgb, x > 0, c->rgb, r.rgb,
                            x + 2 < width ? to_encoded(luts, load_px(src, i + 2)) : r.rgb, x + 2 < width)
-            && !antialiased(src, luts, c->rgb, r.rgb, i, i + 1, width, y > 0, y + 1 < height, x > 0, x + 2 < width)
-            && differs(luts, c, &r, threshold))
+            && differs(src, luts, lin, c, &r, threshold)
+            && !antialiased(src, luts, c->rgb, r.rgb, i, i + 1, width, y > 0, y + 1 < height, x > 0, x + 2 < width))
             e |= EDGE_RIGHT;
         *c = r;
         *c_valid = 1;
@@ -315,7 +338,7 @@ inline uchar float_edges(__global const PIXEL_T *src, __global const float *luts
     return e;
 }
 
-__kernel void detect_edges(__global const PIXEL_T *src, __global const float *luts,
+__kernel void detect_edges(__global const PIXEL_T *src, __global const float *luts, __global const float *lin,
                            __global uchar *edges, const int width, const int height,
                            const float threshold)
 {
@@ -373,7 +396,7 @@ __kernel void detect_edges(__global const PIXEL_T *src, __global const float *lu
                 uchar nb[GROUP];
                 vstore8(convert_uchar8(need), 0, nb);
                 for (int t = 0; t < GROUP; ++t)
-                    edges[i + t] = float_edges(src, luts, i + t, x + t, y, width, height, threshold,
+                    edges[i + t] = float_edges(src, luts, lin, i + t, x + t, y, width, height, threshold,
                                                nb[t] & EDGE_BOTTOM, nb[t] & EDGE_RIGHT, &c, &c_valid);
             }
             x += GROUP;
@@ -387,7 +410,7 @@ __kernel void detect_edges(__global const PIXEL_T *src, __global const float *lu
         const int test_b = y + 1 < height && !same_px(src, i, i + width);
         const int test_r = x + 1 < width && !same_px(src, i, i + 1);
 #endif
-        edges[i] = float_edges(src, luts, i, x, y, width, height, threshold, test_b, test_r, &c, &c_valid);
+        edges[i] = float_edges(src, luts, lin, i, x, y, width, height, threshold, test_b, test_r, &c, &c_valid);
         ++x;
     }
 }

@@ -95,7 +95,7 @@ inline rawdiff max_diff(rawpx a, rawpx b)
 }
 
 // ---- CIELAB, the same numbers as common.cl's rgb_to_lab (after the LINEAR_INPUT encoding). Integer
-// frames read the per-level sRGB->linear values from `lin` (filled once by reconstruct_lin_table with
+// frames read the per-level sRGB->linear values from `lin` (filled once by common.cl's linear_levels with
 // the same lut_read), which halves the cost of a conversion.
 inline float3 lab_of(__global const float *luts, float4 c)
 {
@@ -104,16 +104,6 @@ inline float3 lab_of(__global const float *luts, float4 c)
     c = (float4)(lut_read(enc, c.x), lut_read(enc, c.y), lut_read(enc, c.z), c.w);
 #endif
     return rgb_to_lab(luts, c);
-}
-
-inline float3 lab_from_linear(__global const float *luts, float r, float g, float b)
-{
-    __global const float *f = luts + LUT_SIZE + 1;
-    float X = (0.4124564f * r + 0.3575761f * g + 0.1804375f * b) * (1.0f / 0.95047f);
-    float Y = 0.2126729f * r + 0.7151522f * g + 0.0721750f * b;
-    float Z = (0.0193339f * r + 0.1191920f * g + 0.9503041f * b) * (1.0f / 1.08883f);
-    float fx = lut_read(f, X), fy = lut_read(f, Y), fz = lut_read(f, Z);
-    return (float3)(116.0f * fy - 16.0f, 500.0f * (fx - fy), 200.0f * (fy - fz));
 }
 
 inline float3 lab_px(__global const PIXEL_T *src, __global const float *luts, __global const float *lin, int i)
@@ -131,17 +121,6 @@ inline float3 lab_px(__global const PIXEL_T *src, __global const float *luts, __
     return lab_from_linear(luts, lin[p[0]], lin[p[1]], lin[p[2]]);
 #endif
 #endif
-}
-
-// lin[v] = what rgb_to_lab reads from the sRGB->linear table for the stored level v (load_px's scaling).
-__kernel void reconstruct_lin_table(__global const float *luts, __global float *lin)
-{
-    const int v = get_global_id(0);
-    float c = (float)v * (1.0f / PIXEL_MAX);
-#if LINEAR_INPUT
-    c = lut_read(luts + 2 * (LUT_SIZE + 1), c);
-#endif
-    lin[v] = lut_read(luts, c);
 }
 
 inline float d2(float3 a, float3 b)

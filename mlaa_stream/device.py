@@ -179,6 +179,18 @@ def check_pass_buffers(what: str, fmt, src, dst) -> None:
                              f"{fmt.height}x{fmt.channels} frame, got {buf.size}")
 
 
+def linear_levels(context: Context, program: str, defines: dict[str, object], fmt, luts) -> "cl.Buffer":
+    """Integer frames: a device buffer of PIXEL_MAX + 1 floats, entry v = the linear value common.cl's
+    tables give for the stored level v (its `linear_levels` kernel, run once on the device from the
+    `program` built with `defines`, so the numbers are the kernels' own). Float frames: one unused float."""
+    if fmt.dtype.kind == "f":
+        return context.buffer(4)
+    levels = int(np.iinfo(fmt.dtype).max) + 1
+    lin = context.buffer(4 * levels)
+    context.kernel(program, "linear_levels", defines)(context.queue, (levels,), None, luts, lin).wait()
+    return lin
+
+
 _contexts: dict[str, Context] = {}
 _contexts_lock = threading.Lock()
 

@@ -18,7 +18,7 @@ import numpy as np
 import pyopencl as cl
 
 from .colour import device_luts
-from .device import Context, default_context
+from .device import Context, default_context, linear_levels
 from .formats import FrameFormat, defines_for, frame_format
 
 METRICS = {"lab": 0, "luma": 1, "rgb": 2}
@@ -209,6 +209,7 @@ class Filter:
         defs = defines_for(fmt, **self.options.pass_defines(), QUIET_LEVELS=quiet_levels(self.options, fmt))
         k = self.context.kernel
         self._k_edges = k("edges", "detect_edges", defs)
+        self._lin = linear_levels(self.context, "edges", defs, fmt, self._luts)
         self._k_hdist = k("distances", "hline_distances", defs)
         self._k_vdist = k("distances", "vline_distances", defs)
         self._k_weights = k("weights", "blend_weights", defs)
@@ -257,7 +258,7 @@ class Filter:
         if self._reconstructor is not None:
             ev["reconstruct"] = self._reconstructor.enqueue(q, src, self._recon_buf, self._luts, wait_for=after)
             src, after = self._recon_buf, [ev["reconstruct"]]
-        ev["edges"] = self._k_edges(q, g2, None, src, self._luts, bufs.edges, W, H,
+        ev["edges"] = self._k_edges(q, g2, None, src, self._luts, self._lin, bufs.edges, W, H,
                                     np.float32(self.options.threshold), wait_for=after)
         ev["hlines"] = self._k_hdist(q, (max(h - 1, 1),), None, bufs.edges, bufs.hdist, W, H,
                                      wait_for=[ev["edges"]])

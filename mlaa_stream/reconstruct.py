@@ -11,7 +11,7 @@ import functools
 import numpy as np
 
 from .colour import device_luts, lut_read, rgb_to_lab as _lab_exact
-from .device import Context, check_pass_buffers, default_context
+from .device import Context, check_pass_buffers, default_context, linear_levels
 from .formats import LUT_SIZE, FrameFormat, defines_for, frame_format
 
 try:
@@ -375,11 +375,8 @@ class Reconstructor:
         self._seg = context.buffer(self._global[0] * fmt.height)  # a byte per segment: holds a candidate
         self._lab = context.buffer(16 * fmt.pixels)
         # integer frames: sRGB->linear per stored level, filled once on the device with common.cl's lut_read
-        self._lin = context.buffer(4 * (int(pmax) + 1) if integer else 4)
-        if integer:
-            luts = cl.Buffer(context.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=device_luts())
-            k("reconstruct", "reconstruct_lin_table", defines)(context.queue, (int(pmax) + 1,), None,
-                                                               luts, self._lin).wait()
+        luts = cl.Buffer(context.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=device_luts())
+        self._lin = linear_levels(context, "reconstruct", defines, fmt, luts)
         self._last = None  # this pass's previous frame: its work buffers are reused
 
     def enqueue(self, queue: "cl.CommandQueue", src: "cl.Buffer", dst: "cl.Buffer", luts: "cl.Buffer",
