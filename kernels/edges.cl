@@ -289,6 +289,29 @@ inline int quiet_px(__global const PIXEL_T *src, int i, int j)
         const int8 l_m = RAMP_NUM * VABS(dx), p_1 = (dx) > 0, b_0 = (bx), a_2 = (ax);                  \
         out = (((b_0 > 0) == p_1) & (b_0 != 0) & (VABS(b_0) * RAMP_DEN > l_m)) |                       \
               (((a_2 > 0) == p_1) & (a_2 != 0) & (VABS(a_2) * RAMP_DEN > l_m)); }
+#ifndef VECTOR_LAB_LANES
+#define VECTOR_LAB_LANES 4
+#endif
+// CIELAB of 8 pixels from their stored levels (R, G, B int8 lanes), the same arithmetic as lab_of:
+// per-level linear values from `lin`, common.cl's matrix and f(t) table read (lut_read) lane by lane.
+#define GATHER8(t, v) ((float8)((t)[(v).s0], (t)[(v).s1], (t)[(v).s2], (t)[(v).s3], \
+                                (t)[(v).s4], (t)[(v).s5], (t)[(v).s6], (t)[(v).s7]))
+#define LUT8(lut, x, out) {                                                                              \
+        float8 t_ = (x) * (float)LUT_SIZE;                                                             \
+        t_ = t_ < 0.0f ? 0.0f : (t_ > (float)LUT_SIZE ? (float)LUT_SIZE : t_);                         \
+        int8 i_ = convert_int8(t_);                                                                    \
+        i_ = i_ > LUT_SIZE - 1 ? LUT_SIZE - 1 : i_;                                                    \
+        const float8 f_ = t_ - convert_float8(i_), a_ = GATHER8(lut, i_);                              \
+        out = a_ + f_ * (GATHER8(lut, i_ + 1) - a_); }
+#define LAB8(R, G, B, L, A, Z) {                                                                         \
+        const float8 lr_ = GATHER8(lin, R), lg_ = GATHER8(lin, G), lb_ = GATHER8(lin, B);              \
+        const float8 X_ = (0.4124564f * lr_ + 0.3575761f * lg_ + 0.1804375f * lb_) * (1.0f / 0.95047f); \
+        const float8 Y_ = 0.2126729f * lr_ + 0.7151522f * lg_ + 0.0721750f * lb_;                       \
+        const float8 Z_ = (0.0193339f * lr_ + 0.1191920f * lg_ + 0.9503041f * lb_) * (1.0f / 1.08883f); \
+        __global const float *fl_ = luts + LUT_SIZE + 1;                                               \
+        float8 fx_, fy_, fz_;                                                                          \
+        LUT8(fl_, X_, fx_) LUT8(fl_, Y_, fy_) LUT8(fl_, Z_, fz_)                                       \
+        L = 116.0f * fy_ - 16.0f; A = 500.0f * (fx_ - fy_); Z = 200.0f * (fy_ - fz_); }
 #if CHANNELS >= 3
 #define C0 CH_R
 #define C2 CH_B
@@ -387,7 +410,31 @@ __kernel void detect_edges(__global const PIXEL_T *src, __global const float *lu
 #else
             ramp_b = (int8)(0); ramp_r = ramp_b;
 #endif
-            const int8 need = (~quiet_b & ~ramp_b & EDGE_BOTTOM) | (~quiet_r & ~ramp_r & EDGE_RIGHT);
+            int8 need = (~quiet_b & ~ramp_b & EDGE_BOTTOM) | (~quiet_r & ~ramp_r & EDGE_RIGHT);
+#if METRIC == 0
+            const int8 nz = need != 0;   // -1 per lane that needs the float path
+            const int4 n4 = nz.lo + nz.hi;
+            if (n4.x + n4.y + n4.z + n4.w <= -VECTOR_LAB_LANES) {   // worth it when most lanes need it
+                // CIELAB of the 8 pixels, their right and their bottom neighbours, a lane each (the scalar
+                // path's arithmetic): pairs surely under the threshold (0.1 % margin for rounding) need no
+                // float path; the others go on to it, which decides exactly. Camera noise ends here.
+#if VCH == 3
+                const int8 pG = r1.s12345678, pB = r2.s12345678, qG = r1.s23456789, qB = r2.s23456789;
+#else
+                const int8 pG = p0, pB = p0, qG = r0.s23456789, qB = qG, d1 = d0, d2 = d0;
+#endif
+                float8 pL, pA, pZ, qL, qA, qZ, bL, bA, bZ;
+                LAB8(p0, pG, pB, pL, pA, pZ);
+                LAB8(r0.s23456789, qG, qB, qL, qA, qZ);
+                LAB8(d0, d1, d2, bL, bA, bZ);
+                const float t2 = (0.999f * threshold) * (0.999f * threshold);
+                const float8 eb_l = bL - pL, eb_a = bA - pA, eb_z = bZ - pZ;
+                const float8 er_l = qL - pL, er_a = qA - pA, er_z = qZ - pZ;
+                const int8 over_b = eb_l * eb_l + eb_a * eb_a + eb_z * eb_z > t2;
+                const int8 over_r = er_l * er_l + er_a * er_a + er_z * er_z > t2;
+                need &= (over_b & EDGE_BOTTOM) | (over_r & EDGE_RIGHT);
+            }
+#endif
             const int4 o = need.lo | need.hi;
             if ((o.x | o.y | o.z | o.w) == 0) {
                 vstore8((uchar8)(0), 0, edges + i);

@@ -1,8 +1,9 @@
 """Per-pass timings of the spatial filter on 1920x1080 frames: `python -m mlaa_stream.mlaa_profile`.
 
-Three frames: the yardstick's mixed timing frame (edges, UI text, checkerboard, photo, wires), a
-whole-frame photograph (every pixel differs from its neighbours: the worst case for edge
-detection) and a flat frame (the floor). For each: the median of >= 20 frames after warm-up of
+Five frames: the yardstick's mixed timing frame (edges, UI text, checkerboard, photo, wires); a
+photograph three ways -- upscaled to fill the frame (smooth), tiled at 1:1 (every pixel differs from
+its neighbours: a detailed shot) and upscaled with camera noise (Gaussian, sigma 2 levels: what video
+from a camera looks like to edge detection) --; and a flat frame (the floor). For each: the median of >= 20 frames after warm-up of
 `Filter.process` (host to host), and each pass's device time on a profiling queue. Writes
 docs/performance.md. A benchmark, never a unit test; machines here are noisy.
 """
@@ -26,10 +27,15 @@ def frames() -> dict[str, np.ndarray]:
     from matplotlib import cbook
 
     from .scenes import timing_frame
-    photo = matplotlib.image.imread(cbook.get_sample_data("grace_hopper.jpg", asfileobj=False))
-    photo = cv2.resize(np.ascontiguousarray(photo[..., :3]), (1920, 1080), interpolation=cv2.INTER_CUBIC)
+    original = np.ascontiguousarray(
+        matplotlib.image.imread(cbook.get_sample_data("grace_hopper.jpg", asfileobj=False))[..., :3])
+    photo = cv2.resize(original, (1920, 1080), interpolation=cv2.INTER_CUBIC)
+    rng = np.random.default_rng(0)
+    noisy = np.clip(photo.astype(np.int16) + rng.normal(0, 2, photo.shape).round().astype(np.int16), 0, 255)
     return {"mixed (yardstick timing frame)": timing_frame(),
             "photograph": np.ascontiguousarray(photo, dtype=np.uint8),
+            "photograph, detailed (tiled 1:1)": np.ascontiguousarray(np.tile(original, (3, 4, 1))[:1080, :1920]),
+            "photograph + camera noise": noisy.astype(np.uint8),
             "flat": np.full((1080, 1920, 3), 90, np.uint8)}
 
 
