@@ -8,23 +8,29 @@
 //
 // Defines (mlaa_stream.formats.defines_for): PIXEL_T, CHANNELS, PIXEL_MAX, ORDER_BGR, LUT_SIZE,
 // PIXEL_IS_FLOAT; LINEAR_FRAME (1: samples are linear light, not sRGB); DECODE8 (1: uint8 sRGB
-// frames, decoded through dec8, 256 entries); TILE (edge of a square screen tile in pixels).
+// frames, decoded through dec8, 256 entries, and encoded through enc8); TILE (edge of a square
+// screen tile in pixels).
 //
-// Host data (mlaa_stream.overlay): segments binned into TILE x TILE tiles. One work-item draws one
-// non-empty tile: for each listed segment it visits, row by row, the 8-pixel groups (float8 lanes)
-// that meet the band |perp| <= reach cut to the segment's x-extent (linear in the row), so groups
-// away from lines cost nothing; the coverage formula runs on all 8 lanes at once, with selects
-// (lanes beyond the reach get exactly 0, the stroke's interior exactly 1). Each polyline's coverage
-// (max over its segments) is composited, 8 lanes at a time, once it is complete; the frame's pixel
-// is read, decoded and put under the layers only once, at write-back, and only where the layers
-// are not opaque.
+// Per frame (mlaa_stream.overlay.OverlayRenderer): grlaa_segments builds the segment tables from
+// the polylines' points and bins each segment into the TILE x TILE tiles it can touch (or, for
+// points far off the frame, the host builds the tables in float64 and grlaa_bin bins them); then
+// grlaa_draw runs one work-item per tile: for each listed segment it visits, row by row, the
+// 8-pixel groups (float8 lanes) that meet the band |perp| <= reach cut to the segment's x-extent
+// (linear in the row), so groups away from lines cost nothing; the coverage formula runs on all 8
+// lanes at once, with selects (lanes beyond the reach get exactly 0, the stroke's interior exactly
+// 1). Each polyline's coverage (max over its segments) is composited, 8 lanes at a time, once it
+// is complete; the frame's pixel is read, decoded and put under the layers only once, at
+// write-back, and only where some line covers it.
 //   segs[2s]    float4 (x0, y0, tx, ty): start and unit tangent, in pixels (pixel centres at integers)
-//   segs[2s+1]  float4 (length, r, r_inner, reach): reach = farthest touched pixel centre
+//   segs[2s+1]  float4 (length, r, r_inner, reach): reach = farthest touched pixel centre (-1: cut
+//               away by the clipping, not binned)
 //   seg_meta[s] (polyline << 3) | flags: 1 flat start, 2 flat end, 4 square (flat ends extended by r)
-//   entries[]   segment indices, grouped by tile, in drawing order (polyline, then segment)
-//   tiles[g]    int4 (tile x, tile y, first entry, entry count)
+//   counts[t]   entries of tile t (row-major), at entries[t * cap ..], in any order (grlaa_bin_one;
+//               sorted into drawing order by grlaa_draw, which also clears the count)
 //   polys[5k..5k+4] float4: (r, r_inner, opacity, 0), fill linear RGB, outline linear RGB,
 //                   fill and outline as stored in the frame (normalised), written as-is where covered
+//   pcol[1 + 2k], pcol[2 + 2k]  uint8 frames: fill and outline bytes, (R << 16) | (G << 8) | B
+//   enc8[i]     uint8 frames: the sRGB byte of linear light i / 65535 (the LUT encode, rounded)
 #ifndef TILE
 #define TILE 16
 #endif
@@ -167,6 +173,21 @@ typedef int8 i8;
 #define F8ABS(v) ((v) < 0.0f ? -(v) : (v))
 #define F8MAX(a, b) ((a) > (b) ? (a) : (b))
 
+// Index of the lowest set bit of an 8-bit mask (mask 0: unused).
+__constant uchar LOWBIT[256] = {
+    0, 0, 1, 0, 2, 0, 1, 0, 3, 0, 1, 0, 2, 0, 1, 0, 4, 0, 1, 0, 2, 0, 1, 0, 3, 0, 1, 0, 2, 0, 1, 0,
+    5, 0, 1, 0, 2, 0, 1, 0, 3, 0, 1, 0, 2, 0, 1, 0, 4, 0, 1, 0, 2, 0, 1, 0, 3, 0, 1, 0, 2, 0, 1, 0,
+    6, 0, 1, 0, 2, 0, 1, 0, 3, 0, 1, 0, 2, 0, 1, 0, 4, 0, 1, 0, 2, 0, 1, 0, 3, 0, 1, 0, 2, 0, 1, 0,
+    5, 0, 1, 0, 2, 0, 1, 0, 3, 0, 1, 0, 2, 0, 1, 0, 4, 0, 1, 0, 2, 0, 1, 0, 3, 0, 1, 0, 2, 0, 1, 0,
+    7, 0, 1, 0, 2, 0, 1, 0, 3, 0, 1, 0, 2, 0, 1, 0, 4, 0, 1, 0, 2, 0, 1, 0, 3, 0, 1, 0, 2, 0, 1, 0,
+    5, 0, 1, 0, 2, 0, 1, 0, 3, 0, 1, 0, 2, 0, 1, 0, 4, 0, 1, 0, 2, 0, 1, 0, 3, 0, 1, 0, 2, 0, 1, 0,
+    6, 0, 1, 0, 2, 0, 1, 0, 3, 0, 1, 0, 2, 0, 1, 0, 4, 0, 1, 0, 2, 0, 1, 0, 3, 0, 1, 0, 2, 0, 1, 0,
+    5, 0, 1, 0, 2, 0, 1, 0, 3, 0, 1, 0, 2, 0, 1, 0, 4, 0, 1, 0, 2, 0, 1, 0, 3, 0, 1, 0, 2, 0, 1, 0};
+
+// enc8 index rint(v * 65535), v clamped to [0, 1] (the float's low bits after + 2^23)
+#define Q16(v) (as_int(((v) < 0.0f ? 0.0f : ((v) > 1.0f ? 1.0f : (v))) * 65535.0f + 8388608.0f) \
+                - 0x4B000000)
+
 // footprint_cdf per lane, with h = (a + b) / 2 and the inverses ia = 1 / a, i2 = 1 / (2ab) passed in
 // (i2 is not used where b = 0). Selects instead of branches: the trapezoid's piece changes from lane
 // to lane. Exactly 0 and 1 beyond the ramp, as footprint_cdf.
@@ -222,14 +243,25 @@ INLINE void round_cover8(f8 fx, float dy, float dy1, float tx, float ty, float l
 #define CH (TILE / 8)   // float8 chunks per tile row
 
 __kernel void grlaa_draw(__global PIXEL_T *img, __global const float *luts,
-                         __global const float *dec8, __global const float4 *segs,
-                         __global const int *seg_meta, __global const int *entries,
-                         __global const int4 *tiles, __global const float4 *polys,
-                         const int width, const int height, const float strength, const int ntiles)
+                         __global const float *dec8, __global const uchar *enc8,
+                         __global const uint *pcol, __global const float4 *segs,
+                         __global const int *seg_meta, __global int *entries,
+                         __global int *counts, __global const int *overflow,
+                         __global const float4 *polys, const int width, const int height,
+                         const float strength, const int tiles_x, const int cap)
 {
-    const int gid = (int)get_global_id(0);
-    if (gid >= ntiles) return;
-    const int4 tile = tiles[gid];
+    // One work-item per tile of the frame, in row-major order: the binning (grlaa_bin_one) left
+    // counts[t] entries at entries[t * cap ..]; the count is cleared here for the next frame.
+    // If a tile overflowed its room, nothing is drawn and the host bins again with more.
+    const int gid = (int)get_global_id(0), tiles_y = (height + TILE - 1) / TILE;
+    if (gid >= tiles_x * tiles_y) return;
+    const int count = counts[gid];
+    if (!count) return;
+    counts[gid] = 0;
+    if (*overflow) return;
+    const int4 tile = (int4)(gid % tiles_x, gid / tiles_x, gid * cap, count);
+    // Ask for the entries of the tile two work-items ahead (on a CPU, one this thread runs next).
+    if (gid + 2 < tiles_x * tiles_y) PREFETCH(entries + (gid + 2) * cap);
     const int x0 = tile.x * TILE, y0 = tile.y * TILE;
     const int xmax = IMIN(x0 + TILE, width) - 1, ymax = IMIN(y0 + TILE, height) - 1;
     const f8 lane = (f8)(0.0f, 1.0f, 2.0f, 3.0f, 4.0f, 5.0f, 6.0f, 7.0f);
@@ -240,10 +272,8 @@ __kernel void grlaa_draw(__global PIXEL_T *img, __global const float *luts,
     f8 acc_r[TT / 8], acc_g[TT / 8], acc_b[TT / 8], trans[TT / 8], hit[TT / 8];
     i8 exact[TT / 8];                   // 1 + 2*poly (fill) or 2 + 2*poly (outline): stored as-is
     uint rows_cur[TILE], rows_all[TILE];  // per row, one bit per chunk: the current / any polyline
-    for (int k = 0; k < TT / 8; ++k) {
-        cov_out[k] = 0.0f; cov_in[k] = 0.0f; acc_r[k] = 0.0f; acc_g[k] = 0.0f; acc_b[k] = 0.0f;
-        trans[k] = 1.0f; hit[k] = 0.0f; exact[k] = 0;
-    }
+    // Chunks are set up when first touched (rows_cur / rows_all bits), not here: a thin line
+    // touches a few of a tile's 32 chunks.
     for (int j = 0; j < TILE; ++j) { rows_cur[j] = 0u; rows_all[j] = 0u; }
     // The tile's rows of the frame are read at write-back: ask for them now.
     for (int j = 0; j <= ymax - y0; ++j) {
@@ -253,6 +283,13 @@ __kernel void grlaa_draw(__global PIXEL_T *img, __global const float *luts,
 
     int cur = -1;
     const int end = tile.z + tile.w;
+    // The binning lists a tile's segments in any order: sort them (by index: drawing order).
+    for (int a = tile.z + 1; a < end; ++a) {
+        const int v = entries[a];
+        int b = a - 1;
+        for (; b >= tile.z && entries[b] > v; --b) entries[b + 1] = entries[b];
+        entries[b + 1] = v;
+    }
     for (int e = tile.z; e <= end; ++e) {
         int sidx = 0, meta = -1, poly = -1;
         if (e < end) {
@@ -268,23 +305,29 @@ __kernel void grlaa_draw(__global PIXEL_T *img, __global const float *luts,
             const float op = prm.z;
             const int ef = 1 + 2 * cur, eo = 2 + 2 * cur;
             for (int j = 0; j < TILE; ++j) {
-                const uint bits = rows_cur[j];
+                const uint bits = rows_cur[j], old = rows_all[j];
                 if (!bits) continue;
-                rows_all[j] |= bits;
+                rows_all[j] = old | bits;
                 rows_cur[j] = 0u;
                 for (int c = 0; c < CH; ++c) {
                     if (!(bits & (1u << c))) continue;
                     const int k = j * CH + c;
                     const f8 ao = cov_out[k], ai = cov_in[k];
-                    cov_out[k] = 0.0f; cov_in[k] = 0.0f;
                     const f8 A = ao * op, T = 1.0f - A, ae = ao - ai;
-                    acc_r[k] = op * (ai * fill.x + ae * outl.x) + T * acc_r[k];
-                    acc_g[k] = op * (ai * fill.y + ae * outl.y) + T * acc_g[k];
-                    acc_b[k] = op * (ai * fill.z + ae * outl.z) + T * acc_b[k];
-                    trans[k] = T * trans[k];
-                    hit[k] = F8MAX(hit[k], ao);
+                    const f8 cr = op * (ai * fill.x + ae * outl.x), cg = op * (ai * fill.y + ae * outl.y);
+                    const f8 cb = op * (ai * fill.z + ae * outl.z);
                     const i8 ex = ai >= 1.0f ? (i8)ef : (ai <= 0.0f ? (i8)eo : (i8)0);
-                    exact[k] = A >= 1.0f ? ex : (ao > 0.0f ? (i8)0 : exact[k]);
+                    if (old & (1u << c)) {
+                        acc_r[k] = cr + T * acc_r[k];
+                        acc_g[k] = cg + T * acc_g[k];
+                        acc_b[k] = cb + T * acc_b[k];
+                        trans[k] = T * trans[k];
+                        hit[k] = F8MAX(hit[k], ao);
+                        exact[k] = A >= 1.0f ? ex : (ao > 0.0f ? (i8)0 : exact[k]);
+                    } else {  // first layer of this chunk: over nothing (acc 0, trans 1)
+                        acc_r[k] = cr; acc_g[k] = cg; acc_b[k] = cb; trans[k] = T; hit[k] = ao;
+                        exact[k] = A >= 1.0f ? ex : (i8)0;
+                    }
                 }
             }
         }
@@ -312,6 +355,7 @@ __kernel void grlaa_draw(__global PIXEL_T *img, __global const float *luts,
             const int xa = IMAX(x0, iceil(ax + lo)), xb = IMIN(x0 + TILE - 1, ifloor(ax + hi));
             if (xa > xb) continue;
             const int j = y - y0, ca = (xa - x0) >> 3, cb = (xb - x0) >> 3;
+            const uint fresh = ~rows_cur[j];  // chunks this polyline has not touched yet
             rows_cur[j] |= ((2u << cb) - 1u) & ~((1u << ca) - 1u);
             // One polyline is one shape: its segments' coverages merge by max, so joins are not
             // blended twice. Lanes beyond the segment's reach get exactly 0.
@@ -331,8 +375,12 @@ __kernel void grlaa_draw(__global PIXEL_T *img, __global const float *luts,
                     round_cover8(fx, dy, dy1, tx, ty, len, r, ri, sa, sb, sh, sia, si2, strength,
                                  &co, &ci);
                 }
-                cov_out[k] = F8MAX(cov_out[k], co);
-                cov_in[k] = F8MAX(cov_in[k], ci);
+                if (fresh & (1u << c)) {
+                    cov_out[k] = co; cov_in[k] = ci;
+                } else {
+                    cov_out[k] = F8MAX(cov_out[k], co);
+                    cov_in[k] = F8MAX(cov_in[k], ci);
+                }
             }
         }
     }
@@ -344,6 +392,68 @@ __kernel void grlaa_draw(__global PIXEL_T *img, __global const float *luts,
     __private const float *ab = (__private const float *)acc_b;
     __private const float *tr = (__private const float *)trans;
     __private const int *exs = (__private const int *)exact;
+#if DECODE8
+    // uint8 sRGB frames, one chunk (8 pixels of a row) at a time: the covered pixels are visited
+    // through the chunk's 8-bit mask (lowest set bit first, LOWBIT), so a thin line's few
+    // scattered pixels cost no branch per pixel (they would mispredict). Each is decoded (dec8,
+    // 256 entries), composited and encoded (enc8: linear light rounded to 1/65535 -> sRGB byte);
+    // fully covered ones take their polyline's colour bytes (pcol).
+#if CHANNELS == 1
+#define IR 0
+#define IB 0
+#elif ORDER_BGR
+#define IR 2
+#define IB 0
+#else
+#define IR 0
+#define IB 2
+#endif
+    for (int j = 0; j <= ymax - y0; ++j) {
+        const uint bits = rows_all[j];
+        if (!bits) continue;
+        for (int c = 0; c < CH; ++c) {
+            const int xc = x0 + 8 * c;
+            if (!(bits & (1u << c)) || xc > xmax) continue;
+            const int k = j * CH + c, k8 = 8 * k;
+            const i8 cov = (hit[k] > 0.0f) & (i8)(1, 2, 4, 8, 16, 32, 64, 128);
+            const int4 c4 = cov.lo | cov.hi;
+            const int2 c2 = c4.lo | c4.hi;
+            uint mask = (uint)(c2.x | c2.y) & ((2u << IMIN(7, xmax - xc)) - 1u);
+            __global uchar *p = (__global uchar *)img + (size_t)IDX(xc, y0 + j, width) * CHANNELS;
+            while (mask) {
+                const int i = LOWBIT[mask], q = k8 + i;
+                mask &= mask - 1u;
+                __global uchar *o = p + CHANNELS * i;
+                const int ex = exs[q];
+                const uint pc = pcol[ex];  // pcol[0]: not fully covered (unused)
+                const float T = tr[q];
+#if CHANNELS == 1
+                const uchar e0 = enc8[Q16(ar[q] + T * dec8[o[0]])];
+                o[0] = ex ? (uchar)pc : e0;
+#else
+                float cr = ar[q], cg = ag[q], cb = ab[q];
+#if CHANNELS == 4
+                // straight alpha: premultiplied sum over the frame's premultiplied colour
+                const float ba = (float)o[3] * (1.0f / 255.0f), a = 1.0f - T * (1.0f - ba);
+                const float wb = T * ba, wc = a > 0.0f ? 1.0f / a : 0.0f;
+                cr = (cr + wb * dec8[o[IR]]) * wc; cg = (cg + wb * dec8[o[1]]) * wc;
+                cb = (cb + wb * dec8[o[IB]]) * wc;
+                const uchar ea = (uchar)(a * 255.0f + 0.5f);  // common.cl to_pixel
+                o[3] = ex ? (uchar)255 : ea;
+#else
+                cr += T * dec8[o[IR]]; cg += T * dec8[o[1]]; cb += T * dec8[o[IB]];
+#endif
+                const uchar er = enc8[Q16(cr)], eg = enc8[Q16(cg)], eb = enc8[Q16(cb)];
+                o[IR] = ex ? (uchar)(pc >> 16) : er;
+                o[1] = ex ? (uchar)(pc >> 8) : eg;
+                o[IB] = ex ? (uchar)pc : eb;
+#endif
+            }
+        }
+    }
+#undef IR
+#undef IB
+#else
     for (int j = 0; j <= ymax - y0; ++j) {
         const uint bits = rows_all[j];
         if (!bits) continue;
@@ -362,25 +472,9 @@ __kernel void grlaa_draw(__global PIXEL_T *img, __global const float *luts,
                 const float T = tr[k];
                 float cr = ar[k], cg = ag[k], cb = ab[k], a = 1.0f;
                 if (T > 0.0f) {  // the frame shows through: decode it and put it under the layers
-#if DECODE8
-                    __global const uchar *p = (__global const uchar *)img + (size_t)idx * CHANNELS;
-#if CHANNELS == 1
-                    const float br = dec8[p[0]], bg_ = br, bb = br;
-#elif ORDER_BGR
-                    const float br = dec8[p[2]], bg_ = dec8[p[1]], bb = dec8[p[0]];
-#else
-                    const float br = dec8[p[0]], bg_ = dec8[p[1]], bb = dec8[p[2]];
-#endif
-#if CHANNELS == 4
-                    const float ba = (float)p[3] * (1.0f / 255.0f);
-#else
-                    const float ba = 1.0f;
-#endif
-#else
                     const float4 bgp = load_px(img, idx);
                     const float br = decode_srgb(luts, bgp.x), bg_ = decode_srgb(luts, bgp.y);
                     const float bb = decode_srgb(luts, bgp.z), ba = bgp.w;
-#endif
 #if CHANNELS == 4
                     // straight alpha: premultiplied sum over the frame's premultiplied colour
                     a = 1.0f - T * (1.0f - ba);
@@ -395,4 +489,116 @@ __kernel void grlaa_draw(__global PIXEL_T *img, __global const float *luts,
             store_px(img, idx, outc);
         }
     }
+#endif
+}
+
+// ---------------------------------------------------------------------------------------- binning
+// Segments into TILE x TILE screen tiles, on the device (mlaa_stream.overlay.OverlayRenderer):
+// each segment appends itself to the tiles it can touch, tile t's entries living at
+// entries[t * cap ..] (an atomic counter per tile, cleared by grlaa_draw); a tile that would list
+// more than cap sets *overflow, grlaa_draw then draws nothing and the host bins again with more
+// room. Per row of tiles, the segment is cut to the rows' pixel centres grown by its reach and
+// the tiles whose columns meet that piece's x-range grown by the reach are listed: every pixel
+// within reach of the segment lies in a listed tile (a few listed tiles may have none).
+// BIN_SLACK absorbs the float32 rounding of the end point a + length * t. A tile's entries come
+// in any order; grlaa_draw sorts them into drawing order.
+#define BIN_SLACK 0.01f
+
+INLINE void grlaa_bin_one(int s, float4 g, float4 h, int tiles_x, int tiles_y, int cap,
+                          __global int *counts, __global int *entries, __global int *overflow)
+{
+    if (h.w < 0.0f) return;  // cut away by grlaa_segments' clipping
+    const float ax = g.x, ay = g.y, dx = h.x * g.z, dy = h.x * g.w, R = h.w + BIN_SLACK;
+    const float inv = 1.0f / (float)TILE, idy = dy != 0.0f ? 1.0f / dy : 0.0f;
+    const int r0 = IMAX(ifloor((FMIN(ay, ay + dy) - R) * inv), 0);
+    const int r1 = IMIN(ifloor((FMAX(ay, ay + dy) + R) * inv), tiles_y - 1);
+    for (int row = r0; row <= r1; ++row) {
+        float tlo = 0.0f, thi = 1.0f;  // a horizontal segment lies in every row band listed
+        if (dy != 0.0f) {
+            const float ta = ((float)(row * TILE) - R - ay) * idy;
+            const float tb = ((float)(row * TILE + TILE - 1) + R - ay) * idy;
+            tlo = FMIN(FMAX(FMIN(ta, tb), 0.0f), 1.0f);
+            thi = FMIN(FMAX(FMAX(ta, tb), 0.0f), 1.0f);
+        }
+        const float xa = ax + tlo * dx, xb = ax + thi * dx;
+        const int c0 = IMAX(ifloor((FMIN(xa, xb) - R) * inv), 0);
+        const int c1 = IMIN(ifloor((FMAX(xa, xb) + R) * inv), tiles_x - 1);
+        for (int col = c0; col <= c1; ++col) {
+            const int t = row * tiles_x + col, e = atomic_inc(counts + t);
+            if (e < cap) entries[t * cap + e] = s; else *overflow = 1;
+        }
+    }
+}
+
+// Binning of segment tables built on the host (mlaa_stream.overlay.segment_tables).
+__kernel void grlaa_bin(__global const float4 *segs, const int nseg, const int tiles_x,
+                        const int tiles_y, const int cap, __global int *counts,
+                        __global int *entries, __global int *overflow)
+{
+    const int s = (int)get_global_id(0);
+    if (s < nseg)
+        grlaa_bin_one(s, segs[2 * s], segs[2 * s + 1], tiles_x, tiles_y, cap, counts, entries,
+                      overflow);
+}
+
+// ------------------------------------------------------------------------------- segment tables
+// The kernel's segment tables from the polylines' points, on the device (the numpy
+// mlaa_stream.overlay.segment_tables does the same in float64; the host uses that one when some
+// point lies so far off the frame that float32 would not clip it precisely).
+//   pts[p]     float2 all polylines' points, one after the other
+//   line_i[l]  int4 (first point, first segment, number of points, cap flags of CAPS)
+//   line_f[l]  float4 (r, r_inner, reach, 0)
+// Segment s of a polyline of n points joins its points s and s + 1 (a single point is a
+// zero-length segment). Segments with an end beyond the frame grown by m = reach + 1 are cut to
+// that box (Liang-Barsky); what lies beyond touches no pixel, and the cut end's cap shows nowhere.
+// A segment outside the box gets reach -1 and is not binned. Each segment is then binned
+// (grlaa_bin_one).
+__kernel void grlaa_segments(__global const float2 *pts, __global const int4 *line_i,
+                             __global const float4 *line_f, const int nlines, const int nseg,
+                             const int width, const int height, __global float4 *segs,
+                             __global int *seg_meta, const int tiles_x, const int tiles_y,
+                             const int cap, __global int *counts, __global int *entries,
+                             __global int *overflow)
+{
+    const int s = (int)get_global_id(0);
+    if (s >= nseg) return;
+    int lo = 0, hi = nlines - 1;  // the polyline: the last whose first segment is <= s
+    while (lo < hi) {
+        const int mid = (lo + hi + 1) >> 1;
+        if (line_i[mid].y <= s) lo = mid; else hi = mid - 1;
+    }
+    const int4 L = line_i[lo];
+    const float4 F = line_f[lo];
+    const int k = s - L.y, ia = L.x + k, ib = L.z > 1 ? ia + 1 : ia, last = IMAX(L.z - 1, 1) - 1;
+    const float2 a = pts[ia], b = pts[ib];
+    const float dx = b.x - a.x, dy = b.y - a.y, len = sqrt(dx * dx + dy * dy);
+    float t0 = 0.0f, t1 = 1.0f, reach = F.z;
+    const float m = reach + 1.0f, xh = (float)(width - 1) + m, yh = (float)(height - 1) + m;
+    if (FMIN(a.x, b.x) < -m || FMAX(a.x, b.x) > xh || FMIN(a.y, b.y) < -m || FMAX(a.y, b.y) > yh) {
+        const float p[4] = {-dx, dx, -dy, dy};
+        const float q[4] = {a.x + m, xh - a.x, a.y + m, yh - a.y};
+        int ok = 1;
+        for (int i = 0; i < 4; ++i) {
+            if (p[i] == 0.0f) {
+                ok &= q[i] >= 0.0f;
+            } else {
+                const float r = q[i] / p[i];
+                if (p[i] < 0.0f) t0 = FMAX(t0, r); else t1 = FMIN(t1, r);
+            }
+        }
+        if (!ok || t0 > t1) reach = -1.0f;
+    }
+    const int caps = L.w;
+    int meta = lo << 3;
+    if (caps) {  // flat caps: flags on the polyline's first and last segment
+        if (k == 0) meta |= 1 | (caps & 4);
+        if (k == last) meta |= 2 | (caps & 4);
+    }
+    const float il = len > 0.0f ? 1.0f / len : 0.0f;
+    const float4 g = (float4)(a.x + t0 * dx, a.y + t0 * dy, len > 0.0f ? dx * il : 1.0f, dy * il);
+    const float4 h = (float4)((t1 - t0) * len, F.x, F.y, reach);
+    segs[2 * s] = g;
+    segs[2 * s + 1] = h;
+    seg_meta[s] = meta;
+    grlaa_bin_one(s, g, h, tiles_x, tiles_y, cap, counts, entries, overflow);
 }

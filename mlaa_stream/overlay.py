@@ -20,6 +20,10 @@ from .formats import LUT_SIZE, FrameFormat, defines_for, frame_format
 
 CAPS = {"round": 0, "butt": 3, "square": 7}  # seg_meta flag bits of kernels/grlaa.cl
 DEFAULT_TILE = 16
+ENC8_SIZE = 65536  # kernels/grlaa.cl: uint8 encode table
+BIN_LOCAL = 64     # work-group size of the binning kernel
+BIN_CAP = 64       # initial room for entries per tile (grows when a tile lists more)
+DEVICE_CLIP_MARGIN = 4096.0  # points this far off the frame: segment tables in float64 on the host
 _FOOTPRINT_HALF_DIAGONAL = math.sqrt(0.5)
 
 # --------------------------------------------------------------------------------------- styles
@@ -144,6 +148,26 @@ def as_lines(lines) -> list[np.ndarray]:
     return out
 
 
+def to_byte(v: np.ndarray) -> np.ndarray:
+    """common.cl's to_pixel for uint8 in float32: clamp(v * 255 + 0.5) truncated (round half up)."""
+    t = np.asarray(v, np.float32) * np.float32(255.0) + np.float32(0.5)
+    return np.clip(t, 0, 255).astype(np.uint8)
+
+
+def enc8_table() -> np.ndarray:
+    """uint8 sRGB frames: linear light i / 65535 -> sRGB byte (the LUT encode of common.cl, then
+    to_pixel); kernels/grlaa.cl reads it at rint(v * 65535), a step of 1.5e-5 in linear
+    light, at most 0.05 of a level in sRGB (at black, where the curve is steepest)."""
+    luts = device_luts()
+    x = np.arange(ENC8_SIZE, dtype=np.float64) / (ENC8_SIZE - 1)
+    return to_byte(lut_read(luts[2 * (LUT_SIZE + 1):], x))
+
+
+def enc8_read(table: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """What kernels/grlaa.cl encodes uint8 with: the table at rint(v * 65535), v clamped to [0, 1]."""
+    return table[np.rint(np.clip(v, 0.0, 1.0) * (ENC8_SIZE - 1)).astype(np.intp)]
+
+
 # ------------------------------------------------------------------------------- segment tables
 
 @dataclass
@@ -157,18 +181,31 @@ class SegmentTables:
     polys: np.ndarray  # (P, 5, 4) float32
 
 
-def segment_tables(lines: list[np.ndarray], styles: list[LineStyle], channels: int,
-                   linear_frame: bool = False, strength: float = 1.0,
-                   clip: tuple[int, int] | None = None) -> SegmentTables:
-    """Flatten polylines into the kernel's tables (same for the kernel and the numpy reference).
+@dataclass
+class LineTables:
+    """Per-polyline values: the kernel's polys table (one row per line), and r, r_inner, reach
+    and cap flags (CAPS), one value only when all lines share one style (`uniform`)."""
 
-    With clip=(width, height), segments are cut to the frame grown by their reach (what lies
-    beyond touches no pixel) so float32 stays precise and far-off lines cost nothing."""
-    nl = len(lines)
-    polys = np.zeros((nl, 5, 4), np.float32)
+    polys: np.ndarray  # (P, 5, 4) float32
+    r: np.ndarray
+    ri: np.ndarray
+    reach: np.ndarray  # farthest distance from a segment at which a pixel centre can be touched
+    caps: np.ndarray   # int32
+    uniform: bool
+
+
+def line_tables(styles: list[LineStyle], channels: int, linear_frame: bool = False,
+                strength: float = 1.0) -> LineTables:
+    """Per-polyline tables of kernels/grlaa.cl (colours in linear light and as stored)."""
+    nl = len(styles)
     if nl == 0:
-        return SegmentTables(np.zeros((0, 4)), np.zeros((0, 8), np.float32), np.zeros(0, np.int32),
-                             np.zeros(0), polys)
+        e = np.zeros(0)
+        return LineTables(np.zeros((0, 5, 4), np.float32), e, e, e, np.zeros(0, np.int32), False)
+    # one style for all lines (make_styles' scalar case): computed once, per-line values scalars
+    uniform = styles.count(styles[0]) == nl
+    if uniform:
+        styles = styles[:1]
+    polys = np.zeros((len(styles), 5, 4), np.float32)
     r = 0.5 * np.array([st.width for st in styles])
     ri = np.maximum(r - np.array([st.outline_width for st in styles]), 0.0)
     fill = np.array([st.color for st in styles], np.float64)
@@ -183,7 +220,29 @@ def segment_tables(lines: list[np.ndarray], styles: list[LineStyle], channels: i
     polys[:, 1, :3], polys[:, 2, :3] = fill_lin, out_lin
     polys[:, 3, :3] = fill_lin if linear_frame else fill
     polys[:, 4, :3] = out_lin if linear_frame else outl
+    caps = np.array([CAPS[st.cap] for st in styles], np.int32)
+    # square caps reach r*sqrt(2) past the end point (the corners); + half the footprint diagonal
+    reach = r * np.where(caps & 4, math.sqrt(2.0), 1.0) + (_FOOTPRINT_HALF_DIAGONAL * strength + 1e-3)
+    if uniform:
+        polys = np.repeat(polys, nl, axis=0)
+    return LineTables(polys, r, ri, reach, caps, uniform)
 
+
+def segment_tables(lines: list[np.ndarray], styles: list[LineStyle], channels: int,
+                   linear_frame: bool = False, strength: float = 1.0,
+                   clip: tuple[int, int] | None = None) -> SegmentTables:
+    """Flatten polylines into the kernel's tables in float64 (the numpy reference's, and the
+    kernel's when points lie far off the frame: kernels/grlaa.cl grlaa_segments does the same
+    on the device otherwise).
+
+    With clip=(width, height), segments are cut to the frame grown by their reach (what lies
+    beyond touches no pixel) so float32 stays precise and far-off lines cost nothing."""
+    nl = len(lines)
+    lt = line_tables(styles, channels, linear_frame, strength)
+    polys, r, ri, uniform, caps = lt.polys, lt.r, lt.ri, lt.uniform, lt.caps
+    if nl == 0:
+        return SegmentTables(np.zeros((0, 4)), np.zeros((0, 8), np.float32), np.zeros(0, np.int32),
+                             np.zeros(0), polys)
     counts = np.fromiter(map(len, lines), np.intp, nl)
     nseg = np.maximum(counts - 1, 1)  # a single point is a zero-length segment (a dot)
     allp = np.concatenate(lines)
@@ -199,17 +258,12 @@ def segment_tables(lines: list[np.ndarray], styles: list[LineStyle], channels: i
     # 1-D columns throughout (numpy is much slower on short 2-D rows)
     px, py = allp[:, 0], allp[:, 1]
     cols = [np.take(px, ia), np.take(py, ia), np.take(px, ib), np.take(py, ib)]
-    # one style for all lines (make_styles' scalar case): per-line values are broadcast scalars
-    uniform = styles.count(styles[0]) == nl
-    caps = np.array([CAPS[st.cap] for st in styles[:1 if uniform else nl]], np.int32)
     meta = line_of << 3
     if caps.any():  # flat caps: flags on each line's first and last segment
         capl = np.broadcast_to(caps, (nl,))
         meta[first] |= np.where(capl > 0, 1 | (capl & 4), 0)
         meta[last] |= np.where(capl > 0, 2 | (capl & 4), 0)
-    # square caps reach r*sqrt(2) past the end point (the corners); + half the footprint diagonal
-    reach_l = r[:len(caps)] * np.where(caps & 4, math.sqrt(2.0), 1.0) \
-        + (_FOOTPRINT_HALF_DIAGONAL * strength + 1e-3)
+    reach_l = lt.reach
     reach = np.full(len(ia), reach_l[0]) if uniform else np.take(reach_l, line_of)
     if clip is not None:
         keep, cols = _clip_segments(cols, reach, *clip)
@@ -265,61 +319,6 @@ def _clip_segments(cols: list[np.ndarray], reach: np.ndarray, width: int, height
     return keep, cut
 
 
-def bin_segments(tables: SegmentTables, width: int, height: int, tile: int = DEFAULT_TILE):
-    """Screen tiles each segment can touch: (entries int32, tiles (T, 4) int32 x, y, first, count),
-    entries grouped by tile and in drawing order within a tile.
-
-    Per row of tiles, the segment is cut to the rows' pixel centres grown by its reach; the tiles
-    whose columns meet that piece's x-range grown by the reach are listed: every pixel within reach
-    of the segment lies in a listed tile (a few listed tiles may have none)."""
-    ends = tables.ends
-    nseg = len(ends)
-    tiles_x, tiles_y = -(-width // tile), -(-height // tile)
-    empty = np.zeros(0, np.int32), np.zeros((0, 4), np.int32)
-    if nseg == 0:
-        return empty
-    reach = tables.reach
-    x0, y0, x1, y1 = ends.T
-    inv = 1.0 / tile
-    r0 = np.maximum(np.floor((np.minimum(y0, y1) - reach) * inv), 0).astype(np.int32)
-    r1 = np.minimum(np.floor((np.maximum(y0, y1) + reach) * inv), tiles_y - 1).astype(np.int32)
-    nr = np.maximum(r1 - r0 + 1, 0)
-    total = int(nr.sum())
-    if total == 0:
-        return empty
-    # (segment, row of tiles) pairs
-    seg = np.repeat(np.arange(nseg, dtype=np.int32), nr)
-    row = np.arange(total, dtype=np.int32) - np.repeat(np.cumsum(nr, dtype=np.int32) - nr - r0, nr)
-    R, ax, ay = np.take(reach, seg), np.take(x0, seg), np.take(y0, seg)
-    dx, dy = np.take(x1, seg) - ax, np.take(y1, seg) - ay
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ta = (row * float(tile) - R - ay) / dy
-        tb = (row * float(tile) + (tile - 1) + R - ay) / dy
-    flat = dy == 0  # a horizontal segment lies in every row band it was listed for
-    tlo = np.where(flat, 0.0, np.clip(np.minimum(ta, tb), 0.0, 1.0))
-    thi = np.where(flat, 1.0, np.clip(np.maximum(ta, tb), 0.0, 1.0))
-    xa, xb = ax + tlo * dx, ax + thi * dx
-    c0 = np.maximum(np.floor((np.minimum(xa, xb) - R) * inv), 0).astype(np.int32)
-    c1 = np.minimum(np.floor((np.maximum(xa, xb) + R) * inv), tiles_x - 1).astype(np.int32)
-    nc = np.maximum(c1 - c0 + 1, 0)
-    n = int(nc.sum())
-    if n == 0:
-        return empty
-    pair = np.repeat(np.arange(total, dtype=np.int32), nc)
-    tx = np.arange(n, dtype=np.int32) - np.repeat(np.cumsum(nc, dtype=np.int32) - nc - c0, nc)
-    ty, seg = np.take(row, pair), np.take(seg, pair)
-    tid = ty * np.int32(tiles_x) + tx
-    if tiles_x * tiles_y <= 65536:  # a stable sort of 16-bit keys is a radix sort
-        tid = tid.astype(np.uint16)
-    order = np.argsort(tid, kind="stable")  # stable: segments stay in drawing order in a tile
-    tid, entries = np.take(tid, order), np.take(seg, order)
-    first = np.flatnonzero(np.r_[True, tid[1:] != tid[:-1]])
-    counts = np.diff(np.r_[first, len(tid)])
-    t = tid[first]
-    tiles = np.stack([t % tiles_x, t // tiles_x, first, counts], axis=1).astype(np.int32)
-    return entries, tiles
-
-
 # ----------------------------------------------------------------------------- OpenCL renderer
 
 class OverlayRenderer:
@@ -359,10 +358,14 @@ class OverlayRenderer:
         dec8 = lut_read(luts, np.arange(256) / 255.0).astype(np.float32)
         self._dec8 = self._ctx.buffer(dec8.nbytes, cl.mem_flags.READ_ONLY)
         cl.enqueue_copy(self._ctx.queue, self._dec8, dec8)
+        enc8 = enc8_table()
+        self._enc8 = self._ctx.buffer(enc8.nbytes, cl.mem_flags.READ_ONLY)
+        cl.enqueue_copy(self._ctx.queue, self._enc8, enc8)
         self._fmt: FrameFormat | None = None
         self._frame_buf = None
         self._kernel = None
         self._bufs: dict[str, tuple[object, int]] = {}
+        self._inputs: list[tuple[np.ndarray, object]] = []
 
     @property
     def device_name(self) -> str:
@@ -386,7 +389,124 @@ class OverlayRenderer:
         defines = defines_for(fmt, TILE=self.tile, LINEAR_FRAME=int(self.linear), DECODE8=decode8)
         self._kernel = self._ctx.kernel("grlaa", "grlaa_draw", defines)
         self._frame_buf = None if self.zero_copy else self._ctx.buffer(fmt.nbytes)
+        # binning on the device: per-tile counters (cleared by grlaa_draw), room for `cap`
+        # entries per tile, and a flag set when a tile had more
+        cl = self._cl
+        tx, ty = -(-fmt.width // self.tile), -(-fmt.height // self.tile)
+        self._tiles_xy = (np.int32(tx), np.int32(ty))
+        self._counts = self._ctx.buffer(4 * tx * ty)
+        cl.enqueue_copy(self._ctx.queue, self._counts, np.zeros(tx * ty, np.int32))
+        self._overflow = self._ctx.buffer(4)
+        self._overflow_host = np.zeros(1, np.int32)
+        cl.enqueue_copy(self._ctx.queue, self._overflow, self._overflow_host)
+        self._cap = BIN_CAP
+        self._entries = self._ctx.buffer(4 * tx * ty * self._cap)
+        self._k_bin = self._ctx.kernel("grlaa", "grlaa_bin", defines)
+        self._k_segments = self._ctx.kernel("grlaa", "grlaa_segments", defines)
         self._fmt = fmt
+
+    def _input(self, name: str, host: np.ndarray):
+        """A per-frame input for the kernels. On zero-copy (CPU) devices the host array itself,
+        wrapped (no command in the queue: a write waits for PoCL's worker threads, which under
+        load costs milliseconds); elsewhere a buffer kept between frames, written (_grow)."""
+        if not self.zero_copy:
+            return self._grow(name, host)
+        host = np.ascontiguousarray(host)
+        buf = self._cl.Buffer(self._ctx.ctx, self._cl.mem_flags.READ_ONLY |
+                              self._cl.mem_flags.USE_HOST_PTR, hostbuf=host)
+        self._inputs.append((host, buf))  # both kept until the frame is drawn
+        return buf
+
+    def _writable(self, name: str, nbytes: int):
+        """A device-written buffer of at least nbytes, reused across frames (grows by doubling)."""
+        buf, cap = self._bufs.get(name, (None, 0))
+        if nbytes > cap:
+            cap = max(nbytes, 2 * cap, 4096)
+            buf = self._ctx.buffer(cap)
+            self._bufs[name] = (buf, cap)
+        return buf
+
+    def _segments(self, lines: list[np.ndarray], styles: list[LineStyle], lt: LineTables,
+                  fmt: FrameFormat):
+        """Enqueue the segment tables and their binning into tiles; returns (segs buffer, meta
+        buffer, number of segments). kernels/grlaa.cl grlaa_segments builds and bins them from the
+        points in float32; where a point lies more than DEVICE_CLIP_MARGIN px off the frame
+        (grown to a square), the float64 segment_tables builds them (float32 would not cut such
+        segments to the frame precisely) and grlaa_bin bins them. Nothing waits: grlaa_draw reads
+        the counts, and draws nothing if a tile overflowed its room (_more_room)."""
+        cl, q = self._cl, self._ctx.queue
+        nl = len(lines)
+        tx, ty = self._tiles_xy
+        binning = (tx, ty, np.int32(self._cap), self._counts, self._entries, self._overflow)
+        allp = np.concatenate(lines) if nl > 1 else lines[0]
+        m = DEVICE_CLIP_MARGIN  # (whole-array min and max: much faster than per column)
+        if allp.min() < -m or allp.max() > max(fmt.width, fmt.height) + m:
+            tables = segment_tables(lines, styles, fmt.channels, self.linear, self.strength,
+                                    clip=(fmt.width, fmt.height))
+            total = len(tables.segs)
+            segs, meta = self._input("segs", tables.segs), self._input("meta", tables.meta)
+            if total:
+                self._k_bin.set_args(segs, np.int32(total), *binning)
+                cl.enqueue_nd_range_kernel(q, self._k_bin, (-(-total // BIN_LOCAL) * BIN_LOCAL,),
+                                           (BIN_LOCAL,))
+            return segs, meta, total
+        counts = np.fromiter(map(len, lines), np.int32, nl)
+        nseg = np.maximum(counts - 1, 1)  # a single point is a zero-length segment (a dot)
+        li = np.empty((nl, 4), np.int32)  # first point, first segment, points, cap flags
+        li[:, 0] = np.cumsum(counts) - counts
+        li[:, 1] = np.cumsum(nseg) - nseg
+        li[:, 2] = counts
+        li[:, 3] = lt.caps
+        lf = np.zeros((nl, 4), np.float32)  # r, r_inner, reach
+        lf[:, 0], lf[:, 1], lf[:, 2] = lt.r, lt.ri, lt.reach
+        total = int(li[-1, 1] + nseg[-1])
+        segs = self._writable("segs_dev", 32 * total)
+        meta = self._writable("meta_dev", 4 * total)
+        k = self._k_segments
+        k.set_args(self._input("pts", allp.astype(np.float32)), self._input("line_i", li),
+                   self._input("line_f", lf), np.int32(nl), np.int32(total), np.int32(fmt.width),
+                   np.int32(fmt.height), segs, meta, *binning)
+        cl.enqueue_nd_range_kernel(q, k, (-(-total // BIN_LOCAL) * BIN_LOCAL,), (BIN_LOCAL,))
+        return segs, meta, total
+
+    def _more_room(self) -> bool:
+        """After a draw has completed and self._overflow_host was read: if a tile overflowed its
+        room (nothing was drawn), clear the flag and double the room per tile; True if so."""
+        if not self._overflow_host[0]:
+            return False
+        self._overflow_host[0] = 0
+        self._cl.enqueue_copy(self._ctx.queue, self._overflow, self._overflow_host)
+        self._cap *= 2
+        tx, ty = self._tiles_xy
+        self._entries = self._ctx.buffer(4 * int(tx) * int(ty) * self._cap)
+        return True
+
+    def bin(self, tables: SegmentTables, frame: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """kernels/grlaa.cl grlaa_bin on `tables` for frames like `frame`, read back (for tests):
+        (entries int32, tiles (T, 4) int32 x, y, first, count) of the non-empty tiles, entries
+        in drawing order per tile and packed (first = the tile's offset in entries)."""
+        cl, q = self._cl, self._ctx.queue
+        self._setup(frame_format(frame))
+        tx, ty = (int(v) for v in self._tiles_xy)
+        counts = np.zeros(tx * ty, np.int32)
+        segs = self._grow("segs", tables.segs)
+        while len(tables.segs):
+            self._k_bin.set_args(segs, np.int32(len(tables.segs)), *self._tiles_xy,
+                                 np.int32(self._cap), self._counts, self._entries, self._overflow)
+            cl.enqueue_nd_range_kernel(q, self._k_bin, (-(-len(tables.segs) // BIN_LOCAL) * BIN_LOCAL,),
+                                       (BIN_LOCAL,))
+            cl.enqueue_copy(q, counts, self._counts, is_blocking=True)
+            cl.enqueue_copy(q, self._counts, np.zeros_like(counts))  # as grlaa_draw leaves them
+            cl.enqueue_copy(q, self._overflow_host, self._overflow, is_blocking=True)
+            if not self._more_room():
+                break
+        room = np.empty(tx * ty * self._cap, np.int32)
+        cl.enqueue_copy(q, room, self._entries, is_blocking=True)
+        t = np.flatnonzero(counts)
+        tiles = np.stack([t % tx, t // tx, np.cumsum(counts[t]) - counts[t], counts[t]], axis=1)
+        entries = np.concatenate([np.sort(room[i * self._cap:i * self._cap + counts[i]]) for i in t]
+                                 or [room[:0]])
+        return entries, tiles.astype(np.int32)
 
     def draw(self, frame: np.ndarray, lines, width=2.0, color="#ffffff", outline="#000000",
              outline_width=0.0, opacity=1.0, cap="round", bgr: bool = True,
@@ -400,16 +520,38 @@ class OverlayRenderer:
     def draw_styled(self, frame: np.ndarray, lines: list[np.ndarray], styles: list[LineStyle],
                     bgr: bool = True, inplace: bool = False, what: str = "frame") -> np.ndarray:
         """`draw` with checked lines (as_lines) and one LineStyle per line."""
-        cl = self._cl
         fmt = frame_format(frame, bgr=bgr, what=what)
         if inplace and not frame.flags.writeable:
             raise ValueError(f"{what}: expected a writeable array for inplace drawing, got a read-only one")
-        tables = segment_tables(lines, styles, fmt.channels, self.linear, self.strength,
-                                clip=(fmt.width, fmt.height))
-        entries, tiles = bin_segments(tables, fmt.width, fmt.height, self.tile)
-        if len(tiles) == 0:
+        if not lines:
             return frame if inplace else frame.copy()
         self._setup(fmt)
+        lt = line_tables(styles, fmt.channels, self.linear, self.strength)
+        segs, meta, nseg = self._segments(lines, styles, lt, fmt)
+        if nseg == 0:
+            self._inputs.clear()
+            return frame if inplace else frame.copy()
+        try:
+            dst = self._draw_binned(frame, fmt, inplace, lt, lines, styles, segs, meta)
+        except BaseException:  # the binning's counters must start the next frame at zero
+            self._ctx.queue.finish()
+            self._cl.enqueue_copy(self._ctx.queue, self._counts,
+                                  np.zeros(int(np.prod(self._tiles_xy)), np.int32), is_blocking=True)
+            raise
+        finally:
+            self._inputs.clear()
+        if dst.dtype != frame.dtype:
+            dst = dst.astype(frame.dtype)
+        if inplace and dst is not frame:
+            frame[...] = dst
+            return frame
+        return dst
+
+    def _draw_binned(self, frame: np.ndarray, fmt: FrameFormat, inplace: bool, lt: LineTables,
+                     lines: list[np.ndarray], styles: list[LineStyle], segs, meta) -> np.ndarray:
+        """grlaa_draw over the frame once the segments are binned (draw_styled); returns the
+        drawn array (the frame itself, or a copy in the frame's format)."""
+        cl = self._cl
         q = self._ctx.queue
         mf = cl.mem_flags
         same = frame.dtype == fmt.dtype and frame.flags.c_contiguous
@@ -421,15 +563,25 @@ class OverlayRenderer:
             dst = frame if (inplace and same) else np.empty(src.shape, fmt.dtype)
             fbuf = self._frame_buf
             cl.enqueue_copy(q, fbuf, src, is_blocking=False)
-        bufs = [self._grow("segs", tables.segs), self._grow("meta", tables.meta),
-                self._grow("entries", entries), self._grow("tiles", tiles),
-                self._grow("polys", tables.polys)]
+        # uint8 frames: fully covered pixels take these bytes, (R << 16) | (G << 8) | B, at
+        # 1 + 2 * polyline (fill) and 2 + 2 * polyline (outline)
+        rgb = to_byte(lt.polys[:, 3:5, :3]).astype(np.uint32)
+        pcol = np.zeros(1 + 2 * len(rgb), np.uint32)
+        pcol[1:] = ((rgb[..., 0] << 16) | (rgb[..., 1] << 8) | rgb[..., 2]).ravel()
+        pcol_b, polys_b = self._input("pcol", pcol), self._input("polys", lt.polys)
         k = self._kernel
-        k.set_args(fbuf, self._luts, self._dec8, *bufs, np.int32(fmt.width), np.int32(fmt.height),
-                   np.float32(self.strength), np.int32(len(tiles)))
-        # one work-item per tile; a fixed local size, so no new compile as the tile count changes
-        n = -(-len(tiles) // self._local) * self._local
-        cl.enqueue_nd_range_kernel(q, k, (n,), (self._local,))
+        # one work-item per tile of the frame (empty tiles return at once)
+        n = -(-int(np.prod(self._tiles_xy)) // self._local) * self._local
+        while True:
+            k.set_args(fbuf, self._luts, self._dec8, self._enc8, pcol_b, segs, meta,
+                       self._entries, self._counts, self._overflow, polys_b, np.int32(fmt.width),
+                       np.int32(fmt.height), np.float32(self.strength), self._tiles_xy[0],
+                       np.int32(self._cap))
+            cl.enqueue_nd_range_kernel(q, k, (n,), (self._local,))
+            cl.enqueue_copy(q, self._overflow_host, self._overflow, is_blocking=True)
+            if not self._more_room():
+                break
+            segs, meta, _ = self._segments(lines, styles, lt, fmt)  # bin again, more room
         if self.zero_copy:  # mapping makes the host array current (a no-op on shared memory)
             view, _ = cl.enqueue_map_buffer(q, fbuf, cl.map_flags.READ, 0, dst.shape, dst.dtype,
                                             is_blocking=True)
@@ -438,11 +590,6 @@ class OverlayRenderer:
             fbuf.release()
         else:
             cl.enqueue_copy(q, dst, fbuf, is_blocking=True)
-        if dst.dtype != frame.dtype:
-            dst = dst.astype(frame.dtype)
-        if inplace and dst is not frame:
-            frame[...] = dst
-            return frame
         return dst
 
     __call__ = draw
@@ -747,16 +894,22 @@ def reference_draw_polylines(frame: np.ndarray, lines, width=2.0, color="#ffffff
         ex = np.where((A >= 1) & (a_in >= 1), 1 + 2 * k, np.where((A >= 1) & (a_in <= 0), 2 + 2 * k, 0))
         exact = np.where(m, ex, exact)
         touched |= m
-    out_rgb = lin if linear else np.where(lin > 1, 1.055 * np.abs(lin) ** (1 / 2.4) - 0.055,
-                                          lut_read(enc, lin))
+    alpha = np.where(exact > 0, 1.0, alpha)
+    byte = fmt.dtype == np.uint8 and not linear  # the kernel encodes these through enc8, to bytes
+    if byte:
+        out_rgb = enc8_read(enc8_table(), lin).astype(np.float64)
+        alpha = to_byte(alpha).astype(np.float64)
+    else:
+        out_rgb = lin if linear else np.where(lin > 1, 1.055 * np.abs(lin) ** (1 / 2.4) - 0.055,
+                                              lut_read(enc, lin))
     for k in range(len(pts)):
         for j, sel in ((0, exact == 1 + 2 * k), (1, exact == 2 + 2 * k)):
-            out_rgb[sel] = tables.polys[k, 3 + j, :3]
-    alpha = np.where(exact > 0, 1.0, alpha)
+            col = tables.polys[k, 3 + j, :3]
+            out_rgb[sel] = to_byte(col) if byte else col
     if fmt.bgr:
         out_rgb = out_rgb[..., ::-1]
     res = np.concatenate([out_rgb, alpha[..., None]], axis=2)[..., :c] if c >= 3 else out_rgb[..., :1]
-    if pmax != 1.0:
+    if pmax != 1.0 and not byte:
         res = np.clip(np.rint(res * pmax), 0, pmax)
     out = np.asarray(frame).reshape(h, w, c).copy()
     out[touched] = res[touched].astype(out.dtype)
