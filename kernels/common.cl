@@ -131,6 +131,25 @@ inline float3 rgb_to_lab(__global const float *luts, float4 c)
     return lab_from_linear(luts, lut_read(luts, c.x), lut_read(luts, c.y), lut_read(luts, c.z));
 }
 
+#ifndef PIXEL_IS_FLOAT
+// CIELAB of pixel i of an integer frame, each stored level decoded by one load from `lin` (linear_levels
+// below: the same numbers as rgb_to_lab's table reads).
+inline float3 lab_of_levels(__global const PIXEL_T *src, __global const float *luts, __global const float *lin, int i)
+{
+#if CHANNELS < 3
+    const float v = lin[src[i]];
+    return lab_from_linear(luts, v, v, v);
+#else
+    __global const PIXEL_T *p = src + (size_t)i * CHANNELS;
+#if ORDER_BGR
+    return lab_from_linear(luts, lin[p[2]], lin[p[1]], lin[p[0]]);
+#else
+    return lab_from_linear(luts, lin[p[0]], lin[p[1]], lin[p[2]]);
+#endif
+#endif
+}
+#endif
+
 // lin[v] = the linear value rgb_to_lab reads from the table for the stored level v (load_px's
 // scaling; LINEAR_INPUT frames are encoded first, as the passes do): integer frames decode a
 // sample with one load, the same number. Filled once per frame format (mlaa_stream.device).

@@ -63,16 +63,8 @@ inline float3 lab_of(__global const PIXEL_T *src, __global const float *luts, __
 {
 #ifdef PIXEL_IS_FLOAT
     return rgb_to_lab(luts, c->rgb);
-#elif CHANNELS < 3
-    const float v = lin[src[c->i]];
-    return lab_from_linear(luts, v, v, v);
 #else
-    __global const PIXEL_T *p = src + (size_t)c->i * CHANNELS;
-#if ORDER_BGR
-    return lab_from_linear(luts, lin[p[2]], lin[p[1]], lin[p[0]]);
-#else
-    return lab_from_linear(luts, lin[p[0]], lin[p[1]], lin[p[2]]);
-#endif
+    return lab_of_levels(src, luts, lin, c->i);
 #endif
 }
 

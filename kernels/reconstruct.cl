@@ -110,16 +110,8 @@ inline float3 lab_px(__global const PIXEL_T *src, __global const float *luts, __
 {
 #ifdef PIXEL_IS_FLOAT
     return lab_of(luts, load_px(src, i));
-#elif CHANNELS == 1
-    float v = lin[src[i]];
-    return lab_from_linear(luts, v, v, v);
 #else
-    __global const PIXEL_T *p = src + (size_t)i * CHANNELS;
-#if ORDER_BGR
-    return lab_from_linear(luts, lin[p[2]], lin[p[1]], lin[p[0]]);
-#else
-    return lab_from_linear(luts, lin[p[0]], lin[p[1]], lin[p[2]]);
-#endif
+    return lab_of_levels(src, luts, lin, i);
 #endif
 }
 
