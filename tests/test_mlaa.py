@@ -279,8 +279,9 @@ def test_buffers_allocated_once_per_frame_size(filt):
     assert filt._buffers is bufs
     filt.process(blocky(31, h=20, w=30))
     assert filt._buffers is not bufs
-    # 8-bit RGB: 2 x 2 frame slots (12), edges (1), distances (8), weights (8), bridging (~9)
-    assert filt.device_bytes_per_pixel() <= 40
+    # 8-bit RGB: 2 x 2 frame slots (12), edges (1), distances (8), weights (8), bridging (~13: links,
+    # their claims)
+    assert filt.device_bytes_per_pixel() <= 44
 
 
 def test_submit_overlaps_and_keeps_order(filt):
@@ -319,6 +320,19 @@ def test_linear_float_frames_match_reference():
     want = mlaa_reference(img, linear_input=True)
     np.testing.assert_allclose(got, want, atol=2e-3)
     assert (np.abs(want - img) > 1e-4).mean() > 0.01
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+def test_linear_integer_frames_match_reference(dtype):
+    """Integer frames in linear light (16-bit linear TIFF): CIELAB from the per-level table, which encodes
+    each level first (common.cl linear_levels), must give the reference's edges and output."""
+    img = blocky(17, dtype=dtype)
+    with Filter(linear_input=True) as f:
+        got = f.process(img)
+    want = mlaa_reference(img, linear_input=True)
+    d = np.abs(got.astype(np.int64) - want.astype(np.int64))
+    assert d.max() <= 1 and (d == 0).mean() > 0.999
+    assert (want != img).any(axis=-1).mean() > 0.01
 
 
 def test_display_space_blending_matches_reference():
