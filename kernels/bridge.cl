@@ -5,8 +5,8 @@
 // W = n / (n + g) (mean dash length n, gap g) from the middle of one dash to the middle of the next.
 // Orientations (ORIENTATIONS in mlaa_stream/bridge.py): pixel (i, j) of the lattice at (x, y) is
 // (x + i*ax + j*bx, y + i*ay + j*by). bridge_find finds the links of all four at once; bridge_draw runs once
-// per orientation, in order. Within one orientation no two links own the same pixel (the window rules exclude
-// it), so work items never write the same pixel. Mirrors bridge_reference.
+// per orientation, in order (claims, then drawing: a pixel two links of one orientation want goes to the lower
+// id, so work items never write the same pixel). Mirrors bridge_reference.
 // Defines: MAX_GAP, MAX_RUN (pixels), GAP_PER_RUN, GAP_SLACK (gap <= GAP_PER_RUN * mean dash + GAP_SLACK),
 // INK_MIN, BG_TOL, INK_TOL (max-channel, normalised), MIN_DASHES, BLEND_LINEAR, LINEAR_INPUT (as blend.cl).
 #pragma OPENCL FP_CONTRACT OFF
@@ -82,19 +82,32 @@ inline int near_to(__global const PIXEL_T *src, const lattice L, int x, int y, i
 #define BG(i, j) near_to(src, L, x, y, (i), (j), bgc, BG_TOL)
 #define INK(i, j) near_to(src, L, x, y, (i), (j), ink, INK_TOL)
 
-// Lattice pixel (i, j) as 1 background, 2 ink, 0 anything else or outside the frame (one load).
+// A pixel as 1 background, 2 ink, 3 another colour (another wire), 0 a mix of ink and background (antialiased
+// ink: within INK_TOL of the nearest bgc + t (ink - bgc), t in [0, 1]; it refuses a link as the ink does).
+inline int class_of(__global const PIXEL_T *src, int k, float3 ink, float3 bgc)
+{
+    const float3 c = rgb_at(src, k);
+    if (diff3(c, bgc) <= BG_TOL) return 1;
+    if (diff3(c, ink) <= INK_TOL) return 2;
+    const float3 e = ink - bgc, q = c - bgc;
+    float t = (q.x * e.x + q.y * e.y + q.z * e.z) / (e.x * e.x + e.y * e.y + e.z * e.z);
+    t = t < 0.0f ? 0.0f : (t > 1.0f ? 1.0f : t);
+    return diff3(c, bgc + t * e) <= INK_TOL ? 0 : 3;
+}
+
+// Lattice pixel (i, j) as class_of, or 0 outside the frame.
 inline int classify(__global const PIXEL_T *src, const lattice L, int x, int y, int i, int j, float3 ink, float3 bgc)
 {
     const int k = lat(L, x, y, i, j);
-    if (k < 0) return 0;
-    const float3 c = rgb_at(src, k);
-    return diff3(c, bgc) <= BG_TOL ? 1 : (diff3(c, ink) <= INK_TOL ? 2 : 0);
+    return k < 0 ? 0 : class_of(src, k, ink, bgc);
 }
 
 #define CLS(i, j) classify(src, L, x, y, (i), (j), ink, bgc)
+#define CLEAR(c) ((c) & 1)   // background (1) or another colour (3): a wire crossing this one
 
 // The link whose dash 1 ends at (x, y): 1 and *out, or 0. Rows -d .. 2d over steps a..b hold only the two
-// dashes (one ink) and background (one colour); exactly one direction d qualifies. The predicate of
+// dashes (one ink), background (one colour) and other colours (crossing wires); a dash may run under another
+// colour, not end under it; exactly one direction d qualifies. The predicate of
 // bridge_reference's _Scan.link, evaluated in an order that rejects early: rows -1 and 1 beside dash 1
 // (both directions need them), then per direction the outer row beside dash 1, then the gap and dash 2 one
 // step at a time with all four rows.
@@ -104,36 +117,39 @@ inline int find_link(__global const PIXEL_T *src, const lattice L, int x, int y,
     if (i0 < 0 || i1 < 0) return 0;
     const float3 ink = rgb_at(src, i0), bgc = rgb_at(src, i1);
     if (diff3(ink, bgc) < INK_MIN) return 0;
-    if (CLS(0, -1) != 1 || CLS(0, 1) != 1) return 0;
-    int a = 1;   // dash 1: ink back to a, background before it; rows -1 and 1 background beside it
+    if (!CLEAR(CLS(0, -1)) || !CLEAR(CLS(0, 1))) return 0;
+    int a = 1, under = 0;   // dash 1: ink back to a, background before it; rows -1 and 1 clear beside it
     for (int k = 1; k <= MAX_RUN; ++k) {
         const int c = CLS(-k, 0);
-        if (c == 1) { a = 1 - k; break; }
-        if (c != 2 || CLS(-k, -1) != 1 || CLS(-k, 1) != 1) return 0;
+        if (c == 1) { if (!under) a = 1 - k; break; }
+        if (c == 0 || !CLEAR(CLS(-k, -1)) || !CLEAR(CLS(-k, 1))) return 0;
+        under = c == 3;
     }
     if (a == 1) return 0;
     int found = 0;
     for (int t = 0; t < 2; ++t) {
         const int d = t == 0 ? 1 : -1;
         int ok = 1;
-        for (int i = a; i <= 0 && ok; ++i) ok = CLS(i, 2 * d) == 1;
+        for (int i = a; i <= 0 && ok; ++i) ok = CLEAR(CLS(i, 2 * d));
         if (!ok) continue;
-        // the gap: rows 0, -d, d, 2d background from step 1 until dash 2 starts in row d at s >= 2
+        // the gap: rows 0, -d, d, 2d clear from step 1 until dash 2 starts in row d at s >= 2
         int s = 0;
         for (int k = 1; k <= MAX_GAP + 1; ++k) {
-            if (CLS(k, 0) != 1 || CLS(k, -d) != 1 || CLS(k, 2 * d) != 1) break;
+            if (!CLEAR(CLS(k, 0)) || !CLEAR(CLS(k, -d)) || !CLEAR(CLS(k, 2 * d))) break;
             const int c = CLS(k, d);
-            if (c == 1) continue;
+            if (CLEAR(c)) continue;
             if (k >= 2 && c == 2) s = k;
             break;
         }
         if (s == 0) continue;
-        // dash 2: ink in row d from s to b, background after it; rows 0, -d, 2d background beside it
-        int b = 0;
+        // dash 2: ink (or ink under another colour) in row d from s to b, background after it; rows 0, -d,
+        // 2d clear beside it
+        int b = 0, under2 = 0;
         for (int k = s; k <= s + MAX_RUN; ++k) {
             const int c = CLS(k, d);
-            if (c == 1 && k > s) { b = k - 1; break; }
-            if (c != 2 || CLS(k, 0) != 1 || CLS(k, -d) != 1 || CLS(k, 2 * d) != 1) break;
+            if (c == 1 && k > s) { if (!under2) b = k - 1; break; }
+            if (c == 0 || c == 1 || !CLEAR(CLS(k, 0)) || !CLEAR(CLS(k, -d)) || !CLEAR(CLS(k, 2 * d))) break;
+            under2 = c == 3;
         }
         if (b == 0) continue;
         // a wire at least 1 / (GAP_PER_RUN + 1) px wide: gap <= GAP_PER_RUN * mean dash + GAP_SLACK
@@ -244,18 +260,47 @@ inline void store_rgb(__global PIXEL_T *dst, __global const float *luts, int i, 
 #endif
 }
 
-// Draw the link found at (x, y), if it lies in a chain: rows 0 and d over the steps it owns.
-inline void draw_link(__global const PIXEL_T *src, __global PIXEL_T *dst, __global const float *luts,
-                      __global const uchar *found, __global const ushort *links, const lattice L, const int o,
-                      int x, int y, int diagonal)
+// The link found at (x, y), if it lies in a chain: 1, the link and the steps it owns [c0, c1); else 0.
+inline int chained(__global const PIXEL_T *src, __global const uchar *found, __global const ushort *links,
+                   const lattice L, const int o, int x, int y, link_t *ln, int *c0, int *c1)
 {
-    const link_t ln = unpack_link(x, y, links[4 * IDX(x, y, L.w) + o]);
-    const int inc = incoming(src, found, links, L, o, ln), out = outgoing(found, L, o, ln);
-    if (MIN_DASHES >= 3 && !inc && !out && !touches(src, L, ln)) return;
+    *ln = unpack_link(x, y, links[4 * IDX(x, y, L.w) + o]);
+    const int inc = incoming(src, found, links, L, o, *ln), out = outgoing(found, L, o, *ln);
+    if (MIN_DASHES >= 3 && !inc && !out && !touches(src, L, *ln)) return 0;
     // owned steps [c0, c1): from the middle of dash 1 when a link ends there, else its start; to the middle
     // of dash 2 when a link starts there, else its end (ceil of the half-integer middles)
-    const int c0 = inc ? -((-ln.a) / 2) : ln.a;
-    const int c1 = out ? (ln.s + ln.b + 1) / 2 : ln.b + 1;
+    *c0 = inc ? -((-ln->a) / 2) : ln->a;
+    *c1 = out ? (ln->s + ln->b + 1) / 2 : ln->b + 1;
+    return 1;
+}
+
+// Claim the pixels the link at (x, y) would write (rows 0 and d over the steps it owns, not a pixel of another
+// colour): claims[k] = the lowest id (pixel index of the dash end) of the links of this orientation that want k.
+inline void claim_link(__global const PIXEL_T *src, __global const uchar *found, __global const ushort *links,
+                       volatile __global uint *claims, const lattice L, const int o, int x, int y)
+{
+    link_t ln;
+    int c0, c1;
+    if (!chained(src, found, links, L, o, x, y, &ln, &c0, &c1)) return;
+    const uint id = (uint)IDX(x, y, L.w);
+    const float3 ink = rgb_at(src, lat(L, x, y, 0, 0)), bgc = rgb_at(src, lat(L, x, y, 1, 0));
+    for (int i = c0; i < c1; ++i) {
+        const int k0 = lat(L, x, y, i, 0), k1 = lat(L, x, y, i, ln.d);
+        if (class_of(src, k0, ink, bgc) != 3) atomic_min(claims + k0, id);
+        if (class_of(src, k1, ink, bgc) != 3) atomic_min(claims + k1, id);
+    }
+}
+
+// Draw the link found at (x, y), if it lies in a chain: rows 0 and d over the steps it owns, the pixels it
+// claimed (then their claim is reset for the next orientation).
+inline void draw_link(__global const PIXEL_T *src, __global PIXEL_T *dst, __global const float *luts,
+                      __global const uchar *found, __global const ushort *links, __global uint *claims,
+                      const lattice L, const int o, int x, int y, int diagonal)
+{
+    link_t ln;
+    int c0, c1;
+    if (!chained(src, found, links, L, o, x, y, &ln, &c0, &c1)) return;
+    const uint id = (uint)IDX(x, y, L.w);
     const int n1 = 1 - ln.a, n2 = ln.b - ln.s + 1, g = ln.s - 1;
     const float m1 = (float)ln.a * 0.5f, m2 = (float)(ln.s + ln.b) * 0.5f;
     const float n = (float)(n1 + n2) * 0.5f;
@@ -265,9 +310,15 @@ inline void draw_link(__global const PIXEL_T *src, __global PIXEL_T *dst, __glob
                         to_mix(luts, rgb_at(src, lat(L, x, y, ln.s, ln.d)))) * 0.5f;
     for (int i = c0; i < c1; ++i) {
         const float u = ((float)i - m1) / (m2 - m1);   // the band's centre, rows from row 0 toward row d
-        const float cov0 = band_coverage(u, hw, diagonal), cov1 = band_coverage(u - 1.0f, hw, diagonal);
-        store_rgb(dst, luts, lat(L, x, y, i, 0), bgc + cov0 * (ink - bgc));
-        store_rgb(dst, luts, lat(L, x, y, i, ln.d), bgc + cov1 * (ink - bgc));
+        const int k0 = lat(L, x, y, i, 0), k1 = lat(L, x, y, i, ln.d);
+        if (claims[k0] == id) {
+            store_rgb(dst, luts, k0, bgc + band_coverage(u, hw, diagonal) * (ink - bgc));
+            claims[k0] = 0xffffffffu;
+        }
+        if (claims[k1] == id) {
+            store_rgb(dst, luts, k1, bgc + band_coverage(u - 1.0f, hw, diagonal) * (ink - bgc));
+            claims[k1] = 0xffffffffu;
+        }
     }
 }
 
@@ -285,22 +336,91 @@ inline lattice lattice_of(int o, int width, int height)
 // the work item's pixels. One work item per SEGMENT pixels of a row. Every candidate differs from its right neighbour (x + 1, y) by INK_MIN or more (that pixel is P(1, 0)
 // or P(0, 1) in every orientation), so a group of GROUP pixels where no sample differs from the same sample
 // of the right neighbour by FLAT_LEVELS (<= INK_MIN * PIXEL_MAX) is settled at once, and so is a pixel.
-// Integer frames: a necessary condition of find_link checked on stored samples first -- the pixels beside
-// the dash end across the lattice rows, (0, -1) and (0, 1), must be background, within BG_TOL of the pixel
-// after the dash end (1, 0) (CLS == 1). BG_LEVELS >= BG_TOL * PIXEL_MAX rounds up (never rejects a link the
-// float test accepts). Photographs fail it almost everywhere, before any float conversion.
+// Integer frames: necessary conditions of find_link checked on stored levels first, each rounded so that it
+// never rejects a link the float test accepts (the outputs are those of find_link alone). Photographs fail
+// them almost everywhere, before any float conversion: MAY_CLEAR on the pixels beside the dash end, then the
+// float INK_MIN tests, then may_link.
 #ifndef PIXEL_IS_FLOAT
-#define BG_LEVELS ((int)(BG_TOL * PIXEL_MAX * 1.0001f) + 1)
-inline int near_int(__global const PIXEL_T *src, int i, int j)
+#define BG_LEVELS ((int)(BG_TOL * PIXEL_MAX * 1.0001f) + 1)    // within BG_TOL: every channel <= BG_LEVELS
+#define INK_LEVELS ((int)(INK_TOL * PIXEL_MAX * 0.9999f) - 1)  // every channel <= INK_LEVELS: within INK_TOL
+#define INK_UP ((int)(INK_TOL * PIXEL_MAX * 1.0001f) + 1)      // within INK_TOL: every channel <= INK_UP
+#define SEG_L2 (0.99f * INK_TOL * PIXEL_MAX)                   // L2 (levels) surely within INK_TOL (max-channel)
+inline int near_ptr(__global const PIXEL_T *a, __global const PIXEL_T *b, int levels)
 {
-    __global const PIXEL_T *a = src + (size_t)i * CHANNELS, *b = src + (size_t)j * CHANNELS;
     int ok = 1;
     for (int k = 0; k < (CHANNELS < 3 ? CHANNELS : 3); ++k) {
         const int d = (int)a[k] - (int)b[k];
-        ok &= (d <= BG_LEVELS) & (d >= -BG_LEVELS);
+        ok &= (d <= levels) & (d >= -levels);
     }
     return ok;
 }
+#define near_int(src, i, j, levels) near_ptr((src) + (size_t)(i) * CHANNELS, (src) + (size_t)(j) * CHANNELS, levels)
+// Pixel q may be clear beside the dash end i (r the pixel after it): near r's colour, or surely not the ink.
+#define MAY_CLEAR(q) (near_int(src, (q), r, BG_LEVELS) || !near_int(src, (q), i, INK_LEVELS))
+
+inline float3 levels_at(__global const PIXEL_T *src, int k)
+{
+#if CHANNELS == 1
+    const float v = (float)src[k];
+    return (float3)(v, v, v);
+#else
+    __global const PIXEL_T *p = src + (size_t)k * CHANNELS;
+    return (float3)((float)p[0], (float)p[1], (float)p[2]);
+#endif
+}
+
+// Pixel k is surely not clear for the link with background level rl and ink rl + e: not background (a
+// channel more than BG_LEVELS from rl) and within SEG_L2 (L2, levels) of the segment rl .. rl + e. Then the
+// nearest mix point, which class_of's clamped projection finds to float precision, is within INK_TOL
+// (max-channel <= L2; 1 % margin): class_of is 2 or 0. Any t in [0, 1] bounds the distance from above, so
+// t uses 1 / |e|^2 (no division per pixel). Branch-free: photographs make these outcomes unpredictable.
+inline int not_clear(__global const PIXEL_T *src, int k, float3 rl, float3 e, float ee_inv)
+{
+    const float3 u = levels_at(src, k) - rl;
+    float t = (u.x * e.x + u.y * e.y + u.z * e.z) * ee_inv;
+    t = t < 0.0f ? 0.0f : t;
+    t = t > 1.0f ? 1.0f : t;
+    const float3 w = u - t * e;
+    const float ax = u.x < 0.0f ? -u.x : u.x, ay = u.y < 0.0f ? -u.y : u.y, az = u.z < 0.0f ? -u.z : u.z;
+    const float m = ax > ay ? ax : ay, mm = m > az ? m : az;
+    return (w.x * w.x + w.y * w.y + w.z * w.z <= SEG_L2 * SEG_L2) & (mm > (float)BG_LEVELS);
+}
+
+// Can find_link(src, L, x, y) succeed (i the dash end, r the pixel after it)? 0 only where it fails:
+//  - (1, -1), (1, 1), (0, -1), (0, 1) and (2, 0) clear: every direction d's gap starts with (1, -d), (1, d),
+//    (2, 0) clear, and rows -1 and 1 beside the dash end are clear;
+//  - dash 1, walked back along row 0: the first background pixel (-k, 0) follows ink (k == 1 or (1 - k, 0) of
+//    the ink), and before it every (-k, 0) is no mix and (-k, -1), (-k, 1) are clear. Before the first
+//    pixel that may be background, every pixel is before the first background pixel.
+inline int may_link(__global const PIXEL_T *src, const lattice L, int x, int y, int i, int r)
+{
+    const int p1 = lat(L, x, y, 1, 1), p2 = lat(L, x, y, 1, -1), p3 = lat(L, x, y, 2, 0);
+    if (p1 < 0 || p2 < 0 || p3 < 0) return 0;
+    const float3 rl = levels_at(src, r), e = levels_at(src, i) - rl;
+    const float ee_inv = 1.0f / (e.x * e.x + e.y * e.y + e.z * e.z);   // e != 0: diff3(ink, bgc) >= INK_MIN
+    if (not_clear(src, p1, rl, e, ee_inv) | not_clear(src, p2, rl, e, ee_inv)) return 0;
+    if (not_clear(src, lat(L, x, y, 0, 1), rl, e, ee_inv) | not_clear(src, lat(L, x, y, 0, -1), rl, e, ee_inv) |
+        not_clear(src, p3, rl, e, ee_inv)) return 0;
+    __global const PIXEL_T *ink = src + (size_t)i * CHANNELS, *bg = src + (size_t)r * CHANNELS;
+    int prev = 1;   // (1 - k, 0) may be the ink
+    for (int k = 1; k <= MAX_RUN; ++k) {
+        const int p = lat(L, x, y, -k, 0);
+        if (p < 0) return 0;
+        __global const PIXEL_T *pp = src + (size_t)p * CHANNELS;
+        if (near_ptr(pp, bg, BG_LEVELS)) {
+            if (prev) return 1;
+        } else {
+            const int s1 = lat(L, x, y, -k, -1), s2 = lat(L, x, y, -k, 1);
+            if (s1 < 0 || s2 < 0 || not_clear(src, s1, rl, e, ee_inv) || not_clear(src, s2, rl, e, ee_inv) ||
+                (!near_ptr(pp, ink, INK_UP) && not_clear(src, p, rl, e, ee_inv))) return 0;
+        }
+        prev = near_ptr(pp, ink, INK_UP);
+    }
+    return 0;
+}
+#define MAY_LINK(L, x, y, i, r) may_link(src, L, x, y, i, r)
+#else
+#define MAY_LINK(L, x, y, i, r) 1
 #endif
 
 __kernel void bridge_find(__global const PIXEL_T *src, __global uchar *found, __global ushort *links,
@@ -345,11 +465,12 @@ __kernel void bridge_find(__global const PIXEL_T *src, __global uchar *found, __
                         const int q = lat(L, x, y, 0, 1), r = lat(L, x, y, 1, 0);
 #ifndef PIXEL_IS_FLOAT
                         const int qm = lat(L, x, y, 0, -1);
-                        if (q < 0 || r < 0 || qm < 0 || !near_int(src, q, r) || !near_int(src, qm, r)) continue;
+                        if (q < 0 || r < 0 || qm < 0 || !MAY_CLEAR(q) || !MAY_CLEAR(qm)) continue;
 #endif
                         link_t ln;
                         if (q >= 0 && r >= 0 && diff3(c, rgb_at(src, q)) >= INK_MIN &&
-                            diff3(c, rgb_at(src, r)) >= INK_MIN && find_link(src, L, x, y, &ln)) {
+                            diff3(c, rgb_at(src, r)) >= INK_MIN && MAY_LINK(L, x, y, i, r) &&
+                            find_link(src, L, x, y, &ln)) {
                             links[4 * i + o] = pack_link(ln);
                             hits |= (uchar)(1u << o);
                         }
@@ -363,12 +484,32 @@ __kernel void bridge_find(__global const PIXEL_T *src, __global uchar *found, __
     segments[get_global_id(1) * get_global_size(0) + get_global_id(0)] = any;
 }
 
-// Pass 2, once per orientation o in order: draw every link of orientation o that lies in a chain. A segment
-// with no such link (bit o of segments[] from pass 1) returns at once; groups of GROUP pixels with none are
-// skipped with one 8-byte read.
+// Pass 2, once per orientation o in order, two kernels: bridge_claim, then bridge_draw. Every link of
+// orientation o that lies in a chain claims the pixels it would write (atomic_min of its id: links whose
+// windows hold each other's wires may want the same pixel; the lowest id draws it, whatever the order the work
+// items run in); then each draws the pixels it won. A segment with no link of orientation o (bit o of
+// segments[] from pass 1) returns at once; groups of GROUP pixels with none are skipped with one 8-byte read.
+__kernel void bridge_claim(__global const PIXEL_T *src, __global const uchar *found, __global const ushort *links,
+                           __global const uchar *segments, volatile __global uint *claims, const int width,
+                           const int height, const int o)
+{
+    const int x0 = get_global_id(0) * SEGMENT, y = get_global_id(1);
+    if (x0 >= width || y >= height) return;
+    if (!(segments[get_global_id(1) * get_global_size(0) + get_global_id(0)] >> o & 1u)) return;
+    const int x1 = x0 + SEGMENT < width ? x0 + SEGMENT : width;
+    const lattice L = lattice_of(o, width, height);
+    const ulong bits = 0x0101010101010101UL << o;
+    for (int x = x0; x < x1; ++x) {
+        const int i = IDX(x, y, width);
+        if (x + GROUP <= x1 && (edge_group(found + i) & bits) == 0) { x += GROUP - 1; continue; }
+        if (found[i] >> o & 1u) claim_link(src, found, links, claims, L, o, x, y);
+    }
+}
+
 __kernel void bridge_draw(__global const PIXEL_T *src, __global PIXEL_T *dst, __global const float *luts,
                           __global const uchar *found, __global const ushort *links,
-                          __global const uchar *segments, const int width, const int height, const int o)
+                          __global const uchar *segments, __global uint *claims, const int width,
+                          const int height, const int o)
 {
     const int x0 = get_global_id(0) * SEGMENT, y = get_global_id(1);
     if (x0 >= width || y >= height) return;
@@ -380,6 +521,6 @@ __kernel void bridge_draw(__global const PIXEL_T *src, __global PIXEL_T *dst, __
     for (int x = x0; x < x1; ++x) {
         const int i = IDX(x, y, width);
         if (x + GROUP <= x1 && (edge_group(found + i) & bits) == 0) { x += GROUP - 1; continue; }
-        if (found[i] >> o & 1u) draw_link(src, dst, luts, found, links, L, o, x, y, diagonal);
+        if (found[i] >> o & 1u) draw_link(src, dst, luts, found, links, claims, L, o, x, y, diagonal);
     }
 }

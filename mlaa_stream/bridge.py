@@ -84,6 +84,14 @@ def _diff(p: np.ndarray, q: np.ndarray) -> np.float32:
     return np.float32(np.abs(p - q).max())
 
 
+def _on_mix_line(p: np.ndarray, ink: np.ndarray, bgc: np.ndarray) -> np.ndarray:
+    """The mix bgc + t (ink - bgc), t in [0, 1], nearest to p (float32, in the kernel's order of operations)."""
+    e, q = ink - bgc, p - bgc
+    t = (q[0] * e[0] + q[1] * e[1] + q[2] * e[2]) / (e[0] * e[0] + e[1] * e[1] + e[2] * e[2])
+    t = min(max(t, np.float32(0)), np.float32(1))
+    return bgc + t * e
+
+
 class _Scan:
     """The frame seen in one orientation: pixel (i, j) steps from (x, y) is (x + i a + j b)."""
 
@@ -101,57 +109,73 @@ class _Scan:
         px, py = self.at(x, y, i, j)
         return self.rgb[py, px] if 0 <= px < self.w and 0 <= py < self.h else None
 
+    def cls(self, x: int, y: int, i: int, j: int, ink: np.ndarray, bgc: np.ndarray) -> int:
+        """Lattice pixel (i, j) as 1 background, 2 ink, 3 another colour (another wire), 0 a mix of the two
+        (antialiased ink: it refuses a link as the ink does) or outside the frame."""
+        p = self.px(x, y, i, j)
+        if p is None:
+            return 0
+        if _diff(p, bgc) <= self.bg_tol:
+            return 1
+        if _diff(p, ink) <= self.ink_tol:
+            return 2
+        return 0 if _diff(p, _on_mix_line(p, ink, bgc)) <= self.ink_tol else 3
+
     def link(self, x: int, y: int) -> Link | None:
         """The link whose dash 1 ends at (x, y), or None. Lattice rows -d .. 2d over the span a..b hold only
-        the two dashes (one ink colour) and background (one colour); exactly one direction d qualifies."""
-        o, P = self.o, self.px
-        ink, bgc = P(x, y, 0, 0), P(x, y, 1, 0)
+        the two dashes (one ink colour), background (one colour) and pixels of other colours (wires crossing
+        this one); exactly one direction d qualifies. A dash may run under another colour (ink on both
+        sides of it), not end under it."""
+        o = self.o
+        ink, bgc = self.px(x, y, 0, 0), self.px(x, y, 1, 0)
         if ink is None or bgc is None or _diff(ink, bgc) < self.ink_min:
             return None
 
-        def bg(i: int, j: int) -> bool:
-            p = P(x, y, i, j)
-            return p is not None and _diff(p, bgc) <= self.bg_tol
+        def c(i: int, j: int) -> int:
+            return self.cls(x, y, i, j, ink, bgc)
 
-        def is_ink(i: int, j: int) -> bool:
-            p = P(x, y, i, j)
-            return p is not None and _diff(p, ink) <= self.ink_tol
+        def clear(i: int, j: int) -> bool:  # background, or another wire's colour
+            return c(i, j) in (1, 3)
 
-        if not (bg(0, -1) and bg(0, 1)):
+        if not (clear(0, -1) and clear(0, 1)):
             return None
-        a = None  # dash 1: ink back to a, background before it
+        a, under = None, False  # dash 1: ink back to a, background before it
         for k in range(1, o.max_run + 1):
-            if bg(-k, 0):
-                a = 1 - k
+            ck = c(-k, 0)
+            if ck == 1:
+                a = None if under else 1 - k
                 break
-            if not is_ink(-k, 0):
+            if ck == 0:
                 return None
+            under = ck == 3
         if a is None:
             return None
         found = []
         for d in (1, -1):
             s = None  # the gap in row d, then dash 2 from s
             for k in range(1, o.max_gap + 2):
-                if bg(k, d):
+                if clear(k, d):
                     continue
-                if k >= 2 and is_ink(k, d):
+                if k >= 2 and c(k, d) == 2:
                     s = k
                 break
             if s is None:
                 continue
-            b = None
+            b, under = None, False
             for k in range(s + 1, s + o.max_run + 1):
-                if bg(k, d):
-                    b = k - 1
+                ck = c(k, d)
+                if ck == 1:
+                    b = None if under else k - 1
                     break
-                if not is_ink(k, d):
+                if ck == 0:
                     break
+                under = ck == 3
             if b is None:
                 continue
             if 2 * (s - 1) > o.gap_per_run * ((1 - a) + (b - s + 1)) + 2 * o.gap_slack:
                 continue  # gap <= GAP_PER_RUN * mean dash + GAP_SLACK
-            ok = all(bg(i, 0) for i in range(1, b + 1)) and all(bg(i, d) for i in range(a, 1))
-            ok = ok and all(bg(i, -d) and bg(i, 2 * d) for i in range(a, b + 1))
+            ok = all(clear(i, 0) for i in range(1, b + 1)) and all(clear(i, d) for i in range(a, 1))
+            ok = ok and all(clear(i, -d) and clear(i, 2 * d) for i in range(a, b + 1))
             if ok:
                 found.append(Link(x, y, d, a, s, b))
         return found[0] if len(found) == 1 else None
@@ -242,10 +266,15 @@ def _tri_cdf(t: np.float32) -> np.float32:
     return f32(1)
 
 
-def _draw(scan: _Scan, lin: np.ndarray, out: np.ndarray, written: np.ndarray, diagonal: bool) -> None:
-    """Find the links of one orientation and write their pixels into `out` (RGB in the mixing space)."""
+def _draw(scan: _Scan, lin: np.ndarray, diagonal: bool) -> dict[tuple[int, int], tuple[int, np.ndarray]]:
+    """Find the links of one orientation and the pixels they write: {(x, y): (claim, RGB in the mixing
+    space)}. A pixel of another colour than the link's background and ink (a crossing wire) is never written;
+    a pixel two links would write goes to the lower claim (index of the pixel where dash 1 ends), as the
+    kernel's atomic_min settles it."""
     f32 = np.float32
+    res: dict[tuple[int, int], tuple[int, np.ndarray]] = {}
     for ln, c0, c1 in scan.links():
+        cid = ln.y * scan.w + ln.x
         n1, n2, g = 1 - ln.a, ln.b - ln.s + 1, ln.s - 1
         m1, m2 = f32(ln.a) * f32(0.5), f32(ln.s + ln.b) * f32(0.5)  # dash middles (dash 1 ends at 0)
         n = f32(n1 + n2) * f32(0.5)
@@ -254,13 +283,16 @@ def _draw(scan: _Scan, lin: np.ndarray, out: np.ndarray, written: np.ndarray, di
         sx, sy = scan.at(ln.x, ln.y, ln.s, ln.d)
         bgc = lin[by, bx]
         ink = (lin[ln.y, ln.x] + lin[sy, sx]) * f32(0.5)
+        raw_ink, raw_bgc = scan.rgb[ln.y, ln.x], scan.rgb[by, bx]
         for i in range(c0, c1):
             u = (f32(i) - m1) / (m2 - m1)  # the band's centre, in rows from row 0 toward row d
             for j, delta in ((0, u), (ln.d, u - f32(1))):
-                cov = _coverage(delta, half, diagonal)
+                if scan.cls(ln.x, ln.y, i, j, raw_ink, raw_bgc) == 3:
+                    continue
                 px, py = scan.at(ln.x, ln.y, i, j)
-                out[py, px] = bgc + cov * (ink - bgc)
-                written[py, px] += 1
+                if (px, py) not in res or cid < res[(px, py)][0]:
+                    res[(px, py)] = (cid, bgc + _coverage(delta, half, diagonal) * (ink - bgc))
+    return res
 
 
 def _to_mix(rgb: np.ndarray, o: BridgeOptions) -> np.ndarray:
@@ -313,14 +345,11 @@ def bridge_reference(src: np.ndarray, dst: np.ndarray | None = None, *, bgr: boo
     out = np.array(base, copy=True)
     view = out.reshape(fmt.height, fmt.width, fmt.channels)
     for ab in ORIENTATIONS:
-        mix = np.zeros_like(lin)
-        written = np.zeros(rgb.shape[:2], np.int32)
-        _draw(_Scan(rgb, ab, o), lin, mix, written, ab[0][0] != 0 and ab[0][1] != 0)
-        if written.max(initial=0) > 1:
-            raise AssertionError("bridge: a pixel claimed by two links of one orientation")
-        sel = written > 0
-        vals = _store(_from_mix(mix[sel], o), fmt)
-        view[sel, :vals.shape[-1]] = vals
+        pix = _draw(_Scan(rgb, ab, o), lin, ab[0][0] != 0 and ab[0][1] != 0)
+        if pix:
+            ys, xs = np.array([p[1] for p in pix]), np.array([p[0] for p in pix])
+            vals = _store(_from_mix(np.stack([v for _, v in pix.values()])[None], o), fmt)[0]
+            view[ys, xs, :vals.shape[-1]] = vals
     return out
 
 
@@ -346,21 +375,26 @@ class Bridger:
         self.fmt, self.options = fmt, o
         defines = defines_for(fmt, SEGMENT=SEGMENT, **o.defines())
         self._find = context.kernel("bridge", "bridge_find", defines)
+        self._claim = context.kernel("bridge", "bridge_claim", defines)
         self._draw = context.kernel("bridge", "bridge_draw", defines)
-        # per pixel: 1 byte, bit o = "a link of orientation o ends here", and 4 packed links (2 bytes each)
+        # per pixel: 1 byte, bit o = "a link of orientation o ends here", 4 packed links (2 bytes each), and the
+        # claim of the link that draws it (all ones when none: filled once, each draw pass resets what it used)
         self._found = context.buffer(fmt.pixels)
         self._links = context.buffer(8 * fmt.pixels)
+        self._claims = context.buffer(4 * fmt.pixels)
+        cl.enqueue_fill_buffer(context.queue, self._claims, np.uint32(0xFFFFFFFF), 0, 4 * fmt.pixels).wait()
         self._global = (-(-fmt.width // SEGMENT), fmt.height)
         self._segments = context.buffer(self._global[0] * self._global[1])  # per work item: orientations found
         self._last = None  # this pass's previous frame: its work buffers are reused
 
     def device_bytes(self) -> int:
-        return self._found.size + self._links.size + self._segments.size
+        return self._found.size + self._links.size + self._claims.size + self._segments.size
 
     def enqueue(self, queue: "cl.CommandQueue", src: "cl.Buffer", dst: "cl.Buffer", luts: "cl.Buffer",
                 wait_for: list | None = None, events: dict | None = None) -> "cl.Event":
-        """Enqueue the find pass (all orientations), then the draw pass per orientation in order; returns the
-        last event. `events`, when given, receives each kernel's event (bridge_find, bridge_draw0..3)."""
+        """Enqueue the find pass (all orientations), then the claim and draw passes per orientation in order;
+        returns the last event. `events`, when given, receives each kernel's event (bridge_find, bridge_claim0..3,
+        bridge_draw0..3)."""
         check_pass_buffers("bridge", self.fmt, src, dst)
         W, H = np.int32(self.fmt.width), np.int32(self.fmt.height)
         ev = list(wait_for or []) + ([self._last] if self._last is not None else [])
@@ -369,8 +403,11 @@ class Bridger:
                                         W, H, wait_for=ev)
         ev = [rec["bridge_find"]]
         for o in range(len(ORIENTATIONS)):  # in order: a later orientation's pixels overwrite an earlier's
+            rec[f"bridge_claim{o}"] = self._claim(queue, self._global, None, src, self._found, self._links,
+                                                  self._segments, self._claims, W, H, np.int32(o), wait_for=ev)
             rec[f"bridge_draw{o}"] = self._draw(queue, self._global, None, src, dst, luts, self._found, self._links,
-                                                self._segments, W, H, np.int32(o), wait_for=ev)
+                                                self._segments, self._claims, W, H, np.int32(o),
+                                                wait_for=[rec[f"bridge_claim{o}"]])
             ev = [rec[f"bridge_draw{o}"]]
         self._last = ev[0]
         return self._last

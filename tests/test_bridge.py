@@ -112,6 +112,26 @@ def test_near_diagonal_chain_is_bridged(device):
     assert (gap != BG).any() and coverage_of(out)[7, 7] > 0.05
 
 
+def test_crossing_wires_of_two_colours_are_both_bridged(device):
+    # a shallow dashed wire (INK) crossed by a steep red one (its transpose) through their gaps: each sees the
+    # other's pixels in its link windows as another colour and bridges across them; neither paints the other
+    img = canvas(48, 48)
+    dashes = dash_chain(img, 2, 20, 3, 4, 7)
+    steep = canvas(48, 48)
+    steep_dashes = dash_chain(steep, 2, 17, 3, 4, 7)  # (column, first row, last row) once transposed
+    other = (steep.transpose(1, 0, 2) != BG).any(-1)
+    img[other] = (150, 30, 30)
+    out = both(img)
+    # the red pixels stay red (dimmed by their own links toward the wire's width, never painted with INK)
+    red = out[other].astype(int)
+    assert (red[:, 0] - red[:, 2] >= 20).all()
+    changed = (out != img).any(-1)
+    (r, _, e), (r2, s, _) = dashes[2], dashes[3]  # the shallow wire's gap the steep one crosses
+    assert changed[r, e + 1:s].sum() >= 2 and changed[r2, e + 1:s].sum() >= 2
+    (c, _, e), (c2, s, _) = steep_dashes[2], steep_dashes[3]  # and the steep wire's gap the shallow one crosses
+    assert changed[e + 1:s, c].sum() >= 2 and changed[e + 1:s, c2].sum() >= 2
+
+
 def test_ink_colour_and_channels(device):
     img = canvas()
     dash_chain(img, 2, 4, 3, 4, 6)
@@ -208,6 +228,33 @@ def test_kernel_matches_reference_on_random_wires(device, seed):
     assert (out != other).any(), "the random wires should give some links"
     both(img.astype(np.uint16) * 257)
     both(img, options=BridgeOptions(min_dashes=2, max_gap=8, max_run=12, linear=False))
+
+
+def crossed_dashes(seed: int) -> np.ndarray:
+    """Dash chains of INK (shallow and steep) with pixels of two other colours and of ink-background mixes
+    scattered over them (beside dash ends, in gaps, under dashes: where the kernel's integer pre-tests reject),
+    and +-2 levels of noise."""
+    rng = np.random.default_rng(seed)
+    img = canvas(40, 64)
+    for k in range(4):
+        dash_chain(img, int(rng.integers(0, 8)), 4 + 9 * k, int(rng.integers(1, 5)), int(rng.integers(2, 7)), 8,
+                   1 if k % 2 else -1 if k else 1)
+    steep = canvas(64, 40)
+    dash_chain(steep, 2, 12, 3, 4, 8)
+    img[(steep.transpose(1, 0, 2) != BG).any(-1)] = (150, 30, 30)
+    mix = tuple((np.array(BG) + np.array(INK)) // 2)
+    for colour, share in (((30, 40, 200), 0.04), ((150, 30, 30), 0.02), (mix, 0.02)):
+        img[rng.random(img.shape[:2]) < share] = colour
+    return np.clip(img + rng.integers(-2, 3, img.shape), 0, 255).astype(np.uint8)  # background within BG_TOL
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_kernel_matches_reference_with_other_colours_in_the_windows(device, seed):
+    img = crossed_dashes(seed)
+    out = both(img)
+    assert (out != img).any(), "the dash chains should give some links"
+    both(img.astype(np.uint16) * 257)
+    both(np.ascontiguousarray(img.transpose(1, 0, 2)))
 
 
 def test_filter_option_draws_over_the_blended_frame(device):
