@@ -411,14 +411,17 @@ __kernel void detect_edges(__global const PIXEL_T *src, __global const float *lu
                 // path's arithmetic): pairs surely under the threshold (0.1 % margin for rounding) need no
                 // float path; the others go on to it, which decides exactly. Camera noise ends here.
 #if VCH == 3
-                const int8 pG = r1.s12345678, pB = r2.s12345678, qG = r1.s23456789, qB = r2.s23456789;
+                const int8 pG = r1.s12345678, pB = r2.s12345678;
 #else
-                const int8 pG = p0, pB = p0, qG = r0.s23456789, qB = qG, d1 = d0, d2 = d0;
+                const int8 pG = p0, pB = p0, d1 = d0, d2 = d0;
 #endif
-                float8 pL, pA, pZ, qL, qA, qZ, bL, bA, bZ;
+                float8 pL, pA, pZ, bL, bA, bZ;
                 LAB8(p0, pG, pB, pL, pA, pZ);
-                LAB8(r0.s23456789, qG, qB, qL, qA, qZ);
                 LAB8(d0, d1, d2, bL, bA, bZ);
+                // the right neighbours: the group's own lanes shifted by one, and the pixel after the group
+                const float3 l8 = lab_of_levels(src, luts, lin, i + GROUP);
+                const float8 qL = (float8)(pL.s1234, pL.s567, l8.x), qA = (float8)(pA.s1234, pA.s567, l8.y);
+                const float8 qZ = (float8)(pZ.s1234, pZ.s567, l8.z);
                 const float t2 = (0.999f * threshold) * (0.999f * threshold);
                 const float8 eb_l = bL - pL, eb_a = bA - pA, eb_z = bZ - pZ;
                 const float8 er_l = qL - pL, er_a = qA - pA, er_z = qZ - pZ;
