@@ -6,13 +6,6 @@
 // are mixed as they are). Alpha is copied from the source pixel. dst must already hold a copy of
 // src (the host enqueues it): pixels next to no edge exit at once, and a weight slot is read only
 // where the edge it belongs to exists (weights.cl writes no others).
-#ifndef BLEND_LINEAR
-#define BLEND_LINEAR 1
-#endif
-#ifndef LINEAR_INPUT
-#define LINEAR_INPUT 0
-#endif
-#define DECODE (BLEND_LINEAR && !LINEAR_INPUT)
 
 inline float4 to_mix_space(__global const float *luts, float4 c)
 {

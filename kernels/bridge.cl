@@ -34,13 +34,6 @@
 #ifndef MIN_DASHES
 #define MIN_DASHES 3
 #endif
-#ifndef BLEND_LINEAR
-#define BLEND_LINEAR 1
-#endif
-#ifndef LINEAR_INPUT
-#define LINEAR_INPUT 0
-#endif
-#define DECODE (BLEND_LINEAR && !LINEAR_INPUT)
 #ifdef PIXEL_IS_FLOAT
 #define FLAT_LEVELS INK_MIN
 #else

@@ -5,6 +5,9 @@
 //   PIXEL_MAX 255.0f | 65535.0f | 1.0f
 //   ORDER_BGR 1 when channels 0..2 are B,G,R (OpenCV frames)
 //   LUT_SIZE  entries of each lookup table in `luts` (see colour tables below)
+// and from the passes' options (mlaa_stream.mlaa.FilterOptions.pass_defines):
+//   LINEAR_INPUT 1 when samples are linear light (EXR), 0 when sRGB-encoded
+//   BLEND_LINEAR 1 to mix pixels in linear light (DECODE: sRGB samples are decoded to mix, encoded after)
 #ifndef PIXEL_T
 #define PIXEL_T uchar
 #endif
@@ -20,6 +23,13 @@
 #ifndef LUT_SIZE
 #define LUT_SIZE 4096
 #endif
+#ifndef LINEAR_INPUT
+#define LINEAR_INPUT 0
+#endif
+#ifndef BLEND_LINEAR
+#define BLEND_LINEAR 1
+#endif
+#define DECODE (BLEND_LINEAR && !LINEAR_INPUT)
 
 #define IDX(x, y, w) ((y) * (w) + (x))
 
@@ -157,7 +167,7 @@ __kernel void linear_levels(__global const float *luts, __global float *lin)
 {
     const int v = get_global_id(0);
     float c = (float)v * (1.0f / PIXEL_MAX);
-#if defined(LINEAR_INPUT) && LINEAR_INPUT
+#if LINEAR_INPUT
     c = lut_read(luts + 2 * (LUT_SIZE + 1), c);
 #endif
     lin[v] = lut_read(luts, c);

@@ -9,9 +9,6 @@
 #ifndef METRIC
 #define METRIC 0
 #endif
-#ifndef LINEAR_INPUT
-#define LINEAR_INPUT 0
-#endif
 #ifndef RAMP_TEST
 #define RAMP_TEST 1
 #endif

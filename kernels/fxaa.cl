@@ -26,14 +26,6 @@
 #ifndef FXAA_SUBPIX
 #define FXAA_SUBPIX 0.75f
 #endif
-#ifndef LINEAR_INPUT
-#define LINEAR_INPUT 0
-#endif
-#ifndef BLEND_LINEAR
-#define BLEND_LINEAR 1
-#endif
-
-#define DECODE_SRGB (BLEND_LINEAR && !LINEAR_INPUT)
 
 __constant float fxaa_steps[FXAA_PS] = { FXAA_STEPS };
 
@@ -66,14 +58,14 @@ inline float3 blend_rgb(__global const PIXEL_T *img, __global const float *luts,
                         int w, int h)
 {
     float4 c = load_px(img, IDX(clamp(x, 0, w - 1), clamp(y, 0, h - 1), w));
-#if DECODE_SRGB
+#if DECODE
     return (float3)(srgb_to_linear(luts, c.x), srgb_to_linear(luts, c.y), srgb_to_linear(luts, c.z));
 #else
     return c.xyz;
 #endif
 }
 
-// Bilinear colour at pixel-space position p, mixed in linear light when DECODE_SRGB.
+// Bilinear colour at pixel-space position p, mixed in linear light when DECODE.
 inline float3 colour_at(__global const PIXEL_T *img, __global const float *luts, float2 p,
                         int w, int h)
 {
@@ -86,7 +78,7 @@ inline float3 colour_at(__global const PIXEL_T *img, __global const float *luts,
     float3 top = c00 + (c10 - c00) * tx;
     float3 bot = c01 + (c11 - c01) * tx;
     float3 c = top + (bot - top) * ty;
-#if DECODE_SRGB
+#if DECODE
     __global const float *enc = luts + 2 * (LUT_SIZE + 1);
     c = (float3)(lut_read(enc, c.x), lut_read(enc, c.y), lut_read(enc, c.z));
 #endif

@@ -29,9 +29,6 @@
 #ifndef EXTENDED
 #define EXTENDED 1
 #endif
-#ifndef LINEAR_INPUT
-#define LINEAR_INPUT 0
-#endif
 #ifndef CHEAP_BOUND
 #define CHEAP_BOUND 0.0f
 #endif

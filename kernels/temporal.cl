@@ -32,9 +32,6 @@
 // Defines: LINEAR_INPUT 1 when samples are already linear light (no tables); REJECT (2.0).
 #pragma OPENCL FP_CONTRACT OFF
 
-#ifndef LINEAR_INPUT
-#define LINEAR_INPUT 0
-#endif
 #ifndef REJECT
 #define REJECT 2.0f
 #endif
