@@ -482,13 +482,20 @@ __kernel void bridge_find(__global const PIXEL_T *src, __global uchar *found, __
 // windows hold each other's wires may want the same pixel; the lowest id draws it, whatever the order the work
 // items run in); then each draws the pixels it won. A segment with no link of orientation o (bit o of
 // segments[] from pass 1) returns at once; groups of GROUP pixels with none are skipped with one 8-byte read.
+// This work item's SEGMENT pixels of row y (from x0) lie in the frame and hold a link of orientation o
+// (bit o of segments[], set by pass 1): the common early exit of bridge_claim and bridge_draw.
+inline int segment_has_links(__global const uchar *segments, int width, int height, int o, int x0, int y)
+{
+    return x0 < width && y < height &&
+           (segments[get_global_id(1) * get_global_size(0) + get_global_id(0)] >> o & 1u);
+}
+
 __kernel void bridge_claim(__global const PIXEL_T *src, __global const uchar *found, __global const ushort *links,
                            __global const uchar *segments, volatile __global uint *claims, const int width,
                            const int height, const int o)
 {
     const int x0 = get_global_id(0) * SEGMENT, y = get_global_id(1);
-    if (x0 >= width || y >= height) return;
-    if (!(segments[get_global_id(1) * get_global_size(0) + get_global_id(0)] >> o & 1u)) return;
+    if (!segment_has_links(segments, width, height, o, x0, y)) return;
     const int x1 = x0 + SEGMENT < width ? x0 + SEGMENT : width;
     const lattice L = lattice_of(o, width, height);
     const ulong bits = 0x0101010101010101UL << o;
@@ -505,8 +512,7 @@ __kernel void bridge_draw(__global const PIXEL_T *src, __global PIXEL_T *dst, __
                           const int height, const int o)
 {
     const int x0 = get_global_id(0) * SEGMENT, y = get_global_id(1);
-    if (x0 >= width || y >= height) return;
-    if (!(segments[get_global_id(1) * get_global_size(0) + get_global_id(0)] >> o & 1u)) return;
+    if (!segment_has_links(segments, width, height, o, x0, y)) return;
     const int x1 = x0 + SEGMENT < width ? x0 + SEGMENT : width;
     const lattice L = lattice_of(o, width, height);
     const int diagonal = o >= 2;
