@@ -132,8 +132,23 @@ def make_styles(n: int, width=2.0, color="#ffffff", outline="#000000", outline_w
 
 def as_lines(lines) -> list[np.ndarray]:
     """Polylines as float64 (N, 2) arrays: one (N, 2) array, an (L, N, 2) array or a list of them."""
+    return _checked_lines(lines)[0]
+
+
+def _checked_lines(lines) -> tuple[list[np.ndarray], np.ndarray]:
+    """as_lines, and all points one after the other (float64 (P, 2)). A list of float64 (N, 2)
+    arrays (a capture loop's usual input) is checked at once, through that concatenation."""
     if isinstance(lines, np.ndarray) and lines.ndim == 2:
         lines = [lines]
+    if type(lines) is list and lines and all(type(a) is np.ndarray and a.dtype == np.float64
+                                             for a in lines):
+        try:
+            allp = np.concatenate(lines)
+        except ValueError:  # mixed shapes: the general path names the line
+            allp = None
+        if allp is not None and allp.ndim == 2 and allp.shape[1] == 2 \
+                and min(map(len, lines)) >= 1 and np.isfinite(allp).all():
+            return lines, allp
     out = []
     for i, ln in enumerate(lines):
         a = np.asarray(ln, dtype=np.float64)
@@ -142,10 +157,11 @@ def as_lines(lines) -> list[np.ndarray]:
         if a.ndim != 2 or a.shape[1] < 2 or a.shape[0] < 1:
             raise ValueError(f"line {i}: expected points of shape (N, 2), got {a.shape}")
         out.append(a[:, :2])
-    if out and not np.isfinite(np.concatenate(out)).all():  # one test; then find the line
+    allp = np.concatenate(out) if out else np.zeros((0, 2))
+    if not np.isfinite(allp).all():  # one test; then find the line
         i = next(i for i, a in enumerate(out) if not np.isfinite(a).all())
         raise ValueError(f"line {i}: expected finite coordinates, got NaN or infinity")
-    return out
+    return out, allp
 
 
 def to_byte(v: np.ndarray) -> np.ndarray:
@@ -366,6 +382,9 @@ class OverlayRenderer:
         self._kernel = None
         self._bufs: dict[str, tuple[object, int]] = {}
         self._inputs: list[tuple[np.ndarray, object]] = []
+        self._args: dict[str, list] = {}   # per kernel: the arguments set last (_set_args)
+        self._tables_cache: tuple | None = None   # (key, LineTables, pcol buffer, polys buffer)
+        self._lines_cache: tuple | None = None    # (key, line_i buffer, line_f buffer, segments)
 
     @property
     def device_name(self) -> str:
@@ -385,13 +404,16 @@ class OverlayRenderer:
     def _setup(self, fmt: FrameFormat) -> None:
         if fmt == self._fmt:
             return
+        cl = self._cl
         decode8 = int(fmt.dtype == np.uint8 and not self.linear)
         defines = defines_for(fmt, TILE=self.tile, LINEAR_FRAME=int(self.linear), DECODE8=decode8)
-        self._kernel = self._ctx.kernel("grlaa", "grlaa_draw", defines)
+        # Kernel objects of this renderer's own (not the context's shared ones): _set_args keeps
+        # the arguments set on them between frames and sets only those that changed.
+        prg = self._ctx.program("grlaa", defines)
+        self._kernel = cl.Kernel(prg, "grlaa_draw")
         self._frame_buf = None if self.zero_copy else self._ctx.buffer(fmt.nbytes)
         # binning on the device: per-tile counters (cleared by grlaa_draw), room for `cap`
         # entries per tile, and a flag set when a tile had more
-        cl = self._cl
         tx, ty = -(-fmt.width // self.tile), -(-fmt.height // self.tile)
         self._tiles_xy = (np.int32(tx), np.int32(ty))
         self._counts = self._ctx.buffer(4 * tx * ty)
@@ -401,9 +423,52 @@ class OverlayRenderer:
         cl.enqueue_copy(self._ctx.queue, self._overflow, self._overflow_host)
         self._cap = BIN_CAP
         self._entries = self._ctx.buffer(4 * tx * ty * self._cap)
-        self._k_bin = self._ctx.kernel("grlaa", "grlaa_bin", defines)
-        self._k_segments = self._ctx.kernel("grlaa", "grlaa_segments", defines)
+        self._k_bin = cl.Kernel(prg, "grlaa_bin")
+        self._k_segments = cl.Kernel(prg, "grlaa_segments")
+        self._args = {}
+        self._tables_cache = self._lines_cache = None
         self._fmt = fmt
+
+    def _set_args(self, name: str, kernel, *args) -> None:
+        """kernel.set_arg for the arguments that differ from those set last (the same buffer
+        object, or an equal number of the same type): a frame of a capture loop changes few,
+        and pyopencl's set_args costs microseconds an argument."""
+        last = self._args.get(name)
+        for i, a in enumerate(args):
+            if last is not None:
+                b = last[i]
+                if a is b or (isinstance(a, np.generic) and type(a) is type(b) and a == b):
+                    continue
+            kernel.set_arg(i, a)
+        self._args[name] = list(args)
+
+    def _kept_input(self, host: np.ndarray):
+        """A kernel input kept across frames (cached tables): its own buffer, written once."""
+        mf = self._cl.mem_flags
+        if self.zero_copy:
+            return self._cl.Buffer(self._ctx.ctx, mf.READ_ONLY | mf.USE_HOST_PTR, hostbuf=host)
+        buf = self._ctx.buffer(host.nbytes, mf.READ_ONLY)
+        self._cl.enqueue_copy(self._ctx.queue, buf, host, is_blocking=False)
+        return buf
+
+    def _tables(self, styles: list[LineStyle], channels: int):
+        """(LineTables, pcol buffer, polys buffer) for `styles`. Kept for one style shared by all
+        lines (a capture loop draws the same style every frame), so then nothing is rebuilt."""
+        n = len(styles)
+        key = (styles[0], n, channels) if styles.count(styles[0]) == n else None
+        if key is not None and self._tables_cache is not None and self._tables_cache[0] == key:
+            return self._tables_cache[1:4]
+        lt = line_tables(styles, channels, self.linear, self.strength)
+        # uint8 frames: fully covered pixels take these bytes, (R << 16) | (G << 8) | B, at
+        # 1 + 2 * polyline (fill) and 2 + 2 * polyline (outline)
+        rgb = to_byte(lt.polys[:, 3:5, :3]).astype(np.uint32)
+        pcol = np.zeros(1 + 2 * len(rgb), np.uint32)
+        pcol[1:] = ((rgb[..., 0] << 16) | (rgb[..., 1] << 8) | rgb[..., 2]).ravel()
+        if key is None:
+            return lt, self._input("pcol", pcol), self._input("polys", lt.polys)
+        # the host arrays stay referenced by the cache while their buffers may wrap them
+        self._tables_cache = (key, lt, self._kept_input(pcol), self._kept_input(lt.polys), pcol)
+        return self._tables_cache[1:4]
 
     def _input(self, name: str, host: np.ndarray):
         """A per-frame input for the kernels. On zero-copy (CPU) devices the host array itself,
@@ -427,18 +492,20 @@ class OverlayRenderer:
         return buf
 
     def _segments(self, lines: list[np.ndarray], styles: list[LineStyle], lt: LineTables,
-                  fmt: FrameFormat):
+                  fmt: FrameFormat, allp: np.ndarray | None = None):
         """Enqueue the segment tables and their binning into tiles; returns (segs buffer, meta
         buffer, number of segments). kernels/grlaa.cl grlaa_segments builds and bins them from the
         points in float32; where a point lies more than DEVICE_CLIP_MARGIN px off the frame
         (grown to a square), the float64 segment_tables builds them (float32 would not cut such
         segments to the frame precisely) and grlaa_bin bins them. Nothing waits: grlaa_draw reads
-        the counts, and draws nothing if a tile overflowed its room (_more_room)."""
+        the counts, and draws nothing if a tile overflowed its room (_more_room). `allp`: the
+        lines' points one after the other, when the caller has them."""
         cl, q = self._cl, self._ctx.queue
         nl = len(lines)
         tx, ty = self._tiles_xy
         binning = (tx, ty, np.int32(self._cap), self._counts, self._entries, self._overflow)
-        allp = np.concatenate(lines) if nl > 1 else lines[0]
+        if allp is None:
+            allp = np.concatenate(lines) if nl > 1 else lines[0]
         m = DEVICE_CLIP_MARGIN  # (whole-array min and max: much faster than per column)
         if allp.min() < -m or allp.max() > max(fmt.width, fmt.height) + m:
             tables = segment_tables(lines, styles, fmt.channels, self.linear, self.strength,
@@ -446,26 +513,34 @@ class OverlayRenderer:
             total = len(tables.segs)
             segs, meta = self._input("segs", tables.segs), self._input("meta", tables.meta)
             if total:
-                self._k_bin.set_args(segs, np.int32(total), *binning)
+                self._set_args("bin", self._k_bin, segs, np.int32(total), *binning)
                 cl.enqueue_nd_range_kernel(q, self._k_bin, (-(-total // BIN_LOCAL) * BIN_LOCAL,),
                                            (BIN_LOCAL,))
             return segs, meta, total
         counts = np.fromiter(map(len, lines), np.int32, nl)
-        nseg = np.maximum(counts - 1, 1)  # a single point is a zero-length segment (a dot)
-        li = np.empty((nl, 4), np.int32)  # first point, first segment, points, cap flags
-        li[:, 0] = np.cumsum(counts) - counts
-        li[:, 1] = np.cumsum(nseg) - nseg
-        li[:, 2] = counts
-        li[:, 3] = lt.caps
-        lf = np.zeros((nl, 4), np.float32)  # r, r_inner, reach
-        lf[:, 0], lf[:, 1], lf[:, 2] = lt.r, lt.ri, lt.reach
-        total = int(li[-1, 1] + nseg[-1])
+        # The per-line tables are kept while the lines' point counts and styles stay the same.
+        key = (counts.tobytes(), id(lt))
+        if self._lines_cache is not None and self._lines_cache[0] == key:
+            _, li_b, lf_b, total, _ = self._lines_cache
+        else:
+            nseg = np.maximum(counts - 1, 1)  # a single point is a zero-length segment (a dot)
+            li = np.empty((nl, 4), np.int32)  # first point, first segment, points, cap flags
+            li[:, 0] = np.cumsum(counts) - counts
+            li[:, 1] = np.cumsum(nseg) - nseg
+            li[:, 2] = counts
+            li[:, 3] = lt.caps
+            lf = np.zeros((nl, 4), np.float32)  # r, r_inner, reach
+            lf[:, 0], lf[:, 1], lf[:, 2] = lt.r, lt.ri, lt.reach
+            total = int(li[-1, 1] + nseg[-1])
+            li_b, lf_b = self._kept_input(li), self._kept_input(lf)
+            # lt stays referenced, so its id names it while the entry lives
+            self._lines_cache = (key, li_b, lf_b, total, (li, lf, lt))
         segs = self._writable("segs_dev", 32 * total)
         meta = self._writable("meta_dev", 4 * total)
         k = self._k_segments
-        k.set_args(self._input("pts", allp.astype(np.float32)), self._input("line_i", li),
-                   self._input("line_f", lf), np.int32(nl), np.int32(total), np.int32(fmt.width),
-                   np.int32(fmt.height), segs, meta, *binning)
+        self._set_args("segments", k, self._input("pts", allp.astype(np.float32)), li_b, lf_b,
+                       np.int32(nl), np.int32(total), np.int32(fmt.width), np.int32(fmt.height),
+                       segs, meta, *binning)
         cl.enqueue_nd_range_kernel(q, k, (-(-total // BIN_LOCAL) * BIN_LOCAL,), (BIN_LOCAL,))
         return segs, meta, total
 
@@ -491,8 +566,8 @@ class OverlayRenderer:
         counts = np.zeros(tx * ty, np.int32)
         segs = self._grow("segs", tables.segs)
         while len(tables.segs):
-            self._k_bin.set_args(segs, np.int32(len(tables.segs)), *self._tiles_xy,
-                                 np.int32(self._cap), self._counts, self._entries, self._overflow)
+            self._set_args("bin", self._k_bin, segs, np.int32(len(tables.segs)), *self._tiles_xy,
+                           np.int32(self._cap), self._counts, self._entries, self._overflow)
             cl.enqueue_nd_range_kernel(q, self._k_bin, (-(-len(tables.segs) // BIN_LOCAL) * BIN_LOCAL,),
                                        (BIN_LOCAL,))
             cl.enqueue_copy(q, counts, self._counts, is_blocking=True)
@@ -513,26 +588,32 @@ class OverlayRenderer:
              inplace: bool = False, what: str = "frame") -> np.ndarray:
         """Draw `lines` over `frame`; returns a new frame of the same shape and dtype, or `frame`
         itself (drawn into) with `inplace`. Style arguments: one value or one per line."""
-        pts = as_lines(lines)
+        pts, allp = _checked_lines(lines)
         styles = make_styles(len(pts), width, color, outline, outline_width, opacity, cap, bgr)
-        return self.draw_styled(frame, pts, styles, bgr=bgr, inplace=inplace, what=what)
+        return self._draw(frame, pts, allp, styles, bgr, inplace, what)
 
     def draw_styled(self, frame: np.ndarray, lines: list[np.ndarray], styles: list[LineStyle],
                     bgr: bool = True, inplace: bool = False, what: str = "frame") -> np.ndarray:
         """`draw` with checked lines (as_lines) and one LineStyle per line."""
+        allp = np.concatenate(lines) if lines else np.zeros((0, 2))
+        return self._draw(frame, lines, allp, styles, bgr, inplace, what)
+
+    def _draw(self, frame: np.ndarray, lines: list[np.ndarray], allp: np.ndarray,
+              styles: list[LineStyle], bgr: bool, inplace: bool, what: str) -> np.ndarray:
         fmt = frame_format(frame, bgr=bgr, what=what)
         if inplace and not frame.flags.writeable:
             raise ValueError(f"{what}: expected a writeable array for inplace drawing, got a read-only one")
         if not lines:
             return frame if inplace else frame.copy()
         self._setup(fmt)
-        lt = line_tables(styles, fmt.channels, self.linear, self.strength)
-        segs, meta, nseg = self._segments(lines, styles, lt, fmt)
+        lt, pcol_b, polys_b = self._tables(styles, fmt.channels)
+        segs, meta, nseg = self._segments(lines, styles, lt, fmt, allp)
         if nseg == 0:
             self._inputs.clear()
             return frame if inplace else frame.copy()
         try:
-            dst = self._draw_binned(frame, fmt, inplace, lt, lines, styles, segs, meta)
+            dst = self._draw_binned(frame, fmt, inplace, lt, lines, styles, segs, meta, pcol_b,
+                                    polys_b)
         except BaseException:  # the binning's counters must start the next frame at zero
             self._ctx.queue.finish()
             self._cl.enqueue_copy(self._ctx.queue, self._counts,
@@ -548,7 +629,8 @@ class OverlayRenderer:
         return dst
 
     def _draw_binned(self, frame: np.ndarray, fmt: FrameFormat, inplace: bool, lt: LineTables,
-                     lines: list[np.ndarray], styles: list[LineStyle], segs, meta) -> np.ndarray:
+                     lines: list[np.ndarray], styles: list[LineStyle], segs, meta, pcol_b,
+                     polys_b) -> np.ndarray:
         """grlaa_draw over the frame once the segments are binned (draw_styled); returns the
         drawn array (the frame itself, or a copy in the frame's format)."""
         cl = self._cl
@@ -563,31 +645,27 @@ class OverlayRenderer:
             dst = frame if (inplace and same) else np.empty(src.shape, fmt.dtype)
             fbuf = self._frame_buf
             cl.enqueue_copy(q, fbuf, src, is_blocking=False)
-        # uint8 frames: fully covered pixels take these bytes, (R << 16) | (G << 8) | B, at
-        # 1 + 2 * polyline (fill) and 2 + 2 * polyline (outline)
-        rgb = to_byte(lt.polys[:, 3:5, :3]).astype(np.uint32)
-        pcol = np.zeros(1 + 2 * len(rgb), np.uint32)
-        pcol[1:] = ((rgb[..., 0] << 16) | (rgb[..., 1] << 8) | rgb[..., 2]).ravel()
-        pcol_b, polys_b = self._input("pcol", pcol), self._input("polys", lt.polys)
         k = self._kernel
         # one work-item per tile of the frame (empty tiles return at once)
         n = -(-int(np.prod(self._tiles_xy)) // self._local) * self._local
         while True:
-            k.set_args(fbuf, self._luts, self._dec8, self._enc8, pcol_b, segs, meta,
-                       self._entries, self._counts, self._overflow, polys_b, np.int32(fmt.width),
-                       np.int32(fmt.height), np.float32(self.strength), self._tiles_xy[0],
-                       np.int32(self._cap))
+            self._set_args("draw", k, fbuf, self._luts, self._dec8, self._enc8, pcol_b, segs,
+                           meta, self._entries, self._counts, self._overflow, polys_b,
+                           np.int32(fmt.width), np.int32(fmt.height), np.float32(self.strength),
+                           self._tiles_xy[0], np.int32(self._cap))
             cl.enqueue_nd_range_kernel(q, k, (n,), (self._local,))
+            if self.zero_copy:  # mapping makes the host array current (a no-op on shared memory)
+                view, _ = cl.enqueue_map_buffer(q, fbuf, cl.map_flags.READ, 0, dst.shape,
+                                                dst.dtype, is_blocking=False)
+            # one wait per frame: the in-order queue has drawn (and mapped) when the flag arrives
             cl.enqueue_copy(q, self._overflow_host, self._overflow, is_blocking=True)
+            if self.zero_copy:
+                view.base.release(q)  # unmapping a read mapping writes nothing back
             if not self._more_room():
                 break
             segs, meta, _ = self._segments(lines, styles, lt, fmt)  # bin again, more room
-        if self.zero_copy:  # mapping makes the host array current (a no-op on shared memory)
-            view, _ = cl.enqueue_map_buffer(q, fbuf, cl.map_flags.READ, 0, dst.shape, dst.dtype,
-                                            is_blocking=True)
-            view.base.release(q)
-            q.finish()
-            fbuf.release()
+        if self.zero_copy:
+            fbuf.release()  # freed once the queued unmap has run
         else:
             cl.enqueue_copy(q, dst, fbuf, is_blocking=True)
         return dst

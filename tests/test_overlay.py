@@ -248,6 +248,53 @@ def test_buffers_kept_between_frames(renderer):
     assert buf is not None and r._frame_buf is buf and r._kernel is kern
 
 
+@pytest.mark.parametrize("zero_copy", [True, False])
+def test_kept_tables_and_arguments_follow_every_change(zero_copy):
+    """A renderer keeps the last style's tables, the lines' tables and the kernels' arguments
+    between frames; every change of style, point counts, frame size or format is drawn as a new
+    renderer draws it, including with a second renderer drawing on the same device in between."""
+    rng = np.random.default_rng(11)
+    r, other = OverlayRenderer(zero_copy=zero_copy), OverlayRenderer(zero_copy=zero_copy)
+    lines_a = [rng.uniform(-4, 70, (k, 2)) for k in (2, 5, 9)]
+    lines_b = [rng.uniform(-4, 70, (k, 2)) for k in (2, 5, 9)]   # same point counts as lines_a
+    lines_c = [rng.uniform(-4, 70, (k, 2)) for k in (3, 1, 7, 4)]
+    calls = [
+        ((72, 96, 3), lines_a, dict(width=1.0, color=(250, 200, 10))),
+        ((72, 96, 3), lines_b, dict(width=1.0, color=(250, 200, 10))),
+        ((72, 96, 3), lines_b, dict(width=6.0, color=(250, 200, 10), outline_width=1.5)),
+        ((72, 96, 3), lines_c, dict(width=6.0, color=(250, 200, 10), outline_width=1.5)),
+        ((72, 96, 3), lines_c, dict(width=[1.0, 3.0, 9.0, 2.0], color="#20f0a0")),
+        ((72, 96, 3), lines_a, dict(width=1.0, color=(250, 200, 10))),
+        ((50, 61), lines_a, dict(width=2.5, cap="square")),
+        ((72, 96, 3), lines_a, dict(width=1.0, color=(250, 200, 10))),
+    ]
+    for i, (shape, lines, kw) in enumerate(calls):
+        frame = rng.integers(0, 256, shape).astype(np.uint8)
+        other.draw(frame, lines_c, width=3.0)  # the same device's kernels, other arguments
+        got = r.draw(frame, lines, **kw)
+        want = OverlayRenderer(zero_copy=zero_copy).draw(frame, lines, **kw)
+        assert np.array_equal(got, want), f"call {i}"
+
+
+def test_checked_lines_fast_and_general_paths_agree():
+    """Lists of float64 (N, 2) arrays are checked through their concatenation; anything else
+    goes through the per-line path; both give the same lines and name the same bad line."""
+    rng = np.random.default_rng(3)
+    lines = [rng.uniform(0, 50, (k, 2)) for k in (1, 4, 2)]
+    fast = as_lines(lines)
+    assert fast is lines or all(a is b for a, b in zip(fast, lines))
+    general = as_lines([a.tolist() for a in lines])
+    assert all(np.array_equal(a, b) for a, b in zip(fast, general))
+    bad = [a.copy() for a in lines]
+    bad[2][1, 0] = np.inf
+    with pytest.raises(ValueError, match="line 2: expected finite"):
+        as_lines(bad)
+    with pytest.raises(ValueError, match=r"line 1: expected points of shape \(N, 2\), got \(0, 2\)"):
+        as_lines([lines[0], np.zeros((0, 2))])
+    with pytest.raises(ValueError, match=r"line 1: expected points of shape"):
+        as_lines([lines[0], np.zeros((3, 1))])
+
+
 @pytest.mark.parametrize("dtype,shape", [(np.uint8, (72, 96, 3)), (np.float32, (72, 96, 4)),
                                          (np.float16, (72, 96))])
 def test_zero_copy_and_device_buffer_paths_agree(renderer, dtype, shape):
