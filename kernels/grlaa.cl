@@ -172,6 +172,7 @@ typedef float8 f8;
 typedef int8 i8;
 #define F8ABS(v) ((v) < 0.0f ? -(v) : (v))
 #define F8MAX(a, b) ((a) > (b) ? (a) : (b))
+#define F8MIN(a, b) ((a) < (b) ? (a) : (b))
 
 // Index of the lowest set bit of an 8-bit mask (mask 0: unused).
 __constant uchar LOWBIT[256] = {
@@ -349,12 +350,33 @@ __kernel void grlaa_draw(__global PIXEL_T *img, __global const float *luts,
         const float sa = FMAX(FABS(ty), FABS(tx)) * strength, sb = FMIN(FABS(ty), FABS(tx)) * strength;
         const float sh = 0.5f * (sa + sb), sia = 1.0f / sa, si2 = 0.5f * sia / sb;
         const f8 fx0 = ((float)x0 - ax) + lane;
-        for (int y = ya; y <= yb; ++y) {
-            const float dy = (float)y - ay, dy1 = (float)y - by, c = dy * s_p;
-            const float lo = FMAX(c - w_p, bxl), hi = FMIN(c + w_p, bxh);
-            const int xa = IMAX(x0, iceil(ax + lo)), xb = IMIN(x0 + TILE - 1, ifloor(ax + hi));
-            if (xa > xb) continue;
-            const int j = y - y0, ca = (xa - x0) >> 3, cb = (xb - x0) >> 3;
+        // The spans of the tile's rows, 8 rows at once (a lane per row); then only the rows from
+        // the first to the last with a span are visited (the band is convex: they follow each other).
+        int span_a[TILE], span_b[TILE];
+        int jlo = TILE, jhi = -1;
+        for (int q = 0; q < TILE / 8; ++q) {
+            const f8 cv = (((float)(y0 + 8 * q) - ay) + lane) * s_p;
+            const f8 lo = F8MAX(cv - w_p, (f8)bxl) + ax, hi = F8MIN(cv + w_p, (f8)bxh) + ax;
+            i8 xa8 = convert_int8(lo), xb8 = convert_int8(hi);  // truncation: then iceil / ifloor
+            xa8 -= lo > convert_float8(xa8);                    // (a true comparison is -1)
+            xb8 += hi < convert_float8(xb8);
+            xa8 = xa8 < (i8)x0 ? (i8)x0 : xa8;
+            xb8 = xb8 > (i8)(x0 + TILE - 1) ? (i8)(x0 + TILE - 1) : xb8;
+            const i8 row = (i8)(8 * q) + (i8)(0, 1, 2, 3, 4, 5, 6, 7), yrow = row + y0;
+            const i8 ok = (xa8 <= xb8) & (yrow >= ya) & (yrow <= yb);
+            vstore8(xa8, q, span_a);
+            vstore8(xb8, q, span_b);
+            const i8 mn = ok ? row : (i8)TILE, mx = ok ? row : (i8)(-1);
+            int4 m4 = mn.lo < mn.hi ? mn.lo : mn.hi, x4 = mx.lo > mx.hi ? mx.lo : mx.hi;
+            int2 m2 = m4.lo < m4.hi ? m4.lo : m4.hi, x2 = x4.lo > x4.hi ? x4.lo : x4.hi;
+            jlo = IMIN(jlo, IMIN(m2.x, m2.y));
+            jhi = IMAX(jhi, IMAX(x2.x, x2.y));
+        }
+        for (int j = jlo; j <= jhi; ++j) {
+            const int xa = span_a[j], xb = span_b[j], y = y0 + j;
+            if (xa > xb) continue;  // (only where rounding leaves a row inside without a pixel)
+            const float dy = (float)y - ay, dy1 = (float)y - by;
+            const int ca = (xa - x0) >> 3, cb = (xb - x0) >> 3;
             const uint fresh = ~rows_cur[j];  // chunks this polyline has not touched yet
             rows_cur[j] |= ((2u << cb) - 1u) & ~((1u << ca) - 1u);
             // One polyline is one shape: its segments' coverages merge by max, so joins are not
