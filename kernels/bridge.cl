@@ -6,9 +6,12 @@
 // Orientations (ORIENTATIONS in mlaa_stream/bridge.py): pixel (i, j) of the lattice at (x, y) is
 // (x + i*ax + j*bx, y + i*ay + j*by). bridge_find finds the links of all four at once; bridge_draw runs once
 // per orientation, in order (claims, then drawing: a pixel two links of one orientation want goes to the lower
-// id, so work items never write the same pixel). Mirrors bridge_reference.
+// id, so work items never write the same pixel). A chain cut by a crossing (its last link's window held a
+// same-ink wire) is drawn on across the cut to the chain that resumes with the same period and phase up to
+// MAX_SKIP rows later, over background pixels, by the link that ends the first chain. Mirrors bridge_reference.
 // Defines: MAX_GAP, MAX_RUN (pixels), GAP_PER_RUN, GAP_SLACK (gap <= GAP_PER_RUN * mean dash + GAP_SLACK),
-// INK_MIN, BG_TOL, INK_TOL (max-channel, normalised), MIN_DASHES, BLEND_LINEAR, LINEAR_INPUT (as blend.cl).
+// INK_MIN, BG_TOL, INK_TOL (max-channel, normalised), MIN_DASHES, MAX_SKIP, BLEND_LINEAR, LINEAR_INPUT (as
+// blend.cl).
 #pragma OPENCL FP_CONTRACT OFF
 #ifndef MAX_GAP
 #define MAX_GAP 24
@@ -33,6 +36,9 @@
 #endif
 #ifndef MIN_DASHES
 #define MIN_DASHES 3
+#endif
+#ifndef MAX_SKIP
+#define MAX_SKIP 3
 #endif
 #ifdef PIXEL_IS_FLOAT
 #define FLAT_LEVELS INK_MIN
@@ -100,7 +106,8 @@ inline int classify(__global const PIXEL_T *src, const lattice L, int x, int y, 
 
 // The link whose dash 1 ends at (x, y): 1 and *out, or 0. Rows -d .. 2d over steps a..b hold only the two
 // dashes (one ink), background (one colour) and other colours (crossing wires); a dash may run under another
-// colour, not end under it; exactly one direction d qualifies. The predicate of
+// colour and start or end under it (it then spans its first to last pixel of the ink; the window covers the
+// occluding pixels too); exactly one direction d qualifies. The predicate of
 // bridge_reference's _Scan.link, evaluated in an order that rejects early: rows -1 and 1 beside dash 1
 // (both directions need them), then per direction the outer row beside dash 1, then the gap and dash 2 one
 // step at a time with all four rows.
@@ -111,19 +118,21 @@ inline int find_link(__global const PIXEL_T *src, const lattice L, int x, int y,
     const float3 ink = rgb_at(src, i0), bgc = rgb_at(src, i1);
     if (diff3(ink, bgc) < INK_MIN) return 0;
     if (!CLEAR(CLS(0, -1)) || !CLEAR(CLS(0, 1))) return 0;
-    int a = 1, under = 0;   // dash 1: ink back to a, background before it; rows -1 and 1 clear beside it
+    // dash 1: ink (or another colour over it) back to the background before a0; a = its first pixel of the ink;
+    // rows -1 and 1 clear beside it
+    int a = 1, a0 = 1, last = 0;
     for (int k = 1; k <= MAX_RUN; ++k) {
         const int c = CLS(-k, 0);
-        if (c == 1) { if (!under) a = 1 - k; break; }
+        if (c == 1) { a = last; a0 = 1 - k; break; }
         if (c == 0 || !CLEAR(CLS(-k, -1)) || !CLEAR(CLS(-k, 1))) return 0;
-        under = c == 3;
+        if (c == 2) last = -k;
     }
     if (a == 1) return 0;
     int found = 0;
     for (int t = 0; t < 2; ++t) {
         const int d = t == 0 ? 1 : -1;
         int ok = 1;
-        for (int i = a; i <= 0 && ok; ++i) ok = CLEAR(CLS(i, 2 * d));
+        for (int i = a0; i <= 0 && ok; ++i) ok = CLEAR(CLS(i, 2 * d));
         if (!ok) continue;
         // the gap: rows 0, -d, d, 2d clear from step 1 until dash 2 starts in row d at s >= 2
         int s = 0;
@@ -135,14 +144,14 @@ inline int find_link(__global const PIXEL_T *src, const lattice L, int x, int y,
             break;
         }
         if (s == 0) continue;
-        // dash 2: ink (or ink under another colour) in row d from s to b, background after it; rows 0, -d,
-        // 2d clear beside it
-        int b = 0, under2 = 0;
+        // dash 2: ink (or another colour over it) in row d from s to the background; b = its last pixel of the
+        // ink; rows 0, -d, 2d clear beside it
+        int b = 0, last2 = s;
         for (int k = s; k <= s + MAX_RUN; ++k) {
             const int c = CLS(k, d);
-            if (c == 1 && k > s) { if (!under2) b = k - 1; break; }
+            if (c == 1 && k > s) { b = last2; break; }
             if (c == 0 || c == 1 || !CLEAR(CLS(k, 0)) || !CLEAR(CLS(k, -d)) || !CLEAR(CLS(k, 2 * d))) break;
-            under2 = c == 3;
+            if (c == 2) last2 = k;
         }
         if (b == 0) continue;
         // a wire at least 1 / (GAP_PER_RUN + 1) px wide: gap <= GAP_PER_RUN * mean dash + GAP_SLACK
@@ -171,18 +180,20 @@ inline link_t unpack_link(int x, int y, uint v)
     return ln;
 }
 
-// Does a link end at dash 1 of `ln` (a dash before it, one lattice row to either side)?
+// Does a link end at dash 1 of `ln` (a dash before it, one lattice row to either side, past background and
+// other colours: a wire crossing the gap)?
 inline int incoming(__global const PIXEL_T *src, __global const uchar *found, __global const ushort *links,
                     const lattice L, const int o, const link_t ln)
 {
     const int x = ln.x, y = ln.y;
-    const float3 bgc = rgb_at(src, lat(L, x, y, 1, 0));
+    const float3 ink = rgb_at(src, lat(L, x, y, 0, 0)), bgc = rgb_at(src, lat(L, x, y, 1, 0));
     for (int t = 0; t < 2; ++t) {
         const int j = t == 0 ? -1 : 1;
         for (int k = 1; k <= MAX_GAP + 1; ++k) {
+            const int c = CLS(ln.a - k, j);
+            if (CLEAR(c)) continue;
+            if (c == 0) break;
             const int q = lat(L, x, y, ln.a - k, j);
-            if (q < 0) break;
-            if (diff3(rgb_at(src, q), bgc) <= BG_TOL) continue;
             if (found[q] >> o & 1u) {
                 const link_t prev = unpack_link(0, 0, links[4 * q + o]);
                 if (j + prev.d == 0 && prev.s == k) return 1;
@@ -253,9 +264,10 @@ inline void store_rgb(__global PIXEL_T *dst, __global const float *luts, int i, 
 #endif
 }
 
-// The link found at (x, y), if it lies in a chain: 1, the link and the steps it owns [c0, c1); else 0.
+// The link found at (x, y), if it lies in a chain: 1, the link, the steps it owns [c0, c1) and whether it ends a
+// chain of two links or more (*cut: a link ends at its dash 1, none starts at its dash 2); else 0.
 inline int chained(__global const PIXEL_T *src, __global const uchar *found, __global const ushort *links,
-                   const lattice L, const int o, int x, int y, link_t *ln, int *c0, int *c1)
+                   const lattice L, const int o, int x, int y, link_t *ln, int *c0, int *c1, int *cut)
 {
     *ln = unpack_link(x, y, links[4 * IDX(x, y, L.w) + o]);
     const int inc = incoming(src, found, links, L, o, *ln), out = outgoing(found, L, o, *ln);
@@ -264,17 +276,56 @@ inline int chained(__global const PIXEL_T *src, __global const uchar *found, __g
     // of dash 2 when a link starts there, else its end (ceil of the half-integer middles)
     *c0 = inc ? -((-ln->a) / 2) : ln->a;
     *c1 = out ? (ln->s + ln->b + 1) / 2 : ln->b + 1;
+    *cut = inc && !out;
     return 1;
 }
 
-// Claim the pixels the link at (x, y) would write (rows 0 and d over the steps it owns, not a pixel of another
-// colour): claims[k] = the lowest id (pixel index of the dash end) of the links of this orientation that want k.
-inline void claim_link(__global const PIXEL_T *src, __global const uchar *found, __global const ushort *links,
-                       volatile __global uint *claims, const lattice L, const int o, int x, int y)
+// Where a chain cut by a crossing goes on (bridge_reference's _Scan.resumes): `ln` ends a chain of two links or
+// more; the first link S, m = 1..MAX_SKIP lattice rows beyond its dash 2, of the same direction and ink, that
+// starts a chain of two links or more with the same period (P2 = s + b - a, twice the distance of the dash
+// middles) and whose dash 1's middle lies m periods after the middle of dash 2 of `ln` (both within
+// max(12, P2) / 4 half steps): 1, *m, *is (the step of S's dash 1 end) and *sl; else 0.
+inline int resumes(__global const PIXEL_T *src, __global const uchar *found, __global const ushort *links,
+                   const lattice L, const int o, const link_t ln, int *m_out, int *is_out, link_t *sl)
 {
-    link_t ln;
-    int c0, c1;
-    if (!chained(src, found, links, L, o, x, y, &ln, &c0, &c1)) return;
+    const int x = ln.x, y = ln.y, d = ln.d;
+    const float3 ink = rgb_at(src, lat(L, x, y, 0, 0)), bgc = rgb_at(src, lat(L, x, y, 1, 0));
+    const int p2 = ln.s + ln.b - ln.a, q = p2 > 12 ? p2 : 12;
+    for (int m = 1; m <= MAX_SKIP; ++m) {
+        const int c = ln.s + ln.b + m * p2, j = (m + 1) * d;   // c: twice the middle of S's dash 1 expected
+        for (int i = (4 * c - q) / 8; i <= (4 * c + q + 4 * MAX_RUN) / 8; ++i) {
+            const int k = lat(L, x, y, i, j);
+            if (i <= ln.b || k < 0 || !(found[k] >> o & 1u) || CLS(i, j) != 2 || CLS(i + 1, j) != 1) continue;
+            const link_t s = unpack_link(x + i * L.ax + j * L.bx, y + i * L.ay + j * L.by, links[4 * k + o]);
+            const int e1 = 2 * i + s.a - c, e2 = s.s + s.b - s.a - p2;
+            if (s.d != d || 4 * (e1 < 0 ? -e1 : e1) > q || 4 * (e2 < 0 ? -e2 : e2) > q || !outgoing(found, L, o, s))
+                continue;
+            *m_out = m; *is_out = i; *sl = s;
+            return 1;
+        }
+    }
+    return 0;
+}
+
+// Coverage of lattice pixel (i, (r + 1) d) by the band across a cut: from the middle of dash 2 of `ln` (row d)
+// to the middle ms of dash 1 of the link S it resumes at (row (m + 1) d), the width of `ln`'s band.
+inline float cut_coverage(const link_t ln, int m, float ms, int i, int r, int diagonal)
+{
+    const float m2 = (float)(ln.s + ln.b) * 0.5f, n = (float)(1 - ln.a + ln.b - ln.s + 1) * 0.5f;
+    const float hw = 0.5f * n / (n + (float)(ln.s - 1));
+    const float v = (float)m * ((float)i - m2) / (ms - m2);   // the band's centre, rows beyond row d
+    return band_coverage(v - (float)r, hw, diagonal);
+}
+
+// Claim the pixels the link at (x, y) would write (rows 0 and d over the steps it owns, not a pixel of another
+// colour; across a cut, the background pixels the band covers): claims[k] = the lowest id (pixel index of the
+// dash end) of the links of this orientation that want k.
+inline void claim_link(__global const PIXEL_T *src, __global const uchar *found, __global const ushort *links,
+                       volatile __global uint *claims, const lattice L, const int o, int x, int y, int diagonal)
+{
+    link_t ln, sl;
+    int c0, c1, cut, m, is;
+    if (!chained(src, found, links, L, o, x, y, &ln, &c0, &c1, &cut)) return;
     const uint id = (uint)IDX(x, y, L.w);
     const float3 ink = rgb_at(src, lat(L, x, y, 0, 0)), bgc = rgb_at(src, lat(L, x, y, 1, 0));
     for (int i = c0; i < c1; ++i) {
@@ -282,17 +333,25 @@ inline void claim_link(__global const PIXEL_T *src, __global const uchar *found,
         if (class_of(src, k0, ink, bgc) != 3) atomic_min(claims + k0, id);
         if (class_of(src, k1, ink, bgc) != 3) atomic_min(claims + k1, id);
     }
+    if (!cut || !resumes(src, found, links, L, o, ln, &m, &is, &sl)) return;
+    const float ms = (float)is + (float)sl.a * 0.5f;
+    for (int i = ln.b + 1; i < is + sl.a; ++i)
+        for (int r = 0; r <= m; ++r) {
+            const int k = lat(L, x, y, i, (r + 1) * ln.d);
+            if (cut_coverage(ln, m, ms, i, r, diagonal) > 0.0f && k >= 0 && class_of(src, k, ink, bgc) == 1)
+                atomic_min(claims + k, id);
+        }
 }
 
-// Draw the link found at (x, y), if it lies in a chain: rows 0 and d over the steps it owns, the pixels it
-// claimed (then their claim is reset for the next orientation).
+// Draw the link found at (x, y), if it lies in a chain: rows 0 and d over the steps it owns, and across a cut,
+// the pixels it claimed (then their claim is reset for the next orientation).
 inline void draw_link(__global const PIXEL_T *src, __global PIXEL_T *dst, __global const float *luts,
                       __global const uchar *found, __global const ushort *links, __global uint *claims,
                       const lattice L, const int o, int x, int y, int diagonal)
 {
-    link_t ln;
-    int c0, c1;
-    if (!chained(src, found, links, L, o, x, y, &ln, &c0, &c1)) return;
+    link_t ln, sl;
+    int c0, c1, cut, m, is;
+    if (!chained(src, found, links, L, o, x, y, &ln, &c0, &c1, &cut)) return;
     const uint id = (uint)IDX(x, y, L.w);
     const int n1 = 1 - ln.a, n2 = ln.b - ln.s + 1, g = ln.s - 1;
     const float m1 = (float)ln.a * 0.5f, m2 = (float)(ln.s + ln.b) * 0.5f;
@@ -313,6 +372,16 @@ inline void draw_link(__global const PIXEL_T *src, __global PIXEL_T *dst, __glob
             claims[k1] = 0xffffffffu;
         }
     }
+    if (!cut || !resumes(src, found, links, L, o, ln, &m, &is, &sl)) return;
+    const float ms = (float)is + (float)sl.a * 0.5f;
+    for (int i = ln.b + 1; i < is + sl.a; ++i)
+        for (int r = 0; r <= m; ++r) {
+            const int k = lat(L, x, y, i, (r + 1) * ln.d);
+            if (k >= 0 && claims[k] == id) {
+                store_rgb(dst, luts, k, bgc + cut_coverage(ln, m, ms, i, r, diagonal) * (ink - bgc));
+                claims[k] = 0xffffffffu;
+            }
+        }
 }
 
 // The four orientations (ORIENTATIONS in mlaa_stream/bridge.py): along (AX, AY), across (BX, BY).
@@ -382,9 +451,9 @@ inline int not_clear(__global const PIXEL_T *src, int k, float3 rl, float3 e, fl
 // Can find_link(src, L, x, y) succeed (i the dash end, r the pixel after it)? 0 only where it fails:
 //  - (1, -1), (1, 1), (0, -1), (0, 1) and (2, 0) clear: every direction d's gap starts with (1, -d), (1, d),
 //    (2, 0) clear, and rows -1 and 1 beside the dash end are clear;
-//  - dash 1, walked back along row 0: the first background pixel (-k, 0) follows ink (k == 1 or (1 - k, 0) of
-//    the ink), and before it every (-k, 0) is no mix and (-k, -1), (-k, 1) are clear. Before the first
-//    pixel that may be background, every pixel is before the first background pixel.
+//  - dash 1, walked back along row 0, reaches a background pixel within MAX_RUN steps, and before it every
+//    (-k, 0) is no mix (the ink or another colour) and (-k, -1), (-k, 1) are clear. Before the first pixel
+//    that may be background, every pixel is before the first background pixel.
 inline int may_link(__global const PIXEL_T *src, const lattice L, int x, int y, int i, int r)
 {
     const int p1 = lat(L, x, y, 1, 1), p2 = lat(L, x, y, 1, -1), p3 = lat(L, x, y, 2, 0);
@@ -395,19 +464,14 @@ inline int may_link(__global const PIXEL_T *src, const lattice L, int x, int y, 
     if (not_clear(src, lat(L, x, y, 0, 1), rl, e, ee_inv) | not_clear(src, lat(L, x, y, 0, -1), rl, e, ee_inv) |
         not_clear(src, p3, rl, e, ee_inv)) return 0;
     __global const PIXEL_T *ink = src + (size_t)i * CHANNELS, *bg = src + (size_t)r * CHANNELS;
-    int prev = 1;   // (1 - k, 0) may be the ink
     for (int k = 1; k <= MAX_RUN; ++k) {
         const int p = lat(L, x, y, -k, 0);
         if (p < 0) return 0;
         __global const PIXEL_T *pp = src + (size_t)p * CHANNELS;
-        if (near_ptr(pp, bg, BG_LEVELS)) {
-            if (prev) return 1;
-        } else {
-            const int s1 = lat(L, x, y, -k, -1), s2 = lat(L, x, y, -k, 1);
-            if (s1 < 0 || s2 < 0 || not_clear(src, s1, rl, e, ee_inv) || not_clear(src, s2, rl, e, ee_inv) ||
-                (!near_ptr(pp, ink, INK_UP) && not_clear(src, p, rl, e, ee_inv))) return 0;
-        }
-        prev = near_ptr(pp, ink, INK_UP);
+        if (near_ptr(pp, bg, BG_LEVELS)) return 1;
+        const int s1 = lat(L, x, y, -k, -1), s2 = lat(L, x, y, -k, 1);
+        if (s1 < 0 || s2 < 0 || not_clear(src, s1, rl, e, ee_inv) || not_clear(src, s2, rl, e, ee_inv) ||
+            (!near_ptr(pp, ink, INK_UP) && not_clear(src, p, rl, e, ee_inv))) return 0;
     }
     return 0;
 }
@@ -502,7 +566,7 @@ __kernel void bridge_claim(__global const PIXEL_T *src, __global const uchar *fo
     for (int x = x0; x < x1; ++x) {
         const int i = IDX(x, y, width);
         if (x + GROUP <= x1 && (edge_group(found + i) & bits) == 0) { x += GROUP - 1; continue; }
-        if (found[i] >> o & 1u) claim_link(src, found, links, claims, L, o, x, y);
+        if (found[i] >> o & 1u) claim_link(src, found, links, claims, L, o, x, y, o >= 2);
     }
 }
 

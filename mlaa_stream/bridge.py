@@ -31,6 +31,7 @@ INK_TOL = 0.1  # "the same ink": within this of the colour at the dash end (max 
 GAP_PER_RUN = 3  # gap <= GAP_PER_RUN * mean dash + GAP_SLACK: wires at least 1/4 px wide, not specks far apart
 GAP_SLACK = 2
 MIN_DASHES = 3  # a link is drawn only inside a chain of at least this many dashes (2 or 3)
+MAX_SKIP = 3  # a chain cut by a crossing is bridged to one that goes on at most this many lattice rows later
 
 
 @dataclass(frozen=True)
@@ -45,6 +46,7 @@ class BridgeOptions:
     gap_per_run: int = GAP_PER_RUN
     gap_slack: int = GAP_SLACK
     min_dashes: int = MIN_DASHES
+    max_skip: int = MAX_SKIP
     linear: bool = True
     linear_input: bool = False
 
@@ -52,7 +54,7 @@ class BridgeOptions:
         return {"MAX_GAP": int(self.max_gap), "MAX_RUN": int(self.max_run), "INK_MIN": float(self.ink_min),
                 "BG_TOL": float(self.bg_tol), "INK_TOL": float(self.ink_tol),
                 "GAP_PER_RUN": int(self.gap_per_run), "GAP_SLACK": int(self.gap_slack),
-                "MIN_DASHES": int(self.min_dashes), "BLEND_LINEAR": int(self.linear),
+                "MIN_DASHES": int(self.min_dashes), "MAX_SKIP": int(self.max_skip), "BLEND_LINEAR": int(self.linear),
                 "LINEAR_INPUT": int(self.linear_input)}
 
 
@@ -122,10 +124,11 @@ class _Scan:
         return 0 if _diff(p, _on_mix_line(p, ink, bgc)) <= self.ink_tol else 3
 
     def link(self, x: int, y: int) -> Link | None:
-        """The link whose dash 1 ends at (x, y), or None. Lattice rows -d .. 2d over the span a..b hold only
-        the two dashes (one ink colour), background (one colour) and pixels of other colours (wires crossing
-        this one); exactly one direction d qualifies. A dash may run under another colour (ink on both
-        sides of it), not end under it."""
+        """The link whose dash 1 ends at (x, y), or None. Lattice rows -d .. 2d over the two dashes and the gap
+        hold only the two dashes (one ink colour), background (one colour) and pixels of other colours (wires
+        crossing this one); exactly one direction d qualifies. A dash may run under another colour, and may
+        start or end under it (occluded): it then runs from its first to its last pixel of the ink, and the
+        window covers the occluding pixels too."""
         o = self.o
         ink, bgc = self.px(x, y, 0, 0), self.px(x, y, 1, 0)
         if ink is None or bgc is None or _diff(ink, bgc) < self.ink_min:
@@ -137,19 +140,17 @@ class _Scan:
         def clear(i: int, j: int) -> bool:  # background, or another wire's colour
             return c(i, j) in (1, 3)
 
-        if not (clear(0, -1) and clear(0, 1)):
-            return None
-        a, under = None, False  # dash 1: ink back to a, background before it
+        a0 = None  # dash 1: ink (or another colour) back from (0, 0) to a0, background before it
         for k in range(1, o.max_run + 1):
             ck = c(-k, 0)
             if ck == 1:
-                a = None if under else 1 - k
+                a0 = 1 - k
                 break
             if ck == 0:
                 return None
-            under = ck == 3
-        if a is None:
+        if a0 is None:
             return None
+        a = min(i for i in range(a0, 1) if c(i, 0) == 2)  # its first pixel of the ink
         found = []
         for d in (1, -1):
             s = None  # the gap in row d, then dash 2 from s
@@ -161,21 +162,21 @@ class _Scan:
                 break
             if s is None:
                 continue
-            b, under = None, False
+            b0 = None  # dash 2: ink (or another colour) from s to b0, background after it
             for k in range(s + 1, s + o.max_run + 1):
                 ck = c(k, d)
                 if ck == 1:
-                    b = None if under else k - 1
+                    b0 = k - 1
                     break
                 if ck == 0:
                     break
-                under = ck == 3
-            if b is None:
+            if b0 is None:
                 continue
+            b = max(i for i in range(s, b0 + 1) if c(i, d) == 2)  # its last pixel of the ink
             if 2 * (s - 1) > o.gap_per_run * ((1 - a) + (b - s + 1)) + 2 * o.gap_slack:
                 continue  # gap <= GAP_PER_RUN * mean dash + GAP_SLACK
-            ok = all(clear(i, 0) for i in range(1, b + 1)) and all(clear(i, d) for i in range(a, 1))
-            ok = ok and all(clear(i, -d) and clear(i, 2 * d) for i in range(a, b + 1))
+            ok = all(clear(i, 0) for i in range(1, b0 + 1)) and all(clear(i, d) for i in range(a0, 1))
+            ok = ok and all(clear(i, -d) and clear(i, 2 * d) for i in range(a0, b0 + 1))
             if ok:
                 found.append(Link(x, y, d, a, s, b))
         return found[0] if len(found) == 1 else None
@@ -183,14 +184,14 @@ class _Scan:
     def incoming(self, ln: Link) -> bool:
         """Does a link end at dash 1 of `ln` (a dash before it, one lattice row to either side)?"""
         o, P = self.o, self.px
-        bgc = P(ln.x, ln.y, 1, 0)
+        ink, bgc = P(ln.x, ln.y, 0, 0), P(ln.x, ln.y, 1, 0)
         for j in (-1, 1):
             for k in range(1, o.max_gap + 2):
-                p = P(ln.x, ln.y, ln.a - k, j)
-                if p is None:
-                    break
-                if _diff(p, bgc) <= self.bg_tol:
+                c = self.cls(ln.x, ln.y, ln.a - k, j, ink, bgc)
+                if c in (1, 3):  # background, or a wire of another colour crossing the gap
                     continue
+                if c == 0:
+                    break
                 ex, ey = self.at(ln.x, ln.y, ln.a - k, j)
                 prev = self.link(ex, ey)
                 if prev is not None and j + prev.d == 0 and prev.s == k:
@@ -224,8 +225,9 @@ class _Scan:
         res[ys, xs] = np.abs(self.rgb[ys, xs] - self.rgb[yt, xt]).max(-1)
         return res
 
-    def links(self) -> list[tuple[Link, int, int]]:
-        """Every drawn link with the steps it owns along the lattice row, [c0, c1)."""
+    def links(self) -> list[tuple[Link, int, int, tuple[int, int, Link] | None]]:
+        """Every drawn link with the steps it owns along the lattice row, [c0, c1), and where a chain it ends
+        goes on (`resumes`)."""
         o = self.o
         res = []
         # candidates: a dash end differs from the pixel after it and from the one beside it
@@ -239,8 +241,32 @@ class _Scan:
                 continue
             c0 = math.ceil(ln.a / 2) if inc else ln.a  # the dash middles a/2 and (s + b)/2, rounded up
             c1 = math.ceil((ln.s + ln.b) / 2) if out else ln.b + 1
-            res.append((ln, c0, c1))
+            res.append((ln, c0, c1, self.resumes(ln) if inc and not out else None))
         return res
+
+    def resumes(self, ln: Link) -> tuple[int, int, Link] | None:
+        """Where a chain cut by a crossing goes on: `ln` ends a chain of two links or more; the first link S,
+        m = 1..MAX_SKIP lattice rows beyond its dash 2, of the same direction and ink, that starts a chain
+        of two links or more with the same period (twice the distance of the dash middles, P2 = s + b - a)
+        and whose dash 1's middle lies m periods after the middle of dash 2 of `ln` (both within
+        max(12, P2) / 4 half steps): (m, the step of S's dash 1 end, S), or None."""
+        P, d = self.px, ln.d
+        ink, bgc = P(ln.x, ln.y, 0, 0), P(ln.x, ln.y, 1, 0)
+        p2 = ln.s + ln.b - ln.a
+        q = max(12, p2)
+        for m in range(1, self.o.max_skip + 1):
+            c = ln.s + ln.b + m * p2  # twice the middle of dash 1 of S expected
+            for i in range((4 * c - q) // 8, (4 * c + q + 4 * self.o.max_run) // 8 + 1):
+                if i <= ln.b or self.cls(ln.x, ln.y, i, (m + 1) * d, ink, bgc) != 2 \
+                        or self.cls(ln.x, ln.y, i + 1, (m + 1) * d, ink, bgc) != 1:
+                    continue
+                sx, sy = self.at(ln.x, ln.y, i, (m + 1) * d)
+                s = self.link(sx, sy)
+                if s is None or s.d != d or 4 * abs(2 * i + s.a - c) > q or 4 * abs(s.s + s.b - s.a - p2) > q \
+                        or not self.outgoing(s):
+                    continue
+                return m, i, s
+        return None
 
 
 def _coverage(delta: np.float32, half: np.float32, diagonal: bool) -> np.float32:
@@ -268,12 +294,13 @@ def _tri_cdf(t: np.float32) -> np.float32:
 
 def _draw(scan: _Scan, lin: np.ndarray, diagonal: bool) -> dict[tuple[int, int], tuple[int, np.ndarray]]:
     """Find the links of one orientation and the pixels they write: {(x, y): (claim, RGB in the mixing
-    space)}. A pixel of another colour than the link's background and ink (a crossing wire) is never written;
+    space)}; a link that ends a chain cut by a crossing also writes the band across the cut (`resumes`), over
+    background pixels. A pixel of another colour than the link's background and ink (a crossing wire) is never written;
     a pixel two links would write goes to the lower claim (index of the pixel where dash 1 ends), as the
     kernel's atomic_min settles it."""
     f32 = np.float32
     res: dict[tuple[int, int], tuple[int, np.ndarray]] = {}
-    for ln, c0, c1 in scan.links():
+    for ln, c0, c1, on in scan.links():
         cid = ln.y * scan.w + ln.x
         n1, n2, g = 1 - ln.a, ln.b - ln.s + 1, ln.s - 1
         m1, m2 = f32(ln.a) * f32(0.5), f32(ln.s + ln.b) * f32(0.5)  # dash middles (dash 1 ends at 0)
@@ -292,6 +319,22 @@ def _draw(scan: _Scan, lin: np.ndarray, diagonal: bool) -> dict[tuple[int, int],
                 px, py = scan.at(ln.x, ln.y, i, j)
                 if (px, py) not in res or cid < res[(px, py)][0]:
                     res[(px, py)] = (cid, bgc + _coverage(delta, half, diagonal) * (ink - bgc))
+        if on is None:
+            continue
+        # the cut: the band from the middle of dash 2 (row d) to the middle of dash 1 of S (row (m + 1) d),
+        # over the background pixels of rows d .. (m + 1) d between the two dashes
+        m, i_s, sl = on
+        ms = f32(i_s) + f32(sl.a) * f32(0.5)
+        for i in range(ln.b + 1, i_s + sl.a):
+            v = f32(m) * (f32(i) - m2) / (ms - m2)  # the band's centre, rows beyond row d
+            for r in range(m + 1):
+                j = (r + 1) * ln.d
+                cov = _coverage(v - f32(r), half, diagonal)
+                if cov <= f32(0) or scan.cls(ln.x, ln.y, i, j, raw_ink, raw_bgc) != 1:
+                    continue
+                px, py = scan.at(ln.x, ln.y, i, j)
+                if (px, py) not in res or cid < res[(px, py)][0]:
+                    res[(px, py)] = (cid, bgc + cov * (ink - bgc))
     return res
 
 
@@ -372,6 +415,8 @@ class Bridger:
                              f"and {o.max_run}")
         if o.min_dashes not in (2, 3):
             raise ValueError(f"bridge: expected min_dashes 2 or 3, got {o.min_dashes}")
+        if not 0 <= o.max_skip <= 3:
+            raise ValueError(f"bridge: expected max_skip in 0..3, got {o.max_skip}")
         self.fmt, self.options = fmt, o
         defines = defines_for(fmt, SEGMENT=SEGMENT, **o.defines())
         self._find = context.kernel("bridge", "bridge_find", defines)

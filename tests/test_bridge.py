@@ -132,6 +132,44 @@ def test_crossing_wires_of_two_colours_are_both_bridged(device):
     assert changed[e + 1:s, c].sum() >= 2 and changed[e + 1:s, c2].sum() >= 2
 
 
+def test_dash_ending_under_another_colour_is_still_linked(device):
+    # the last ink pixel of one dash is covered by a red wire's pixel: the dash ends under it (occluded), so the
+    # gaps on both sides of that dash are still bridged, and the red pixel is kept
+    img = canvas()
+    dashes = dash_chain(img, 2, 4, 3, 4, 6)
+    r, _, e = dashes[2]
+    img[r, e] = (150, 30, 30)
+    out = both(img)
+    np.testing.assert_array_equal(out[r, e], img[r, e])
+    # each gap column on both sides of that dash carries about the band's ink (W = 3/7 over the two rows;
+    # the occluded dash counts 2 px, so its links' bands are a little thinner)
+    cov = coverage_of(out)
+    for (r1, _, e1), (r2, s2, _) in ((dashes[1], dashes[2]), (dashes[2], dashes[3])):
+        np.testing.assert_allclose(cov[r1:r2 + 1, e1 + 1:s2].sum(0), 3 / 7, atol=0.1)
+
+
+def test_chain_cut_by_a_crossing_of_the_same_ink_goes_on_across_it(device):
+    # a shallow chain crossed by a 1-px vertical line of the same ink: the links whose windows hold the line are
+    # refused (in text a glyph's other strokes look the same), so the chain is cut; both parts are chains of two
+    # links or more with the same period and phase, so the band is drawn across the cut over the background
+    img = canvas(24, 64)
+    dashes = dash_chain(img, 2, 4, 3, 4, 9)
+    img[:, 30] = INK
+    out = both(img)
+    np.testing.assert_array_equal(out[:, 30], img[:, 30])
+    cut = both(img, options=BridgeOptions(max_skip=0))
+    W = 3 / 7
+    # every gap column (background over the chain's rows) between the first and last dash carries the band's
+    # ink, W over those rows (within 0.1); without the cut rule, the gap columns around the line do not. (A
+    # dash inside the cut is ink, so no band writes it: it keeps its value.)
+    rows = slice(dashes[0][0], dashes[-1][0] + 1)
+    cols = [c for c in range(dashes[0][2] + 1, dashes[-1][1]) if (img[rows, c] == BG).all()]
+    cov = np.array([coverage_of(out)[rows, c].sum() for c in cols])
+    np.testing.assert_allclose(cov, W, atol=0.1)
+    assert (np.array([coverage_of(cut)[rows, c].sum() for c in cols]) < W / 2).sum() >= 4
+    assert (out != cut).any(-1).sum() >= 8
+
+
 def test_ink_colour_and_channels(device):
     img = canvas()
     dash_chain(img, 2, 4, 3, 4, 6)
@@ -277,3 +315,5 @@ def test_host_checks(device):
         Bridger(device, frame_format(img), BridgeOptions(max_gap=40))
     with pytest.raises(ValueError, match="min_dashes 2 or 3"):
         Bridger(device, frame_format(img), BridgeOptions(min_dashes=4))
+    with pytest.raises(ValueError, match="max_skip in 0..3"):
+        Bridger(device, frame_format(img), BridgeOptions(max_skip=4))
