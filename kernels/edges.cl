@@ -281,26 +281,7 @@ inline int quiet_px(__global const PIXEL_T *src, int i, int j)
 #ifndef VECTOR_LAB_LANES
 #define VECTOR_LAB_LANES 4
 #endif
-// CIELAB of 8 pixels from their stored levels (R, G, B int8 lanes), the same arithmetic as lab_of:
-// per-level linear values from `lin`, common.cl's matrix and f(t) table read (lut_read) lane by lane.
-#define GATHER8(t, v) ((float8)((t)[(v).s0], (t)[(v).s1], (t)[(v).s2], (t)[(v).s3], \
-                                (t)[(v).s4], (t)[(v).s5], (t)[(v).s6], (t)[(v).s7]))
-#define LUT8(lut, x, out) {                                                                              \
-        float8 t_ = (x) * (float)LUT_SIZE;                                                             \
-        t_ = t_ < 0.0f ? 0.0f : (t_ > (float)LUT_SIZE ? (float)LUT_SIZE : t_);                         \
-        int8 i_ = convert_int8(t_);                                                                    \
-        i_ = i_ > LUT_SIZE - 1 ? LUT_SIZE - 1 : i_;                                                    \
-        const float8 f_ = t_ - convert_float8(i_), a_ = GATHER8(lut, i_);                              \
-        out = a_ + f_ * (GATHER8(lut, i_ + 1) - a_); }
-#define LAB8(R, G, B, L, A, Z) {                                                                         \
-        const float8 lr_ = GATHER8(lin, R), lg_ = GATHER8(lin, G), lb_ = GATHER8(lin, B);              \
-        const float8 X_ = (0.4124564f * lr_ + 0.3575761f * lg_ + 0.1804375f * lb_) * (1.0f / 0.95047f); \
-        const float8 Y_ = 0.2126729f * lr_ + 0.7151522f * lg_ + 0.0721750f * lb_;                       \
-        const float8 Z_ = (0.0193339f * lr_ + 0.1191920f * lg_ + 0.9503041f * lb_) * (1.0f / 1.08883f); \
-        __global const float *fl_ = luts + LUT_SIZE + 1;                                               \
-        float8 fx_, fy_, fz_;                                                                          \
-        LUT8(fl_, X_, fx_) LUT8(fl_, Y_, fy_) LUT8(fl_, Z_, fz_)                                       \
-        L = 116.0f * fy_ - 16.0f; A = 500.0f * (fx_ - fy_); Z = 200.0f * (fy_ - fz_); }
+// CIELAB of 8 pixels: common.cl's LAB8.
 #if CHANNELS >= 3
 #define C0 CH_R
 #define C2 CH_B

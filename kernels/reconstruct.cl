@@ -1,23 +1,25 @@
 // reconstruct.cl -- topological reconstruction of sub-pixel features (seed 000 §4), plus two rules
 // beyond the paper (docs/reconstruct.md). Runs before edge detection. dst must hold a copy of src (the host
-// enqueues it): the kernels write reconstructed pixels only.
+// enqueues it): the kernel writes reconstructed pixels only.
 // The numpy reference is mlaa_stream.reconstruct.reconstruct_reference; this file mirrors it rule for rule.
 //
-// Three passes, each one work item per SEGMENT pixels of a row that skips GROUP pixels at a time where
-// nothing can happen (PoCL CPU runs branchy per-pixel kernels slowly, and CIELAB costs ~25 ns a pixel):
-//   reconstruct_candidates  RGB only: mask[i] = the ring neighbours that may differ from A in ΔE (Lipschitz
-//                           bound) when the rules may fire at A, else 0; seg[] = the segment holds a
-//                           candidate. Identical segments and groups settled at once; integer frames
-//                           test a group a vector lane per pixel
-//   reconstruct_lab         lab[i] = CIELAB of every pixel a candidate will read (itself, its maybe-ring);
-//                           segments with no candidate in the 3x3 segments around skipped
-//   reconstruct             the rules, at candidates only (segments without one skipped)
+// One kernel, one work item per SEGMENT pixels of STRIP rows (PoCL CPU runs branchy per-pixel kernels slowly,
+// and CIELAB costs ~25 ns a pixel converted alone, several times less in lanes of eight), row by row, GROUP
+// pixels at a time (docs/reconstruct.md, "Speed"):
+//   1. RGB only (Lipschitz bound of ΔE in max-channel difference): a lane per pixel, the pixels where a rule
+//      may fire (a gap among the ring neighbours at the bound, table bit 1; extended, a neighbour at twice
+//      it); bit-identical windows settled at once; the frame's border groups run the rules a pixel at a time;
+//   2. CIELAB a lane per pixel of rows y-1, y, y+1 of the groups holding such pixels (and the neighbour groups
+//      their end lanes read), kept in a 3-row scratch per work item (each pixel converted once per strip);
+//   3. the exact ring masks, eight ΔE at once per lane: only lanes whose X can make a rule fire run the
+//      rules (reconstruct_at), from the same CIELAB numbers.
 // Defines (mlaa_stream.reconstruct.Reconstructor):
 //   CHEAP_BOUND      max-channel difference (normalised) below which ΔE76 cannot exceed the threshold
 //   CHEAP_LEVELS     integer frames: the smallest difference in stored levels over CHEAP_BOUND * PIXEL_MAX
 //   FAR_LEVELS       the same for 2 * CHEAP_BOUND (the extended rules' line contrast)
 //   SAMPLE_BYTES     1, 2 or 4: bytes of a stored sample (uchar, ushort, float), for the identical-window
 //                    tests and the 8-bit RGB loads
+//   STRIP            rows per work item
 //   EXTENDED         1: also the rules beyond the paper (line-relative X, two-pixel gaps)
 //   LINEAR_INPUT     1 when samples are linear light: encoded to sRGB (table) before the Lab comparison
 //   MAX_LINE_PIXELS  line-coloured pixels a 5x5 window around a gap may hold
@@ -47,10 +49,9 @@
 #ifndef MAX_OFFSET
 #define MAX_OFFSET 1.01f
 #endif
-
-// seg[]: a byte per SEGMENT pixels of a row, set by pass 1 when the segment holds a candidate.
-#define SEG_COUNT(w) (((w) + SEGMENT - 1) / SEGMENT)
-#define SEG_IDX(s, y, w) ((y) * SEG_COUNT(w) + (s))
+#ifndef STRIP
+#define STRIP 16
+#endif
 
 // The ring N8*(A), clockwise from the top-left: bit k of a mask is (RX[k], RY[k]).
 __constant int RX[8] = {-1, 0, 1, 1, 1, 0, -1, -1};
@@ -201,9 +202,9 @@ inline void store_mean(__global const PIXEL_T *src, __global PIXEL_T *dst, int x
 }
 
 
-// ---- pass 1: candidates, from RGB alone.
+// ---- step 1: where a rule may fire, from RGB alone.
 // Quiet group: none of the GROUP pixels has a ring neighbour at the cheap bound or beyond in any channel, so
-// every mask is 0 -- exactly the per-pixel result. Tested on the raw sample stream (channel order does not
+// no ring neighbour can be in X. Tested on the raw sample stream (channel order does not
 // matter: a pixel's samples are compared with the same samples of its neighbours); flat and smooth areas
 // cost just this. Interior groups only (the caller checks). Alpha samples take part (a stricter test).
 // Plain byte/sample loops: PoCL runs them 2-3x faster than vload8 words here (docs/reconstruct.md).
@@ -272,35 +273,16 @@ inline uint valid_ring(int x, int y, int width, int height)
      ((d4 >= (ushort)(lim)) & (short8)16) | ((d5 >= (ushort)(lim)) & (short8)32) |                       \
      ((d6 >= (ushort)(lim)) & (short8)64) | ((d7 >= (ushort)(lim)) & (short8)128))
 
-#if RGB8
-// 8-bit RGB: a row's 30 bytes are bytes 0-15 (lo) and 14-29 (hi) of two loads, split into samples by swizzles.
-#define SPLIT_RGB8(lo, hi, c0, c1, c2) {                                                                  \
-    c0 = convert_ushort16((uchar16)(lo.s0, lo.s3, lo.s6, lo.s9, lo.sc, lo.sf, hi.s4, hi.s7, hi.sa, hi.sd, \
-                                    0, 0, 0, 0, 0, 0));                                                   \
-    c1 = convert_ushort16((uchar16)(lo.s1, lo.s4, lo.s7, lo.sa, lo.sd, hi.s2, hi.s5, hi.s8, hi.sb, hi.se, \
-                                    0, 0, 0, 0, 0, 0));                                                   \
-    c2 = convert_ushort16((uchar16)(lo.s2, lo.s5, lo.s8, lo.sb, lo.se, hi.s3, hi.s6, hi.s9, hi.sc, hi.sf, \
-                                    0, 0, 0, 0, 0, 0)); }
-
-#endif
-
 // Ring masks of the GROUP pixels from i on (an interior group): bit k where neighbour k's max-channel
-// difference reaches NEAR_LIMIT (*maybe) or FAR_LIMIT (*far) -- the scalar path's test, a lane per pixel.
-// 8-bit RGB: lo, hi are the group's row (SPLIT_RGB8).
-inline void group_masks(__global const PIXEL_T *src, int i, int width, uchar16 lo, uchar16 hi,
-                        short8 *maybe, short8 *far)
+// difference reaches NEAR_LIMIT (*maybe) or FAR_LIMIT (*far) -- ring_masks() a lane per pixel
+// (formats other than 8-bit RGB, which gate_rgb8 handles).
+inline void group_masks(__global const PIXEL_T *src, int i, int width, short8 *maybe, short8 *far)
 {
     __global const PIXEL_T *p = src + (size_t)(i - 1) * CHANNELS;
     const size_t rs = (size_t)width * CHANNELS;
 #if CH == 3
-    ushort16 c0, c1, c2;
-#if RGB8
-    SPLIT_RGB8(lo, hi, c0, c1, c2)
-#define LOAD_ROW(q) { const uchar16 l = vload16(0, q), h = vload16(0, (q) + 14); SPLIT_RGB8(l, h, c0, c1, c2) }
-#else
-    c0 = ROW_SAMPLE(p, 0); c1 = ROW_SAMPLE(p, 1); c2 = ROW_SAMPLE(p, 2);
+    ushort16 c0 = ROW_SAMPLE(p, 0), c1 = ROW_SAMPLE(p, 1), c2 = ROW_SAMPLE(p, 2);
 #define LOAD_ROW(q) { c0 = ROW_SAMPLE(q, 0); c1 = ROW_SAMPLE(q, 1); c2 = ROW_SAMPLE(q, 2); }
-#endif
     const ushort8 a0 = c0.s12345678, a1 = c1.s12345678, a2 = c2.s12345678;
 #define DIFF(sw, out) {                                                                    \
         ushort8 u = ABS_DIFF(c0.sw, a0), v = ABS_DIFF(c1.sw, a1), w = ABS_DIFF(c2.sw, a2);    \
@@ -330,6 +312,58 @@ inline void group_masks(__global const PIXEL_T *src, int i, int width, uchar16 l
 }
 #endif
 
+#if RGB8
+// 8-bit RGB: the pixels of the interior group from i on (bit t: pixel i + t) where a rule may fire by the RGB
+// bounds alone, candidate()'s first tests a lane per pixel on uchar planes: two ring neighbours at ring
+// distance >= 3 (what table bit 1 means: such a pair is a gap, and every gap holds one) reach NEAR_LIMIT in some
+// sample, or (extended rules) one reaches FAR_LIMIT.
+#define PLANES(q, c0, c1, c2) {                                                                          \
+        const uchar16 l_ = vload16(0, q), h_ = vload16(0, (q) + 14);                                   \
+        c0 = (uchar16)(l_.s0, l_.s3, l_.s6, l_.s9, l_.sc, l_.sf, h_.s4, h_.s7, h_.sa, h_.sd, 0, 0, 0, 0, 0, 0); \
+        c1 = (uchar16)(l_.s1, l_.s4, l_.s7, l_.sa, l_.sd, h_.s2, h_.s5, h_.s8, h_.sb, h_.se, 0, 0, 0, 0, 0, 0); \
+        c2 = (uchar16)(l_.s2, l_.s5, l_.s8, l_.sb, l_.se, h_.s3, h_.s6, h_.s9, h_.sc, h_.sf, 0, 0, 0, 0, 0, 0); }
+inline uint gate_rgb8(__global const uchar *src, int i, int width)
+{
+#if NEAR_LIMIT > 255
+    return 0u;
+#else
+    __global const uchar *q = src + (size_t)(i - 1) * 3;
+    const int rs = width * 3;
+    uchar16 c0, c1, c2;
+    PLANES(q, c0, c1, c2)
+    const uchar8 a0 = c0.s12345678, a1 = c1.s12345678, a2 = c2.s12345678;
+#define PDIFF(sw, out) {                                                                                 \
+        const uchar8 u_ = ABS_DIFF(c0.sw, a0), v_ = ABS_DIFF(c1.sw, a1), w_ = ABS_DIFF(c2.sw, a2);     \
+        const uchar8 m_ = u_ > v_ ? u_ : v_;                                                           \
+        out = m_ > w_ ? m_ : w_; }
+    uchar8 d0, d1, d2, d3, d4, d5, d6, d7;
+    PDIFF(s01234567, d7) PDIFF(s23456789, d3)
+    PLANES(q - rs, c0, c1, c2)
+    PDIFF(s01234567, d0) PDIFF(s12345678, d1) PDIFF(s23456789, d2)
+    PLANES(q + rs, c0, c1, c2)
+    PDIFF(s01234567, d6) PDIFF(s12345678, d5) PDIFF(s23456789, d4)
+#undef PDIFF
+    const uchar lim = (uchar)NEAR_LIMIT;
+    const char8 h0 = d0 >= lim, h1 = d1 >= lim, h2 = d2 >= lim, h3 = d3 >= lim, h4 = d4 >= lim, h5 = d5 >= lim,
+                h6 = d6 >= lim, h7 = d7 >= lim;
+    // pairs at ring distance 4 (opposite) and 3 (knight's move)
+    char8 p = (h0 & h4) | (h1 & h5) | (h2 & h6) | (h3 & h7) | (h0 & h3) | (h1 & h4) | (h2 & h5) | (h3 & h6) |
+              (h4 & h7) | (h5 & h0) | (h6 & h1) | (h7 & h2);
+#if EXTENDED && FAR_LIMIT <= 255
+    uchar8 mx = d0 > d1 ? d0 : d1;
+    mx = mx > d2 ? mx : d2; mx = mx > d3 ? mx : d3; mx = mx > d4 ? mx : d4;
+    mx = mx > d5 ? mx : d5; mx = mx > d6 ? mx : d6; mx = mx > d7 ? mx : d7;
+    p |= mx >= (uchar)FAR_LIMIT;
+#endif
+    ulong v = as_ulong(p) & 0x8040201008040201ul;   // byte t: bit t where lane t may fire
+    v |= v >> 32;
+    v |= v >> 16;
+    v |= v >> 8;
+    return (uint)(v & 0xfful);
+#endif
+}
+#endif
+
 // Necessary conditions of the two-pixel rule along ring direction k, in RGB: q1 q2 (ahead) and q3 q4 (behind
 // B) all more than 2 thresholds from A in ΔE (each is within one threshold of the line's mean, which is more
 // than 3 from A), so at least 2 * CHEAP_BOUND from A in some channel; all inside the frame.
@@ -356,147 +390,16 @@ inline int candidate(__global const PIXEL_T *src, __global const uint *table, ra
 #endif
     return cand;
 }
-
-// mask[i] = `maybe` where a rule may fire at i (candidate()), else 0. Interior groups: a bit-identical
-// window is settled at once; else integer frames test the group a lane per pixel (group_masks), float
-// frames skip smooth groups. Borders and float frames: a sliding 3x3 window, a pixel at a time.
-__kernel void reconstruct_candidates(__global const PIXEL_T *src, __global uchar *mask, __global uchar *seg,
-                                     __global const uint *table, const int width, const int height)
-{
-    const int x0 = get_global_id(0) * SEGMENT, y = get_global_id(1);
-    if (x0 >= width || y >= height) return;
-    const int x1 = x0 + SEGMENT < width ? x0 + SEGMENT : width;
-    const int ya = y > 0 ? y - 1 : 0, yb = y + 1 < height ? y + 1 : height - 1;
-    uint any = 0;   // some candidate in this segment (seg[], read by passes 2 and 3)
-    // a whole interior segment bit-identical at once: 3 rows of x0-1..x1 equal, this row constant
-    if (x1 - x0 == SEGMENT && x0 > 0 && x1 < width && y > 0 && y + 1 < height) {
-        const int px = CHANNELS * SAMPLE_BYTES, row = width * px;
-        __global const uchar *p = (__global const uchar *)src + (size_t)(IDX(x0, y, width) - 1) * px;
-        if (same_bytes(p, p - row, (SEGMENT + 2) * px) && same_bytes(p, p + row, (SEGMENT + 2) * px) &&
-            same_bytes(p, p + px, (SEGMENT + 1) * px)) {
-            for (int g = x0; g < x1; g += GROUP) vstore8((uchar8)(0), 0, mask + IDX(g, y, width));
-            seg[SEG_IDX(get_global_id(0), y, width)] = 0;
-            return;
-        }
-    }
-    for (int g = x0; g < x1; g += GROUP) {
-        const int ge = g + GROUP < x1 ? g + GROUP : x1, i = IDX(g, y, width);
-        if (ge - g == GROUP && g > 0 && g + GROUP < width && y > 0 && y + 1 < height) {
-            if (identical_window(src, i, width)) {
-                vstore8((uchar8)(0), 0, mask + i);
-                continue;
-            }
-#if RGB8
-            __global const uchar *q = src + (size_t)(i - 1) * 3;
-            const uchar16 lo = vload16(0, q), hi = vload16(0, q + 14);
-#else
-            const uchar16 lo = (uchar16)(0), hi = lo;
-#endif
-#ifndef PIXEL_IS_FLOAT
-            short8 mv, fv;
-            group_masks(src, i, width, lo, hi, &mv, &fv);
-            const short4 o = mv.lo | mv.hi;
-            if ((o.x | o.y | o.z | o.w) == 0) {
-                vstore8((uchar8)(0), 0, mask + i);
-                continue;
-            }
-            short mb[GROUP], fb[GROUP];
-            vstore8(mv, 0, mb);
-            vstore8(fv, 0, fb);
-            for (int t = 0; t < GROUP; ++t) {
-                const uint maybe = (uint)mb[t];
-                const int cand = maybe && candidate(src, table, raw_px(src, i + t), maybe, (uint)fb[t], g + t, y,
-                                                    width, height);
-                mask[i + t] = cand ? (uchar)maybe : (uchar)0;
-                any |= (uint)cand;
-            }
-            continue;
-#else
-            if (smooth_group(src, i, width)) {
-                vstore8((uchar8)(0), 0, mask + i);
-                continue;
-            }
-#endif
-        }
-        // a sliding 3x3 window: columns l (x-1), m (x), r (x+1); rows 0 (y-1), 1 (y), 2 (y+1); clamped reads,
-        // out-of-frame neighbours removed by valid_ring
-        int xl = g > 0 ? g - 1 : 0;
-        rawpx l0 = raw_px(src, IDX(xl, ya, width)), l1 = raw_px(src, IDX(xl, y, width)),
-              l2 = raw_px(src, IDX(xl, yb, width));
-        rawpx m0 = raw_px(src, IDX(g, ya, width)), m1 = raw_px(src, IDX(g, y, width)),
-              m2 = raw_px(src, IDX(g, yb, width));
-        for (int x = g; x < ge; ++x) {
-            const int xr = x + 1 < width ? x + 1 : width - 1;
-            rawpx r0 = raw_px(src, IDX(xr, ya, width)), r1 = raw_px(src, IDX(xr, y, width)),
-                  r2 = raw_px(src, IDX(xr, yb, width));
-            rawdiff d[8] = {max_diff(l0, m1), max_diff(m0, m1), max_diff(r0, m1), max_diff(r1, m1),
-                            max_diff(r2, m1), max_diff(m2, m1), max_diff(l2, m1), max_diff(l1, m1)};
-            const uint valid = valid_ring(x, y, width, height);
-            uint maybe = 0, far = 0;
-            for (int k = 0; k < 8; ++k) {
-                maybe |= (uint)(d[k] >= NEAR_LIMIT) << k;
-                far |= (uint)(d[k] >= FAR_LIMIT) << k;
-            }
-            maybe &= valid;
-            far &= valid;
-            const int cand = maybe && candidate(src, table, m1, maybe, far, x, y, width, height);
-            mask[IDX(x, y, width)] = cand ? (uchar)maybe : (uchar)0;
-            any |= (uint)cand;
-            l0 = m0; l1 = m1; l2 = m2;
-            m0 = r0; m1 = r1; m2 = r2;
-        }
-    }
-    seg[SEG_IDX(get_global_id(0), y, width)] = (uchar)any;
-}
-
-// ---- pass 2: CIELAB of every pixel a candidate reads in its 3x3: the candidate itself and the ring
-// neighbours in its mask (the others cannot be in X). Each pixel is converted once.
-__kernel void reconstruct_lab(__global const PIXEL_T *src, __global const uchar *mask, __global const uchar *seg,
-                              __global const float *luts, __global const float *lin, __global float4 *lab,
-                              const int width, const int height)
-{
-    const int s = get_global_id(0), x0 = s * SEGMENT, y = get_global_id(1);
-    if (x0 >= width || y >= height) return;
-    const int x1 = x0 + SEGMENT < width ? x0 + SEGMENT : width;
-    // no candidate in this segment or the 8 around it: nothing here is read
-    const int s1 = s + 1 < SEG_COUNT(width) ? s + 1 : s, sa = s > 0 ? s - 1 : 0;
-    uint around = 0;
-    for (int r = y > 0 ? y - 1 : 0; r <= y + 1 && r < height; ++r)
-        for (int t = sa; t <= s1; ++t) around |= seg[SEG_IDX(t, r, width)];
-    if (around == 0) return;
-    for (int g = x0; g < x1; g += GROUP) {
-        const int ge = g + GROUP < x1 ? g + GROUP : x1;
-        if (ge - g == GROUP && g > 0 && g + GROUP < width) {
-            // no candidate in the 3x(GROUP+2) window: nothing here is read
-            __global const uchar *m = mask + IDX(g - 1, y > 0 ? y - 1 : y, width);
-            const int rows = (y > 0) + 1 + (y + 1 < height);
-            uint any = 0;
-            for (int r = 0; r < rows; ++r, m += width)
-                for (int t = 0; t < GROUP + 2; ++t) any |= m[t];
-            if (any == 0) continue;
-        }
-        for (int x = g; x < ge; ++x) {
-            const int i = IDX(x, y, width);
-            const uint valid = valid_ring(x, y, width, height);
-            uint need = mask[i];
-            for (int k = 0; k < 8; ++k)   // neighbour k reads this pixel when its bit (k + 4) & 7 is set
-                if (valid >> k & 1u) need |= mask[IDX(x + RX[k], y + RY[k], width)] >> ((k + 4) & 7) & 1u;
-            if (need) lab[i] = (float4)(lab_px(src, luts, lin, i), 0.0f);
-        }
-    }
-}
-
-
-// The rules at pixel (x, y), a candidate of pass 1 with ring bits `maybe`; writes dst[i] when one fires.
+// The rules at pixel (x, y) with CIELAB a; `maybe` holds every ring neighbour over the threshold (X) and
+// ring[k] its CIELAB for k in `maybe`; writes dst[i] when a rule fires.
 inline void reconstruct_at(__global const PIXEL_T *src, __global PIXEL_T *dst, __global const float *luts,
-                           __global const float *lin, __global const float4 *lab, __global const uint *table,
-                           const int x, const int y, const int width, const int height, const float t2,
-                           const uint maybe)
+                           __global const float *lin, __global const uint *table, const int x, const int y,
+                           const int width, const int height, const float t2, const uint maybe, const float3 a,
+                           const float3 *ring)
 {
     const int i = IDX(x, y, width);
-    // X from the Lab of pass 2: a ring pixel outside `maybe` is within the threshold of A (the cheap bound),
-    // so its da stays 0 here and its Lab is read only if the two-pixel rule needs it (as B).
-    float3 a = lab[i].xyz;
+    // X from the Lab of the ring pixels in `maybe`: the others are within the threshold of A, so their da
+    // stays 0 here and their Lab is read only if the two-pixel rule needs it (as B).
     float3 n[8];
     float da[8];
     int valid[8];
@@ -506,7 +409,7 @@ inline void reconstruct_at(__global const PIXEL_T *src, __global PIXEL_T *dst, _
         n[k] = a;
         da[k] = 0.0f;
         if (maybe >> k & 1u) {
-            n[k] = lab[IDX(x + RX[k], y + RY[k], width)].xyz;
+            n[k] = ring[k];
             da[k] = d2(n[k], a);
             if (da[k] > t2) X |= 1u << k;
         }
@@ -527,6 +430,16 @@ inline void reconstruct_at(__global const PIXEL_T *src, __global PIXEL_T *dst, _
     uint far = 0;
     for (int k = 0; k < 8; ++k) far |= (uint)(da[k] > 3.99f * t2) << k;   // 2t, less rounding slack
     if (!(table[far] & 2u)) far = 0;
+    if (far) {   // every xk is X when X lies within 0.49 thresholds of its mean: |n_j - n_k| < t < |n_j - A|
+        float3 mx = (float3)(0.0f);
+        int cnt = 0, tight = 1;
+        for (int j = 0; j < 8; ++j)
+            if (X >> j & 1u) { mx += n[j]; ++cnt; }
+        mx /= (float)cnt;
+        for (int j = 0; j < 8; ++j)
+            if (X >> j & 1u) tight &= d2(n[j], mx) < 0.24f * t2;
+        if (tight) far = 0;
+    }
     for (int k = 0; far >> k; ++k) {
         if (!(far >> k & 1u)) continue;
         uint xk = 0;
@@ -594,23 +507,253 @@ inline void reconstruct_at(__global const PIXEL_T *src, __global PIXEL_T *dst, _
 #endif
 }
 
-// ---- pass 3: the rules, at the candidates of pass 1.
-__kernel void reconstruct(__global const PIXEL_T *src, __global PIXEL_T *dst, __global const float *luts,
-                          __global const float *lin, __global const float4 *lab, __global const uchar *mask,
-                          __global const uchar *seg, __global const uint *table, const int width, const int height,
-                          const float t2)
+
+// ---- CIELAB of a group's pixels into the work item's scratch. A slot holds one row of the segment and its
+// two outside neighbours: L, a, b planes of LAB_STRIDE floats, column c = x - x0 + 1.
+#define LAB_STRIDE (SEGMENT + 8)
+#define SLOT_FLOATS (3 * LAB_STRIDE)
+#define EDGE_L (1u << 8)   // slot flags: bit j = group j converted; EDGE_L/R = pixel x0 - 1 / x1
+#define EDGE_R (1u << 9)
+
+inline void put_lab(__global float *slot, int c, float3 v)
 {
-    const int x0 = get_global_id(0) * SEGMENT, y = get_global_id(1);
-    if (x0 >= width || y >= height || seg[SEG_IDX(get_global_id(0), y, width)] == 0) return;
-    const int x1 = x0 + SEGMENT < width ? x0 + SEGMENT : width;
-    for (int x = x0; x < x1; ++x) {
-        const int i = IDX(x, y, width);
-        if (x + GROUP <= x1) {
-            uint any = 0;
-            for (int t = 0; t < GROUP; ++t) any |= mask[i + t];
-            if (any == 0) { x += GROUP - 1; continue; }
+    slot[c] = v.x;
+    slot[LAB_STRIDE + c] = v.y;
+    slot[2 * LAB_STRIDE + c] = v.z;
+}
+
+inline float3 get_lab(__global const float *slot, int c)
+{
+    return (float3)(slot[c], slot[LAB_STRIDE + c], slot[2 * LAB_STRIDE + c]);
+}
+
+#ifndef PIXEL_IS_FLOAT
+// CIELAB of 8 pixels: common.cl's LAB8 (checked for every 8-bit colour by tests/test_reconstruct.py).
+// Sample c of the 8 pixels from p on.
+#define SAMPLES8(p, c) convert_int8((ushort8)((p)[c], (p)[(c) + CHANNELS], (p)[(c) + 2 * CHANNELS],       \
+    (p)[(c) + 3 * CHANNELS], (p)[(c) + 4 * CHANNELS], (p)[(c) + 5 * CHANNELS], (p)[(c) + 6 * CHANNELS],   \
+    (p)[(c) + 7 * CHANNELS]))
+#endif
+
+// Lab of the n pixels from i on into slot columns c.. (n = GROUP: a lane each; else a pixel at a time).
+inline void lab_group(__global const PIXEL_T *src, __global const float *luts, __global const float *lin,
+                      __global float *slot, int c, int i, int n)
+{
+#ifndef PIXEL_IS_FLOAT
+    if (n == GROUP) {
+        __global const PIXEL_T *p = src + (size_t)i * CHANNELS;
+        int8 s0, s1, s2;
+#if RGB8
+        const uchar16 lo = vload16(0, p);   // the group's 24 bytes
+        const uchar8 hi = vload8(0, p + 16);
+        s0 = convert_int8((uchar8)(lo.s0, lo.s3, lo.s6, lo.s9, lo.sc, lo.sf, hi.s2, hi.s5));
+        s1 = convert_int8((uchar8)(lo.s1, lo.s4, lo.s7, lo.sa, lo.sd, hi.s0, hi.s3, hi.s6));
+        s2 = convert_int8((uchar8)(lo.s2, lo.s5, lo.s8, lo.sb, lo.se, hi.s1, hi.s4, hi.s7));
+#elif CHANNELS >= 3
+        s0 = SAMPLES8(p, 0); s1 = SAMPLES8(p, 1); s2 = SAMPLES8(p, 2);
+#else
+        s0 = SAMPLES8(p, 0); s1 = s0; s2 = s0;
+#endif
+        float8 L, A, Z;
+#if ORDER_BGR
+        LAB8(s2, s1, s0, L, A, Z);
+#else
+        LAB8(s0, s1, s2, L, A, Z);
+#endif
+        vstore8(L, 0, slot + c);
+        vstore8(A, 0, slot + LAB_STRIDE + c);
+        vstore8(Z, 0, slot + 2 * LAB_STRIDE + c);
+        return;
+    }
+#endif
+    for (int t = 0; t < n; ++t) put_lab(slot, c + t, lab_px(src, luts, lin, i + t));
+}
+
+// Ring bits of pixel (x, y) whose max-channel difference reaches NEAR_LIMIT (returned) and FAR_LIMIT (*far).
+inline uint ring_masks(__global const PIXEL_T *src, int x, int y, int width, int height, uint *far)
+{
+    const rawpx a = raw_px(src, IDX(x, y, width));
+    const uint valid = valid_ring(x, y, width, height);
+    uint maybe = 0, f = 0;
+    for (int k = 0; k < 8; ++k) {
+        if (!(valid >> k & 1u)) continue;
+        const rawdiff d = max_diff(raw_px(src, IDX(x + RX[k], y + RY[k], width)), a);
+        maybe |= (uint)(d >= NEAR_LIMIT) << k;
+        f |= (uint)(d >= FAR_LIMIT) << k;
+    }
+    *far = f;
+    return maybe;
+}
+
+// The ΔE² of 8 lanes to their ring neighbour in scratch row `row` at column offset `off`: bit `bit` of M where
+// over the threshold less 0.2% (M, within it X: the lanes' sums may round unlike d2()), of S where over it
+// plus 0.2% (S within X), of F where over 2 thresholds less 0.5% (F holds reconstruct_at's `far`) and of B
+// where over 2.012 thresholds (B within reconstruct_at's `beyond`, over 2.01).
+#define RING_DE2(row, off, bit) {                                                                        \
+        const float8 l_ = vload8(0, (row) + c + (off)) - aL;                                          \
+        const float8 a_ = vload8(0, (row) + LAB_STRIDE + c + (off)) - aA;                             \
+        const float8 b_ = vload8(0, (row) + 2 * LAB_STRIDE + c + (off)) - aB;                         \
+        const float8 e_ = l_ * l_ + a_ * a_ + b_ * b_;                                                 \
+        M |= (e_ > tm) & (int8)(bit);                                                                  \
+        S |= (e_ > th) & (int8)(bit);                                                                  \
+        F |= (e_ > tf) & (int8)(bit);                                                                  \
+        B |= (e_ > tb) & (int8)(bit); }
+
+// dst = src except where a rule fires. `scratch`: 3 * SLOT_FLOATS floats per work item.
+__kernel void reconstruct(__global const PIXEL_T *src, __global PIXEL_T *dst, __global const float *luts,
+                          __global const float *lin, __global float *scratch, __global const uint *table,
+                          const int width, const int height, const float t2)
+{
+    const int x0 = get_global_id(0) * SEGMENT, y0 = get_global_id(1) * STRIP;
+    if (x0 >= width || y0 >= height) return;
+    const int x1 = x0 + SEGMENT < width ? x0 + SEGMENT : width, y1 = y0 + STRIP < height ? y0 + STRIP : height;
+    const int ngroups = (x1 - x0 + GROUP - 1) / GROUP;
+    __global float *slots = scratch + (size_t)(get_global_id(1) * get_global_size(0) + get_global_id(0)) * 3 *
+                                          SLOT_FLOATS;
+    const float tm = 0.998f * t2, th = 1.002f * t2, tf = 3.98f * t2, tb = 4.05f * t2;
+    uint have[3] = {0u, 0u, 0u};   // per slot: what holds CIELAB (group bits, EDGE_L, EDGE_R)
+    for (int y = y0; y < y1; ++y) {
+        // row yy lives in slot (yy - y0 + 1) % 3: y - 1 in su, y in sm, y + 1 in sd (which held y - 2)
+        const int su = (y - y0) % 3, sm = (y - y0 + 1) % 3, sd = (y - y0 + 2) % 3;
+        if (y > y0) have[sd] = 0u;
+        const int inner = y > 0 && y + 1 < height;
+        // a whole interior segment bit-identical at once: 3 rows of x0-1..x1 equal, this row constant
+        if (inner && x1 - x0 == SEGMENT && x0 > 0 && x1 < width) {
+            const int px = CHANNELS * SAMPLE_BYTES, row = width * px;
+            __global const uchar *p = (__global const uchar *)src + (size_t)(IDX(x0, y, width) - 1) * px;
+            if (same_bytes(p, p - row, (SEGMENT + 2) * px) && same_bytes(p, p + row, (SEGMENT + 2) * px) &&
+                same_bytes(p, p + px, (SEGMENT + 1) * px))
+                continue;
         }
-        const uint maybe = mask[i];
-        if (maybe) reconstruct_at(src, dst, luts, lin, lab, table, x, y, width, height, t2, maybe);
+        // 1. RGB: lanes[j] = the pixels of interior group j where a rule may fire by the RGB bounds (bit t: pixel
+        // g + t; candidate()'s tests, or the first of them); the frame's border groups run the rules here, from
+        // CIELAB a pixel at a time
+        uchar lanes[SEGMENT / GROUP];
+        uint cg = 0u, cl = 0u, cr = 0u;   // groups with such pixels; of those, with one in lane 0 / lane 7
+        for (int j = 0; j < ngroups; ++j) {
+            const int g = x0 + j * GROUP, ge = g + GROUP < x1 ? g + GROUP : x1, i = IDX(g, y, width);
+            lanes[j] = 0;
+            if (ge - g == GROUP && g > 0 && g + GROUP < width && inner) {
+                if (identical_window(src, i, width)) continue;
+                uint on = 0u;
+#if RGB8
+                on = gate_rgb8(src, i, width);
+#else
+#ifndef PIXEL_IS_FLOAT
+                short8 mv, fv;
+                group_masks(src, i, width, &mv, &fv);
+                const short4 o = mv.lo | mv.hi;
+                if ((o.x | o.y | o.z | o.w) == 0) continue;
+                short mb[GROUP], fb[GROUP];
+                vstore8(mv, 0, mb);
+                vstore8(fv, 0, fb);
+#else
+                if (smooth_group(src, i, width)) continue;
+                uint mb[GROUP], fb[GROUP];
+                for (int t = 0; t < GROUP; ++t) mb[t] = ring_masks(src, g + t, y, width, height, fb + t);
+#endif
+                for (int t = 0; t < GROUP; ++t)
+                    if (mb[t] && candidate(src, table, raw_px(src, i + t), (uint)mb[t], (uint)fb[t], g + t, y,
+                                           width, height))
+                        on |= 1u << t;
+#endif
+                lanes[j] = (uchar)on;
+                cg |= (uint)(on != 0u) << j;
+                cl |= (on & 1u) << j;
+                cr |= (on >> 7 & 1u) << j;
+                continue;
+            }
+            for (int x = g; x < ge; ++x) {
+                uint far;
+                const uint maybe = ring_masks(src, x, y, width, height, &far);
+                if (!maybe || !candidate(src, table, raw_px(src, IDX(x, y, width)), maybe, far, x, y, width, height))
+                    continue;
+                float3 ring[8];
+                for (int k = 0; k < 8; ++k)
+                    if (maybe >> k & 1u) ring[k] = lab_px(src, luts, lin, IDX(x + RX[k], y + RY[k], width));
+                reconstruct_at(src, dst, luts, lin, table, x, y, width, height, t2, maybe,
+                               lab_px(src, luts, lin, IDX(x, y, width)), ring);
+            }
+        }
+        if (cg == 0u) continue;
+        // 2. CIELAB of rows y-1, y, y+1 over those groups, and the neighbour groups their lanes 0 and 7 read
+        // (each once per strip; converting the one pixel alone was slower, measured), or the pixels x0 - 1, x1
+        uint need = (cg | cl >> 1 | cr << 1) & ((1u << ngroups) - 1u);
+        need |= (cl & 1u ? EDGE_L : 0u) | (cr >> (ngroups - 1) & 1u ? EDGE_R : 0u);
+        for (int r = 0; r < 3; ++r) {
+            const int sl = r == 0 ? su : (r == 1 ? sm : sd), yy = y - 1 + r;
+            const uint todo = need & ~have[sl];
+            __global float *slot = slots + sl * SLOT_FLOATS;
+            for (int j = 0; j < ngroups; ++j) {
+                if (!(todo >> j & 1u)) continue;
+                const int g = x0 + j * GROUP;
+                lab_group(src, luts, lin, slot, g - x0 + 1, IDX(g, yy, width), g + GROUP < x1 ? GROUP : x1 - g);
+            }
+            if (todo & EDGE_L) put_lab(slot, 0, lab_px(src, luts, lin, IDX(x0 - 1, yy, width)));
+            if (todo & EDGE_R) put_lab(slot, x1 - x0 + 1, lab_px(src, luts, lin, IDX(x1, yy, width)));
+            have[sl] |= todo;
+        }
+        // 3. the exact ring masks, a lane per pixel; the rules where X may hold a gap
+        __global const float *u = slots + su * SLOT_FLOATS, *m = slots + sm * SLOT_FLOATS,
+                             *d = slots + sd * SLOT_FLOATS;
+        for (int j = 0; j < ngroups; ++j) {
+            if (!(cg >> j & 1u)) continue;
+            const int g = x0 + j * GROUP, c = g - x0 + 1, i = IDX(g, y, width);
+            const float8 aL = vload8(0, m + c), aA = vload8(0, m + LAB_STRIDE + c),
+                         aB = vload8(0, m + 2 * LAB_STRIDE + c);
+            int8 M = (int8)(0), S = M, F = M, B = M;
+            RING_DE2(u, -1, 1) RING_DE2(u, 0, 2) RING_DE2(u, 1, 4) RING_DE2(m, 1, 8)
+            RING_DE2(d, 1, 16) RING_DE2(d, 0, 32) RING_DE2(d, -1, 64) RING_DE2(m, -1, 128)
+            const int4 mo = M.lo | M.hi;
+            if ((mo.x | mo.y | mo.z | mo.w) == 0) continue;
+            int mb[GROUP], sb[GROUP], fb[GROUP], bb[GROUP];
+            vstore8(M, 0, mb);
+            vstore8(S, 0, sb);
+            vstore8(F, 0, fb);
+            vstore8(B, 0, bb);
+            for (int t = 0; t < GROUP; ++t) {
+                const uint maybe = (uint)mb[t];
+                if (!maybe || !(lanes[j] >> t & 1u)) continue;
+                // necessary for a rule to fire, on the ΔE masks (S within X within M): the paper's rule needs
+                // gap[X] -- exactly that when S = M, else some sub-mask of M a gap; the line-relative rule a gap
+                // within reconstruct_at's `far` (inside F); the two-pixel rule a direction k of its `line` (the
+                // one bit of `beyond` if it holds one, none if two, else one of X beyond 2 thresholds: `over`
+                // = B within `beyond`, F beyond it) with the opposite pixel B not in X (S) and two_gap_possible
+                const uint sure = (uint)sb[t], far = (uint)fb[t], over = (uint)bb[t];
+                int cand = (table[maybe] & (sure == maybe ? 1u : 2u)) != 0;
+#if EXTENDED
+                cand = cand || (table[far] & 2u) != 0;
+                const uint line = over & (over - 1u) ? 0u : (over ? over : far);
+                for (int k = 0; line >> k && !cand; ++k)
+                    if ((line >> k & 1u) && !(sure >> ((k + 4) & 7) & 1u))
+                        cand = two_gap_possible(src, raw_px(src, i + t), g + t, y, k, width, height);
+#endif
+                if (!cand) continue;
+                float3 ring[8];
+                for (int k = 0; k < 8; ++k)
+                    if (maybe >> k & 1u) ring[k] = get_lab(RY[k] < 0 ? u : (RY[k] > 0 ? d : m), c + t + RX[k]);
+                reconstruct_at(src, dst, luts, lin, table, g + t, y, width, height, t2, maybe, get_lab(m, c + t),
+                               ring);
+            }
+        }
+    }
+}
+
+// Test support (tests/test_reconstruct.py): bad[j] = how many of the GROUP pixels from j * GROUP on get a
+// CIELAB from lab_group (lanes) that differs in some bit from lab_px's (a pixel at a time); `scratch`: a slot
+// per work item.
+__kernel void reconstruct_lab_check(__global const PIXEL_T *src, __global const float *luts,
+                                    __global const float *lin, __global float *scratch, __global int *bad,
+                                    const int groups)
+{
+    __global float *slot = scratch + (size_t)get_global_id(0) * SLOT_FLOATS;
+    for (int j = get_global_id(0); j < groups; j += get_global_size(0)) {
+        lab_group(src, luts, lin, slot, 1, j * GROUP, GROUP);
+        int n = 0;
+        for (int t = 0; t < GROUP; ++t) {
+            const float3 u = get_lab(slot, 1 + t), v = lab_px(src, luts, lin, j * GROUP + t);
+            n += as_uint(u.x) != as_uint(v.x) || as_uint(u.y) != as_uint(v.y) || as_uint(u.z) != as_uint(v.z);
+        }
+        bad[j] = n;
     }
 }

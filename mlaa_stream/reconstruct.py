@@ -334,6 +334,7 @@ def _device_table() -> np.ndarray:
 
 
 SEGMENT = 64  # pixels of a row per work item (kernels/common.cl), as in the core filter's passes
+STRIP = 16  # rows per work item: each keeps the CIELAB of its last rows for the next
 
 
 def cheap_levels(threshold: float, pixel_max: float, linear_input: bool = False) -> tuple[int, int]:
@@ -344,9 +345,9 @@ def cheap_levels(threshold: float, pixel_max: float, linear_input: bool = False)
 
 
 class Reconstructor:
-    """The reconstruction pass for one frame format: programs built, tables and work buffers allocated once,
-    then `enqueue` per frame (src -> dst, laid out like the frame). Three kernels (kernels/reconstruct.cl):
-    candidates from RGB, CIELAB where candidates read it, the rules at the candidates."""
+    """The reconstruction pass for one frame format: program built, tables and scratch allocated once, then
+    `enqueue` per frame (src -> dst, laid out like the frame). One kernel (kernels/reconstruct.cl): RGB bounds
+    first, CIELAB a lane per pixel where a rule may fire, the rules where the exact ring masks allow."""
 
     def __init__(self, context: Context, fmt: FrameFormat, *, threshold: float = DEFAULT_THRESHOLD,
                  extended: bool = True, linear_input: bool = False):
@@ -360,40 +361,35 @@ class Reconstructor:
         defines = defines_for(fmt, CHEAP_BOUND=cheap_bound(threshold, linear_input), CHEAP_LEVELS=near,
                               FAR_LEVELS=far, EXTENDED=int(extended), LINEAR_INPUT=int(linear_input),
                               MAX_LINE_PIXELS=MAX_LINE_PIXELS, MIN_AIM=float(MIN_AIM),
-                              MAX_OFFSET=float(MAX_OFFSET), SEGMENT=SEGMENT,
+                              MAX_OFFSET=float(MAX_OFFSET), SEGMENT=SEGMENT, STRIP=STRIP,
                               SAMPLE_BYTES=fmt.dtype.itemsize)
-        k = context.kernel
-        self._k_candidates = k("reconstruct", "reconstruct_candidates", defines)
-        self._k_lab = k("reconstruct", "reconstruct_lab", defines)
-        self._k_rules = k("reconstruct", "reconstruct", defines)
+        self.defines = defines  # the build defines (tests build reconstruct_lab_check with them)
+        self._kernel = context.kernel("reconstruct", "reconstruct", defines)
         mf = cl.mem_flags
         self._table = cl.Buffer(context.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=_device_table())
         self._t2 = np.float32(np.float32(threshold) * np.float32(threshold))
-        # per-frame work buffers: the candidates' ring masks (1 byte a pixel), a byte per segment, CIELAB (float4)
-        self._mask = context.buffer(fmt.pixels)
-        self._global = (-(-fmt.width // SEGMENT), fmt.height)
-        self._seg = context.buffer(self._global[0] * fmt.height)  # a byte per segment: holds a candidate
-        self._lab = context.buffer(16 * fmt.pixels)
+        # a work item per SEGMENT pixels of STRIP rows, each with CIELAB scratch for 3 rows of its segment
+        self._global = (-(-fmt.width // SEGMENT), -(-fmt.height // STRIP))
+        self._scratch = context.buffer(4 * 3 * 3 * (SEGMENT + 8) * self._global[0] * self._global[1])
+        # CPU devices: a work group per row of work items (left to PoCL, this small grid became one group, one
+        # thread); other devices choose their own
+        cpu = context.device.type & cl.device_type.CPU
+        self._local = (self._global[0], 1) if cpu else None
         # integer frames: sRGB->linear per stored level, filled once on the device with common.cl's lut_read
         luts = cl.Buffer(context.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=device_luts())
         self._lin = linear_levels(context, "reconstruct", defines, fmt, luts)
-        self._last = None  # this pass's previous frame: its work buffers are reused
+        self._last = None  # this pass's previous frame: its scratch is reused
 
     def enqueue(self, queue: "cl.CommandQueue", src: "cl.Buffer", dst: "cl.Buffer", luts: "cl.Buffer",
                 wait_for: list | None = None) -> "cl.Event":
-        """Enqueue the pass on `queue`: dst = src except reconstructed pixels; returns the last kernel's event."""
+        """Enqueue the pass on `queue`: dst = src except reconstructed pixels; returns the kernel's event."""
         check_pass_buffers("reconstruct", self.fmt, src, dst)
-        need = self.fmt.nbytes
         W, H = np.int32(self.fmt.width), np.int32(self.fmt.height)
         after = list(wait_for or []) + ([self._last] if self._last is not None else [])
-        # dst = src first (a device copy, ~0.3 ms at 1080p); the rules then write changed pixels only
-        copied = cl.enqueue_copy(queue, dst, src, byte_count=need, wait_for=after)
-        cand = self._k_candidates(queue, self._global, None, src, self._mask, self._seg, self._table, W, H,
-                                  wait_for=after)
-        lab = self._k_lab(queue, self._global, None, src, self._mask, self._seg, luts, self._lin, self._lab,
-                          W, H, wait_for=[cand])
-        self._last = self._k_rules(queue, self._global, None, src, dst, luts, self._lin, self._lab, self._mask,
-                                   self._seg, self._table, W, H, self._t2, wait_for=[copied, lab])
+        # dst = src first (a device copy, ~0.3 ms at 1080p); the kernel then writes changed pixels only
+        copied = cl.enqueue_copy(queue, dst, src, byte_count=self.fmt.nbytes, wait_for=after)
+        self._last = self._kernel(queue, self._global, self._local, src, dst, luts, self._lin, self._scratch,
+                                  self._table, W, H, self._t2, wait_for=[copied])
         return self._last
 
 

@@ -81,8 +81,8 @@ def timing_frames() -> dict[str, np.ndarray]:
 
 
 def _time_frame(ctx: Context, frame: np.ndarray, luts: "cl.Buffer", runs: int, device) -> dict[str, float]:
-    """Median ms of the pass (device copy + kernels) for both rule sets, and of the core filter
-    (Filter().process: upload, kernels, download) on the same frame, after 3 warm-up runs each."""
+    """Median ms of the pass (device copy + kernel) for both rule sets, and of the core filter
+    (Filter().process: upload, kernels, download) on the same frame, after 3 warm-up runs each; and their ratios."""
     from .mlaa import Filter
     fmt = frame_format(frame)
     src = cl.Buffer(ctx.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(frame))
@@ -104,6 +104,8 @@ def _time_frame(ctx: Context, frame: np.ndarray, luts: "cl.Buffer", runs: int, d
         out["extended" if ext else "paper"] = median_ms(lambda: rec.enqueue(ctx.queue, src, dst, luts).wait())
     with Filter(device) as f:
         out["core_filter"] = median_ms(lambda: f.process(frame))
+    for rules in ("paper", "extended"):  # issue #5's budget: the pass at most half the core filter
+        out[f"{rules}_vs_core"] = round(out[rules] / out["core_filter"], 2)
     return out
 
 

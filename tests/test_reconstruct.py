@@ -10,10 +10,10 @@ import cv2
 import numpy as np
 import pytest
 
-from mlaa_stream.colour import rgb_to_lab
+from mlaa_stream.colour import device_luts, rgb_to_lab
 from mlaa_stream.formats import frame_format
-from mlaa_stream.reconstruct import (RING, Reconstructor, cheap_bound, cheap_levels, connexity_table, gap_table,
-                                     reconstruct, reconstruct_reference)
+from mlaa_stream.reconstruct import (RING, SEGMENT, Reconstructor, _device_table, cheap_bound, cheap_levels,
+                                     connexity_table, gap_table, reconstruct, reconstruct_reference)
 
 BG = (40, 90, 160)  # a non-black background
 INKS = [(250, 230, 20), (235, 235, 235), (10, 10, 10), (200, 40, 40)]
@@ -86,6 +86,50 @@ def test_cheap_levels_are_the_smallest_integers_over_the_bound():
             near, far = cheap_levels(10.0, pmax, linear)
             assert near - 1 <= bound < near, f"pmax {pmax}: expected {bound} in [{near - 1}, {near}), got {near}"
             assert far - 1 <= 2 * bound < far, f"pmax {pmax}: expected {2 * bound} in [{far - 1}, {far}), got {far}"
+
+
+def test_gap_subset_bit_is_a_pair_at_ring_distance_three():
+    # the kernel's 8-bit RGB gate (gate_rgb8) tests "some sub-mask of `maybe` is a gap" (table bit 1) as "two ring
+    # neighbours at ring distance >= 3 are in `maybe`": the same for all 256 masks
+    table = _device_table()
+    for m in range(256):
+        bits = [k for k in range(8) if m >> k & 1]
+        pair = any(min((a - b) % 8, (b - a) % 8) >= 3 for a in bits for b in bits)
+        assert bool(table[m] & 2) == pair, f"mask {m:08b}: expected table bit 1 = {pair}"
+
+
+def _all_colours(fmt: str) -> np.ndarray:
+    if fmt in ("uint8", "uint8-bgr", "uint8-linear"):
+        v = np.arange(256 ** 3, dtype=np.uint32)
+        return np.stack([v & 255, v >> 8 & 255, v >> 16], -1).astype(np.uint8).reshape(4096, 4096, 3)
+    if fmt == "gray":
+        return np.arange(256, dtype=np.uint8).reshape(8, 32)
+    rng = np.random.default_rng(11)  # uint16, rgba8: a million random pixels
+    if fmt == "uint16":
+        return rng.integers(0, 65536, (1024, 1024, 3)).astype(np.uint16)
+    return rng.integers(0, 256, (1024, 1024, 4)).astype(np.uint8)
+
+
+@pytest.mark.parametrize("fmt", ["uint8", "uint8-bgr", "uint8-linear", "gray", "uint16", "rgba8"])
+def test_lane_cielab_is_bit_identical_to_scalar(device, fmt):
+    # the kernel's CIELAB a lane per pixel (lab_group) and a pixel at a time (lab_px) give the same bits: for
+    # every 8-bit colour (RGB, BGR order, linear input), every gray level, a million 16-bit / RGBA pixels.
+    # reconstruct_at mixes the two (ring from lanes, 5x5 window a pixel at a time), as the reference does not
+    import pyopencl as cl
+    img = _all_colours(fmt)
+    rec = Reconstructor(device, frame_format(img, fmt == "uint8-bgr"), linear_input=fmt == "uint8-linear")
+    k = device.kernel("reconstruct", "reconstruct_lab_check", rec.defines)
+    mf = cl.mem_flags
+    src = cl.Buffer(device.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(img))
+    luts = cl.Buffer(device.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=device_luts())
+    groups = img.shape[0] * img.shape[1] // 8
+    bad = np.full(groups, -1, np.int32)
+    bad_buf = device.buffer(bad.nbytes)
+    items = 1024
+    scratch = device.buffer(4 * 3 * (SEGMENT + 8) * items)
+    k(device.queue, (items,), None, src, luts, rec._lin, scratch, bad_buf, np.int32(groups)).wait()
+    cl.enqueue_copy(device.queue, bad, bad_buf)
+    assert bad.min() == 0 and bad.sum() == 0, f"{fmt}: expected 0 pixels with differing CIELAB, got {bad.sum()}"
 
 
 # --- known answers --------------------------------------------------------------------------------
