@@ -4,11 +4,14 @@
 // drawn into dst: along the steps it owns, rows 0 and d get the coverage of a straight band of width
 // W = n / (n + g) (mean dash length n, gap g) from the middle of one dash to the middle of the next.
 // Orientations (ORIENTATIONS in mlaa_stream/bridge.py): pixel (i, j) of the lattice at (x, y) is
-// (x + i*ax + j*bx, y + i*ay + j*by). bridge_find finds the links of all four at once; bridge_draw runs once
-// per orientation, in order (claims, then drawing: a pixel two links of one orientation want goes to the lower
-// id, so work items never write the same pixel). A chain cut by a crossing (its last link's window held a
-// same-ink wire) is drawn on across the cut to the chain that resumes with the same period and phase up to
-// MAX_SKIP rows later, over background pixels, by the link that ends the first chain. Mirrors bridge_reference.
+// (x + i*ax + j*bx, y + i*ay + j*by). bridge_find finds the links of all four at once; bridge_claim and
+// bridge_draw run once per orientation, in order (claims, then drawing: a pixel two links of one orientation want
+// goes to the lower id, so work items never write the same pixel; the claim pass keeps each link's verdict for
+// the draw pass). A chain cut by a crossing (its last link's window held a same-ink wire) is drawn on across the
+// cut to the chain that resumes with the same period and phase up to MAX_SKIP rows later, over background pixels,
+// by the link that ends the first chain. At the frame's edge: a dash cut by it counts as long as the link's other
+// dash (the chain must go on from that one), and a chain of three links or more that starts or ends within a gap
+// of the edge draws its band on to it. Mirrors bridge_reference.
 // Defines: MAX_GAP, MAX_RUN (pixels), GAP_PER_RUN, GAP_SLACK (gap <= GAP_PER_RUN * mean dash + GAP_SLACK),
 // INK_MIN, BG_TOL, INK_TOL (max-channel, normalised), MIN_DASHES, MAX_SKIP, BLEND_LINEAR, LINEAR_INPUT (as
 // blend.cl).
@@ -102,12 +105,25 @@ inline int classify(__global const PIXEL_T *src, const lattice L, int x, int y, 
 }
 
 #define CLS(i, j) classify(src, L, x, y, (i), (j), ink, bgc)
-#define CLEAR(c) ((c) & 1)   // background (1) or another colour (3): a wire crossing this one
+#define CLEAR(c) ((c) & 1)   // background (1), another colour (3: a wire crossing this one) or OUTSIDE
+#define OUTSIDE 5
+
+// Lattice pixel (i, j) as class_of, or OUTSIDE the frame (clear in a link's window: nothing there refuses it).
+inline int classify_o(__global const PIXEL_T *src, const lattice L, int x, int y, int i, int j, float3 ink,
+                      float3 bgc)
+{
+    const int k = lat(L, x, y, i, j);
+    return k < 0 ? OUTSIDE : class_of(src, k, ink, bgc);
+}
+#define CLSO(i, j) classify_o(src, L, x, y, (i), (j), ink, bgc)
+// A window pixel: clear, noting in `reach` one outside the frame (allowed only beside a dash the frame cuts).
+#define WIN(c) ((c) == OUTSIDE ? (reach = 1) : CLEAR(c))
 
 // The link whose dash 1 ends at (x, y): 1 and *out, or 0. Rows -d .. 2d over steps a..b hold only the two
-// dashes (one ink), background (one colour) and other colours (crossing wires); a dash may run under another
-// colour and start or end under it (it then spans its first to last pixel of the ink; the window covers the
-// occluding pixels too); exactly one direction d qualifies. The predicate of
+// dashes (one ink), background (one colour), other colours (crossing wires) and, when a dash is cut by the
+// frame's edge (its ink reaches it: judged with the length cut_lengths gives it), pixels outside the frame; a
+// dash may run under another colour and start or end under it (it then spans its first to last pixel of the
+// ink; the window covers the occluding pixels too); exactly one direction d qualifies. The predicate of
 // bridge_reference's _Scan.link, evaluated in an order that rejects early: rows -1 and 1 beside dash 1
 // (both directions need them), then per direction the outer row beside dash 1, then the gap and dash 2 one
 // step at a time with all four rows.
@@ -117,49 +133,68 @@ inline int find_link(__global const PIXEL_T *src, const lattice L, int x, int y,
     if (i0 < 0 || i1 < 0) return 0;
     const float3 ink = rgb_at(src, i0), bgc = rgb_at(src, i1);
     if (diff3(ink, bgc) < INK_MIN) return 0;
-    if (!CLEAR(CLS(0, -1)) || !CLEAR(CLS(0, 1))) return 0;
-    // dash 1: ink (or another colour over it) back to the background before a0; a = its first pixel of the ink;
-    // rows -1 and 1 clear beside it
-    int a = 1, a0 = 1, last = 0;
+    int reach1 = 0, reach = 0;
+    if (!WIN(CLSO(0, -1)) || !WIN(CLSO(0, 1))) return 0;
+    // dash 1: ink (or another colour over it) back to the background before a0, or to the frame's edge (cut1:
+    // its ink must reach it); a = its first pixel of the ink; rows -1 and 1 clear beside it
+    int a = 1, a0 = 1, last = 0, cut1 = 0;
     for (int k = 1; k <= MAX_RUN; ++k) {
-        const int c = CLS(-k, 0);
+        const int c = CLSO(-k, 0);
+        if (c == OUTSIDE) {
+            if (last != 1 - k) return 0;
+            a = a0 = last; cut1 = 1;
+            break;
+        }
         if (c == 1) { a = last; a0 = 1 - k; break; }
-        if (c == 0 || !CLEAR(CLS(-k, -1)) || !CLEAR(CLS(-k, 1))) return 0;
+        if (c == 0 || !WIN(CLSO(-k, -1)) || !WIN(CLSO(-k, 1))) return 0;
         if (c == 2) last = -k;
     }
     if (a == 1) return 0;
-    int found = 0;
-    for (int t = 0; t < 2; ++t) {
-        const int d = t == 0 ? 1 : -1;
-        int ok = 1;
-        for (int i = a0; i <= 0 && ok; ++i) ok = CLEAR(CLS(i, 2 * d));
-        if (!ok) continue;
-        // the gap: rows 0, -d, d, 2d clear from step 1 until dash 2 starts in row d at s >= 2
-        int s = 0;
-        for (int k = 1; k <= MAX_GAP + 1; ++k) {
-            if (!CLEAR(CLS(k, 0)) || !CLEAR(CLS(k, -d)) || !CLEAR(CLS(k, 2 * d))) break;
-            const int c = CLS(k, d);
-            if (CLEAR(c)) continue;
-            if (k >= 2 && c == 2) s = k;
+    reach1 = reach;   // rows -1 and 1 beside dash 1 reach outside the frame
+    // the direction: rows 1 and -1 walked together from step 1. Direction d lives while row -d is clear (a window
+    // row) and row d is clear inside the frame (the gap); dash 2 starts where row d first holds the ink, at s >= 2.
+    // At most one direction qualifies (the other's row -d holds this one's dash 2), so the rest of the window is
+    // checked for that one only: half the reads of checking both.
+    int d = 0, s = 0, alive = 3, outp = 0, outm = 0;   // alive: bit 0 d = 1, bit 1 d = -1
+    for (int k = 1; k <= MAX_GAP + 1 && alive && !s; ++k) {
+        const int cp = CLSO(k, 1), cm = CLSO(k, -1);
+        outp |= cp == OUTSIDE; outm |= cm == OUTSIDE;
+        if (!CLEAR(cm)) alive &= 2;
+        if (!CLEAR(cp)) alive &= 1;
+        if ((alive & 1) && (cp == OUTSIDE || !CLEAR(cp))) {
+            if (k >= 2 && cp == 2) { d = 1; s = k; } else alive &= 2;
+        }
+        if ((alive & 2) && (cm == OUTSIDE || !CLEAR(cm))) {
+            if (k >= 2 && cm == 2) { d = -1; s = k; } else alive &= 1;
+        }
+    }
+    if (s == 0) return 0;
+    reach = reach1 | (d > 0 ? outm : outp);   // row -d over the gap
+    // row 2d beside dash 1, rows 0 and 2d over the gap
+    for (int i = a0; i <= 0; ++i) if (!WIN(CLSO(i, 2 * d))) return 0;
+    for (int k = 1; k <= s; ++k) if (!WIN(CLSO(k, 0)) || !WIN(CLSO(k, 2 * d))) return 0;
+    // dash 2: ink (or another colour over it) in row d from s to the background, or to the frame's edge (cut2:
+    // its ink reaches it); b = its last pixel of the ink; rows 0, -d, 2d clear beside it
+    int b = 0, last2 = s, cut2 = 0;
+    for (int k = s; k <= s + MAX_RUN; ++k) {
+        const int c = CLSO(k, d);
+        if (c == OUTSIDE) {
+            if (last2 == k - 1) { b = last2; cut2 = 1; }
             break;
         }
-        if (s == 0) continue;
-        // dash 2: ink (or another colour over it) in row d from s to the background; b = its last pixel of the
-        // ink; rows 0, -d, 2d clear beside it
-        int b = 0, last2 = s;
-        for (int k = s; k <= s + MAX_RUN; ++k) {
-            const int c = CLS(k, d);
-            if (c == 1 && k > s) { b = last2; break; }
-            if (c == 0 || c == 1 || !CLEAR(CLS(k, 0)) || !CLEAR(CLS(k, -d)) || !CLEAR(CLS(k, 2 * d))) break;
-            if (c == 2) last2 = k;
-        }
-        if (b == 0) continue;
-        // a wire at least 1 / (GAP_PER_RUN + 1) px wide: gap <= GAP_PER_RUN * mean dash + GAP_SLACK
-        if (2 * (s - 1) > GAP_PER_RUN * (1 - a + b - s + 1) + 2 * GAP_SLACK) continue;
-        ++found;
-        out->x = x; out->y = y; out->d = d; out->a = a; out->s = s; out->b = b;
+        if (c == 1 && k > s) { b = last2; break; }
+        if (c == 0 || c == 1 || !WIN(CLSO(k, 0)) || !WIN(CLSO(k, -d)) || !WIN(CLSO(k, 2 * d))) break;
+        if (c == 2) last2 = k;
     }
-    return found == 1;
+    if (b == 0 || (cut1 && cut2) || (reach && !cut1 && !cut2)) return 0;
+    // a dash cut by the frame counts as long as the other one when its visible part is shorter
+    int n1 = 1 - a, n2 = b - s + 1;
+    if (cut1 && n2 > n1) n1 = n2;
+    if (cut2 && n1 > n2) n2 = n1;
+    // a wire at least 1 / (GAP_PER_RUN + 1) px wide: gap <= GAP_PER_RUN * mean dash + GAP_SLACK
+    if (2 * (s - 1) > GAP_PER_RUN * (n1 + n2) + 2 * GAP_SLACK) return 0;
+    out->x = x; out->y = y; out->d = d; out->a = a; out->s = s; out->b = b;
+    return 1;
 }
 
 // Links found by bridge_find, one ushort per pixel and orientation where its `found` bit is set: bit 0 d < 0,
@@ -181,9 +216,9 @@ inline link_t unpack_link(int x, int y, uint v)
 }
 
 // Does a link end at dash 1 of `ln` (a dash before it, one lattice row to either side, past background and
-// other colours: a wire crossing the gap)?
+// other colours: a wire crossing the gap)? 1 and that link in *prev, or 0.
 inline int incoming(__global const PIXEL_T *src, __global const uchar *found, __global const ushort *links,
-                    const lattice L, const int o, const link_t ln)
+                    const lattice L, const int o, const link_t ln, link_t *prev)
 {
     const int x = ln.x, y = ln.y;
     const float3 ink = rgb_at(src, lat(L, x, y, 0, 0)), bgc = rgb_at(src, lat(L, x, y, 1, 0));
@@ -195,8 +230,9 @@ inline int incoming(__global const PIXEL_T *src, __global const uchar *found, __
             if (c == 0) break;
             const int q = lat(L, x, y, ln.a - k, j);
             if (found[q] >> o & 1u) {
-                const link_t prev = unpack_link(0, 0, links[4 * q + o]);
-                if (j + prev.d == 0 && prev.s == k) return 1;
+                *prev = unpack_link(x + (ln.a - k) * L.ax + j * L.bx, y + (ln.a - k) * L.ay + j * L.by,
+                                    links[4 * q + o]);
+                if (j + prev->d == 0 && prev->s == k) return 1;
             }
             break;
         }
@@ -264,27 +300,78 @@ inline void store_rgb(__global PIXEL_T *dst, __global const float *luts, int i, 
 #endif
 }
 
-// The link found at (x, y), if it lies in a chain: 1, the link, the steps it owns [c0, c1) and whether it ends a
-// chain of two links or more (*cut: a link ends at its dash 1, none starts at its dash 2); else 0.
-inline int chained(__global const PIXEL_T *src, __global const uchar *found, __global const ushort *links,
-                   const lattice L, const int o, int x, int y, link_t *ln, int *c0, int *c1, int *cut)
+// Is dash 1 (bit 0) / dash 2 (bit 1) of `ln` cut by the frame's edge (the step before its first / after its
+// last pixel of the ink lies outside)?
+inline int cuts(const lattice L, const link_t ln)
 {
+    return (lat(L, ln.x, ln.y, ln.a - 1, 0) < 0) | (lat(L, ln.x, ln.y, ln.b + 1, ln.d) < 0) << 1;
+}
+
+// The dash lengths `ln` is judged and drawn with (bridge_reference's cut_lengths): a dash cut by the frame's
+// edge counts as long as the other one when its visible part is shorter.
+inline void cut_lengths(const lattice L, const link_t ln, int *n1, int *n2)
+{
+    const int c = cuts(L, ln);
+    *n1 = 1 - ln.a; *n2 = ln.b - ln.s + 1;
+    if ((c & 1) && *n2 > *n1) *n1 = *n2;
+    if ((c & 2) && *n1 > *n2) *n2 = *n1;
+}
+
+// How many steps i0, i0 + di, ... of lattice row j0 lie in the frame before its edge, when that is at most the
+// link's gap g = s - 1 and they are all background, and so are those of row j1 inside the frame; else 0 (a chain
+// that starts or ends that close to the edge has its previous or next dash, g steps on in row j1, outside it).
+inline int to_edge(__global const PIXEL_T *src, const lattice L, const link_t ln, int i0, int di, int j0, int j1)
+{
+    const int x = ln.x, y = ln.y;
+    const float3 ink = rgb_at(src, lat(L, x, y, 0, 0)), bgc = rgb_at(src, lat(L, x, y, 1, 0));
+    for (int k = 0; k < ln.s; ++k) {
+        const int i = i0 + k * di, p = lat(L, x, y, i, j0), q = lat(L, x, y, i, j1);
+        if (p < 0) return k;
+        if (k == ln.s - 1 || class_of(src, p, ink, bgc) != 1 || (q >= 0 && class_of(src, q, ink, bgc) != 1)) return 0;
+    }
+    return 0;
+}
+
+// Steps [c0, c1) a link owns: from the middle of dash 1 when a link ends there (inc), else its start; to the middle
+// of dash 2 when a link starts there (out), else its end (ceil of the half-integer middles).
+inline int own_c0(const link_t ln, int inc) { return inc ? -((-ln.a) / 2) : ln.a; }
+inline int own_c1(const link_t ln, int out) { return out ? (ln.s + ln.b + 1) / 2 : ln.b + 1; }
+
+// The link found at (x, y), if it lies in a chain: 1, the link, whether a link ends at its dash 1 (*inc) and one
+// starts at its dash 2 (*out), the steps *e0 before c0 and *e1 after c1 its band goes on over to the frame's edge
+// (rows -d and 0 / d and 2d), and whether it ends a chain of two links or more (*cut: a link ends at its dash 1,
+// none starts at its dash 2); else 0. A link with a dash cut by the frame needs the chain to go on from its other
+// dash.
+inline int chained(__global const PIXEL_T *src, __global const uchar *found, __global const ushort *links,
+                   const lattice L, const int o, int x, int y, link_t *ln, int *inc, int *out, int *e0, int *e1,
+                   int *cut)
+{
+    link_t prev;
     *ln = unpack_link(x, y, links[4 * IDX(x, y, L.w) + o]);
-    const int inc = incoming(src, found, links, L, o, *ln), out = outgoing(found, L, o, *ln);
-    if (MIN_DASHES >= 3 && !inc && !out && !touches(src, L, *ln)) return 0;
-    // owned steps [c0, c1): from the middle of dash 1 when a link ends there, else its start; to the middle
-    // of dash 2 when a link starts there, else its end (ceil of the half-integer middles)
-    *c0 = inc ? -((-ln->a) / 2) : ln->a;
-    *c1 = out ? (ln->s + ln->b + 1) / 2 : ln->b + 1;
-    *cut = inc && !out;
+    *inc = incoming(src, found, links, L, o, *ln, &prev);
+    *out = outgoing(found, L, o, *ln);
+    const int cf = cuts(L, *ln);
+    if (cf ? !((cf & 1) ? *out : *inc) : (MIN_DASHES >= 3 && !*inc && !*out && !touches(src, L, *ln))) return 0;
+    // a chain of three links or more that starts (ends) within a gap of the frame's edge
+    *e0 = *e1 = 0;
+    if (*out && !*inc && !(cf & 1)) {
+        const int q = lat(L, x, y, ln->b, ln->d);
+        const link_t next = unpack_link(x + ln->b * L.ax + ln->d * L.bx, y + ln->b * L.ay + ln->d * L.by,
+                                        links[4 * q + o]);
+        if (outgoing(found, L, o, next)) *e0 = to_edge(src, L, *ln, ln->a - 1, -1, 0, -ln->d);
+    }
+    link_t pp;
+    if (*inc && !*out && !(cf & 2) && incoming(src, found, links, L, o, prev, &pp))
+        *e1 = to_edge(src, L, *ln, ln->b + 1, 1, ln->d, 2 * ln->d);
+    *cut = *inc && !*out && !(cf & 2);
     return 1;
 }
 
 // Where a chain cut by a crossing goes on (bridge_reference's _Scan.resumes): `ln` ends a chain of two links or
-// more; the first link S, m = 1..MAX_SKIP lattice rows beyond its dash 2, of the same direction and ink, that
-// starts a chain of two links or more with the same period (P2 = s + b - a, twice the distance of the dash
-// middles) and whose dash 1's middle lies m periods after the middle of dash 2 of `ln` (both within
-// max(12, P2) / 4 half steps): 1, *m, *is (the step of S's dash 1 end) and *sl; else 0.
+// more; the first link S, m = 1..MAX_SKIP lattice rows beyond its dash 2, of the same direction and ink, no dash
+// cut by the frame, that starts a chain of two links or more with the same period (P2 = s + b - a, twice the
+// distance of the dash middles) and whose dash 1's middle lies m periods after the middle of dash 2 of `ln` (both
+// within max(12, P2) / 4 half steps): 1, *m, *is (the step of S's dash 1 end) and *sl; else 0.
 inline int resumes(__global const PIXEL_T *src, __global const uchar *found, __global const ushort *links,
                    const lattice L, const int o, const link_t ln, int *m_out, int *is_out, link_t *sl)
 {
@@ -298,7 +385,8 @@ inline int resumes(__global const PIXEL_T *src, __global const uchar *found, __g
             if (i <= ln.b || k < 0 || !(found[k] >> o & 1u) || CLS(i, j) != 2 || CLS(i + 1, j) != 1) continue;
             const link_t s = unpack_link(x + i * L.ax + j * L.bx, y + i * L.ay + j * L.by, links[4 * k + o]);
             const int e1 = 2 * i + s.a - c, e2 = s.s + s.b - s.a - p2;
-            if (s.d != d || 4 * (e1 < 0 ? -e1 : e1) > q || 4 * (e2 < 0 ? -e2 : e2) > q || !outgoing(found, L, o, s))
+            if (s.d != d || 4 * (e1 < 0 ? -e1 : e1) > q || 4 * (e2 < 0 ? -e2 : e2) > q || cuts(L, s) ||
+                !outgoing(found, L, o, s))
                 continue;
             *m_out = m; *is_out = i; *sl = s;
             return 1;
@@ -317,68 +405,113 @@ inline float cut_coverage(const link_t ln, int m, float ms, int i, int r, int di
     return band_coverage(v - (float)r, hw, diagonal);
 }
 
-// Claim the pixels the link at (x, y) would write (rows 0 and d over the steps it owns, not a pixel of another
-// colour; across a cut, the background pixels the band covers): claims[k] = the lowest id (pixel index of the
-// dash end) of the links of this orientation that want k.
-inline void claim_link(__global const PIXEL_T *src, __global const uchar *found, __global const ushort *links,
-                       volatile __global uint *claims, const lattice L, const int o, int x, int y, int diagonal)
+// The claim pass's verdict on the link at (x, y), kept for the draw pass (one uint per pixel, rewritten per
+// orientation; the draw pass walks no chain): 0 when it is not drawn, else bit 0 set, bit 1 inc, bit 2 out, bits
+// 3-7 e0, bits 8-12 e1 (< MAX_GAP), and where it ends a chain cut by a crossing, bits 13-14 m (1..MAX_SKIP),
+// bits 15-23 the step `is` of S's dash 1 end (resumes: is <= (4 c + q + 4 MAX_RUN) / 8 <= 264 for MAX_GAP <= 30,
+// MAX_RUN <= 32, MAX_SKIP <= 3), bits 24-28 -a of S.
+typedef struct {
+    link_t ln;
+    int c0, c1, e0, e1, m, is, sa;
+} verdict_t;
+
+inline uint judge_link(__global const PIXEL_T *src, __global const uchar *found, __global const ushort *links,
+                       const lattice L, const int o, int x, int y)
 {
     link_t ln, sl;
-    int c0, c1, cut, m, is;
-    if (!chained(src, found, links, L, o, x, y, &ln, &c0, &c1, &cut)) return;
+    int inc, out, e0, e1, cut, m, is;
+    if (!chained(src, found, links, L, o, x, y, &ln, &inc, &out, &e0, &e1, &cut)) return 0u;
+    uint v = 1u | (uint)inc << 1 | (uint)out << 2 | (uint)e0 << 3 | (uint)e1 << 8;
+    if (cut && resumes(src, found, links, L, o, ln, &m, &is, &sl))
+        v |= (uint)m << 13 | (uint)is << 15 | (uint)(-sl.a) << 24;
+    return v;
+}
+
+inline verdict_t read_verdict(__global const ushort *links, const lattice L, const int o, int x, int y, uint v)
+{
+    verdict_t r;
+    r.ln = unpack_link(x, y, links[4 * IDX(x, y, L.w) + o]);
+    r.c0 = own_c0(r.ln, v >> 1 & 1u);
+    r.c1 = own_c1(r.ln, v >> 2 & 1u);
+    r.e0 = (int)(v >> 3 & 31u);
+    r.e1 = (int)(v >> 8 & 31u);
+    r.m = (int)(v >> 13 & 3u);
+    r.is = (int)(v >> 15 & 511u);
+    r.sa = -(int)(v >> 24 & 31u);
+    return r;
+}
+
+// Claim the pixels the link at (x, y) would write (rows 0 and d over the steps it owns, rows -d and 0 / d and 2d
+// over the steps to the frame's edge, not a pixel of another colour or outside the frame; across a cut, the
+// background pixels the band covers): claims[k] = the lowest id (pixel index of the dash end) of the links of
+// this orientation that want k. Its verdict goes to verdicts[id].
+inline void claim_link(__global const PIXEL_T *src, __global const uchar *found, __global const ushort *links,
+                       volatile __global uint *claims, __global uint *verdicts, const lattice L, const int o, int x,
+                       int y, int diagonal)
+{
     const uint id = (uint)IDX(x, y, L.w);
+    const uint v = judge_link(src, found, links, L, o, x, y);
+    verdicts[id] = v;
+    if (!v) return;
+    const verdict_t r = read_verdict(links, L, o, x, y, v);
+    const link_t ln = r.ln;
     const float3 ink = rgb_at(src, lat(L, x, y, 0, 0)), bgc = rgb_at(src, lat(L, x, y, 1, 0));
-    for (int i = c0; i < c1; ++i) {
-        const int k0 = lat(L, x, y, i, 0), k1 = lat(L, x, y, i, ln.d);
-        if (class_of(src, k0, ink, bgc) != 3) atomic_min(claims + k0, id);
-        if (class_of(src, k1, ink, bgc) != 3) atomic_min(claims + k1, id);
+    for (int i = r.c0 - r.e0; i < r.c1 + r.e1; ++i) {
+        const int r0 = i < r.c0 ? -ln.d : (i >= r.c1 ? ln.d : 0);   // the band crosses rows r0 and r0 + d here
+        const int k0 = lat(L, x, y, i, r0), k1 = lat(L, x, y, i, r0 + ln.d);
+        if (k0 >= 0 && class_of(src, k0, ink, bgc) != 3) atomic_min(claims + k0, id);
+        if (k1 >= 0 && class_of(src, k1, ink, bgc) != 3) atomic_min(claims + k1, id);
     }
-    if (!cut || !resumes(src, found, links, L, o, ln, &m, &is, &sl)) return;
-    const float ms = (float)is + (float)sl.a * 0.5f;
-    for (int i = ln.b + 1; i < is + sl.a; ++i)
-        for (int r = 0; r <= m; ++r) {
-            const int k = lat(L, x, y, i, (r + 1) * ln.d);
-            if (cut_coverage(ln, m, ms, i, r, diagonal) > 0.0f && k >= 0 && class_of(src, k, ink, bgc) == 1)
+    if (!r.m) return;
+    const float ms = (float)r.is + (float)r.sa * 0.5f;
+    for (int i = ln.b + 1; i < r.is + r.sa; ++i)
+        for (int q = 0; q <= r.m; ++q) {
+            const int k = lat(L, x, y, i, (q + 1) * ln.d);
+            if (cut_coverage(ln, r.m, ms, i, q, diagonal) > 0.0f && k >= 0 && class_of(src, k, ink, bgc) == 1)
                 atomic_min(claims + k, id);
         }
 }
 
-// Draw the link found at (x, y), if it lies in a chain: rows 0 and d over the steps it owns, and across a cut,
-// the pixels it claimed (then their claim is reset for the next orientation).
+// Draw the link found at (x, y), if the claim pass judged it drawn: rows 0 and d over the steps it owns (and on to
+// the frame's edge), and across a cut, the pixels it claimed (then their claim is reset for the next orientation).
 inline void draw_link(__global const PIXEL_T *src, __global PIXEL_T *dst, __global const float *luts,
-                      __global const uchar *found, __global const ushort *links, __global uint *claims,
+                      __global const ushort *links, __global uint *claims, __global const uint *verdicts,
                       const lattice L, const int o, int x, int y, int diagonal)
 {
-    link_t ln, sl;
-    int c0, c1, cut, m, is;
-    if (!chained(src, found, links, L, o, x, y, &ln, &c0, &c1, &cut)) return;
     const uint id = (uint)IDX(x, y, L.w);
-    const int n1 = 1 - ln.a, n2 = ln.b - ln.s + 1, g = ln.s - 1;
-    const float m1 = (float)ln.a * 0.5f, m2 = (float)(ln.s + ln.b) * 0.5f;
+    const uint v = verdicts[id];
+    if (!v) return;
+    const verdict_t r = read_verdict(links, L, o, x, y, v);
+    const link_t ln = r.ln;
+    int n1, n2;
+    cut_lengths(L, ln, &n1, &n2);   // dash middles of the lengths judged (dash 1 ends at step 0, dash 2 starts at s)
+    const int g = ln.s - 1;
+    const float m1 = (float)(1 - n1) * 0.5f, m2 = (float)(2 * ln.s + n2 - 1) * 0.5f;
     const float n = (float)(n1 + n2) * 0.5f;
     const float hw = 0.5f * n / (n + (float)g);   // W = n / (n + g) rows
     const float3 bgc = to_mix(luts, rgb_at(src, lat(L, x, y, 1, 0)));
     const float3 ink = (to_mix(luts, rgb_at(src, lat(L, x, y, 0, 0))) +
                         to_mix(luts, rgb_at(src, lat(L, x, y, ln.s, ln.d)))) * 0.5f;
-    for (int i = c0; i < c1; ++i) {
+    for (int i = r.c0 - r.e0; i < r.c1 + r.e1; ++i) {
         const float u = ((float)i - m1) / (m2 - m1);   // the band's centre, rows from row 0 toward row d
-        const int k0 = lat(L, x, y, i, 0), k1 = lat(L, x, y, i, ln.d);
-        if (claims[k0] == id) {
-            store_rgb(dst, luts, k0, bgc + band_coverage(u, hw, diagonal) * (ink - bgc));
+        const int r0 = i < r.c0 ? -1 : (i >= r.c1 ? 1 : 0);   // the band crosses rows r0 d and (r0 + 1) d here
+        const int k0 = lat(L, x, y, i, r0 * ln.d), k1 = lat(L, x, y, i, (r0 + 1) * ln.d);
+        if (k0 >= 0 && claims[k0] == id) {
+            store_rgb(dst, luts, k0, bgc + band_coverage(u - (float)r0, hw, diagonal) * (ink - bgc));
             claims[k0] = 0xffffffffu;
         }
-        if (claims[k1] == id) {
-            store_rgb(dst, luts, k1, bgc + band_coverage(u - 1.0f, hw, diagonal) * (ink - bgc));
+        if (k1 >= 0 && claims[k1] == id) {
+            store_rgb(dst, luts, k1, bgc + band_coverage(u - (float)(r0 + 1), hw, diagonal) * (ink - bgc));
             claims[k1] = 0xffffffffu;
         }
     }
-    if (!cut || !resumes(src, found, links, L, o, ln, &m, &is, &sl)) return;
-    const float ms = (float)is + (float)sl.a * 0.5f;
-    for (int i = ln.b + 1; i < is + sl.a; ++i)
-        for (int r = 0; r <= m; ++r) {
-            const int k = lat(L, x, y, i, (r + 1) * ln.d);
+    if (!r.m) return;
+    const float ms = (float)r.is + (float)r.sa * 0.5f;
+    for (int i = ln.b + 1; i < r.is + r.sa; ++i)
+        for (int q = 0; q <= r.m; ++q) {
+            const int k = lat(L, x, y, i, (q + 1) * ln.d);
             if (k >= 0 && claims[k] == id) {
-                store_rgb(dst, luts, k, bgc + cut_coverage(ln, m, ms, i, r, diagonal) * (ink - bgc));
+                store_rgb(dst, luts, k, bgc + cut_coverage(ln, r.m, ms, i, q, diagonal) * (ink - bgc));
                 claims[k] = 0xffffffffu;
             }
         }
@@ -395,9 +528,11 @@ inline lattice lattice_of(int o, int width, int height)
 
 // Pass 1, all orientations at once: bit o of found[i] set, and links[4 i + o] = the packed link, where dash 1
 // of a link of orientation o ends at pixel i (links untouched elsewhere); segments[] = the OR of found over
-// the work item's pixels. One work item per SEGMENT pixels of a row. Every candidate differs from its right neighbour (x + 1, y) by INK_MIN or more (that pixel is P(1, 0)
-// or P(0, 1) in every orientation), so a group of GROUP pixels where no sample differs from the same sample
-// of the right neighbour by FLAT_LEVELS (<= INK_MIN * PIXEL_MAX) is settled at once, and so is a pixel.
+// the work item's pixels. One work item per SEGMENT pixels of a row. Every candidate differs from its right
+// neighbour (x + 1, y) by INK_MIN or more (that pixel is P(1, 0) or P(0, 1) in every orientation), or lies in the
+// last column (P(0, 1) outside the frame), so a group of GROUP pixels short of the last column where no sample
+// differs from the same sample of the right neighbour by FLAT_LEVELS (<= INK_MIN * PIXEL_MAX) is settled at
+// once, and so is a pixel.
 // Integer frames: necessary conditions of find_link checked on stored levels first, each rounded so that it
 // never rejects a link the float test accepts (the outputs are those of find_link alone). Photographs fail
 // them almost everywhere, before any float conversion: MAY_CLEAR on the pixels beside the dash end, then the
@@ -448,29 +583,35 @@ inline int not_clear(__global const PIXEL_T *src, int k, float3 rl, float3 e, fl
     return (w.x * w.x + w.y * w.y + w.z * w.z <= SEG_L2 * SEG_L2) & (mm > (float)BG_LEVELS);
 }
 
+// not_clear for lattice pixel k, or 0 outside the frame (k < 0: clear in a link's window). Branch-free: pixel 0
+// is read in its place.
+inline int not_clear_at(__global const PIXEL_T *src, int k, float3 rl, float3 e, float ee_inv)
+{
+    return (k >= 0) & not_clear(src, k < 0 ? 0 : k, rl, e, ee_inv);
+}
+
 // Can find_link(src, L, x, y) succeed (i the dash end, r the pixel after it)? 0 only where it fails:
-//  - (1, -1), (1, 1), (0, -1), (0, 1) and (2, 0) clear: every direction d's gap starts with (1, -d), (1, d),
-//    (2, 0) clear, and rows -1 and 1 beside the dash end are clear;
-//  - dash 1, walked back along row 0, reaches a background pixel within MAX_RUN steps, and before it every
-//    (-k, 0) is no mix (the ink or another colour) and (-k, -1), (-k, 1) are clear. Before the first pixel
-//    that may be background, every pixel is before the first background pixel.
+//  - (1, -1), (1, 1), (0, -1), (0, 1) and (2, 0) clear or outside the frame: every direction d's gap starts with
+//    (1, -d), (1, d), (2, 0) clear, and rows -1 and 1 beside the dash end are clear;
+//  - dash 1, walked back along row 0, reaches a background pixel or the frame's edge within MAX_RUN steps, and
+//    before it every (-k, 0) is no mix (the ink or another colour) and (-k, -1), (-k, 1) are clear or outside.
+//    Before the first pixel that may be background, every pixel is before the first background pixel.
 inline int may_link(__global const PIXEL_T *src, const lattice L, int x, int y, int i, int r)
 {
     const int p1 = lat(L, x, y, 1, 1), p2 = lat(L, x, y, 1, -1), p3 = lat(L, x, y, 2, 0);
-    if (p1 < 0 || p2 < 0 || p3 < 0) return 0;
     const float3 rl = levels_at(src, r), e = levels_at(src, i) - rl;
     const float ee_inv = 1.0f / (e.x * e.x + e.y * e.y + e.z * e.z);   // e != 0: diff3(ink, bgc) >= INK_MIN
-    if (not_clear(src, p1, rl, e, ee_inv) | not_clear(src, p2, rl, e, ee_inv)) return 0;
-    if (not_clear(src, lat(L, x, y, 0, 1), rl, e, ee_inv) | not_clear(src, lat(L, x, y, 0, -1), rl, e, ee_inv) |
-        not_clear(src, p3, rl, e, ee_inv)) return 0;
+    if (not_clear_at(src, p1, rl, e, ee_inv) | not_clear_at(src, p2, rl, e, ee_inv)) return 0;
+    if (not_clear_at(src, lat(L, x, y, 0, 1), rl, e, ee_inv) | not_clear_at(src, lat(L, x, y, 0, -1), rl, e, ee_inv) |
+        not_clear_at(src, p3, rl, e, ee_inv)) return 0;
     __global const PIXEL_T *ink = src + (size_t)i * CHANNELS, *bg = src + (size_t)r * CHANNELS;
     for (int k = 1; k <= MAX_RUN; ++k) {
         const int p = lat(L, x, y, -k, 0);
-        if (p < 0) return 0;
+        if (p < 0) return 1;   // the frame's edge: dash 1 may be cut by it
         __global const PIXEL_T *pp = src + (size_t)p * CHANNELS;
         if (near_ptr(pp, bg, BG_LEVELS)) return 1;
         const int s1 = lat(L, x, y, -k, -1), s2 = lat(L, x, y, -k, 1);
-        if (s1 < 0 || s2 < 0 || not_clear(src, s1, rl, e, ee_inv) || not_clear(src, s2, rl, e, ee_inv) ||
+        if (not_clear_at(src, s1, rl, e, ee_inv) || not_clear_at(src, s2, rl, e, ee_inv) ||
             (!near_ptr(pp, ink, INK_UP) && not_clear(src, p, rl, e, ee_inv))) return 0;
     }
     return 0;
@@ -502,13 +643,13 @@ __kernel void bridge_find(__global const PIXEL_T *src, __global uchar *found, __
                 flat &= (u > v ? u - v : v - u) < FLAT_LEVELS;
             }
         }
-        if (flat && ge - g == GROUP) {
+        if (flat && ge - g == GROUP && ge < width) {
             vstore8((uchar8)(0), 0, found + IDX(g, y, width));
             continue;
         }
         for (int x = g; x < ge; ++x) {
             const int i = IDX(x, y, width);
-            int near = 1;
+            int near = x + 1 < width;   // the last column: (x + 1, y) is outside (a candidate in all but rows)
             for (int t = 0; t < px && x + 1 < width; ++t) {
                 const PIXEL_T u = p[(x - g) * px + t], v = p[(x - g + 1) * px + t];
                 near &= (u > v ? u - v : v - u) < FLAT_LEVELS;
@@ -516,16 +657,16 @@ __kernel void bridge_find(__global const PIXEL_T *src, __global uchar *found, __
             uchar hits = 0;
             if (!near) {
                 const float3 c = rgb_at(src, i);
-                if (diff3(c, rgb_at(src, i + 1)) >= INK_MIN) {
+                if (x + 1 == width || diff3(c, rgb_at(src, i + 1)) >= INK_MIN) {
                     for (int o = 0; o < 4; ++o) {
                         const lattice L = lattice_of(o, width, height);
                         const int q = lat(L, x, y, 0, 1), r = lat(L, x, y, 1, 0);
 #ifndef PIXEL_IS_FLOAT
                         const int qm = lat(L, x, y, 0, -1);
-                        if (q < 0 || r < 0 || qm < 0 || !MAY_CLEAR(q) || !MAY_CLEAR(qm)) continue;
+                        if (r < 0 || (q >= 0 && !MAY_CLEAR(q)) || (qm >= 0 && !MAY_CLEAR(qm))) continue;
 #endif
                         link_t ln;
-                        if (q >= 0 && r >= 0 && diff3(c, rgb_at(src, q)) >= INK_MIN &&
+                        if (r >= 0 && (q < 0 || diff3(c, rgb_at(src, q)) >= INK_MIN) &&
                             diff3(c, rgb_at(src, r)) >= INK_MIN && MAY_LINK(L, x, y, i, r) &&
                             find_link(src, L, x, y, &ln)) {
                             links[4 * i + o] = pack_link(ln);
@@ -555,8 +696,8 @@ inline int segment_has_links(__global const uchar *segments, int width, int heig
 }
 
 __kernel void bridge_claim(__global const PIXEL_T *src, __global const uchar *found, __global const ushort *links,
-                           __global const uchar *segments, volatile __global uint *claims, const int width,
-                           const int height, const int o)
+                           __global const uchar *segments, volatile __global uint *claims, __global uint *verdicts,
+                           const int width, const int height, const int o)
 {
     const int x0 = get_global_id(0) * SEGMENT, y = get_global_id(1);
     if (!segment_has_links(segments, width, height, o, x0, y)) return;
@@ -566,14 +707,14 @@ __kernel void bridge_claim(__global const PIXEL_T *src, __global const uchar *fo
     for (int x = x0; x < x1; ++x) {
         const int i = IDX(x, y, width);
         if (x + GROUP <= x1 && (edge_group(found + i) & bits) == 0) { x += GROUP - 1; continue; }
-        if (found[i] >> o & 1u) claim_link(src, found, links, claims, L, o, x, y, o >= 2);
+        if (found[i] >> o & 1u) claim_link(src, found, links, claims, verdicts, L, o, x, y, o >= 2);
     }
 }
 
 __kernel void bridge_draw(__global const PIXEL_T *src, __global PIXEL_T *dst, __global const float *luts,
                           __global const uchar *found, __global const ushort *links,
-                          __global const uchar *segments, __global uint *claims, const int width,
-                          const int height, const int o)
+                          __global const uchar *segments, __global uint *claims, __global const uint *verdicts,
+                          const int width, const int height, const int o)
 {
     const int x0 = get_global_id(0) * SEGMENT, y = get_global_id(1);
     if (!segment_has_links(segments, width, height, o, x0, y)) return;
@@ -584,6 +725,6 @@ __kernel void bridge_draw(__global const PIXEL_T *src, __global PIXEL_T *dst, __
     for (int x = x0; x < x1; ++x) {
         const int i = IDX(x, y, width);
         if (x + GROUP <= x1 && (edge_group(found + i) & bits) == 0) { x += GROUP - 1; continue; }
-        if (found[i] >> o & 1u) draw_link(src, dst, luts, found, links, claims, L, o, x, y, diagonal);
+        if (found[i] >> o & 1u) draw_link(src, dst, luts, links, claims, verdicts, L, o, x, y, diagonal);
     }
 }

@@ -4,7 +4,9 @@ A wire thinner than a pixel at a shallow angle is sampled at 1 spp as dashes: a 
 row r, a gap of background in rows r and r+d, the next run in row r+d. This pass finds such links and
 redraws the columns they span, in rows r and r+d, with the coverage a straight band of the estimated
 width passing from the middle of one dash to the middle of the next would give. Steep wires are the
-transpose, wires near 45 degrees the same on the two diagonal lattices. Detection reads the input; the
+transpose, wires near 45 degrees the same on the two diagonal lattices. A wire that crosses the frame's edge
+keeps its first and last gap: a dash cut by the edge counts as long as the next one, and a chain that starts
+or ends within a gap of the edge draws its band on to it. Detection reads the input; the
 drawing writes another frame (the MLAA output: `Filter(bridge=True)`, the default).
 """
 from __future__ import annotations
@@ -123,12 +125,18 @@ class _Scan:
             return 2
         return 0 if _diff(p, _on_mix_line(p, ink, bgc)) <= self.ink_tol else 3
 
+    def inside(self, x: int, y: int, i: int, j: int) -> bool:
+        px, py = self.at(x, y, i, j)
+        return 0 <= px < self.w and 0 <= py < self.h
+
     def link(self, x: int, y: int) -> Link | None:
         """The link whose dash 1 ends at (x, y), or None. Lattice rows -d .. 2d over the two dashes and the gap
-        hold only the two dashes (one ink colour), background (one colour) and pixels of other colours (wires
-        crossing this one); exactly one direction d qualifies. A dash may run under another colour, and may
-        start or end under it (occluded): it then runs from its first to its last pixel of the ink, and the
-        window covers the occluding pixels too."""
+        hold only the two dashes (one ink colour), background (one colour), pixels of other colours (wires
+        crossing this one) and, when a dash is cut by the frame, pixels outside it; exactly one direction d
+        qualifies. A dash may run under another colour, and may start or end under it (occluded): it then runs
+        from its first to its last pixel of the ink, and the window covers the occluding pixels too. One dash may
+        be cut by the frame's edge (its ink reaches the edge): `cut_lengths` gives the lengths the link is judged
+        and drawn with."""
         o = self.o
         ink, bgc = self.px(x, y, 0, 0), self.px(x, y, 1, 0)
         if ink is None or bgc is None or _diff(ink, bgc) < self.ink_min:
@@ -137,11 +145,20 @@ class _Scan:
         def c(i: int, j: int) -> int:
             return self.cls(x, y, i, j, ink, bgc)
 
-        def clear(i: int, j: int) -> bool:  # background, or another wire's colour
-            return c(i, j) in (1, 3)
+        def clear(i: int, j: int) -> bool:  # background, another wire's colour, or outside the frame
+            return c(i, j) in (1, 3) or not self.inside(x, y, i, j)
 
-        a0 = None  # dash 1: ink (or another colour) back from (0, 0) to a0, background before it
+        def window(a0: int, b0: int, d: int) -> list[tuple[int, int]]:  # rows -d .. 2d but the two dashes
+            return [(i, 0) for i in range(1, b0 + 1)] + [(i, d) for i in range(a0, 1)] + \
+                [(i, j) for i in range(a0, b0 + 1) for j in (-d, 2 * d)]
+
+        a0 = None  # dash 1: ink (or another colour) back from (0, 0) to a0; background (or the frame's edge) before
         for k in range(1, o.max_run + 1):
+            if not self.inside(x, y, -k, 0):  # cut by the frame: its ink must reach the edge
+                if c(1 - k, 0) != 2:
+                    return None
+                a0 = 1 - k
+                break
             ck = c(-k, 0)
             if ck == 1:
                 a0 = 1 - k
@@ -155,6 +172,8 @@ class _Scan:
         for d in (1, -1):
             s = None  # the gap in row d, then dash 2 from s
             for k in range(1, o.max_gap + 2):
+                if not self.inside(x, y, k, d):
+                    break
                 if clear(k, d):
                     continue
                 if k >= 2 and c(k, d) == 2:
@@ -162,8 +181,12 @@ class _Scan:
                 break
             if s is None:
                 continue
-            b0 = None  # dash 2: ink (or another colour) from s to b0, background after it
+            b0 = None  # dash 2: ink (or another colour) from s to b0, background (or the frame's edge) after it
             for k in range(s + 1, s + o.max_run + 1):
+                if not self.inside(x, y, k, d):
+                    if c(k - 1, d) == 2:
+                        b0 = k - 1
+                    break
                 ck = c(k, d)
                 if ck == 1:
                     b0 = k - 1
@@ -173,16 +196,37 @@ class _Scan:
             if b0 is None:
                 continue
             b = max(i for i in range(s, b0 + 1) if c(i, d) == 2)  # its last pixel of the ink
-            if 2 * (s - 1) > o.gap_per_run * ((1 - a) + (b - s + 1)) + 2 * o.gap_slack:
+            ln = Link(x, y, d, a, s, b)
+            cut = self.cut_lengths(ln)
+            if cut is None:
+                continue  # both dashes cut by the frame
+            n1, n2 = cut
+            if 2 * (s - 1) > o.gap_per_run * (n1 + n2) + 2 * o.gap_slack:
                 continue  # gap <= GAP_PER_RUN * mean dash + GAP_SLACK
-            ok = all(clear(i, 0) for i in range(1, b0 + 1)) and all(clear(i, d) for i in range(a0, 1))
-            ok = ok and all(clear(i, -d) and clear(i, 2 * d) for i in range(a0, b0 + 1))
-            if ok:
-                found.append(Link(x, y, d, a, s, b))
+            win = window(a0, b0, d)
+            # the window may reach outside the frame only beside a dash the frame cuts
+            if all(clear(i, j) for i, j in win) and \
+                    (any(self.cuts(ln)) or all(self.inside(x, y, i, j) for i, j in win)):
+                found.append(ln)
         return found[0] if len(found) == 1 else None
 
-    def incoming(self, ln: Link) -> bool:
-        """Does a link end at dash 1 of `ln` (a dash before it, one lattice row to either side)?"""
+    def cuts(self, ln: Link) -> tuple[bool, bool]:
+        """Is dash 1 / dash 2 of `ln` cut by the frame's edge (the step before its first / after its last
+        pixel of the ink lies outside the frame)?"""
+        return (not self.inside(ln.x, ln.y, ln.a - 1, 0), not self.inside(ln.x, ln.y, ln.b + 1, ln.d))
+
+    def cut_lengths(self, ln: Link) -> tuple[int, int] | None:
+        """The dash lengths (n1, n2) `ln` is judged and drawn with: a dash cut by the frame's edge is taken as
+        long as the other dash when its visible part is shorter (a straight wire's dashes differ by at most one
+        pixel); None when both are cut."""
+        n1, n2 = 1 - ln.a, ln.b - ln.s + 1
+        c1, c2 = self.cuts(ln)
+        if c1 and c2:
+            return None
+        return (max(n1, n2) if c1 else n1), (max(n1, n2) if c2 else n2)
+
+    def incoming(self, ln: Link) -> Link | None:
+        """The link that ends at dash 1 of `ln` (a dash before it, one lattice row to either side), or None."""
         o, P = self.o, self.px
         ink, bgc = P(ln.x, ln.y, 0, 0), P(ln.x, ln.y, 1, 0)
         for j in (-1, 1):
@@ -195,9 +239,9 @@ class _Scan:
                 ex, ey = self.at(ln.x, ln.y, ln.a - k, j)
                 prev = self.link(ex, ey)
                 if prev is not None and j + prev.d == 0 and prev.s == k:
-                    return True
+                    return prev
                 break
-        return False
+        return None
 
     def outgoing(self, ln: Link) -> bool:
         """Does a link start at the end of dash 2 of `ln`?"""
@@ -225,31 +269,62 @@ class _Scan:
         res[ys, xs] = np.abs(self.rgb[ys, xs] - self.rgb[yt, xt]).max(-1)
         return res
 
-    def links(self) -> list[tuple[Link, int, int, tuple[int, int, Link] | None]]:
-        """Every drawn link with the steps it owns along the lattice row, [c0, c1), and where a chain it ends
-        goes on (`resumes`)."""
+    def to_edge(self, ln: Link, i0: int, di: int, j0: int, j1: int) -> int:
+        """How many steps i0, i0 + di, ... of lattice row j0 lie in the frame before its edge, when that is at
+        most the link's gap g = s - 1 and they are all background, and so are those of row j1 inside the frame;
+        else 0. A chain that starts (ends) that close to the edge has its previous (next) dash, g steps on in row
+        j1, outside the frame."""
+        ink, bgc = self.px(ln.x, ln.y, 0, 0), self.px(ln.x, ln.y, 1, 0)
+        for k in range(ln.s):
+            i = i0 + k * di
+            if not self.inside(ln.x, ln.y, i, j0):
+                return k
+            if k == ln.s - 1 or self.cls(ln.x, ln.y, i, j0, ink, bgc) != 1 or \
+                    (self.inside(ln.x, ln.y, i, j1) and self.cls(ln.x, ln.y, i, j1, ink, bgc) != 1):
+                return 0
+        return 0
+
+    def links(self) -> list[tuple[Link, int, int, int, int, tuple[int, int, Link] | None]]:
+        """Every drawn link with the steps it owns along the lattice row, [c0, c1), the steps e0 before c0 and
+        e1 after c1 it extends the band over to the frame's edge (the first or last link of a chain of three
+        links or more, `to_edge`), and where a chain it ends goes on (`resumes`). A link with a dash cut by the
+        frame is drawn only where the chain goes on from its other dash."""
         o = self.o
         res = []
-        # candidates: a dash end differs from the pixel after it and from the one beside it
-        cand = (self._step_diff(self.ax, self.ay) >= self.ink_min) & (self._step_diff(self.bx, self.by) >= self.ink_min)
+        # candidates: a dash end differs from the pixel after it and from the one beside it (or that one lies
+        # outside the frame)
+        beside = self._step_diff(self.bx, self.by)
+        cand = (self._step_diff(self.ax, self.ay) >= self.ink_min) & ((beside >= self.ink_min) | (beside < 0))
         for y, x in zip(*np.nonzero(cand)):
             ln = self.link(int(x), int(y))
             if ln is None:
                 continue
-            inc, out = self.incoming(ln), self.outgoing(ln)
-            if o.min_dashes >= 3 and not (inc or out or self.touches(ln)):
+            prev = self.incoming(ln)
+            inc, out = prev is not None, self.outgoing(ln)
+            cut1, cut2 = self.cuts(ln)
+            if cut1 or cut2:
+                if not (out if cut1 else inc):
+                    continue  # a dash cut by the frame: the chain must go on from the other dash
+            elif o.min_dashes >= 3 and not (inc or out or self.touches(ln)):
                 continue
             c0 = math.ceil(ln.a / 2) if inc else ln.a  # the dash middles a/2 and (s + b)/2, rounded up
             c1 = math.ceil((ln.s + ln.b) / 2) if out else ln.b + 1
-            res.append((ln, c0, c1, self.resumes(ln) if inc and not out else None))
+            # a chain of three links or more that starts (ends) within a gap of the frame's edge: the band goes on
+            # to the edge in rows 0 and -d (d and 2d)
+            e0 = e1 = 0
+            if out and not inc and not cut1 and self.outgoing(self.link(*self.at(ln.x, ln.y, ln.b, ln.d))):
+                e0 = self.to_edge(ln, ln.a - 1, -1, 0, -ln.d)
+            if inc and not out and not cut2 and self.incoming(prev) is not None:
+                e1 = self.to_edge(ln, ln.b + 1, 1, ln.d, 2 * ln.d)
+            res.append((ln, c0, c1, e0, e1, self.resumes(ln) if inc and not out and not cut2 else None))
         return res
 
     def resumes(self, ln: Link) -> tuple[int, int, Link] | None:
         """Where a chain cut by a crossing goes on: `ln` ends a chain of two links or more; the first link S,
-        m = 1..MAX_SKIP lattice rows beyond its dash 2, of the same direction and ink, that starts a chain
-        of two links or more with the same period (twice the distance of the dash middles, P2 = s + b - a)
-        and whose dash 1's middle lies m periods after the middle of dash 2 of `ln` (both within
-        max(12, P2) / 4 half steps): (m, the step of S's dash 1 end, S), or None."""
+        m = 1..MAX_SKIP lattice rows beyond its dash 2, of the same direction and ink, no dash cut by the
+        frame, that starts a chain of two links or more with the same period (twice the distance of the dash
+        middles, P2 = s + b - a) and whose dash 1's middle lies m periods after the middle of dash 2 of `ln`
+        (both within max(12, P2) / 4 half steps): (m, the step of S's dash 1 end, S), or None."""
         P, d = self.px, ln.d
         ink, bgc = P(ln.x, ln.y, 0, 0), P(ln.x, ln.y, 1, 0)
         p2 = ln.s + ln.b - ln.a
@@ -263,7 +338,7 @@ class _Scan:
                 sx, sy = self.at(ln.x, ln.y, i, (m + 1) * d)
                 s = self.link(sx, sy)
                 if s is None or s.d != d or 4 * abs(2 * i + s.a - c) > q or 4 * abs(s.s + s.b - s.a - p2) > q \
-                        or not self.outgoing(s):
+                        or any(self.cuts(s)) or not self.outgoing(s):
                     continue
                 return m, i, s
         return None
@@ -300,10 +375,10 @@ def _draw(scan: _Scan, lin: np.ndarray, diagonal: bool) -> dict[tuple[int, int],
     kernel's atomic_min settles it."""
     f32 = np.float32
     res: dict[tuple[int, int], tuple[int, np.ndarray]] = {}
-    for ln, c0, c1, on in scan.links():
+    for ln, c0, c1, e0, e1, on in scan.links():
         cid = ln.y * scan.w + ln.x
-        n1, n2, g = 1 - ln.a, ln.b - ln.s + 1, ln.s - 1
-        m1, m2 = f32(ln.a) * f32(0.5), f32(ln.s + ln.b) * f32(0.5)  # dash middles (dash 1 ends at 0)
+        (n1, n2), g = scan.cut_lengths(ln), ln.s - 1  # a dash cut by the frame: as long as the other one
+        m1, m2 = f32(1 - n1) * f32(0.5), f32(2 * ln.s + n2 - 1) * f32(0.5)  # dash middles (dash 1 ends at 0)
         n = f32(n1 + n2) * f32(0.5)
         half = f32(0.5) * n / (n + f32(g))  # the band's half thickness: W = n / (n + g) rows
         bx, by = scan.at(ln.x, ln.y, 1, 0)
@@ -311,10 +386,11 @@ def _draw(scan: _Scan, lin: np.ndarray, diagonal: bool) -> dict[tuple[int, int],
         bgc = lin[by, bx]
         ink = (lin[ln.y, ln.x] + lin[sy, sx]) * f32(0.5)
         raw_ink, raw_bgc = scan.rgb[ln.y, ln.x], scan.rgb[by, bx]
-        for i in range(c0, c1):
+        for i in range(c0 - e0, c1 + e1):
             u = (f32(i) - m1) / (m2 - m1)  # the band's centre, in rows from row 0 toward row d
-            for j, delta in ((0, u), (ln.d, u - f32(1))):
-                if scan.cls(ln.x, ln.y, i, j, raw_ink, raw_bgc) == 3:
+            j0 = -ln.d if i < c0 else (ln.d if i >= c1 else 0)  # the two rows the band crosses at step i
+            for j, delta in ((j0, u - f32(j0 * ln.d)), (j0 + ln.d, u - f32(j0 * ln.d + 1))):
+                if not scan.inside(ln.x, ln.y, i, j) or scan.cls(ln.x, ln.y, i, j, raw_ink, raw_bgc) == 3:
                     continue
                 px, py = scan.at(ln.x, ln.y, i, j)
                 if (px, py) not in res or cid < res[(px, py)][0]:
@@ -422,18 +498,20 @@ class Bridger:
         self._find = context.kernel("bridge", "bridge_find", defines)
         self._claim = context.kernel("bridge", "bridge_claim", defines)
         self._draw = context.kernel("bridge", "bridge_draw", defines)
-        # per pixel: 1 byte, bit o = "a link of orientation o ends here", 4 packed links (2 bytes each), and the
-        # claim of the link that draws it (all ones when none: filled once, each draw pass resets what it used)
+        # per pixel: 1 byte, bit o = "a link of orientation o ends here", 4 packed links (2 bytes each), the
+        # claim of the link that draws it (all ones when none: filled once, each draw pass resets what it used),
+        # and the claim pass's verdict on the link ending here (read by the draw pass of the same orientation)
         self._found = context.buffer(fmt.pixels)
         self._links = context.buffer(8 * fmt.pixels)
         self._claims = context.buffer(4 * fmt.pixels)
+        self._verdicts = context.buffer(4 * fmt.pixels)
         cl.enqueue_fill_buffer(context.queue, self._claims, np.uint32(0xFFFFFFFF), 0, 4 * fmt.pixels).wait()
         self._global = (-(-fmt.width // SEGMENT), fmt.height)
         self._segments = context.buffer(self._global[0] * self._global[1])  # per work item: orientations found
         self._last = None  # this pass's previous frame: its work buffers are reused
 
     def device_bytes(self) -> int:
-        return self._found.size + self._links.size + self._claims.size + self._segments.size
+        return self._found.size + self._links.size + self._claims.size + self._verdicts.size + self._segments.size
 
     def enqueue(self, queue: "cl.CommandQueue", src: "cl.Buffer", dst: "cl.Buffer", luts: "cl.Buffer",
                 wait_for: list | None = None, events: dict | None = None) -> "cl.Event":
@@ -449,9 +527,10 @@ class Bridger:
         ev = [rec["bridge_find"]]
         for o in range(len(ORIENTATIONS)):  # in order: a later orientation's pixels overwrite an earlier's
             rec[f"bridge_claim{o}"] = self._claim(queue, self._global, None, src, self._found, self._links,
-                                                  self._segments, self._claims, W, H, np.int32(o), wait_for=ev)
+                                                  self._segments, self._claims, self._verdicts, W, H, np.int32(o),
+                                                  wait_for=ev)
             rec[f"bridge_draw{o}"] = self._draw(queue, self._global, None, src, dst, luts, self._found, self._links,
-                                                self._segments, self._claims, W, H, np.int32(o),
+                                                self._segments, self._claims, self._verdicts, W, H, np.int32(o),
                                                 wait_for=[rec[f"bridge_claim{o}"]])
             ev = [rec[f"bridge_draw{o}"]]
         self._last = ev[0]

@@ -170,6 +170,67 @@ def test_chain_cut_by_a_crossing_of_the_same_ink_goes_on_across_it(device):
     assert (out != cut).any(-1).sum() >= 8
 
 
+def band_cover(img_shape, rows_cols, m1: float, m2: float, r: int, W: float) -> np.ndarray:
+    """The band model on rows r and r + 1: coverage of pixel (row, c) by a band of thickness W whose centre goes
+    from column m1 (row r) to column m2 (row r + 1), extended straight beyond them."""
+    cov = np.zeros(img_shape[:2])
+    for row, c in rows_cols:
+        u = (c - m1) / (m2 - m1)
+        lo = row - r - 0.5
+        cov[row, c] = max(0.0, min(u + W / 2, lo + 1) - max(u - W / 2, lo))
+    return cov
+
+
+def test_wire_entering_at_the_frame_edge_gets_its_first_gap_bridged(device):
+    # a shallow wire cut by the left edge: its first dash shows 2 of its 3 pixels. The cut dash is taken as long
+    # as the next one (3 px: middle at column 0), so the first gap carries the band of W = 3/6 from column 0
+    # (row 4) to column 6 (row 5), exactly as an inner gap does; mirrored, the last gap at the right edge
+    n, g = 3, 3
+    img = canvas(16, 40)
+    for k in range(5):
+        img[4 + k, max(0, -1 + k * (n + g)):-1 + k * (n + g) + n] = INK
+    out = both(img)
+    W = n / (n + g)
+    cov = coverage_of(out)
+    want = band_cover(img.shape, [(r, c) for r in (4, 5) for c in range(2, 5)], 0.0, 6.0, 4, W)
+    np.testing.assert_allclose(cov[4:6, 2:5], want[4:6, 2:5], atol=0.01)
+    np.testing.assert_allclose(cov[4:6, 2:5].sum(0), W, atol=0.01)
+    mirror = both(np.ascontiguousarray(img[::-1, ::-1]))
+    np.testing.assert_array_equal(mirror[::-1, ::-1], out)
+    steep = both(np.ascontiguousarray(img.transpose(1, 0, 2)))  # a steep wire cut by the top edge
+    np.testing.assert_array_equal(steep.transpose(1, 0, 2), out)
+    # a lone pair of dashes at the edge (no chain beyond the cut link) stays as it is
+    pair = canvas(16, 40)
+    pair[4, 0:2] = INK
+    pair[5, 5:8] = INK
+    np.testing.assert_array_equal(both(pair), pair)
+
+
+def test_wire_entering_in_a_gap_has_its_band_drawn_to_the_frame_edge(device):
+    # the wire enters the frame in a gap: its first dash (columns 2-4 of row 4) is whole and the dash before it
+    # (row 3) lies outside. Within one gap of the edge, a chain of three links or more draws its first link's
+    # band on to the edge, in rows 3 and 4; a chain starting farther in than its gap does not
+    n, g = 3, 3
+    for x0, extends in ((2, True), (3, True), (4, False)):
+        img = canvas(16, 40)
+        dashes = dash_chain(img, x0, 4, n, g, 5)
+        out = both(img)
+        cov = coverage_of(out)
+        (r, a, e), (_, s, b) = dashes[0], dashes[1]
+        want = band_cover(img.shape, [(rr, c) for rr in (r - 1, r) for c in range(a)], (a + e) / 2, (s + b) / 2, r,
+                          n / (n + g))
+        if extends:
+            np.testing.assert_allclose(cov[r - 1:r + 1, :a], want[r - 1:r + 1, :a], atol=0.01)
+            assert cov[r - 1:r + 1, :a].sum(0).min() > 0.2
+        else:
+            np.testing.assert_array_equal(out[r - 1:r + 1, :a], img[r - 1:r + 1, :a])
+    # a chain of two links (three dashes) is not enough to extend
+    img = canvas(16, 40)
+    dashes = dash_chain(img, 2, 4, n, g, 3)
+    out = both(img)
+    np.testing.assert_array_equal(out[:, :2], img[:, :2])
+
+
 def test_ink_colour_and_channels(device):
     img = canvas()
     dash_chain(img, 2, 4, 3, 4, 6)
@@ -235,6 +296,32 @@ def test_free_text_is_never_bridged_across_glyphs(device):
             near |= np.roll(np.roll(ink, dy, 0), dx, 1)
     assert not (changed & ~near).any()
     assert changed.sum() <= 0.005 * changed.size
+
+
+def test_text_cut_by_the_frame_edge_is_untouched(device):
+    # Glyphs cut by all four edges of the frame (free text, 6-12 px, shifted past the edges, and UI boxes cropped
+    # through their text): their clipped strokes are short runs that reach the edge; the cut-dash and to-the-edge
+    # rules must not link them (the chain must go on from the dash the frame does not cut; three links or more
+    # to draw on to the edge). So the frame's edge makes the pass draw nothing that it does not draw in the same
+    # frame given an 8-px margin of background (where no stroke reaches the edge; thin strokes of small glyphs
+    # may be bridged there, as in free text above).
+    frames = []
+    for size, txt in ((7.0, "Settings mnw Il1 -=- e"), (9.0, "Cancel OK @% jumps"), (12.0, "Wavy //\\\\ 7VAW kxz"),
+                      (8.0, "Tyvwxz ZY7 /// <>"), (6.0, "lazy dogs 4567")):
+        for y0, x0 in ((size * 0.5, -1.3), (size * 0.9, -3.0), (size * 0.7, -2.2)):
+            img = render_1spp([Layer(text_polygons(txt, x0, y0, size), INK)], 96, int(size * 2) + 4)
+            frames += [img, np.ascontiguousarray(img[::-1, ::-1]), np.ascontiguousarray(img.transpose(1, 0, 2))]
+    layers, _ = _ui_layers(160, 120, np.random.default_rng(3), False)
+    ui = encode8(render(layers, 160, 120, 1))
+    frames += [np.ascontiguousarray(ui[t:120 - b, l:160 - r]) for t, l, b, r in ((5, 7, 0, 0), (0, 0, 11, 3))]
+    m = 8
+    for img in frames:
+        out = both(img)
+        padded = canvas(img.shape[0] + 2 * m, img.shape[1] + 2 * m)
+        padded[m:-m, m:-m] = img
+        inner = bridge_reference(padded)[m:-m, m:-m]
+        changed, changed_inner = (out != img).any(-1), (inner != img).any(-1)
+        assert not (changed & ~changed_inner).any(), f"{img.shape}: {np.argwhere(changed & ~changed_inner)[:4]}"
 
 
 # --- kernel vs reference on seeded random frames ----------------------------------------------------
