@@ -383,8 +383,10 @@ class OverlayRenderer:
         self._bufs: dict[str, tuple[object, int]] = {}
         self._inputs: list[tuple[np.ndarray, object]] = []
         self._args: dict[str, list] = {}   # per kernel: the arguments set last (_set_args)
-        self._tables_cache: tuple | None = None   # (key, LineTables, pcol buffer, polys buffer)
-        self._lines_cache: tuple | None = None    # (key, line_i buffer, line_f buffer, segments)
+        # (key, LineTables, pcol buffer, polys buffer, pcol array the buffer may wrap)
+        self._tables_cache: tuple | None = None
+        # (key, line_i buffer, line_f buffer, segments, (line_i, line_f, LineTables) kept alive)
+        self._lines_cache: tuple | None = None
 
     @property
     def device_name(self) -> str:
