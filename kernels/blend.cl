@@ -29,9 +29,69 @@ inline float4 from_mix_space(__global const float *luts, float4 c)
 #define EDGE_BOTTOM 1
 #define EDGE_RIGHT 2
 
+// Grain and fine texture (film grain, sensor noise) are not jaggies: a pixel whose 3x3 window holds only
+// pixels that differ from at least GRAIN_MIN of their 8 neighbours, by GRAIN_STEP / 255 of full scale or more
+// in some colour channel, keeps its colour (beyond the seeds; mlaa_stream.mlaa.GRAIN_STEP, the numpy
+// reference is reference.grain_mask). Neighbours and window are clamped at the frame's edge.
+#ifndef GRAIN_GUARD
+#define GRAIN_GUARD 1
+#endif
+#ifndef GRAIN_STEP
+#define GRAIN_STEP 12
+#endif
+#ifndef GRAIN_MIN
+#define GRAIN_MIN 5
+#endif
+#ifdef PIXEL_IS_FLOAT
+typedef float grain_t;
+#define GRAIN_LIMIT ((float)GRAIN_STEP / 255.0f)
+#else
+typedef int grain_t;
+#define GRAIN_LIMIT ((GRAIN_STEP * (int)PIXEL_MAX + 254) / 255)   // whole levels, rounded up
+#endif
+#define GRAIN_CH (CHANNELS < 3 ? 1 : 3)
+
+inline int grain_differs(__global const PIXEL_T *src, int i, int j)
+{
+    __global const PIXEL_T *a = src + (size_t)i * CHANNELS, *b = src + (size_t)j * CHANNELS;
+    for (int c = 0; c < GRAIN_CH; ++c) {
+        const grain_t u = a[c], v = b[c];
+        if ((u > v ? u - v : v - u) >= GRAIN_LIMIT) return 1;
+    }
+    return 0;
+}
+
+inline int clampi(int v, int hi) { return v < 0 ? 0 : (v > hi ? hi : v); }
+
+// At least GRAIN_MIN of the 8 neighbours of (x, y) differ (stops as soon as the count is settled).
+inline int busy_px(__global const PIXEL_T *src, int x, int y, int width, int height)
+{
+    const int i = IDX(x, y, width);
+    int n = 0, left = 8;
+    for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+            if (!dx && !dy) continue;
+            n += grain_differs(src, i, IDX(clampi(x + dx, width - 1), clampi(y + dy, height - 1), width));
+            --left;
+            if (n >= GRAIN_MIN) return 1;
+            if (n + left < GRAIN_MIN) return 0;
+        }
+    return 0;
+}
+
+inline int in_grain(__global const PIXEL_T *src, int x, int y, int width, int height)
+{
+    if (!busy_px(src, x, y, width, height)) return 0;   // the pixel itself first: most edges stop here
+    for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx)
+            if ((dx || dy) && !busy_px(src, clampi(x + dx, width - 1), clampi(y + dy, height - 1), width, height))
+                return 0;
+    return 1;
+}
+
 inline void blend_pixel(__global const PIXEL_T *src, __global const uchar *edges,
                         __global const ushort *weights, __global const float *luts,
-                        __global PIXEL_T *dst, int x, int y, int width)
+                        __global PIXEL_T *dst, int x, int y, int width, int height)
 {
     const int i = IDX(x, y, width);
     const uchar e = edges[i];
@@ -42,6 +102,9 @@ inline void blend_pixel(__global const PIXEL_T *src, __global const uchar *edges
     float4 w = (float4)(top ? w16.x : 0, (e & EDGE_BOTTOM) ? w16.y : 0,
                         left ? w16.z : 0, (e & EDGE_RIGHT) ? w16.w : 0) * (1.0f / 65535.0f);
     if (w.x == 0.0f && w.y == 0.0f && w.z == 0.0f && w.w == 0.0f) return;
+#if GRAIN_GUARD
+    if (in_grain(src, x, y, width, height)) return;
+#endif
     float4 c = load_px(src, i);
     float4 m = to_mix_space(luts, c), acc = (float4)(0.0f);
     if (w.x > 0.0f) acc += w.x * w.x * (to_mix_space(luts, load_px(src, i - width)) - m);
@@ -69,7 +132,7 @@ __kernel void blend_neighbours(__global const PIXEL_T *src, __global const uchar
             int from_left = x > 0 && (edges[i - 1] & EDGE_RIGHT);
             if ((own | above) == 0 && !from_left) { x += GROUP; continue; }
         }
-        blend_pixel(src, edges, weights, luts, dst, x, y, width);
+        blend_pixel(src, edges, weights, luts, dst, x, y, width, height);
         ++x;
     }
 }

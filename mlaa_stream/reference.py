@@ -235,9 +235,38 @@ def weights_reference(edges: np.ndarray, hdist: np.ndarray, vdist: np.ndarray,
     return out
 
 
+def grain_mask(frame: np.ndarray) -> np.ndarray:
+    """kernels/blend.cl's in_grain for every pixel: its 3x3 window (clamped at the frame's edge) holds only
+    pixels that differ from at least GRAIN_MIN of their 8 neighbours (clamped), by GRAIN_STEP / 255 of full
+    scale or more in some colour channel (stored values; integer frames in whole levels)."""
+    from .mlaa import GRAIN_MIN, GRAIN_STEP
+    f = frame if frame.ndim == 3 else frame[..., None]
+    f = f[..., :3] if f.shape[2] >= 3 else f[..., :1]
+    if f.dtype.kind in "ui":
+        x = f.astype(np.int64)
+        lim = -(-GRAIN_STEP * int(np.iinfo(f.dtype).max) // 255)
+    else:
+        x = f.astype(np.float32)
+        lim = np.float32(GRAIN_STEP) / np.float32(255.0)
+    h, w = x.shape[:2]
+    pad = np.pad(x, ((1, 1), (1, 1), (0, 0)), mode="edge")
+    count = np.zeros((h, w), np.int32)
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            if dx or dy:
+                count += (np.abs(pad[1 + dy:1 + dy + h, 1 + dx:1 + dx + w] - x) >= lim).any(-1)
+    busy = np.pad(count >= GRAIN_MIN, 1, mode="edge")
+    out = np.ones((h, w), bool)
+    for dy in range(3):
+        for dx in range(3):
+            out &= busy[dy:dy + h, dx:dx + w]
+    return out
+
+
 def blend_reference(frame: np.ndarray, weights: np.ndarray, linear: bool = True,
-                    linear_input: bool = False, bgr: bool = False) -> np.ndarray:
-    """out = c + sum w_k^2 (n_k - c) / sum w_k over the four neighbours (seed 000 §3.5)."""
+                    linear_input: bool = False, bgr: bool = False, grain_guard: bool = True) -> np.ndarray:
+    """out = c + sum w_k^2 (n_k - c) / sum w_k over the four neighbours (seed 000 §3.5); pixels in grain
+    (grain_mask) keep their colour."""
     rgb, alpha = normalised_rgb(frame, False)  # channel order does not matter for mixing
     decode = linear and not linear_input
     m = srgb_to_linear(rgb) if decode else rgb
@@ -247,7 +276,11 @@ def blend_reference(frame: np.ndarray, weights: np.ndarray, linear: bool = True,
     total = weights.sum(-1)[..., None]
     out = m + np.divide(acc, total, out=np.zeros_like(m), where=total > 0)
     out = linear_to_srgb(out) if decode else out
-    return _to_dtype(out, alpha, frame)
+    res = _to_dtype(out, alpha, frame)
+    if grain_guard:
+        keep = grain_mask(frame)
+        res[keep] = frame[keep]
+    return res
 
 
 def _to_dtype(rgb: np.ndarray, alpha: np.ndarray | None, like: np.ndarray) -> np.ndarray:
@@ -268,9 +301,10 @@ def _to_dtype(rgb: np.ndarray, alpha: np.ndarray | None, like: np.ndarray) -> np
 def mlaa_reference(frame: np.ndarray, threshold: float | None = None, metric: str = "lab",
                    linear: bool = True, bgr: bool = False, linear_input: bool = False,
                    rounding: float = 0.0, blend_u: bool = True, ramp: float = 0.35,
-                   short_corner: float = SHORT_CORNER, aa_guard: bool = True) -> np.ndarray:
+                   short_corner: float = SHORT_CORNER, aa_guard: bool = True,
+                   grain_guard: bool = True) -> np.ndarray:
     """The whole spatial filter, pass after pass (without the bridging pass: mlaa_stream.bridge.bridge_reference)."""
     e = edges_reference(frame, threshold, metric, bgr, linear_input, ramp, aa_guard)
     hd, vd = distances_reference(e)
     wts = weights_reference(e, hd, vd, rounding, blend_u, frame, short_corner)
-    return blend_reference(frame, wts, linear, linear_input, bgr)
+    return blend_reference(frame, wts, linear, linear_input, bgr, grain_guard)

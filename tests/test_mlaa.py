@@ -351,3 +351,68 @@ def test_cheap_rgb_bound_never_hides_a_lab_edge():
     b = np.clip(a + (rng.random((200000, 3)) - 0.5) * rng.choice([0.002, 0.02, 0.1], (200000, 1)), 0, 1)
     de = np.linalg.norm(rgb_to_lab(a) - rgb_to_lab(b), axis=-1)
     assert (de <= LAB_LIPSCHITZ * np.abs(a - b).max(-1) + 1e-9).all()
+
+
+# ---- grain guard (kernels/blend.cl in_grain, reference.grain_mask) ----------------------------------------
+
+def grainy(seed: int, dtype=np.uint8, channels: int = 3) -> np.ndarray:
+    """blocky() with a 20x24 patch of per-pixel grain (mid grey +-40 levels per channel) across its edges."""
+    img = blocky(seed, channels=channels).astype(np.int64)
+    rng = np.random.default_rng(seed)
+    img[14:34, 20:44, :3] = 128 + rng.integers(-40, 41, (20, 24, min(channels, 3)))
+    img = img.astype(np.uint8)
+    if dtype == np.uint16:
+        return img.astype(np.uint16) * 257
+    if dtype == np.float32:
+        return img.astype(np.float32) / 255.0
+    return img
+
+
+def test_grain_mask_known_answers():
+    from mlaa_stream.reference import grain_mask
+    rng = np.random.default_rng(3)
+    flat = np.full((20, 24, 3), 90, np.uint8)
+    assert not grain_mask(flat).any()
+    checker = ((np.indices((20, 24)).sum(0) % 2) * 255).astype(np.uint8)   # 4 neighbours differ, 4 do not
+    assert not grain_mask(checker).any()
+    line = flat.copy()
+    line[10, :] = 250                                                      # a 1-px line: 3 neighbours at most
+    assert not grain_mask(line).any()
+    noise = (128 + rng.integers(-60, 61, (20, 24, 3))).astype(np.uint8)     # grain: almost every pixel
+    assert grain_mask(noise).mean() > 0.95
+    # 11 levels do not count, 12 do (GRAIN_STEP): a checker of +-6 around grey in every channel is not grain
+    soft = (np.indices((20, 24)).sum(0) % 2 * 11 + 100).astype(np.uint8)
+    rnd = rng.integers(0, 2, (20, 24)).astype(np.uint8)
+    assert not grain_mask(soft).any()
+    assert grain_mask(rnd * 12 + 100).sum() > grain_mask(rnd * 11 + 100).sum() == 0
+
+
+def test_grain_is_left_untouched():
+    """Per-pixel grain over a whole frame: the filter returns it unchanged; without the guard it would not."""
+    img = (128 + np.random.default_rng(8).integers(-40, 41, (48, 64, 3))).astype(np.uint8)
+    with Filter(bridge=False) as f:
+        np.testing.assert_array_equal(f.process(img), img)
+    with Filter(bridge=False, grain_guard=False) as f:
+        assert (f.process(img) != img).any(-1).mean() > 0.02
+
+
+@pytest.mark.parametrize("dtype,channels", [(np.uint8, 3), (np.uint16, 3), (np.float32, 3), (np.uint8, 1),
+                                            (np.uint8, 4)])
+def test_grain_guard_matches_reference(dtype, channels):
+    """A render with a grain patch: kernel against mlaa_reference (<= 1 level, as the other formats); the guard
+    keeps the patch and the reference without it would have changed pixels there."""
+    from mlaa_stream.reference import grain_mask
+    img = grainy(21, dtype, channels)
+    if channels == 1:
+        img = img[..., 0]
+    with Filter(bridge=False) as f:
+        got = f.process(img)
+    want = mlaa_reference(img)
+    scale = {np.uint8: 1.0, np.uint16: 1 / 257.0, np.float32: 255.0}[dtype]
+    assert np.abs(got.astype(np.float64) - want.astype(np.float64)).max() * scale <= 1.0 + 1e-6
+    keep = grain_mask(img)
+    assert keep.sum() > 100
+    np.testing.assert_array_equal(got[keep], img[keep])
+    unguarded = mlaa_reference(img, grain_guard=False)
+    assert (unguarded[keep] != img[keep]).any()
+    assert (got != img).any()   # the blocks' edges outside the patch are still antialiased
