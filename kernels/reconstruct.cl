@@ -25,6 +25,7 @@
 //   MAX_LINE_PIXELS  line-coloured pixels a 5x5 window around a gap may hold
 //   MIN_AIM          cosine between a line piece's direction and the way to A
 //   MAX_OFFSET       px between the lines through the two pieces
+//   STOP_AFTER       0; 1 or 2 stop the work early, for reconstruct_bench --split's timing of the parts
 // table[mask] (mask: bit k = ring neighbour k differs): bit 0 = gap (T8(A,X)=2, T8(A,X-bar)=1 or the
 // straight-gap case, seed 000 eq. 4), bit 1 = some sub-mask is a gap, bits 8..15 = the ring pixels of
 // the first 8-component of X.
@@ -51,6 +52,9 @@
 #endif
 #ifndef STRIP
 #define STRIP 16
+#endif
+#ifndef STOP_AFTER
+#define STOP_AFTER 0   // timing split only (reconstruct_bench --split): 1 = after the RGB gate, 2 = before the rules
 #endif
 
 // The ring N8*(A), clockwise from the top-left: bit k of a mask is (RX[k], RY[k]).
@@ -675,6 +679,10 @@ __kernel void reconstruct(__global const PIXEL_T *src, __global PIXEL_T *dst, __
                                lab_px(src, luts, lin, IDX(x, y, width)), ring);
             }
         }
+#if STOP_AFTER == 1   // timing split (reconstruct_bench --split): the RGB gate alone, its result kept live
+        if ((cg ^ cl ^ cr ^ lanes[0] ^ lanes[SEGMENT / GROUP - 1]) == 0xfffffu) dst[0] = 1;
+        continue;
+#endif
         if (cg == 0u) continue;
         // 2. CIELAB of rows y-1, y, y+1 over those groups, and the neighbour groups their lanes 0 and 7 read
         // (each once per strip; converting the one pixel alone was slower, measured), or the pixels x0 - 1, x1
@@ -706,6 +714,10 @@ __kernel void reconstruct(__global const PIXEL_T *src, __global PIXEL_T *dst, __
             RING_DE2(d, 1, 16) RING_DE2(d, 0, 32) RING_DE2(d, -1, 64) RING_DE2(m, -1, 128)
             const int4 mo = M.lo | M.hi;
             if ((mo.x | mo.y | mo.z | mo.w) == 0) continue;
+#if STOP_AFTER == 2   // timing split: the gate, CIELAB and the exact ring masks, without the rules
+            if ((M.s0 ^ S.s1 ^ F.s2 ^ B.s3) == 0xfffff) dst[0] = 1;
+            continue;
+#endif
             int mb[GROUP], sb[GROUP], fb[GROUP], bb[GROUP];
             vstore8(M, 0, mb);
             vstore8(S, 0, sb);

@@ -26,9 +26,10 @@ def centre_line(truth: np.ndarray, background: np.ndarray, wires: np.ndarray) ->
     return wires & (across_x | across_y)
 
 
-def bench_reconstruct(device=None, runs: int = 20, small: bool = False) -> dict:
+def bench_reconstruct(device=None, runs: int = 20, small: bool = False, split: bool = False) -> dict:
     """Accuracy on the yardstick scenes (wires, text_ui, photo); ms per 1920x1080 frame of the pass alone and
-    of the core filter, on the frames of timing_frames()."""
+    of the core filter, on the frames of timing_frames(); with `split`, also the timing of the pass's parts
+    and how many pixels each kind of RGB bound would send on to CIELAB (gate_stats)."""
     from .metrics import broken_wires, damage
     from .scenes import generate_scenes
 
@@ -55,8 +56,54 @@ def bench_reconstruct(device=None, runs: int = 20, small: bool = False) -> dict:
     report["device"] = ctx.name
     luts = cl.Buffer(ctx.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=device_luts())
     for name, frame in timing_frames().items():
-        report[f"ms_1080p_{name}"] = _time_frame(ctx, frame, luts, runs, device)
+        report[f"ms_1080p_{name}"] = _time_frame(ctx, frame, luts, runs, device, split)
+        if split:
+            report[f"gate_stats_{name}"] = gate_stats(frame)
     return report
+
+
+def gate_stats(frame: np.ndarray, threshold: float = 10.0) -> dict[str, float]:
+    """Share of an 8-bit RGB frame's pixels (and of its 8-pixel groups) where a rule may fire -- two ring
+    neighbours at ring distance >= 3 over the threshold, the kernel's table bit 1 -- by each way of bounding
+    ΔE76 from RGB: the kernel's rigorous bound (global Lipschitz constant x max-channel difference); the
+    same with the Lipschitz constant at A's own colour (no margin: what any direction-free bound can reach
+    at best); the linearisation J(A) (rgb_b - rgb_a) (no margin: what a direction-aware bound can reach at
+    best); and exact CIELAB. Also the share where the exact mask is a gap (the rules run)."""
+    from .colour import rgb_to_lab
+    from .reconstruct import _device_table, cheap_levels
+    table = _device_table()
+    may = (table & 2).astype(bool)
+    h, w = frame.shape[:2]
+    rgb = frame[..., :3].astype(np.float64) / 255.0
+    lab = rgb_to_lab(rgb)
+    step = 1.0 / 255.0
+    jac = [(rgb_to_lab(np.clip(rgb + np.eye(3)[c] * step, 0.0, 1.0)) - lab) / step for c in range(3)]
+    k_local = np.zeros((h, w))
+    for sgn in np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T:
+        d = jac[0] * sgn[0] + jac[1] * sgn[1] + jac[2] * sgn[2]
+        k_local = np.maximum(k_local, np.sqrt((d * d).sum(-1)))
+    near = cheap_levels(threshold, 255.0)[0]
+    pad_i = np.pad(frame[..., :3].astype(np.int32), ((1, 1), (1, 1), (0, 0)), mode="edge")
+    pad_l = np.pad(lab, ((1, 1), (1, 1), (0, 0)), mode="edge")
+    masks = {k: np.zeros((h, w), np.int32) for k in ("rgb_gate", "local_lipschitz", "linearised", "exact")}
+    ring = [(-1, -1), (0, -1), (1, -1), (1, 0), (1, 1), (0, 1), (-1, 1), (-1, 0)]
+    for k, (dx, dy) in enumerate(ring):
+        diff = pad_i[1 + dy:1 + dy + h, 1 + dx:1 + dx + w] - pad_i[1:-1, 1:-1]
+        m = np.abs(diff).max(-1)
+        lin = sum(jac[c] * (diff[..., c:c + 1] / 255.0) for c in range(3))
+        dl = pad_l[1 + dy:1 + dy + h, 1 + dx:1 + dx + w] - lab
+        for name, over in (("rgb_gate", m >= near), ("local_lipschitz", m / 255.0 * k_local > threshold),
+                           ("linearised", (lin * lin).sum(-1) > threshold ** 2),
+                           ("exact", (dl * dl).sum(-1) > threshold ** 2)):
+            masks[name] |= over.astype(np.int32) << k
+    out: dict[str, float] = {}
+    w8 = w // 8 * 8
+    for name, mask in masks.items():
+        px = may[mask]
+        out[f"{name}_pixels"] = round(float(px.mean()), 4)
+        out[f"{name}_groups"] = round(float(px[:, :w8].reshape(h, -1, 8).any(-1).mean()), 4)
+    out["exact_gap_pixels"] = round(float((table[masks["exact"]] & 1).astype(bool).mean()), 4)
+    return out
 
 
 def timing_frames() -> dict[str, np.ndarray]:
@@ -80,9 +127,12 @@ def timing_frames() -> dict[str, np.ndarray]:
     return frames
 
 
-def _time_frame(ctx: Context, frame: np.ndarray, luts: "cl.Buffer", runs: int, device) -> dict[str, float]:
+def _time_frame(ctx: Context, frame: np.ndarray, luts: "cl.Buffer", runs: int, device,
+                split: bool = False) -> dict[str, float]:
     """Median ms of the pass (device copy + kernel) for both rule sets, and of the core filter
-    (Filter().process: upload, kernels, download) on the same frame, after 3 warm-up runs each; and their ratios."""
+    (Filter().process: upload, kernels, download) on the same frame, after 3 warm-up runs each; and their ratios.
+    With `split`, the extended pass stopped after the RGB gate and before the rules (STOP_AFTER 1, 2), all
+    interleaved in one loop."""
     from .mlaa import Filter
     fmt = frame_format(frame)
     src = cl.Buffer(ctx.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(frame))
@@ -99,6 +149,27 @@ def _time_frame(ctx: Context, frame: np.ndarray, luts: "cl.Buffer", runs: int, d
             times.append((time.perf_counter() - t0) * 1e3)
         return round(float(np.median(times)), 2)
 
+    if split:
+        steps = {}
+        for stop, name in ((1, "gate_only"), (2, "gate_cielab"), (0, "extended")):
+            rec = Reconstructor(ctx, fmt, extended=True)
+            if stop:
+                rec._kernel = ctx.kernel("reconstruct", "reconstruct", {**rec.defines, "STOP_AFTER": stop})
+            steps[name] = lambda rec=rec: rec.enqueue(ctx.queue, src, dst, luts).wait()
+        with Filter(device) as f:
+            steps["core_filter"] = lambda: f.process(frame)
+            times: dict[str, list[float]] = {k: [] for k in steps}
+            for it in range(runs + 3):
+                for k, step in steps.items():
+                    t0 = time.perf_counter()
+                    step()
+                    if it >= 3:
+                        times[k].append((time.perf_counter() - t0) * 1e3)
+        core = float(np.median(times["core_filter"]))
+        for k, v in times.items():
+            out[k] = round(float(np.median(v)), 2)
+            out[f"{k}_vs_core"] = round(float(np.median(v)) / core, 2)
+        return out
     for ext in (False, True):
         rec = Reconstructor(ctx, fmt, extended=ext)
         out["extended" if ext else "paper"] = median_ms(lambda: rec.enqueue(ctx.queue, src, dst, luts).wait())
@@ -116,8 +187,10 @@ def main() -> None:
     p.add_argument("--device", default=None)
     p.add_argument("--runs", type=int, default=20)
     p.add_argument("--small", action="store_true")
+    p.add_argument("--split", action="store_true",
+                   help="time the pass's parts (RGB gate, + CIELAB, + rules) and count what each RGB bound lets through")
     args = p.parse_args()
-    print(json.dumps(bench_reconstruct(args.device, args.runs, args.small), indent=1))
+    print(json.dumps(bench_reconstruct(args.device, args.runs, args.small, args.split), indent=1))
 
 
 if __name__ == "__main__":
