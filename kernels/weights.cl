@@ -108,6 +108,28 @@ inline int has(__global const uchar *edges, int x, int y, int width, int height,
     return x >= 0 && y >= 0 && x < width && y < height && (edges[IDX(x, y, width)] & bit);
 }
 
+// A stroke's end (seed 002's corners, extended): a crossing exactly two pixels long at the end of a line of
+// CAP_MIN_L or more pixels, whose far end turns back along the line for three pixels (the stroke's other
+// border), is the square end of a 2-px stroke -- hinted text stems, UI rules -- not a step of a staircase
+// (there the border goes on the other way): a corner, as a crossing of three or more pixels.
+#ifndef CAP_MIN_L
+#define CAP_MIN_L 8
+#endif
+
+// The far border of a 2-px stroke's end: bottom edges of row r from column x on, three pixels in direction
+// dir (along the line); right edges of column c from row y on, three rows in direction dir.
+inline int stroke_end_h(__global const uchar *edges, int x, int r, int dir, int width, int height)
+{
+    return has(edges, x, r, width, height, EDGE_BOTTOM) && has(edges, x + dir, r, width, height, EDGE_BOTTOM) &&
+           has(edges, x + 2 * dir, r, width, height, EDGE_BOTTOM);
+}
+
+inline int stroke_end_v(__global const uchar *edges, int c, int y, int dir, int width, int height)
+{
+    return has(edges, c, y, width, height, EDGE_RIGHT) && has(edges, c, y + dir, width, height, EDGE_RIGHT) &&
+           has(edges, c, y + 2 * dir, width, height, EDGE_RIGHT);
+}
+
 inline void pixel_weights(__global const PIXEL_T *src, __global const uchar *edges, __global const ushort2 *hdist,
                           __global const ushort2 *vdist, __global const float *table,
                           __global ushort *weights, int x, int y, int width, int height)
@@ -132,6 +154,12 @@ inline void pixel_weights(__global const PIXEL_T *src, __global const uchar *edg
                           run2(has(edges, x1, y + 2, width, height, EDGE_RIGHT), has(edges, x1, y + 3, width, height, EDGE_RIGHT)),
                           IDX(x1 + 1, y, width), IDX(x1 + 1, y + 1, width),
                           IDX(x1, y, width), IDX(x1, y + 1, width), &k1);
+        if ((int)d.x + (int)d.y + 1 >= CAP_MIN_L) {   // stroke ends: the far border in row y -/+ 2
+            if ((s0 == 1 || s0 == -1) && k0 == 1 && stroke_end_h(edges, x0, s0 == 1 ? y - 2 : y + 2, 1, width, height))
+                k0 = 2;
+            if ((s1 == 1 || s1 == -1) && k1 == 1 && stroke_end_h(edges, x1, s1 == 1 ? y - 2 : y + 2, -1, width, height))
+                k1 = 2;
+        }
         line_areas(table, d.x, d.y, s0, s1, k0, k1, &up, &down);
     }
     if (e & EDGE_RIGHT) {    // vertical line between columns x and x+1, ends at y0 and y1
@@ -150,6 +178,12 @@ inline void pixel_weights(__global const PIXEL_T *src, __global const uchar *edg
                           run2(has(edges, x + 2, y1, width, height, EDGE_BOTTOM), has(edges, x + 3, y1, width, height, EDGE_BOTTOM)),
                           IDX(x, y1 + 1, width), IDX(x + 1, y1 + 1, width),
                           IDX(x, y1, width), IDX(x + 1, y1, width), &k1);
+        if ((int)d.x + (int)d.y + 1 >= CAP_MIN_L) {   // stroke ends: the far border in column x -/+ 2
+            if ((s0 == 1 || s0 == -1) && k0 == 1 && stroke_end_v(edges, s0 == 1 ? x - 2 : x + 2, y0, 1, width, height))
+                k0 = 2;
+            if ((s1 == 1 || s1 == -1) && k1 == 1 && stroke_end_v(edges, s1 == 1 ? x - 2 : x + 2, y1, -1, width, height))
+                k1 = 2;
+        }
         line_areas(table, d.x, d.y, s0, s1, k0, k1, &left, &right);
     }
     __global ushort *w = weights + (size_t)i * 4;   // (top, bottom, left, right)

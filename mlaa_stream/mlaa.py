@@ -33,6 +33,13 @@ AREA_TABLE_L = 64
 # Area factor for a line ending in a crossing edge exactly two pixels long (kernels/weights.cl):
 # 1 treats it as a jaggy, 0 as a corner; 0.75 was best on the yardstick (wires, text, rotation).
 SHORT_CORNER = 0.75
+# A 2-px crossing at the end of a line of this many pixels or more, whose far end turns back along the line
+# for three pixels, is a 2-px stroke's square end (hinted text stems, UI rules), kept sharp as a corner
+# (kernels/weights.cl). Measured (bench scenes, without -> with): already antialiased text damage 1.55 -> 0.47
+# levels RMSE, aliased text error removed 34.9 -> 34.9 %, checkerboard 41.1 -> 40.9 %, the others unchanged
+# (from lines of 6 px: text 34.3 %; such ends as no crossing at all, L shapes: text 36.2 % but checkerboard
+# damage 0.49 -> 0.60).
+STROKE_END_MIN_L = 8
 # Already antialiased edges (kernels/edges.cl `antialiased`): a neighbour along the step whose colour
 # projects on p -> q at t in (AA_LO, 1 - AA_LO), within AA_OFF of the step off the segment, or p (q)
 # between its neighbour across the step and q (p), marks a rendered coverage ramp. Measured by the
@@ -121,7 +128,7 @@ class FilterOptions:
             "AREA_TABLE_L": AREA_TABLE_L,
             "ROUNDING": float(self.rounding),
             "BLEND_U": int(self.blend_u),
-            "SHORT_CORNER": float(self.short_corner),
+            "SHORT_CORNER": float(self.short_corner), "CAP_MIN_L": STROKE_END_MIN_L,
             "AA_GUARD": int(self.aa_guard), "AA_LO": float(AA_LO), "AA_OFF": float(AA_OFF),
             "GRAIN_GUARD": int(self.grain_guard), "GRAIN_STEP": GRAIN_STEP, "GRAIN_MIN": GRAIN_MIN,
             "SEGMENT": SEGMENT,

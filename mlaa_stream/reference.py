@@ -158,7 +158,10 @@ def weights_reference(edges: np.ndarray, hdist: np.ndarray, vdist: np.ndarray,
                       rounding: float = 0.0, blend_u: bool = True,
                       frame: np.ndarray | None = None, short_corner: float = SHORT_CORNER) -> np.ndarray:
     """(top, bottom, left, right) fractions each pixel takes from its neighbours (seed 000 eq. 2).
-    With `frame`, a crossing edge counts only if the pixel beyond it has the other side's colour."""
+    With `frame`, a crossing edge counts only if the pixel beyond it has the other side's colour. A 2-px
+    crossing at the end of a line of STROKE_END_MIN_L+ pixels whose far end turns back along the line for
+    three pixels is a 2-px stroke's square end: a corner, like a 3-px crossing."""
+    from .mlaa import STROKE_END_MIN_L
     h, w = edges.shape
     out = np.zeros((h, w, 4))
     rgb = None if frame is None else normalised_rgb(frame)[0]
@@ -217,6 +220,11 @@ def weights_reference(edges: np.ndarray, hdist: np.ndarray, vdist: np.ndarray,
                 b1 = has(x1, y + 1, RIGHT) and turns((y + 1, x1 + 1), (y, x1), (y + 1, x1))
                 s0, k0 = crossing(a0, b0, run(x0 - 1, y - 1, RIGHT, 0, -1), run(x0 - 1, y + 2, RIGHT, 0, 1))
                 s1, k1 = crossing(a1, b1, run(x1, y - 1, RIGHT, 0, -1), run(x1, y + 2, RIGHT, 0, 1))
+                if dl + dr + 1 >= STROKE_END_MIN_L:  # a 2-px stroke's square end: a corner
+                    if s0 in (1, -1) and k0 == 1 and all(has(x0 + t, y - 2 * s0, BOTTOM) for t in range(3)):
+                        k0 = 2
+                    if s1 in (1, -1) and k1 == 1 and all(has(x1 - t, y - 2 * s1, BOTTOM) for t in range(3)):
+                        k1 = 2
                 up, down = areas(dl, dr, s0, k0, s1, k1)
                 out[y, x, 1] = up
                 out[y + 1, x, 0] = down
@@ -229,6 +237,11 @@ def weights_reference(edges: np.ndarray, hdist: np.ndarray, vdist: np.ndarray,
                 b1 = has(x + 1, y1, BOTTOM) and turns((y1 + 1, x + 1), (y1, x), (y1, x + 1))
                 s0, k0 = crossing(a0, b0, run(x - 1, y0 - 1, BOTTOM, -1, 0), run(x + 2, y0 - 1, BOTTOM, 1, 0))
                 s1, k1 = crossing(a1, b1, run(x - 1, y1, BOTTOM, -1, 0), run(x + 2, y1, BOTTOM, 1, 0))
+                if du + dd + 1 >= STROKE_END_MIN_L:
+                    if s0 in (1, -1) and k0 == 1 and all(has(x - 2 * s0, y0 + t, RIGHT) for t in range(3)):
+                        k0 = 2
+                    if s1 in (1, -1) and k1 == 1 and all(has(x - 2 * s1, y1 - t, RIGHT) for t in range(3)):
+                        k1 = 2
                 left, right = areas(du, dd, s0, k0, s1, k1)
                 out[y, x, 3] = left
                 out[y, x + 1, 2] = right

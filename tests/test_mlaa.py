@@ -416,3 +416,59 @@ def test_grain_guard_matches_reference(dtype, channels):
     unguarded = mlaa_reference(img, grain_guard=False)
     assert (unguarded[keep] != img[keep]).any()
     assert (got != img).any()   # the blocks' edges outside the patch are still antialiased
+
+
+# ---- square ends of 2-px strokes (kernels/weights.cl stroke_end_h / stroke_end_v) ---------------------------
+
+def _glyph_l(transpose: bool = False) -> np.ndarray:
+    """An 'L' turned over: a 2-px stem 16 px tall hanging from a 2-px bar, pixel-aligned (hinted text)."""
+    img = np.full((24, 20, 3), 240, np.uint8)
+    img[2:4, 6:16] = 30     # the bar
+    img[2:18, 6:8] = 30     # the stem, its square end at row 17
+    return np.ascontiguousarray(img.transpose(1, 0, 2)) if transpose else img
+
+
+@pytest.mark.parametrize("transpose", [False, True])
+def test_square_end_of_a_2px_stroke_stays_sharp(transpose, monkeypatch):
+    import mlaa_stream.mlaa as mlaa_module
+    img = _glyph_l(transpose)
+    with Filter(bridge=False) as f:
+        got = f.intermediates(img)
+    want = weights_reference(*_edges_and_distances(img), frame=img)
+    _assert_weights_match(got, want)
+    # the stem's border along its last rows: nothing taken across it (before the rule, the Z from the bar's
+    # corner to the square end blended the stem's last 8 rows)
+    stem = (slice(10, 18), 7) if not transpose else (7, slice(10, 18))
+    assert not want[stem].any()
+    np.testing.assert_array_equal(got["out"], img)
+    monkeypatch.setattr(mlaa_module, "STROKE_END_MIN_L", 10 ** 6)
+    assert weights_reference(*_edges_and_distances(img), frame=img)[stem].any()
+
+
+def test_a_2px_step_of_a_filled_shape_is_still_blended():
+    """The same 2-px crossing where the border goes on the other way (a staircase step) is a jaggy."""
+    img = np.full((24, 20, 3), 240, np.uint8)
+    img[:12, 6:] = 30
+    img[12:, 8:] = 30
+    with Filter(bridge=False) as f:
+        got = f.intermediates(img)
+    want = weights_reference(*_edges_and_distances(img), frame=img)
+    _assert_weights_match(got, want)
+    assert want[:12, 5:7].any() and (got["out"] != img).any()
+
+
+def _assert_weights_match(got: dict, want: np.ndarray) -> None:
+    """The kernel's weights equal the reference's in the slots it writes (next to an edge)."""
+    b, rt = (got["edges"] & 1) > 0, (got["edges"] & 2) > 0
+    valid = np.zeros_like(want, dtype=bool)
+    valid[1:, :, 0] = b[:-1]
+    valid[:, :, 1] = b
+    valid[:, 1:, 2] = rt[:, :-1]
+    valid[:, :, 3] = rt
+    np.testing.assert_allclose(got["weights"][valid] / 65535.0, want[valid], atol=1e-4)
+
+
+def _edges_and_distances(img: np.ndarray):
+    e = edges_reference(img)
+    hd, vd = distances_reference(e)
+    return e, hd, vd
