@@ -174,20 +174,77 @@ typedef int8 i8;
 #define F8MAX(a, b) ((a) > (b) ? (a) : (b))
 #define F8MIN(a, b) ((a) < (b) ? (a) : (b))
 
-// Index of the lowest set bit of an 8-bit mask (mask 0: unused).
-__constant uchar LOWBIT[256] = {
-    0, 0, 1, 0, 2, 0, 1, 0, 3, 0, 1, 0, 2, 0, 1, 0, 4, 0, 1, 0, 2, 0, 1, 0, 3, 0, 1, 0, 2, 0, 1, 0,
-    5, 0, 1, 0, 2, 0, 1, 0, 3, 0, 1, 0, 2, 0, 1, 0, 4, 0, 1, 0, 2, 0, 1, 0, 3, 0, 1, 0, 2, 0, 1, 0,
-    6, 0, 1, 0, 2, 0, 1, 0, 3, 0, 1, 0, 2, 0, 1, 0, 4, 0, 1, 0, 2, 0, 1, 0, 3, 0, 1, 0, 2, 0, 1, 0,
-    5, 0, 1, 0, 2, 0, 1, 0, 3, 0, 1, 0, 2, 0, 1, 0, 4, 0, 1, 0, 2, 0, 1, 0, 3, 0, 1, 0, 2, 0, 1, 0,
-    7, 0, 1, 0, 2, 0, 1, 0, 3, 0, 1, 0, 2, 0, 1, 0, 4, 0, 1, 0, 2, 0, 1, 0, 3, 0, 1, 0, 2, 0, 1, 0,
-    5, 0, 1, 0, 2, 0, 1, 0, 3, 0, 1, 0, 2, 0, 1, 0, 4, 0, 1, 0, 2, 0, 1, 0, 3, 0, 1, 0, 2, 0, 1, 0,
-    6, 0, 1, 0, 2, 0, 1, 0, 3, 0, 1, 0, 2, 0, 1, 0, 4, 0, 1, 0, 2, 0, 1, 0, 3, 0, 1, 0, 2, 0, 1, 0,
-    5, 0, 1, 0, 2, 0, 1, 0, 3, 0, 1, 0, 2, 0, 1, 0, 4, 0, 1, 0, 2, 0, 1, 0, 3, 0, 1, 0, 2, 0, 1, 0};
+// The set bits of an 8-bit mask: their indices as the bytes of a ulong, lowest bit first in the
+// lowest byte (LANES), and their count (POPC). The write-back lists a chunk's pixels with them.
+__constant ulong LANES[256] = {
+    0x0UL, 0x0UL, 0x1UL, 0x100UL, 0x2UL,
+    0x200UL, 0x201UL, 0x20100UL, 0x3UL, 0x300UL,
+    0x301UL, 0x30100UL, 0x302UL, 0x30200UL, 0x30201UL,
+    0x3020100UL, 0x4UL, 0x400UL, 0x401UL, 0x40100UL,
+    0x402UL, 0x40200UL, 0x40201UL, 0x4020100UL, 0x403UL,
+    0x40300UL, 0x40301UL, 0x4030100UL, 0x40302UL, 0x4030200UL,
+    0x4030201UL, 0x403020100UL, 0x5UL, 0x500UL, 0x501UL,
+    0x50100UL, 0x502UL, 0x50200UL, 0x50201UL, 0x5020100UL,
+    0x503UL, 0x50300UL, 0x50301UL, 0x5030100UL, 0x50302UL,
+    0x5030200UL, 0x5030201UL, 0x503020100UL, 0x504UL, 0x50400UL,
+    0x50401UL, 0x5040100UL, 0x50402UL, 0x5040200UL, 0x5040201UL,
+    0x504020100UL, 0x50403UL, 0x5040300UL, 0x5040301UL, 0x504030100UL,
+    0x5040302UL, 0x504030200UL, 0x504030201UL, 0x50403020100UL, 0x6UL,
+    0x600UL, 0x601UL, 0x60100UL, 0x602UL, 0x60200UL,
+    0x60201UL, 0x6020100UL, 0x603UL, 0x60300UL, 0x60301UL,
+    0x6030100UL, 0x60302UL, 0x6030200UL, 0x6030201UL, 0x603020100UL,
+    0x604UL, 0x60400UL, 0x60401UL, 0x6040100UL, 0x60402UL,
+    0x6040200UL, 0x6040201UL, 0x604020100UL, 0x60403UL, 0x6040300UL,
+    0x6040301UL, 0x604030100UL, 0x6040302UL, 0x604030200UL, 0x604030201UL,
+    0x60403020100UL, 0x605UL, 0x60500UL, 0x60501UL, 0x6050100UL,
+    0x60502UL, 0x6050200UL, 0x6050201UL, 0x605020100UL, 0x60503UL,
+    0x6050300UL, 0x6050301UL, 0x605030100UL, 0x6050302UL, 0x605030200UL,
+    0x605030201UL, 0x60503020100UL, 0x60504UL, 0x6050400UL, 0x6050401UL,
+    0x605040100UL, 0x6050402UL, 0x605040200UL, 0x605040201UL, 0x60504020100UL,
+    0x6050403UL, 0x605040300UL, 0x605040301UL, 0x60504030100UL, 0x605040302UL,
+    0x60504030200UL, 0x60504030201UL, 0x6050403020100UL, 0x7UL, 0x700UL,
+    0x701UL, 0x70100UL, 0x702UL, 0x70200UL, 0x70201UL,
+    0x7020100UL, 0x703UL, 0x70300UL, 0x70301UL, 0x7030100UL,
+    0x70302UL, 0x7030200UL, 0x7030201UL, 0x703020100UL, 0x704UL,
+    0x70400UL, 0x70401UL, 0x7040100UL, 0x70402UL, 0x7040200UL,
+    0x7040201UL, 0x704020100UL, 0x70403UL, 0x7040300UL, 0x7040301UL,
+    0x704030100UL, 0x7040302UL, 0x704030200UL, 0x704030201UL, 0x70403020100UL,
+    0x705UL, 0x70500UL, 0x70501UL, 0x7050100UL, 0x70502UL,
+    0x7050200UL, 0x7050201UL, 0x705020100UL, 0x70503UL, 0x7050300UL,
+    0x7050301UL, 0x705030100UL, 0x7050302UL, 0x705030200UL, 0x705030201UL,
+    0x70503020100UL, 0x70504UL, 0x7050400UL, 0x7050401UL, 0x705040100UL,
+    0x7050402UL, 0x705040200UL, 0x705040201UL, 0x70504020100UL, 0x7050403UL,
+    0x705040300UL, 0x705040301UL, 0x70504030100UL, 0x705040302UL, 0x70504030200UL,
+    0x70504030201UL, 0x7050403020100UL, 0x706UL, 0x70600UL, 0x70601UL,
+    0x7060100UL, 0x70602UL, 0x7060200UL, 0x7060201UL, 0x706020100UL,
+    0x70603UL, 0x7060300UL, 0x7060301UL, 0x706030100UL, 0x7060302UL,
+    0x706030200UL, 0x706030201UL, 0x70603020100UL, 0x70604UL, 0x7060400UL,
+    0x7060401UL, 0x706040100UL, 0x7060402UL, 0x706040200UL, 0x706040201UL,
+    0x70604020100UL, 0x7060403UL, 0x706040300UL, 0x706040301UL, 0x70604030100UL,
+    0x706040302UL, 0x70604030200UL, 0x70604030201UL, 0x7060403020100UL, 0x70605UL,
+    0x7060500UL, 0x7060501UL, 0x706050100UL, 0x7060502UL, 0x706050200UL,
+    0x706050201UL, 0x70605020100UL, 0x7060503UL, 0x706050300UL, 0x706050301UL,
+    0x70605030100UL, 0x706050302UL, 0x70605030200UL, 0x70605030201UL, 0x7060503020100UL,
+    0x7060504UL, 0x706050400UL, 0x706050401UL, 0x70605040100UL, 0x706050402UL,
+    0x70605040200UL, 0x70605040201UL, 0x7060504020100UL, 0x706050403UL, 0x70605040300UL,
+    0x70605040301UL, 0x7060504030100UL, 0x70605040302UL, 0x7060504030200UL, 0x7060504030201UL,
+    0x706050403020100UL
+};
+__constant uchar POPC[256] = {
+    0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4, 1, 2, 2, 3, 2, 3, 3, 4, 2, 3, 3, 4, 3, 4, 4, 5,
+    1, 2, 2, 3, 2, 3, 3, 4, 2, 3, 3, 4, 3, 4, 4, 5, 2, 3, 3, 4, 3, 4, 4, 5, 3, 4, 4, 5, 4, 5, 5, 6,
+    1, 2, 2, 3, 2, 3, 3, 4, 2, 3, 3, 4, 3, 4, 4, 5, 2, 3, 3, 4, 3, 4, 4, 5, 3, 4, 4, 5, 4, 5, 5, 6,
+    2, 3, 3, 4, 3, 4, 4, 5, 3, 4, 4, 5, 4, 5, 5, 6, 3, 4, 4, 5, 4, 5, 5, 6, 4, 5, 5, 6, 5, 6, 6, 7,
+    1, 2, 2, 3, 2, 3, 3, 4, 2, 3, 3, 4, 3, 4, 4, 5, 2, 3, 3, 4, 3, 4, 4, 5, 3, 4, 4, 5, 4, 5, 5, 6,
+    2, 3, 3, 4, 3, 4, 4, 5, 3, 4, 4, 5, 4, 5, 5, 6, 3, 4, 4, 5, 4, 5, 5, 6, 4, 5, 5, 6, 5, 6, 6, 7,
+    2, 3, 3, 4, 3, 4, 4, 5, 3, 4, 4, 5, 4, 5, 5, 6, 3, 4, 4, 5, 4, 5, 5, 6, 4, 5, 5, 6, 5, 6, 6, 7,
+    3, 4, 4, 5, 4, 5, 5, 6, 4, 5, 5, 6, 5, 6, 6, 7, 4, 5, 5, 6, 5, 6, 6, 7, 5, 6, 6, 7, 6, 7, 7, 8};
 
-// enc8 index rint(v * 65535), v clamped to [0, 1] (the float's low bits after + 2^23)
-#define Q16(v) (as_int(((v) < 0.0f ? 0.0f : ((v) > 1.0f ? 1.0f : (v))) * 65535.0f + 8388608.0f) \
-                - 0x4B000000)
+// enc8 index rint(v * 65535) (the float's low bits after + 2^23). What is encoded lies in [0, 1] up
+// to a few ulp of rounding, which rounds to the table's ends; FMAX and the mask keep anything else
+// (NaN included) inside the table, with two operations instead of a clamp's three.
+#define Q16(v) (as_int(FMAX(v, 0.0f) * 65535.0f + 8388608.0f) & 0xFFFF)
+
 
 // footprint_cdf per lane, with h = (a + b) / 2 and the inverses ia = 1 / a, i2 = 1 / (2ab) passed in
 // (i2 is not used where b = 0). Selects instead of branches: the trapezoid's piece changes from lane
@@ -243,6 +300,29 @@ INLINE void round_cover8(f8 fx, float dy, float dy1, float tx, float ty, float l
 #define TT (TILE * TILE)
 #define CH (TILE / 8)   // float8 chunks per tile row
 
+// A tile's list of covered pixels: q = row * TILE + column in a byte up to 16 x 16 tiles. A
+// chunk's entries (8 lanes) are written at once, unaligned: on PoCL's CPU build as one scalar
+// store (vstore8 is an out-of-line call there), elsewhere with vstore8.
+#if TT <= 256
+typedef uchar qidx_t;
+#define LANE_LIST(mask, k) (LANES[mask] + (ulong)(8 * (k)) * 0x0101010101010101UL)
+#ifdef POCL_DEVICE_ADDRESS_BITS
+typedef ulong ulong_u __attribute__((aligned(1)));
+#define STORE_LANES(v, p) (*(__private ulong_u *)(p) = (v))
+#else
+#define STORE_LANES(v, p) vstore8(as_uchar8(v), 0, p)
+#endif
+#else
+typedef ushort qidx_t;
+#define LANE_LIST(mask, k) (convert_ushort8(as_uchar8(LANES[mask])) + (ushort8)(8 * (k)))
+#ifdef POCL_DEVICE_ADDRESS_BITS
+typedef ushort8 ushort8_u __attribute__((aligned(2)));
+#define STORE_LANES(v, p) (*(__private ushort8_u *)(p) = (v))
+#else
+#define STORE_LANES(v, p) vstore8(v, 0, p)
+#endif
+#endif
+
 __kernel void grlaa_draw(__global PIXEL_T *img, __global const float *luts,
                          __global const float *dec8, __global const uchar *enc8,
                          __global const uint *pcol, __global const float4 *segs,
@@ -267,7 +347,8 @@ __kernel void grlaa_draw(__global PIXEL_T *img, __global const float *luts,
     const int xmax = IMIN(x0 + TILE, width) - 1, ymax = IMIN(y0 + TILE, height) - 1;
     const f8 lane = (f8)(0.0f, 1.0f, 2.0f, 3.0f, 4.0f, 5.0f, 6.0f, 7.0f);
 
-    f8 cov_out[TT / 8], cov_in[TT / 8];  // current polyline's coverage (max over its segments)
+    // current polyline's coverage (max over its segments), outer and inner (with an outline band)
+    f8 cov_out[TT / 8], cov_in[TT / 8];
     // Layers so far, premultiplied "over" without the frame: colour acc, transmittance trans (the
     // frame's pixel joins once, at write-back); hit > 0 where some line covers the pixel.
     f8 acc_r[TT / 8], acc_g[TT / 8], acc_b[TT / 8], trans[TT / 8], hit[TT / 8];
@@ -304,6 +385,8 @@ __kernel void grlaa_draw(__global PIXEL_T *img, __global const float *luts,
             const float4 prm = polys[5 * cur];
             const float4 fill = polys[5 * cur + 1], outl = polys[5 * cur + 2];
             const float op = prm.z;
+            // an outline band: inner coverage kept (cov_in); none: inner = outer; all outline: 0
+            const int solid = prm.y >= prm.x, banded = prm.y < prm.x && prm.y > 0.0f;
             const int ef = 1 + 2 * cur, eo = 2 + 2 * cur;
             for (int j = 0; j < TILE; ++j) {
                 const uint bits = rows_cur[j], old = rows_all[j];
@@ -313,7 +396,8 @@ __kernel void grlaa_draw(__global PIXEL_T *img, __global const float *luts,
                 for (int c = 0; c < CH; ++c) {
                     if (!(bits & (1u << c))) continue;
                     const int k = j * CH + c;
-                    const f8 ao = cov_out[k], ai = cov_in[k];
+                    const f8 ao = cov_out[k];
+                    const f8 ai = banded ? cov_in[k] : (solid ? ao : (f8)0.0f);
                     const f8 A = ao * op, T = 1.0f - A, ae = ao - ai;
                     const f8 cr = op * (ai * fill.x + ae * outl.x), cg = op * (ai * fill.y + ae * outl.y);
                     const f8 cb = op * (ai * fill.z + ae * outl.z);
@@ -339,6 +423,7 @@ __kernel void grlaa_draw(__global PIXEL_T *img, __global const float *luts,
         const float4 h = segs[2 * sidx + 1];  // length, r, r_inner, reach
         const float ax = g.x, ay = g.y, tx = g.z, ty = g.w;
         const float len = h.x, r = h.y, ri = h.z, R = h.w, by = ay + len * ty;
+        const int banded = ri < r && ri > 0.0f;  // else the inner coverage is co or 0: not kept
         const int ya = IMAX(y0, iceil(FMIN(ay, by) - R));
         const int yb = IMIN(ymax, ifloor(FMAX(ay, by) + R));
         // Row spans (conservative): the band |perp| <= R, x - a.x = dy t.x / t.y +- R / |t.y|, cut to
@@ -352,7 +437,9 @@ __kernel void grlaa_draw(__global PIXEL_T *img, __global const float *luts,
         const f8 fx0 = ((float)x0 - ax) + lane;
         // The spans of the tile's rows, 8 rows at once (a lane per row); then only the rows from
         // the first to the last with a span are visited (the band is convex: they follow each other).
-        int span_a[TILE], span_b[TILE];
+        i8 span_a8[TILE / 8], span_b8[TILE / 8];  // (vectors: PoCL calls vstore8 out of line)
+        __private const int *span_a = (__private const int *)span_a8;
+        __private const int *span_b = (__private const int *)span_b8;
         int jlo = TILE, jhi = -1;
         for (int q = 0; q < TILE / 8; ++q) {
             const f8 cv = (((float)(y0 + 8 * q) - ay) + lane) * s_p;
@@ -364,8 +451,8 @@ __kernel void grlaa_draw(__global PIXEL_T *img, __global const float *luts,
             xb8 = xb8 > (i8)(x0 + TILE - 1) ? (i8)(x0 + TILE - 1) : xb8;
             const i8 row = (i8)(8 * q) + (i8)(0, 1, 2, 3, 4, 5, 6, 7), yrow = row + y0;
             const i8 ok = (xa8 <= xb8) & (yrow >= ya) & (yrow <= yb);
-            vstore8(xa8, q, span_a);
-            vstore8(xb8, q, span_b);
+            span_a8[q] = xa8;
+            span_b8[q] = xb8;
             const i8 mn = ok ? row : (i8)TILE, mx = ok ? row : (i8)(-1);
             int4 m4 = mn.lo < mn.hi ? mn.lo : mn.hi, x4 = mx.lo > mx.hi ? mx.lo : mx.hi;
             int2 m2 = m4.lo < m4.hi ? m4.lo : m4.hi, x2 = x4.lo > x4.hi ? x4.lo : x4.hi;
@@ -387,21 +474,21 @@ __kernel void grlaa_draw(__global PIXEL_T *img, __global const float *luts,
                 f8 co, ci;
                 if (meta & 3) {
                     const float xs = (float)(x0 + 8 * c), yf = (float)y;
-                    float o[8], n[8];
+                    __private float *o = (__private float *)&co, *n = (__private float *)&ci;
                     for (int i = 0; i < 8; ++i) {
                         const float2 cv = segment_cover(xs + (float)i, yf, g, h, meta, strength);
                         o[i] = cv.x; n[i] = cv.y;
                     }
-                    co = vload8(0, o); ci = vload8(0, n);
                 } else {
                     round_cover8(fx, dy, dy1, tx, ty, len, r, ri, sa, sb, sh, sia, si2, strength,
                                  &co, &ci);
                 }
                 if (fresh & (1u << c)) {
-                    cov_out[k] = co; cov_in[k] = ci;
+                    cov_out[k] = co;
+                    if (banded) cov_in[k] = ci;
                 } else {
                     cov_out[k] = F8MAX(cov_out[k], co);
-                    cov_in[k] = F8MAX(cov_in[k], ci);
+                    if (banded) cov_in[k] = F8MAX(cov_in[k], ci);
                 }
             }
         }
@@ -415,11 +502,12 @@ __kernel void grlaa_draw(__global PIXEL_T *img, __global const float *luts,
     __private const float *tr = (__private const float *)trans;
     __private const int *exs = (__private const int *)exact;
 #if DECODE8
-    // uint8 sRGB frames, one chunk (8 pixels of a row) at a time: the covered pixels are visited
-    // through the chunk's 8-bit mask (lowest set bit first, LOWBIT), so a thin line's few
-    // scattered pixels cost no branch per pixel (they would mispredict). Each is decoded (dec8,
-    // 256 entries), composited and encoded (enc8: linear light rounded to 1/65535 -> sRGB byte);
-    // fully covered ones take their polyline's colour bytes (pcol).
+    // uint8 sRGB frames. The covered pixels are first listed per tile, branch-free per chunk (8
+    // pixels of a row): the chunk's 8-bit masks of covered and of fully covered pixels give their
+    // indices at once (LANES, POPC). Then one loop visits them: a loop per chunk would mispredict
+    // its exit once per chunk, and a thin line leaves a few pixels per chunk. Each partly covered
+    // pixel is decoded (dec8, 256 entries), composited and encoded (enc8: linear light rounded to
+    // 1/65535 -> sRGB byte); fully covered ones take their polyline's colour bytes (pcol).
 #if CHANNELS == 1
 #define IR 0
 #define IB 0
@@ -430,48 +518,66 @@ __kernel void grlaa_draw(__global PIXEL_T *img, __global const float *luts,
 #define IR 0
 #define IB 2
 #endif
+    qidx_t part[TT + 8], full[TT + 8];  // (+ 8: a chunk's 8 entries are stored at once)
+    int np = 0, nf = 0;
     for (int j = 0; j <= ymax - y0; ++j) {
         const uint bits = rows_all[j];
         if (!bits) continue;
         for (int c = 0; c < CH; ++c) {
-            const int xc = x0 + 8 * c;
-            if (!(bits & (1u << c)) || xc > xmax) continue;
-            const int k = j * CH + c, k8 = 8 * k;
+            const int k = j * CH + c, lim = xmax - x0 - 8 * c;  // lanes up to lim: in the frame
             const i8 cov = (hit[k] > 0.0f) & (i8)(1, 2, 4, 8, 16, 32, 64, 128);
-            const int4 c4 = cov.lo | cov.hi;
-            const int2 c2 = c4.lo | c4.hi;
-            uint mask = (uint)(c2.x | c2.y) & ((2u << IMIN(7, xmax - xc)) - 1u);
-            __global uchar *p = (__global uchar *)img + (size_t)IDX(xc, y0 + j, width) * CHANNELS;
-            while (mask) {
-                const int i = LOWBIT[mask], q = k8 + i;
-                mask &= mask - 1u;
-                __global uchar *o = p + CHANNELS * i;
-                const int ex = exs[q];
-                const uint pc = pcol[ex];  // pcol[0]: not fully covered (unused)
-                const float T = tr[q];
-#if CHANNELS == 1
-                const uchar e0 = enc8[Q16(ar[q] + T * dec8[o[0]])];
-                o[0] = ex ? (uchar)pc : e0;
-#else
-                float cr = ar[q], cg = ag[q], cb = ab[q];
-#if CHANNELS == 4
-                // straight alpha: premultiplied sum over the frame's premultiplied colour
-                const float ba = (float)o[3] * (1.0f / 255.0f), a = 1.0f - T * (1.0f - ba);
-                const float wb = T * ba, wc = a > 0.0f ? 1.0f / a : 0.0f;
-                cr = (cr + wb * dec8[o[IR]]) * wc; cg = (cg + wb * dec8[o[1]]) * wc;
-                cb = (cb + wb * dec8[o[IB]]) * wc;
-                const uchar ea = (uchar)(a * 255.0f + 0.5f);  // common.cl to_pixel
-                o[3] = ex ? (uchar)255 : ea;
-#else
-                cr += T * dec8[o[IR]]; cg += T * dec8[o[1]]; cb += T * dec8[o[IB]];
-#endif
-                const uchar er = enc8[Q16(cr)], eg = enc8[Q16(cg)], eb = enc8[Q16(cb)];
-                o[IR] = ex ? (uchar)(pc >> 16) : er;
-                o[1] = ex ? (uchar)(pc >> 8) : eg;
-                o[IB] = ex ? (uchar)pc : eb;
-#endif
-            }
+            const i8 exl = (exact[k] != 0) & (i8)(1, 2, 4, 8, 16, 32, 64, 128);
+            const int4 c4 = cov.lo | cov.hi, e4 = exl.lo | exl.hi;
+            const int2 c2 = c4.lo | c4.hi, e2 = e4.lo | e4.hi;
+            uint mask = (uint)(c2.x | c2.y) & (lim < 0 ? 0u : (2u << IMIN(7, lim)) - 1u);
+            mask = (bits >> c) & 1u ? mask : 0u;  // (untouched chunks hold stale values)
+            const uint fm = mask & (uint)(e2.x | e2.y);
+            mask &= ~fm;
+            STORE_LANES(LANE_LIST(mask, k), part + np);
+            STORE_LANES(LANE_LIST(fm, k), full + nf);
+            np += POPC[mask];
+            nf += POPC[fm];
         }
+    }
+    __global uchar *const timg = (__global uchar *)img + (size_t)IDX(x0, y0, width) * CHANNELS;
+    const size_t pitch = (size_t)width * CHANNELS;
+    for (int t = 0; t < np; ++t) {  // partly covered: the frame's pixel under the layers
+        const int q = part[t];
+        __global uchar *o = timg + (size_t)(q / TILE) * pitch + CHANNELS * (q % TILE);
+        const float T = tr[q];
+#if CHANNELS == 1
+        o[0] = enc8[Q16(ar[q] + T * dec8[o[0]])];
+#else
+        float cr = ar[q], cg = ag[q], cb = ab[q];
+#if CHANNELS == 4
+        // straight alpha: premultiplied sum over the frame's premultiplied colour
+        const float ba = (float)o[3] * (1.0f / 255.0f), a = 1.0f - T * (1.0f - ba);
+        const float wb = T * ba, wc = a > 0.0f ? 1.0f / a : 0.0f;
+        cr = (cr + wb * dec8[o[IR]]) * wc; cg = (cg + wb * dec8[o[1]]) * wc;
+        cb = (cb + wb * dec8[o[IB]]) * wc;
+        o[3] = (uchar)(a * 255.0f + 0.5f);  // common.cl to_pixel
+#else
+        cr += T * dec8[o[IR]]; cg += T * dec8[o[1]]; cb += T * dec8[o[IB]];
+#endif
+        o[IR] = enc8[Q16(cr)];
+        o[1] = enc8[Q16(cg)];
+        o[IB] = enc8[Q16(cb)];
+#endif
+    }
+    for (int t = 0; t < nf; ++t) {  // fully covered by a fill or an outline: its colour's bytes
+        const int q = full[t];
+        __global uchar *o = timg + (size_t)(q / TILE) * pitch + CHANNELS * (q % TILE);
+        const uint pc = pcol[exs[q]];
+#if CHANNELS == 1
+        o[0] = (uchar)pc;
+#else
+#if CHANNELS == 4
+        o[3] = (uchar)255;
+#endif
+        o[IR] = (uchar)(pc >> 16);
+        o[1] = (uchar)(pc >> 8);
+        o[IB] = (uchar)pc;
+#endif
     }
 #undef IR
 #undef IB
@@ -525,6 +631,12 @@ __kernel void grlaa_draw(__global PIXEL_T *img, __global const float *luts,
 // BIN_SLACK absorbs the float32 rounding of the end point a + length * t. A tile's entries come
 // in any order; grlaa_draw sorts them into drawing order.
 #define BIN_SLACK 0.01f
+// PoCL's CPU build calls atomic_inc out of line; the compiler's builtin is one locked instruction.
+#ifdef POCL_DEVICE_ADDRESS_BITS
+#define ATOMIC_INC(p) __atomic_fetch_add(p, 1, __ATOMIC_RELAXED)
+#else
+#define ATOMIC_INC(p) atomic_inc(p)
+#endif
 
 INLINE void grlaa_bin_one(int s, float4 g, float4 h, int tiles_x, int tiles_y, int cap,
                           __global int *counts, __global int *entries, __global int *overflow)
@@ -546,7 +658,7 @@ INLINE void grlaa_bin_one(int s, float4 g, float4 h, int tiles_x, int tiles_y, i
         const int c0 = IMAX(ifloor((FMIN(xa, xb) - R) * inv), 0);
         const int c1 = IMIN(ifloor((FMAX(xa, xb) + R) * inv), tiles_x - 1);
         for (int col = c0; col <= c1; ++col) {
-            const int t = row * tiles_x + col, e = atomic_inc(counts + t);
+            const int t = row * tiles_x + col, e = ATOMIC_INC(counts + t);
             if (e < cap) entries[t * cap + e] = s; else *overflow = 1;
         }
     }

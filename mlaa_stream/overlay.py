@@ -387,6 +387,8 @@ class OverlayRenderer:
         self._tables_cache: tuple | None = None
         # (key, line_i buffer, line_f buffer, segments, (line_i, line_f, LineTables) kept alive)
         self._lines_cache: tuple | None = None
+        # ((number of lines, style arguments), styles): draw's last styles
+        self._styles_cache: tuple | None = None
 
     @property
     def device_name(self) -> str:
@@ -591,8 +593,22 @@ class OverlayRenderer:
         """Draw `lines` over `frame`; returns a new frame of the same shape and dtype, or `frame`
         itself (drawn into) with `inplace`. Style arguments: one value or one per line."""
         pts, allp = _checked_lines(lines)
-        styles = make_styles(len(pts), width, color, outline, outline_width, opacity, cap, bgr)
+        styles = self._styles(len(pts), width, color, outline, outline_width, opacity, cap, bgr)
         return self._draw(frame, pts, allp, styles, bgr, inplace, what)
+
+    def _styles(self, n: int, *args) -> list[LineStyle]:
+        """make_styles(n, *args), kept for the last arguments when they are hashable (numbers,
+        strings, tuples): a capture loop passes the same ones every frame."""
+        key = (n, args)
+        try:
+            if self._styles_cache is not None and self._styles_cache[0] == key:
+                return self._styles_cache[1]
+            hash(key)
+        except (TypeError, ValueError):  # lists, arrays: built every time
+            return make_styles(n, *args)
+        styles = make_styles(n, *args)
+        self._styles_cache = (key, styles)
+        return styles
 
     def draw_styled(self, frame: np.ndarray, lines: list[np.ndarray], styles: list[LineStyle],
                     bgr: bool = True, inplace: bool = False, what: str = "frame") -> np.ndarray:
