@@ -11,10 +11,12 @@
 // cut to the chain that resumes with the same period and phase up to MAX_SKIP rows later, over background pixels,
 // by the link that ends the first chain. At the frame's edge: a dash cut by it counts as long as the link's other
 // dash (the chain must go on from that one), and a chain of three links or more that starts or ends within a gap
-// of the edge draws its band on to it. Mirrors bridge_reference.
+// of the edge draws its band on to it. The end of another wire of the same ink two rows from a dash (beside it, not
+// over its step next to the gap) does not refuse a link whose dashes are both POKE_DASH px or longer. Mirrors
+// bridge_reference.
 // Defines: MAX_GAP, MAX_RUN (pixels), GAP_PER_RUN, GAP_SLACK (gap <= GAP_PER_RUN * mean dash + GAP_SLACK),
-// INK_MIN, BG_TOL, INK_TOL (max-channel, normalised), MIN_DASHES, MAX_SKIP, BLEND_LINEAR, LINEAR_INPUT (as
-// blend.cl).
+// INK_MIN, BG_TOL, INK_TOL (max-channel, normalised), MIN_DASHES, MAX_SKIP, POKE_RUN, POKE_DASH, BLEND_LINEAR,
+// LINEAR_INPUT (as blend.cl).
 #pragma OPENCL FP_CONTRACT OFF
 #ifndef MAX_GAP
 #define MAX_GAP 24
@@ -42,6 +44,12 @@
 #endif
 #ifndef MAX_SKIP
 #define MAX_SKIP 3
+#endif
+#ifndef POKE_RUN
+#define POKE_RUN 2
+#endif
+#ifndef POKE_DASH
+#define POKE_DASH 3
 #endif
 #ifdef PIXEL_IS_FLOAT
 #define FLAT_LEVELS INK_MIN
@@ -119,11 +127,26 @@ inline int classify_o(__global const PIXEL_T *src, const lattice L, int x, int y
 // A window pixel: clear, noting in `reach` one outside the frame (allowed only beside a dash the frame cuts).
 #define WIN(c) ((c) == OUTSIDE ? (reach = 1) : CLEAR(c))
 
+// Is lattice pixel (i, j) the end of another wire of the link's ink reaching into row j from beyond it
+// (bridge_reference's _Scan.poke): the ink, in a run of at most POKE_RUN steps along row j, with the ink at step
+// i - 1, i or i + 1 of row j + out? (The caller has found (i, j) to be the ink.)
+inline int poke(__global const PIXEL_T *src, const lattice L, int x, int y, int i, int j, int out, float3 ink,
+                float3 bgc)
+{
+    if (CLS(i - 1, j + out) != 2 && CLS(i, j + out) != 2 && CLS(i + 1, j + out) != 2) return 0;
+    int lo = i, hi = i;
+    while (lo > i - POKE_RUN && CLS(lo - 1, j) == 2) --lo;
+    while (hi < i + POKE_RUN && CLS(hi + 1, j) == 2) ++hi;
+    return hi - lo + 1 <= POKE_RUN;
+}
+
 // The link whose dash 1 ends at (x, y): 1 and *out, or 0. Rows -d .. 2d over steps a..b hold only the two
 // dashes (one ink), background (one colour), other colours (crossing wires) and, when a dash is cut by the
 // frame's edge (its ink reaches it: judged with the length cut_lengths gives it), pixels outside the frame; a
 // dash may run under another colour and start or end under it (it then spans its first to last pixel of the
-// ink; the window covers the occluding pixels too); exactly one direction d qualifies. The predicate of
+// ink; the window covers the occluding pixels too); beside a dash, two rows from it (row 2d beside dash 1, row -d
+// beside dash 2, not over the dash's step next to the gap), the end of another wire of the same ink (poke) counts as
+// clear when both dashes are at least POKE_DASH long; exactly one direction d qualifies. The predicate of
 // bridge_reference's _Scan.link, evaluated in an order that rejects early: rows -1 and 1 beside dash 1
 // (both directions need them), then per direction the outer row beside dash 1, then the gap and dash 2 one
 // step at a time with all four rows.
@@ -170,11 +193,17 @@ inline int find_link(__global const PIXEL_T *src, const lattice L, int x, int y,
     }
     if (s == 0) return 0;
     reach = reach1 | (d > 0 ? outm : outp);   // row -d over the gap
-    // row 2d beside dash 1, rows 0 and 2d over the gap
-    for (int i = a0; i <= 0; ++i) if (!WIN(CLSO(i, 2 * d))) return 0;
+    // row 2d beside dash 1 (another wire's end allowed but over step 0: poked), rows 0 and 2d over the gap
+    int poked = 0;
+    for (int i = a0; i <= 0; ++i) {
+        const int c = CLSO(i, 2 * d);
+        if (WIN(c)) continue;
+        if (c == 2 && i < 0 && poke(src, L, x, y, i, 2 * d, d, ink, bgc)) poked = 1; else return 0;
+    }
     for (int k = 1; k <= s; ++k) if (!WIN(CLSO(k, 0)) || !WIN(CLSO(k, 2 * d))) return 0;
     // dash 2: ink (or another colour over it) in row d from s to the background, or to the frame's edge (cut2:
-    // its ink reaches it); b = its last pixel of the ink; rows 0, -d, 2d clear beside it
+    // its ink reaches it); b = its last pixel of the ink; rows 0, -d, 2d clear beside it (row -d: or another wire's
+    // end, but over step s)
     int b = 0, last2 = s, cut2 = 0;
     for (int k = s; k <= s + MAX_RUN; ++k) {
         const int c = CLSO(k, d);
@@ -183,7 +212,11 @@ inline int find_link(__global const PIXEL_T *src, const lattice L, int x, int y,
             break;
         }
         if (c == 1 && k > s) { b = last2; break; }
-        if (c == 0 || c == 1 || !WIN(CLSO(k, 0)) || !WIN(CLSO(k, -d)) || !WIN(CLSO(k, 2 * d))) break;
+        if (c == 0 || c == 1 || !WIN(CLSO(k, 0)) || !WIN(CLSO(k, 2 * d))) break;
+        const int cm = CLSO(k, -d);
+        if (!WIN(cm)) {
+            if (cm == 2 && k > s && poke(src, L, x, y, k, -d, -d, ink, bgc)) poked = 1; else break;
+        }
         if (c == 2) last2 = k;
     }
     if (b == 0 || (cut1 && cut2) || (reach && !cut1 && !cut2)) return 0;
@@ -191,6 +224,7 @@ inline int find_link(__global const PIXEL_T *src, const lattice L, int x, int y,
     int n1 = 1 - a, n2 = b - s + 1;
     if (cut1 && n2 > n1) n1 = n2;
     if (cut2 && n1 > n2) n2 = n1;
+    if (poked && (n1 < POKE_DASH || n2 < POKE_DASH)) return 0;   // another wire's end: only beside long dashes
     // a wire at least 1 / (GAP_PER_RUN + 1) px wide: gap <= GAP_PER_RUN * mean dash + GAP_SLACK
     if (2 * (s - 1) > GAP_PER_RUN * (n1 + n2) + 2 * GAP_SLACK) return 0;
     out->x = x; out->y = y; out->d = d; out->a = a; out->s = s; out->b = b;

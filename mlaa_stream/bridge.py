@@ -6,7 +6,8 @@ redraws the columns they span, in rows r and r+d, with the coverage a straight b
 width passing from the middle of one dash to the middle of the next would give. Steep wires are the
 transpose, wires near 45 degrees the same on the two diagonal lattices. A wire that crosses the frame's edge
 keeps its first and last gap: a dash cut by the edge counts as long as the next one, and a chain that starts
-or ends within a gap of the edge draws its band on to it. Detection reads the input; the
+or ends within a gap of the edge draws its band on to it. The end of another wire of the same ink two rows from a
+dash (beside it, away from the gap) does not refuse a link of long dashes. Detection reads the input; the
 drawing writes another frame (the MLAA output: `Filter(bridge=True)`, the default).
 """
 from __future__ import annotations
@@ -34,6 +35,8 @@ GAP_PER_RUN = 3  # gap <= GAP_PER_RUN * mean dash + GAP_SLACK: wires at least 1/
 GAP_SLACK = 2
 MIN_DASHES = 3  # a link is drawn only inside a chain of at least this many dashes (2 or 3)
 MAX_SKIP = 3  # a chain cut by a crossing is bridged to one that goes on at most this many lattice rows later
+POKE_RUN = 2  # another wire's end of the link's ink beside a dash, two rows from it: at most this long (0: off)
+POKE_DASH = 3  # ... and only for links whose dashes are both at least this long
 
 
 @dataclass(frozen=True)
@@ -49,6 +52,8 @@ class BridgeOptions:
     gap_slack: int = GAP_SLACK
     min_dashes: int = MIN_DASHES
     max_skip: int = MAX_SKIP
+    poke_run: int = POKE_RUN
+    poke_dash: int = POKE_DASH
     linear: bool = True
     linear_input: bool = False
 
@@ -56,7 +61,8 @@ class BridgeOptions:
         return {"MAX_GAP": int(self.max_gap), "MAX_RUN": int(self.max_run), "INK_MIN": float(self.ink_min),
                 "BG_TOL": float(self.bg_tol), "INK_TOL": float(self.ink_tol),
                 "GAP_PER_RUN": int(self.gap_per_run), "GAP_SLACK": int(self.gap_slack),
-                "MIN_DASHES": int(self.min_dashes), "MAX_SKIP": int(self.max_skip), "BLEND_LINEAR": int(self.linear),
+                "MIN_DASHES": int(self.min_dashes), "MAX_SKIP": int(self.max_skip), "POKE_RUN": int(self.poke_run),
+                "POKE_DASH": int(self.poke_dash), "BLEND_LINEAR": int(self.linear),
                 "LINEAR_INPUT": int(self.linear_input)}
 
 
@@ -136,7 +142,9 @@ class _Scan:
         qualifies. A dash may run under another colour, and may start or end under it (occluded): it then runs
         from its first to its last pixel of the ink, and the window covers the occluding pixels too. One dash may
         be cut by the frame's edge (its ink reaches the edge): `cut_lengths` gives the lengths the link is judged
-        and drawn with."""
+        and drawn with. Beside a dash, two rows from it (row 2d beside dash 1, row -d beside dash 2, but not over
+        the dash's step next to the gap), the end of another wire of the same ink (`poke`) counts as clear when
+        both dashes are at least POKE_DASH long."""
         o = self.o
         ink, bgc = self.px(x, y, 0, 0), self.px(x, y, 1, 0)
         if ink is None or bgc is None or _diff(ink, bgc) < self.ink_min:
@@ -204,11 +212,31 @@ class _Scan:
             if 2 * (s - 1) > o.gap_per_run * (n1 + n2) + 2 * o.gap_slack:
                 continue  # gap <= GAP_PER_RUN * mean dash + GAP_SLACK
             win = window(a0, b0, d)
+            pokes = min(n1, n2) >= o.poke_dash
+
+            def ok(i: int, j: int) -> bool:  # clear, or another wire's end beside a dash, two rows from it
+                return clear(i, j) or (pokes and ((j == 2 * d and i < 0 and self.poke(x, y, i, j, d, ink, bgc)) or
+                                                  (j == -d and i > s and self.poke(x, y, i, j, -d, ink, bgc))))
             # the window may reach outside the frame only beside a dash the frame cuts
-            if all(clear(i, j) for i, j in win) and \
+            if all(ok(i, j) for i, j in win) and \
                     (any(self.cuts(ln)) or all(self.inside(x, y, i, j) for i, j in win)):
                 found.append(ln)
         return found[0] if len(found) == 1 else None
+
+    def poke(self, x: int, y: int, i: int, j: int, out: int, ink: np.ndarray, bgc: np.ndarray) -> bool:
+        """Is lattice pixel (i, j) the end of another wire of the link's ink reaching into row j from beyond it: the
+        ink, in a run of at most POKE_RUN steps along row j, with the ink at step i - 1, i or i + 1 of row j + out?"""
+        def ink_at(ii: int, jj: int) -> bool:
+            return self.cls(x, y, ii, jj, ink, bgc) == 2
+
+        if not ink_at(i, j) or not (ink_at(i - 1, j + out) or ink_at(i, j + out) or ink_at(i + 1, j + out)):
+            return False
+        lo = hi = i
+        while lo > i - self.o.poke_run and ink_at(lo - 1, j):
+            lo -= 1
+        while hi < i + self.o.poke_run and ink_at(hi + 1, j):
+            hi += 1
+        return hi - lo + 1 <= self.o.poke_run
 
     def cuts(self, ln: Link) -> tuple[bool, bool]:
         """Is dash 1 / dash 2 of `ln` cut by the frame's edge (the step before its first / after its last

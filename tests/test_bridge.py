@@ -170,6 +170,30 @@ def test_chain_cut_by_a_crossing_of_the_same_ink_goes_on_across_it(device):
     assert (out != cut).any(-1).sum() >= 8
 
 
+@pytest.mark.parametrize("case", ["end", "end_under_dash_end", "wide_end", "short_dashes"])
+def test_wire_end_of_the_same_ink_two_rows_from_a_dash(device, case):
+    # a chain of four dashes; a vertical wire of the same ink comes up from the bottom and ends two rows below
+    # dash 3 (in row 2d of the last link's window, beside its dash 1). Its end counts as clear: the last link is
+    # drawn (its gap carries the band, W over the two rows), and the wire's pixels keep their values. Not when
+    # the end lies under the dash's step next to the gap, is 3 px wide (POKE_RUN = 2), or the dashes are
+    # shorter than POKE_DASH = 3 (in text, a glyph's strokes near small dashes look the same).
+    n, g = (2, 3) if case == "short_dashes" else (5, 6)
+    img = canvas(24, 48)
+    dashes = dash_chain(img, 2, 4, n, g, 4)
+    (r, a, e), (r2, s, _) = dashes[2], dashes[3]
+    col = {"end": a + 1, "end_under_dash_end": e, "wide_end": a, "short_dashes": a}[case]
+    img[r + 2:, col:col + (3 if case == "wide_end" else 1)] = INK
+    out = both(img)
+    np.testing.assert_array_equal(out[r + 2:], img[r + 2:])
+    cov = coverage_of(out)[r:r2 + 1, e + 1:s].sum(0)
+    if case == "end":
+        np.testing.assert_allclose(cov, n / (n + g), atol=0.1)
+        off = both(img, options=BridgeOptions(poke_run=0))
+        assert (coverage_of(off)[r:r2 + 1, e + 1:s].sum(0) < 0.1).all()
+    else:
+        assert (cov < 0.1).all()
+
+
 def band_cover(img_shape, rows_cols, m1: float, m2: float, r: int, W: float) -> np.ndarray:
     """The band model on rows r and r + 1: coverage of pixel (row, c) by a band of thickness W whose centre goes
     from column m1 (row r) to column m2 (row r + 1), extended straight beyond them."""
@@ -380,6 +404,31 @@ def test_kernel_matches_reference_with_other_colours_in_the_windows(device, seed
     assert (out != img).any(), "the dash chains should give some links"
     both(img.astype(np.uint16) * 257)
     both(np.ascontiguousarray(img.transpose(1, 0, 2)))
+
+
+def poked_chains(seed: int) -> np.ndarray:
+    """Shallow dash chains of INK (dashes 2-6 px) with ends of steep wires of the same ink, 1-3 px wide, coming
+    from above or below and stopping two rows from a dash, and +-2 levels of noise."""
+    rng = np.random.default_rng(seed)
+    img = canvas(48, 72)
+    for k in range(4):
+        d = 1 if k % 2 else -1
+        dashes = dash_chain(img, int(rng.integers(0, 6)), 8 + 11 * k + (3 if d < 0 else 0), int(rng.integers(2, 7)),
+                            int(rng.integers(2, 8)), 6, d)
+        for r, a, e in dashes[1:5]:
+            x, w, y = int(rng.integers(a - 1, e + 2)), int(rng.integers(1, 4)), r + int(rng.choice([-5, 2]))
+            img[max(0, y):y + 4, x:x + w] = INK
+    return np.clip(img + rng.integers(-2, 3, img.shape), 0, 255).astype(np.uint8)  # background within BG_TOL
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_kernel_matches_reference_with_wire_ends_of_the_same_ink(device, seed):
+    img = poked_chains(seed)
+    out = both(img)
+    assert (out != bridge_reference(img, options=BridgeOptions(poke_run=0))).any(), "some links need the rule"
+    both(img.astype(np.uint16) * 257)
+    both(np.ascontiguousarray(img.transpose(1, 0, 2)))
+    both(img, options=BridgeOptions(poke_run=1, poke_dash=5))
 
 
 def test_filter_option_draws_over_the_blended_frame(device):
