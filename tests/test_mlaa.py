@@ -93,6 +93,24 @@ def test_edges_match_reference_on_antialiased_input(filt, seed):
     assert (loose & ~want).any()   # the guard did reject edges here
 
 
+@pytest.mark.parametrize("seed,sigma,dtype", [(24, 6, np.uint8), (22, 20, np.uint8), (23, 12, np.uint16)])
+def test_edges_match_reference_on_noisy_input(filt, seed, sigma, dtype):
+    """Camera noise over blocky content: nearly every group takes the lane path (CIELAB and the
+    antialiased guard decided 8 lanes at a time on the stored levels, kernels/edges.cl VANTIALIASED,
+    the float path only where the rounding could matter); edges as the reference's. (Seed 21 at sigma 6
+    holds an exact tie, t = AA_LO in `between`, which the float32 kernel -- before and after the lane
+    path -- and the float64 reference round apart: a known reference limit, not tested here.)"""
+    rng = np.random.default_rng(seed)
+    img = blocky(seed, dtype=np.float64) + rng.normal(0, sigma / 255, (48, 64, 3))
+    img = to_dtype(np.clip(img, 0, 1), dtype)
+    got = filt.intermediates(img)["edges"]
+    want = edges_reference(img, filt.options.threshold)
+    differ = (got ^ want) & ~near_threshold(img, filt.options.threshold)
+    assert not differ.any(), f"{differ.astype(bool).sum()} edge bits differ"
+    loose = edges_reference(img, filt.options.threshold, aa_guard=False)
+    assert want.astype(bool).mean() > 0.05 and (loose & ~want).any()   # edges found, and some guarded
+
+
 @pytest.mark.parametrize("angle", [10, 30, 45, 60, 80])
 def test_antialiased_polygon_edges_are_left_alone(filt, angle):
     """A polygon already antialiased (8x8 samples per pixel) comes out untouched; its 1-spp render
