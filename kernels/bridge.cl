@@ -12,11 +12,12 @@
 // by the link that ends the first chain. At the frame's edge: a dash cut by it counts as long as the link's other
 // dash (the chain must go on from that one), and a chain of three links or more that starts or ends within a gap
 // of the edge draws its band on to it. The end of another wire of the same ink two rows from a dash (beside it, not
-// over its step next to the gap) does not refuse a link whose dashes are both POKE_DASH px or longer. Mirrors
-// bridge_reference.
+// over its step next to the gap) does not refuse a link whose dashes are both POKE_DASH px or longer, nor does
+// another wire of the same ink crossing the gap (its runs XING_RUN px or shorter) when they are XING_DASH px or
+// longer: the gap runs past it and the band leaves its pixels as they are. Mirrors bridge_reference.
 // Defines: MAX_GAP, MAX_RUN (pixels), GAP_PER_RUN, GAP_SLACK (gap <= GAP_PER_RUN * mean dash + GAP_SLACK),
-// INK_MIN, BG_TOL, INK_TOL (max-channel, normalised), MIN_DASHES, MAX_SKIP, POKE_RUN, POKE_DASH, BLEND_LINEAR,
-// LINEAR_INPUT (as blend.cl).
+// INK_MIN, BG_TOL, INK_TOL (max-channel, normalised), MIN_DASHES, MAX_SKIP, POKE_RUN, POKE_DASH, XING_RUN,
+// XING_DASH, BLEND_LINEAR, LINEAR_INPUT (as blend.cl).
 #pragma OPENCL FP_CONTRACT OFF
 #ifndef MAX_GAP
 #define MAX_GAP 24
@@ -50,6 +51,12 @@
 #endif
 #ifndef POKE_DASH
 #define POKE_DASH 3
+#endif
+#ifndef XING_RUN
+#define XING_RUN 3
+#endif
+#ifndef XING_DASH
+#define XING_DASH 4
 #endif
 #ifdef PIXEL_IS_FLOAT
 #define FLAT_LEVELS INK_MIN
@@ -140,67 +147,60 @@ inline int poke(__global const PIXEL_T *src, const lattice L, int x, int y, int 
     return hi - lo + 1 <= POKE_RUN;
 }
 
-// The link whose dash 1 ends at (x, y): 1 and *out, or 0. Rows -d .. 2d over steps a..b hold only the two
-// dashes (one ink), background (one colour), other colours (crossing wires) and, when a dash is cut by the
-// frame's edge (its ink reaches it: judged with the length cut_lengths gives it), pixels outside the frame; a
-// dash may run under another colour and start or end under it (it then spans its first to last pixel of the
-// ink; the window covers the occluding pixels too); beside a dash, two rows from it (row 2d beside dash 1, row -d
-// beside dash 2, not over the dash's step next to the gap), the end of another wire of the same ink (poke) counts as
-// clear when both dashes are at least POKE_DASH long; exactly one direction d qualifies. The predicate of
-// bridge_reference's _Scan.link, evaluated in an order that rejects early: rows -1 and 1 beside dash 1
-// (both directions need them), then per direction the outer row beside dash 1, then the gap and dash 2 one
-// step at a time with all four rows.
-inline int find_link(__global const PIXEL_T *src, const lattice L, int x, int y, link_t *out)
+// Is lattice pixel (i, j), the ink (the caller has found it so), in a run of at most XING_RUN steps along row j
+// (bridge_reference's _Scan.thin)? 1 and the run's ends *lo, *hi, or 0.
+inline int thin_run(__global const PIXEL_T *src, const lattice L, int x, int y, int i, int j, float3 ink, float3 bgc,
+                    int *lo, int *hi)
 {
-    const int i0 = lat(L, x, y, 0, 0), i1 = lat(L, x, y, 1, 0);
-    if (i0 < 0 || i1 < 0) return 0;
-    const float3 ink = rgb_at(src, i0), bgc = rgb_at(src, i1);
-    if (diff3(ink, bgc) < INK_MIN) return 0;
-    int reach1 = 0, reach = 0;
-    if (!WIN(CLSO(0, -1)) || !WIN(CLSO(0, 1))) return 0;
-    // dash 1: ink (or another colour over it) back to the background before a0, or to the frame's edge (cut1:
-    // its ink must reach it); a = its first pixel of the ink; rows -1 and 1 clear beside it
-    int a = 1, a0 = 1, last = 0, cut1 = 0;
-    for (int k = 1; k <= MAX_RUN; ++k) {
-        const int c = CLSO(-k, 0);
-        if (c == OUTSIDE) {
-            if (last != 1 - k) return 0;
-            a = a0 = last; cut1 = 1;
-            break;
-        }
-        if (c == 1) { a = last; a0 = 1 - k; break; }
-        if (c == 0 || !WIN(CLSO(-k, -1)) || !WIN(CLSO(-k, 1))) return 0;
-        if (c == 2) last = -k;
+    int l = i, h = i;
+    while (h < i + XING_RUN && CLS(h + 1, j) == 2) ++h;
+    if (h - i + 1 > XING_RUN) return 0;
+    while (l > i - XING_RUN && CLS(l - 1, j) == 2) --l;
+    *lo = l; *hi = h;
+    return h - l + 1 <= XING_RUN;
+}
+
+// Is lattice pixel (i, j), the ink, part of another wire of the link's ink crossing its lattice rows (_Scan.xing): a
+// thin run with a thin run of the ink on both sides across the rows, in row j -+ 1 within a step of its ends or in
+// row j -+ 2 within two?
+inline int xing(__global const PIXEL_T *src, const lattice L, int x, int y, int i, int j, float3 ink, float3 bgc)
+{
+    int lo, hi, u, v;
+    if (!thin_run(src, L, x, y, i, j, ink, bgc, &lo, &hi)) return 0;
+    for (int t = -1; t <= 1; t += 2) {
+        int ok = 0;
+        for (int r = 1; r <= 2 && !ok; ++r)
+            for (int ii = lo - r; ii <= hi + r && !ok; ++ii)
+                ok = CLS(ii, j + t * r) == 2 && thin_run(src, L, x, y, ii, j + t * r, ink, bgc, &u, &v);
+        if (!ok) return 0;
     }
-    if (a == 1) return 0;
-    reach1 = reach;   // rows -1 and 1 beside dash 1 reach outside the frame
-    // the direction: rows 1 and -1 walked together from step 1. Direction d lives while row -d is clear (a window
-    // row) and row d is clear inside the frame (the gap); dash 2 starts where row d first holds the ink, at s >= 2.
-    // At most one direction qualifies (the other's row -d holds this one's dash 2), so the rest of the window is
-    // checked for that one only: half the reads of checking both.
-    int d = 0, s = 0, alive = 3, outp = 0, outm = 0;   // alive: bit 0 d = 1, bit 1 d = -1
-    for (int k = 1; k <= MAX_GAP + 1 && alive && !s; ++k) {
-        const int cp = CLSO(k, 1), cm = CLSO(k, -1);
-        outp |= cp == OUTSIDE; outm |= cm == OUTSIDE;
-        if (!CLEAR(cm)) alive &= 2;
-        if (!CLEAR(cp)) alive &= 1;
-        if ((alive & 1) && (cp == OUTSIDE || !CLEAR(cp))) {
-            if (k >= 2 && cp == 2) { d = 1; s = k; } else alive &= 2;
-        }
-        if ((alive & 2) && (cm == OUTSIDE || !CLEAR(cm))) {
-            if (k >= 2 && cm == 2) { d = -1; s = k; } else alive &= 1;
-        }
-    }
-    if (s == 0) return 0;
-    reach = reach1 | (d > 0 ? outm : outp);   // row -d over the gap
-    // row 2d beside dash 1 (another wire's end allowed but over step 0: poked), rows 0 and 2d over the gap
+    return 1;
+}
+
+// The rest of find_link for direction d, once the walk has found dash 2's start s (rows d and -d over steps 1..s
+// judged: `reach` whether row -d or the rows beside dash 1 left the frame, `crossed` whether a crossing was let
+// through, `xmax` its last step): rows 0 and 2d over the gap, dash 2 and rows 0, -d, 2d beside it, the link's
+// length rules. 1 and *out, or 0.
+inline int finish_link(__global const PIXEL_T *src, const lattice L, int x, int y, float3 ink, float3 bgc, int a,
+                       int a0, int cut1, int d, int s, int reach, int crossed, int xmax, link_t *out)
+{
+    // row 2d beside dash 1 (another wire's end allowed but over step 0: poked), rows 0 and 2d over the gap (a
+    // crossing allowed in steps 2 .. s - 2)
     int poked = 0;
     for (int i = a0; i <= 0; ++i) {
         const int c = CLSO(i, 2 * d);
         if (WIN(c)) continue;
         if (c == 2 && i < 0 && poke(src, L, x, y, i, 2 * d, d, ink, bgc)) poked = 1; else return 0;
     }
-    for (int k = 1; k <= s; ++k) if (!WIN(CLSO(k, 0)) || !WIN(CLSO(k, 2 * d))) return 0;
+    for (int k = 1; k <= s; ++k) {
+        const int c0 = CLSO(k, 0), c2 = CLSO(k, 2 * d);
+        if (!WIN(c0)) {
+            if (c0 == 2 && k >= 2 && k <= s - 2 && xing(src, L, x, y, k, 0, ink, bgc)) crossed = 1; else return 0;
+        }
+        if (!WIN(c2)) {
+            if (c2 == 2 && k >= 2 && k <= s - 2 && xing(src, L, x, y, k, 2 * d, ink, bgc)) crossed = 1; else return 0;
+        }
+    }
     // dash 2: ink (or another colour over it) in row d from s to the background, or to the frame's edge (cut2:
     // its ink reaches it); b = its last pixel of the ink; rows 0, -d, 2d clear beside it (row -d: or another wire's
     // end, but over step s)
@@ -219,15 +219,112 @@ inline int find_link(__global const PIXEL_T *src, const lattice L, int x, int y,
         }
         if (c == 2) last2 = k;
     }
-    if (b == 0 || (cut1 && cut2) || (reach && !cut1 && !cut2)) return 0;
+    if (b == 0 || (cut1 && cut2) || (reach && !cut1 && !cut2) || xmax > s - 2) return 0;
     // a dash cut by the frame counts as long as the other one when its visible part is shorter
     int n1 = 1 - a, n2 = b - s + 1;
     if (cut1 && n2 > n1) n1 = n2;
     if (cut2 && n1 > n2) n2 = n1;
     if (poked && (n1 < POKE_DASH || n2 < POKE_DASH)) return 0;   // another wire's end: only beside long dashes
+    if (crossed && (n1 < XING_DASH || n2 < XING_DASH)) return 0;  // a crossing: likewise
     // a wire at least 1 / (GAP_PER_RUN + 1) px wide: gap <= GAP_PER_RUN * mean dash + GAP_SLACK
     if (2 * (s - 1) > GAP_PER_RUN * (n1 + n2) + 2 * GAP_SLACK) return 0;
     out->x = x; out->y = y; out->d = d; out->a = a; out->s = s; out->b = b;
+    return 1;
+}
+
+// The link whose dash 1 ends at (x, y): 1 and *out, or 0. Rows -d .. 2d over steps a..b hold only the two
+// dashes (one ink), background (one colour), other colours (crossing wires) and, when a dash is cut by the
+// frame's edge (its ink reaches it: judged with the length cut_lengths gives it), pixels outside the frame; a
+// dash may run under another colour and start or end under it (it then spans its first to last pixel of the
+// ink; the window covers the occluding pixels too); beside a dash, two rows from it (row 2d beside dash 1, row -d
+// beside dash 2, not over the dash's step next to the gap), the end of another wire of the same ink (poke) counts as
+// clear when both dashes are at least POKE_DASH long; over steps 2 .. s - 2 of the gap, another wire of the same
+// ink crossing the rows (xing) counts as clear, and the gap in row d runs past its runs that could not start dash 2,
+// when both dashes are at least XING_DASH long; exactly one direction d qualifies. The predicate of
+// bridge_reference's _Scan.link, evaluated in an order that rejects early: rows -1 and 1 beside dash 1 (both
+// directions need them), then rows 1 and -1 walked together over the gap, then the rest for the direction(s) whose
+// dash 2 was found (finish_link).
+inline int find_link(__global const PIXEL_T *src, const lattice L, int x, int y, link_t *out)
+{
+    const int i0 = lat(L, x, y, 0, 0), i1 = lat(L, x, y, 1, 0);
+    if (i0 < 0 || i1 < 0) return 0;
+    const float3 ink = rgb_at(src, i0), bgc = rgb_at(src, i1);
+    if (diff3(ink, bgc) < INK_MIN) return 0;
+    int reach = 0;
+    if (!WIN(CLSO(0, -1)) || !WIN(CLSO(0, 1))) return 0;
+    // dash 1: ink (or another colour over it) back to the background before a0, or to the frame's edge (cut1:
+    // its ink must reach it); a = its first pixel of the ink; rows -1 and 1 clear beside it
+    int a = 1, a0 = 1, last = 0, cut1 = 0;
+    for (int k = 1; k <= MAX_RUN; ++k) {
+        const int c = CLSO(-k, 0);
+        if (c == OUTSIDE) {
+            if (last != 1 - k) return 0;
+            a = a0 = last; cut1 = 1;
+            break;
+        }
+        if (c == 1) { a = last; a0 = 1 - k; break; }
+        if (c == 0 || !WIN(CLSO(-k, -1)) || !WIN(CLSO(-k, 1))) return 0;
+        if (c == 2) last = -k;
+    }
+    if (a == 1) return 0;
+    // the directions: rows 1 and -1 walked together from step 1, t = 0 for d = 1 (gap row 1, window row -1), t = 1
+    // for d = -1. Direction d lives while row -d is clear or a crossing (a window row) and row d is clear inside the
+    // frame or a crossing that cannot start dash 2 (the gap: its run is skipped, up to sk); dash 2 starts where row d
+    // then holds the ink, at s >= 2. Usually one direction's dash 2 ends the other (in its row -d); both are finished
+    // only where a crossing let both through.
+    // A crossing refuses a link of dashes shorter than XING_DASH, and where the gap runs past one, the link that would
+    // start dash 2 there is refused too (the ink beside it): with a short dash 1 (not cut by the frame) crossings are
+    // not looked for (the same links, fewer reads).
+    const int xok = cut1 || 1 - a >= XING_DASH;
+    // per direction (p: d = 1, m: d = -1): alive, dash 2's start, last step of a skipped crossing run, crossing let
+    // through, its last step, row -d left the frame
+    int alp = 1, alm = 1, sp = 0, sm = 0, skp = 0, skm = 0, xcp = 0, xcm = 0, xmp = 0, xmm = 0, otp = 0, otm = 0;
+    for (int k = 1; k <= MAX_GAP + 1 && ((alp && !sp) || (alm && !sm)); ++k) {
+        const int cp = CLSO(k, 1), cm = CLSO(k, -1);
+        const int wp = alp && !sp, wm = alm && !sm;   // directions still walking
+        // is the ink at (k, 1) / (k, -1) a crossing (k >= 2), where a walking direction needs to know
+        const int xp = xok && cp == 2 && k >= 2 && (wm || (wp && k > skp)) && xing(src, L, x, y, k, 1, ink, bgc);
+        const int xm = xok && cm == 2 && k >= 2 && (wp || (wm && k > skm)) && xing(src, L, x, y, k, -1, ink, bgc);
+        if (wp) {   // d = 1: window row -1, gap row 1
+            otp |= cm == OUTSIDE;
+            if (!CLEAR(cm) && !xm) alp = 0;
+            else {
+                if (!CLEAR(cm)) { xcp = 1; xmp = k > xmp ? k : xmp; }
+                if (k > skp && !(CLEAR(cp) && cp != OUTSIDE)) {
+                    int lo, hi, adj = 0;
+                    if (cp != 2 || k < 2) alp = 0;
+                    else {
+                        if (xp && thin_run(src, L, x, y, k, 1, ink, bgc, &lo, &hi))
+                            for (int i = k - 1; i <= hi && !adj; ++i) adj = CLS(i, 0) == 2 || CLS(i, 2) == 2;
+                        if (adj) { skp = hi; xcp = 1; xmp = hi; }   // a crossing that cannot start dash 2
+                        else sp = k;
+                    }
+                }
+            }
+        }
+        if (wm) {   // d = -1: window row 1, gap row -1
+            otm |= cp == OUTSIDE;
+            if (!CLEAR(cp) && !xp) alm = 0;
+            else {
+                if (!CLEAR(cp)) { xcm = 1; xmm = k > xmm ? k : xmm; }
+                if (k > skm && !(CLEAR(cm) && cm != OUTSIDE)) {
+                    int lo, hi, adj = 0;
+                    if (cm != 2 || k < 2) alm = 0;
+                    else {
+                        if (xm && thin_run(src, L, x, y, k, -1, ink, bgc, &lo, &hi))
+                            for (int i = k - 1; i <= hi && !adj; ++i) adj = CLS(i, 0) == 2 || CLS(i, -2) == 2;
+                        if (adj) { skm = hi; xcm = 1; xmm = hi; }
+                        else sm = k;
+                    }
+                }
+            }
+        }
+    }
+    link_t l0, l1;
+    const int f0 = alp && sp && finish_link(src, L, x, y, ink, bgc, a, a0, cut1, 1, sp, reach | otp, xcp, xmp, &l0);
+    const int f1 = alm && sm && finish_link(src, L, x, y, ink, bgc, a, a0, cut1, -1, sm, reach | otm, xcm, xmm, &l1);
+    if (f0 == f1) return 0;
+    *out = f0 ? l0 : l1;
     return 1;
 }
 
@@ -249,8 +346,9 @@ inline link_t unpack_link(int x, int y, uint v)
     return ln;
 }
 
-// Does a link end at dash 1 of `ln` (a dash before it, one lattice row to either side, past background and
-// other colours: a wire crossing the gap)? 1 and that link in *prev, or 0.
+// Does a link end at dash 1 of `ln` (a dash before it, one lattice row to either side, past background, other
+// colours and, before a dash 1 of XING_DASH or more, a wire of the same ink crossing the gap)? 1 and that link in
+// *prev, or 0.
 inline int incoming(__global const PIXEL_T *src, __global const uchar *found, __global const ushort *links,
                     const lattice L, const int o, const link_t ln, link_t *prev)
 {
@@ -268,6 +366,7 @@ inline int incoming(__global const PIXEL_T *src, __global const uchar *found, __
                                     links[4 * q + o]);
                 if (j + prev->d == 0 && prev->s == k) return 1;
             }
+            if (c == 2 && 1 - ln.a >= XING_DASH && xing(src, L, x, y, ln.a - k, j, ink, bgc)) continue;
             break;
         }
     }
@@ -475,10 +574,14 @@ inline verdict_t read_verdict(__global const ushort *links, const lattice L, con
     return r;
 }
 
+// A pixel of class c the band may write: not another wire's (another colour), and over the gap not the ink (a wire of
+// the link's ink crossing it).
+inline int writable(int c, int gap) { return c != 3 && !(gap && c == 2); }
+
 // Claim the pixels the link at (x, y) would write (rows 0 and d over the steps it owns, rows -d and 0 / d and 2d
-// over the steps to the frame's edge, not a pixel of another colour or outside the frame; across a cut, the
-// background pixels the band covers): claims[k] = the lowest id (pixel index of the dash end) of the links of
-// this orientation that want k. Its verdict goes to verdicts[id].
+// over the steps to the frame's edge, not a pixel of another colour or of the ink over the gap, nor outside the
+// frame; across a cut, the background pixels the band covers): claims[k] = the lowest id (pixel index of the dash
+// end) of the links of this orientation that want k. Its verdict goes to verdicts[id].
 inline void claim_link(__global const PIXEL_T *src, __global const uchar *found, __global const ushort *links,
                        volatile __global uint *claims, __global uint *verdicts, const lattice L, const int o, int x,
                        int y, int diagonal)
@@ -492,9 +595,9 @@ inline void claim_link(__global const PIXEL_T *src, __global const uchar *found,
     const float3 ink = rgb_at(src, lat(L, x, y, 0, 0)), bgc = rgb_at(src, lat(L, x, y, 1, 0));
     for (int i = r.c0 - r.e0; i < r.c1 + r.e1; ++i) {
         const int r0 = i < r.c0 ? -ln.d : (i >= r.c1 ? ln.d : 0);   // the band crosses rows r0 and r0 + d here
-        const int k0 = lat(L, x, y, i, r0), k1 = lat(L, x, y, i, r0 + ln.d);
-        if (k0 >= 0 && class_of(src, k0, ink, bgc) != 3) atomic_min(claims + k0, id);
-        if (k1 >= 0 && class_of(src, k1, ink, bgc) != 3) atomic_min(claims + k1, id);
+        const int k0 = lat(L, x, y, i, r0), k1 = lat(L, x, y, i, r0 + ln.d), gap = i > 0 && i < ln.s;
+        if (k0 >= 0 && writable(class_of(src, k0, ink, bgc), gap)) atomic_min(claims + k0, id);
+        if (k1 >= 0 && writable(class_of(src, k1, ink, bgc), gap)) atomic_min(claims + k1, id);
     }
     if (!r.m) return;
     const float ms = (float)r.is + (float)r.sa * 0.5f;
@@ -625,19 +728,19 @@ inline int not_clear_at(__global const PIXEL_T *src, int k, float3 rl, float3 e,
 }
 
 // Can find_link(src, L, x, y) succeed (i the dash end, r the pixel after it)? 0 only where it fails:
-//  - (1, -1), (1, 1), (0, -1), (0, 1) and (2, 0) clear or outside the frame: every direction d's gap starts with
-//    (1, -d), (1, d), (2, 0) clear, and rows -1 and 1 beside the dash end are clear;
+//  - (1, -1), (1, 1), (0, -1), (0, 1) clear or outside the frame: every direction d's gap starts with (1, -d),
+//    (1, d) clear (a crossing lies in steps 2 .. s - 2), and rows -1 and 1 beside the dash end are clear;
 //  - dash 1, walked back along row 0, reaches a background pixel or the frame's edge within MAX_RUN steps, and
 //    before it every (-k, 0) is no mix (the ink or another colour) and (-k, -1), (-k, 1) are clear or outside.
 //    Before the first pixel that may be background, every pixel is before the first background pixel.
 inline int may_link(__global const PIXEL_T *src, const lattice L, int x, int y, int i, int r)
 {
-    const int p1 = lat(L, x, y, 1, 1), p2 = lat(L, x, y, 1, -1), p3 = lat(L, x, y, 2, 0);
+    const int p1 = lat(L, x, y, 1, 1), p2 = lat(L, x, y, 1, -1);
     const float3 rl = levels_at(src, r), e = levels_at(src, i) - rl;
     const float ee_inv = 1.0f / (e.x * e.x + e.y * e.y + e.z * e.z);   // e != 0: diff3(ink, bgc) >= INK_MIN
     if (not_clear_at(src, p1, rl, e, ee_inv) | not_clear_at(src, p2, rl, e, ee_inv)) return 0;
-    if (not_clear_at(src, lat(L, x, y, 0, 1), rl, e, ee_inv) | not_clear_at(src, lat(L, x, y, 0, -1), rl, e, ee_inv) |
-        not_clear_at(src, p3, rl, e, ee_inv)) return 0;
+    if (not_clear_at(src, lat(L, x, y, 0, 1), rl, e, ee_inv) | not_clear_at(src, lat(L, x, y, 0, -1), rl, e, ee_inv))
+        return 0;
     __global const PIXEL_T *ink = src + (size_t)i * CHANNELS, *bg = src + (size_t)r * CHANNELS;
     for (int k = 1; k <= MAX_RUN; ++k) {
         const int p = lat(L, x, y, -k, 0);

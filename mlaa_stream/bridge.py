@@ -7,7 +7,8 @@ width passing from the middle of one dash to the middle of the next would give. 
 transpose, wires near 45 degrees the same on the two diagonal lattices. A wire that crosses the frame's edge
 keeps its first and last gap: a dash cut by the edge counts as long as the next one, and a chain that starts
 or ends within a gap of the edge draws its band on to it. The end of another wire of the same ink two rows from a
-dash (beside it, away from the gap) does not refuse a link of long dashes. Detection reads the input; the
+dash (beside it, away from the gap) does not refuse a link of long dashes, nor does another wire of the same ink
+crossing the gap (the gap runs past it; it keeps its pixels). Detection reads the input; the
 drawing writes another frame (the MLAA output: `Filter(bridge=True)`, the default).
 """
 from __future__ import annotations
@@ -37,6 +38,8 @@ MIN_DASHES = 3  # a link is drawn only inside a chain of at least this many dash
 MAX_SKIP = 3  # a chain cut by a crossing is bridged to one that goes on at most this many lattice rows later
 POKE_RUN = 2  # another wire's end of the link's ink beside a dash, two rows from it: at most this long (0: off)
 POKE_DASH = 3  # ... and only for links whose dashes are both at least this long
+XING_RUN = 3  # another wire of the link's ink crossing the gap: at most this many steps along each row (0: off)
+XING_DASH = 4  # ... and only for links whose dashes are both at least this long
 
 
 @dataclass(frozen=True)
@@ -54,6 +57,8 @@ class BridgeOptions:
     max_skip: int = MAX_SKIP
     poke_run: int = POKE_RUN
     poke_dash: int = POKE_DASH
+    xing_run: int = XING_RUN
+    xing_dash: int = XING_DASH
     linear: bool = True
     linear_input: bool = False
 
@@ -62,7 +67,8 @@ class BridgeOptions:
                 "BG_TOL": float(self.bg_tol), "INK_TOL": float(self.ink_tol),
                 "GAP_PER_RUN": int(self.gap_per_run), "GAP_SLACK": int(self.gap_slack),
                 "MIN_DASHES": int(self.min_dashes), "MAX_SKIP": int(self.max_skip), "POKE_RUN": int(self.poke_run),
-                "POKE_DASH": int(self.poke_dash), "BLEND_LINEAR": int(self.linear),
+                "POKE_DASH": int(self.poke_dash), "XING_RUN": int(self.xing_run),
+                "XING_DASH": int(self.xing_dash), "BLEND_LINEAR": int(self.linear),
                 "LINEAR_INPUT": int(self.linear_input)}
 
 
@@ -144,7 +150,10 @@ class _Scan:
         be cut by the frame's edge (its ink reaches the edge): `cut_lengths` gives the lengths the link is judged
         and drawn with. Beside a dash, two rows from it (row 2d beside dash 1, row -d beside dash 2, but not over
         the dash's step next to the gap), the end of another wire of the same ink (`poke`) counts as clear when
-        both dashes are at least POKE_DASH long."""
+        both dashes are at least POKE_DASH long. Over steps 2 .. s - 2 of the gap, another wire of the same ink
+        crossing the rows (`xing`) counts as clear when both dashes are at least XING_DASH long, and the gap in row d
+        runs past a run of it that could not start dash 2 (the ink beside it in row 0 or 2d would refuse that
+        link: so no link found before is lost)."""
         o = self.o
         ink, bgc = self.px(x, y, 0, 0), self.px(x, y, 1, 0)
         if ink is None or bgc is None or _diff(ink, bgc) < self.ink_min:
@@ -178,11 +187,21 @@ class _Scan:
         a = min(i for i in range(a0, 1) if c(i, 0) == 2)  # its first pixel of the ink
         found = []
         for d in (1, -1):
-            s = None  # the gap in row d, then dash 2 from s
-            for k in range(1, o.max_gap + 2):
+            s = None  # the gap in row d (past another wire of the ink crossing it), then dash 2 from s
+            xs = []  # steps of the crossing pixels in it
+            k = 0
+            while k < o.max_gap + 1:
+                k += 1
                 if not self.inside(x, y, k, d):
                     break
                 if clear(k, d):
+                    continue
+                run = self.thin(x, y, k, d, ink, bgc) if k >= 2 else None
+                if run is not None and self.xing(x, y, k, d, ink, bgc) and \
+                        any(c(i, j) == 2 for i in range(k - 1, run[1] + 1) for j in (0, 2 * d)):
+                    # a crossing that cannot start dash 2 (the ink beside it in row 0 or 2d would refuse that link)
+                    xs.append(run[1])
+                    k = run[1]
                     continue
                 if k >= 2 and c(k, d) == 2:
                     s = k
@@ -212,16 +231,55 @@ class _Scan:
             if 2 * (s - 1) > o.gap_per_run * (n1 + n2) + 2 * o.gap_slack:
                 continue  # gap <= GAP_PER_RUN * mean dash + GAP_SLACK
             win = window(a0, b0, d)
-            pokes = min(n1, n2) >= o.poke_dash
+            used = set()  # which allowance the window needed: "poke", "xing"
 
-            def ok(i: int, j: int) -> bool:  # clear, or another wire's end beside a dash, two rows from it
-                return clear(i, j) or (pokes and ((j == 2 * d and i < 0 and self.poke(x, y, i, j, d, ink, bgc)) or
-                                                  (j == -d and i > s and self.poke(x, y, i, j, -d, ink, bgc))))
-            # the window may reach outside the frame only beside a dash the frame cuts
-            if all(ok(i, j) for i, j in win) and \
-                    (any(self.cuts(ln)) or all(self.inside(x, y, i, j) for i, j in win)):
+            def ok(i: int, j: int) -> bool:  # clear; another wire's end beside a dash, two rows from it; a crossing
+                if clear(i, j):
+                    return True
+                if (j == 2 * d and i < 0 and self.poke(x, y, i, j, d, ink, bgc)) or \
+                        (j == -d and i > s and self.poke(x, y, i, j, -d, ink, bgc)):
+                    used.add("poke")
+                    return True
+                if 2 <= i <= s - 2 and self.xing(x, y, i, j, ink, bgc):
+                    used.add("xing")
+                    return True
+                return False
+            if xs:
+                used.add("xing")
+            # the window may reach outside the frame only beside a dash the frame cuts; crossings lie in steps
+            # 2 .. s - 2 of the gap; each allowance only for links of long dashes
+            if all(ok(i, j) for i, j in win) and (not xs or max(xs) <= s - 2) and \
+                    (any(self.cuts(ln)) or all(self.inside(x, y, i, j) for i, j in win)) and \
+                    ("poke" not in used or min(n1, n2) >= o.poke_dash) and \
+                    ("xing" not in used or min(n1, n2) >= o.xing_dash):
                 found.append(ln)
         return found[0] if len(found) == 1 else None
+
+    def thin(self, x: int, y: int, i: int, j: int, ink: np.ndarray, bgc: np.ndarray) -> tuple[int, int] | None:
+        """The run of the ink along lattice row j through (i, j), (lo, hi), when it is at most XING_RUN steps long;
+        else None (not the ink, or a longer run: a dash or a shape, not a wire crossing the row)."""
+        def ink_at(ii: int) -> bool:
+            return self.cls(x, y, ii, j, ink, bgc) == 2
+
+        if not ink_at(i):
+            return None
+        lo = hi = i
+        while lo > i - self.o.xing_run and ink_at(lo - 1):
+            lo -= 1
+        while hi < i + self.o.xing_run and ink_at(hi + 1):
+            hi += 1
+        return (lo, hi) if hi - lo + 1 <= self.o.xing_run else None
+
+    def xing(self, x: int, y: int, i: int, j: int, ink: np.ndarray, bgc: np.ndarray) -> bool:
+        """Is lattice pixel (i, j) part of another wire of the link's ink crossing its lattice rows: a thin run
+        (`thin`) with a thin run of the ink on either side across the rows, in row j -+ 1 within a step of its
+        ends or in row j -+ 2 within two (a steep wire, or the dashes of one under a pixel wide)?"""
+        run = self.thin(x, y, i, j, ink, bgc)
+        if run is None:
+            return False
+        lo, hi = run
+        return all(any(self.thin(x, y, ii, j + t * r, ink, bgc) is not None
+                       for r in (1, 2) for ii in range(lo - r, hi + r + 1)) for t in (-1, 1))
 
     def poke(self, x: int, y: int, i: int, j: int, out: int, ink: np.ndarray, bgc: np.ndarray) -> bool:
         """Is lattice pixel (i, j) the end of another wire of the link's ink reaching into row j from beyond it: the
@@ -254,7 +312,8 @@ class _Scan:
         return (max(n1, n2) if c1 else n1), (max(n1, n2) if c2 else n2)
 
     def incoming(self, ln: Link) -> Link | None:
-        """The link that ends at dash 1 of `ln` (a dash before it, one lattice row to either side), or None."""
+        """The link that ends at dash 1 of `ln` (a dash before it, one lattice row to either side, past background,
+        other colours and, before a dash 1 of XING_DASH or more, a wire of the same ink crossing the gap), or None."""
         o, P = self.o, self.px
         ink, bgc = P(ln.x, ln.y, 0, 0), P(ln.x, ln.y, 1, 0)
         for j in (-1, 1):
@@ -268,6 +327,8 @@ class _Scan:
                 prev = self.link(ex, ey)
                 if prev is not None and j + prev.d == 0 and prev.s == k:
                     return prev
+                if 1 - ln.a >= o.xing_dash and self.xing(ln.x, ln.y, ln.a - k, j, ink, bgc):
+                    continue  # a wire of the same ink crossing the gap, before a long dash 1
                 break
         return None
 
@@ -398,7 +459,8 @@ def _tri_cdf(t: np.float32) -> np.float32:
 def _draw(scan: _Scan, lin: np.ndarray, diagonal: bool) -> dict[tuple[int, int], tuple[int, np.ndarray]]:
     """Find the links of one orientation and the pixels they write: {(x, y): (claim, RGB in the mixing
     space)}; a link that ends a chain cut by a crossing also writes the band across the cut (`resumes`), over
-    background pixels. A pixel of another colour than the link's background and ink (a crossing wire) is never written;
+    background pixels. A pixel of another colour than the link's background and ink (a crossing wire), or of the ink
+    over the gap (a wire of the same ink crossing it), is never written;
     a pixel two links would write goes to the lower claim (index of the pixel where dash 1 ends), as the
     kernel's atomic_min settles it."""
     f32 = np.float32
@@ -418,7 +480,10 @@ def _draw(scan: _Scan, lin: np.ndarray, diagonal: bool) -> dict[tuple[int, int],
             u = (f32(i) - m1) / (m2 - m1)  # the band's centre, in rows from row 0 toward row d
             j0 = -ln.d if i < c0 else (ln.d if i >= c1 else 0)  # the two rows the band crosses at step i
             for j, delta in ((j0, u - f32(j0 * ln.d)), (j0 + ln.d, u - f32(j0 * ln.d + 1))):
-                if not scan.inside(ln.x, ln.y, i, j) or scan.cls(ln.x, ln.y, i, j, raw_ink, raw_bgc) == 3:
+                if not scan.inside(ln.x, ln.y, i, j):
+                    continue
+                k = scan.cls(ln.x, ln.y, i, j, raw_ink, raw_bgc)
+                if k == 3 or (k == 2 and 0 < i < ln.s):  # another wire's pixel, or one of the ink crossing the gap
                     continue
                 px, py = scan.at(ln.x, ln.y, i, j)
                 if (px, py) not in res or cid < res[(px, py)][0]:

@@ -194,6 +194,39 @@ def test_wire_end_of_the_same_ink_two_rows_from_a_dash(device, case):
         assert (cov < 0.1).all()
 
 
+@pytest.mark.parametrize("case", ["crossing", "short_dashes", "touching_dash_2"])
+def test_wire_of_the_same_ink_crossing_the_gap(device, case):
+    # a chain of four dashes (8 px, gaps of 10: W = 8/18); a steep wire of the same ink (2 px a row, one step a
+    # row) crosses the gap of link 2 (dash 2 in row 5, dash 3 in row 6) in all its window rows, over steps 3..7.
+    # The crossing counts as clear and the gap in row d runs past it (it cannot start dash 2: the ink beside it
+    # in row 0 would refuse that link): link 2 is drawn with the band, and the crossing keeps its pixels. Link 3
+    # (the last) is drawn too: looking back for the link that ends at its dash 1, `incoming` passes the crossing.
+    # Neither when the dashes are shorter than XING_DASH = 4 (3 px, gaps of 8), nor when the crossing reaches
+    # step s - 1 (it touches dash 2).
+    n, g = (3, 8) if case == "short_dashes" else (8, 10)
+    img = canvas(24, 96)
+    dashes = dash_chain(img, 2, 4, n, g, 4)
+    (r, _, e), (r2, s, e2), (r3, s3, _) = dashes[1:]
+    c0 = e + (5 if case != "touching_dash_2" else 9) - r2   # the crossing's first column in row r2 is c0 + r2
+    wire = np.zeros(img.shape[:2], bool)
+    for y in range(img.shape[0]):
+        wire[y, c0 + y:c0 + y + 2] = True
+    img[wire] = INK
+    out = both(img)
+    np.testing.assert_array_equal(out[wire], img[wire])
+    cols = [c for c in range(e + 1, s) if not wire[r:r2 + 1, c].any()]
+    cov = coverage_of(out)[r:r2 + 1, cols].sum(0)
+    cov3 = coverage_of(out)[r2:r3 + 1, e2 + 1:s3].sum(0)
+    if case == "crossing":
+        np.testing.assert_allclose(cov, n / (n + g), atol=0.1)
+        np.testing.assert_allclose(cov3, n / (n + g), atol=0.1)
+        off = both(img, options=BridgeOptions(xing_run=0))
+        assert (coverage_of(off)[r:r2 + 1, cols].sum(0) < 0.1).all()
+        assert (coverage_of(off)[r2:r3 + 1, e2 + 1:s3].sum(0) < 0.1).all()
+    else:
+        assert (cov < 0.1).all() and (cov3 < 0.1).all()
+
+
 def band_cover(img_shape, rows_cols, m1: float, m2: float, r: int, W: float) -> np.ndarray:
     """The band model on rows r and r + 1: coverage of pixel (row, c) by a band of thickness W whose centre goes
     from column m1 (row r) to column m2 (row r + 1), extended straight beyond them."""
@@ -429,6 +462,36 @@ def test_kernel_matches_reference_with_wire_ends_of_the_same_ink(device, seed):
     both(img.astype(np.uint16) * 257)
     both(np.ascontiguousarray(img.transpose(1, 0, 2)))
     both(img, options=BridgeOptions(poke_run=1, poke_dash=5))
+
+
+def crossed_by_the_same_ink(seed: int) -> np.ndarray:
+    """Shallow dash chains of INK (dashes 3-9 px, gaps 6-14), two of each chain's gaps crossed near their middle by
+    a steep wire of the same ink (1-2 px a row, 0-2 steps every two rows, some dotted: ink every other row), and
+    +-2 levels of noise."""
+    rng = np.random.default_rng(seed)
+    img = canvas(64, 96)
+    for k in range(4):
+        d = 1 if k % 2 else -1
+        dashes = dash_chain(img, int(rng.integers(0, 6)), 8 + 14 * k + (4 if d < 0 else 0), int(rng.integers(3, 10)),
+                            int(rng.integers(6, 15)), 6, d)
+        for i in rng.choice(4, 2, replace=False) + 1:
+            (r, _, e), (_, a2, _) = dashes[i], dashes[i + 1]
+            cx, w, step, every = (e + a2) // 2 + int(rng.integers(-1, 2)), int(rng.integers(1, 3)), \
+                int(rng.integers(-2, 3)), int(rng.choice([1, 1, 2]))
+            for y in range(max(0, r - 6), min(img.shape[0], r + 8), every):
+                c = cx + ((y - r) * step) // 2
+                img[y, max(0, c):max(0, c + w)] = INK
+    return np.clip(img + rng.integers(-2, 3, img.shape), 0, 255).astype(np.uint8)  # background within BG_TOL
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_kernel_matches_reference_with_crossings_of_the_same_ink(device, seed):
+    img = crossed_by_the_same_ink(seed)
+    out = both(img)
+    assert (out != bridge_reference(img, options=BridgeOptions(xing_run=0))).any(), "some links need the rule"
+    both(img.astype(np.uint16) * 257)
+    both(np.ascontiguousarray(img.transpose(1, 0, 2)))
+    both(img, options=BridgeOptions(xing_run=2, xing_dash=6))
 
 
 def test_filter_option_draws_over_the_blended_frame(device):
