@@ -34,7 +34,8 @@
 #define IDX(x, y, w) ((y) * (w) + (x))
 
 // Per-pixel passes run one work item per SEGMENT pixels of a row: enough work items for a GPU, and
-// on a CPU a tight loop that skips flat stretches 8 pixels at a time. Global size (ceil(W/SEGMENT), H).
+// on a CPU a tight loop that skips flat stretches 8 pixels at a time. Global size (ceil(W/SEGMENT), H)
+// (edges.cl: EDGE_ROWS rows per work item, (ceil(W/SEGMENT), ceil(H/EDGE_ROWS))).
 #ifndef SEGMENT
 #define SEGMENT 64
 #endif

@@ -262,6 +262,8 @@ inline int quiet_px(__global const PIXEL_T *src, int i, int j)
 #define ROW11(p, c) ((int16)((p)[c], (p)[(c) + CHANNELS], (p)[(c) + 2 * CHANNELS], (p)[(c) + 3 * CHANNELS], \
     (p)[(c) + 4 * CHANNELS], (p)[(c) + 5 * CHANNELS], (p)[(c) + 6 * CHANNELS], (p)[(c) + 7 * CHANNELS],     \
     (p)[(c) + 8 * CHANNELS], (p)[(c) + 9 * CHANNELS], (p)[(c) + 10 * CHANNELS], 0, 0, 0, 0, 0))
+// ROW11 with lanes 1 .. 8 given (mid: an int8 of the same samples)
+#define ROW11_MID(p, c, mid) ((int16)((p)[c], (mid), (p)[(c) + 9 * CHANNELS], (p)[(c) + 10 * CHANNELS], 0, 0, 0, 0, 0))
 #define ROW8(p, c) ((int8)((p)[c], (p)[(c) + CHANNELS], (p)[(c) + 2 * CHANNELS], (p)[(c) + 3 * CHANNELS], \
     (p)[(c) + 4 * CHANNELS], (p)[(c) + 5 * CHANNELS], (p)[(c) + 6 * CHANNELS], (p)[(c) + 7 * CHANNELS]))
 #define VABS(v) ((v) < 0 ? -(v) : (v))
@@ -375,149 +377,222 @@ inline uchar float_edges(__global const PIXEL_T *src, __global const float *luts
     return e;
 }
 
+// Work item: the SEGMENT pixels from x0 of EDGE_ROWS consecutive rows from y0. Flat groups first, row by
+// row, in a loop of their own (a bit each in `flat`); then the others GROUP columns at a time (segment-
+// aligned), top to bottom, so each row's CIELAB (computed as the bottom neighbours of the row above) serves
+// that row's own pairs too: one LAB8 per row instead of two, and the lane path's rows y - 1, y + 1 and
+// y + 2 are the row above's, shifted: one row loaded per row instead of four. Global size
+// (ceil(W / SEGMENT), ceil(H / EDGE_ROWS)) (mlaa.py; on a CPU one work item per work group).
+#ifndef EDGE_ROWS
+#define EDGE_ROWS 1
+#endif
+#define ROW_BITS (SEGMENT / GROUP)
+#if EDGE_ROWS * ROW_BITS > 64
+#error "EDGE_ROWS * SEGMENT / GROUP must fit the 64 bits of `flat`"
+#endif
 __kernel void detect_edges(__global const PIXEL_T *src, __global const float *luts, __global const float *lin,
                            __global uchar *edges, const int width, const int height,
                            const float threshold)
 {
-    const int x0 = get_global_id(0) * SEGMENT, y = get_global_id(1);
-    if (x0 >= width || y >= height) return;
-    const int x1 = min(x0 + SEGMENT, width);
+    const int x0 = get_global_id(0) * SEGMENT, y0 = get_global_id(1) * EDGE_ROWS;
+    if (x0 >= width || y0 >= height) return;
+    const int x1 = x0 + SEGMENT < width ? x0 + SEGMENT : width, y1 = y0 + EDGE_ROWS < height ? y0 + EDGE_ROWS : height;
+    // flat_group needs the right neighbour of the group's last pixel and the row below
+    const int xf = x1 < width - 1 ? x1 : width - 1, yf = y1 < height - 1 ? y1 : height - 1;
+    ulong flat = 0;   // bit (y - y0) * ROW_BITS + (x - x0) / GROUP: group x of row y is flat
+    for (int y = y0; y < yf; ++y) {
+        int i = IDX(x0, y, width);
+        for (int x = x0, b = (y - y0) * ROW_BITS; x + GROUP <= xf; x += GROUP, i += GROUP, ++b)
+            if (flat_group(src, i, width)) {
+                vstore8((uchar8)(0), 0, edges + i);
+                flat |= (ulong)1 << b;
+            }
+    }
+    ulong col = 0;   // the bits of column block 0's rows
+    for (int y = y0; y < y1; ++y) col |= (ulong)1 << ((y - y0) * ROW_BITS);
+    if (flat == col * (((ulong)1 << ROW_BITS) - 1)) return;   // all flat (flat, rendered frames)
     Colour c;
-    int c_valid = 0;   // c holds pixel x (converted only when some pair may be an edge)
-    for (int x = x0; x < x1;) {
-        const int i = IDX(x, y, width);
-        if (x + GROUP < width && x + GROUP <= x1 && y + 1 < height && flat_group(src, i, width)) {
-            vstore8((uchar8)(0), 0, edges + i);
-            x += GROUP;
-            c_valid = 0;
-            continue;
-        }
+    int c_valid;   // c holds pixel x (converted only when some pair may be an edge)
+    for (int x = x0, g = 0; x < x1; x += GROUP, ++g) {
+        if (((flat >> g) & col) == col) continue;
+        const int n = x1 - x < GROUP ? x1 - x : GROUP;   // this column block's pixels
 #if QUIET_LEVELS >= 0
-        // Integer frames reject quiet pairs and ramps on the stored samples first (no conversion):
-        // interior groups a lane per pixel, the others a pixel at a time.
-        if (x > 0 && x + GROUP + 1 < width && x + GROUP <= x1 && y > 0 && y + 2 < height) {
-            __global const PIXEL_T *p = src + (size_t)(i - 1) * CHANNELS;
-            const size_t rs = (size_t)width * CHANNELS;
-            int16 r0 = ROW11(p, C0);
-            int8 u0 = ROW8(p + CHANNELS - rs, C0), d0 = ROW8(p + CHANNELS + rs, C0),
-                 e0 = ROW8(p + CHANNELS + 2 * rs, C0);
-            const int8 p0 = r0.s12345678, qb0 = d0 - p0, qr0 = r0.s23456789 - p0;
-            int8 quiet_b = VQUIET(qb0), quiet_r = VQUIET(qr0), ramp_b, ramp_r;
+        const int can_vec = n == GROUP && x > 0 && x + GROUP + 1 < width;
+#if METRIC == 0
+        float8 pL, pA, pZ;   // CIELAB of row y's 8 pixels when lab_valid: row y - 1's bottom neighbours
+        int lab_valid = 0;
+#endif
+        // rows_valid: row y - 1 took the lane path; su*, sd*, se*: its rows y - 1, y + 1, y + 2 (x .. x + 7)
+        int8 su0, sd0, se0;
 #if VCH == 3
-            int16 r1 = ROW11(p, 1), r2 = ROW11(p, C2);
-            int8 u1 = ROW8(p + CHANNELS - rs, 1), d1 = ROW8(p + CHANNELS + rs, 1),
-                 e1 = ROW8(p + CHANNELS + 2 * rs, 1);
-            int8 u2 = ROW8(p + CHANNELS - rs, C2), d2 = ROW8(p + CHANNELS + rs, C2),
-                 e2 = ROW8(p + CHANNELS + 2 * rs, C2);
-            const int8 p1 = r1.s12345678, p2 = r2.s12345678;
-            const int8 qb1 = d1 - p1, qb2 = d2 - p2, qr1 = r1.s23456789 - p1, qr2 = r2.s23456789 - p2;
-            quiet_b &= VQUIET(qb1) & VQUIET(qb2);
-            quiet_r &= VQUIET(qr1) & VQUIET(qr2);
+        int8 su1, sd1, se1, su2, sd2, se2;
+#endif
+        int rows_valid = 0;
+#endif
+        for (int y = y0; y < y1; ++y) {
+            const int i = IDX(x, y, width);
+#if QUIET_LEVELS >= 0
+            const int rows_above = rows_valid;
+            rows_valid = 0;
+#if METRIC == 0
+            const int lab_above = lab_valid;
+            lab_valid = 0;
+#endif
+#endif
+            if ((flat >> ((y - y0) * ROW_BITS + g)) & 1) continue;
+            c_valid = 0;
+#if QUIET_LEVELS >= 0
+            // Integer frames reject quiet pairs and ramps on the stored samples first (no conversion):
+            // interior groups a lane per pixel, the others a pixel at a time.
+            if (can_vec && y > 0 && y + 2 < height) {
+                __global const PIXEL_T *p = src + (size_t)(i - 1) * CHANNELS;
+                const size_t rs = (size_t)width * CHANNELS;
+                // rows y - 1, y (x - 1 .. x + 9), y + 1, y + 2: those of the row above's lanes, shifted,
+                // when it took this path, and row y + 2 loaded
+                int16 r0;
+                int8 u0, d0, e0 = ROW8(p + CHANNELS + 2 * rs, C0);
+#if VCH == 3
+                int16 r1, r2;
+                int8 u1, d1, e1 = ROW8(p + CHANNELS + 2 * rs, 1);
+                int8 u2, d2, e2 = ROW8(p + CHANNELS + 2 * rs, C2);
+#endif
+                if (rows_above) {
+                    r0 = ROW11_MID(p, C0, sd0); u0 = su0; d0 = se0;
+#if VCH == 3
+                    r1 = ROW11_MID(p, 1, sd1); u1 = su1; d1 = se1;
+                    r2 = ROW11_MID(p, C2, sd2); u2 = su2; d2 = se2;
+#endif
+                } else {
+                    r0 = ROW11(p, C0); u0 = ROW8(p + CHANNELS - rs, C0); d0 = ROW8(p + CHANNELS + rs, C0);
+#if VCH == 3
+                    r1 = ROW11(p, 1); u1 = ROW8(p + CHANNELS - rs, 1); d1 = ROW8(p + CHANNELS + rs, 1);
+                    r2 = ROW11(p, C2); u2 = ROW8(p + CHANNELS - rs, C2); d2 = ROW8(p + CHANNELS + rs, C2);
+#endif
+                }
+                su0 = r0.s12345678; sd0 = d0; se0 = e0;
+#if VCH == 3
+                su1 = r1.s12345678; sd1 = d1; se1 = e1;
+                su2 = r2.s12345678; sd2 = d2; se2 = e2;
+#endif
+                rows_valid = 1;
+                const int8 p0 = r0.s12345678, qb0 = d0 - p0, qr0 = r0.s23456789 - p0;
+                int8 quiet_b = VQUIET(qb0), quiet_r = VQUIET(qr0), ramp_b, ramp_r;
+#if VCH == 3
+                const int8 p1 = r1.s12345678, p2 = r2.s12345678;
+                const int8 qb1 = d1 - p1, qb2 = d2 - p2, qr1 = r1.s23456789 - p1, qr2 = r2.s23456789 - p2;
+                quiet_b &= VQUIET(qb1) & VQUIET(qb2);
+                quiet_r &= VQUIET(qr1) & VQUIET(qr2);
 #endif
 #if RAMP_TEST && VCH == 3
-            VRAMP3(qb0, qb1, qb2, p0 - u0, p1 - u1, p2 - u2, e0 - d0, e1 - d1, e2 - d2, ramp_b)
-            VRAMP3(qr0, qr1, qr2, p0 - r0.s01234567, p1 - r1.s01234567, p2 - r2.s01234567,
-                   r0.s3456789a - r0.s23456789, r1.s3456789a - r1.s23456789, r2.s3456789a - r2.s23456789, ramp_r)
+                VRAMP3(qb0, qb1, qb2, p0 - u0, p1 - u1, p2 - u2, e0 - d0, e1 - d1, e2 - d2, ramp_b)
+                VRAMP3(qr0, qr1, qr2, p0 - r0.s01234567, p1 - r1.s01234567, p2 - r2.s01234567,
+                       r0.s3456789a - r0.s23456789, r1.s3456789a - r1.s23456789, r2.s3456789a - r2.s23456789, ramp_r)
 #elif RAMP_TEST
-            VRAMP1(qb0, p0 - u0, e0 - d0, ramp_b)
-            VRAMP1(qr0, p0 - r0.s01234567, r0.s3456789a - r0.s23456789, ramp_r)
+                VRAMP1(qb0, p0 - u0, e0 - d0, ramp_b)
+                VRAMP1(qr0, p0 - r0.s01234567, r0.s3456789a - r0.s23456789, ramp_r)
 #else
-            ramp_b = (int8)(0); ramp_r = ramp_b;
+                ramp_b = (int8)(0); ramp_r = ramp_b;
 #endif
-            int8 need = (~quiet_b & ~ramp_b & EDGE_BOTTOM) | (~quiet_r & ~ramp_r & EDGE_RIGHT);
-            int8 found = (int8)(0);   // edge bits decided in the lanes
+                int8 need = (~quiet_b & ~ramp_b & EDGE_BOTTOM) | (~quiet_r & ~ramp_r & EDGE_RIGHT);
+                int8 found = (int8)(0);   // edge bits decided in the lanes
 #if METRIC == 0
-            const int8 nz = need != 0;   // -1 per lane that needs the float path
-            const int4 n4 = nz.lo + nz.hi;
-            if (n4.x + n4.y + n4.z + n4.w <= -VECTOR_LAB_LANES) {
-                // CIELAB of the 8 pixels, their right and their bottom neighbours, a lane each (the scalar
-                // path's arithmetic): pairs surely under the threshold (0.1 % margin for rounding) need no
-                // float path. Camera noise and photographs' texture end here.
+                const int8 nz = need != 0;   // -1 per lane that needs the float path
+                const int4 n4 = nz.lo + nz.hi;
+                if (n4.x + n4.y + n4.z + n4.w <= -VECTOR_LAB_LANES) {
+                    // CIELAB of the 8 pixels, their right and their bottom neighbours, a lane each (the scalar
+                    // path's arithmetic): pairs surely under the threshold (0.1 % margin for rounding) need no
+                    // float path. Camera noise and photographs' texture end here.
 #if VCH == 3
-                const int8 pG = r1.s12345678, pB = r2.s12345678;
+                    const int8 pG = r1.s12345678, pB = r2.s12345678;
 #else
-                const int8 pG = p0, pB = p0, d1 = d0, d2 = d0;
+                    const int8 pG = p0, pB = p0, d1 = d0, d2 = d0;
 #endif
-                float8 pL, pA, pZ, bL, bA, bZ;
-                LAB8(p0, pG, pB, pL, pA, pZ);
-                LAB8(d0, d1, d2, bL, bA, bZ);
-                // the right neighbours: the group's own lanes shifted by one, and the pixel after the group
-                const float3 l8 = lab_of_levels(src, luts, lin, i + GROUP);
-                const float8 qL = (float8)(pL.s1234, pL.s567, l8.x), qA = (float8)(pA.s1234, pA.s567, l8.y);
-                const float8 qZ = (float8)(pZ.s1234, pZ.s567, l8.z);
-                const float t2 = (0.999f * threshold) * (0.999f * threshold);
-                const float t3 = (1.001f * threshold) * (1.001f * threshold);
-                const float8 eb_l = bL - pL, eb_a = bA - pA, eb_z = bZ - pZ;
-                const float8 er_l = qL - pL, er_a = qA - pA, er_z = qZ - pZ;
-                const float8 de_b = eb_l * eb_l + eb_a * eb_a + eb_z * eb_z, de_r = er_l * er_l + er_a * er_a + er_z * er_z;
-                need &= ((de_b > t2) & EDGE_BOTTOM) | ((de_r > t2) & EDGE_RIGHT);
-                // pairs surely over it (0.1 %) are edges unless antialiased(): decided on the levels where
-                // VANTIALIASED is sure, which is nearly always; the rest (and the pairs near the
-                // threshold) go on to the float path.
-                const int8 cand_b = ((need & EDGE_BOTTOM) != 0) & (de_b > t3);
-                const int8 cand_r = ((need & EDGE_RIGHT) != 0) & (de_r > t3);
-                const int4 c4 = (cand_b | cand_r).lo | (cand_b | cand_r).hi;
-                if (c4.x | c4.y | c4.z | c4.w) {
+                    float8 bL, bA, bZ;
+                    if (!lab_above) LAB8(p0, pG, pB, pL, pA, pZ);
+                    LAB8(d0, d1, d2, bL, bA, bZ);
+                    // the right neighbours: the group's own lanes shifted by one, and the pixel after the group
+                    const float3 l8 = lab_of_levels(src, luts, lin, i + GROUP);
+                    const float8 qL = (float8)(pL.s1234, pL.s567, l8.x), qA = (float8)(pA.s1234, pA.s567, l8.y);
+                    const float8 qZ = (float8)(pZ.s1234, pZ.s567, l8.z);
+                    const float t2 = (0.999f * threshold) * (0.999f * threshold);
+                    const float t3 = (1.001f * threshold) * (1.001f * threshold);
+                    const float8 eb_l = bL - pL, eb_a = bA - pA, eb_z = bZ - pZ;
+                    const float8 er_l = qL - pL, er_a = qA - pA, er_z = qZ - pZ;
+                    const float8 de_b = eb_l * eb_l + eb_a * eb_a + eb_z * eb_z, de_r = er_l * er_l + er_a * er_a + er_z * er_z;
+                    need &= ((de_b > t2) & EDGE_BOTTOM) | ((de_r > t2) & EDGE_RIGHT);
+                    pL = bL; pA = bA; pZ = bZ;   // the next row's own CIELAB
+                    lab_valid = 1;
+                    // pairs surely over it (0.1 %) are edges unless antialiased(): decided on the levels where
+                    // VANTIALIASED is sure, which is nearly always; the rest (and the pairs near the
+                    // threshold) go on to the float path.
+                    const int8 cand_b = ((need & EDGE_BOTTOM) != 0) & (de_b > t3);
+                    const int8 cand_r = ((need & EDGE_RIGHT) != 0) & (de_r > t3);
+                    const int4 c4 = (cand_b | cand_r).lo | (cand_b | cand_r).hi;
+                    if (c4.x | c4.y | c4.z | c4.w) {
 #if AA_GUARD
-                    // rows y - 1 and y + 1 from x - 1; the aliases name each pixel's R, G, B lanes
-                    const int16 U0 = ROW11(p - rs, C0), D0 = ROW11(p + rs, C0);
+                        // rows y - 1 and y + 1 from x - 1; the aliases name each pixel's R, G, B lanes
+                        const int16 U0 = ROW11(p - rs, C0), D0 = ROW11(p + rs, C0);
 #if VCH == 3
-                    const int16 U1 = ROW11(p - rs, 1), D1 = ROW11(p + rs, 1);
-                    const int16 U2 = ROW11(p - rs, C2), D2 = ROW11(p + rs, C2);
-                    const int16 R0 = r0, R1 = r1, R2 = r2;
+                        const int16 U1 = ROW11(p - rs, 1), D1 = ROW11(p + rs, 1);
+                        const int16 U2 = ROW11(p - rs, C2), D2 = ROW11(p + rs, C2);
+                        const int16 R0 = r0, R1 = r1, R2 = r2;
 #else
-                    const int16 U1 = U0, D1 = D0, U2 = U0, D2 = D0, R0 = r0, R1 = r0, R2 = r0;
+                        const int16 U1 = U0, D1 = D0, U2 = U0, D2 = D0, R0 = r0, R1 = r0, R2 = r0;
 #endif
 #define LANES(name, V, sw) const int8 name##x = (V##0).sw, name##y = (V##1).sw, name##z = (V##2).sw;
-                    LANES(P, R, s12345678) LANES(RT, R, s23456789) LANES(LF, R, s01234567)
-                    LANES(RR, R, s3456789a) LANES(UP, U, s12345678) LANES(UR, U, s23456789)
-                    LANES(DN, D, s12345678) LANES(DL, D, s01234567) LANES(DR, D, s23456789)
+                        LANES(P, R, s12345678) LANES(RT, R, s23456789) LANES(LF, R, s01234567)
+                        LANES(RR, R, s3456789a) LANES(UP, U, s12345678) LANES(UR, U, s23456789)
+                        LANES(DN, D, s12345678) LANES(DL, D, s01234567) LANES(DR, D, s23456789)
 #undef LANES
 #if VCH == 3
-                    const int8 E2x = e0, E2y = e1, E2z = e2;
+                        const int8 E2x = e0, E2y = e1, E2z = e2;
 #else
-                    const int8 E2x = e0, E2y = e0, E2z = e0;
+                        const int8 E2x = e0, E2y = e0, E2z = e0;
 #endif
-                    int8 yes_b = (int8)(0), no_b = yes_b, yes_r = yes_b, no_r = yes_b;
-                    const int4 b4 = cand_b.lo | cand_b.hi, r4 = cand_r.lo | cand_r.hi;
-                    if (b4.x | b4.y | b4.z | b4.w)   // bottom: across UP / E2, along LF DL, RT DR
-                        VANTIALIASED(P, DN, UP, E2, LF, DL, RT, DR, yes_b, no_b)
-                    if (r4.x | r4.y | r4.z | r4.w)   // right: across LF / RR, along UP UR, DN DR
-                        VANTIALIASED(P, RT, LF, RR, UP, UR, DN, DR, yes_r, no_r)
-                    const int8 sure_b = cand_b & no_b, sure_r = cand_r & no_r;
-                    need &= ~(((sure_b | yes_b) & EDGE_BOTTOM) | ((sure_r | yes_r) & EDGE_RIGHT));
+                        int8 yes_b = (int8)(0), no_b = yes_b, yes_r = yes_b, no_r = yes_b;
+                        const int4 b4 = cand_b.lo | cand_b.hi, r4 = cand_r.lo | cand_r.hi;
+                        if (b4.x | b4.y | b4.z | b4.w)   // bottom: across UP / E2, along LF DL, RT DR
+                            VANTIALIASED(P, DN, UP, E2, LF, DL, RT, DR, yes_b, no_b)
+                        if (r4.x | r4.y | r4.z | r4.w)   // right: across LF / RR, along UP UR, DN DR
+                            VANTIALIASED(P, RT, LF, RR, UP, UR, DN, DR, yes_r, no_r)
+                        const int8 sure_b = cand_b & no_b, sure_r = cand_r & no_r;
+                        need &= ~(((sure_b | yes_b) & EDGE_BOTTOM) | ((sure_r | yes_r) & EDGE_RIGHT));
 #else
-                    const int8 sure_b = cand_b, sure_r = cand_r;
-                    need &= ~((sure_b & EDGE_BOTTOM) | (sure_r & EDGE_RIGHT));
+                        const int8 sure_b = cand_b, sure_r = cand_r;
+                        need &= ~((sure_b & EDGE_BOTTOM) | (sure_r & EDGE_RIGHT));
 #endif
-                    found = (sure_b & EDGE_BOTTOM) | (sure_r & EDGE_RIGHT);
+                        found = (sure_b & EDGE_BOTTOM) | (sure_r & EDGE_RIGHT);
+                    }
                 }
+#endif
+                const int4 o = need.lo | need.hi;
+                if ((o.x | o.y | o.z | o.w) == 0) {
+                    vstore8(convert_uchar8(found), 0, edges + i);
+                } else {
+                    uchar nb[GROUP], fb[GROUP];
+                    vstore8(convert_uchar8(need), 0, nb);
+                    vstore8(convert_uchar8(found), 0, fb);
+                    for (int t = 0; t < GROUP; ++t)
+                        edges[i + t] = fb[t] | float_edges(src, luts, lin, i + t, x + t, y, width, height, threshold,
+                                                           nb[t] & EDGE_BOTTOM, nb[t] & EDGE_RIGHT, &c, &c_valid);
+                }
+                continue;
             }
 #endif
-            const int4 o = need.lo | need.hi;
-            if ((o.x | o.y | o.z | o.w) == 0) {
-                vstore8(convert_uchar8(found), 0, edges + i);
-                c_valid = 0;
-            } else {
-                uchar nb[GROUP], fb[GROUP];
-                vstore8(convert_uchar8(need), 0, nb);
-                vstore8(convert_uchar8(found), 0, fb);
-                for (int t = 0; t < GROUP; ++t)
-                    edges[i + t] = fb[t] | float_edges(src, luts, lin, i + t, x + t, y, width, height, threshold,
-                                                       nb[t] & EDGE_BOTTOM, nb[t] & EDGE_RIGHT, &c, &c_valid);
-            }
-            x += GROUP;
-            continue;
-        }
-        const int test_b = y + 1 < height && !quiet_px(src, i, i + width)
-            && !is_ramp_int(src, i - width, y > 0, i, i + width, i + 2 * width, y + 2 < height);
-        const int test_r = x + 1 < width && !quiet_px(src, i, i + 1)
-            && !is_ramp_int(src, i - 1, x > 0, i, i + 1, i + 2, x + 2 < width);
+            for (int t = 0; t < n; ++t) {
+                const int it = i + t, xt = x + t;
+#if QUIET_LEVELS >= 0
+                const int test_b = y + 1 < height && !quiet_px(src, it, it + width)
+                    && !is_ramp_int(src, it - width, y > 0, it, it + width, it + 2 * width, y + 2 < height);
+                const int test_r = xt + 1 < width && !quiet_px(src, it, it + 1)
+                    && !is_ramp_int(src, it - 1, xt > 0, it, it + 1, it + 2, xt + 2 < width);
 #else
-        const int test_b = y + 1 < height && !same_px(src, i, i + width);
-        const int test_r = x + 1 < width && !same_px(src, i, i + 1);
+                const int test_b = y + 1 < height && !same_px(src, it, it + width);
+                const int test_r = xt + 1 < width && !same_px(src, it, it + 1);
 #endif
-        edges[i] = float_edges(src, luts, lin, i, x, y, width, height, threshold, test_b, test_r, &c, &c_valid);
-        ++x;
+                edges[it] = float_edges(src, luts, lin, it, xt, y, width, height, threshold, test_b, test_r,
+                                        &c, &c_valid);
+            }
+        }
     }
 }

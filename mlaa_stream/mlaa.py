@@ -54,6 +54,7 @@ AA_LO, AA_OFF = 0.1, 0.35
 # every other scene unchanged (Filter(grain_guard=False) against Filter() gives the same).
 GRAIN_STEP, GRAIN_MIN = 12, 5
 SEGMENT = 64  # pixels of a row per work item in the per-pixel passes (kernels/common.cl)
+EDGE_ROWS = 4  # rows per work item in detect_edges (kernels/edges.cl): each row's CIELAB and samples shared
 
 # Named quality presets -> Filter keyword arguments (the CLI's --preset).
 PRESETS: dict[str, dict] = {
@@ -132,7 +133,7 @@ class FilterOptions:
             "SHORT_CORNER": float(self.short_corner), "CAP_MIN_L": STROKE_END_MIN_L,
             "AA_GUARD": int(self.aa_guard), "AA_LO": float(AA_LO), "AA_OFF": float(AA_OFF),
             "GRAIN_GUARD": int(self.grain_guard), "GRAIN_STEP": GRAIN_STEP, "GRAIN_MIN": GRAIN_MIN,
-            "SEGMENT": SEGMENT,
+            "SEGMENT": SEGMENT, "EDGE_ROWS": EDGE_ROWS,
             "RAMP_TEST": int(self.ramp > 0),
             "RAMP": float(self.ramp),
             "RAMP_NUM": ramp_fraction(self.ramp)[0], "RAMP_DEN": ramp_fraction(self.ramp)[1],
@@ -275,7 +276,11 @@ class Filter:
         if self._reconstructor is not None:
             ev["reconstruct"] = self._reconstructor.enqueue(q, src, self._recon_buf, self._luts, wait_for=after)
             src, after = self._recon_buf, [ev["reconstruct"]]
-        ev["edges"] = self._k_edges(q, g2, None, src, self._luts, self._lin, bufs.edges, W, H,
+        # detect_edges: EDGE_ROWS rows per work item; on a CPU (PoCL) one per work group (measured: mixed
+        # frame 0.87x vs PoCL's own choice 1.05x of the one-row kernel's time, docs/edges_speed.md)
+        g_edges = (g2[0], -(-h // EDGE_ROWS))
+        l_edges = (1, 1) if self.context.device.type & cl.device_type.CPU else None
+        ev["edges"] = self._k_edges(q, g_edges, l_edges, src, self._luts, self._lin, bufs.edges, W, H,
                                     np.float32(self.options.threshold), wait_for=after)
         ev["hlines"] = self._k_hdist(q, (max(h - 1, 1),), None, bufs.edges, bufs.hdist, W, H,
                                      wait_for=[ev["edges"]])

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from mlaa_stream.colour import rgb_to_lab
-from mlaa_stream.mlaa import SHORT_CORNER, Filter, area_table, trapezoid_area
+from mlaa_stream.mlaa import EDGE_ROWS, SHORT_CORNER, Filter, area_table, trapezoid_area
 from mlaa_stream.reference import (distances_reference, edges_reference, mlaa_reference,
                                    normalised_rgb, weights_reference)
 
@@ -109,6 +109,28 @@ def test_edges_match_reference_on_noisy_input(filt, seed, sigma, dtype):
     assert not differ.any(), f"{differ.astype(bool).sum()} edge bits differ"
     loose = edges_reference(img, filt.options.threshold, aa_guard=False)
     assert want.astype(bool).mean() > 0.05 and (loose & ~want).any()   # edges found, and some guarded
+
+
+@pytest.mark.parametrize("h,w,dtype", [(45, 70, np.uint8), (46, 129, np.uint8), (47, 200, np.uint16),
+                                       (9, 65, np.uint8), (3, 17, np.uint8), (2, 70, np.uint8),
+                                       (1, 130, np.uint8), (130, 1, np.uint8)])
+def test_edges_match_reference_when_height_is_not_a_multiple_of_edge_rows(filt, h, w, dtype):
+    """detect_edges' work items own EDGE_ROWS rows (kernels/edges.cl keeps a row's samples and CIELAB for
+    the row below): the frame's last, shorter block of rows, segments cut short by the width, single rows
+    and columns; runs of four close colours with noise, so consecutive rows take the lane path and the
+    ramp test sees the row above (breaking the kept row y - 1, its CIELAB or row y's right samples fails
+    here). (Seeds + 0 and + 1 hold exact ties, t = 1 - AA_LO in `between`, at 46 x 129: the known
+    reference limit.)"""
+    assert h % EDGE_ROWS
+    rng = np.random.default_rng(h * 1000 + w + 2)
+    pal = rng.random((1, 3)) * 0.6 + rng.random((4, 3)) * 0.2
+    blocks = np.repeat(rng.integers(0, 4, (h, -(-w // 5))), 5, axis=1)[:, :w]   # runs of 5 px, a row each
+    img = to_dtype(np.clip(pal[blocks] + rng.normal(0, 3 / 255, (h, w, 3)), 0, 1), dtype)
+    got = filt.intermediates(img)["edges"]
+    want = edges_reference(img, filt.options.threshold)
+    differ = (got ^ want) & ~near_threshold(img, filt.options.threshold)
+    assert not differ.any(), f"{differ.astype(bool).sum()} edge bits differ"
+    assert want.astype(bool).mean() > 0.02   # the image really has edges
 
 
 @pytest.mark.parametrize("angle", [10, 30, 45, 60, 80])
