@@ -679,6 +679,7 @@ inline lattice lattice_of(int o, int width, int height)
 #define INK_LEVELS ((int)(INK_TOL * PIXEL_MAX * 0.9999f) - 1)  // every channel <= INK_LEVELS: within INK_TOL
 #define INK_UP ((int)(INK_TOL * PIXEL_MAX * 1.0001f) + 1)      // within INK_TOL: every channel <= INK_UP
 #define SEG_L2 (0.99f * INK_TOL * PIXEL_MAX)                   // L2 (levels) surely within INK_TOL (max-channel)
+#define SEG_INK ((int)(SEG_L2 * 0.5769f))  // every channel <= SEG_INK: L2 <= sqrt(3) SEG_INK <= 0.9993 SEG_L2
 inline int near_ptr(__global const PIXEL_T *a, __global const PIXEL_T *b, int levels)
 {
     int ok = 1;
@@ -727,6 +728,15 @@ inline int not_clear_at(__global const PIXEL_T *src, int k, float3 rl, float3 e,
     return (k >= 0) & not_clear(src, k < 0 ? 0 : k, rl, e, ee_inv);
 }
 
+// not_clear's outcome 1 on stored levels, no float work: lattice pixel k within SEG_INK levels of the ink i in
+// every channel (its L2 distance to the segment's ink end, so to the segment, at most sqrt(3) SEG_INK, 0.07 % under
+// SEG_L2: far beyond float rounding) and more than BG_LEVELS from the background r in some channel (exactly
+// not_clear's second test).
+inline int ink_near(__global const PIXEL_T *src, int k, int i, int r)
+{
+    return k >= 0 && near_int(src, k, i, SEG_INK) && !near_int(src, k, r, BG_LEVELS);
+}
+
 // Can find_link(src, L, x, y) succeed (i the dash end, r the pixel after it)? 0 only where it fails:
 //  - (1, -1), (1, 1), (0, -1), (0, 1) clear or outside the frame: every direction d's gap starts with (1, -d),
 //    (1, d) clear (a crossing lies in steps 2 .. s - 2), and rows -1 and 1 beside the dash end are clear;
@@ -741,21 +751,31 @@ inline int may_link(__global const PIXEL_T *src, const lattice L, int x, int y, 
     if (not_clear_at(src, p1, rl, e, ee_inv) | not_clear_at(src, p2, rl, e, ee_inv)) return 0;
     if (not_clear_at(src, lat(L, x, y, 0, 1), rl, e, ee_inv) | not_clear_at(src, lat(L, x, y, 0, -1), rl, e, ee_inv))
         return 0;
-    __global const PIXEL_T *ink = src + (size_t)i * CHANNELS, *bg = src + (size_t)r * CHANNELS;
-    for (int k = 1; k <= MAX_RUN; ++k) {
+    // dash 1's end: the first step back along row 0 that leaves the frame or may be background (0: none within
+    // MAX_RUN, so find_link fails); integer only, before the float tests of the steps before it
+    __global const PIXEL_T *bg = src + (size_t)r * CHANNELS;
+    int end = 0;
+    for (int k = 1; k <= MAX_RUN && !end; ++k) {
         const int p = lat(L, x, y, -k, 0);
-        if (p < 0) return 1;   // the frame's edge: dash 1 may be cut by it
-        __global const PIXEL_T *pp = src + (size_t)p * CHANNELS;
-        if (near_ptr(pp, bg, BG_LEVELS)) return 1;
+        end = (p < 0 || near_ptr(src + (size_t)p * CHANNELS, bg, BG_LEVELS)) ? k : 0;
+    }
+    if (!end) return 0;
+    __global const PIXEL_T *ink = src + (size_t)i * CHANNELS;
+    for (int k = 1; k < end; ++k) {
+        const int p = lat(L, x, y, -k, 0);
         const int s1 = lat(L, x, y, -k, -1), s2 = lat(L, x, y, -k, 1);
         if (not_clear_at(src, s1, rl, e, ee_inv) || not_clear_at(src, s2, rl, e, ee_inv) ||
-            (!near_ptr(pp, ink, INK_UP) && not_clear(src, p, rl, e, ee_inv))) return 0;
+            (!near_ptr(src + (size_t)p * CHANNELS, ink, INK_UP) && not_clear(src, p, rl, e, ee_inv))) return 0;
     }
-    return 0;
+    return 1;
 }
 #define MAY_LINK(L, x, y, i, r) may_link(src, L, x, y, i, r)
+// may_link's first test, (1, 1) or (1, -1) surely not clear, on stored levels: fails most candidates of
+// photographs before the float INK_MIN tests and may_link's float set-up
+#define INK_NEAR(L, x, y, i, r) (ink_near(src, lat(L, x, y, 1, 1), i, r) | ink_near(src, lat(L, x, y, 1, -1), i, r))
 #else
 #define MAY_LINK(L, x, y, i, r) 1
+#define INK_NEAR(L, x, y, i, r) 0
 #endif
 
 __kernel void bridge_find(__global const PIXEL_T *src, __global uchar *found, __global ushort *links,
@@ -803,7 +823,7 @@ __kernel void bridge_find(__global const PIXEL_T *src, __global uchar *found, __
                         if (r < 0 || (q >= 0 && !MAY_CLEAR(q)) || (qm >= 0 && !MAY_CLEAR(qm))) continue;
 #endif
                         link_t ln;
-                        if (r >= 0 && (q < 0 || diff3(c, rgb_at(src, q)) >= INK_MIN) &&
+                        if (r >= 0 && !INK_NEAR(L, x, y, i, r) && (q < 0 || diff3(c, rgb_at(src, q)) >= INK_MIN) &&
                             diff3(c, rgb_at(src, r)) >= INK_MIN && MAY_LINK(L, x, y, i, r) &&
                             find_link(src, L, x, y, &ln)) {
                             links[4 * i + o] = pack_link(ln);
