@@ -770,12 +770,12 @@ inline int may_link(__global const PIXEL_T *src, const lattice L, int x, int y, 
     return 1;
 }
 #define MAY_LINK(L, x, y, i, r) may_link(src, L, x, y, i, r)
-// may_link's first test, (1, 1) or (1, -1) surely not clear, on stored levels: fails most candidates of
-// photographs before the float INK_MIN tests and may_link's float set-up
-#define INK_NEAR(L, x, y, i, r) (ink_near(src, lat(L, x, y, 1, 1), i, r) | ink_near(src, lat(L, x, y, 1, -1), i, r))
+// 0 where may_link's first test surely fails ((1, 1) or (1, -1) surely not clear, on stored levels): rejects most
+// candidates of photographs before the float INK_MIN tests and may_link's float set-up
+#define INK_FAR(L, x, y, i, r) (!(ink_near(src, lat(L, x, y, 1, 1), i, r) | ink_near(src, lat(L, x, y, 1, -1), i, r)))
 #else
 #define MAY_LINK(L, x, y, i, r) 1
-#define INK_NEAR(L, x, y, i, r) 0
+#define INK_FAR(L, x, y, i, r) 1
 #endif
 
 __kernel void bridge_find(__global const PIXEL_T *src, __global uchar *found, __global ushort *links,
@@ -823,7 +823,7 @@ __kernel void bridge_find(__global const PIXEL_T *src, __global uchar *found, __
                         if (r < 0 || (q >= 0 && !MAY_CLEAR(q)) || (qm >= 0 && !MAY_CLEAR(qm))) continue;
 #endif
                         link_t ln;
-                        if (r >= 0 && !INK_NEAR(L, x, y, i, r) && (q < 0 || diff3(c, rgb_at(src, q)) >= INK_MIN) &&
+                        if (r >= 0 && INK_FAR(L, x, y, i, r) && (q < 0 || diff3(c, rgb_at(src, q)) >= INK_MIN) &&
                             diff3(c, rgb_at(src, r)) >= INK_MIN && MAY_LINK(L, x, y, i, r) &&
                             find_link(src, L, x, y, &ln)) {
                             links[4 * i + o] = pack_link(ln);
