@@ -454,16 +454,6 @@ def poked_chains(seed: int) -> np.ndarray:
     return np.clip(img + rng.integers(-2, 3, img.shape), 0, 255).astype(np.uint8)  # background within BG_TOL
 
 
-@pytest.mark.parametrize("seed", range(3))
-def test_kernel_matches_reference_with_wire_ends_of_the_same_ink(device, seed):
-    img = poked_chains(seed)
-    out = both(img)
-    assert (out != bridge_reference(img, options=BridgeOptions(poke_run=0))).any(), "some links need the rule"
-    both(img.astype(np.uint16) * 257)
-    both(np.ascontiguousarray(img.transpose(1, 0, 2)))
-    both(img, options=BridgeOptions(poke_run=1, poke_dash=5))
-
-
 def crossed_by_the_same_ink(seed: int) -> np.ndarray:
     """Shallow dash chains of INK (dashes 3-9 px, gaps 6-14), two of each chain's gaps crossed near their middle by
     a steep wire of the same ink (1-2 px a row, 0-2 steps every two rows, some dotted: ink every other row), and
@@ -484,14 +474,21 @@ def crossed_by_the_same_ink(seed: int) -> np.ndarray:
     return np.clip(img + rng.integers(-2, 3, img.shape), 0, 255).astype(np.uint8)  # background within BG_TOL
 
 
+# (scene, options without the rule, other option values): each rule's kernel against the reference
+SAME_INK_RULES = {"wire_ends": (poked_chains, dict(poke_run=0), dict(poke_run=1, poke_dash=5)),
+                  "crossings": (crossed_by_the_same_ink, dict(xing_run=0), dict(xing_run=2, xing_dash=6))}
+
+
 @pytest.mark.parametrize("seed", range(3))
-def test_kernel_matches_reference_with_crossings_of_the_same_ink(device, seed):
-    img = crossed_by_the_same_ink(seed)
+@pytest.mark.parametrize("rule", list(SAME_INK_RULES))
+def test_kernel_matches_reference_with_same_ink_rules(device, rule, seed):
+    scene, off, other = SAME_INK_RULES[rule]
+    img = scene(seed)
     out = both(img)
-    assert (out != bridge_reference(img, options=BridgeOptions(xing_run=0))).any(), "some links need the rule"
+    assert (out != bridge_reference(img, options=BridgeOptions(**off))).any(), "some links need the rule"
     both(img.astype(np.uint16) * 257)
     both(np.ascontiguousarray(img.transpose(1, 0, 2)))
-    both(img, options=BridgeOptions(xing_run=2, xing_dash=6))
+    both(img, options=BridgeOptions(**other))
 
 
 def test_filter_option_draws_over_the_blended_frame(device):
