@@ -65,3 +65,18 @@ def test_build_error_names_file_defines_and_log(monkeypatch):
         ctx.program("edges", {"METRIC": 0})
     text = str(err.value)
     assert "kernels/edges.cl" in text and "-DMETRIC=0" in text and "undeclared_thing" in text
+
+
+def test_pocl_workers_are_pinned_only_where_the_process_may_use_every_cpu(monkeypatch):
+    from mlaa_stream import device
+    n = 4
+    monkeypatch.setattr(device.os, "cpu_count", lambda: n)
+    monkeypatch.setattr(device.os, "sched_getaffinity", lambda pid: set(range(n)), raising=False)
+    env: dict[str, str] = {}
+    assert device.pin_pocl_workers(env) and env == {"POCL_AFFINITY": "1"}
+    env = {"POCL_AFFINITY": "0"}  # the user's choice stands
+    assert not device.pin_pocl_workers(env) and env == {"POCL_AFFINITY": "0"}
+    # taskset / cpusets: pinning worker i to CPU i would leave the allowed set
+    monkeypatch.setattr(device.os, "sched_getaffinity", lambda pid: {1, 2}, raising=False)
+    env = {}
+    assert not device.pin_pocl_workers(env) and env == {}

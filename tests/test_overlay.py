@@ -496,6 +496,27 @@ def test_tile_overflow_bins_again_with_more_room():
     assert np.abs(got.astype(int) - ref.astype(int)).max() <= 1
 
 
+@pytest.mark.parametrize("zero_copy", [True, False])
+def test_a_failed_frame_leaves_the_renderer_usable(monkeypatch, zero_copy):
+    """An error after the frame's first kernel was queued behind its gate (here, interrupting the
+    draw): the gate opens, the binning's counters are cleared, and the next frame is drawn as by
+    a fresh renderer."""
+    rng, lines, kw = random_scene(5, n=12)
+    frame = rng.integers(0, 256, (72, 96, 3)).astype(np.uint8)
+    want = OverlayRenderer(zero_copy=zero_copy).draw(frame, lines, **kw)
+    r = OverlayRenderer(zero_copy=zero_copy)
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(r, "_draw_binned", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        r.draw(frame, lines, **kw)
+    monkeypatch.undo()
+    assert r._gate is None
+    assert np.array_equal(r.draw(frame, lines, **kw), want)
+
+
 @pytest.mark.parametrize("bad,match", [
     (dict(lines=[np.array([[0.0, np.nan], [3.0, 4.0]])]), "line 0: expected finite coordinates"),
     (dict(width=0.0), "expected width > 0"),
