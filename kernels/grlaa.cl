@@ -69,6 +69,14 @@
 #define IMAX(a, b) ((a) > (b) ? (a) : (b))
 #define HALF_DIAGONAL 0.70711f
 
+// sqrt is a call out of line there too, and every live vector register is saved around it; clang's
+// scalar builtin is inlined (lane by lane, vectorised back into vsqrtps). Both are exact.
+#ifdef POCL_DEVICE_ADDRESS_BITS
+#define SQRT(x) __builtin_sqrtf(x)
+#else
+#define SQRT(x) sqrt(x)
+#endif
+
 // floor / ceil to int for |x| < 2^24 (coordinates are clipped to the frame on the host).
 INLINE int ifloor(float x) { int i = (int)x; return i - (x < (float)i); }
 INLINE int iceil(float x) { int i = (int)x; return i + (x > (float)i); }
@@ -142,7 +150,7 @@ INLINE float2 segment_cover(float px, float py, float4 g, float4 h, int meta, fl
         || (along > len && !(meta & 2))) {
         const float vx = along < 0.0f ? apx : apx - len * tx;
         const float vy = along < 0.0f ? apy : apy - len * ty;
-        dist = sqrt(vx * vx + vy * vy);
+        dist = SQRT(vx * vx + vy * vy);
         if (dist > 1e-6f) { nx = vx / dist; ny = vy / dist; }
     } else {
         dist = FABS(perp);
@@ -173,6 +181,15 @@ typedef int8 i8;
 #define F8ABS(v) ((v) < 0.0f ? -(v) : (v))
 #define F8MAX(a, b) ((a) > (b) ? (a) : (b))
 #define F8MIN(a, b) ((a) < (b) ? (a) : (b))
+INLINE f8 sqrt8(f8 v)
+{
+#ifdef POCL_DEVICE_ADDRESS_BITS
+    return (f8)(SQRT(v.s0), SQRT(v.s1), SQRT(v.s2), SQRT(v.s3), SQRT(v.s4), SQRT(v.s5), SQRT(v.s6),
+                SQRT(v.s7));
+#else
+    return sqrt(v);
+#endif
+}
 
 // The set bits of an 8-bit mask: their indices as the bytes of a ulong, lowest bit first in the
 // lowest byte (LANES), and their count (POPC). The write-back lists a chunk's pixels with them.
@@ -258,21 +275,25 @@ INLINE f8 fcdf8(f8 s, f8 a, f8 b, f8 h, f8 ia, f8 i2)
     return x <= 0.0f ? (f8)0.0f : q;
 }
 
-// segment_cover for a segment with round ends (no flags), the common case, at 8 pixel centres of a
-// row: (fx, dy) = p - a, dy1 = p.y - b.y; (sa >= sb) the footprint widths on the body's normal.
-// Same arithmetic as segment_cover; the end discs' terms only where a lane lies beyond an end.
-INLINE void round_cover8(f8 fx, float dy, float dy1, float tx, float ty, float len, float r,
+// segment_cover for a segment with round ends (no flags), the common case, at 8 pixel centres: a
+// chunk of a row, or two runs of 4 pixels on two rows (narrow rows, grlaa_draw); (fx, dy) = p - a,
+// dy1 = p.y - b.y; (sa >= sb) the footprint widths on the body's normal. Same arithmetic as
+// segment_cover; the end discs' terms only where a lane lies beyond an end. A lane's value does
+// not depend on the others (with no lane beyond an end, the disc branch gives the body's values).
+INLINE void round_cover8(f8 fx, f8 dy, f8 dy1, float tx, float ty, float len, float r,
                          float ri, float sa, float sb, float sh, float sia, float si2,
                          float strength, f8 *co, f8 *ci)
 {
     const f8 along = fx * tx + dy * ty;
     const f8 perp = tx * dy - ty * fx;
     f8 dist = F8ABS(perp), fa = (f8)sa, fb = (f8)sb, h = (f8)sh, ia = (f8)sia, i2 = (f8)si2;
-    const float l0 = along.s0, l7 = along.s7;  // along is linear in x: its extremes are the end lanes
-    if (FMIN(l0, l7) < 0.0f || FMAX(l0, l7) > len) {
+    // along is linear in x along each run of 4 lanes: its extremes are the runs' end lanes
+    const float lmin = FMIN(FMIN(along.s0, along.s3), FMIN(along.s4, along.s7));
+    const float lmax = FMAX(FMAX(along.s0, along.s3), FMAX(along.s4, along.s7));
+    if (lmin < 0.0f || lmax > len) {
         const i8 st = along < 0.0f, en = along > len;
-        const f8 vx = st ? fx : fx - len * tx, vy = st ? (f8)dy : (f8)dy1;
-        const f8 dd = sqrt(vx * vx + vy * vy);
+        const f8 vx = st ? fx : fx - len * tx, vy = st ? dy : dy1;
+        const f8 dd = sqrt8(vx * vx + vy * vy);
         const i8 disc = st | en, rad = disc & (dd > 1e-6f);  // the footprint on the radial normal
         const f8 ux = F8ABS(vx), uy = F8ABS(vy), k = strength / (rad ? dd : (f8)1.0f);
         dist = disc ? dd : dist;
@@ -322,6 +343,33 @@ typedef ushort8 ushort8_u __attribute__((aligned(2)));
 #define STORE_LANES(v, p) vstore8(v, 0, p)
 #endif
 #endif
+
+// Four lanes of coverage (co, ci) at columns q .. q + 3 of tile row j merged into the current
+// polyline's coverage by max. The chunks they fall in are cleared first where this polyline has
+// not touched them yet: outside a row's span coverage is exactly 0, so a chunk computed whole
+// would hold the same values.
+typedef float4 float4_u __attribute__((aligned(4)));
+INLINE void merge_run4(f8 *cov_out, f8 *cov_in, uint *rows_cur, int banded, int j, int q,
+                       float4 co, float4 ci)
+{
+    const int c0 = q >> 3, c1 = (q + 3) >> 3;
+    const uint fresh = ~rows_cur[j];
+    if (fresh & (1u << c0)) {
+        cov_out[j * CH + c0] = (f8)0.0f;
+        if (banded) cov_in[j * CH + c0] = (f8)0.0f;
+    }
+    if (c1 != c0 && (fresh & (1u << c1))) {
+        cov_out[j * CH + c1] = (f8)0.0f;
+        if (banded) cov_in[j * CH + c1] = (f8)0.0f;
+    }
+    rows_cur[j] |= (1u << c0) | (1u << c1);
+    __private float4_u *po = (__private float4_u *)((__private float *)cov_out + j * TILE + q);
+    *po = FMAX(*po, co);
+    if (banded) {
+        __private float4_u *pi = (__private float4_u *)((__private float *)cov_in + j * TILE + q);
+        *pi = FMAX(*pi, ci);
+    }
+}
 
 __kernel void grlaa_draw(__global PIXEL_T *img, __global const float *luts,
                          __global const float *dec8, __global const uchar *enc8,
@@ -459,9 +507,39 @@ __kernel void grlaa_draw(__global PIXEL_T *img, __global const float *luts,
             jlo = IMIN(jlo, IMIN(m2.x, m2.y));
             jhi = IMAX(jhi, IMAX(x2.x, x2.y));
         }
-        for (int j = jlo; j <= jhi; ++j) {
-            const int xa = span_a[j], xb = span_b[j], y = y0 + j;
-            if (xa > xb) continue;  // (only where rounding leaves a row inside without a pixel)
+        // Rows whose span is at most 4 px (most rows of a thin stroke) are paired: one f8 holds
+        // a run of 4 pixels of each (q1, q2: their first columns); one left over pairs with itself.
+        const int4 run4 = (int4)(0, 1, 2, 3);
+        int pend = -1, pend_q = 0;
+        for (int j = jlo; j <= jhi + 1; ++j) {
+            int xa = 0, xb = -1;
+            if (j <= jhi) {
+                xa = span_a[j];
+                xb = span_b[j];
+                if (xa > xb) continue;  // (only where rounding leaves a row inside without a pixel)
+            }
+            const int narrow = j <= jhi && !(meta & 3) && xb - xa < 4;
+            if (narrow && pend < 0) {
+                pend = j;
+                pend_q = IMIN(xa - x0, TILE - 4);
+                continue;
+            }
+            if (pend >= 0 && (narrow || j > jhi)) {
+                const int j2 = narrow ? j : pend, q2 = narrow ? IMIN(xa - x0, TILE - 4) : pend_q;
+                // the chunk code's arithmetic: ((x0 - a.x) + column % 8) + 8 * (column / 8)
+                const i8 col = (i8)(pend_q + run4, q2 + run4);
+                const f8 fxr = (((float)x0 - ax) + convert_float8(col & 7)) + convert_float8(col & ~7);
+                const f8 yr = (f8)((float4)((float)(y0 + pend)), (float4)((float)(y0 + j2)));
+                f8 co, ci;
+                round_cover8(fxr, yr - ay, yr - by, tx, ty, len, r, ri, sa, sb, sh, sia, si2,
+                             strength, &co, &ci);
+                merge_run4(cov_out, cov_in, rows_cur, banded, pend, pend_q, co.lo, ci.lo);
+                if (j2 != pend) merge_run4(cov_out, cov_in, rows_cur, banded, j2, q2, co.hi, ci.hi);
+                pend = -1;
+                if (narrow) continue;
+            }
+            if (j > jhi) break;
+            const int y = y0 + j;
             const float dy = (float)y - ay, dy1 = (float)y - by;
             const int ca = (xa - x0) >> 3, cb = (xb - x0) >> 3;
             const uint fresh = ~rows_cur[j];  // chunks this polyline has not touched yet
@@ -480,8 +558,8 @@ __kernel void grlaa_draw(__global PIXEL_T *img, __global const float *luts,
                         o[i] = cv.x; n[i] = cv.y;
                     }
                 } else {
-                    round_cover8(fx, dy, dy1, tx, ty, len, r, ri, sa, sb, sh, sia, si2, strength,
-                                 &co, &ci);
+                    round_cover8(fx, (f8)dy, (f8)dy1, tx, ty, len, r, ri, sa, sb, sh, sia, si2,
+                                 strength, &co, &ci);
                 }
                 if (fresh & (1u << c)) {
                     cov_out[k] = co;
@@ -705,7 +783,7 @@ __kernel void grlaa_segments(__global const float2 *pts, __global const int4 *li
     const float4 F = line_f[lo];
     const int k = s - L.y, ia = L.x + k, ib = L.z > 1 ? ia + 1 : ia, last = IMAX(L.z - 1, 1) - 1;
     const float2 a = pts[ia], b = pts[ib];
-    const float dx = b.x - a.x, dy = b.y - a.y, len = sqrt(dx * dx + dy * dy);
+    const float dx = b.x - a.x, dy = b.y - a.y, len = SQRT(dx * dx + dy * dy);
     float t0 = 0.0f, t1 = 1.0f, reach = F.z;
     const float m = reach + 1.0f, xh = (float)(width - 1) + m, yh = (float)(height - 1) + m;
     if (FMIN(a.x, b.x) < -m || FMAX(a.x, b.x) > xh || FMIN(a.y, b.y) < -m || FMAX(a.y, b.y) > yh) {
