@@ -345,24 +345,12 @@ typedef ushort8 ushort8_u __attribute__((aligned(2)));
 #endif
 
 // Four lanes of coverage (co, ci) at columns q .. q + 3 of tile row j merged into the current
-// polyline's coverage by max. The chunks they fall in are cleared first where this polyline has
-// not touched them yet: outside a row's span coverage is exactly 0, so a chunk computed whole
-// would hold the same values.
+// polyline's coverage by max (grlaa_draw keeps it 0 where the polyline has not reached).
 typedef float4 float4_u __attribute__((aligned(4)));
 INLINE void merge_run4(f8 *cov_out, f8 *cov_in, uint *rows_cur, int banded, int j, int q,
                        float4 co, float4 ci)
 {
-    const int c0 = q >> 3, c1 = (q + 3) >> 3;
-    const uint fresh = ~rows_cur[j];
-    if (fresh & (1u << c0)) {
-        cov_out[j * CH + c0] = (f8)0.0f;
-        if (banded) cov_in[j * CH + c0] = (f8)0.0f;
-    }
-    if (c1 != c0 && (fresh & (1u << c1))) {
-        cov_out[j * CH + c1] = (f8)0.0f;
-        if (banded) cov_in[j * CH + c1] = (f8)0.0f;
-    }
-    rows_cur[j] |= (1u << c0) | (1u << c1);
+    rows_cur[j] |= (1u << (q >> 3)) | (1u << ((q + 3) >> 3));
     __private float4_u *po = (__private float4_u *)((__private float *)cov_out + j * TILE + q);
     *po = FMAX(*po, co);
     if (banded) {
@@ -402,9 +390,12 @@ __kernel void grlaa_draw(__global PIXEL_T *img, __global const float *luts,
     f8 acc_r[TT / 8], acc_g[TT / 8], acc_b[TT / 8], trans[TT / 8], hit[TT / 8];
     i8 exact[TT / 8];                   // 1 + 2*poly (fill) or 2 + 2*poly (outline): stored as-is
     uint rows_cur[TILE], rows_all[TILE];  // per row, one bit per chunk: the current / any polyline
-    // Chunks are set up when first touched (rows_cur / rows_all bits), not here: a thin line
-    // touches a few of a tile's 32 chunks.
+    // The layers' chunks are set up when first touched (rows_all bits), not here: a thin line
+    // touches a few of a tile's 32 chunks. The coverage starts at 0 and the compositing puts
+    // back 0 where it read, so segments always merge by max (outside its span a segment's
+    // coverage is exactly 0 anyway).
     for (int j = 0; j < TILE; ++j) { rows_cur[j] = 0u; rows_all[j] = 0u; }
+    for (int k = 0; k < TT / 8; ++k) { cov_out[k] = (f8)0.0f; cov_in[k] = (f8)0.0f; }
     // The tile's rows of the frame are read at write-back: ask for them now.
     for (int j = 0; j <= ymax - y0; ++j) {
         PREFETCH(img + (size_t)IDX(x0, y0 + j, width) * CHANNELS);
@@ -446,6 +437,8 @@ __kernel void grlaa_draw(__global PIXEL_T *img, __global const float *luts,
                     const int k = j * CH + c;
                     const f8 ao = cov_out[k];
                     const f8 ai = banded ? cov_in[k] : (solid ? ao : (f8)0.0f);
+                    cov_out[k] = (f8)0.0f;
+                    cov_in[k] = (f8)0.0f;
                     const f8 A = ao * op, T = 1.0f - A, ae = ao - ai;
                     const f8 cr = op * (ai * fill.x + ae * outl.x), cg = op * (ai * fill.y + ae * outl.y);
                     const f8 cb = op * (ai * fill.z + ae * outl.z);
@@ -542,7 +535,6 @@ __kernel void grlaa_draw(__global PIXEL_T *img, __global const float *luts,
             const int y = y0 + j;
             const float dy = (float)y - ay, dy1 = (float)y - by;
             const int ca = (xa - x0) >> 3, cb = (xb - x0) >> 3;
-            const uint fresh = ~rows_cur[j];  // chunks this polyline has not touched yet
             rows_cur[j] |= ((2u << cb) - 1u) & ~((1u << ca) - 1u);
             // One polyline is one shape: its segments' coverages merge by max, so joins are not
             // blended twice. Lanes beyond the segment's reach get exactly 0.
@@ -561,13 +553,8 @@ __kernel void grlaa_draw(__global PIXEL_T *img, __global const float *luts,
                     round_cover8(fx, (f8)dy, (f8)dy1, tx, ty, len, r, ri, sa, sb, sh, sia, si2,
                                  strength, &co, &ci);
                 }
-                if (fresh & (1u << c)) {
-                    cov_out[k] = co;
-                    if (banded) cov_in[k] = ci;
-                } else {
-                    cov_out[k] = F8MAX(cov_out[k], co);
-                    if (banded) cov_in[k] = F8MAX(cov_in[k], ci);
-                }
+                cov_out[k] = F8MAX(cov_out[k], co);
+                if (banded) cov_in[k] = F8MAX(cov_in[k], ci);
             }
         }
     }
