@@ -535,6 +535,17 @@ __kernel void grlaa_draw(__global PIXEL_T *img, __global const float *luts,
             const int y = y0 + j;
             const float dy = (float)y - ay, dy1 = (float)y - by;
             const int ca = (xa - x0) >> 3, cb = (xb - x0) >> 3;
+            if (ca != cb && xb - xa < 8 && !(meta & 3)) {  // 5 to 8 px across two chunks: one f8
+                const int q = IMIN(xa - x0, TILE - 8);
+                const i8 col = (i8)(q + run4, q + 4 + run4);
+                const f8 fxr = (((float)x0 - ax) + convert_float8(col & 7)) + convert_float8(col & ~7);
+                f8 co, ci;
+                round_cover8(fxr, (f8)dy, (f8)dy1, tx, ty, len, r, ri, sa, sb, sh, sia, si2,
+                             strength, &co, &ci);
+                merge_run4(cov_out, cov_in, rows_cur, banded, j, q, co.lo, ci.lo);
+                merge_run4(cov_out, cov_in, rows_cur, banded, j, q + 4, co.hi, ci.hi);
+                continue;
+            }
             rows_cur[j] |= ((2u << cb) - 1u) & ~((1u << ca) - 1u);
             // One polyline is one shape: its segments' coverages merge by max, so joins are not
             // blended twice. Lanes beyond the segment's reach get exactly 0.
