@@ -389,7 +389,6 @@ class OverlayRenderer:
         self._lines_cache: tuple | None = None
         # ((number of lines, style arguments), styles): draw's last styles
         self._styles_cache: tuple | None = None
-        self._gate = None  # the frame's gate while its commands are queued (_draw)
 
     @property
     def device_name(self) -> str:
@@ -497,15 +496,14 @@ class OverlayRenderer:
         return buf
 
     def _segments(self, lines: list[np.ndarray], styles: list[LineStyle], lt: LineTables,
-                  fmt: FrameFormat, allp: np.ndarray | None = None, wait_for=None):
+                  fmt: FrameFormat, allp: np.ndarray | None = None):
         """Enqueue the segment tables and their binning into tiles; returns (segs buffer, meta
         buffer, number of segments). kernels/grlaa.cl grlaa_segments builds and bins them from the
         points in float32; where a point lies more than DEVICE_CLIP_MARGIN px off the frame
         (grown to a square), the float64 segment_tables builds them (float32 would not cut such
         segments to the frame precisely) and grlaa_bin bins them. Nothing waits: grlaa_draw reads
         the counts, and draws nothing if a tile overflowed its room (_more_room). `allp`: the
-        lines' points one after the other, when the caller has them; `wait_for`: events the first
-        kernel waits on (_draw's gate)."""
+        lines' points one after the other, when the caller has them."""
         cl, q = self._cl, self._ctx.queue
         nl = len(lines)
         tx, ty = self._tiles_xy
@@ -521,7 +519,7 @@ class OverlayRenderer:
             if total:
                 self._set_args("bin", self._k_bin, segs, np.int32(total), *binning)
                 cl.enqueue_nd_range_kernel(q, self._k_bin, (-(-total // BIN_LOCAL) * BIN_LOCAL,),
-                                           (BIN_LOCAL,), wait_for=wait_for)
+                                           (BIN_LOCAL,))
             return segs, meta, total
         counts = np.fromiter(map(len, lines), np.int32, nl)
         # The per-line tables are kept while the lines' point counts and styles stay the same.
@@ -547,8 +545,7 @@ class OverlayRenderer:
         self._set_args("segments", k, self._input("pts", allp.astype(np.float32)), li_b, lf_b,
                        np.int32(nl), np.int32(total), np.int32(fmt.width), np.int32(fmt.height),
                        segs, meta, *binning)
-        cl.enqueue_nd_range_kernel(q, k, (-(-total // BIN_LOCAL) * BIN_LOCAL,), (BIN_LOCAL,),
-                                   wait_for=wait_for)
+        cl.enqueue_nd_range_kernel(q, k, (-(-total // BIN_LOCAL) * BIN_LOCAL,), (BIN_LOCAL,))
         return segs, meta, total
 
     def _more_room(self) -> bool:
@@ -628,26 +625,18 @@ class OverlayRenderer:
             return frame if inplace else frame.copy()
         self._setup(fmt)
         lt, pcol_b, polys_b = self._tables(styles, fmt.channels)
-        # Zero-copy (CPU) devices: the frame's first kernel waits on a gate opened once all its
-        # commands are queued, so the device runs them back to back instead of waiting for this
-        # thread to queue the next (the workers take the cores, and this thread gets one back
-        # late). Not with buffer copies: PoCL's write of a buffer waits behind a closed gate.
-        self._gate = self._cl.UserEvent(self._ctx.ctx) if self.zero_copy else None
         try:
-            segs, meta, nseg = self._segments(lines, styles, lt, fmt, allp,
-                                              wait_for=[self._gate] if self._gate else None)
+            segs, meta, nseg = self._segments(lines, styles, lt, fmt, allp)
             if nseg == 0:
                 return frame if inplace else frame.copy()
             dst = self._draw_binned(frame, fmt, inplace, lt, lines, styles, segs, meta, pcol_b,
                                     polys_b)
         except BaseException:  # the binning's counters must start the next frame at zero
-            self._open_gate()
             self._ctx.queue.finish()
             self._cl.enqueue_copy(self._ctx.queue, self._counts,
                                   np.zeros(int(np.prod(self._tiles_xy)), np.int32), is_blocking=True)
             raise
         finally:
-            self._open_gate()
             self._inputs.clear()
         if dst.dtype != frame.dtype:
             dst = dst.astype(frame.dtype)
@@ -655,12 +644,6 @@ class OverlayRenderer:
             frame[...] = dst
             return frame
         return dst
-
-    def _open_gate(self) -> None:
-        """Let the frame's queued commands run (_draw's gate); once per frame."""
-        if self._gate is not None:
-            self._gate.set_status(self._cl.command_execution_status.COMPLETE)
-            self._gate = None
 
     def _draw_binned(self, frame: np.ndarray, fmt: FrameFormat, inplace: bool, lt: LineTables,
                      lines: list[np.ndarray], styles: list[LineStyle], segs, meta, pcol_b,
@@ -692,7 +675,6 @@ class OverlayRenderer:
                 view, _ = cl.enqueue_map_buffer(q, fbuf, cl.map_flags.READ, 0, dst.shape,
                                                 dst.dtype, is_blocking=False)
             # one wait per frame: the in-order queue has drawn (and mapped) when the flag arrives
-            self._open_gate()
             cl.enqueue_copy(q, self._overflow_host, self._overflow, is_blocking=True)
             if self.zero_copy:
                 view.base.release(q)  # unmapping a read mapping writes nothing back
