@@ -344,6 +344,25 @@ typedef ushort8 ushort8_u __attribute__((aligned(2)));
 #endif
 #endif
 
+// The write-back's list of covered pixels (uint8 frames): chunk k's lanes covered (hit > 0) and in
+// the frame (up to lane lim) go to `part`, those fully covered by one polyline's fill or outline
+// (exact != 0) to `full`; keep = 0 lists nothing (branch-free: 8-bit masks, LANES, POPC).
+INLINE void list_chunk(f8 hit, i8 exact, int lim, int k, uint keep, qidx_t *part, qidx_t *full,
+                       int *np, int *nf)
+{
+    const i8 cov = (hit > 0.0f) & (i8)(1, 2, 4, 8, 16, 32, 64, 128);
+    const i8 exl = (exact != 0) & (i8)(1, 2, 4, 8, 16, 32, 64, 128);
+    const int4 c4 = cov.lo | cov.hi, e4 = exl.lo | exl.hi;
+    const int2 c2 = c4.lo | c4.hi, e2 = e4.lo | e4.hi;
+    uint mask = (uint)(c2.x | c2.y) & (lim < 0 ? 0u : (2u << IMIN(7, lim)) - 1u) & keep;
+    const uint fm = mask & (uint)(e2.x | e2.y);
+    mask &= ~fm;
+    STORE_LANES(LANE_LIST(mask, k), part + *np);
+    STORE_LANES(LANE_LIST(fm, k), full + *nf);
+    *np += POPC[mask];
+    *nf += POPC[fm];
+}
+
 // Four lanes of coverage (co, ci) at columns q .. q + 3 of tile row j merged into the current
 // polyline's coverage by max (grlaa_draw keeps it 0 where the polyline has not reached).
 typedef float4 float4_u __attribute__((aligned(4)));
@@ -402,7 +421,12 @@ __kernel void grlaa_draw(__global PIXEL_T *img, __global const float *luts,
         PREFETCH(img + (size_t)IDX(xmax, y0 + j, width) * CHANNELS);
     }
 
-    int cur = -1;
+#if DECODE8
+    // the write-back's lists of covered pixels (+ 8: a chunk's 8 entries are stored at once)
+    qidx_t part[TT + 8], full[TT + 8];
+    int np = 0, nf = 0;
+#endif
+    int cur = -1, layers = 0;  // polylines composited so far
     const int end = tile.z + tile.w;
     // The binning lists a tile's segments in any order: sort them (by index: drawing order).
     for (int a = tile.z + 1; a < end; ++a) {
@@ -427,6 +451,10 @@ __kernel void grlaa_draw(__global PIXEL_T *img, __global const float *luts,
             // an outline band: inner coverage kept (cov_in); none: inner = outer; all outline: 0
             const int solid = prm.y >= prm.x, banded = prm.y < prm.x && prm.y > 0.0f;
             const int ef = 1 + 2 * cur, eo = 2 + 2 * cur;
+            // The tile's only polyline (most tiles of thin lines): its pixels are listed for the
+            // write-back here, as the general listing after the loop would list them.
+            const int only = DECODE8 && e == end && layers == 0;
+            ++layers;
             for (int j = 0; j < TILE; ++j) {
                 const uint bits = rows_cur[j], old = rows_all[j];
                 if (!bits) continue;
@@ -451,8 +479,16 @@ __kernel void grlaa_draw(__global PIXEL_T *img, __global const float *luts,
                         hit[k] = F8MAX(hit[k], ao);
                         exact[k] = A >= 1.0f ? ex : (ao > 0.0f ? (i8)0 : exact[k]);
                     } else {  // first layer of this chunk: over nothing (acc 0, trans 1)
-                        acc_r[k] = cr; acc_g[k] = cg; acc_b[k] = cb; trans[k] = T; hit[k] = ao;
-                        exact[k] = A >= 1.0f ? ex : (i8)0;
+                        acc_r[k] = cr; acc_g[k] = cg; acc_b[k] = cb; trans[k] = T;
+                        const i8 exk = A >= 1.0f ? ex : (i8)0;
+                        exact[k] = exk;
+#if DECODE8
+                        if (only) {
+                            list_chunk(ao, exk, xmax - x0 - 8 * c, k, ~0u, part, full, &np, &nf);
+                            continue;
+                        }
+#endif
+                        hit[k] = ao;
                     }
                 }
             }
@@ -594,25 +630,13 @@ __kernel void grlaa_draw(__global PIXEL_T *img, __global const float *luts,
 #define IR 0
 #define IB 2
 #endif
-    qidx_t part[TT + 8], full[TT + 8];  // (+ 8: a chunk's 8 entries are stored at once)
-    int np = 0, nf = 0;
-    for (int j = 0; j <= ymax - y0; ++j) {
+    for (int j = 0; j <= ymax - y0 && layers > 1; ++j) {  // (one polyline: listed above)
         const uint bits = rows_all[j];
         if (!bits) continue;
-        for (int c = 0; c < CH; ++c) {
-            const int k = j * CH + c, lim = xmax - x0 - 8 * c;  // lanes up to lim: in the frame
-            const i8 cov = (hit[k] > 0.0f) & (i8)(1, 2, 4, 8, 16, 32, 64, 128);
-            const i8 exl = (exact[k] != 0) & (i8)(1, 2, 4, 8, 16, 32, 64, 128);
-            const int4 c4 = cov.lo | cov.hi, e4 = exl.lo | exl.hi;
-            const int2 c2 = c4.lo | c4.hi, e2 = e4.lo | e4.hi;
-            uint mask = (uint)(c2.x | c2.y) & (lim < 0 ? 0u : (2u << IMIN(7, lim)) - 1u);
-            mask = (bits >> c) & 1u ? mask : 0u;  // (untouched chunks hold stale values)
-            const uint fm = mask & (uint)(e2.x | e2.y);
-            mask &= ~fm;
-            STORE_LANES(LANE_LIST(mask, k), part + np);
-            STORE_LANES(LANE_LIST(fm, k), full + nf);
-            np += POPC[mask];
-            nf += POPC[fm];
+        for (int c = 0; c < CH; ++c) {  // lanes up to lim: in the frame; untouched chunks: stale
+            const int k = j * CH + c;
+            list_chunk(hit[k], exact[k], xmax - x0 - 8 * c, k, (bits >> c) & 1u ? ~0u : 0u, part,
+                       full, &np, &nf);
         }
     }
     __global uchar *const timg = (__global uchar *)img + (size_t)IDX(x0, y0, width) * CHANNELS;
