@@ -313,6 +313,26 @@ def test_zero_copy_and_device_buffer_paths_agree(renderer, dtype, shape):
     assert (outs[0] != frame).mean() > 0.3
 
 
+@pytest.mark.parametrize("offset", [0, 1, 3, 100])
+def test_drawing_in_place_into_unaligned_frames(offset):
+    """Zero-copy drawing reads no map back on PoCL (the kernel writes the array itself): frames at
+    any byte offset, in place and into copies, equal the device-buffer path's, over two frames."""
+    rng, lines, kw = random_scene(6, n=14)
+    h, w = 72, 96
+    store = np.zeros(h * w * 3 + offset, np.uint8)
+    frame = store[offset:].reshape(h, w, 3)
+    frame[...] = rng.integers(0, 256, (h, w, 3))
+    direct, buffered = OverlayRenderer(zero_copy=True), OverlayRenderer(zero_copy=False)
+    for lines_now in (lines, [ln[::-1] + 1.5 for ln in lines]):
+        want = buffered.draw(frame, lines_now, **kw)
+        assert np.array_equal(direct.draw(frame, lines_now, **kw), want)
+        f = frame.copy() if offset == 0 else frame
+        before = f.copy()
+        assert direct.draw(f, lines_now, inplace=True, **kw) is f
+        assert np.array_equal(f, want) and (f != before).mean() > 0.1
+        frame[...] = before
+
+
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_thin_and_outlined_strokes_match_reference(renderer, seed):
     """The kernel's 8-pixel lanes (kernels/grlaa.cl round_cover8): thin strokes (both edges' terms),
