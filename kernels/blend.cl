@@ -98,7 +98,7 @@ inline void blend_pixel(__global const PIXEL_T *src, __global const uchar *edges
     const int top = y > 0 && (edges[i - width] & EDGE_BOTTOM);
     const int left = x > 0 && (edges[i - 1] & EDGE_RIGHT);
     if (e == 0 && !top && !left) return;
-    ushort4 w16 = vload4(i, weights);   // (top, bottom, left, right), valid where the edge exists
+    ushort4 w16 = LOAD_USHORT4(weights + 4 * i);  // (top, bottom, left, right), valid where the edge exists
     float4 w = (float4)(top ? w16.x : 0, (e & EDGE_BOTTOM) ? w16.y : 0,
                         left ? w16.z : 0, (e & EDGE_RIGHT) ? w16.w : 0) * (1.0f / 65535.0f);
     if (w.x == 0.0f && w.y == 0.0f && w.z == 0.0f && w.w == 0.0f) return;

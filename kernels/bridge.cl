@@ -801,7 +801,7 @@ __kernel void bridge_find(__global const PIXEL_T *src, __global uchar *found, __
             }
         }
         if (flat && ge - g == GROUP && ge < width) {
-            vstore8((uchar8)(0), 0, found + IDX(g, y, width));
+            STORE_UCHAR8((uchar8)(0), found + IDX(g, y, width));
             continue;
         }
         for (int x = g; x < ge; ++x) {

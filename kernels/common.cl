@@ -41,8 +41,27 @@
 #endif
 #define GROUP 8
 
-// Eight edge bytes at once (vload8 needs only byte alignment).
-inline ulong edge_group(__global const uchar *e) { return as_ulong(vload8(0, e)); }
+// PoCL's CPU build calls vload8 / vstore8 / vload4 and rint out of line (a call, with the live vector
+// registers saved around it); a load or store through a vector type of the element's alignment is
+// one instruction on the same bytes, and clang's rint builtin is one instruction too.
+#ifdef POCL_DEVICE_ADDRESS_BITS
+typedef uchar8 uchar8_a1 __attribute__((aligned(1)));
+typedef ushort4 ushort4_a2 __attribute__((aligned(2)));
+#define LOAD_UCHAR8(p) (*(__global const uchar8_a1 *)(p))
+#define STORE_UCHAR8(v, p) (*(__global uchar8_a1 *)(p) = (v))
+#define STORE_UCHAR8_PRIVATE(v, p) (*(__private uchar8_a1 *)(p) = (v))
+#define LOAD_USHORT4(p) (*(__global const ushort4_a2 *)(p))
+#define RINT(x) __builtin_rintf(x)
+#else
+#define LOAD_UCHAR8(p) vload8(0, p)
+#define STORE_UCHAR8(v, p) vstore8(v, 0, p)
+#define STORE_UCHAR8_PRIVATE(v, p) vstore8(v, 0, p)
+#define LOAD_USHORT4(p) vload4(0, p)
+#define RINT(x) rint(x)
+#endif
+
+// Eight edge bytes at once (byte alignment is enough).
+inline ulong edge_group(__global const uchar *e) { return as_ulong(LOAD_UCHAR8(e)); }
 
 // A pixel as normalised RGBA (grayscale repeated in r, g, b; alpha 1 when absent).
 inline float4 load_px(__global const PIXEL_T *img, int i)

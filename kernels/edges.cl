@@ -404,7 +404,7 @@ __kernel void detect_edges(__global const PIXEL_T *src, __global const float *lu
         int i = IDX(x0, y, width);
         for (int x = x0, b = (y - y0) * ROW_BITS; x + GROUP <= xf; x += GROUP, i += GROUP, ++b)
             if (flat_group(src, i, width)) {
-                vstore8((uchar8)(0), 0, edges + i);
+                STORE_UCHAR8((uchar8)(0), edges + i);
                 flat |= (ulong)1 << b;
             }
     }
@@ -567,11 +567,11 @@ __kernel void detect_edges(__global const PIXEL_T *src, __global const float *lu
 #endif
                 const int4 o = need.lo | need.hi;
                 if ((o.x | o.y | o.z | o.w) == 0) {
-                    vstore8(convert_uchar8(found), 0, edges + i);
+                    STORE_UCHAR8(convert_uchar8(found), edges + i);
                 } else {
                     uchar nb[GROUP], fb[GROUP];
-                    vstore8(convert_uchar8(need), 0, nb);
-                    vstore8(convert_uchar8(found), 0, fb);
+                    STORE_UCHAR8_PRIVATE(convert_uchar8(need), nb);
+                    STORE_UCHAR8_PRIVATE(convert_uchar8(found), fb);
                     for (int t = 0; t < GROUP; ++t)
                         edges[i + t] = fb[t] | float_edges(src, luts, lin, i + t, x + t, y, width, height, threshold,
                                                            nb[t] & EDGE_BOTTOM, nb[t] & EDGE_RIGHT, &c, &c_valid);

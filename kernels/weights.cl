@@ -43,7 +43,12 @@ inline float trapezoid_area(__global const float *table, int p, int L)
     return 0.0f;
 }
 
-inline ushort to_u16(float a) { return (ushort)clamp(rint(a * 65535.0f), 0.0f, 65535.0f); }
+// clamp(rint(a * 65535), 0, 65535) as a 16-bit weight (NaN -> 0, as clamp's fmax gives).
+inline ushort to_u16(float a)
+{
+    const float r = RINT(a * 65535.0f), lo = r > 0.0f ? r : 0.0f;
+    return (ushort)(lo < 65535.0f ? lo : 65535.0f);
+}
 
 // Crossing at one end of a line: `a`/`b` say whether an edge crosses on side a (up/left) or side b
 // (down/right); `a2`/`b2` how far that crossing edge continues: 0 one pixel, 1 two, 2 three or more
