@@ -47,12 +47,26 @@
 #ifdef POCL_DEVICE_ADDRESS_BITS
 typedef uchar8 uchar8_a1 __attribute__((aligned(1)));
 typedef ushort4 ushort4_a2 __attribute__((aligned(2)));
+typedef uchar16 uchar16_a1 __attribute__((aligned(1)));
+typedef float8 float8_a4 __attribute__((aligned(4)));
+typedef int8 int8_a4 __attribute__((aligned(4)));
+typedef short8 short8_a2 __attribute__((aligned(2)));
+#define LOAD_UCHAR16(p) (*(__global const uchar16_a1 *)(p))
+#define LOAD_FLOAT8(p) (*(__global const float8_a4 *)(p))
+#define STORE_FLOAT8(v, p) (*(__global float8_a4 *)(p) = (v))
+#define STORE_INT8_PRIVATE(v, p) (*(__private int8_a4 *)(p) = (v))
+#define STORE_SHORT8_PRIVATE(v, p) (*(__private short8_a2 *)(p) = (v))
 #define LOAD_UCHAR8(p) (*(__global const uchar8_a1 *)(p))
 #define STORE_UCHAR8(v, p) (*(__global uchar8_a1 *)(p) = (v))
 #define STORE_UCHAR8_PRIVATE(v, p) (*(__private uchar8_a1 *)(p) = (v))
 #define LOAD_USHORT4(p) (*(__global const ushort4_a2 *)(p))
 #define RINT(x) __builtin_rintf(x)
 #else
+#define LOAD_UCHAR16(p) vload16(0, p)
+#define LOAD_FLOAT8(p) vload8(0, p)
+#define STORE_FLOAT8(v, p) vstore8(v, 0, p)
+#define STORE_INT8_PRIVATE(v, p) vstore8(v, 0, p)
+#define STORE_SHORT8_PRIVATE(v, p) vstore8(v, 0, p)
 #define LOAD_UCHAR8(p) vload8(0, p)
 #define STORE_UCHAR8(v, p) vstore8(v, 0, p)
 #define STORE_UCHAR8_PRIVATE(v, p) vstore8(v, 0, p)

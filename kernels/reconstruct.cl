@@ -322,7 +322,7 @@ inline void group_masks(__global const PIXEL_T *src, int i, int width, short8 *m
 // distance >= 3 (what table bit 1 means: such a pair is a gap, and every gap holds one) reach NEAR_LIMIT in some
 // sample, or (extended rules) one reaches FAR_LIMIT.
 #define PLANES(q, c0, c1, c2) {                                                                          \
-        const uchar16 l_ = vload16(0, q), h_ = vload16(0, (q) + 14);                                   \
+        const uchar16 l_ = LOAD_UCHAR16(q), h_ = LOAD_UCHAR16((q) + 14);                               \
         c0 = (uchar16)(l_.s0, l_.s3, l_.s6, l_.s9, l_.sc, l_.sf, h_.s4, h_.s7, h_.sa, h_.sd, 0, 0, 0, 0, 0, 0); \
         c1 = (uchar16)(l_.s1, l_.s4, l_.s7, l_.sa, l_.sd, h_.s2, h_.s5, h_.s8, h_.sb, h_.se, 0, 0, 0, 0, 0, 0); \
         c2 = (uchar16)(l_.s2, l_.s5, l_.s8, l_.sb, l_.se, h_.s3, h_.s6, h_.s9, h_.sc, h_.sf, 0, 0, 0, 0, 0, 0); }
@@ -548,8 +548,8 @@ inline void lab_group(__global const PIXEL_T *src, __global const float *luts, _
         __global const PIXEL_T *p = src + (size_t)i * CHANNELS;
         int8 s0, s1, s2;
 #if RGB8
-        const uchar16 lo = vload16(0, p);   // the group's 24 bytes
-        const uchar8 hi = vload8(0, p + 16);
+        const uchar16 lo = LOAD_UCHAR16(p);   // the group's 24 bytes
+        const uchar8 hi = LOAD_UCHAR8(p + 16);
         s0 = convert_int8((uchar8)(lo.s0, lo.s3, lo.s6, lo.s9, lo.sc, lo.sf, hi.s2, hi.s5));
         s1 = convert_int8((uchar8)(lo.s1, lo.s4, lo.s7, lo.sa, lo.sd, hi.s0, hi.s3, hi.s6));
         s2 = convert_int8((uchar8)(lo.s2, lo.s5, lo.s8, lo.sb, lo.se, hi.s1, hi.s4, hi.s7));
@@ -564,9 +564,9 @@ inline void lab_group(__global const PIXEL_T *src, __global const float *luts, _
 #else
         LAB8(s0, s1, s2, L, A, Z);
 #endif
-        vstore8(L, 0, slot + c);
-        vstore8(A, 0, slot + LAB_STRIDE + c);
-        vstore8(Z, 0, slot + 2 * LAB_STRIDE + c);
+        STORE_FLOAT8(L, slot + c);
+        STORE_FLOAT8(A, slot + LAB_STRIDE + c);
+        STORE_FLOAT8(Z, slot + 2 * LAB_STRIDE + c);
         return;
     }
 #endif
@@ -594,9 +594,9 @@ inline uint ring_masks(__global const PIXEL_T *src, int x, int y, int width, int
 // plus 0.2% (S within X), of F where over 2 thresholds less 0.5% (F holds reconstruct_at's `far`) and of B
 // where over 2.012 thresholds (B within reconstruct_at's `beyond`, over 2.01).
 #define RING_DE2(row, off, bit) {                                                                        \
-        const float8 l_ = vload8(0, (row) + c + (off)) - aL;                                          \
-        const float8 a_ = vload8(0, (row) + LAB_STRIDE + c + (off)) - aA;                             \
-        const float8 b_ = vload8(0, (row) + 2 * LAB_STRIDE + c + (off)) - aB;                         \
+        const float8 l_ = LOAD_FLOAT8((row) + c + (off)) - aL;                                        \
+        const float8 a_ = LOAD_FLOAT8((row) + LAB_STRIDE + c + (off)) - aA;                           \
+        const float8 b_ = LOAD_FLOAT8((row) + 2 * LAB_STRIDE + c + (off)) - aB;                       \
         const float8 e_ = l_ * l_ + a_ * a_ + b_ * b_;                                                 \
         M |= (e_ > tm) & (int8)(bit);                                                                  \
         S |= (e_ > th) & (int8)(bit);                                                                  \
@@ -649,8 +649,8 @@ __kernel void reconstruct(__global const PIXEL_T *src, __global PIXEL_T *dst, __
                 const short4 o = mv.lo | mv.hi;
                 if ((o.x | o.y | o.z | o.w) == 0) continue;
                 short mb[GROUP], fb[GROUP];
-                vstore8(mv, 0, mb);
-                vstore8(fv, 0, fb);
+                STORE_SHORT8_PRIVATE(mv, mb);
+                STORE_SHORT8_PRIVATE(fv, fb);
 #else
                 if (smooth_group(src, i, width)) continue;
                 uint mb[GROUP], fb[GROUP];
@@ -707,8 +707,8 @@ __kernel void reconstruct(__global const PIXEL_T *src, __global PIXEL_T *dst, __
         for (int j = 0; j < ngroups; ++j) {
             if (!(cg >> j & 1u)) continue;
             const int g = x0 + j * GROUP, c = g - x0 + 1, i = IDX(g, y, width);
-            const float8 aL = vload8(0, m + c), aA = vload8(0, m + LAB_STRIDE + c),
-                         aB = vload8(0, m + 2 * LAB_STRIDE + c);
+            const float8 aL = LOAD_FLOAT8(m + c), aA = LOAD_FLOAT8(m + LAB_STRIDE + c),
+                         aB = LOAD_FLOAT8(m + 2 * LAB_STRIDE + c);
             int8 M = (int8)(0), S = M, F = M, B = M;
             RING_DE2(u, -1, 1) RING_DE2(u, 0, 2) RING_DE2(u, 1, 4) RING_DE2(m, 1, 8)
             RING_DE2(d, 1, 16) RING_DE2(d, 0, 32) RING_DE2(d, -1, 64) RING_DE2(m, -1, 128)
@@ -719,10 +719,10 @@ __kernel void reconstruct(__global const PIXEL_T *src, __global PIXEL_T *dst, __
             continue;
 #endif
             int mb[GROUP], sb[GROUP], fb[GROUP], bb[GROUP];
-            vstore8(M, 0, mb);
-            vstore8(S, 0, sb);
-            vstore8(F, 0, fb);
-            vstore8(B, 0, bb);
+            STORE_INT8_PRIVATE(M, mb);
+            STORE_INT8_PRIVATE(S, sb);
+            STORE_INT8_PRIVATE(F, fb);
+            STORE_INT8_PRIVATE(B, bb);
             for (int t = 0; t < GROUP; ++t) {
                 const uint maybe = (uint)mb[t];
                 if (!maybe || !(lanes[j] >> t & 1u)) continue;
