@@ -69,14 +69,6 @@
 #define IMAX(a, b) ((a) > (b) ? (a) : (b))
 #define HALF_DIAGONAL 0.70711f
 
-// sqrt is a call out of line there too, and every live vector register is saved around it; clang's
-// scalar builtin is inlined (lane by lane, vectorised back into vsqrtps). Both are exact.
-#ifdef POCL_DEVICE_ADDRESS_BITS
-#define SQRT(x) __builtin_sqrtf(x)
-#else
-#define SQRT(x) sqrt(x)
-#endif
-
 // floor / ceil to int for |x| < 2^24 (coordinates are clipped to the frame on the host).
 INLINE int ifloor(float x) { int i = (int)x; return i - (x < (float)i); }
 INLINE int iceil(float x) { int i = (int)x; return i + (x > (float)i); }
