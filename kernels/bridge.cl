@@ -792,12 +792,27 @@ __kernel void bridge_find(__global const PIXEL_T *src, __global uchar *found, __
         __global const PIXEL_T *p = src + (size_t)IDX(g, y, width) * px;
         const int nb = (last - g) * px;
         int flat = 1;
-        for (int t = 0; t < nb; ++t) flat &= p[t] == p[t + px];
-        if (!flat) {
-            flat = 1;
-            for (int t = 0; t < nb; ++t) {
-                const PIXEL_T u = p[t], v = p[t + px];
-                flat &= (u > v ? u - v : v - u) < FLAT_LEVELS;
+#if CHANNELS == 3 && SAMPLE_BYTES == 1
+        if (ge - g == GROUP && ge < width) {
+            // 8-bit RGB, a whole group and its right neighbour (27 bytes): every sample against the
+            // next pixel's at once (detailed photo: the pass 0.91x)
+            const uchar16 a0 = LOAD_UCHAR16(p), a1 = LOAD_UCHAR16(p + 3);
+            const uchar8 c0 = LOAD_UCHAR8(p + 16), c1 = LOAD_UCHAR8(p + 19);
+            const uchar16 d0 = a0 > a1 ? a0 - a1 : a1 - a0;
+            const uchar8 d1 = c0 > c1 ? c0 - c1 : c1 - c0;
+            const ulong2 m0 = as_ulong2(d0 >= (uchar16)FLAT_LEVELS);
+            const ulong m1 = as_ulong(d1 >= (uchar8)FLAT_LEVELS);
+            flat = (m0.x | m0.y | m1) == 0;
+        } else
+#endif
+        {
+            for (int t = 0; t < nb; ++t) flat &= p[t] == p[t + px];
+            if (!flat) {
+                flat = 1;
+                for (int t = 0; t < nb; ++t) {
+                    const PIXEL_T u = p[t], v = p[t + px];
+                    flat &= (u > v ? u - v : v - u) < FLAT_LEVELS;
+                }
             }
         }
         if (flat && ge - g == GROUP && ge < width) {

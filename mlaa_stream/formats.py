@@ -61,6 +61,7 @@ def defines_for(fmt: FrameFormat, **options: object) -> dict[str, object]:
         "PIXEL_T": ctype,
         "CHANNELS": fmt.channels,
         "PIXEL_MAX": float(pmax),
+        "SAMPLE_BYTES": fmt.dtype.itemsize,
         "ORDER_BGR": int(fmt.bgr),
         "LUT_SIZE": LUT_SIZE,
     }

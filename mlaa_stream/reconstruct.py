@@ -361,8 +361,7 @@ class Reconstructor:
         defines = defines_for(fmt, CHEAP_BOUND=cheap_bound(threshold, linear_input), CHEAP_LEVELS=near,
                               FAR_LEVELS=far, EXTENDED=int(extended), LINEAR_INPUT=int(linear_input),
                               MAX_LINE_PIXELS=MAX_LINE_PIXELS, MIN_AIM=float(MIN_AIM),
-                              MAX_OFFSET=float(MAX_OFFSET), SEGMENT=SEGMENT, STRIP=STRIP,
-                              SAMPLE_BYTES=fmt.dtype.itemsize)
+                              MAX_OFFSET=float(MAX_OFFSET), SEGMENT=SEGMENT, STRIP=STRIP)
         self.defines = defines  # the build defines (tests build reconstruct_lab_check with them)
         self._kernel = context.kernel("reconstruct", "reconstruct", defines)
         mf = cl.mem_flags
