@@ -99,9 +99,18 @@ inline int near_to(__global const PIXEL_T *src, const lattice L, int x, int y, i
 #define BG(i, j) near_to(src, L, x, y, (i), (j), bgc, BG_TOL)
 #define INK(i, j) near_to(src, L, x, y, (i), (j), ink, INK_TOL)
 
+// PoCL's CPU build calls atomic_min out of line; the compiler's builtin is one locked instruction.
+#ifdef POCL_DEVICE_ADDRESS_BITS
+#define ATOMIC_MIN(p, v) __atomic_fetch_min(p, v, __ATOMIC_RELAXED)
+#else
+#define ATOMIC_MIN(p, v) atomic_min(p, v)
+#endif
+
+// (class_of, classify and classify_o forced inline: PoCL's CPU build calls them per probe otherwise; on dense
+// wires bridge_find 0.85x.)
 // A pixel as 1 background, 2 ink, 3 another colour (another wire), 0 a mix of ink and background (antialiased
 // ink: within INK_TOL of the nearest bgc + t (ink - bgc), t in [0, 1]; it refuses a link as the ink does).
-inline int class_of(__global const PIXEL_T *src, int k, float3 ink, float3 bgc)
+inline __attribute__((always_inline)) int class_of(__global const PIXEL_T *src, int k, float3 ink, float3 bgc)
 {
     const float3 c = rgb_at(src, k);
     if (diff3(c, bgc) <= BG_TOL) return 1;
@@ -113,7 +122,7 @@ inline int class_of(__global const PIXEL_T *src, int k, float3 ink, float3 bgc)
 }
 
 // Lattice pixel (i, j) as class_of, or 0 outside the frame.
-inline int classify(__global const PIXEL_T *src, const lattice L, int x, int y, int i, int j, float3 ink, float3 bgc)
+inline __attribute__((always_inline)) int classify(__global const PIXEL_T *src, const lattice L, int x, int y, int i, int j, float3 ink, float3 bgc)
 {
     const int k = lat(L, x, y, i, j);
     return k < 0 ? 0 : class_of(src, k, ink, bgc);
@@ -124,7 +133,7 @@ inline int classify(__global const PIXEL_T *src, const lattice L, int x, int y, 
 #define OUTSIDE 5
 
 // Lattice pixel (i, j) as class_of, or OUTSIDE the frame (clear in a link's window: nothing there refuses it).
-inline int classify_o(__global const PIXEL_T *src, const lattice L, int x, int y, int i, int j, float3 ink,
+inline __attribute__((always_inline)) int classify_o(__global const PIXEL_T *src, const lattice L, int x, int y, int i, int j, float3 ink,
                       float3 bgc)
 {
     const int k = lat(L, x, y, i, j);
@@ -596,8 +605,8 @@ inline void claim_link(__global const PIXEL_T *src, __global const uchar *found,
     for (int i = r.c0 - r.e0; i < r.c1 + r.e1; ++i) {
         const int r0 = i < r.c0 ? -ln.d : (i >= r.c1 ? ln.d : 0);   // the band crosses rows r0 and r0 + d here
         const int k0 = lat(L, x, y, i, r0), k1 = lat(L, x, y, i, r0 + ln.d), gap = i > 0 && i < ln.s;
-        if (k0 >= 0 && writable(class_of(src, k0, ink, bgc), gap)) atomic_min(claims + k0, id);
-        if (k1 >= 0 && writable(class_of(src, k1, ink, bgc), gap)) atomic_min(claims + k1, id);
+        if (k0 >= 0 && writable(class_of(src, k0, ink, bgc), gap)) ATOMIC_MIN(claims + k0, id);
+        if (k1 >= 0 && writable(class_of(src, k1, ink, bgc), gap)) ATOMIC_MIN(claims + k1, id);
     }
     if (!r.m) return;
     const float ms = (float)r.is + (float)r.sa * 0.5f;
@@ -605,7 +614,7 @@ inline void claim_link(__global const PIXEL_T *src, __global const uchar *found,
         for (int q = 0; q <= r.m; ++q) {
             const int k = lat(L, x, y, i, (q + 1) * ln.d);
             if (cut_coverage(ln, r.m, ms, i, q, diagonal) > 0.0f && k >= 0 && class_of(src, k, ink, bgc) == 1)
-                atomic_min(claims + k, id);
+                ATOMIC_MIN(claims + k, id);
         }
 }
 
