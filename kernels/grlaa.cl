@@ -355,6 +355,13 @@ INLINE void list_chunk(f8 hit, i8 exact, int lim, int k, uint keep, qidx_t *part
     *nf += POPC[fm];
 }
 
+// p.x - a.x at tile columns `col` (dx0 = x0 - a.x), rounded as a chunk's lanes are: (dx0 + column % 8) +
+// 8 * (column / 8), so a pixel's coverage does not depend on how its row was evaluated.
+INLINE f8 run_dx(i8 col, float dx0)
+{
+    return (dx0 + convert_float8(col & 7)) + convert_float8(col & ~7);
+}
+
 // Four lanes of coverage (co, ci) at columns q .. q + 3 of tile row j merged into the current
 // polyline's coverage by max (grlaa_draw keeps it 0 where the polyline has not reached).
 typedef float4 float4_u __attribute__((aligned(4)));
@@ -547,9 +554,7 @@ __kernel void grlaa_draw(__global PIXEL_T *img, __global const float *luts,
             }
             if (pend >= 0 && (narrow || j > jhi)) {
                 const int j2 = narrow ? j : pend, q2 = narrow ? IMIN(xa - x0, TILE - 4) : pend_q;
-                // the chunk code's arithmetic: ((x0 - a.x) + column % 8) + 8 * (column / 8)
-                const i8 col = (i8)(pend_q + run4, q2 + run4);
-                const f8 fxr = (((float)x0 - ax) + convert_float8(col & 7)) + convert_float8(col & ~7);
+                const f8 fxr = run_dx((i8)(pend_q + run4, q2 + run4), (float)x0 - ax);
                 const f8 yr = (f8)((float4)((float)(y0 + pend)), (float4)((float)(y0 + j2)));
                 f8 co, ci;
                 round_cover8(fxr, yr - ay, yr - by, tx, ty, len, r, ri, sa, sb, sh, sia, si2,
@@ -565,8 +570,7 @@ __kernel void grlaa_draw(__global PIXEL_T *img, __global const float *luts,
             const int ca = (xa - x0) >> 3, cb = (xb - x0) >> 3;
             if (ca != cb && xb - xa < 8 && !(meta & 3)) {  // 5 to 8 px across two chunks: one f8
                 const int q = IMIN(xa - x0, TILE - 8);
-                const i8 col = (i8)(q + run4, q + 4 + run4);
-                const f8 fxr = (((float)x0 - ax) + convert_float8(col & 7)) + convert_float8(col & ~7);
+                const f8 fxr = run_dx((i8)(q + run4, q + 4 + run4), (float)x0 - ax);
                 f8 co, ci;
                 round_cover8(fxr, (f8)dy, (f8)dy1, tx, ty, len, r, ri, sa, sb, sh, sia, si2,
                              strength, &co, &ci);
