@@ -2,9 +2,12 @@
 from __future__ import annotations
 
 import os
+import signal
 import sys
 import tempfile
+from contextlib import contextmanager
 from dataclasses import dataclass
+from typing import Iterator
 
 import click
 
@@ -30,8 +33,9 @@ linear (and untagged float images) are taken as linear light, others as sRGB-enc
 files that are not images by their extension are skipped with a warning; a file that cannot be
 read or written is reported and the others are still processed. A sequence (%04d pattern) must keep
 one size, channel count and sample type; the first frame that differs stops it. Gaps in the
-numbering are reported. Every output is written under a temporary name beside it and renamed when
-complete: an existing output is complete, and --resume skips it.
+numbering are reported. Every output is written under a temporary name beside it, checked (it
+reopens and decodes to the end) and renamed: --resume skips an existing output only when it is
+complete and writes an incomplete one again. NaN and infinite samples pass through unchanged.
 
 \b
 Video goes through PyAV (FFmpeg): frame rate, timestamps, resolution, colour tags and audio are
@@ -42,7 +46,8 @@ valid shorter file; the exit code is 1 and the message says at which frame decod
 \b
 Exit codes: 0 all done; 1 some inputs failed (the others were processed); 2 usage error
 (nothing done: bad option, missing input, output would overwrite); 3 no OpenCL device;
-130 interrupted (Ctrl-C; outputs in progress are removed).
+130 interrupted (Ctrl-C), 143 terminated (SIGTERM), 129 hung up (SIGHUP): outputs in progress
+are removed, complete ones kept; --resume goes on from there.
 """
 
 
@@ -62,6 +67,36 @@ class Console:
     def info(self, msg: str) -> None:
         if self.verbose and not self.quiet:
             click.echo(f"mlaa-stream: {msg}", err=True)
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM or SIGHUP arrived: unwinds every stage as Ctrl-C does (outputs in progress removed)."""
+
+    def __init__(self, signum: int):
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+@contextmanager
+def stop_signals_as_interrupts() -> Iterator[None]:
+    """SIGTERM (timeout, systemd, docker, render-farm managers) and SIGHUP raise Terminated in the main
+    thread for as long as the command runs; the previous handlers come back afterwards."""
+    wanted = [getattr(signal, n) for n in ("SIGTERM", "SIGHUP") if hasattr(signal, n)]
+    previous = {}
+
+    def handler(signum, frame):
+        raise Terminated(signum)
+
+    try:
+        for sig in wanted:
+            previous[sig] = signal.signal(sig, handler)
+    except ValueError:  # not the main thread (e.g. called from a worker): signals stay as they are
+        pass
+    try:
+        yield
+    finally:
+        for sig, old in previous.items():
+            signal.signal(sig, old)
 
 
 class Usage(Exception):
@@ -207,13 +242,17 @@ def filter_command(ctx: click.Context, input_path: str, output: str, overwrite: 
     configure_logging(verbose, quiet)
     con = Console(verbose, quiet)
     try:
-        code = _filter(ctx, con, input_path, output, overwrite=overwrite, resume=resume,
-                       frames=frames, preset=preset, threshold=threshold, metric=metric,
-                       display_space=display_space, reconstruct=reconstruct, bridge=bridge,
-                       codec=codec, crf=crf,
-                       encoder_preset=encoder_preset, pix_fmt=pix_fmt, video_backend=video_backend,
-                       overlay=overlay, in_flight=in_flight, device=device,
-                       temporal=TemporalOptions(temporal, temporal_mode, temporal_k, stats_path, show))
+        with stop_signals_as_interrupts():
+            code = _filter(ctx, con, input_path, output, overwrite=overwrite, resume=resume,
+                           frames=frames, preset=preset, threshold=threshold, metric=metric,
+                           display_space=display_space, reconstruct=reconstruct, bridge=bridge,
+                           codec=codec, crf=crf,
+                           encoder_preset=encoder_preset, pix_fmt=pix_fmt, video_backend=video_backend,
+                           overlay=overlay, in_flight=in_flight, device=device,
+                           temporal=TemporalOptions(temporal, temporal_mode, temporal_k, stats_path, show))
+    except Terminated as exc:
+        con.error(f"terminated by {exc}; complete outputs are kept, the one in progress was removed")
+        code = 128 + exc.signum
     except KeyboardInterrupt:
         con.error("interrupted; complete outputs are kept, the one in progress was removed")
         code = EXIT_INTERRUPTED
@@ -343,12 +382,13 @@ class _ImageJob(_Job):
     """An image, a folder of images or a numbered sequence."""
 
     def prepare(self) -> None:
+        from ..image_io import remove_quietly, stale_temp_files
         from ..sequence import (Report, expand_pattern, format_ranges, is_pattern, list_folder,
                                 parse_frames, plan_images, same_file)
 
         o, con = self.opts, self.con
         self.strict = self.kind == "pattern"
-        self.report = Report(say=con.error)
+        self.report = Report(say=con.error, inform=con.info)
         numbers = None
         if self.kind == "image":
             srcs = [self.input]
@@ -397,8 +437,13 @@ class _ImageJob(_Job):
                 except OSError as exc:
                     raise OSError(exc.errno, f"cannot create the output folder ({exc.strerror})",
                                   d) from exc
+        for d in dst_dirs:  # temporary files of a run that was killed (SIGKILL, power cut)
+            for path in stale_temp_files(d):
+                remove_quietly(path)
+                con.info(f"{path}: removed (a temporary file left by an interrupted run)")
         existing = [ff for ff in self.plan if os.path.exists(ff.dst)]
         if existing and o["resume"]:
+            existing = self._keep_complete(existing)
             self.report.skipped.extend(ff.dst for ff in existing)
             con.info(f"--resume: {len(existing)} outputs exist and are skipped")
             self.plan = [ff for ff in self.plan if ff not in existing]
@@ -410,6 +455,25 @@ class _ImageJob(_Job):
             if not os.path.isdir(d):
                 raise Failed(f"{d}: the output folder does not exist")
             _check_writable(d)
+
+    def _keep_complete(self, existing: list) -> list:
+        """--resume: the existing outputs that are complete (header of the input's size, PNG/JPEG end
+        marker); an incomplete one (e.g. from a version that did not check writes) is removed and redone."""
+        from ..image_io import check_complete, image_shape
+
+        complete = []
+        for ff in existing:
+            shape = image_shape(ff.src)
+            why = check_complete(ff.dst, *shape, decode=False) if shape else None
+            if why is None:
+                complete.append(ff)
+                continue
+            self.con.warn(f"{ff.dst}: incomplete ({why}); it is written again")
+            try:
+                os.unlink(ff.dst)
+            except OSError as exc:
+                raise Failed(f"{ff.dst}: incomplete and cannot be removed ({exc.strerror})") from exc
+        return complete
 
     def nothing_to_do(self) -> bool:
         return not self.plan
@@ -489,6 +553,10 @@ class _VideoJob(_Job):
         if not os.path.isdir(folder):
             raise Failed(f"{folder}: the output folder does not exist")
         _check_writable(folder)
+        from ..image_io import remove_quietly, stale_temp_files
+        for path in stale_temp_files(folder):  # left by a run that was killed
+            remove_quietly(path)
+            self.con.info(f"{path}: removed (a temporary file left by an interrupted run)")
         try:
             self.info = (probe_video_cv if o["video_backend"] == "opencv" else probe_video)(self.input)
         except VideoError as exc:

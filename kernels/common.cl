@@ -152,7 +152,8 @@ inline void store_px(__global PIXEL_T *img, int i, float4 c)
 inline float lut_read(__global const float *lut, float x)
 {
     float t = x * (float)LUT_SIZE;
-    t = t < 0.0f ? 0.0f : (t > (float)LUT_SIZE ? (float)LUT_SIZE : t);
+    // Written so that NaN (false in every comparison) reads entry 0 instead of an index out of range.
+    t = t > 0.0f ? (t < (float)LUT_SIZE ? t : (float)LUT_SIZE) : 0.0f;
     int i = (int)t;
     i = i > LUT_SIZE - 1 ? LUT_SIZE - 1 : i;
     float f = t - (float)i, a = lut[i];

@@ -20,6 +20,7 @@ import pyopencl as cl
 from .colour import device_luts
 from .device import Context, default_context, linear_levels
 from .formats import FrameFormat, defines_for, frame_format
+from .nonfinite import NonFinite, replace_non_finite
 
 METRICS = {"lab": 0, "luma": 1, "rgb": 2}
 # Default discontinuity thresholds per metric: ΔE76 for lab, fraction of full scale for the others.
@@ -143,14 +144,18 @@ class FilterOptions:
 class PendingFrame:
     """A frame in flight; `result()` waits for its download and returns it in the input's dtype."""
 
-    def __init__(self, host_out: np.ndarray, event, out_dtype: np.dtype, shape: tuple, keep=()):
+    def __init__(self, host_out: np.ndarray, event, out_dtype: np.dtype, shape: tuple, keep=(),
+                 non_finite: NonFinite | None = None):
         self._out, self._event, self._dtype, self._shape = host_out, event, out_dtype, shape
         self._keep = keep  # host arrays that must outlive the non-blocking copies
+        self._non_finite = non_finite
 
     def result(self) -> np.ndarray:
         self._event.wait()
         self._keep = ()
         out = self._out.reshape(self._shape)
+        if self._non_finite is not None:
+            out = self._non_finite.restore(out)
         return out if out.dtype == self._dtype else out.astype(self._dtype)
 
 
@@ -254,6 +259,7 @@ class Filter:
                 bufs.last_use[slot].wait()  # the frame that used this slot two frames ago is out
             staging = bufs.staging[slot]
             np.copyto(staging.reshape(frame.shape), frame, casting="unsafe")
+            non_finite = replace_non_finite(staging.reshape(frame.shape))  # float frames only
             up = cl.enqueue_copy(self.queue, bufs.src[slot], staging, is_blocking=False)
             after = [up] + ([self._last_event] if self._last_event is not None else [])
             done = self._enqueue_passes(bufs, bufs.src[slot], bufs.dst[slot], after)
@@ -263,7 +269,8 @@ class Filter:
             bufs.last_use[slot] = down
             self._last_event = done
             self.queue.flush()
-        return PendingFrame(host_out, down, np.dtype(frame.dtype), frame.shape, keep=(staging,))
+        return PendingFrame(host_out, down, np.dtype(frame.dtype), frame.shape, keep=(staging,),
+                            non_finite=non_finite)
 
     def _enqueue_passes(self, bufs: _FrameBuffers, src, dst, after: list, queue=None,
                         events: dict | None = None):

@@ -41,6 +41,7 @@ class Report:
     """What happened to each file: messages are also passed to `say` as they happen."""
 
     say: Callable[[str], None] = lambda msg: None
+    inform: Callable[[str], None] = lambda msg: None  # details (the CLI's -v)
     written: list[str] = field(default_factory=list)
     skipped: list[str] = field(default_factory=list)  # resume: outputs already complete
     failed: list[str] = field(default_factory=list)  # messages naming the file
@@ -211,6 +212,8 @@ def image_source(files: list[FrameFile], report: Report, *, strict: bool) -> Ite
                 raise
             report.fail(str(exc))
             continue
+        for note in image.conversions:
+            report.inform(f"{ff.src}: {note}")
         if strict:
             shape = (image.pixels.shape, image.pixels.dtype)
             if first is None:

@@ -81,6 +81,8 @@ class VideoInfo:
     codec: str
     colour: dict  # colorspace, color_range, color_primaries, color_trc as FFmpeg's enum values
     audio_streams: int
+    frames_declared: bool = True  # `frames` is the container's own count, not duration x rate
+    duration: float | None = None  # seconds, the stream's (or the container's) when known
 
     @property
     def sample_format(self) -> str:
@@ -136,16 +138,18 @@ def probe_video(path: str) -> VideoInfo:
         bits, alpha = _format_bits_alpha(pix)
         fps = s.average_rate or s.guessed_rate or None
         frames = s.frames or None
-        if frames is None and fps:
-            duration = (float(s.duration * s.time_base) if s.duration and s.time_base else
-                        container.duration / 1e6 if container.duration else None)
-            frames = int(round(duration * fps)) if duration else None
+        declared = frames is not None
+        duration = (float(s.duration * s.time_base) if s.duration and s.time_base else
+                    container.duration / 1e6 if container.duration else None)
+        if frames is None and fps and duration:
+            frames = int(round(duration * fps))  # an estimate (progress bar): wrong for variable rates
         colour = {k: int(getattr(cc, k) or 0) for k in _UNSPECIFIED}
         return VideoInfo(path=path, width=cc.width, height=cc.height,
                          fps=Fraction(fps) if fps else None,
                          time_base=Fraction(s.time_base) if s.time_base else None,
                          frames=frames, pix_fmt=pix, bits=bits, has_alpha=alpha, codec=cc.name,
-                         colour=colour, audio_streams=len(container.streams.audio))
+                         colour=colour, audio_streams=len(container.streams.audio),
+                         frames_declared=declared, duration=duration)
     finally:
         container.close()
 
@@ -162,7 +166,7 @@ def read_video(info: VideoInfo, *, check_length: bool = True) -> Iterator[Item]:
         container = av.open(path)
     except (av.error.FFmpegError, OSError) as exc:
         raise VideoReadError(f"{path}: cannot open: {exc}", 0) from exc
-    n = 0
+    n, last_time = 0, None
     try:
         stream = container.streams.video[0]
         stream.thread_type = "AUTO"
@@ -178,16 +182,31 @@ def read_video(info: VideoInfo, *, check_length: bool = True) -> Iterator[Item]:
                     rng = frame.color_range or None
                     rgb = frame.reformat(format=info.sample_format, src_color_range=rng,
                                          interpolation=sws)
+                    if frame.pts is not None and frame.time_base:
+                        last_time = float(frame.pts * frame.time_base)
                     yield Item(rgb.to_ndarray(), FrameTime(frame.pts, frame.time_base))
                     n += 1
         except (av.error.FFmpegError, EOFError) as exc:
             raise VideoReadError(f"{path}: decoding stopped at frame {n}: {exc}", n) from exc
-        expected = info.frames
-        if check_length and expected and n + max(2, expected // 50) < expected:
-            raise VideoReadError(f"{path}: the stream ended at frame {n}, expected about {expected} "
-                                 f"frames (truncated file?)", n)
+        if check_length:
+            _check_length(info, n, last_time)
     finally:
         container.close()
+
+
+def _check_length(info: VideoInfo, n: int, last_time: float | None) -> None:
+    """VideoReadError when a stream that decoded without an error still ended early: fewer frames
+    than the container declares, or (no declared count: MKV, WebM, variable frame rates) its last
+    frame well before the declared duration. Durations are not frame counts when the rate varies."""
+    expected = info.frames
+    if info.frames_declared and expected and n + max(2, expected // 50) < expected:
+        raise VideoReadError(f"{info.path}: the stream ended at frame {n}, expected {expected} "
+                             f"frames (truncated file?)", n)
+    if not info.frames_declared and info.duration and last_time is not None:
+        slack = max(0.05 * info.duration, 3.0 / float(info.fps or 25))  # 3 frames at the mean rate
+        if last_time + slack < info.duration:
+            raise VideoReadError(f"{info.path}: the stream ended at frame {n} ({last_time:.2f} s), "
+                                 f"expected {info.duration:.2f} s (truncated file?)", n)
 
 
 def choose_pix_fmt(codec: str, src_pix_fmt: str, width: int, height: int) -> str | None:

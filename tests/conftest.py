@@ -2,6 +2,9 @@
 without one the kernel tests fail loudly instead of skipping (a skip would hide a broken install)."""
 from __future__ import annotations
 
+import os
+import signal
+
 import pytest
 
 from mlaa_stream.device import Context, DeviceError, default_context
@@ -14,3 +17,16 @@ def device() -> Context:
         return default_context(None)
     except DeviceError as exc:
         pytest.fail(f"no OpenCL device (expected PoCL from `pip install .`): {exc}")
+
+
+@pytest.fixture
+def send_signal():
+    """`send_signal(sig)` delivers a real signal to this process, as a terminal's Ctrl-C or `kill` would.
+
+    SIGINT gets Python's default handler (KeyboardInterrupt) for the test, so it arrives whether or not
+    the suite was started with SIGINT ignored (`cmd &` in a non-interactive shell)."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        yield lambda sig=signal.SIGINT: os.kill(os.getpid(), sig)
+    finally:
+        signal.signal(signal.SIGINT, previous)

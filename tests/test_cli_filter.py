@@ -2,7 +2,6 @@
 folders, sequences and videos, for good input and for every kind of bad input."""
 from __future__ import annotations
 
-import _thread
 import errno
 import importlib.util
 import os
@@ -243,7 +242,7 @@ def test_a_full_disk_stops_the_run_and_leaves_no_partial_file(tmp_path, monkeypa
     assert temp_files(tmp_path) == []
 
 
-def test_ctrl_c_keeps_complete_files_and_no_temporary_one(tmp_path, monkeypatch):
+def test_ctrl_c_keeps_complete_files_and_no_temporary_one(tmp_path, monkeypatch, send_signal):
     src = tmp_path / "in"
     src.mkdir()
     for i in range(12):
@@ -254,7 +253,7 @@ def test_ctrl_c_keeps_complete_files_and_no_temporary_one(tmp_path, monkeypatch)
     def interrupt_at_third(tmp, pixels, spec, final):
         seen.append(final)
         if len(seen) == 3:
-            _thread.interrupt_main()  # Ctrl-C arrives while file 3 is being written
+            send_signal()  # Ctrl-C arrives while file 3 is being written
         return real(tmp, pixels, spec, final)
 
     monkeypatch.setattr(image_io, "_write_file", interrupt_at_third)
@@ -407,14 +406,14 @@ def test_video_output_rules(tmp_path):
     assert (tmp_path / "o.mp4").read_bytes() == b"keep me"
 
 
-def test_video_ctrl_c_removes_the_output(tmp_path, monkeypatch):
+def test_video_ctrl_c_removes_the_output(tmp_path, monkeypatch, send_signal):
     from mlaa_stream import video_io
 
     real = video_io.VideoWriter.write
 
     def write(self, frame, when=None):
         if self.frames_written == 3:
-            _thread.interrupt_main()
+            send_signal()
         return real(self, frame, when)
 
     monkeypatch.setattr(video_io.VideoWriter, "write", write)

@@ -6,7 +6,6 @@ Most tests drive the pipeline with `HostFilter`, a small numpy filter with the F
 """
 from __future__ import annotations
 
-import _thread
 import threading
 import time
 
@@ -183,13 +182,13 @@ def test_an_error_in_any_stage_stops_all_and_names_the_frame(where, stage):
     assert len(read) < 40  # the reader was stopped, bounded by the queues
 
 
-def test_keyboard_interrupt_stops_every_stage():
+def test_keyboard_interrupt_stops_every_stage(send_signal):
     written = []
 
     def sink(item):
         written.append(item.index)
         if item.index == 3:
-            _thread.interrupt_main()  # what Ctrl-C does: KeyboardInterrupt in the main thread
+            send_signal()  # Ctrl-C: KeyboardInterrupt in the main thread
         time.sleep(0.01)
 
     def endless():

@@ -168,8 +168,38 @@ def test_a_truncated_mkv_that_decodes_cleanly_is_caught_by_its_length(tmp_path):
     cut = str(tmp_path / "cut.mkv")
     open(cut, "wb").write(data[: len(data) // 2])
     info = probe_video(cut)
-    with pytest.raises(VideoReadError, match=r"ended at frame \d+, expected about 30"):
+    assert not info.frames_declared  # MKV declares a duration, not a frame count
+    with pytest.raises(VideoReadError, match=r"ended at frame \d+ \(0\.\d+ s\), expected 1\.\d+ s"):
         list(read_video(info))
+
+
+def make_vfr_mkv(path: str) -> list[int]:
+    """40 frames in milliseconds: 20 at 30 fps, then 20 at 10 fps; returns their timestamps."""
+    out = av.open(path, "w")
+    s = out.add_stream("ffv1", rate=30)
+    s.width, s.height, s.pix_fmt, s.time_base = 64, 48, "yuv420p", Fraction(1, 1000)
+    rng = np.random.default_rng(1)
+    pts = [33 * i if i < 20 else 660 + 100 * (i - 20) for i in range(40)]
+    for t in pts:
+        f = av.VideoFrame.from_ndarray((rng.random((48, 64, 3)) * 255).astype(np.uint8), format="rgb24")
+        f.pts, f.time_base = t, Fraction(1, 1000)
+        for p in s.encode(f):
+            out.mux(p)
+    for p in s.encode():
+        out.mux(p)
+    out.close()
+    return pts
+
+
+def test_a_variable_frame_rate_mkv_is_read_whole_without_a_false_truncation(tmp_path):
+    src = str(tmp_path / "vfr.mkv")
+    pts = make_vfr_mkv(src)
+    info = probe_video(src)
+    assert not info.frames_declared and info.frames != 40  # duration x mean rate: only an estimate
+    items = list(read_video(info))
+    got = [it.meta.pts for it in items]
+    assert len(got) == 40 and got == sorted(got)
+    assert max(abs(a - b) for a, b in zip(got, pts)) <= 34  # the encoder keeps them to 1/30 s
 
 
 def test_abort_leaves_nothing(tmp_path):

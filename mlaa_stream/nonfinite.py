@@ -1,0 +1,55 @@
+"""Non-finite samples (NaN, ±Inf) in float frames: kept out of the kernels, put back in the output.
+
+What they become (README "Non-finite samples"): a NaN or infinite sample passes through unchanged and
+never counts as an edge or spreads to its neighbours. Finite samples beyond ±SAMPLE_LIMIT are treated
+the same way: no image holds such light levels, and blending them (differences, squared weights summed
+over four neighbours) could overflow float32 into ±Inf. Before upload each one is replaced by the
+nearest finite sample of the same channel along its row (left first, then right; 0 in a row with
+none), so its neighbours are filtered as if the pixel continued the row; after download the original
+non-finite sample is written back in place.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+SAMPLE_LIMIT = 1e15  # |v| above this is out of range; its square and sums of four stay finite in float32
+
+
+@dataclass
+class NonFinite:
+    """Where a frame had non-finite samples, and their values, to restore after filtering."""
+
+    where: np.ndarray  # bool, the frame's shape
+    values: np.ndarray  # the non-finite samples, in `where`'s order
+
+    def restore(self, out: np.ndarray) -> np.ndarray:
+        """Write the original non-finite samples back into `out` (same shape as the frame)."""
+        out = out.astype(self.values.dtype, copy=False) if out.dtype.kind == "f" else out
+        out[self.where] = self.values.astype(out.dtype, copy=False)
+        return out
+
+
+def replace_non_finite(frame: np.ndarray) -> NonFinite | None:
+    """Replace the non-finite and out-of-range samples of a float `frame` in place (see the module's
+    note); None when there are none (the usual case: one vectorised test per frame)."""
+    if frame.dtype.kind != "f":
+        return None
+    with np.errstate(invalid="ignore"):
+        finite = np.abs(frame) <= SAMPLE_LIMIT  # False for NaN and ±Inf too
+    if finite.all():
+        return None
+    bad = ~finite
+    restore = NonFinite(bad.copy(), frame[bad].copy())
+    rows = frame.reshape(frame.shape[0], frame.shape[1], -1)  # (H, W, C) view
+    good = finite.reshape(rows.shape)
+    w = rows.shape[1]
+    col = np.arange(w)[None, :, None]
+    left = np.maximum.accumulate(np.where(good, col, -1), axis=1)  # nearest finite at or left of x
+    right = np.flip(np.minimum.accumulate(np.flip(np.where(good, col, w), axis=1), axis=1), axis=1)
+    src = np.where(left >= 0, left, right)
+    fill = np.take_along_axis(rows, np.clip(src, 0, w - 1), axis=1)
+    fill = np.where(src < w, fill, 0)  # a row of one channel with no finite sample at all
+    rows[...] = np.where(good, rows, fill)
+    return restore
