@@ -10,8 +10,8 @@ import sys
 
 import click
 
-from ..device import DeviceError
-from .options import device_option
+from mlaa_stream.device.context import DeviceError
+from mlaa_stream.cli.options import device_option
 
 
 @click.command("bench")
@@ -30,7 +30,7 @@ from .options import device_option
 @device_option
 def bench_command(quick, out_dir, methods, frames, flip, seed, scene_names, list_methods, device) -> None:
     """Measure speed against accuracy for every method on the generated scenes."""
-    from .. import bench as B
+    from mlaa_stream.bench import accuracy as B
 
     if list_methods:
         for name in [*B.METHODS, B.TRUTH]:

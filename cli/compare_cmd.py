@@ -34,7 +34,7 @@ def read_image(path: str) -> np.ndarray:
 def compare_numbers(out: np.ndarray, truth: np.ndarray, inp: np.ndarray | None,
                     with_flip: bool) -> dict[str, float]:
     """The numbers `compare` prints; those that need the input are NaN without it."""
-    from .. import metrics as M
+    from mlaa_stream.yardstick import metrics as M
 
     res = {"rmse": math.sqrt(M.mse(out, truth)), "flip": M.flip(out, truth) if with_flip else math.nan}
     if inp is not None:
@@ -61,7 +61,7 @@ def _f(v: float, fmt: str) -> str:
               help="Also score NVIDIA FLIP (needs 'pip install flip-evaluator'; centre crop <= 256x256).")
 def compare_command(out_path, truth_path, input_path, flip) -> None:
     """Score a filtered image OUT against a reference TRUTH (and the input IN)."""
-    from .. import metrics as M
+    from mlaa_stream.yardstick import metrics as M
 
     out, truth = read_image(out_path), read_image(truth_path)
     inp = read_image(input_path) if input_path else None

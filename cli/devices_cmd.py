@@ -5,7 +5,7 @@ import sys
 
 import click
 
-from ..device import DeviceError, list_devices, select_device
+from mlaa_stream.device.context import DeviceError, list_devices, select_device
 
 
 @click.command("devices")

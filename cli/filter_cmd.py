@@ -11,8 +11,8 @@ from typing import Iterator
 
 import click
 
-from ..mlaa import PRESETS
-from .options import configure_logging, device_option, verbosity_options
+from mlaa_stream.spatial.filter import PRESETS
+from mlaa_stream.cli.options import configure_logging, device_option, verbosity_options
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_NO_DEVICE, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
 
@@ -138,7 +138,7 @@ def _load_post_hooks(overlay: str | None, device: str | None) -> list:
     if overlay is None:
         return []
     try:
-        from ..overlay import load_overlay
+        from mlaa_stream.overlay.grlaa import load_overlay
     except ImportError as exc:
         raise Usage(f"--overlay: this build has no overlay support ({exc})") from exc
     try:
@@ -149,9 +149,9 @@ def _load_post_hooks(overlay: str | None, device: str | None) -> list:
 
 def _kind_of(path: str) -> str:
     """'pattern', 'folder', 'video' or 'image' by name; an unknown extension is tried as both."""
-    from ..image_io import is_image_path
-    from ..sequence import is_pattern
-    from ..video_io import is_video_path
+    from mlaa_stream.io.images import is_image_path
+    from mlaa_stream.io.sequence import is_pattern
+    from mlaa_stream.io.video import is_video_path
 
     if is_pattern(path) and not os.path.exists(path):
         return "pattern"
@@ -296,9 +296,9 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
         con.info("nothing to do: every output exists")
         return EXIT_FAILED if runner.failed_early else EXIT_OK
 
-    from ..device import DeviceError, KernelBuildError
-    from ..mlaa import Filter
-    from ..pipeline import StageTimes
+    from mlaa_stream.device.context import DeviceError, KernelBuildError
+    from mlaa_stream.spatial.filter import Filter
+    from mlaa_stream.pipeline import StageTimes
 
     try:
         try:
@@ -342,7 +342,7 @@ class TemporalOptions:
         """A TemporalStage sharing the filter's OpenCL context, or None when off."""
         if self.enabled is False or (self.enabled is None and not (self.show or self.stats_path)):
             return None  # off unless asked for; --show history and --stats imply it
-        from ..temporal import TemporalStage
+        from mlaa_stream.temporal.stage import TemporalStage
         kw = {} if self.k is None else {"k": self.k}
         return TemporalStage(context=filt.context, mode=self.mode, bgr=False, show=self.show, **kw)
 
@@ -372,7 +372,7 @@ class _Job:
         self.failed_early = False
 
     def _progress(self, total: int | None):
-        from ..progress import Progress
+        from mlaa_stream.io.progress import Progress
 
         return Progress(total, label=os.path.basename(self.input.rstrip("/")) or self.input,
                         enabled=None if not self.con.quiet else False)
@@ -382,8 +382,8 @@ class _ImageJob(_Job):
     """An image, a folder of images or a numbered sequence."""
 
     def prepare(self) -> None:
-        from ..image_io import remove_quietly, stale_temp_files
-        from ..sequence import (Report, expand_pattern, format_ranges, is_pattern, list_folder,
+        from mlaa_stream.io.images import remove_quietly, stale_temp_files
+        from mlaa_stream.io.sequence import (Report, expand_pattern, format_ranges, is_pattern, list_folder,
                                 parse_frames, plan_images, same_file)
 
         o, con = self.opts, self.con
@@ -459,7 +459,7 @@ class _ImageJob(_Job):
     def _keep_complete(self, existing: list) -> list:
         """--resume: the existing outputs that are complete (header of the input's size, PNG/JPEG end
         marker); an incomplete one (e.g. from a version that did not check writes) is removed and redone."""
-        from ..image_io import check_complete, image_shape
+        from mlaa_stream.io.images import check_complete, image_shape
 
         complete = []
         for ff in existing:
@@ -479,9 +479,9 @@ class _ImageJob(_Job):
         return not self.plan
 
     def run(self, filt, post_hooks, in_flight, times, temporal=None) -> int:
-        from ..mlaa import Filter
-        from ..pipeline import PipelineError, run_pipeline
-        from ..sequence import FilterSet, image_sink, image_source
+        from mlaa_stream.spatial.filter import Filter
+        from mlaa_stream.pipeline import PipelineError, run_pipeline
+        from mlaa_stream.io.sequence import FilterSet, image_sink, image_source
 
         encoded = filt
 
@@ -534,8 +534,8 @@ class _VideoJob(_Job):
     """A video file in, a video file out."""
 
     def prepare(self) -> None:
-        from ..sequence import same_file
-        from ..video_io import (CvVideoWriter, VideoError, VideoWriter, probe_video,
+        from mlaa_stream.io.sequence import same_file
+        from mlaa_stream.io.video import (CvVideoWriter, VideoError, VideoWriter, probe_video,
                                 probe_video_cv)
 
         o = self.opts
@@ -553,7 +553,7 @@ class _VideoJob(_Job):
         if not os.path.isdir(folder):
             raise Failed(f"{folder}: the output folder does not exist")
         _check_writable(folder)
-        from ..image_io import remove_quietly, stale_temp_files
+        from mlaa_stream.io.images import remove_quietly, stale_temp_files
         for path in stale_temp_files(folder):  # left by a run that was killed
             remove_quietly(path)
             self.con.info(f"{path}: removed (a temporary file left by an interrupted run)")
@@ -585,8 +585,9 @@ class _VideoJob(_Job):
             writer.abort()
 
     def run(self, filt, post_hooks, in_flight, times, temporal=None) -> int:
-        from ..pipeline import PipelineError
-        from ..video_io import VideoReadError, filter_video, read_video_cv
+        from mlaa_stream.pipeline import PipelineError
+        from mlaa_stream.io.video import VideoReadError, read_video_cv
+        from mlaa_stream.pipeline import filter_video
 
         source = read_video_cv(self.info) if self.opts["video_backend"] == "opencv" else None
         progress = self._progress(self.info.frames)

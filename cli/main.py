@@ -7,9 +7,9 @@ from __future__ import annotations
 
 import click
 
-from . import devices_cmd, filter_cmd
-from . import overlay_cmd
-from . import bench_cmd, compare_cmd, scenes_cmd
+from mlaa_stream.cli import devices_cmd, filter_cmd
+from mlaa_stream.cli import overlay_cmd
+from mlaa_stream.cli import bench_cmd, compare_cmd, scenes_cmd
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_NO_DEVICE, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
 

@@ -10,7 +10,7 @@ import sys
 
 import click
 
-from .options import device_option, verbosity_options
+from mlaa_stream.cli.options import device_option, verbosity_options
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_NO_DEVICE = 0, 1, 2, 3
 
@@ -70,10 +70,10 @@ def _run(input_path: str, output: str, lines_path: str, frame: int, strength: fl
         _err(f"{output}: exists; use --overwrite to replace it")
         return EXIT_USAGE
 
-    from ..device import DeviceError, KernelBuildError
-    from ..image_io import ImageReadError, ImageWriteError, read_image, split_for_filter, write_image
-    from ..overlay import OverlayRenderer, read_overlay
-    from ..sequence import is_linear
+    from mlaa_stream.device.context import DeviceError, KernelBuildError
+    from mlaa_stream.io.images import ImageReadError, ImageWriteError, read_image, split_for_filter, write_image
+    from mlaa_stream.overlay.grlaa import OverlayRenderer, read_overlay
+    from mlaa_stream.io.sequence import is_linear
 
     try:
         features = read_overlay(lines_path)

@@ -53,7 +53,7 @@ def scene_files(scene) -> dict[str, np.ndarray]:
 @click.option("--overwrite", is_flag=True, help="Replace files that already exist.")
 def scenes_command(out_dir, small, seed, only, overwrite) -> None:
     """Render the test scenes (1-spp input and 8x8-spp truth) into OUT_DIR as PNG files."""
-    from ..scenes import generate_scenes
+    from mlaa_stream.yardstick.scenes import generate_scenes
 
     names = None if only is None else [n.strip() for n in only.split(",") if n.strip()]
     try:

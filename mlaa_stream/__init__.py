@@ -7,9 +7,9 @@ _root = _Path(__file__).resolve().parent.parent
 if (_root / "pyproject.toml").is_file() and (_root / "kernels" / "common.cl").is_file():
     __path__.append(str(_root))  # noqa: F821 - the package's own __path__
 
-from .device import DeviceError, KernelBuildError, list_devices  # noqa: E402
-from .mlaa import PRESETS, Filter  # noqa: E402
-from .antialiaser import Antialiaser  # noqa: E402
+from mlaa_stream.device.context import DeviceError, KernelBuildError, list_devices  # noqa: E402
+from mlaa_stream.spatial.filter import PRESETS, Filter  # noqa: E402
+from mlaa_stream.antialiaser import Antialiaser  # noqa: E402
 
 __all__ = ["Antialiaser", "DeviceError", "Filter", "KernelBuildError", "PRESETS", "list_devices"]
 __version__ = "0.1.0"

@@ -14,8 +14,8 @@ from typing import Any, Iterable, Iterator, Sequence
 
 import numpy as np
 
-from .mlaa import PRESETS, Filter
-from .pipeline import PostHook, Temporal, stream_items
+from mlaa_stream.spatial.filter import PRESETS, Filter
+from mlaa_stream.pipeline import PostHook, Temporal, stream_items
 
 
 def _capture_frames(cap: Any) -> Iterator[np.ndarray]:
@@ -31,7 +31,7 @@ class Antialiaser:
     """Antialias BGR(A) frames (uint8 as OpenCV delivers them; uint16/float also work).
 
     Options are the Filter's (`preset` first, explicit keywords override it). `temporal=True`
-    adds optical-flow reprojection blending (mlaa_stream.temporal.TemporalStage; its history is
+    adds optical-flow reprojection blending (mlaa_stream.temporal.stage.TemporalStage; its history is
     kept between calls), or pass any `(frame_in, frame_filtered, index) -> frame` stage.
     `post_hooks` is a list of `(frame, index) -> frame` callables (overlays), applied after it.
     """
@@ -50,7 +50,7 @@ class Antialiaser:
         self._filter = Filter(device, bgr=True, **kwargs)
         self.device_name: str = self._filter.device_name
         if temporal is True:
-            from .temporal import TemporalStage
+            from mlaa_stream.temporal.stage import TemporalStage
             temporal = TemporalStage(context=self._filter.context, bgr=True)
         self.temporal = temporal or None
         self.post_hooks = list(post_hooks)

@@ -21,6 +21,8 @@ from typing import Any, Callable, Iterable, Iterator, Protocol, Sequence
 
 import numpy as np
 
+from mlaa_stream.io.item import Item
+
 Temporal = Callable[[np.ndarray, np.ndarray, int], np.ndarray]
 PostHook = Callable[[np.ndarray, int], np.ndarray]
 
@@ -35,21 +37,12 @@ class _Sentinel:
 END = _Sentinel()
 
 
-@dataclass
-class Item:
-    """One frame on its way through the pipeline; `meta` is the source's (file name, pts, spec...)."""
-
-    frame: np.ndarray
-    meta: Any = None
-    index: int = -1
-
-
 class PendingResult(Protocol):
     def result(self) -> np.ndarray: ...
 
 
 class FrameFilter(Protocol):
-    """What the device stage needs: `mlaa_stream.mlaa.Filter` has it. An object with
+    """What the device stage needs: `mlaa_stream.spatial.filter.Filter` has it. An object with
     `for_item(item) -> FrameFilter` instead picks a filter per frame (e.g. by colour encoding)."""
 
     def submit(self, frame: np.ndarray) -> PendingResult: ...
@@ -322,3 +315,32 @@ def run_pipeline(source: Iterable, filt: FrameFilter, sink: Callable[[Item], Non
     if upstream is not None:
         raise upstream
     return writer.done
+
+
+def filter_video(info: "VideoInfo", writer: "VideoWriter | CvVideoWriter", filt, *, source=None,
+                 temporal=None, post_hooks=(), in_flight: int = 2, times=None, on_frame=None) -> int:
+    """Decode `info`, filter every frame and encode it with `writer`; returns the frames written.
+
+    A decoding error or a truncated input keeps the frames before it: the output is finished as a
+    valid, shorter file (audio cut at its last frame), renamed into place, and the PipelineError
+    is raised so the caller reports where the input stopped. Any other error, or Ctrl-C, removes
+    the output. `source` replaces the decoder (the OpenCV fallback passes read_video_cv(info)).
+    """
+    from mlaa_stream.io.video import VideoReadError, read_video
+
+    source = read_video(info) if source is None else source
+    try:
+        n = run_pipeline(source, filt, lambda item: writer.write(item.frame, item.meta),
+                         in_flight=in_flight, temporal=temporal, post_hooks=post_hooks,
+                         times=times, on_frame=on_frame)
+    except PipelineError as exc:
+        if exc.stage == "read" and isinstance(exc.cause, VideoReadError) and writer.frames_written:
+            writer.commit(audio_until=writer.last_time)
+        else:
+            writer.abort()
+        raise
+    except BaseException:
+        writer.abort()
+        raise
+    writer.commit()
+    return n

@@ -7,7 +7,7 @@ import signal
 
 import pytest
 
-from mlaa_stream.device import Context, DeviceError, default_context
+from mlaa_stream.device.context import Context, DeviceError, default_context
 
 
 @pytest.fixture(scope="module")

@@ -12,8 +12,8 @@ import time
 import numpy as np
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from mlaa_stream.mlaa import PRESETS, Filter
-from mlaa_stream.nonfinite import SAMPLE_LIMIT
+from mlaa_stream.spatial.filter import PRESETS, Filter
+from mlaa_stream.spatial.nonfinite import SAMPLE_LIMIT
 
 # Few distinct frame sizes and formats: each new (size, format, options) is a PoCL kernel build of seconds.
 SHAPES = [(3, 5), (24, 31)]

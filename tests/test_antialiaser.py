@@ -10,7 +10,7 @@ import pytest
 
 import mlaa_stream
 from mlaa_stream import Antialiaser
-from mlaa_stream.mlaa import Filter
+from mlaa_stream.spatial.filter import Filter
 from mlaa_stream.pipeline import PipelineError
 
 CLIP = os.path.join(os.path.dirname(__file__), "..", "fixtures", "demo", "clip.mp4")

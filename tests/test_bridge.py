@@ -11,10 +11,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mlaa_stream.bridge import BridgeOptions, Bridger, bridge, bridge_reference
-from mlaa_stream.colour import linear_to_srgb, srgb_to_linear
-from mlaa_stream.formats import frame_format
-from mlaa_stream.scenes import Layer, _ui_layers, encode8, rect, render, stroke, text_polygons
+from mlaa_stream.spatial.bridge import BridgeOptions, Bridger, bridge, bridge_reference
+from mlaa_stream.device.colour import linear_to_srgb, srgb_to_linear
+from mlaa_stream.device.formats import frame_format
+from mlaa_stream.yardstick.scenes import Layer, _ui_layers, encode8, rect, render, stroke, text_polygons
 
 BG = (228, 226, 218)
 INK = (24, 24, 32)
@@ -492,7 +492,7 @@ def test_kernel_matches_reference_with_same_ink_rules(device, rule, seed):
 
 
 def test_filter_option_draws_over_the_blended_frame(device):
-    from mlaa_stream.mlaa import PRESETS, Filter
+    from mlaa_stream.spatial.filter import PRESETS, Filter
     img = random_wires(7)
     with Filter(bridge=False) as core, Filter() as bridged:
         base = core.process(img)

@@ -19,9 +19,9 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from mlaa_stream import image_io
+from mlaa_stream.io import images as image_io
 from mlaa_stream.cli.main import main
-from mlaa_stream.image_io import read_image
+from mlaa_stream.io.images import read_image
 
 ROOT = os.path.join(os.path.dirname(__file__), "..")
 DEMO = os.path.join(ROOT, "fixtures", "demo")
@@ -407,7 +407,7 @@ def test_video_output_rules(tmp_path):
 
 
 def test_video_ctrl_c_removes_the_output(tmp_path, monkeypatch, send_signal):
-    from mlaa_stream import video_io
+    from mlaa_stream.io import video as video_io
 
     real = video_io.VideoWriter.write
 
@@ -423,7 +423,7 @@ def test_video_ctrl_c_removes_the_output(tmp_path, monkeypatch, send_signal):
 
 
 def test_video_full_disk_removes_the_output(tmp_path, monkeypatch):
-    from mlaa_stream import video_io
+    from mlaa_stream.io import video as video_io
 
     def write(self, frame, when=None):
         if self.frames_written == 4:
@@ -459,7 +459,7 @@ def test_overlay_option_calls_load_overlay_lazily(tmp_path, monkeypatch):
             return out
         return hook
 
-    monkeypatch.setitem(sys.modules, "mlaa_stream.overlay",
+    monkeypatch.setitem(sys.modules, "mlaa_stream.overlay.grlaa",
                         types.SimpleNamespace(load_overlay=load_overlay))
     geo = tmp_path / "roads.geojson"
     geo.write_text("{}")
@@ -470,7 +470,7 @@ def test_overlay_option_calls_load_overlay_lazily(tmp_path, monkeypatch):
 
 
 def test_overlay_with_the_real_overlay_module_draws_in_rgb(tmp_path):
-    pytest.importorskip("mlaa_stream.overlay")
+    pytest.importorskip("mlaa_stream.overlay.grlaa")
     geo = tmp_path / "road.geojson"
     geo.write_text('{"type": "Feature", "geometry": {"type": "LineString", '
                    '"coordinates": [[2, 12], [30, 12]]}, "properties": {"width": 5, "color": "#ff0000"}}')
@@ -494,7 +494,7 @@ def test_bad_options_are_usage_errors(tmp_path):
 
 
 def test_preset_and_options(tmp_path):
-    from mlaa_stream.mlaa import PRESETS
+    from mlaa_stream.spatial.filter import PRESETS
 
     src = tmp_path / "in.png"
     write_png(src, staircase())
@@ -508,8 +508,8 @@ def test_bridge_switch_matches_the_filter(tmp_path):
     bridges them, as Filter()."""
     import cv2
 
-    from mlaa_stream import scenes as S
-    from mlaa_stream.mlaa import Filter
+    from mlaa_stream.yardstick import scenes as S
+    from mlaa_stream.spatial.filter import Filter
 
     wire = S.stroke(np.array([[4.0, 10.3], [120.0, 22.1]]), 0.5)
     img = S.encode8(S.render([S.Layer(None, (228, 226, 218)), S.Layer((wire,), (24, 24, 32))], 128, 32, 1))

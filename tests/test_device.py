@@ -5,7 +5,7 @@ import pyopencl as cl
 import pytest
 from click.testing import CliRunner
 
-from mlaa_stream import device as dev
+from mlaa_stream.device import context as dev
 from mlaa_stream.cli.main import main
 
 
@@ -68,7 +68,7 @@ def test_build_error_names_file_defines_and_log(monkeypatch):
 
 
 def test_pocl_workers_are_pinned_only_where_the_process_may_use_every_cpu(monkeypatch):
-    from mlaa_stream import device
+    from mlaa_stream.device import context as device
     n = 4
     monkeypatch.setattr(device.os, "cpu_count", lambda: n)
     monkeypatch.setattr(device.os, "sched_getaffinity", lambda pid: set(range(n)), raising=False)

@@ -10,9 +10,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mlaa_stream import scenes as S
-from mlaa_stream.colour import linear_to_srgb
-from mlaa_stream.fxaa import FXAA, QUALITY_STEPS, fxaa_reference
+from mlaa_stream.yardstick import scenes as S
+from mlaa_stream.device.colour import linear_to_srgb
+from mlaa_stream.yardstick.fxaa import FXAA, QUALITY_STEPS, fxaa_reference
 
 
 @pytest.fixture(scope="module")

@@ -9,8 +9,8 @@ import numpy as np
 import OpenImageIO as oiio
 import pytest
 
-from mlaa_stream import image_io
-from mlaa_stream.image_io import (ImageReadError, ImageWriteError, filtered_channels, publish,
+from mlaa_stream.io import images as image_io
+from mlaa_stream.io.images import (ImageReadError, ImageWriteError, filtered_channels, publish,
                                   read_image, split_for_filter, write_image)
 
 DEMO = os.path.join(os.path.dirname(__file__), "..", "fixtures", "demo", "images")

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from mlaa_stream import bench as B
-from mlaa_stream import metrics as M
-from mlaa_stream import scenes as S
+from mlaa_stream.bench import accuracy as B
+from mlaa_stream.yardstick import metrics as M
+from mlaa_stream.yardstick import scenes as S
 from mlaa_stream.cli.main import main
 
 
@@ -122,7 +122,7 @@ def test_score_of_input_and_truth_on_a_scene():
 
 
 def test_registry_holds_baselines_and_every_preset():
-    from mlaa_stream.mlaa import PRESETS
+    from mlaa_stream.spatial.filter import PRESETS
 
     assert {"none", "fxaa", "mlaa"} <= set(B.METHODS)
     for name, kw in PRESETS.items():

@@ -9,9 +9,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mlaa_stream.colour import rgb_to_lab
-from mlaa_stream.mlaa import EDGE_ROWS, SHORT_CORNER, Filter, area_table, trapezoid_area
-from mlaa_stream.reference import (distances_reference, edges_reference, mlaa_reference,
+from mlaa_stream.device.colour import rgb_to_lab
+from mlaa_stream.spatial.filter import EDGE_ROWS, SHORT_CORNER, Filter, area_table, trapezoid_area
+from mlaa_stream.spatial.reference import (distances_reference, edges_reference, mlaa_reference,
                                    normalised_rgb, weights_reference)
 
 
@@ -70,7 +70,7 @@ def test_edges_match_reference(filt, seed):
 
 def antialiased_scene(seed: int) -> tuple[np.ndarray, np.ndarray]:
     """(1-spp render, 8x8-supersampled render) of random polygons and a thin bar."""
-    from mlaa_stream import scenes as S
+    from mlaa_stream.yardstick import scenes as S
 
     rng = np.random.default_rng(seed)
     layers = [S.Layer(None, tuple(rng.integers(0, 256, 3)))]
@@ -137,7 +137,7 @@ def test_edges_match_reference_when_height_is_not_a_multiple_of_edge_rows(filt, 
 def test_antialiased_polygon_edges_are_left_alone(filt, angle):
     """A polygon already antialiased (8x8 samples per pixel) comes out untouched; its 1-spp render
     is still filtered."""
-    from mlaa_stream import scenes as S
+    from mlaa_stream.yardstick import scenes as S
 
     layers = [S.Layer(None, (230, 225, 210)), S.Layer((S.rotated_rect(40.3, 30.2, 50, 30, angle),), (40, 60, 120))]
     one_spp, aa = S.render_pair(layers, 80, 60)
@@ -385,7 +385,7 @@ def test_display_space_blending_matches_reference():
 
 def test_cheap_rgb_bound_never_hides_a_lab_edge():
     """The early exit of edges.cl: ΔE76 <= LAB_LIPSCHITZ * max channel difference, on random pairs."""
-    from mlaa_stream.mlaa import LAB_LIPSCHITZ
+    from mlaa_stream.spatial.filter import LAB_LIPSCHITZ
     rng = np.random.default_rng(8)
     a = rng.random((200000, 3))
     b = np.clip(a + (rng.random((200000, 3)) - 0.5) * rng.choice([0.002, 0.02, 0.1], (200000, 1)), 0, 1)
@@ -409,7 +409,7 @@ def grainy(seed: int, dtype=np.uint8, channels: int = 3) -> np.ndarray:
 
 
 def test_grain_mask_known_answers():
-    from mlaa_stream.reference import grain_mask
+    from mlaa_stream.spatial.reference import grain_mask
     rng = np.random.default_rng(3)
     flat = np.full((20, 24, 3), 90, np.uint8)
     assert not grain_mask(flat).any()
@@ -441,7 +441,7 @@ def test_grain_is_left_untouched():
 def test_grain_guard_matches_reference(dtype, channels):
     """A render with a grain patch: kernel against mlaa_reference (<= 1 level, as the other formats); the guard
     keeps the patch and the reference without it would have changed pixels there."""
-    from mlaa_stream.reference import grain_mask
+    from mlaa_stream.spatial.reference import grain_mask
     img = grainy(21, dtype, channels)
     if channels == 1:
         img = img[..., 0]
@@ -470,7 +470,7 @@ def _glyph_l(transpose: bool = False) -> np.ndarray:
 
 @pytest.mark.parametrize("transpose", [False, True])
 def test_square_end_of_a_2px_stroke_stays_sharp(transpose, monkeypatch):
-    import mlaa_stream.mlaa as mlaa_module
+    import mlaa_stream.spatial.filter as mlaa_module
     img = _glyph_l(transpose)
     with Filter(bridge=False) as f:
         got = f.intermediates(img)

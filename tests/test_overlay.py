@@ -17,10 +17,10 @@ import numpy as np
 import pyopencl as cl
 import pytest
 
-from mlaa_stream.colour import linear_to_srgb, srgb_to_linear
-from mlaa_stream.device import DeviceError
-from mlaa_stream.colour import device_luts, lut_read
-from mlaa_stream.overlay import (OverlayRenderer, _segment_cover, as_lines,
+from mlaa_stream.device.colour import linear_to_srgb, srgb_to_linear
+from mlaa_stream.device.context import DeviceError
+from mlaa_stream.device.colour import device_luts, lut_read
+from mlaa_stream.overlay.grlaa import (OverlayRenderer, _segment_cover, as_lines,
                                  draw_polylines, enc8_read, enc8_table, footprint_cdf,
                                  line_tables, load_overlay, make_styles, segment_tables,
                                  parse_color, parse_overlay, reference_draw_polylines)
@@ -207,7 +207,7 @@ def test_footprint_cdf_is_the_box_coverage():
 
 def test_error_against_supersampled_truth_is_small(renderer):
     """Random polylines of widths 1..12 against 8x8 point samples resolved in linear light."""
-    from mlaa_stream.overlay_bench import draw_grlaa, random_lines, truth_image
+    from mlaa_stream.bench.overlay import draw_grlaa, random_lines, truth_image
     rng = np.random.default_rng(11)
     h, w = 90, 120
     lines = random_lines(rng, 8, h, w, margin=8)
@@ -642,7 +642,7 @@ def test_cli_overlay(renderer, tmp_path):
     run = CliRunner().invoke
     r = run(main, ["overlay", src, "-o", dst, "--lines", lines])
     assert r.exit_code == 0, r.output
-    from mlaa_stream.image_io import read_image
+    from mlaa_stream.io.images import read_image
     img = read_image(dst).pixels
     assert img.dtype == np.uint16 and (img[15, 20] == 65535).all() and (img[2, 2] == 20000).all()
     r = run(main, ["overlay", src, "-o", dst, "--lines", lines])

@@ -24,5 +24,5 @@ def test_wheel_contains_every_kernel_and_no_top_level_cli(tmp_path):
 
 
 def test_kernels_load_through_importlib_resources():
-    from mlaa_stream.device import kernel_source
+    from mlaa_stream.device.context import kernel_source
     assert "__kernel void detect_edges" in kernel_source("edges")

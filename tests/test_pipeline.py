@@ -237,7 +237,7 @@ def test_in_flight_below_one_is_refused():
 
 
 def test_real_filter_through_the_pipeline_matches_process():
-    from mlaa_stream.mlaa import Filter
+    from mlaa_stream.spatial.filter import Filter
 
     rng = np.random.default_rng(11)
     y, x = np.mgrid[0:36, 0:40]
@@ -258,7 +258,7 @@ def test_real_filter_through_the_pipeline_matches_process():
 def test_progress_shows_frames_fps_and_time_left_only_on_a_terminal():
     import io
 
-    from mlaa_stream.progress import Progress
+    from mlaa_stream.io.progress import Progress
 
     p = Progress(100, label="clip.mp4", stream=io.StringIO(), enabled=True, interval=0)
     p.started -= 2.0  # two seconds ago

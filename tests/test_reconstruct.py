@@ -10,9 +10,9 @@ import cv2
 import numpy as np
 import pytest
 
-from mlaa_stream.colour import device_luts, rgb_to_lab
-from mlaa_stream.formats import frame_format
-from mlaa_stream.reconstruct import (RING, SEGMENT, Reconstructor, _device_table, cheap_bound, cheap_levels,
+from mlaa_stream.device.colour import device_luts, rgb_to_lab
+from mlaa_stream.device.formats import frame_format
+from mlaa_stream.spatial.reconstruct import (RING, SEGMENT, Reconstructor, _device_table, cheap_bound, cheap_levels,
                                      connexity_table, gap_table, reconstruct, reconstruct_reference)
 
 BG = (40, 90, 160)  # a non-black background

@@ -14,9 +14,9 @@ import pytest
 from click.testing import CliRunner
 
 from mlaa_stream.cli.main import main
-from mlaa_stream.image_io import check_complete, read_image, write_image
-from mlaa_stream.mlaa import Filter
-from mlaa_stream.nonfinite import SAMPLE_LIMIT, replace_non_finite
+from mlaa_stream.io.images import check_complete, read_image, write_image
+from mlaa_stream.spatial.filter import Filter
+from mlaa_stream.spatial.nonfinite import SAMPLE_LIMIT, replace_non_finite
 
 HERE = os.path.dirname(__file__)
 CLI = [sys.executable, "-c", "from mlaa_stream.cli.main import main; main()"]
@@ -193,7 +193,7 @@ def test_sigterm_stops_cleanly_and_resume_goes_on(tmp_path, sig, code):
 
 
 def test_sigterm_during_a_video_removes_the_output(tmp_path, monkeypatch):
-    from mlaa_stream import video_io
+    from mlaa_stream.io import video as video_io
 
     real = video_io.VideoWriter.write
 

@@ -9,9 +9,9 @@ import pytest
 from click.testing import CliRunner
 from matplotlib.path import Path
 
-from mlaa_stream import scenes as S
+from mlaa_stream.yardstick import scenes as S
 from mlaa_stream.cli.main import main
-from mlaa_stream.colour import linear_to_srgb
+from mlaa_stream.device.colour import linear_to_srgb
 
 
 @pytest.fixture(scope="module")
@@ -135,7 +135,7 @@ def test_stroke_area_is_width_times_length():
 
 
 def test_thin_wires_break_at_one_sample_per_pixel(small):
-    from mlaa_stream.metrics import broken_wires
+    from mlaa_stream.yardstick.metrics import broken_wires
 
     s = small["wires"]
     assert s.wires.mean() > 0.02 and s.backgrounds is not None

@@ -10,9 +10,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mlaa_stream import bench as B
-from mlaa_stream import metrics as M
-from mlaa_stream import scenes as S
+from mlaa_stream.bench import accuracy as B
+from mlaa_stream.yardstick import metrics as M
+from mlaa_stream.yardstick import scenes as S
 
 # photo: RMSE (8-bit levels) away from edges. Measured: mlaa presets 0.34-0.48, FXAA 6.96,
 # 3x3 box blur 15.5, no-op 0.
@@ -185,7 +185,7 @@ def test_truth_passes_every_check(scenes):
 
 def test_fxaa_fails_where_expected(scenes):
     """The FXAA baseline blurs texture and text: the bounds catch it (documents the baseline)."""
-    from mlaa_stream.fxaa import FXAA
+    from mlaa_stream.yardstick.fxaa import FXAA
 
     with FXAA() as f:
         failed = _failed_checks(f.process, scenes)

@@ -14,15 +14,15 @@ import numpy as np
 import pyopencl as cl
 import pytest
 
-from mlaa_stream import scenes as S
-from mlaa_stream.colour import device_luts, linear_to_srgb, srgb_to_linear
-from mlaa_stream.device import default_context
-from mlaa_stream.formats import frame_format
-from mlaa_stream.mlaa import Filter
-from mlaa_stream.temporal import (CUR_AFFINE, CUR_DENSE, CUR_RESET, PREV_AFFINE, PREV_DENSE, PREV_NONE,
+from mlaa_stream.yardstick import scenes as S
+from mlaa_stream.device.colour import device_luts, linear_to_srgb, srgb_to_linear
+from mlaa_stream.device.context import default_context
+from mlaa_stream.device.formats import frame_format
+from mlaa_stream.spatial.filter import Filter
+from mlaa_stream.temporal.stage import (CUR_AFFINE, CUR_DENSE, CUR_RESET, PREV_AFFINE, PREV_DENSE, PREV_NONE,
                                   SEGMENT, TemporalStage, decode_table, flat_3x3, flat_levels, kernel_defines, make_params,
                                   temporal_reference)
-from mlaa_stream.temporal_bench import _pan_layers
+from mlaa_stream.bench.temporal import _pan_layers
 
 
 # --- kernel vs reference ------------------------------------------------------------------------------
@@ -121,7 +121,7 @@ def test_decode_table_is_the_interpolated_table_read(dtype):
     ulp of colour.lut_read, which widens to float64; the kernel output matches the reference, above);
     known answers: 0 -> 0, max -> 1, monotone, within the table's interpolation error (2e-4) of the
     exact sRGB decode."""
-    from mlaa_stream.colour import lut_read
+    from mlaa_stream.device.colour import lut_read
     fmt = frame_format(np.zeros((4, 4, 3), dtype), False)
     table = decode_table(fmt)
     pmax = np.iinfo(dtype).max

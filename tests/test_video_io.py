@@ -10,7 +10,7 @@ import av
 import numpy as np
 import pytest
 
-from mlaa_stream.video_io import (CvVideoWriter, VideoError, VideoReadError, VideoWriter,
+from mlaa_stream.io.video import (CvVideoWriter, VideoError, VideoReadError, VideoWriter,
                                   choose_pix_fmt, probe_video, probe_video_cv, read_video,
                                   read_video_cv)
 

@@ -17,10 +17,10 @@ from fractions import Fraction
 import numpy as np
 import pyopencl as cl
 
-from .colour import device_luts
-from .device import Context, default_context, linear_levels
-from .formats import FrameFormat, defines_for, frame_format
-from .nonfinite import NonFinite, replace_non_finite
+from mlaa_stream.device.colour import device_luts
+from mlaa_stream.device.context import Context, default_context, linear_levels
+from mlaa_stream.device.formats import FrameFormat, defines_for, frame_format
+from mlaa_stream.spatial.nonfinite import NonFinite, replace_non_finite
 
 METRICS = {"lab": 0, "luma": 1, "rgb": 2}
 # Default discontinuity thresholds per metric: ΔE76 for lab, fraction of full scale for the others.
@@ -32,27 +32,20 @@ DEFAULT_THRESHOLDS = {"lab": 8.0, "luma": 0.06, "rgb": 0.06}
 LAB_LIPSCHITZ = 520.0
 AREA_TABLE_L = 64
 # Area factor for a line ending in a crossing edge exactly two pixels long (kernels/weights.cl):
-# 1 treats it as a jaggy, 0 as a corner; 0.75 was best on the yardstick (wires, text, rotation).
+# 1 treats it as a jaggy, 0 as a corner; a 2-px crossing is either. How each value below was chosen:
+# docs/spatial_tuning.md.
 SHORT_CORNER = 0.75
 # A 2-px crossing at the end of a line of this many pixels or more, whose far end turns back along the line
 # for three pixels, is a 2-px stroke's square end (hinted text stems, UI rules), kept sharp as a corner
-# (kernels/weights.cl). Measured (bench scenes, without -> with): already antialiased text damage 1.55 -> 0.47
-# levels RMSE, aliased text error removed 34.9 -> 34.9 %, checkerboard 41.1 -> 40.9 %, the others unchanged
-# (from lines of 6 px: text 34.3 %; such ends as no crossing at all, L shapes: text 36.2 % but checkerboard
-# damage 0.49 -> 0.60).
+# (kernels/weights.cl).
 STROKE_END_MIN_L = 8
 # Already antialiased edges (kernels/edges.cl `antialiased`): a neighbour along the step whose colour
 # projects on p -> q at t in (AA_LO, 1 - AA_LO), within AA_OFF of the step off the segment, or p (q)
-# between its neighbour across the step and q (p), marks a rendered coverage ramp. Measured by the
-# bench's "antialiased" scenes (`mlaa-stream bench --scenes antialiased`), RMSE of the change in levels:
-# text 4.66 -> 1.55, wires 1.76 -> 0.13, diagonals 0.74 -> 0.00 (Filter(aa_guard=False) -> Filter()).
+# between its neighbour across the step and q (p), marks a rendered coverage ramp, not a 1-spp jaggy.
 AA_LO, AA_OFF = 0.1, 0.35
 # Grain and fine texture (film grain, sensor noise) are not jaggies (kernels/blend.cl `in_grain`): a pixel
 # whose 3x3 window holds only pixels that differ from at least GRAIN_MIN of their 8 neighbours, by
-# GRAIN_STEP / 255 of full scale or more in some channel, is left as it is. Measured with `mlaa-stream bench`
-# (docs/bench, before and after): the noise scene's per-pixel grain (exact in the truth) damage 6.30 -> 0.00
-# levels RMSE, its aliasing value-noise half 7.1 -> 0.0 % error removed, checkerboard moire 41.7 -> 41.1 %,
-# every other scene unchanged (Filter(grain_guard=False) against Filter() gives the same).
+# GRAIN_STEP / 255 of full scale or more in some channel, is left as it is.
 GRAIN_STEP, GRAIN_MIN = 12, 5
 SEGMENT = 64  # pixels of a row per work item in the per-pixel passes (kernels/common.cl)
 EDGE_ROWS = 4  # rows per work item in detect_edges (kernels/edges.cl): each row's CIELAB and samples shared
@@ -238,11 +231,11 @@ class Filter:
         self._k_weights = k("weights", "blend_weights", defs)
         self._k_blend = k("blend", "blend_neighbours", defs)
         if self.reconstruct:
-            from .reconstruct import Reconstructor
+            from mlaa_stream.spatial.reconstruct import Reconstructor
             self._reconstructor = Reconstructor(self.context, fmt)
             self._recon_buf = self.context.buffer(fmt.nbytes)
         if self.bridge:
-            from .bridge import BridgeOptions, Bridger
+            from mlaa_stream.spatial.bridge import BridgeOptions, Bridger
             self._bridger = Bridger(self.context, fmt, BridgeOptions(linear=self.options.linear,
                                                                      linear_input=self.options.linear_input))
         return bufs
@@ -283,8 +276,8 @@ class Filter:
         if self._reconstructor is not None:
             ev["reconstruct"] = self._reconstructor.enqueue(q, src, self._recon_buf, self._luts, wait_for=after)
             src, after = self._recon_buf, [ev["reconstruct"]]
-        # detect_edges: EDGE_ROWS rows per work item; on a CPU (PoCL) one per work group (measured: mixed
-        # frame 0.87x vs PoCL's own choice 1.05x of the one-row kernel's time, docs/edges_speed.md)
+        # detect_edges: EDGE_ROWS rows per work item; on a CPU (PoCL) one per work group, faster than
+        # PoCL's own choice (docs/spatial_tuning.md)
         g_edges = (g2[0], -(-h // EDGE_ROWS))
         l_edges = (1, 1) if self.context.device.type & cl.device_type.CPU else None
         ev["edges"] = self._k_edges(q, g_edges, l_edges, src, self._luts, self._lin, bufs.edges, W, H,

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .formats import LUT_SIZE
+from mlaa_stream.device.formats import LUT_SIZE
 
 # sRGB -> XYZ (D65), rows X, Y, Z; white point for CIELAB.
 _RGB_TO_XYZ = np.array([[0.4124564, 0.3575761, 0.1804375],

@@ -1,4 +1,4 @@
-"""Per-pass timings of the spatial filter on 1920x1080 frames: `python -m mlaa_stream.mlaa_profile`.
+"""Per-pass timings of the spatial filter on 1920x1080 frames: `python -m mlaa_stream.bench.mlaa_profile`.
 
 Five frames: the yardstick's mixed timing frame (edges, UI text, checkerboard, photo, wires); a
 photograph three ways -- upscaled to fill the frame (smooth), tiled at 1:1 (every pixel differs from
@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .mlaa import Filter
+from mlaa_stream.spatial.filter import Filter
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -26,7 +26,7 @@ def frames() -> dict[str, np.ndarray]:
     import matplotlib.image
     from matplotlib import cbook
 
-    from .scenes import timing_frame
+    from mlaa_stream.yardstick.scenes import timing_frame
     original = np.ascontiguousarray(
         matplotlib.image.imread(cbook.get_sample_data("grace_hopper.jpg", asfileobj=False))[..., :3])
     photo = cv2.resize(original, (1920, 1080), interpolation=cv2.INTER_CUBIC)
@@ -56,7 +56,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--preset", default="default")
     ap.add_argument("--out", default=str(ROOT / "docs" / "performance.md"))
     args = ap.parse_args(argv)
-    from .mlaa import PRESETS
+    from mlaa_stream.spatial.filter import PRESETS
     lines = []
     with Filter(**PRESETS[args.preset]) as f:
         for name, frame in frames().items():
@@ -69,7 +69,7 @@ def main(argv: list[str] | None = None) -> None:
     text = "\n".join([
         "# Spatial filter: time per 1920x1080 frame",
         "",
-        f"- command: `python -m mlaa_stream.mlaa_profile --runs {args.runs} --preset {args.preset}`",
+        f"- command: `python -m mlaa_stream.bench.mlaa_profile --runs {args.runs} --preset {args.preset}`",
         f"- date: {datetime.datetime.now():%Y-%m-%d %H:%M}",
         f"- device: {device}",
         f"- device memory: {bpp:.1f} bytes per pixel (8-bit RGB), allocated once per frame format",

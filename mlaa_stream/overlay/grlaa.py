@@ -15,8 +15,8 @@ from typing import Callable
 
 import numpy as np
 
-from .colour import LUMA, device_luts, linear_to_srgb, lut_read, srgb_to_linear
-from .formats import LUT_SIZE, FrameFormat, defines_for, frame_format
+from mlaa_stream.device.colour import LUMA, device_luts, linear_to_srgb, lut_read, srgb_to_linear
+from mlaa_stream.device.formats import LUT_SIZE, FrameFormat, defines_for, frame_format
 
 CAPS = {"round": 0, "butt": 3, "square": 7}  # seg_meta flag bits of kernels/grlaa.cl
 DEFAULT_TILE = 16
@@ -349,7 +349,7 @@ class OverlayRenderer:
         `linear` says frames hold linear light instead of sRGB. `zero_copy`: the kernel draws
         straight into the numpy frame (wrapped, not copied); default: on devices that share host
         memory (CPU). Otherwise the frame goes through a device buffer kept per frame size."""
-        from .device import default_context
+        from mlaa_stream.device.context import default_context
         import pyopencl as cl
 
         if not (math.isfinite(strength) and strength > 0):

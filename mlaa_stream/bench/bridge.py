@@ -1,4 +1,4 @@
-"""Benchmark of the bridging pass: `python -m mlaa_stream.bridge_bench`.
+"""Benchmark of the bridging pass: `python -m mlaa_stream.bench.bridge`.
 
 Per yardstick scene Filter(bridge=False) against Filter() (error removed, damage, broken wire pixels, pixels
 changed), then ms per 1920x1080 frame, interleaved; docs/reconstruct.md quotes it.
@@ -8,10 +8,10 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
-from .bridge import Bridger
-from .colour import device_luts
-from .device import default_context
-from .formats import frame_format
+from mlaa_stream.spatial.bridge import Bridger
+from mlaa_stream.device.colour import device_luts
+from mlaa_stream.device.context import default_context
+from mlaa_stream.device.formats import frame_format
 
 
 def _detailed_photo() -> np.ndarray:
@@ -29,11 +29,11 @@ def bench_bridge(device=None, runs: int = 25) -> dict:
     with bridging, and the pass alone (device buffers), interleaved, after 3 warm-up runs."""
     import time
 
-    from .bench import score_scene
-    from .metrics import broken_wires
-    from .mlaa import Filter
-    from .reconstruct_bench import centre_line, timing_frames
-    from .scenes import generate_scenes, timing_frame
+    from mlaa_stream.bench.accuracy import score_scene
+    from mlaa_stream.yardstick.metrics import broken_wires
+    from mlaa_stream.spatial.filter import Filter
+    from mlaa_stream.bench.reconstruct import centre_line, timing_frames
+    from mlaa_stream.yardstick.scenes import generate_scenes, timing_frame
 
     report: dict = {"device": default_context(device).name, "scenes": {}}
     with Filter(device, bridge=False) as core, Filter(device) as bridged:

@@ -16,7 +16,7 @@ from typing import Callable, Union
 
 import numpy as np
 
-from .colour import linear_to_srgb, srgb_to_linear
+from mlaa_stream.device.colour import linear_to_srgb, srgb_to_linear
 
 TRUTH_SPP = 8  # samples per pixel side of the truth: 8x8 = 64 per pixel (the issue asks >= 8x8)
 EDGE_LEVELS = 3  # an "edge pixel" differs from the truth by more than this, in 8-bit levels

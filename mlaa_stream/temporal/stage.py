@@ -22,9 +22,9 @@ import cv2
 import numpy as np
 import pyopencl as cl
 
-from .colour import device_luts, lut_read
-from .device import Context, default_context
-from .formats import LUT_SIZE, FrameFormat, defines_for, frame_format
+from mlaa_stream.device.colour import device_luts, lut_read
+from mlaa_stream.device.context import Context, default_context
+from mlaa_stream.device.formats import LUT_SIZE, FrameFormat, defines_for, frame_format
 
 MODES = ("adaptive", "dense", "global", "static", "off")
 SHOWS = (None, "history")

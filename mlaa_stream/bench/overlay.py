@@ -1,6 +1,6 @@
 """Benchmark GRLAA overlays against cv2.polylines(LINE_AA) and a supersampled truth.
 
-Run `python -m mlaa_stream.overlay_bench` (`--quick` for a smaller run); writes docs/grlaa_bench.md.
+Run `python -m mlaa_stream.bench.overlay` (`--quick` for a smaller run); writes docs/grlaa_bench.md.
 Truth: the same lines point-sampled 8x8 per pixel without antialiasing (8x larger), box-downsampled
 in linear light. Errors are in 8-bit sRGB levels over the pixels near the lines.
 """
@@ -17,8 +17,8 @@ import time
 
 import numpy as np
 
-from .colour import linear_to_srgb, srgb_to_linear
-from .overlay import OverlayRenderer
+from mlaa_stream.device.colour import linear_to_srgb, srgb_to_linear
+from mlaa_stream.overlay.grlaa import OverlayRenderer
 
 BG = (40, 60, 50)            # background, sRGB 8-bit (RGB)
 FG = (255, 236, 160)         # line colour, sRGB 8-bit (RGB)
@@ -296,7 +296,7 @@ def main(argv: list[str] | None = None) -> int:
     speed_rows = speed(renderer, runs=5 if args.quick else max(args.runs, 20))
     if not args.quick:
         speed_rows += speed(renderer, widths=(8,), runs=max(args.runs, 20), outline=True)
-    cmd = "python -m mlaa_stream.overlay_bench" + (" " + " ".join(argv or sys.argv[1:])).rstrip()
+    cmd = "python -m mlaa_stream.bench.overlay" + (" " + " ".join(argv or sys.argv[1:])).rstrip()
     text = _report(cmd, renderer.device_name, width_rows, angle_rows, scale_rows, speed_rows,
                    time.time() - t0)
     os.makedirs(os.path.dirname(args.output) or ".", exist_ok=True)

@@ -1,4 +1,4 @@
-"""End-to-end streaming benchmark: `python -m mlaa_stream.pipeline_bench [--frames N] [--sizes ...]`.
+"""End-to-end streaming benchmark: `python -m mlaa_stream.bench.pipeline [--frames N] [--sizes ...]`.
 
 For each size (default 1080p and 720p) it writes a synthetic aliased clip (H.264), then measures
 in one run, as frames per second and as ratios:
@@ -18,8 +18,9 @@ from fractions import Fraction
 
 import numpy as np
 
-from .pipeline import StageTimes
-from .video_io import VideoWriter, filter_video, probe_video, read_video
+from mlaa_stream.pipeline import StageTimes
+from mlaa_stream.io.video import VideoWriter, probe_video, read_video
+from mlaa_stream.pipeline import filter_video
 
 SIZES = {"2160p": (3840, 2160), "1080p": (1920, 1080), "720p": (1280, 720), "480p": (854, 480)}
 
@@ -125,7 +126,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--encoder-preset", default="veryfast")
     args = ap.parse_args(argv)
 
-    from .mlaa import Filter
+    from mlaa_stream.spatial.filter import Filter
 
     with Filter(args.device) as filt, tempfile.TemporaryDirectory(prefix="mlaa-bench-") as folder:
         device = filt.device_name

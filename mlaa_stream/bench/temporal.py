@@ -1,11 +1,11 @@
 """Benchmark of the temporal stage: accuracy and steadiness on animated scenes, speed per 1080p frame.
 
-    python -m mlaa_stream.temporal_bench [--frames 20] [--width 480] [--height 270] [--timed 20]
+    python -m mlaa_stream.bench.temporal [--frames 20] [--width 480] [--height 270] [--timed 20]
 
 Writes docs/temporal_bench.md (command, device, date). Scenes are rendered here with the scene
 module's rasteriser (1 sample per pixel input, 8x8 supersampled truth in linear light), longer than
 the bench's own animated scenes so that a history can build up: slow rotation, sub-pixel pan, a
-fast mover with disocclusion, a hard cut. Metrics are mlaa_stream.metrics' (temporal error, flicker
+fast mover with disocclusion, a hard cut. Metrics are mlaa_stream.yardstick.metrics' (temporal error, flicker
 energy ratio, error removed). Methods: spatial only (Filter) and Filter + TemporalStage per mode.
 """
 from __future__ import annotations
@@ -21,12 +21,12 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from . import metrics as M
-from .colour import linear_to_srgb, srgb_to_linear
-from .mlaa import Filter
-from .scenes import (Layer, Scene, build_scene, ellipse, rect, rotated_rect, text_polygons, timing_frame,
+from mlaa_stream.yardstick import metrics as M
+from mlaa_stream.device.colour import linear_to_srgb, srgb_to_linear
+from mlaa_stream.spatial.filter import Filter
+from mlaa_stream.yardstick.scenes import (Layer, Scene, build_scene, ellipse, rect, rotated_rect, text_polygons, timing_frame,
                      translate)
-from .temporal import TemporalStage
+from mlaa_stream.temporal.stage import TemporalStage
 
 MODES = ["adaptive", "dense", "global", "static"]
 DOCS = Path(__file__).resolve().parent.parent / "docs" / "temporal_bench.md"
@@ -179,7 +179,7 @@ def _fmt(v: float, digits: int = 3) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m mlaa_stream.temporal_bench", description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(prog="python -m mlaa_stream.bench.temporal", description=__doc__.split("\n")[0])
     ap.add_argument("--frames", type=int, default=20)
     ap.add_argument("--width", type=int, default=480)
     ap.add_argument("--height", type=int, default=270)
@@ -188,7 +188,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--scenes", default=",".join(SCENES))
     ap.add_argument("--out", default=str(DOCS))
     args = ap.parse_args(argv)
-    command = "python -m mlaa_stream.temporal_bench " + " ".join(argv if argv is not None else sys.argv[1:])
+    command = "python -m mlaa_stream.bench.temporal " + " ".join(argv if argv is not None else sys.argv[1:])
     lines: list[str] = []
 
     def log(msg: str) -> None:
@@ -253,7 +253,7 @@ def main(argv: list[str] | None = None) -> int:
     lines += ["# Temporal stage benchmark", "",
               f"- command: `{command.strip()}`", f"- device: {device}", f"- date: {date}",
               f"- scenes: {args.frames} frames of {args.width}x{args.height}, input 1 sample per pixel, "
-              "truth 8x8 samples resolved in linear light (rendered by mlaa_stream.temporal_bench)", "",
+              "truth 8x8 samples resolved in linear light (rendered by mlaa_stream.bench.temporal)", "",
               "Temporal error = mean |(out_t - out_t-1) - (truth_t - truth_t-1)| / the same for the input "
               "(< 1 steadier than the input; goal <= 0.2 on rotation and pan). Flicker = sum (out_t - out_t-1)^2 / "
               "sum (truth_t - truth_t-1)^2 (1 ideal; goal 0.8-1.2). Error removed = 1 - MSE(out, truth) / "

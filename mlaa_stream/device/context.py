@@ -132,6 +132,11 @@ def select_device(spec: str | int | None = None):
     return matches[0]
 
 
+# Programs built from more than one file, in this order (after common.cl): the long passes are split
+# into readable parts; the compiler sees the same text as one file would give it.
+PROGRAM_PARTS = {"bridge": ("bridge_links", "bridge"), "reconstruct": ("reconstruct_rules", "reconstruct")}
+
+
 def kernel_source(name: str) -> str:
     """The text of kernels/<name>.cl as shipped inside the package."""
     return resources.files("mlaa_stream.kernels").joinpath(f"{name}.cl").read_text()
@@ -172,12 +177,14 @@ class Context:
             prg = self._programs.get(key)
             if prg is None:
                 # common.cl (pixel formats, colour tables) is prepended to every kernel file.
-                src = kernel_source("common") + "\n#line 1\n" + kernel_source(name)
+                src = kernel_source("common") + "".join(
+                    "\n#line 1\n" + kernel_source(part) for part in PROGRAM_PARTS.get(name, (name,)))
                 try:
                     prg = cl.Program(self.ctx, src).build(options=["-cl-std=CL1.2", *opts])
                 except cl.Error as exc:
                     raise KernelBuildError(
-                        f"kernels/{name}.cl failed to build on {self.name} with defines "
+                        f"{' + '.join(f'kernels/{p}.cl' for p in PROGRAM_PARTS.get(name, (name,)))} "
+                        f"failed to build on {self.name} with defines "
                         f"{' '.join(opts) or '(none)'}:\n{exc}") from exc
                 self._programs[key] = prg
             return prg

@@ -15,9 +15,9 @@ import re
 from dataclasses import dataclass, field
 from typing import Callable, Iterator
 
-from .image_io import (Image, ImageReadError, ImageWriteError, is_image_path, is_temp_path,
+from mlaa_stream.io.images import (Image, ImageReadError, ImageWriteError, is_image_path, is_temp_path,
                        read_image, split_for_filter, write_image)
-from .pipeline import Item
+from mlaa_stream.io.item import Item
 
 _PRINTF = re.compile(r"%(0?)(\d*)d")
 _FATAL_ERRNOS = {errno.ENOSPC, errno.EDQUOT, errno.EROFS}

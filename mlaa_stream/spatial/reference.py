@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .colour import LUMA, linear_to_srgb, rgb_to_lab, srgb_to_linear
-from .mlaa import AA_LO, AA_OFF, DEFAULT_THRESHOLDS, SHORT_CORNER, ramp_fraction, trapezoid_area
+from mlaa_stream.device.colour import LUMA, linear_to_srgb, rgb_to_lab, srgb_to_linear
+from mlaa_stream.spatial.filter import AA_LO, AA_OFF, DEFAULT_THRESHOLDS, SHORT_CORNER, ramp_fraction, trapezoid_area
 
 BOTTOM, RIGHT = 1, 2
 BOTH = 2  # an end crossed on both sides
@@ -161,7 +161,7 @@ def weights_reference(edges: np.ndarray, hdist: np.ndarray, vdist: np.ndarray,
     With `frame`, a crossing edge counts only if the pixel beyond it has the other side's colour. A 2-px
     crossing at the end of a line of STROKE_END_MIN_L+ pixels whose far end turns back along the line for
     three pixels is a 2-px stroke's square end: a corner, like a 3-px crossing."""
-    from .mlaa import STROKE_END_MIN_L
+    from mlaa_stream.spatial.filter import STROKE_END_MIN_L
     h, w = edges.shape
     out = np.zeros((h, w, 4))
     rgb = None if frame is None else normalised_rgb(frame)[0]
@@ -252,7 +252,7 @@ def grain_mask(frame: np.ndarray) -> np.ndarray:
     """kernels/blend.cl's in_grain for every pixel: its 3x3 window (clamped at the frame's edge) holds only
     pixels that differ from at least GRAIN_MIN of their 8 neighbours (clamped), by GRAIN_STEP / 255 of full
     scale or more in some colour channel (stored values; integer frames in whole levels)."""
-    from .mlaa import GRAIN_MIN, GRAIN_STEP
+    from mlaa_stream.spatial.filter import GRAIN_MIN, GRAIN_STEP
     f = frame if frame.ndim == 3 else frame[..., None]
     f = f[..., :3] if f.shape[2] >= 3 else f[..., :1]
     if f.dtype.kind in "ui":
@@ -316,7 +316,7 @@ def mlaa_reference(frame: np.ndarray, threshold: float | None = None, metric: st
                    rounding: float = 0.0, blend_u: bool = True, ramp: float = 0.35,
                    short_corner: float = SHORT_CORNER, aa_guard: bool = True,
                    grain_guard: bool = True) -> np.ndarray:
-    """The whole spatial filter, pass after pass (without the bridging pass: mlaa_stream.bridge.bridge_reference)."""
+    """The whole spatial filter, pass after pass (without the bridging pass: mlaa_stream.spatial.bridge.bridge_reference)."""
     e = edges_reference(frame, threshold, metric, bgr, linear_input, ramp, aa_guard)
     hd, vd = distances_reference(e)
     wts = weights_reference(e, hd, vd, rounding, blend_u, frame, short_corner)

@@ -1,4 +1,4 @@
-"""Benchmark of the topological reconstruction pass (seed 000 §4): `python -m mlaa_stream.reconstruct_bench`.
+"""Benchmark of the topological reconstruction pass (seed 000 §4): `python -m mlaa_stream.bench.reconstruct`.
 
 Accuracy on the yardstick scenes (wires, text_ui, photo) and ms per 1920x1080 frame of the pass alone and of
 the core filter, interleaved; docs/reconstruct.md quotes it. Timings never go in unit tests.
@@ -10,15 +10,15 @@ import time
 import numpy as np
 import pyopencl as cl
 
-from .colour import device_luts
-from .device import Context, default_context
-from .formats import frame_format
-from .reconstruct import Reconstructor, reconstruct
+from mlaa_stream.device.colour import device_luts
+from mlaa_stream.device.context import Context, default_context
+from mlaa_stream.device.formats import frame_format
+from mlaa_stream.spatial.reconstruct import Reconstructor, reconstruct
 
 
 def centre_line(truth: np.ndarray, background: np.ndarray, wires: np.ndarray) -> np.ndarray:
     """Wire pixels on the wire's centre line: a local maximum of the truth's contrast across x or y."""
-    from .metrics import contrast
+    from mlaa_stream.yardstick.metrics import contrast
     c = np.pad(contrast(truth, background), 1)
     mid = c[1:-1, 1:-1]
     across_x = (mid >= c[1:-1, :-2]) & (mid >= c[1:-1, 2:])
@@ -30,8 +30,8 @@ def bench_reconstruct(device=None, runs: int = 20, small: bool = False, split: b
     """Accuracy on the yardstick scenes (wires, text_ui, photo); ms per 1920x1080 frame of the pass alone and
     of the core filter, on the frames of timing_frames(); with `split`, also the timing of the pass's parts
     and how many pixels each kind of RGB bound would send on to CIELAB (gate_stats)."""
-    from .metrics import broken_wires, damage
-    from .scenes import generate_scenes
+    from mlaa_stream.yardstick.metrics import broken_wires, damage
+    from mlaa_stream.yardstick.scenes import generate_scenes
 
     report: dict = {}
     for scene in generate_scenes(small=small, names=["wires", "text_ui", "photo"]):
@@ -40,7 +40,7 @@ def bench_reconstruct(device=None, runs: int = 20, small: bool = False, split: b
         outs = {"input": inp}
         for ext in (False, True):
             outs["paper+5x5" if not ext else "extended"] = reconstruct(inp, extended=ext, device=device)
-        from .mlaa import Filter
+        from mlaa_stream.spatial.filter import Filter
         for name, rec in (("core", False), ("core+reconstruct", True)):
             with Filter(device, reconstruct=rec) as f:
                 outs[name] = f.process(inp)
@@ -69,8 +69,8 @@ def gate_stats(frame: np.ndarray, threshold: float = 10.0) -> dict[str, float]:
     same with the Lipschitz constant at A's own colour (no margin: what any direction-free bound can reach
     at best); the linearisation J(A) (rgb_b - rgb_a) (no margin: what a direction-aware bound can reach at
     best); and exact CIELAB. Also the share where the exact mask is a gap (the rules run)."""
-    from .colour import rgb_to_lab
-    from .reconstruct import _device_table, cheap_levels
+    from mlaa_stream.device.colour import rgb_to_lab
+    from mlaa_stream.spatial.reconstruct import _device_table, cheap_levels
     table = _device_table()
     may = (table & 2).astype(bool)
     h, w = frame.shape[:2]
@@ -110,7 +110,7 @@ def timing_frames() -> dict[str, np.ndarray]:
     """1920x1080 uint8 RGB frames for the speed measurement: the mixed timing frame, a photograph
     (matplotlib's grace_hopper sample, resized) and a mostly flat render (the wires scene on a plain canvas)."""
     import cv2
-    from .scenes import generate_scenes, timing_frame
+    from mlaa_stream.yardstick.scenes import generate_scenes, timing_frame
     frames = {"timing": timing_frame()}
     try:
         from matplotlib import cbook
@@ -133,7 +133,7 @@ def _time_frame(ctx: Context, frame: np.ndarray, luts: "cl.Buffer", runs: int, d
     (Filter().process: upload, kernels, download) on the same frame, after 3 warm-up runs each; and their ratios.
     With `split`, the extended pass stopped after the RGB gate and before the rules (STOP_AFTER 1, 2), all
     interleaved in one loop."""
-    from .mlaa import Filter
+    from mlaa_stream.spatial.filter import Filter
     fmt = frame_format(frame)
     src = cl.Buffer(ctx.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(frame))
     dst = ctx.buffer(fmt.nbytes)

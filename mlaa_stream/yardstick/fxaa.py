@@ -13,9 +13,9 @@ import threading
 import numpy as np
 import pyopencl as cl
 
-from .colour import device_luts, lut_read
-from .device import Context, default_context
-from .formats import LUT_SIZE, FrameFormat, defines_for, frame_format
+from mlaa_stream.device.colour import device_luts, lut_read
+from mlaa_stream.device.context import Context, default_context
+from mlaa_stream.device.formats import LUT_SIZE, FrameFormat, defines_for, frame_format
 
 # Search step sizes per quality preset (Fxaa3_11.h, FXAA_QUALITY__P0..P11).
 QUALITY_STEPS: dict[int, tuple[float, ...]] = {

@@ -17,8 +17,8 @@ from typing import Iterator
 
 import numpy as np
 
-from .image_io import publish, remove_quietly, temp_path_for
-from .pipeline import Item
+from mlaa_stream.io.images import publish, remove_quietly, temp_path_for
+from mlaa_stream.io.item import Item
 
 try:
     import av
@@ -511,32 +511,3 @@ class CvVideoWriter:
     def abort(self) -> None:
         self._w.release()
         remove_quietly(self._tmp)
-
-
-def filter_video(info: VideoInfo, writer: "VideoWriter | CvVideoWriter", filt, *, source=None,
-                 temporal=None, post_hooks=(), in_flight: int = 2, times=None, on_frame=None) -> int:
-    """Decode `info`, filter every frame and encode it with `writer`; returns the frames written.
-
-    A decoding error or a truncated input keeps the frames before it: the output is finished as a
-    valid, shorter file (audio cut at its last frame), renamed into place, and the PipelineError
-    is raised so the caller reports where the input stopped. Any other error, or Ctrl-C, removes
-    the output. `source` replaces the decoder (the OpenCV fallback passes read_video_cv(info)).
-    """
-    from .pipeline import PipelineError, run_pipeline
-
-    source = read_video(info) if source is None else source
-    try:
-        n = run_pipeline(source, filt, lambda item: writer.write(item.frame, item.meta),
-                         in_flight=in_flight, temporal=temporal, post_hooks=post_hooks,
-                         times=times, on_frame=on_frame)
-    except PipelineError as exc:
-        if exc.stage == "read" and isinstance(exc.cause, VideoReadError) and writer.frames_written:
-            writer.commit(audio_until=writer.last_time)
-        else:
-            writer.abort()
-        raise
-    except BaseException:
-        writer.abort()
-        raise
-    writer.commit()
-    return n

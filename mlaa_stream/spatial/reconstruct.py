@@ -10,9 +10,9 @@ import functools
 
 import numpy as np
 
-from .colour import device_luts, lut_read, rgb_to_lab as _lab_exact
-from .device import Context, check_pass_buffers, default_context, linear_levels
-from .formats import LUT_SIZE, FrameFormat, defines_for, frame_format
+from mlaa_stream.device.colour import device_luts, lut_read, rgb_to_lab as _lab_exact
+from mlaa_stream.device.context import Context, check_pass_buffers, default_context, linear_levels
+from mlaa_stream.device.formats import LUT_SIZE, FrameFormat, defines_for, frame_format
 
 try:
     import pyopencl as cl
@@ -108,7 +108,7 @@ def _lab_lipschitz(linear_input: bool) -> float:
 
 
 def _lab_of(rgb: np.ndarray, linear_input: bool) -> np.ndarray:
-    from .colour import linear_to_srgb
+    from mlaa_stream.device.colour import linear_to_srgb
     return _lab_exact(linear_to_srgb(rgb) if linear_input else rgb)
 
 

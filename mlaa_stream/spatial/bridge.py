@@ -18,9 +18,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .colour import device_luts, lut_read
-from .device import Context, check_pass_buffers, default_context
-from .formats import LUT_SIZE, FrameFormat, defines_for, frame_format
+from mlaa_stream.device.colour import device_luts, lut_read
+from mlaa_stream.device.context import Context, check_pass_buffers, default_context
+from mlaa_stream.device.formats import LUT_SIZE, FrameFormat, defines_for, frame_format
 
 try:
     import pyopencl as cl

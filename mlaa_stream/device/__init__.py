@@ -1,0 +1,1 @@
+"""The OpenCL context, device choice, program cache and colour tables."""

@@ -1,0 +1,1 @@
+"""Reading and writing frames: video (PyAV), images (OpenImageIO), folders and sequences, progress."""

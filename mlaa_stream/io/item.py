@@ -1,0 +1,16 @@
+"""The unit every stage passes on: one frame, its position in the stream and its source's metadata."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+
+@dataclass
+class Item:
+    """One frame on its way through the pipeline; `meta` is the source's (file name, pts, spec...)."""
+
+    frame: np.ndarray
+    meta: Any = None
+    index: int = -1

@@ -1,0 +1,1 @@
+"""GRLAA anti-aliased polylines (seed 001) drawn over frames."""

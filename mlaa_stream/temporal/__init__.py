@@ -1,0 +1,1 @@
+"""The temporal stage: motion models and history resolved on the device."""
