@@ -53,13 +53,16 @@ def scene_files(scene) -> dict[str, np.ndarray]:
 @click.option("--overwrite", is_flag=True, help="Replace files that already exist.")
 def scenes_command(out_dir, small, seed, only, overwrite) -> None:
     """Render the test scenes (1-spp input and 8x8-spp truth) into OUT_DIR as PNG files."""
-    from mlaa_stream.yardstick.scenes import generate_scenes
+    from mlaa_stream.yardstick.scenes import SceneUnavailable, generate_scenes
 
     names = None if only is None else [n.strip() for n in only.split(",") if n.strip()]
     try:
-        scenes = generate_scenes(small=small, seed=seed, names=names)
+        scenes = generate_scenes(small=small, seed=seed, names=names,
+                                 warn=lambda msg: click.echo(f"mlaa-stream: warning: {msg}", err=True))
     except ValueError as exc:
         raise click.UsageError(str(exc)) from exc
+    except SceneUnavailable as exc:
+        raise click.ClickException(str(exc)) from exc
     out = Path(out_dir)
     plan = {name: img for s in scenes for name, img in scene_files(s).items()}
     plan_names = [*plan, "scenes.json"]

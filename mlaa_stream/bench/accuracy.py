@@ -402,7 +402,7 @@ def bench(out_dir: Path | str = "docs/bench", quick: bool = False, device: str |
           seed: int = 0, scene_names: list[str] | None = None, log: Callable[[str], None] | None = None,
           command: str = "") -> BenchResult:
     """The whole benchmark: scenes (small ones when quick), every method, the three outputs."""
-    scenes = generate_scenes(small=quick, seed=seed, names=scene_names)
+    scenes = generate_scenes(small=quick, seed=seed, names=scene_names, warn=log)
     with_flip = (not quick and M.flip_available()) if flip is None else bool(flip and M.flip_available())
     n = frames if frames is not None else (5 if quick else 20)
     res = run_bench(scenes, method_names, device, timed_frames=n, warmup=2 if quick else 3,

@@ -557,6 +557,21 @@ def scene_antialiased(rng: np.random.Generator, small: bool) -> list[Scene]:
     return out
 
 
+class SceneUnavailable(RuntimeError):
+    """A scene group needs a part this machine lacks (the rendered group: an EGL context)."""
+
+
+def scene_rendered(rng: np.random.Generator, small: bool) -> list[Scene]:
+    """Frames of a real 3D rasterizer (yardstick/rendered.py): textured, lit, alpha-tested, thin geometry
+    far away; stills and camera shots. Cached on disk after the first render."""
+    from mlaa_stream.yardstick.rendered import egl_available, generate_rendered
+
+    ok, why = egl_available()
+    if not ok:
+        raise SceneUnavailable(f"rendered scenes need a headless OpenGL context: {why}")
+    return generate_rendered(small=small)
+
+
 SCENES: dict[str, Callable[[np.random.Generator, bool], list[Scene]]] = {
     "long_edges": scene_long_edges,
     "diagonals": scene_diagonals,
@@ -570,12 +585,17 @@ SCENES: dict[str, Callable[[np.random.Generator, bool], list[Scene]]] = {
     "pan": scene_pan,
     "mover": scene_mover,
     "cut": scene_cut,
+    "rendered": scene_rendered,
 }
 CATEGORIES = list(SCENES)
 
 
-def generate_scenes(small: bool = False, seed: int = 0, names: list[str] | None = None) -> list[Scene]:
-    """Render the scene set (or the named groups of it); same seed, same pixels."""
+def generate_scenes(small: bool = False, seed: int = 0, names: list[str] | None = None,
+                    warn: Callable[[str], None] | None = None) -> list[Scene]:
+    """Render the scene set (or the named groups of it); same seed, same pixels. Without `names`, a
+    group this machine cannot render (SceneUnavailable) is left out and `warn` says why; a group asked
+    for by name raises instead."""
+    asked = names is not None
     names = list(SCENES) if names is None else list(names)
     unknown = [n for n in names if n not in SCENES]
     if unknown:
@@ -583,7 +603,12 @@ def generate_scenes(small: bool = False, seed: int = 0, names: list[str] | None 
     out: list[Scene] = []
     for name in names:
         rng = np.random.default_rng([seed, list(SCENES).index(name)])
-        out.extend(SCENES[name](rng, small))
+        try:
+            out.extend(SCENES[name](rng, small))
+        except SceneUnavailable as exc:
+            if asked:
+                raise
+            (warn or (lambda msg: None))(f"{name}: left out: {exc}")
     return out
 
 

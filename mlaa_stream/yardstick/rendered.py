@@ -1,0 +1,1021 @@
+"""A "rendered" yardstick category: procedural 3D scenes drawn by a real rasterizer.
+
+The other scenes (mlaa_stream.yardstick.scenes) are 2D polygons filled by a numpy scanline. These are 3D
+worlds rendered with OpenGL (moderngl on a headless EGL context; Mesa llvmpipe on a CPU), so the
+aliasing is what a game engine produces: perspective edges, textures with mipmaps and trilinear
+filtering, Lambert + Blinn-Phong lighting, sub-pixel cables and balusters, alpha-tested fences and
+foliage, specular highlights.
+
+Each frame is drawn twice from the same camera:
+- input: one pass at the pixel centres into an 8-bit target, the shader encoding sRGB (what a
+  game writes to its swapchain);
+- truth: 8x8 passes with the projection jittered by ((i + 0.5) / 8 - 0.5) pixel, each written as
+  linear light to a float32 target and averaged, then encoded to 8-bit sRGB (the scenes' encode8).
+Texture LOD is the same in every pass (jitter moves the image, not the derivatives), so the truth is
+the input's own shading, supersampled: a filter is scored on edges, not on texture sharpness.
+
+    scenes = generate_rendered(small=True)       # list[mlaa_stream.yardstick.scenes.Scene], category "rendered"
+    ok, why = egl_available()
+
+Rendered scenes are cached as compressed .npz files (see cache_path); a second call loads them.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import time
+from dataclasses import dataclass, field
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+from mlaa_stream.yardstick.scenes import TRUTH_SPP, Scene, edge_mask, encode8, srgb8_to_linear
+
+VERSION = 1  # bump when geometry, shading or cameras change: it keys the cache
+CATEGORY = "rendered"
+SCENE_NAMES = ("rendered_atrium", "rendered_stress", "rendered_pan", "rendered_dolly", "rendered_orbit")
+SIZES = {True: (320, 180), False: (640, 360)}  # small -> (width, height)
+SHOT_FRAMES = 8  # frames of each animated shot
+PAN_PX_PER_FRAME = 0.3  # image motion of the pan at the image centre
+FLAT_COLOUR = (200, 48, 40)  # sRGB8 of the unlit banner: its truth must equal it exactly
+GL_SRGB8_ALPHA8 = 0x8C43  # textures store sRGB codes; the sampler decodes to linear before filtering
+NEAR, FAR = 0.2, 2500.0
+SUN_DIR = (-0.45, 0.75, 0.48)  # towards the sun (normalised in the shader setup)
+SUN = (2.0, 1.85, 1.6)  # linear radiance of the sun
+SKY_ZENITH, SKY_HORIZON = (0.18, 0.32, 0.62), (0.62, 0.72, 0.85)  # linear
+AMBIENT_SKY, AMBIENT_GROUND = (0.16, 0.19, 0.26), (0.07, 0.06, 0.05)  # hemisphere light, linear
+FOG_DENSITY = 0.0035  # per metre: distant pylons fade into the horizon colour
+
+
+# --- the EGL context ------------------------------------------------------------------------------
+EGL_HINT = ("needs moderngl (pip install moderngl) and an EGL driver: Debian's libegl1 + libegl-mesa0 "
+            "(the Mesa EGL vendor, which exposes llvmpipe as a device) and libgl1-mesa-dri (swrast)")
+
+
+@lru_cache(maxsize=1)
+def _context():
+    """One headless OpenGL 3.3+ context per process (EGL device platform; llvmpipe without a GPU)."""
+    import moderngl
+    return moderngl.create_context(standalone=True, backend="egl", require=330)
+
+
+def egl_available() -> tuple[bool, str]:
+    """(True, renderer name) when a headless EGL context can be made, else (False, why)."""
+    try:
+        import moderngl  # noqa: F401
+    except ImportError as exc:
+        return False, f"moderngl is not installed ({exc}); {EGL_HINT}"
+    try:
+        ctx = _context()
+    except Exception as exc:  # glcontext raises plain Exceptions naming the failing EGL call
+        _context.cache_clear()
+        return False, f"no EGL context: {type(exc).__name__}: {exc}; {EGL_HINT}"
+    return True, f"{ctx.info['GL_RENDERER']} ({ctx.info['GL_VERSION']})"
+
+
+# --- textures: procedural, sRGB8 RGBA, mip chains built in linear light ----------------------------
+def _value_noise(size: int, cells: int, rng: np.random.Generator) -> np.ndarray:
+    """Tileable value noise in [0, 1]: a cells x cells random grid, smoothstep-interpolated."""
+    g = rng.random((cells, cells))
+    x = np.arange(size) * cells / size
+    i = np.floor(x).astype(int)
+    f = x - i
+    f = f * f * (3 - 2 * f)
+    i1 = (i + 1) % cells
+    rows = g[:, i] * (1 - f) + g[:, i1] * f  # (cells, size): interpolated along x
+    return rows[i] * (1 - f)[:, None] + rows[i1] * f[:, None]
+
+
+def _fbm(size: int, cells: int, octaves: int, rng: np.random.Generator) -> np.ndarray:
+    """Fractal sum of value noise octaves, normalised to [0, 1]."""
+    out = sum(0.5 ** o * _value_noise(size, cells * 2 ** o, rng) for o in range(octaves))
+    return (out - out.min()) / max(out.max() - out.min(), 1e-9)
+
+
+def _rgba(rgb: np.ndarray, alpha: np.ndarray | None = None) -> np.ndarray:
+    """float sRGB in [0, 1] (H, W, 3) (+ alpha) -> uint8 RGBA."""
+    a = np.ones(rgb.shape[:2]) if alpha is None else alpha
+    return np.round(np.clip(np.dstack([rgb, a]), 0, 1) * 255).astype(np.uint8)
+
+
+def tex_bricks(rng: np.random.Generator, size: int = 512) -> np.ndarray:
+    """Running-bond bricks: 8 bricks x 32 courses, 3 px mortar, per-brick colour and grain."""
+    y, x = np.mgrid[0:size, 0:size]
+    row = y // (size // 32)
+    bx = (x + (row % 2) * (size // 16)) % size  # every other course offset by half a brick
+    col = bx // (size // 8)
+    mortar = ((y % (size // 32)) < 3) | ((bx % (size // 8)) < 3)
+    tone = rng.uniform(0.75, 1.1, (32, 8))[row, col]
+    grain = _fbm(size, 16, 4, rng)
+    brick = np.stack([0.62, 0.30, 0.22]) * (tone * (0.8 + 0.35 * grain))[..., None]
+    rgb = np.where(mortar[..., None], (0.72 + 0.1 * grain[..., None]) * np.array([0.9, 0.88, 0.82]), brick)
+    return _rgba(rgb)
+
+
+def tex_tiles(rng: np.random.Generator, size: int = 512) -> np.ndarray:
+    """4x4 square floor tiles, a checker of two stones with grain, 4 px dark grout."""
+    y, x = np.mgrid[0:size, 0:size]
+    t = size // 4
+    tx, ty = x // t, y // t
+    grout = ((x % t) < 4) | ((y % t) < 4)
+    grain = _fbm(size, 8, 5, rng)
+    light, dark = np.array([0.80, 0.76, 0.68]), np.array([0.56, 0.53, 0.50])
+    base = np.where(((tx + ty) % 2 == 0)[..., None], light, dark)
+    tone = rng.uniform(0.9, 1.05, (4, 4))[ty, tx]
+    rgb = base * (tone * (0.85 + 0.25 * grain))[..., None]
+    return _rgba(np.where(grout[..., None], 0.22, rgb))
+
+
+def tex_stone(rng: np.random.Generator, size: int = 256) -> np.ndarray:
+    """Beige-grey stone: fractal noise with darker veins."""
+    n = _fbm(size, 4, 6, rng)
+    veins = np.abs(np.sin(12 * _fbm(size, 2, 4, rng)))
+    v = 0.65 + 0.25 * n - 0.15 * (veins < 0.12)
+    return _rgba(v[..., None] * np.array([0.95, 0.9, 0.82]))
+
+
+def tex_wood(rng: np.random.Generator, size: int = 256) -> np.ndarray:
+    """Wood grain running along x: rings perturbed by noise."""
+    y = np.arange(size)[:, None] / size
+    n = _fbm(size, 4, 4, rng)
+    rings = 0.5 + 0.5 * np.sin(2 * np.pi * (6 * y + 1.5 * n))
+    v = 0.55 + 0.3 * rings
+    return _rgba(v[..., None] * np.array([0.62, 0.42, 0.25]))
+
+
+def tex_grass(rng: np.random.Generator, size: int = 256) -> np.ndarray:
+    """Green-brown ground: two noise scales mixing grass and earth."""
+    big, fine = _fbm(size, 4, 3, rng), _value_noise(size, 128, rng)
+    green, earth = np.array([0.30, 0.42, 0.16]), np.array([0.42, 0.36, 0.24])
+    rgb = green * (1 - big[..., None]) + earth * big[..., None]
+    return _rgba(rgb * (0.8 + 0.35 * fine)[..., None])
+
+
+def tex_metal(rng: np.random.Generator, size: int = 64) -> np.ndarray:
+    """Near-white brushed metal; materials tint it."""
+    v = 0.85 + 0.1 * _value_noise(size, 32, rng)
+    return _rgba(np.repeat(v[..., None], 3, axis=-1))
+
+
+def tex_white(rng: np.random.Generator, size: int = 4) -> np.ndarray:
+    """Plain white: the colour comes from the material's tint (exactly, 255 decodes to 1.0)."""
+    return np.full((size, size, 4), 255, np.uint8)
+
+
+def tex_chainlink(rng: np.random.Generator, size: int = 256, diamonds: int = 5,
+                  wire_px: float = 5.0) -> np.ndarray:
+    """Chain-link mesh: wires along both diagonals, alpha 1 on the wire (antialiased), 0 between."""
+    y, x = np.mgrid[0:size, 0:size] + 0.5
+    p = size / diamonds
+    u, v = (x + y) % p, (x - y) % p
+    d = np.minimum(np.minimum(u, p - u), np.minimum(v, p - v)) / math.sqrt(2)  # px to the nearest wire
+    alpha = np.clip(wire_px / 2 + 0.5 - d, 0, 1)
+    shade = 0.62 + 0.25 * np.clip(1 - d / (wire_px / 2), 0, 1)  # round wire: lighter along its middle
+    return _rgba(shade[..., None] * np.array([0.95, 0.97, 1.0]), alpha)
+
+
+def tex_leaves(rng: np.random.Generator, size: int = 256, leaves: int = 90) -> np.ndarray:
+    """A leaf card: a twig and filled ellipse leaves in greens on transparent black."""
+    import cv2
+    img = np.zeros((size, size, 4), np.uint8)
+    cv2.line(img, (size // 2, size - 4), (size // 2 + 10, 20), (90, 60, 35, 255), 3, cv2.LINE_AA)
+    for _ in range(leaves):
+        c = (int(rng.uniform(0.12, 0.88) * size), int(rng.uniform(0.08, 0.92) * size))
+        axes = (int(rng.uniform(0.06, 0.10) * size), int(rng.uniform(0.025, 0.04) * size))
+        g = rng.uniform(0.6, 1.0)
+        colour = (int(60 * g), int(140 * g), int(45 * g), 255)
+        cv2.ellipse(img, c, axes, float(rng.uniform(0, 180)), 0, 360, colour, -1, cv2.LINE_AA)
+    return img
+
+
+def tex_sign(rng: np.random.Generator, width: int = 512, height: int = 128) -> np.ndarray:
+    """A station sign: white border and text (cv2.putText, antialiased) on dark blue."""
+    import cv2
+    img = np.zeros((height, width, 4), np.uint8)
+    img[:] = (22, 52, 112, 255)
+    cv2.rectangle(img, (6, 6), (width - 7, height - 7), (240, 240, 240, 255), 5, cv2.LINE_AA)
+    cv2.putText(img, "PLATFORM 3", (28, 62), cv2.FONT_HERSHEY_DUPLEX, 1.5, (245, 245, 245, 255), 3,
+                cv2.LINE_AA)
+    cv2.putText(img, "MLAA STREAM -> CITY", (30, 104), cv2.FONT_HERSHEY_SIMPLEX, 1.0,
+                (250, 210, 60, 255), 2, cv2.LINE_AA)
+    return img
+
+
+# name -> (texture maker, alpha-tested); seeds are fixed per name so every run draws the same texels
+TEXTURES = {
+    "bricks": (tex_bricks, False), "tiles": (tex_tiles, False), "stone": (tex_stone, False),
+    "wood": (tex_wood, False), "grass": (tex_grass, False), "metal": (tex_metal, False),
+    "white": (tex_white, False), "chainlink": (tex_chainlink, True), "leaves": (tex_leaves, True),
+    "sign": (tex_sign, False),
+}
+
+
+def _down2(a: np.ndarray, w: np.ndarray | None = None) -> np.ndarray:
+    """2x2 box average (a dimension of 1 stays 1); with weights w, the w-weighted average."""
+    h, wd = a.shape[:2]
+    sy, sx = (2 if h > 1 else 1), (2 if wd > 1 else 1)
+    shape = (h // sy, sy, wd // sx, sx) + a.shape[2:]
+    if w is None:
+        return a.reshape(shape).mean(axis=(1, 3))
+    ws = w.reshape(shape[:4])
+    num = (a * w[..., None]).reshape(shape).sum(axis=(1, 3))
+    den = ws.sum(axis=(1, 3))[..., None]
+    plain = a.reshape(shape).mean(axis=(1, 3))
+    return np.where(den > 0, num / np.maximum(den, 1e-12), plain)
+
+
+ALPHA_MIP_MIN = 16  # alpha-tested chains stop at 16 texels: smaller levels are near-uniform alpha
+
+
+def mip_chain(rgba: np.ndarray, alpha_tested: bool) -> list[np.ndarray]:
+    """The mip levels, averaged in linear light and re-encoded to sRGB8: down to 1x1, or for
+    alpha-tested textures down to ALPHA_MIP_MIN texels (the sampler's max level).
+
+    Alpha-tested textures average colour weighted by alpha (no dark fringes from the transparent
+    texels) and rescale each level's alpha so that the share of texels passing the 0.5 test stays
+    the base level's (coverage-preserving mipmaps, as engines do). Levels below ALPHA_MIP_MIN are
+    left out: their alpha is nearly uniform and the test would turn a distant fence into a solid
+    wall or nothing; instead it stays undersampled, sparkling at 1 spp as in games."""
+    lin = srgb8_to_linear(rgba[..., :3]).astype(np.float64)
+    alpha = rgba[..., 3].astype(np.float64) / 255.0
+    coverage = float(np.mean(alpha >= 0.5))
+    levels = [rgba]
+    raw_alpha = alpha
+    smallest = ALPHA_MIP_MIN if alpha_tested else 1
+    while min(lin.shape[:2]) > smallest or (smallest == 1 and max(lin.shape[:2]) > 1):
+        lin = _down2(lin, raw_alpha if alpha_tested else None)
+        raw_alpha = _down2(raw_alpha)
+        a = raw_alpha
+        if alpha_tested and 0 < coverage < 1:
+            q = float(np.quantile(a, 1 - coverage))  # the alpha the 0.5 test should cut at
+            a = np.clip(a * (0.5 / max(q, 1e-6)), 0, 1)
+        levels.append(np.dstack([encode8(lin), np.round(a * 255).astype(np.uint8)]))
+    return levels
+
+
+# --- meshes ---------------------------------------------------------------------------------------
+@dataclass
+class Mesh:
+    """Indexed triangles in world space: positions and normals (N, 3), uv in metres (N, 2)."""
+
+    pos: np.ndarray
+    nrm: np.ndarray
+    uv: np.ndarray
+    idx: np.ndarray
+
+    @property
+    def triangles(self) -> int:
+        return len(self.idx) // 3
+
+
+def merge(meshes: list[Mesh]) -> Mesh:
+    offsets = np.cumsum([0] + [len(m.pos) for m in meshes[:-1]])
+    return Mesh(np.concatenate([m.pos for m in meshes]), np.concatenate([m.nrm for m in meshes]),
+                np.concatenate([m.uv for m in meshes]),
+                np.concatenate([m.idx + o for m, o in zip(meshes, offsets)]).astype(np.uint32))
+
+
+def transform(mesh: Mesh, m: np.ndarray) -> Mesh:
+    """Apply a 4x4 affine matrix (normals by the inverse transpose)."""
+    pos = mesh.pos @ m[:3, :3].T + m[:3, 3]
+    nrm = mesh.nrm @ np.linalg.inv(m[:3, :3])
+    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+    return Mesh(pos, nrm, mesh.uv, mesh.idx)
+
+
+def _frame(p0, p1) -> np.ndarray:
+    """4x4 matrix taking local z to the segment p0 -> p1 (local origin at p0), unit scale."""
+    p0, p1 = np.asarray(p0, float), np.asarray(p1, float)
+    z = (p1 - p0) / np.linalg.norm(p1 - p0)
+    ref = np.array([0.0, 1.0, 0.0]) if abs(z[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    x = np.cross(ref, z)
+    x /= np.linalg.norm(x)
+    m = np.eye(4)
+    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = x, np.cross(z, x), z, p0
+    return m
+
+
+def hexahedron(c: np.ndarray) -> Mesh:
+    """Six flat-shaded quads from 8 corners c[(ix, iy, iz)] given as an (2, 2, 2, 3) array; uv is
+    each face's own corner-to-corner lengths in metres."""
+    faces = [((0, 0, 0), (0, 1, 0), (0, 1, 1), (0, 0, 1)), ((1, 0, 0), (1, 0, 1), (1, 1, 1), (1, 1, 0)),
+             ((0, 0, 0), (0, 0, 1), (1, 0, 1), (1, 0, 0)), ((0, 1, 0), (1, 1, 0), (1, 1, 1), (0, 1, 1)),
+             ((0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)), ((0, 0, 1), (0, 1, 1), (1, 1, 1), (1, 0, 1))]
+    centre = c.reshape(-1, 3).mean(axis=0)
+    pos, nrm, uv, idx = [], [], [], []
+    for k, f in enumerate(faces):
+        q = np.array([c[i] for i in f])
+        n = np.cross(q[1] - q[0], q[3] - q[0])
+        n /= max(np.linalg.norm(n), 1e-12)
+        if np.dot(n, q.mean(axis=0) - centre) < 0:  # point outwards whatever the corner order
+            n = -n
+        du, dv = np.linalg.norm(q[3] - q[0]), np.linalg.norm(q[1] - q[0])
+        pos.append(q)
+        nrm.append(np.repeat(n[None], 4, axis=0))
+        uv.append(np.array([[0, 0], [0, dv], [du, dv], [du, 0]]))
+        idx += [4 * k + j for j in (0, 1, 2, 0, 2, 3)]
+    return Mesh(np.concatenate(pos), np.concatenate(nrm), np.concatenate(uv), np.array(idx, np.uint32))
+
+
+def box(lo, hi) -> Mesh:
+    """Axis-aligned box from corner lo to corner hi."""
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    g = np.stack(np.meshgrid([0, 1], [0, 1], [0, 1], indexing="ij"), -1)
+    return hexahedron(lo + g * (hi - lo))
+
+
+def beam(p0, p1, w: float, h: float) -> Mesh:
+    """A square-section bar of w x h from p0 to p1 (railings, lattice members, cross-arms)."""
+    length = float(np.linalg.norm(np.asarray(p1, float) - np.asarray(p0, float)))
+    return transform(box((-w / 2, -h / 2, 0), (w / 2, h / 2, length)), _frame(p0, p1))
+
+
+def cylinder(p0, p1, r: float, seg: int = 12, caps: bool = True) -> Mesh:
+    """A smooth-shaded cylinder from p0 to p1; uv = (arc length, length) in metres."""
+    length = float(np.linalg.norm(np.asarray(p1, float) - np.asarray(p0, float)))
+    t = np.linspace(0, 2 * np.pi, seg + 1)
+    ring = np.stack([np.cos(t), np.sin(t), np.zeros_like(t)], -1)
+    pos = np.concatenate([ring * r, ring * r + [0, 0, length]])
+    nrm = np.concatenate([ring, ring])
+    uv = np.concatenate([np.stack([t * r, np.zeros_like(t)], -1), np.stack([t * r, np.full_like(t, length)], -1)])
+    n = seg + 1
+    idx = [[i, i + 1, n + i + 1, i, n + i + 1, n + i] for i in range(seg)]
+    parts = [Mesh(pos, nrm, uv, np.array(idx, np.uint32).ravel())]
+    if caps:
+        for z, s in ((0.0, -1.0), (length, 1.0)):
+            cp = np.concatenate([[[0, 0, z]], ring[:-1] * r + [0, 0, z]])
+            cn = np.repeat([[0, 0, s]], seg + 1, axis=0)
+            ci = np.array([[0, 1 + i, 1 + (i + 1) % seg] for i in range(seg)], np.uint32).ravel()
+            parts.append(Mesh(cp, cn, cp[:, :2].copy(), ci))
+    return transform(merge(parts), _frame(p0, p1))
+
+
+def sphere(c, r: float, nu: int = 32, nv: int = 16) -> Mesh:
+    u = np.linspace(0, 2 * np.pi, nu + 1)
+    v = np.linspace(0, np.pi, nv + 1)
+    uu, vv = np.meshgrid(u, v)
+    n = np.stack([np.sin(vv) * np.cos(uu), np.cos(vv), np.sin(vv) * np.sin(uu)], -1).reshape(-1, 3)
+    uv = np.stack([uu * r, vv * r], -1).reshape(-1, 2)
+    return Mesh(np.asarray(c, float) + r * n, n, uv, _grid_indices(nu, nv))
+
+
+def torus(c, big_r: float, r: float, axis=(0, 0, 1), nu: int = 40, nv: int = 14) -> Mesh:
+    """A torus around `axis` through c: ring radius big_r, tube radius r."""
+    u = np.linspace(0, 2 * np.pi, nu + 1)
+    v = np.linspace(0, 2 * np.pi, nv + 1)
+    uu, vv = np.meshgrid(u, v)
+    ring = np.stack([np.cos(uu), np.sin(uu), np.zeros_like(uu)], -1)
+    n = ring * np.cos(vv)[..., None] + np.array([0, 0, 1.0]) * np.sin(vv)[..., None]
+    pos = big_r * ring + r * n
+    uv = np.stack([uu * big_r, vv * r], -1)
+    local = Mesh(pos.reshape(-1, 3), n.reshape(-1, 3), uv.reshape(-1, 2), _grid_indices(nu, nv))
+    c = np.asarray(c, float)
+    return transform(local, _frame(c, c + np.asarray(axis, float)))
+
+
+def _grid_indices(nu: int, nv: int) -> np.ndarray:
+    """Two triangles per cell of an (nv + 1) x (nu + 1) vertex grid."""
+    j, i = np.mgrid[0:nv, 0:nu]
+    a = (j * (nu + 1) + i).ravel()
+    return np.stack([a, a + 1, a + nu + 2, a, a + nu + 2, a + nu + 1], -1).ravel().astype(np.uint32)
+
+
+def quad(centre, u_half, v_half) -> Mesh:
+    """A flat quad centre +- u_half +- v_half; uv in metres from its (-u, -v) corner."""
+    c, u, v = (np.asarray(a, float) for a in (centre, u_half, v_half))
+    pos = np.array([c - u - v, c + u - v, c + u + v, c - u + v])
+    n = np.cross(u, v)
+    n /= np.linalg.norm(n)
+    lu, lv = 2 * np.linalg.norm(u), 2 * np.linalg.norm(v)
+    uv = np.array([[0, 0], [lu, 0], [lu, lv], [0, lv]])
+    return Mesh(pos, np.repeat(n[None], 4, axis=0), uv, np.array([0, 1, 2, 0, 2, 3], np.uint32))
+
+
+# --- materials and the world ----------------------------------------------------------------------
+def _lin(srgb8) -> tuple:
+    """sRGB8 triple -> linear tint (exact decode: a white texture times it gives that colour)."""
+    return tuple(float(x) for x in srgb8_to_linear(np.asarray(srgb8, np.uint8)))
+
+
+@dataclass(frozen=True)
+class Material:
+    texture: str
+    tile: tuple = (2.0, 2.0)  # metres per texture repeat along u and v
+    tint: tuple = (1.0, 1.0, 1.0)  # linear multiplier of the texture colour
+    specular: float = 0.04  # Blinn-Phong weight (energy-normalised lobe)
+    shininess: float = 16.0
+    alpha_test: bool = False  # discard where texture alpha < 0.5
+    two_sided: bool = False  # light the back face with the flipped normal (cards, fences)
+    emissive: bool = False  # unlit and unfogged: outputs texture * tint
+
+
+MATERIALS = {
+    "grass": Material("grass", (4.0, 4.0), specular=0.02, shininess=8),
+    "tiles": Material("tiles", (2.0, 2.0), specular=0.25, shininess=48),
+    "stone": Material("stone", (2.0, 2.0), specular=0.05, shininess=16),
+    "marble": Material("stone", (1.5, 1.5), tint=(1.25, 1.22, 1.18), specular=0.35, shininess=80),
+    "bricks": Material("bricks", (2.0, 2.0), specular=0.03),
+    "wood": Material("wood", (1.0, 0.5), specular=0.05),
+    "rail": Material("metal", (1.0, 1.0), tint=(0.06, 0.16, 0.08), specular=0.6, shininess=60),
+    "steel": Material("metal", (1.0, 1.0), tint=(0.45, 0.46, 0.48), specular=0.5, shininess=40),
+    "cable": Material("metal", (1.0, 1.0), tint=(0.02, 0.02, 0.02), specular=0.4, shininess=30),
+    "chainlink": Material("chainlink", (0.3, 0.3), specular=0.3, shininess=30, alpha_test=True, two_sided=True),
+    "leaves": Material("leaves", (1.4, 1.4), specular=0.05, alpha_test=True, two_sided=True),
+    "sign": Material("sign", (3.2, 0.8), specular=0.1, shininess=30),
+    "banner": Material("white", (1.0, 1.0), tint=_lin(FLAT_COLOUR), emissive=True),
+    "red_gloss": Material("white", tint=(0.55, 0.02, 0.02), specular=1.0, shininess=300),
+    "blue_gloss": Material("white", tint=(0.02, 0.06, 0.45), specular=1.0, shininess=500),
+    "chrome": Material("white", tint=(0.5, 0.5, 0.52), specular=1.5, shininess=800),
+    "gold": Material("white", tint=(0.6, 0.38, 0.08), specular=1.0, shininess=120),
+}
+
+
+def _ground() -> dict[str, list[Mesh]]:
+    """A 4 km ground to the horizon and a tiled plaza in front of the colonnade."""
+    return {"grass": [quad((0, 0, -800), (2000, 0, 0), (0, 0, 2000))],
+            "tiles": [quad((-0.5, 0.01, -22), (7.5, 0, 0), (0, 0, 30))]}
+
+
+def _colonnade() -> dict[str, list[Mesh]]:
+    """A raised arcade along -z: platform, columns with bases and capitals, round arches of
+    voussoirs, an entablature, a back wall, a roof slab, and five stairs down to the plaza."""
+    out: dict[str, list[Mesh]] = {"stone": [], "marble": [], "bricks": []}
+    x, z0, z1, pitch = -6.0, -4.0, -44.0, 4.0
+    out["stone"].append(box((-10.5, 0, -46), (-4.5, 0.9, -2)))
+    top = 4.85  # capitals' top: the arches spring from here
+    zs = np.arange(z0, z1 - 0.1, -pitch)
+    for z in zs:
+        out["stone"].append(box((x - 0.45, 0.9, z - 0.45), (x + 0.45, 1.15, z + 0.45)))
+        out["marble"].append(cylinder((x, 1.15, z), (x, 4.6, z), 0.3, seg=16, caps=False))
+        out["stone"].append(box((x - 0.4, 4.6, z - 0.4), (x + 0.4, top, z + 0.4)))
+    r_in, r_out, half = pitch / 2 - 0.4, pitch / 2 + 0.05, 0.35
+    for za, zb in zip(zs[:-1], zs[1:]):
+        zc = (za + zb) / 2
+        th = np.linspace(0, np.pi, 10)
+        for t0, t1 in zip(th[:-1], th[1:]):  # one voussoir: an annulus sector, extruded along x
+            c = np.empty((2, 2, 2, 3))
+            for ix, xx in enumerate((x - half, x + half)):
+                for iy, rr in enumerate((r_in, r_out)):
+                    for iz, tt in enumerate((t0, t1)):
+                        c[ix, iy, iz] = (xx, top + rr * np.sin(tt), zc + rr * np.cos(tt))
+            out["bricks"].append(hexahedron(c))
+    roof_y = top + r_out
+    out["stone"].append(box((x - 0.45, roof_y, z1 - 0.6), (x + 0.45, roof_y + 0.7, z0 + 0.6)))
+    out["bricks"].append(box((-10.5, 0.9, z1 - 0.6), (-10.0, roof_y + 0.7, z0 + 0.6)))
+    out["stone"].append(box((-10.6, roof_y + 0.7, z1 - 0.8), (x + 0.6, roof_y + 0.95, z0 + 0.8)))
+    for k in range(5):  # the lowest step reaches furthest towards the plaza
+        out["stone"].append(box((-4.5, 0.18 * k, -45), (-4.5 + 0.35 * (5 - k), 0.18 * (k + 1), -3)))
+    return out
+
+
+def _railing() -> dict[str, list[Mesh]]:
+    """A railing to the horizon: two rails and a baluster every 0.4 m for 200 m."""
+    x, z0, z1 = 6.5, 4.0, -200.0
+    parts = [beam((x, 1.0, z0), (x, 1.0, z1), 0.07, 0.06), beam((x, 0.15, z0), (x, 0.15, z1), 0.05, 0.05)]
+    parts += [beam((x, 0.15, z), (x, 1.0, z), 0.035, 0.035) for z in np.arange(z0, z1, -0.4)]
+    return {"rail": parts}
+
+
+def _sag(p0, p1, sag: float, n: int) -> np.ndarray:
+    """n + 1 points of a hanging cable from p0 to p1 (a parabola: close to a catenary at small sag)."""
+    s = np.linspace(0, 1, n + 1)[:, None]
+    pts = np.asarray(p0, float) * (1 - s) + np.asarray(p1, float) * s
+    pts[:, 1] -= 4 * sag * s[:, 0] * (1 - s[:, 0])
+    return pts
+
+
+def _cable(points: np.ndarray, r: float) -> list[Mesh]:
+    """A cable as thin 4-sided cylinders along a polyline (sub-pixel beyond a few metres)."""
+    return [cylinder(a, b, r, seg=4, caps=False) for a, b in zip(points[:-1], points[1:])]
+
+
+def _power_line() -> dict[str, list[Mesh]]:
+    """Wooden poles every 25 m along the road to 400 m, cross-arms, three sagging cables."""
+    out: dict[str, list[Mesh]] = {"wood": [], "steel": [], "cable": []}
+    x, h = 11.0, 9.0
+    zs = np.arange(2.0, -400.0, -25.0)
+    arms = (-0.9, 0.0, 0.9)
+    for z in zs:
+        out["wood"].append(cylinder((x, 0, z), (x, h, z), 0.13, seg=8))
+        out["wood"].append(beam((x - 1.1, h - 0.6, z), (x + 1.1, h - 0.6, z), 0.12, 0.12))
+        out["steel"] += [box((x + a - 0.04, h - 0.54, z - 0.04), (x + a + 0.04, h - 0.4, z + 0.04)) for a in arms]
+    for a in arms:
+        for za, zb in zip(zs[:-1], zs[1:]):
+            out["cable"] += _cable(_sag((x + a, h - 0.4, za), (x + a, h - 0.4, zb), 0.5, 8), 0.015)
+    return out
+
+
+def _fence() -> dict[str, list[Mesh]]:
+    """A 2.2 m chain-link fence along x = 8.6 with posts every 3 m and a top pipe."""
+    x, z0, z1, h = 8.6, -3.0, -72.0, 2.2
+    zs = np.arange(z0, z1 - 0.1, -3.0)
+    out = {"chainlink": [quad((x, h / 2, (z0 + z1) / 2), (0, 0, (z0 - z1) / 2), (0, h / 2, 0))],
+           "steel": [cylinder((x, 0, z), (x, h + 0.05, z), 0.035, seg=6) for z in zs]}
+    out["steel"].append(cylinder((x, h, z0), (x, h, z1), 0.025, seg=6))
+    return out
+
+
+def _tree(rng: np.random.Generator, base) -> dict[str, list[Mesh]]:
+    """A trunk and a crown of 48 randomly oriented alpha-tested leaf cards."""
+    bx, bz = base
+    out = {"wood": [cylinder((bx, 0, bz), (bx, 3.8, bz), 0.2, seg=6)], "leaves": []}
+    centre = np.array([bx, 5.0, bz])
+    for _ in range(48):
+        p = centre + rng.normal(0, 1, 3) * (1.3, 0.9, 1.3)
+        n = rng.normal(0, 1, 3)
+        n /= np.linalg.norm(n)
+        u = np.cross(n, [0, 1, 0] if abs(n[1]) < 0.9 else [1, 0, 0])
+        u /= np.linalg.norm(u)
+        out["leaves"].append(quad(p, u * 0.7, np.cross(n, u) * 0.7))
+    return out
+
+
+def _trees() -> dict[str, list[Mesh]]:
+    rng = np.random.default_rng(7)
+    bases = [(-13.5, -8), (-14, -22), (-13, -37), (15, -12), (19, -25), (14, -40), (22, -55), (16, -70),
+             (28, -34)]
+    return _combine(_tree(rng, b) for b in bases)
+
+
+def _ornaments() -> dict[str, list[Mesh]]:
+    """Plinths with glossy spheres and a standing torus; a lit sign; the flat unlit banner."""
+    out: dict[str, list[Mesh]] = {"stone": [], "wood": [], "steel": []}
+    items = [((0.0, -5.0), "red_gloss"), ((2.4, -7.0), "chrome"), ((-1.8, -9.0), "blue_gloss")]
+    for (px, pz), mat in items:
+        out["stone"].append(box((px - 0.4, 0, pz - 0.4), (px + 0.4, 1.0, pz + 0.4)))
+        out.setdefault(mat, []).append(sphere((px, 1.45, pz), 0.45))
+    out["stone"].append(box((3.8, 0, -3.6), (4.6, 0.8, -2.8)))
+    out["gold"] = [torus((4.2, 1.45, -3.2), 0.5, 0.14, axis=(0.6, 0.0, 0.8))]
+    # the sign: turned 20 degrees so its text and border run at a slant
+    a = math.radians(20)
+    u, v = np.array([math.cos(a), 0, -math.sin(a)]) * 1.6, np.array([0, 0.4, 0])
+    centre = np.array([-1.2, 2.6, -13.0])
+    out["sign"] = [quad(centre, u, v)]
+    out["wood"] += [cylinder(centre + s * u * 0.8 - [0, 2.6, 0], centre + s * u * 0.8 - [0, 0.4, 0], 0.06, seg=8)
+                    for s in (-1, 1)]
+    out["banner"] = [quad((3.0, 2.8, -16.0), (1.5, 0, 0), (0, 1.0, 0))]
+    out["steel"] += [cylinder((x, 0, -16.05), (x, 3.8, -16.05), 0.05, seg=8) for x in (1.45, 4.55)]
+    return out
+
+
+def _pylon(x: float, z: float, h: float = 36.0) -> list[Mesh]:
+    """A lattice transmission tower: four tapering legs, a ring and X-bracing per 4.5 m panel,
+    and cross-arms near the top."""
+    def corner(y: float, sx: int, sz: int) -> np.ndarray:
+        half = 4.0 + (1.2 - 4.0) * y / h
+        return np.array([x + sx * half, y, z + sz * half])
+
+    cs = [(-1, -1), (1, -1), (1, 1), (-1, 1)]
+    w = 0.35
+    parts = [beam(corner(0, *c), corner(h, *c), w, w) for c in cs]
+    ys = np.linspace(0, h, 9)
+    for y0, y1 in zip(ys[:-1], ys[1:]):
+        for c, d in zip(cs, cs[1:] + cs[:1]):
+            parts.append(beam(corner(y1, *c), corner(y1, *d), w * 0.6, w * 0.6))
+            parts.append(beam(corner(y0, *c), corner(y1, *d), w * 0.5, w * 0.5))
+            parts.append(beam(corner(y0, *d), corner(y1, *c), w * 0.5, w * 0.5))
+    for y in (h - 8, h - 2):
+        parts.append(beam((x - 12, y, z), (x + 12, y, z), 0.6, 0.8))
+    return parts
+
+
+def _pylons() -> dict[str, list[Mesh]]:
+    """Five pylons across the view 300 m away, with four sagging cables between them."""
+    xs, z, h = np.arange(-200.0, 201.0, 100.0), -320.0, 36.0
+    out = {"steel": [m for x in xs for m in _pylon(x, z, h)], "cable": []}
+    for dx, y in ((-11.5, h - 8), (11.5, h - 8), (-11.5, h - 2), (11.5, h - 2)):
+        for xa, xb in zip(xs[:-1], xs[1:]):
+            out["cable"] += _cable(_sag((xa + dx, y, z), (xb + dx, y, z), 5.0, 12), 0.05)
+    return out
+
+
+def _combine(groups) -> dict[str, list[Mesh]]:
+    out: dict[str, list[Mesh]] = {}
+    for g in groups:
+        for k, v in g.items():
+            out.setdefault(k, []).extend(v)
+    return out
+
+
+@lru_cache(maxsize=1)
+def build_world() -> dict[str, Mesh]:
+    """material name -> one merged mesh: the whole world, the same for every scene."""
+    groups = _combine([_ground(), _colonnade(), _railing(), _power_line(), _fence(), _trees(),
+                       _ornaments(), _pylons()])
+    return {k: merge(v) for k, v in groups.items() if v}
+
+
+# --- cameras --------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Camera:
+    eye: tuple
+    target: tuple
+    vfov: float = 50.0  # vertical field of view, degrees
+
+    def view(self) -> np.ndarray:
+        e, t = np.asarray(self.eye, float), np.asarray(self.target, float)
+        f = (t - e) / np.linalg.norm(t - e)
+        s = np.cross(f, [0, 1, 0])
+        s /= np.linalg.norm(s)
+        u = np.cross(s, f)
+        m = np.eye(4)
+        m[0, :3], m[1, :3], m[2, :3] = s, u, -f
+        m[:3, 3] = -m[:3, :3] @ e
+        return m
+
+    def projection(self, aspect: float) -> np.ndarray:
+        f = 1.0 / math.tan(math.radians(self.vfov) / 2)
+        m = np.zeros((4, 4))
+        m[0, 0], m[1, 1] = f / aspect, f
+        m[2, 2], m[2, 3] = (FAR + NEAR) / (NEAR - FAR), 2 * FAR * NEAR / (NEAR - FAR)
+        m[3, 2] = -1.0
+        return m
+
+    def view_projection(self, width: int, height: int, dx: float = 0.0, dy: float = 0.0) -> np.ndarray:
+        """Projection x view, the image shifted by (dx, dy) pixels (a translation in NDC, applied
+        after the perspective divide: the jitter of the supersampled truth)."""
+        jitter = np.eye(4)
+        jitter[0, 3], jitter[1, 3] = 2 * dx / width, 2 * dy / height
+        return jitter @ self.projection(width / height) @ self.view()
+
+
+def _yawed(eye, target, angle: float) -> tuple:
+    """target turned around the eye's vertical axis by angle (radians, positive to the right)."""
+    e, t = np.asarray(eye, float), np.asarray(target, float)
+    d = t - e
+    c, s = math.cos(angle), math.sin(angle)
+    return tuple(e + [c * d[0] - s * d[2], d[1], s * d[0] + c * d[2]])
+
+
+def shot(name: str, width: int, height: int) -> list[Camera]:
+    """The cameras of a scene, one per frame."""
+    n = SHOT_FRAMES
+    if name == "rendered_atrium":
+        return [Camera((2.0, 1.7, 9.0), (-2.5, 2.4, -20.0), 55.0)]
+    if name == "rendered_stress":  # down the road: railing, fence, cables and pylons converge
+        return [Camera((5.6, 1.7, -18.0), (7.9, 2.7, -140.0), 30.0)]
+    if name == "rendered_pan":  # a yaw pan, PAN_PX_PER_FRAME at the image centre whatever the size
+        cam = Camera((0.5, 1.65, 6.0), (-4.0, 2.6, -18.0), 50.0)
+        step = PAN_PX_PER_FRAME * 2 * math.tan(math.radians(cam.vfov) / 2) / height
+        return [Camera(cam.eye, _yawed(cam.eye, cam.target, k * step), cam.vfov) for k in range(n)]
+    if name == "rendered_dolly":  # forward 5 cm per frame towards the plinths
+        return [Camera((1.2, 1.6, 5.0 - 0.05 * k), (1.0, 1.5, -8.0 - 0.05 * k), 50.0) for k in range(n)]
+    if name == "rendered_orbit":  # 0.25 degree per frame around the spheres, 6.5 m out
+        centre = np.array([0.6, 1.3, -7.0])
+        cams = []
+        for k in range(n):
+            a = math.radians(28.0 + 0.25 * k)
+            eye = centre + [6.5 * math.sin(a), 1.2, 6.5 * math.cos(a)]
+            cams.append(Camera(tuple(eye), tuple(centre), 48.0))
+        return cams
+    raise ValueError(f"expected a scene name from {', '.join(SCENE_NAMES)}, got {name!r}")
+
+
+NOTES = {
+    "rendered_atrium": "arcade, stairs, glossy spheres, torus, sign, banner, railing and poles to the horizon",
+    "rendered_stress": "long lens down the road: balusters, chain-link, cables and pylons going sub-pixel",
+    "rendered_pan": f"yaw pan {PAN_PX_PER_FRAME} px/frame over the arcade, sign and trees",
+    "rendered_dolly": "dolly forward 5 cm/frame towards the glossy spheres",
+    "rendered_orbit": "orbit 0.25 deg/frame around the spheres and torus",
+}
+
+
+# --- the renderer ---------------------------------------------------------------------------------
+VERTEX_SHADER = """
+#version 330
+uniform mat4 u_vp;
+in vec3 in_pos;
+in vec3 in_nrm;
+in vec2 in_uv;
+out vec3 v_pos;
+out vec3 v_nrm;
+out vec2 v_uv;
+void main() {
+    v_pos = in_pos;  // meshes are in world space: no model matrix
+    v_nrm = in_nrm;
+    v_uv = in_uv;
+    gl_Position = u_vp * vec4(in_pos, 1.0);
+}
+"""
+
+# Shading in linear light; clamped to [0, 1] (the display range) before either output, so the
+# truth averages exactly the values the 1-spp input encodes.
+COMMON_GLSL = """
+uniform bool u_encode;  // true: sRGB-encode for the 8-bit input target; false: linear for the truth
+vec3 encode_srgb(vec3 c) {
+    return mix(c * 12.92, 1.055 * pow(c, vec3(1.0 / 2.4)) - 0.055, step(vec3(0.0031308), c));
+}
+vec4 finish(vec3 c) {
+    c = clamp(c, 0.0, 1.0);
+    return vec4(u_encode ? encode_srgb(c) : c, 1.0);
+}
+"""
+
+FRAGMENT_SHADER = """
+#version 330
+uniform sampler2D u_tex;
+uniform vec2 u_tile;
+uniform vec3 u_tint;
+uniform float u_spec;
+uniform float u_shininess;
+uniform bool u_alpha_test;
+uniform bool u_two_sided;
+uniform bool u_emissive;
+uniform vec3 u_eye;
+uniform vec3 u_sun_dir;
+uniform vec3 u_sun;
+uniform vec3 u_amb_sky;
+uniform vec3 u_amb_ground;
+uniform vec3 u_fog;
+uniform float u_fog_density;
+in vec3 v_pos;
+in vec3 v_nrm;
+in vec2 v_uv;
+out vec4 f_colour;
+""" + COMMON_GLSL + """
+void main() {
+    vec4 t = texture(u_tex, v_uv / u_tile);  // trilinear; sRGB texels decoded before filtering
+    if (u_alpha_test && t.a < 0.5) discard;
+    vec3 albedo = t.rgb * u_tint;
+    if (u_emissive) { f_colour = finish(albedo); return; }
+    vec3 n = normalize(v_nrm);
+    vec3 to_eye = u_eye - v_pos;
+    vec3 v = normalize(to_eye);
+    if (u_two_sided && dot(n, v) < 0.0) n = -n;
+    float ndl = max(dot(n, u_sun_dir), 0.0);
+    vec3 h = normalize(u_sun_dir + v);
+    // energy-normalised Blinn-Phong lobe: small bright highlights at high shininess
+    float spec = ndl > 0.0 ? pow(max(dot(n, h), 0.0), u_shininess) * (u_shininess + 8.0) / 25.13 : 0.0;
+    vec3 ambient = mix(u_amb_ground, u_amb_sky, 0.5 + 0.5 * n.y);
+    vec3 c = albedo * (ambient + u_sun * ndl) + u_spec * spec * u_sun;
+    float fog = exp(-u_fog_density * length(to_eye));
+    f_colour = finish(mix(u_fog, c, fog));
+}
+"""
+
+SKY_VERTEX = """
+#version 330
+void main() {  // one triangle covering the screen, at the far plane
+    vec2 p = vec2((gl_VertexID << 1) & 2, gl_VertexID & 2) * 2.0 - 1.0;
+    gl_Position = vec4(p, 1.0, 1.0);
+}
+"""
+
+SKY_FRAGMENT = """
+#version 330
+uniform mat4 u_inv_vp;  // inverse of the (jittered) view-projection: each sample's own ray
+uniform vec2 u_size;
+uniform vec3 u_eye;
+uniform vec3 u_zenith;
+uniform vec3 u_horizon;
+out vec4 f_colour;
+""" + COMMON_GLSL + """
+void main() {
+    vec4 p = u_inv_vp * vec4(gl_FragCoord.xy / u_size * 2.0 - 1.0, 1.0, 1.0);
+    vec3 d = normalize(p.xyz / p.w - u_eye);
+    float t = pow(clamp(d.y, 0.0, 1.0), 0.6);
+    f_colour = finish(mix(u_horizon, u_zenith, t));
+}
+"""
+
+
+# Small and near things first, the ground last, alpha-tested cards after the opaque ones and the
+# sky at the very end where nothing was drawn: llvmpipe's early depth test then skips shading the
+# occluded parts of the big surfaces (the pass is fragment-bound).
+DRAW_ORDER = ["red_gloss", "blue_gloss", "chrome", "gold", "sign", "banner", "marble", "stone", "bricks",
+              "wood", "steel", "rail", "cable", "tiles", "grass", "leaves", "chainlink"]
+
+
+def _mat_bytes(m: np.ndarray) -> bytes:
+    return np.ascontiguousarray(m.T, dtype=np.float32).tobytes()  # GLSL reads column-major
+
+
+class Renderer:
+    """The world on one GL context at one size: textures, meshes, an 8-bit target for the input
+    and a float32 target for the truth passes (sharing one depth buffer)."""
+
+    def __init__(self, ctx, width: int, height: int):
+        import moderngl
+        self.mgl = moderngl
+        self.ctx, self.width, self.height = ctx, width, height
+        self.prog = ctx.program(vertex_shader=VERTEX_SHADER, fragment_shader=FRAGMENT_SHADER)
+        self.sky = ctx.program(vertex_shader=SKY_VERTEX, fragment_shader=SKY_FRAGMENT)
+        self.sky_vao = ctx.vertex_array(self.sky, [])
+        self.textures = {name: self._texture(name) for name in TEXTURES}
+        self.draws = []  # (material, vertex array, buffers) in DRAW_ORDER
+        world = build_world()
+        for name in sorted(world, key=DRAW_ORDER.index):
+            mesh = world[name]
+            data = np.hstack([mesh.pos, mesh.nrm, mesh.uv]).astype(np.float32)
+            vbo, ibo = ctx.buffer(data.tobytes()), ctx.buffer(mesh.idx.astype(np.uint32).tobytes())
+            vao = ctx.vertex_array(self.prog, [(vbo, "3f 3f 2f", "in_pos", "in_nrm", "in_uv")],
+                                   index_buffer=ibo, index_element_size=4)
+            self.draws.append((MATERIALS[name], vao, (vbo, ibo)))
+        depth = ctx.depth_renderbuffer((width, height))
+        self.fbo8 = ctx.framebuffer([ctx.renderbuffer((width, height), 4)], depth)
+        self.fbo32 = ctx.framebuffer([ctx.renderbuffer((width, height), 4, dtype="f4")], depth)
+        self._set_lights()
+
+    def _texture(self, name: str):
+        """Upload a procedural texture with its own mip chain (sRGB8, trilinear, repeating)."""
+        make, alpha_tested = TEXTURES[name]
+        seed = int(hashlib.sha256(name.encode()).hexdigest()[:8], 16)
+        levels = mip_chain(make(np.random.default_rng(seed)), alpha_tested)
+        # numpy row 0 is the image's top; GL's first row is v = 0, the bottom: flip on upload
+        h, w = levels[0].shape[:2]
+        tex = self.ctx.texture((w, h), 4, np.flipud(levels[0]).tobytes(), internal_format=GL_SRGB8_ALPHA8)
+        tex.build_mipmaps(0, len(levels) - 1)  # allocates the chain; each level is then replaced by ours
+        for k, lev in enumerate(levels[1:], start=1):
+            tex.write(np.ascontiguousarray(np.flipud(lev)).tobytes(), level=k)
+        tex.filter = (self.mgl.LINEAR_MIPMAP_LINEAR, self.mgl.LINEAR)  # trilinear
+        tex.repeat_x = tex.repeat_y = True
+        return tex
+
+    def _set_lights(self) -> None:
+        sun = np.asarray(SUN_DIR, float)
+        p = self.prog
+        p["u_sun_dir"].value = tuple(sun / np.linalg.norm(sun))
+        p["u_sun"].value, p["u_fog"].value, p["u_fog_density"].value = SUN, SKY_HORIZON, FOG_DENSITY
+        p["u_amb_sky"].value, p["u_amb_ground"].value = AMBIENT_SKY, AMBIENT_GROUND
+        self.sky["u_zenith"].value, self.sky["u_horizon"].value = SKY_ZENITH, SKY_HORIZON
+        self.sky["u_size"].value = (float(self.width), float(self.height))
+
+    def draw(self, cam: Camera, dx: float, dy: float, encode: bool) -> None:
+        """One pass of the whole world into the bound target, the image shifted by (dx, dy) px."""
+        mgl = self.mgl
+        vp = cam.view_projection(self.width, self.height, dx, dy)
+        self.ctx.disable(mgl.CULL_FACE)  # no face culling: cards and fences are seen from both sides
+        self.ctx.enable(mgl.DEPTH_TEST)
+        self.ctx.depth_func = "<="  # the sky sits at depth 1.0, the cleared value: drawn where nothing is
+        p = self.prog
+        p["u_vp"].write(_mat_bytes(vp))
+        p["u_eye"].value = tuple(map(float, cam.eye))
+        p["u_encode"].value = encode
+        for mat, vao, _ in self.draws:
+            self.textures[mat.texture].use(0)
+            p["u_tex"].value = 0
+            p["u_tile"].value, p["u_tint"].value = mat.tile, mat.tint
+            p["u_spec"].value, p["u_shininess"].value = mat.specular, mat.shininess
+            p["u_alpha_test"].value, p["u_two_sided"].value = mat.alpha_test, mat.two_sided
+            p["u_emissive"].value = mat.emissive
+            vao.render()
+        self.sky["u_inv_vp"].write(_mat_bytes(np.linalg.inv(vp)))
+        self.sky["u_eye"].value = tuple(map(float, cam.eye))
+        self.sky["u_encode"].value = encode
+        self.sky_vao.render(mgl.TRIANGLES, vertices=3)
+
+    def input_frame(self, cam: Camera) -> np.ndarray:
+        """One sample per pixel at the pixel centres, sRGB-encoded by the shader: (H, W, 3) uint8."""
+        self.fbo8.use()
+        self.fbo8.clear(0, 0, 0, 1, depth=1.0)
+        self.draw(cam, 0.0, 0.0, encode=True)
+        img = np.frombuffer(self.fbo8.read(components=3), np.uint8).reshape(self.height, self.width, 3)
+        return np.flipud(img).copy()
+
+    def truth_linear(self, cam: Camera, spp: int = TRUTH_SPP) -> np.ndarray:
+        """The mean of spp x spp jittered passes in linear light: (H, W, 3) float64."""
+        self.fbo32.use()
+        acc = np.zeros((self.height, self.width, 3), np.float64)
+        offsets = (np.arange(spp) + 0.5) / spp - 0.5
+        for dy in offsets:
+            for dx in offsets:
+                self.fbo32.clear(0, 0, 0, 1, depth=1.0)
+                self.draw(cam, dx, dy, encode=False)
+                acc += np.frombuffer(self.fbo32.read(components=3, dtype="f4"),
+                                     np.float32).reshape(self.height, self.width, 3)
+        return np.flipud(acc / (spp * spp))
+
+    def truth_frame(self, cam: Camera, spp: int = TRUTH_SPP) -> np.ndarray:
+        """The supersampled truth encoded like the other scenes' (encode8): (H, W, 3) uint8."""
+        return encode8(self.truth_linear(cam, spp))
+
+    def release(self) -> None:
+        for _, vao, bufs in self.draws:
+            vao.release()
+            for b in bufs:
+                b.release()
+        for t in self.textures.values():
+            t.release()
+        for obj in (self.sky_vao, self.prog, self.sky, self.fbo8, self.fbo32):
+            obj.release()
+
+
+def render_scene(name: str, small: bool = False, renderer: Renderer | None = None) -> Scene:
+    """Render one scene (no cache): every frame's input and 8x8 truth."""
+    width, height = SIZES[bool(small)]
+    own = renderer is None
+    r = Renderer(_context(), width, height) if own else renderer
+    try:
+        cams = shot(name, width, height)
+        inputs = np.stack([r.input_frame(c) for c in cams])
+        truths = np.stack([r.truth_frame(c) for c in cams])
+    finally:
+        if own:
+            r.release()
+    return Scene(name, CATEGORY, inputs, truths, edge_mask(inputs, truths), notes=NOTES[name])
+
+
+# --- cache and the public entry point -------------------------------------------------------------
+def default_cache_dir() -> Path:
+    """$MLAA_STREAM_CACHE/rendered when set, else ~/.cache/mlaa-stream/rendered."""
+    root = os.environ.get("MLAA_STREAM_CACHE")
+    return (Path(root) if root else Path.home() / ".cache" / "mlaa-stream") / "rendered"
+
+
+def cache_path(cache_dir: Path, name: str, small: bool) -> Path:
+    """The .npz of one scene, keyed by a hash of (name, size, VERSION)."""
+    width, height = SIZES[bool(small)]
+    key = json.dumps([name, width, height, VERSION]).encode()
+    return Path(cache_dir) / f"{name}_{width}x{height}_{hashlib.sha256(key).hexdigest()[:16]}.npz"
+
+
+def _load(path: Path, name: str) -> Scene | None:
+    try:
+        with np.load(path) as z:
+            inputs, truths = z["inputs"], z["truths"]
+    except (OSError, KeyError, ValueError):  # absent or half-written: render again
+        return None
+    return Scene(name, CATEGORY, inputs, truths, edge_mask(inputs, truths), notes=NOTES[name])
+
+
+def _save(path: Path, scene: Scene) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f"{path.stem}.{os.getpid()}.tmp.npz")
+    np.savez_compressed(tmp, inputs=scene.inputs, truths=scene.truths)
+    os.replace(tmp, path)  # atomic: a reader never sees half a file
+
+
+@dataclass
+class RenderLog:
+    """Seconds spent per scene (0 when loaded from the cache)."""
+
+    seconds: dict[str, float] = field(default_factory=dict)
+    cached: dict[str, bool] = field(default_factory=dict)
+
+
+LAST_RUN = RenderLog()  # timings of the latest generate_rendered call
+
+
+def generate_rendered(small: bool = False, names: list[str] | None = None,
+                      cache_dir: Path | None = None, *, use_cache: bool = True) -> list[Scene]:
+    """The rendered scenes (or the named ones), from the cache when there, else rendered and cached.
+
+    Raises RuntimeError when a scene must be rendered and no EGL context can be made."""
+    names = list(SCENE_NAMES) if names is None else list(names)
+    unknown = [n for n in names if n not in SCENE_NAMES]
+    if unknown:
+        raise ValueError(f"expected scene names from {', '.join(SCENE_NAMES)}, got {', '.join(unknown)}")
+    cache_dir = Path(cache_dir) if cache_dir is not None else default_cache_dir()
+    LAST_RUN.seconds.clear()
+    LAST_RUN.cached.clear()
+    out: list[Scene] = []
+    renderer = None
+    try:
+        for name in names:
+            t0 = time.perf_counter()
+            path = cache_path(cache_dir, name, small)
+            scene = _load(path, name) if use_cache else None
+            LAST_RUN.cached[name] = scene is not None
+            if scene is None:
+                if renderer is None:
+                    ok, why = egl_available()
+                    if not ok:
+                        raise RuntimeError(f"cannot render the '{CATEGORY}' scenes: {why}")
+                    renderer = Renderer(_context(), *SIZES[bool(small)])
+                scene = render_scene(name, small, renderer)
+                if use_cache:
+                    _save(path, scene)
+            LAST_RUN.seconds[name] = time.perf_counter() - t0
+            out.append(scene)
+    finally:
+        if renderer is not None:
+            renderer.release()
+    return out
+
+
+if __name__ == "__main__":  # python rendered.py [--small] [--no-cache] [--png DIR]
+    import argparse
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--small", action="store_true")
+    ap.add_argument("--no-cache", action="store_true")
+    ap.add_argument("--png", type=Path, help="write each scene's first input and truth as PNG here")
+    ap.add_argument("names", nargs="*")
+    args = ap.parse_args()
+    print("EGL:", egl_available()[1])
+    t_all = time.perf_counter()
+    scenes = generate_rendered(args.small, args.names or None, use_cache=not args.no_cache)
+    for s in scenes:
+        edges = float(s.edges.mean())
+        print(f"{s.name:18s} {s.size[0]}x{s.size[1]}x{s.frames}  {LAST_RUN.seconds[s.name]:6.1f} s"
+              f"{' (cache)' if LAST_RUN.cached[s.name] else ''}  edge pixels {100 * edges:.1f} %")
+        if args.png:
+            import cv2
+            args.png.mkdir(parents=True, exist_ok=True)
+            for k in sorted({0, s.frames - 1}):
+                for kind, arr in (("in", s.inputs[k]), ("truth", s.truths[k])):
+                    cv2.imwrite(str(args.png / f"{s.name}_{k}_{kind}.png"), arr[..., ::-1])
+    print(f"total {time.perf_counter() - t_all:.1f} s")
