@@ -1,11 +1,12 @@
 """`mlaa-stream devices`: list the OpenCL devices and which one is picked by default."""
 from __future__ import annotations
 
+import os
 import sys
 
 import click
 
-from mlaa_stream.device.context import DeviceError, list_devices, select_device
+from mlaa_stream.device.context import DEVICE_ENV, DeviceError, _all_devices, default_choice, list_devices, select_device
 
 
 @click.command("devices")
@@ -14,10 +15,13 @@ def devices_command() -> None:
     try:
         infos = list_devices()
         chosen = select_device(None)
+        env = os.environ.get(DEVICE_ENV)
+        why = f"${DEVICE_ENV}={env}" if env else default_choice(_all_devices())[1]
     except DeviceError as exc:
         click.echo(f"mlaa-stream: {exc}", err=True)
         sys.exit(3)
     for info in infos:
-        mark = "*" if info.name == chosen.name.strip() else " "
+        mark = "*" if (info.name, info.platform) == (chosen.name.strip(), chosen.platform.name.strip()) else " "
         click.echo(f"{mark} {info.index}: {info.name}  [{info.kind}, {info.platform}, "
                    f"{info.compute_units} compute units, {info.global_mem_mb} MiB]")
+    click.echo(f"* picked by default: {why} (--device N or ${DEVICE_ENV} picks another)")

@@ -50,13 +50,11 @@
 #define INLINE inline __attribute__((always_inline))
 
 // A cache prefetch hint. OpenCL's prefetch() is a no-op on PoCL's CPU device, where reading the
-// frame's pixels (cold cache lines, a row apart) is what a tile waits on most.
-#if defined(__has_builtin)
-#if __has_builtin(__builtin_prefetch)
+// frame's pixels (cold cache lines, a row apart) is what a tile waits on most. Clang's builtin only on
+// PoCL: other clang-based compilers (rusticl's SPIR-V path) reject llvm.prefetch.
+#ifdef POCL_DEVICE_ADDRESS_BITS
 #define PREFETCH(p) __builtin_prefetch(p)
-#endif
-#endif
-#ifndef PREFETCH
+#else
 #define PREFETCH(p) prefetch(p, 1)
 #endif
 

@@ -189,6 +189,16 @@ __kernel void reconstruct(__global const PIXEL_T *src, __global PIXEL_T *dst, __
             if (todo & EDGE_L) put_lab(slot, 0, lab_px(src, luts, lin, IDX(x0 - 1, yy, width)));
             if (todo & EDGE_R) put_lab(slot, x1 - x0 + 1, lab_px(src, luts, lin, IDX(x1, yy, width)));
             have[sl] |= todo;
+            // Lanes 0 and 7 of a group also read one column of each neighbour group; where that neighbour
+            // holds no CIELAB (its pixel is no candidate, so those lanes' results are masked out by `lanes`),
+            // the column gets a defined value: no lane reads scratch memory that was never written.
+            for (int j = 0; j < ngroups; ++j) {
+                if (!(cg >> j & 1u)) continue;
+                const int c = j * GROUP + 1;
+                const uint left = j > 0 ? 1u << (j - 1) : EDGE_L, right = j + 1 < ngroups ? 1u << (j + 1) : EDGE_R;
+                if (!(have[sl] & left)) put_lab(slot, c - 1, (float3)(0.0f));
+                if (!(have[sl] & right)) put_lab(slot, c + GROUP, (float3)(0.0f));
+            }
         }
         // 3. the exact ring masks, a lane per pixel; the rules where X may hold a gap
         __global const float *u = slots + su * SLOT_FLOATS, *m = slots + sm * SLOT_FLOATS,

@@ -8,6 +8,8 @@ from importlib import resources
 
 import numpy as np
 
+from mlaa_stream.device.buildcheck import check_build_in_child, needs_child_build
+
 try:  # pyopencl is a hard dependency, but say how to fix a broken install in one sentence.
     import pyopencl as cl
 except ImportError as exc:  # pragma: no cover - only on broken installs
@@ -17,6 +19,8 @@ else:
     _IMPORT_ERROR = None
 
 DEVICE_ENV = "MLAA_STREAM_DEVICE"
+# Extra OpenCL build options for debugging tools, e.g. "-cl-opt-disable" under Oclgrind (docs/portability.md).
+CL_OPTIONS_ENV = "MLAA_STREAM_CL_OPTIONS"
 
 
 def pin_pocl_workers(environ=os.environ) -> bool:
@@ -109,14 +113,42 @@ def list_devices() -> list[DeviceInfo]:
     ]
 
 
+# Devices that report themselves as GPUs but are not hardware (debugging tools): never the default.
+SIMULATORS = ("oclgrind",)
+# CPU runtimes in order of preference when there is no GPU: PoCL is the one the kernels are tuned for
+# (measured here: rusticl on llvmpipe runs the test suite ~3x slower); others after it, in listing order.
+CPU_PREFERENCE = ("portable computing language",)
+
+
+def _is_simulator(dev) -> bool:
+    text = f"{dev.platform.name} {dev.name}".lower()
+    return any(s in text for s in SIMULATORS)
+
+
+def default_choice(devices: list) -> tuple[object, str]:
+    """The device used when none is asked for, and why: a GPU that is not a simulator, else the
+    preferred CPU runtime (PoCL), else the first device."""
+    gpus = [d for d in devices if _kind(d) == "GPU" and not _is_simulator(d)]
+    if gpus:
+        return gpus[0], "a GPU"
+    cpus = [d for d in devices if _kind(d) == "CPU"]
+    for name in CPU_PREFERENCE:
+        for d in cpus:
+            if name in d.platform.name.lower():
+                return d, "no GPU; PoCL is the CPU runtime the kernels are tuned for"
+    if cpus:
+        return cpus[0], "no GPU; the first CPU runtime"
+    return devices[0], "no GPU or CPU device; the first device (a simulator or accelerator)"
+
+
 def select_device(spec: str | int | None = None):
-    """Pick a device: `spec` (index or name substring), else $MLAA_STREAM_DEVICE, else a GPU, else the first."""
+    """Pick a device: `spec` (index or name substring), else $MLAA_STREAM_DEVICE, else
+    `default_choice` (a real GPU, else PoCL's CPU device, else the first)."""
     devices = _all_devices()
     if spec is None or spec == "":
         spec = os.environ.get(DEVICE_ENV) or None
     if spec is None:
-        gpus = [d for d in devices if _kind(d) == "GPU"]
-        return (gpus or devices)[0]
+        return default_choice(devices)[0]
     s = str(spec).strip()
     if s.isdigit():
         i = int(s)
@@ -165,6 +197,7 @@ class Context:
         self._programs: dict[tuple, object] = {}
         self._kernels: dict[tuple, object] = {}
         self._lock = threading.Lock()
+        self.poison: int | None = None  # a byte pattern for new buffers (see `buffer`)
 
     @property
     def name(self) -> str:
@@ -179,12 +212,18 @@ class Context:
                 # common.cl (pixel formats, colour tables) is prepended to every kernel file.
                 src = kernel_source("common") + "".join(
                     "\n#line 1\n" + kernel_source(part) for part in PROGRAM_PARTS.get(name, (name,)))
+                options = ["-cl-std=CL1.2", *opts, *os.environ.get(CL_OPTIONS_ENV, "").split()]
+                files = " + ".join(f"kernels/{p}.cl" for p in PROGRAM_PARTS.get(name, (name,)))
+                if needs_child_build(self.device):  # a driver that may end the process on a failed build
+                    problem = check_build_in_child(self.device, src, options)
+                    if problem is not None:
+                        raise KernelBuildError(f"{files} failed to build on {self.name} with defines "
+                                               f"{' '.join(opts) or '(none)'}:\n{problem}")
                 try:
-                    prg = cl.Program(self.ctx, src).build(options=["-cl-std=CL1.2", *opts])
+                    prg = cl.Program(self.ctx, src).build(options=options)
                 except cl.Error as exc:
                     raise KernelBuildError(
-                        f"{' + '.join(f'kernels/{p}.cl' for p in PROGRAM_PARTS.get(name, (name,)))} "
-                        f"failed to build on {self.name} with defines "
+                        f"{files} failed to build on {self.name} with defines "
                         f"{' '.join(opts) or '(none)'}:\n{exc}") from exc
                 self._programs[key] = prg
             return prg
@@ -199,7 +238,12 @@ class Context:
         return k
 
     def buffer(self, nbytes: int, flags=None):
-        return cl.Buffer(self.ctx, flags or cl.mem_flags.READ_WRITE, size=max(int(nbytes), 1))
+        """A device buffer; filled with the byte `self.poison` when that is set (tests: no kernel may read
+        a byte it did not write first, so outputs must not depend on the pattern)."""
+        buf = cl.Buffer(self.ctx, flags or cl.mem_flags.READ_WRITE, size=max(int(nbytes), 1))
+        if self.poison is not None:
+            cl.enqueue_fill_buffer(self.queue, buf, np.uint8(self.poison), 0, buf.size).wait()
+        return buf
 
 
 def check_pass_buffers(what: str, fmt, src, dst) -> None:
