@@ -1,23 +1,26 @@
-"""`mlaa-stream bench`: every method and preset over the scenes; writes docs/bench/.
+"""`mlaa-stream bench`: every method and preset over the scenes; writes a results folder (--out).
 
 Exit codes: 0 done (methods that failed are listed in the outputs); 1 every method failed;
 2 usage error; 3 no OpenCL device.
 """
 from __future__ import annotations
 
+import os
 import shlex
 import sys
+import tempfile
 
 import click
 
 from mlaa_stream.device.context import DeviceError
-from mlaa_stream.cli.options import device_option
+from mlaa_stream.cli.options import device_option, require_bench_extras
 
 
 @click.command("bench")
 @click.option("--quick", is_flag=True, help="CI-sized: small scenes, 5 timed frames, no FLIP (< 1 minute).")
-@click.option("--out", "out_dir", default="docs/bench", show_default=True, type=click.Path(file_okay=False),
-              help="Folder for results.csv, README.md and speed_vs_accuracy.png (replaced on each run).")
+@click.option("--out", "out_dir", default=None, type=click.Path(file_okay=False),
+              help="Folder for results.csv, README.md and speed_vs_accuracy.png (replaced on each run); "
+                   "default: mlaa-stream-bench in the temporary folder. The project's figures: --out docs/bench.")
 @click.option("--methods", default=None, metavar="A,B",
               help="Comma-separated subset of methods (default: all; see --list).")
 @click.option("--frames", type=click.IntRange(1, 10000), default=None,
@@ -30,12 +33,15 @@ from mlaa_stream.cli.options import device_option
 @device_option
 def bench_command(quick, out_dir, methods, frames, flip, seed, scene_names, list_methods, device) -> None:
     """Measure speed against accuracy for every method on the generated scenes."""
+    require_bench_extras()
     from mlaa_stream.bench import accuracy as B
 
     if list_methods:
         for name in [*B.METHODS, B.TRUTH]:
             click.echo(name)
         return
+    if out_dir is None:
+        out_dir = os.path.join(tempfile.gettempdir(), "mlaa-stream-bench")
     names = None if methods is None else [m.strip() for m in methods.split(",") if m.strip()]
     groups = None if scene_names is None else [m.strip() for m in scene_names.split(",") if m.strip()]
     command = "mlaa-stream " + " ".join(shlex.quote(a) for a in ["bench", *sys.argv[2:]]) \
@@ -48,6 +54,7 @@ def bench_command(quick, out_dir, methods, frames, flip, seed, scene_names, list
         sys.exit(3)
     except ValueError as exc:
         raise click.UsageError(str(exc)) from exc
+    click.echo(f"mlaa-stream: results in {out_dir}", err=True)
     summ = B.summary(res)
     click.echo(f"device: {res.device}")
     click.echo(f"{'method':<18}{'ms/1080p':>10}{'err removed':>13}{'edge err':>10}{'damage':>8}"

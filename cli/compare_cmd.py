@@ -9,6 +9,8 @@ import math
 import click
 import numpy as np
 
+from mlaa_stream.cli.options import CommandError
+
 
 def read_image(path: str) -> np.ndarray:
     """An image as float32 (H, W, 3), 0..1 for integer files; alpha dropped, grey repeated."""
@@ -16,11 +18,11 @@ def read_image(path: str) -> np.ndarray:
 
     inp = oiio.ImageInput.open(path)
     if inp is None:
-        raise click.ClickException(f"{path}: cannot open ({oiio.geterror()})")
+        raise CommandError(f"{path}: cannot open ({oiio.geterror()})")
     try:
         arr = inp.read_image(format="float")
         if arr is None:
-            raise click.ClickException(f"{path}: cannot read pixels ({inp.geterror()})")
+            raise CommandError(f"{path}: cannot read pixels ({inp.geterror()})")
     finally:
         inp.close()
     arr = np.asarray(arr, np.float32)
@@ -67,7 +69,7 @@ def compare_command(out_path, truth_path, input_path, flip) -> None:
     inp = read_image(input_path) if input_path else None
     for name, img in ((out_path, out), (input_path, inp)):
         if img is not None and img.shape != truth.shape:
-            raise click.ClickException(f"{name}: expected {truth.shape[1]}x{truth.shape[0]} like "
+            raise CommandError(f"{name}: expected {truth.shape[1]}x{truth.shape[0]} like "
                                        f"{truth_path}, got {img.shape[1]}x{img.shape[0]}")
     with_flip = flip and M.flip_available()
     r = compare_numbers(out, truth, inp, with_flip)

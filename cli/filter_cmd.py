@@ -5,6 +5,7 @@ import os
 import signal
 import sys
 import tempfile
+import time
 from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Iterator
@@ -172,17 +173,33 @@ def _kind_of(path: str) -> str:
     return "video"  # probe_video says so if it is not one either
 
 
+def _job_for(kind: str, output: str) -> type:
+    """The job for an input kind and an output: same kind (video -> video, images -> images), or a
+    conversion: a folder or pattern -> a video file (by its extension), a video -> a frame pattern."""
+    from mlaa_stream.io.sequence import is_pattern
+    from mlaa_stream.io.video import is_video_path
+
+    if kind in ("folder", "pattern") and is_video_path(output) and not os.path.isdir(output):
+        from mlaa_stream.cli.convert_jobs import SequenceToVideoJob
+        return SequenceToVideoJob
+    if kind == "video" and is_pattern(output):
+        from mlaa_stream.cli.convert_jobs import VideoToImagesJob
+        return VideoToImagesJob
+    return _VideoJob if kind == "video" else _ImageJob
+
+
 @click.command("filter", epilog=EPILOG, context_settings={"max_content_width": 100})
 @click.argument("input_path", metavar="INPUT")
 @click.option("-o", "--output", required=True, metavar="OUTPUT",
               help="Output file, folder (same names as the inputs) or frame pattern (clean/%04d.png).")
-@click.option("--overwrite", is_flag=True, help="Replace outputs that exist (never an input).")
+@click.option("-y", "--overwrite", is_flag=True, help="Replace outputs that exist (never an input).")
 @click.option("--resume", is_flag=True,
               help="Skip inputs whose output exists already (folders and sequences).")
 @click.option("--frames", metavar="A-B", help="Frame numbers of a %04d pattern, e.g. 1001-1100 "
               "(default: every number found; gaps are reported).")
 @click.option("--preset", type=click.Choice(sorted(PRESETS)), default=None,
-              help="Named filter settings; the options below override them.")
+              help="The antialiasing filter's named settings (the options below override them); "
+                   "the video encoder's speed is --encoder-preset.")
 @click.option("--threshold", type=click.FloatRange(min=0, min_open=True), default=None,
               help="Edge threshold: CIELAB ΔE for --metric lab (default 8), a fraction of full "
                    "scale for luma/rgb (default 0.06).")
@@ -200,8 +217,11 @@ def _kind_of(path: str) -> str:
 @click.option("--crf", type=click.IntRange(0, 63), default=18, show_default=True,
               help="Constant rate factor for x264/x265/VP9/AV1 (0 = lossless with libx264rgb).")
 @click.option("--encoder-preset", default="veryfast", show_default=True,
-              help="x264/x265 speed preset (ultrafast ... veryslow).")
+              help="The video encoder's speed preset for x264/x265 (ultrafast ... veryslow); not the "
+                   "filter's --preset.")
 @click.option("--pix-fmt", default=None, help="Encoder pixel format (default: the closest to the source).")
+@click.option("--rate", type=click.FloatRange(min=0, min_open=True), default=24.0, show_default=True,
+              help="Frame rate of a video made from images (a folder or pattern with -o out.mp4).")
 @click.option("--video-backend", type=click.Choice(["pyav", "opencv"]), default="pyav",
               show_default=True, help="opencv: the fallback (8-bit, mp4v, no audio).")
 @click.option("--overlay", type=click.Path(dir_okay=False), default=None,
@@ -230,7 +250,7 @@ def filter_command(ctx: click.Context, input_path: str, output: str, overwrite: 
                    frames: str | None, preset: str | None, threshold: float | None,
                    metric: str | None, display_space: bool, reconstruct: bool | None,
                    bridge: bool | None, codec: str,
-                   crf: int, encoder_preset: str, pix_fmt: str | None, video_backend: str,
+                   crf: int, encoder_preset: str, pix_fmt: str | None, rate: float, video_backend: str,
                    overlay: str | None, in_flight: int, temporal: bool | None, temporal_mode: str,
                    temporal_k: float | None, stats_path: str | None, show: str | None,
                    device: str | None, verbose: int, quiet: bool) -> None:
@@ -247,7 +267,7 @@ def filter_command(ctx: click.Context, input_path: str, output: str, overwrite: 
                            frames=frames, preset=preset, threshold=threshold, metric=metric,
                            display_space=display_space, reconstruct=reconstruct, bridge=bridge,
                            codec=codec, crf=crf,
-                           encoder_preset=encoder_preset, pix_fmt=pix_fmt, video_backend=video_backend,
+                           encoder_preset=encoder_preset, pix_fmt=pix_fmt, rate=rate, video_backend=video_backend,
                            overlay=overlay, in_flight=in_flight, device=device,
                            temporal=TemporalOptions(temporal, temporal_mode, temporal_k, stats_path, show))
     except Terminated as exc:
@@ -263,7 +283,7 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
             resume: bool, frames: str | None, preset: str | None, threshold, metric, display_space,
             reconstruct, codec: str, crf: int, encoder_preset: str, pix_fmt: str | None,
             video_backend: str, overlay: str | None, in_flight: int, device: str | None,
-            temporal: "TemporalOptions | None" = None, bridge: bool | None = None) -> int:
+            temporal: "TemporalOptions | None" = None, bridge: bool | None = None, rate: float = 24.0) -> int:
     """Check everything that can be checked without a device, then build the filter and run."""
     temporal = temporal or TemporalOptions()
     if overwrite and resume:
@@ -278,10 +298,10 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
         if (temporal.enabled or temporal.show or temporal.stats_path) and kind != "video":
             raise Usage("--temporal works on video input for now; image folders and sequences are "
                         "filtered frame by frame")
-        job = _VideoJob if kind == "video" else _ImageJob
+        job = _job_for(kind, output)
         runner = job(input_path, output, kind, con, overwrite=overwrite, resume=resume,
                      frames=frames, codec=codec, crf=crf, encoder_preset=encoder_preset,
-                     pix_fmt=pix_fmt, video_backend=video_backend, filter_kwargs=kwargs)
+                     pix_fmt=pix_fmt, rate=rate, video_backend=video_backend, filter_kwargs=kwargs)
         runner.prepare()
     except Usage as exc:
         con.error(str(exc))
@@ -322,6 +342,10 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
         runner.abort()  # no-op after a commit; removes a video in progress on errors and Ctrl-C
     if con.verbose and not con.quiet:
         click.echo(times.report(), err=True)
+    elif not con.quiet and not sys.stderr.isatty():  # logs and pipelines: one line, no progress bar
+        wall = time.perf_counter() - times.started
+        click.echo(f"mlaa-stream: {runner.written} frames in {wall:.1f} s "
+                   f"({runner.written / wall if wall > 0 else 0:.1f} fps) -> {runner.output}", err=True)
     if runner.failed_early and code == EXIT_OK:
         code = EXIT_FAILED
     return code

@@ -21,3 +21,19 @@ def configure_logging(verbose: int, quiet: bool) -> None:
     level = logging.ERROR if quiet else (logging.DEBUG if verbose > 1 else
                                          logging.INFO if verbose else logging.WARNING)
     logging.basicConfig(level=level, format="mlaa-stream: %(message)s")
+
+
+class CommandError(click.ClickException):
+    """A failure every command reports the same way: `mlaa-stream: error: ...` on stderr, exit 1."""
+
+    def show(self, file=None) -> None:
+        click.echo(f"mlaa-stream: error: {self.format_message()}", err=True, file=file)
+
+
+def require_bench_extras() -> None:
+    """The yardstick and the chart need matplotlib (text outlines, the sample photograph, the chart)."""
+    try:
+        import matplotlib  # noqa: F401
+    except ImportError as exc:
+        raise CommandError("this command needs the benchmark extras: pip install 'mlaa-stream[bench]' "
+                           f"({exc})") from exc

@@ -9,6 +9,8 @@ import json
 from pathlib import Path
 
 import click
+
+from mlaa_stream.cli.options import CommandError, require_bench_extras
 import numpy as np
 
 
@@ -53,6 +55,7 @@ def scene_files(scene) -> dict[str, np.ndarray]:
 @click.option("--overwrite", is_flag=True, help="Replace files that already exist.")
 def scenes_command(out_dir, small, seed, only, overwrite) -> None:
     """Render the test scenes (1-spp input and 8x8-spp truth) into OUT_DIR as PNG files."""
+    require_bench_extras()
     from mlaa_stream.yardstick.scenes import SceneUnavailable, generate_scenes
 
     names = None if only is None else [n.strip() for n in only.split(",") if n.strip()]
@@ -62,7 +65,7 @@ def scenes_command(out_dir, small, seed, only, overwrite) -> None:
     except ValueError as exc:
         raise click.UsageError(str(exc)) from exc
     except SceneUnavailable as exc:
-        raise click.ClickException(str(exc)) from exc
+        raise CommandError(str(exc)) from exc
     out = Path(out_dir)
     plan = {name: img for s in scenes for name, img in scene_files(s).items()}
     plan_names = [*plan, "scenes.json"]

@@ -1,0 +1,163 @@
+"""Frames <-> video for `mlaa-stream INPUT -o OUTPUT`: an image folder or frame pattern encoded into one
+video file, and a video written out as numbered images. The filter and the pipeline are the same as for
+the other jobs (filter_cmd.py); only the source or the sink changes kind."""
+from __future__ import annotations
+
+import os
+from fractions import Fraction
+
+from mlaa_stream.cli.filter_cmd import EXIT_FAILED, EXIT_OK, Failed, Usage, _check_writable, _Job
+
+
+def _sequence_plan(job: _Job) -> list:
+    """The input images in order (folder: name order; pattern: frame numbers), as FrameFile items."""
+    from mlaa_stream.io.sequence import FrameFile, expand_pattern, format_ranges, list_folder, parse_frames
+
+    if job.kind == "folder":
+        srcs, others = list_folder(job.input)
+        for path in others:
+            job.con.warn(f"{path}: skipped (not an image file by its extension)")
+        if not srcs:
+            raise Failed(f"{job.input}: expected image files, found none")
+        return [FrameFile(p, "", None) for p in srcs]
+    rng = None
+    if job.opts["frames"] is not None:
+        try:
+            rng = parse_frames(job.opts["frames"])
+        except ValueError as exc:
+            raise Usage(str(exc)) from exc
+    found, missing = expand_pattern(job.input, rng)
+    if not found:
+        raise Usage(f"{job.input}: no files match this frame pattern")
+    if missing:
+        job.con.warn(f"{job.input}: missing frames {format_ranges(missing)} (the video skips them)")
+    return [FrameFile(p, "", n) for n, p in found]
+
+
+class SequenceToVideoJob(_Job):
+    """A folder of images or a frame pattern -> one video file (frame rate from --rate)."""
+
+    def prepare(self) -> None:
+        from mlaa_stream.io.images import image_shape, read_image
+        from mlaa_stream.io.video import VideoError, VideoInfo, VideoWriter
+
+        o = self.opts
+        if os.path.exists(self.output) and not o["overwrite"]:
+            raise Usage(f"{self.output}: exists; use --overwrite (-y) to replace it")
+        folder = os.path.dirname(os.path.abspath(self.output))
+        if not os.path.isdir(folder):
+            raise Failed(f"{folder}: the output folder does not exist")
+        _check_writable(folder)
+        self.plan = _sequence_plan(self)
+        first = read_image(self.plan[0].src)
+        if first.pixels.dtype.kind == "f":
+            raise Usage(f"{self.plan[0].src}: float (linear-light) images cannot be encoded to video here; "
+                        f"write PNG/TIFF frames, or convert them to 8/16-bit display values first")
+        w, h, c = image_shape(self.plan[0].src)
+        bits = 16 if first.pixels.dtype.itemsize == 2 else 8
+        rate = Fraction(o["rate"]).limit_denominator(1001)
+        self.info = VideoInfo(path=self.input, width=w, height=h, fps=rate, time_base=1 / rate,
+                              frames=len(self.plan), pix_fmt="rgb48le" if bits > 8 else "rgb24", bits=bits,
+                              has_alpha=False, codec="images", colour={}, audio_streams=0)
+        if c == 4 or c == 2:
+            self.con.warn(f"{self.input}: alpha is not kept in the video")
+        try:
+            self.writer = VideoWriter(self.output, self.info, codec=o["codec"], crf=o["crf"],
+                                      preset=o["encoder_preset"], pix_fmt=o["pix_fmt"], copy_audio=False,
+                                      overwrite=o["overwrite"])
+        except VideoError as exc:
+            raise Failed(str(exc)) from exc
+        self.con.info(f"{len(self.plan)} frames {w}x{h} at {rate} fps -> {self.output} "
+                      f"({self.writer.codec} {self.writer.pix_fmt})")
+
+    def nothing_to_do(self) -> bool:
+        return False
+
+    def run(self, filt, post_hooks, in_flight, times, temporal=None) -> int:
+        import numpy as np
+
+        from mlaa_stream.io.sequence import Report, image_source
+        from mlaa_stream.pipeline import PipelineError, run_pipeline
+
+        report = Report(say=self.con.error, inform=self.con.info)
+        progress = self._progress(len(self.plan))
+        rgb = slice(0, 3)
+
+        def sink(item) -> None:
+            frame = item.frame if item.frame.ndim == 3 else item.frame[..., None]
+            frame = np.repeat(frame, 3, axis=2) if frame.shape[2] < 3 else frame[..., rgb]
+            self.writer.write(np.ascontiguousarray(frame))
+
+        try:
+            run_pipeline(image_source(self.plan, report, strict=True), filt, sink, in_flight=in_flight,
+                         post_hooks=post_hooks, times=times, on_frame=progress.update)
+            self.writer.commit()
+            self._finished = True
+        except PipelineError as exc:
+            self.con.error(f"{exc.meta[0].label if exc.meta else f'frame {exc.index}'}: {exc.stage} failed: "
+                           f"{exc.cause}; {self.output} not written")
+            return EXIT_FAILED
+        finally:
+            progress.close()
+            self.written = self.writer.frames_written
+        return EXIT_OK
+
+    def abort(self) -> None:
+        writer = getattr(self, "writer", None)
+        if writer is not None and not getattr(self, "_finished", False):
+            writer.abort()
+
+
+class VideoToImagesJob(_Job):
+    """A video -> numbered images through a frame pattern (clean/%04d.png), numbered from 1 as ffmpeg does."""
+
+    FIRST_NUMBER = 1
+
+    def prepare(self) -> None:
+        from mlaa_stream.io.video import VideoError, probe_video
+
+        o = self.opts
+        folder = os.path.dirname(os.path.abspath(self.output))
+        os.makedirs(folder, exist_ok=True)
+        _check_writable(folder)
+        try:
+            self.info = probe_video(self.input)
+        except VideoError as exc:
+            raise Failed(str(exc)) from exc
+        if self.info.audio_streams:
+            self.con.warn(f"{self.input}: audio is not written to images")
+        self.overwrite = o["overwrite"]
+
+    def nothing_to_do(self) -> bool:
+        return False
+
+    def run(self, filt, post_hooks, in_flight, times, temporal=None) -> int:
+        from mlaa_stream.io.images import ImageWriteError, write_image
+        from mlaa_stream.io.sequence import frame_path
+        from mlaa_stream.io.video import VideoReadError, read_video
+        from mlaa_stream.pipeline import PipelineError, run_pipeline
+
+        progress = self._progress(self.info.frames)
+
+        def sink(item) -> None:
+            write_image(frame_path(self.output, self.FIRST_NUMBER + item.index), item.frame,
+                        overwrite=self.overwrite)
+            self.written += 1
+
+        try:
+            run_pipeline(read_video(self.info), filt, sink, in_flight=in_flight, post_hooks=post_hooks,
+                         times=times, on_frame=progress.update)
+        except PipelineError as exc:
+            cause = exc.cause
+            if isinstance(cause, (VideoReadError, ImageWriteError)):
+                self.con.error(str(cause))
+            else:
+                self.con.error(f"frame {exc.index}: {exc.stage} failed: {cause}")
+            self.con.error(f"stopped: {self.written} images written")
+            return EXIT_FAILED
+        finally:
+            progress.close()
+        return EXIT_OK
+
+    def abort(self) -> None:
+        pass

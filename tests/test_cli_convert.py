@@ -1,0 +1,109 @@
+"""Frames <-> video and the command-line habits of issue 17: a folder or frame pattern encoded into a
+video, a video written as numbered images, -y, the one-line summary when stderr is not a terminal, one
+error format for every command, and the bench's results folder."""
+from __future__ import annotations
+
+import os
+
+import av
+import numpy as np
+from click.testing import CliRunner
+
+from mlaa_stream.cli.main import main
+from mlaa_stream.io.images import read_image, write_image
+
+DEMO = os.path.join(os.path.dirname(__file__), "..", "fixtures", "demo")
+CLIP = os.path.join(DEMO, "clip.mp4")
+
+
+def run(*args):
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+def stderr(r) -> str:
+    return r.stderr if hasattr(r, "stderr") else r.output
+
+
+def staircases(folder, n: int, dtype=np.uint8, size=(36, 52)):
+    folder.mkdir(exist_ok=True)
+    y, x = np.mgrid[0:size[0], 0:size[1]]
+    top = np.iinfo(dtype).max
+    for k in range(n):
+        img = np.where(((y * (2 + k % 3)) > x + k)[..., None], [top // 9, top // 7, top // 5], [top, top, top // 2])
+        write_image(str(folder / f"shot.{1001 + k:04d}.png"), img.astype(dtype))
+
+
+def video_frames(path) -> tuple[list[np.ndarray], float]:
+    with av.open(str(path)) as c:
+        s = c.streams.video[0]
+        return [f.to_ndarray(format="rgb24") for f in c.decode(s)], float(s.average_rate)
+
+
+def test_a_frame_pattern_becomes_a_video_at_the_given_rate(tmp_path):
+    staircases(tmp_path / "seq", 6)
+    r = run(tmp_path / "seq" / "shot.%04d.png", "-o", tmp_path / "out.mp4", "--rate", "30")
+    assert r.exit_code == 0, stderr(r)
+    frames, rate = video_frames(tmp_path / "out.mp4")
+    assert len(frames) == 6 and frames[0].shape == (36, 52, 3) and rate == 30.0
+    assert not (tmp_path / "out.mp4").is_dir()
+
+
+def test_a_folder_becomes_a_lossless_video_equal_to_the_filtered_frames(tmp_path):
+    staircases(tmp_path / "seq", 4)
+    assert run(tmp_path / "seq", "-o", tmp_path / "out.mkv", "--codec", "libx264rgb", "--crf", "0").exit_code == 0
+    assert run(tmp_path / "seq", "-o", tmp_path / "frames").exit_code == 0
+    frames, rate = video_frames(tmp_path / "out.mkv")
+    assert rate == 24.0  # the default --rate
+    for k, name in enumerate(sorted(os.listdir(tmp_path / "frames"))):
+        assert np.array_equal(frames[k], read_image(str(tmp_path / "frames" / name)).pixels)
+
+
+def test_a_video_becomes_numbered_images_from_1(tmp_path):
+    r = run(CLIP, "-o", tmp_path / "img" / "f_%04d.png")
+    assert r.exit_code == 0, stderr(r)
+    names = sorted(os.listdir(tmp_path / "img"))
+    assert names == [f"f_{n:04d}.png" for n in range(1, 11)]
+    assert read_image(str(tmp_path / "img" / names[0])).pixels.shape == (48, 64, 3)
+    assert "audio is not written to images" in stderr(r)
+
+
+def test_float_frames_to_video_are_refused_and_existing_outputs_need_y(tmp_path):
+    folder = tmp_path / "exr"
+    folder.mkdir()
+    write_image(str(folder / "a.0001.exr"), np.full((8, 8, 3), 0.5, np.float16))
+    r = run(folder, "-o", tmp_path / "o.mp4")
+    assert r.exit_code == 2 and "cannot be encoded to video" in stderr(r)
+    staircases(tmp_path / "seq", 3)
+    (tmp_path / "o.mp4").write_bytes(b"keep")
+    r = run(tmp_path / "seq", "-o", tmp_path / "o.mp4")
+    assert r.exit_code == 2 and "--overwrite (-y)" in stderr(r)
+    assert (tmp_path / "o.mp4").read_bytes() == b"keep"
+    assert run(tmp_path / "seq", "-o", tmp_path / "o.mp4", "-y").exit_code == 0
+    assert len(video_frames(tmp_path / "o.mp4")[0]) == 3
+
+
+def test_one_summary_line_when_stderr_is_not_a_terminal_and_none_with_q(tmp_path):
+    staircases(tmp_path / "seq", 2)
+    r = run(tmp_path / "seq", "-o", tmp_path / "out")
+    assert r.exit_code == 0
+    lines = [l for l in stderr(r).splitlines() if "frames in" in l]
+    assert len(lines) == 1 and lines[0].startswith("mlaa-stream: 2 frames in") and "fps) ->" in lines[0]
+    r = run(tmp_path / "seq", "-o", tmp_path / "out2", "-q")
+    assert r.exit_code == 0 and "frames in" not in stderr(r)
+
+
+def test_every_command_reports_errors_alike(tmp_path):
+    r = run("compare", tmp_path / "missing.png", tmp_path / "missing2.png")
+    assert r.exit_code == 1 and stderr(r).startswith("mlaa-stream: error: ") and "missing.png" in stderr(r)
+
+
+def test_bench_writes_to_a_temporary_folder_unless_told(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("TMPDIR", str(tmp_path / "tmp"))
+    (tmp_path / "tmp").mkdir()
+    import tempfile
+    monkeypatch.setattr(tempfile, "tempdir", None)
+    r = run("bench", "--quick", "--methods", "none", "--scenes", "diagonals", "--frames", "1")
+    assert r.exit_code == 0, stderr(r)
+    assert (tmp_path / "tmp" / "mlaa-stream-bench" / "README.md").exists()
+    assert not (tmp_path / "docs").exists()
