@@ -211,9 +211,13 @@ def _job_for(kind: str, output: str) -> type:
               help="Topological reconstruction of thin features before edge detection.")
 @click.option("--bridge/--no-bridge", default=None,
               help="Reconnect the dashes of sub-pixel wires after blending (default: on).")
-@click.option("--codec", default="libx264", show_default=True,
+@click.option("--codec", default=None,
               help="Video encoder: libx264, libx265, ffv1 / libx264rgb (lossless intermediates), "
-                   "prores_ks ...")
+                   "prores_ks ... (default: the source's family, HEVC -> libx265, ProRes -> prores_ks, "
+                   "FFV1 -> ffv1; others libx264).")
+@click.option("--audio", type=click.Choice(["copy", "aac", "none"]), default="copy", show_default=True,
+              help="Audio tracks: copied with the subtitle streams and every tag (language, title), "
+                   "re-encoded to AAC (subtitles still copied), or left out.")
 @click.option("--crf", type=click.IntRange(0, 63), default=18, show_default=True,
               help="Constant rate factor for x264/x265/VP9/AV1 (0 = lossless with libx264rgb).")
 @click.option("--encoder-preset", default="veryfast", show_default=True,
@@ -249,7 +253,7 @@ def _job_for(kind: str, output: str) -> type:
 def filter_command(ctx: click.Context, input_path: str, output: str, overwrite: bool, resume: bool,
                    frames: str | None, preset: str | None, threshold: float | None,
                    metric: str | None, display_space: bool, reconstruct: bool | None,
-                   bridge: bool | None, codec: str,
+                   bridge: bool | None, codec: str | None, audio: str,
                    crf: int, encoder_preset: str, pix_fmt: str | None, rate: float, video_backend: str,
                    overlay: str | None, in_flight: int, temporal: bool | None, temporal_mode: str,
                    temporal_k: float | None, stats_path: str | None, show: str | None,
@@ -266,7 +270,7 @@ def filter_command(ctx: click.Context, input_path: str, output: str, overwrite: 
             code = _filter(ctx, con, input_path, output, overwrite=overwrite, resume=resume,
                            frames=frames, preset=preset, threshold=threshold, metric=metric,
                            display_space=display_space, reconstruct=reconstruct, bridge=bridge,
-                           codec=codec, crf=crf,
+                           codec=codec, audio=audio, crf=crf,
                            encoder_preset=encoder_preset, pix_fmt=pix_fmt, rate=rate, video_backend=video_backend,
                            overlay=overlay, in_flight=in_flight, device=device,
                            temporal=TemporalOptions(temporal, temporal_mode, temporal_k, stats_path, show))
@@ -281,9 +285,10 @@ def filter_command(ctx: click.Context, input_path: str, output: str, overwrite: 
 
 def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, overwrite: bool,
             resume: bool, frames: str | None, preset: str | None, threshold, metric, display_space,
-            reconstruct, codec: str, crf: int, encoder_preset: str, pix_fmt: str | None,
+            reconstruct, codec: str | None, crf: int, encoder_preset: str, pix_fmt: str | None,
             video_backend: str, overlay: str | None, in_flight: int, device: str | None,
-            temporal: "TemporalOptions | None" = None, bridge: bool | None = None, rate: float = 24.0) -> int:
+            temporal: "TemporalOptions | None" = None, bridge: bool | None = None, rate: float = 24.0,
+            audio: str = "copy") -> int:
     """Check everything that can be checked without a device, then build the filter and run."""
     temporal = temporal or TemporalOptions()
     if overwrite and resume:
@@ -300,7 +305,7 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
                         "filtered frame by frame")
         job = _job_for(kind, output)
         runner = job(input_path, output, kind, con, overwrite=overwrite, resume=resume,
-                     frames=frames, codec=codec, crf=crf, encoder_preset=encoder_preset,
+                     frames=frames, codec=codec, audio=audio, crf=crf, encoder_preset=encoder_preset,
                      pix_fmt=pix_fmt, rate=rate, video_backend=video_backend, filter_kwargs=kwargs)
         runner.prepare()
     except Usage as exc:
@@ -594,7 +599,7 @@ class _VideoJob(_Job):
             else:
                 self.writer = VideoWriter(out, self.info, codec=o["codec"], crf=o["crf"],
                                           preset=o["encoder_preset"], pix_fmt=o["pix_fmt"],
-                                          overwrite=o["overwrite"])
+                                          overwrite=o["overwrite"], audio=o["audio"])
         except VideoError as exc:
             raise Failed(str(exc)) from exc
         self.con.info(f"encoding {getattr(self.writer, 'codec', 'mp4v')} "

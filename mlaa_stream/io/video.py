@@ -83,6 +83,9 @@ class VideoInfo:
     audio_streams: int
     frames_declared: bool = True  # `frames` is the container's own count, not duration x rate
     duration: float | None = None  # seconds, the stream's (or the container's) when known
+    rotation: int = 0  # degrees of the display matrix (phones film sideways and say so there)
+    subtitle_streams: int = 0
+    other_streams: tuple[str, ...] = ()  # streams neither video, audio nor subtitle (data, attachments)
 
     @property
     def sample_format(self) -> str:
@@ -144,14 +147,50 @@ def probe_video(path: str) -> VideoInfo:
         if frames is None and fps and duration:
             frames = int(round(duration * fps))  # an estimate (progress bar): wrong for variable rates
         colour = {k: int(getattr(cc, k) or 0) for k in _UNSPECIFIED}
+        others = tuple(f"{st.type} stream {st.index}" for st in container.streams
+                       if st.type not in ("video", "audio", "subtitle"))
         return VideoInfo(path=path, width=cc.width, height=cc.height,
                          fps=Fraction(fps) if fps else None,
                          time_base=Fraction(s.time_base) if s.time_base else None,
                          frames=frames, pix_fmt=pix, bits=bits, has_alpha=alpha, codec=cc.name,
                          colour=colour, audio_streams=len(container.streams.audio),
-                         frames_declared=declared, duration=duration)
+                         frames_declared=declared, duration=duration, rotation=_rotation(path),
+                         subtitle_streams=len(container.streams.subtitles), other_streams=others)
     finally:
         container.close()
+
+
+def _rotation(path: str) -> int:
+    """The display rotation in degrees (0, 90, 180, -90), from the first frame's display matrix."""
+    try:
+        with av.open(path) as c:
+            for frame in c.decode(video=0):
+                return int(round(frame.rotation or 0))
+    except (av.error.FFmpegError, OSError, EOFError, AttributeError):
+        pass
+    return 0
+
+
+# The encoder that keeps a source's codec family when no --codec is given (None: DEFAULT_CODEC).
+CODEC_FAMILY = {"hevc": "libx265", "prores": "prores_ks", "ffv1": "ffv1", "vp9": "libvpx-vp9",
+                "av1": "libaom-av1", "dnxhd": "dnxhd", "mjpeg": "mjpeg", "png": "png", "utvideo": "utvideo"}
+# Container and stream tags that describe the file written, not the content: not copied.
+_NOT_COPIED_TAGS = {"encoder", "major_brand", "minor_version", "compatible_brands", "duration",
+                    "number_of_frames", "number_of_bytes", "_statistics_tags", "_statistics_writing_app",
+                    "_statistics_writing_date_utc", "bps", "handler_name", "vendor_id"}
+
+
+def codec_for(info: VideoInfo) -> str:
+    """The encoder for `info` when none is asked for: the source's family (HEVC stays HEVC, ProRes stays
+    ProRes) where FFmpeg has an encoder for it, else DEFAULT_CODEC."""
+    name = CODEC_FAMILY.get(info.codec)
+    return name if name and name in av.codecs_available else DEFAULT_CODEC
+
+
+def _copy_tags(src: dict, dst) -> None:
+    for key, value in src.items():
+        if key.lower() not in _NOT_COPIED_TAGS and not key.upper().startswith("DURATION"):
+            dst[key] = value
 
 
 def read_video(info: VideoInfo, *, check_length: bool = True) -> Iterator[Item]:
@@ -256,10 +295,20 @@ def encoder_options(codec: str, crf: int | None, preset: str | None) -> dict[str
 class VideoWriter:
     """Encode RGB(A) frames like `info`'s source, copying its audio; `commit()` renames into place."""
 
-    def __init__(self, path: str, info: VideoInfo, *, codec: str = DEFAULT_CODEC,
+    def __init__(self, path: str, info: VideoInfo, *, codec: str | None = DEFAULT_CODEC,
                  crf: int | None = DEFAULT_CRF, preset: str | None = DEFAULT_ENCODER_PRESET,
-                 pix_fmt: str | None = None, copy_audio: bool = True, overwrite: bool = False):
+                 pix_fmt: str | None = None, copy_audio: bool = True, overwrite: bool = False,
+                 audio: str | None = None, container_format: str | None = None):
+        """`codec` None: the source's family (codec_for). `audio`: "copy" (default, with the subtitle
+        streams and every tag), "aac" (audio re-encoded, subtitles copied) or "none"; `copy_audio=False`
+        is "none"."""
         _require_av()
+        codec = codec or codec_for(info)
+        audio = audio or ("copy" if copy_audio else "none")
+        if audio not in ("copy", "aac", "none"):
+            raise VideoError(f"{path}: expected --audio copy, aac or none, got {audio!r}")
+        self.audio = audio
+        self.container_format = container_format
         if codec not in av.codecs_available:
             raise VideoError(f"{path}: expected an encoder FFmpeg has (libx264, libx265, ffv1, "
                              f"libx264rgb, prores_ks ...), got {codec!r}")
@@ -280,8 +329,10 @@ class VideoWriter:
         self._audio_map: dict = {}
         self._lookahead = None
         self._closed = False
+        self._decoders: dict = {}  # source audio stream index -> output stream, when re-encoding
+        kinds = ("audio", "subtitle") if audio != "none" else ()
         try:
-            self._open(copy_audio and info.audio_streams > 0)
+            self._open(tuple(k for k in kinds if (info.audio_streams if k == "audio" else info.subtitle_streams)))
         except VideoError:
             remove_quietly(self._tmp)
             raise
@@ -290,14 +341,19 @@ class VideoWriter:
             raise VideoError(f"{path}: cannot start encoding with {codec} ({self.pix_fmt}): {exc}") from exc
 
     # -- setup ---------------------------------------------------------------------------------
-    def _open(self, with_audio: bool) -> None:
+    def _open(self, keep: tuple[str, ...]) -> None:
+        """Open the output with the video stream and the source's streams of the kinds in `keep`
+        ("audio", "subtitle"); where the container cannot hold them, try again with fewer, and say so."""
         info = self.info
         try:
-            self._out = av.open(self._tmp, "w")
-        except (av.error.FFmpegError, OSError) as exc:
+            self._out = av.open(self._tmp, "w", format=self.container_format)
+        except (av.error.FFmpegError, OSError, ValueError) as exc:
             raise VideoError(f"{self.path}: cannot create the output: {exc}") from exc
         rate = info.fps or Fraction(25)
         stream = self._out.add_stream(self.codec, rate=rate, options=dict(self._options))
+        if info.rotation:
+            stream.set_display_rotation(info.rotation)
+        self._copy_metadata(stream)
         stream.width, stream.height = info.width, info.height
         stream.pix_fmt = self.pix_fmt
         if self.codec in _FPS_TIME_BASE_CODECS or info.time_base is None:
@@ -322,24 +378,48 @@ class VideoWriter:
                                  f"{self.pix_fmt} ({self.codec} has no deeper format)")
         if info.has_alpha and not _format_bits_alpha(self.pix_fmt)[1]:
             self.warnings.append(f"{self.path}: {self.codec} ({self.pix_fmt}) has no alpha; alpha dropped")
-        if with_audio:
+        if keep:
             try:
-                self._start_audio()
+                self._start_audio(keep)
                 self._out.start_encoding()
-            except Exception as exc:  # e.g. an audio codec this container cannot hold
-                self.warnings.append(f"{self.path}: audio not copied ({exc})")
+            except Exception as exc:  # e.g. SRT subtitles in MP4, or AAC in WebM
+                dropped = keep[-1]
+                hint = " (--audio aac re-encodes the audio)" if dropped == "audio" else " (MKV holds them)"
+                self.warnings.append(f"{self.path}: {dropped} streams not kept: {self._out.format.name} "
+                                     f"cannot hold them ({exc}){hint}")
                 self._close_quietly()
-                self._audio_map = {}
-                self._open(False)
+                self._audio_map, self._decoders = {}, {}
+                self._open(keep[:-1])
                 return
         else:
             self._out.start_encoding()
+        for what in self.info.other_streams:
+            self.warnings.append(f"{self.path}: {what} of {self.info.path} not kept")
 
-    def _start_audio(self) -> None:
+    def _copy_metadata(self, video_stream) -> None:
+        """The container's tags (title, dates, ...) and the video stream's (language, title)."""
+        try:
+            with av.open(self.info.path) as src:
+                _copy_tags(src.metadata, self._out.metadata)
+                _copy_tags(src.streams.video[0].metadata, video_stream.metadata)
+        except (av.error.FFmpegError, OSError, IndexError):
+            pass  # a source that is not a video file (frames encoded into one): nothing to copy
+
+    def _start_audio(self, keep: tuple[str, ...]) -> None:
+        """The source's audio and subtitle streams (those of the kinds in `keep`), copied (or audio
+        re-encoded with --audio aac), with their tags (language, title) and disposition."""
         self._audio_in = av.open(self.info.path)
-        ins = list(self._audio_in.streams.audio)
+        ins = [s for s in self._audio_in.streams if s.type in keep]
         for s in ins:
-            self._audio_map[s.index] = self._out.add_stream_from_template(s)
+            if s.type == "audio" and self.audio == "aac":
+                out = self._out.add_stream("aac", rate=s.codec_context.sample_rate or 48000)
+                out.layout = s.codec_context.layout
+                self._decoders[s.index] = out
+            else:
+                out = self._out.add_stream_from_template(s)
+            _copy_tags(s.metadata, out.metadata)
+            out.disposition = s.disposition
+            self._audio_map[s.index] = out
         self._audio_packets = iter(self._audio_in.demux(*ins))
 
     # -- writing -------------------------------------------------------------------------------
@@ -395,7 +475,14 @@ class VideoWriter:
                 self._lookahead = pkt
                 return
             self._lookahead = None
-            pkt.stream = self._audio_map[pkt.stream.index]
+            index = pkt.stream.index
+            if index in self._decoders:  # --audio aac: decode, re-encode
+                for frame in pkt.decode():
+                    frame.pts = None
+                    for out in self._decoders[index].encode(frame):
+                        self._out.mux(out)
+                continue
+            pkt.stream = self._audio_map[index]
             self._out.mux(pkt)
 
     # -- finishing -----------------------------------------------------------------------------
@@ -406,6 +493,9 @@ class VideoWriter:
                 self._out.mux(packet)
             if self._audio_packets is not None:
                 self._copy_audio(until=audio_until)
+            for stream in self._decoders.values():  # flush the audio encoders
+                for packet in stream.encode(None):
+                    self._out.mux(packet)
             self._out.close()
             self._closed = True
             if self._audio_in is not None:

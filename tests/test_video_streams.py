@@ -1,0 +1,118 @@
+"""Every stream and its metadata kept (issue 17): audio tracks and subtitles with their language tags,
+the container's title, the display rotation, and the source's codec family when no --codec is given."""
+from __future__ import annotations
+
+import importlib.util
+import os
+
+import av
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from mlaa_stream.cli.main import main
+from mlaa_stream.io.video import probe_video
+
+ROOT = os.path.join(os.path.dirname(__file__), "..")
+_spec = importlib.util.spec_from_file_location("make_demo", os.path.join(ROOT, "fixtures", "make_demo.py"))
+make_demo = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(make_demo)
+
+
+def run(*args):
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+def make_rich(path: str, tmp) -> None:
+    """An MKV as phones and rippers make them: rotated 90°, titled, two audio tracks (eng, fra) and a
+    German subtitle stream (from an SRT through FFmpeg's demuxer)."""
+    srt = os.path.join(tmp, "subs.srt")
+    with open(srt, "w") as fh:
+        fh.write("1\n00:00:00,000 --> 00:00:00,300\nHallo\n\n2\n00:00:00,300 --> 00:00:00,400\nWelt\n")
+    sub_in = av.open(srt)
+    out = av.open(path, "w")
+    out.metadata["title"] = "A phone clip"
+    v = out.add_stream("libx264", rate=24)
+    v.width, v.height, v.pix_fmt = 64, 48, "yuv420p"
+    v.set_display_rotation(90)
+    v.metadata["language"] = "eng"
+    auds = []
+    for lang in ("eng", "fra"):
+        a = out.add_stream("aac", rate=48000)
+        a.layout = "mono"
+        a.metadata["language"] = lang
+        auds.append(a)
+    s = out.add_stream_from_template(sub_in.streams.subtitles[0])
+    s.metadata["language"] = "deu"
+    out.start_encoding()
+    t = np.arange(48000 // 24 * 10) / 48000
+    for k, a in enumerate(auds):
+        samples = (0.2 * np.sin(2 * np.pi * (440 + 220 * k) * t)).astype(np.float32)[None, :]
+        for i in range(0, samples.shape[1], 1024):
+            fr = av.AudioFrame.from_ndarray(np.ascontiguousarray(samples[:, i:i + 1024]), format="fltp",
+                                            layout="mono")
+            fr.sample_rate, fr.pts = 48000, i
+            for p in a.encode(fr):
+                out.mux(p)
+        for p in a.encode(None):
+            out.mux(p)
+    for i in range(10):
+        f = av.VideoFrame.from_ndarray(np.full((48, 64, 3), i * 20, np.uint8), format="rgb24")
+        f.pts = i
+        for p in v.encode(f):
+            out.mux(p)
+    for p in v.encode():
+        out.mux(p)
+    for pkt in sub_in.demux(sub_in.streams.subtitles[0]):
+        if pkt.dts is not None:
+            pkt.stream = s
+            out.mux(pkt)
+    out.close()
+    sub_in.close()
+
+
+def streams(path) -> list[tuple[str, str, str | None]]:
+    with av.open(str(path)) as c:
+        return [(st.type, st.codec_context.name, st.metadata.get("language")) for st in c.streams]
+
+
+@pytest.fixture(scope="module")
+def rich(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("rich")
+    path = str(tmp / "rich.mkv")
+    make_rich(path, str(tmp))
+    return path
+
+
+def test_streams_tags_and_rotation_are_kept(rich, tmp_path):
+    info = probe_video(rich)
+    assert info.rotation == 90 and info.audio_streams == 2 and info.subtitle_streams == 1
+    r = run(rich, "-o", tmp_path / "out.mkv")
+    assert r.exit_code == 0, r.output
+    assert streams(tmp_path / "out.mkv") == [("video", "h264", "eng"), ("audio", "aac", "eng"),
+                                             ("audio", "aac", "fra"), ("subtitle", "srt", "deu")]
+    with av.open(str(tmp_path / "out.mkv")) as c:
+        assert c.metadata.get("title") == "A phone clip"
+        assert next(c.decode(video=0)).rotation == 90
+    with av.open(str(tmp_path / "out.mkv")) as c:
+        assert sum(1 for p in c.demux(c.streams.subtitles[0]) if p.size) == 2
+
+
+def test_audio_none_and_aac(rich, tmp_path):
+    assert run(rich, "-o", tmp_path / "none.mkv", "--audio", "none").exit_code == 0
+    assert [s[0] for s in streams(tmp_path / "none.mkv")] == ["video"]
+    r = run(rich, "-o", tmp_path / "aac.mp4", "--audio", "aac")
+    assert r.exit_code == 0, r.output
+    kinds = streams(tmp_path / "aac.mp4")
+    assert "subtitle streams not kept: mp4 cannot hold them" in r.output  # SRT in MP4: named, not silent
+    assert [k[:2] for k in kinds if k[0] == "audio"] == [("audio", "aac"), ("audio", "aac")]
+
+
+def test_the_codec_family_follows_the_source(tmp_path):
+    src = str(tmp_path / "hevc.mkv")
+    make_demo.write_clip(src, frames=6, codec="libx265", audio=False, options={"x265-params": "log-level=error"})
+    r = run(src, "-o", tmp_path / "out.mkv")
+    assert r.exit_code == 0, r.output
+    assert streams(tmp_path / "out.mkv")[0][1] == "hevc"
+    assert run(src, "-o", tmp_path / "h264.mkv", "--codec", "libx264").exit_code == 0
+    assert streams(tmp_path / "h264.mkv")[0][1] == "h264"
