@@ -224,12 +224,19 @@ def _job_for(kind: str, output: str) -> type:
               help="The video encoder's speed preset for x264/x265 (ultrafast ... veryslow); not the "
                    "filter's --preset.")
 @click.option("--pix-fmt", default=None, help="Encoder pixel format (default: the closest to the source).")
+@click.option("--start", "start", default=None, metavar="TIME",
+              help="Video: begin here (seconds 12.5, 1:02.5, 0:01:02.5, or a frame 300f); the output "
+                   "starts at 0, audio and subtitles cut to match.")
+@click.option("--end", "end", default=None, metavar="TIME", help="Video: stop before this time or frame.")
 @click.option("--rate", type=click.FloatRange(min=0, min_open=True), default=24.0, show_default=True,
               help="Frame rate of a video made from images (a folder or pattern with -o out.mp4).")
 @click.option("--video-backend", type=click.Choice(["pyav", "opencv"]), default="pyav",
               show_default=True, help="opencv: the fallback (8-bit, mp4v, no audio).")
 @click.option("--overlay", type=click.Path(dir_okay=False), default=None,
               help="Draw antialiased polylines from a JSON/GeoJSON file on every frame.")
+@click.option("--progress", "progress_path", default=None, metavar="FILE|-",
+              help="Also write machine-readable progress there (- is stdout): key=value lines (frame, "
+                   "total_frames, fps, elapsed_s, left_s), each block ended by progress=continue|end.")
 @click.option("--in-flight", type=click.IntRange(1, 3), default=2, show_default=True,
               help="Frames submitted to the device before the oldest is collected (1 = serialized).")
 @click.option("--temporal/--no-temporal", default=None,
@@ -254,8 +261,10 @@ def filter_command(ctx: click.Context, input_path: str, output: str, overwrite: 
                    frames: str | None, preset: str | None, threshold: float | None,
                    metric: str | None, display_space: bool, reconstruct: bool | None,
                    bridge: bool | None, codec: str | None, audio: str,
-                   crf: int, encoder_preset: str, pix_fmt: str | None, rate: float, video_backend: str,
-                   overlay: str | None, in_flight: int, temporal: bool | None, temporal_mode: str,
+                   crf: int, encoder_preset: str, pix_fmt: str | None, start: str | None, end: str | None,
+                   rate: float, video_backend: str,
+                   overlay: str | None, progress_path: str | None, in_flight: int, temporal: bool | None,
+                   temporal_mode: str,
                    temporal_k: float | None, stats_path: str | None, show: str | None,
                    device: str | None, verbose: int, quiet: bool) -> None:
     """Remove jaggies from an image, a folder of images, a frame sequence or a video.
@@ -272,7 +281,8 @@ def filter_command(ctx: click.Context, input_path: str, output: str, overwrite: 
                            display_space=display_space, reconstruct=reconstruct, bridge=bridge,
                            codec=codec, audio=audio, crf=crf,
                            encoder_preset=encoder_preset, pix_fmt=pix_fmt, rate=rate, video_backend=video_backend,
-                           overlay=overlay, in_flight=in_flight, device=device,
+                           start=start, end=end,
+                           overlay=overlay, in_flight=in_flight, device=device, progress_path=progress_path,
                            temporal=TemporalOptions(temporal, temporal_mode, temporal_k, stats_path, show))
     except Terminated as exc:
         con.error(f"terminated by {exc}; complete outputs are kept, the one in progress was removed")
@@ -288,7 +298,8 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
             reconstruct, codec: str | None, crf: int, encoder_preset: str, pix_fmt: str | None,
             video_backend: str, overlay: str | None, in_flight: int, device: str | None,
             temporal: "TemporalOptions | None" = None, bridge: bool | None = None, rate: float = 24.0,
-            audio: str = "copy") -> int:
+            audio: str = "copy", progress_path: str | None = None, start: str | None = None,
+            end: str | None = None) -> int:
     """Check everything that can be checked without a device, then build the filter and run."""
     temporal = temporal or TemporalOptions()
     if overwrite and resume:
@@ -298,14 +309,19 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
     try:
         kind = _kind_of(input_path)
         if frames is not None and kind != "pattern":
-            raise Usage(f"--frames needs a frame pattern like shot/%04d.exr, got {input_path}")
+            raise Usage(f"--frames needs a frame pattern like shot/%04d.exr, got {input_path} "
+                        f"(for a video: --start/--end)")
+        if (start is not None or end is not None) and kind != "video":
+            raise Usage("--start/--end trim a video; for a frame pattern use --frames A-B")
         post_hooks = _load_post_hooks(overlay, device)
         if (temporal.enabled or temporal.show or temporal.stats_path) and kind != "video":
             raise Usage("--temporal works on video input for now; image folders and sequences are "
                         "filtered frame by frame")
         job = _job_for(kind, output)
         runner = job(input_path, output, kind, con, overwrite=overwrite, resume=resume,
-                     frames=frames, codec=codec, audio=audio, crf=crf, encoder_preset=encoder_preset,
+                     frames=frames, codec=codec, audio=audio, progress_path=progress_path, crf=crf,
+                     start=start, end=end,
+                     encoder_preset=encoder_preset,
                      pix_fmt=pix_fmt, rate=rate, video_backend=video_backend, filter_kwargs=kwargs)
         runner.prepare()
     except Usage as exc:
@@ -345,6 +361,7 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
                 temporal.finish(stage, con)
     finally:
         runner.abort()  # no-op after a commit; removes a video in progress on errors and Ctrl-C
+        runner.close_progress()
     if con.verbose and not con.quiet:
         click.echo(times.report(), err=True)
     elif not con.quiet and not sys.stderr.isatty():  # logs and pipelines: one line, no progress bar
@@ -403,8 +420,19 @@ class _Job:
     def _progress(self, total: int | None):
         from mlaa_stream.io.progress import Progress
 
+        path = self.opts.get("progress_path")
+        if path and getattr(self, "_machine", None) is None:
+            try:
+                self._machine = sys.stdout if path == "-" else open(path, "w", buffering=1)
+            except OSError as exc:
+                raise Failed(f"{path}: cannot write progress ({exc.strerror})") from exc
         return Progress(total, label=os.path.basename(self.input.rstrip("/")) or self.input,
-                        enabled=None if not self.con.quiet else False)
+                        enabled=None if not self.con.quiet else False, machine=getattr(self, "_machine", None))
+
+    def close_progress(self) -> None:
+        machine = getattr(self, "_machine", None)
+        if machine is not None and machine is not sys.stdout:
+            machine.close()
 
 
 class _ImageJob(_Job):
@@ -590,6 +618,7 @@ class _VideoJob(_Job):
             self.info = (probe_video_cv if o["video_backend"] == "opencv" else probe_video)(self.input)
         except VideoError as exc:
             raise Failed(str(exc)) from exc
+        self.start, self.end = self._trim()
         self.con.info(f"{self.input}: {self.info.width}x{self.info.height} {self.info.pix_fmt} "
                       f"{self.info.bits}-bit, {self.info.fps} fps, {self.info.frames or '?'} frames, "
                       f"{self.info.audio_streams} audio streams")
@@ -599,11 +628,28 @@ class _VideoJob(_Job):
             else:
                 self.writer = VideoWriter(out, self.info, codec=o["codec"], crf=o["crf"],
                                           preset=o["encoder_preset"], pix_fmt=o["pix_fmt"],
-                                          overwrite=o["overwrite"], audio=o["audio"])
+                                          overwrite=o["overwrite"], audio=o["audio"],
+                                          offset=self.start or 0.0, end=self.end)
         except VideoError as exc:
             raise Failed(str(exc)) from exc
         self.con.info(f"encoding {getattr(self.writer, 'codec', 'mp4v')} "
                       f"{getattr(self.writer, 'pix_fmt', 'bgr24')} to {out}")
+
+    def _trim(self) -> tuple[float | None, float | None]:
+        """--start/--end in seconds (None: not given); refused when empty or backwards."""
+        from mlaa_stream.io.video import parse_time
+
+        o = self.opts
+        try:
+            start = parse_time(o["start"], self.info.fps) if o.get("start") is not None else None
+            end = parse_time(o["end"], self.info.fps) if o.get("end") is not None else None
+        except ValueError as exc:
+            raise Usage(f"--start/--end: {exc}") from exc
+        if start is not None and end is not None and end <= start:
+            raise Usage(f"--end ({o['end']}) must come after --start ({o['start']})")
+        if o["video_backend"] == "opencv" and (start or end is not None):
+            raise Usage("--start/--end need the pyav video backend")
+        return start, end
 
     def nothing_to_do(self) -> bool:
         return False
@@ -618,8 +664,17 @@ class _VideoJob(_Job):
         from mlaa_stream.io.video import VideoReadError, read_video_cv
         from mlaa_stream.pipeline import filter_video
 
-        source = read_video_cv(self.info) if self.opts["video_backend"] == "opencv" else None
-        progress = self._progress(self.info.frames)
+        from mlaa_stream.io.video import read_video
+
+        if self.opts["video_backend"] == "opencv":
+            source = read_video_cv(self.info)
+        else:
+            source = read_video(self.info, start=self.start, end=self.end)
+        total = self.info.frames
+        if total and self.info.fps and (self.start or self.end is not None):
+            duration = (self.end if self.end is not None else total / float(self.info.fps)) - (self.start or 0)
+            total = max(int(round(duration * float(self.info.fps))), 0)
+        progress = self._progress(total)
         try:
             filter_video(self.info, self.writer, filt, source=source, post_hooks=post_hooks,
                          temporal=temporal,

@@ -107,3 +107,49 @@ def test_bench_writes_to_a_temporary_folder_unless_told(tmp_path, monkeypatch):
     assert r.exit_code == 0, stderr(r)
     assert (tmp_path / "tmp" / "mlaa-stream-bench" / "README.md").exists()
     assert not (tmp_path / "docs").exists()
+
+
+def test_start_and_end_trim_a_video_and_its_audio(tmp_path):
+    r = run(CLIP, "-o", tmp_path / "t.mp4", "--start", "0.125", "--end", "8f")
+    assert r.exit_code == 0, stderr(r)
+    with av.open(str(tmp_path / "t.mp4")) as c:
+        times = [float(f.pts * f.time_base) for f in c.decode(video=0)]
+    assert len(times) == 5 and times[0] == 0.0  # source frames 3..7, the output starts at 0
+    with av.open(str(tmp_path / "t.mp4")) as c:
+        audio = c.streams.audio[0]
+        assert abs(float(audio.duration * audio.time_base) - 5 / 24) < 0.03
+    r = run(CLIP, "-o", tmp_path / "u.mp4", "--start", "2", "--end", "1")
+    assert r.exit_code == 2 and "must come after --start" in stderr(r)
+    r = run(DEMO + "/images", "-o", tmp_path / "o", "--start", "1")
+    assert r.exit_code == 2 and "--start/--end trim a video" in stderr(r)
+
+
+def test_parse_time_forms():
+    from mlaa_stream.io.video import parse_time
+    from fractions import Fraction
+
+    assert parse_time("12.5", None) == 12.5 and parse_time("1:02.5", None) == 62.5
+    assert parse_time("1:00:01", None) == 3601.0 and parse_time("48f", Fraction(24)) == 2.0
+    for bad in ("", "x", "1:2:3:4", "-3"):
+        try:
+            parse_time(bad, None)
+        except ValueError as exc:
+            assert "expected a time" in str(exc)
+        else:
+            raise AssertionError(bad)
+
+
+def test_machine_readable_progress(tmp_path):
+    r = run(CLIP, "-o", tmp_path / "o.mp4", "--progress", tmp_path / "p.txt", "-q")
+    assert r.exit_code == 0, stderr(r)
+    blocks, block = [], {}
+    for line in (tmp_path / "p.txt").read_text().splitlines():
+        key, _, value = line.partition("=")
+        block[key] = value
+        if key == "progress":
+            blocks.append(block)
+            block = {}
+    assert blocks and block == {} and blocks[-1]["progress"] == "end"
+    assert all(b["progress"] == "continue" for b in blocks[:-1])
+    last = blocks[-1]
+    assert last["frame"] == "10" and last["total_frames"] == "10" and float(last["fps"]) > 0

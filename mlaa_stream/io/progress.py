@@ -22,7 +22,12 @@ class Progress:
     """`update(done)` from any thread; `close()` ends the line. Prints nothing when disabled."""
 
     def __init__(self, total: int | None, *, label: str = "", stream: TextIO | None = None,
-                 enabled: bool | None = None, interval: float = 0.25):
+                 enabled: bool | None = None, interval: float = 0.25, machine: TextIO | None = None):
+        """`machine`: also write key=value blocks there (--progress FILE|-), each ended by a `progress=`
+        line as ffmpeg's -progress does: frame, total_frames, fps, elapsed_s, left_s; at most one a second
+        and a last one (progress=end) on close."""
+        self.machine = machine
+        self._machine_last = 0.0
         self.stream = stream if stream is not None else sys.stderr
         if enabled is None:
             isatty = getattr(self.stream, "isatty", None)
@@ -49,8 +54,30 @@ class Progress:
             text += f"  {_clock(elapsed)}"
         return text.strip()
 
+    def machine_block(self, done: int, end: bool, now: float | None = None) -> str:
+        """One key=value block for `done` frames."""
+        elapsed = (now if now is not None else time.perf_counter()) - self.started
+        fps = done / elapsed if elapsed > 0 else 0.0
+        left = (self.total - done) / fps if self.total and fps > 0 else None
+        lines = [f"frame={done}", f"total_frames={self.total if self.total else 'N/A'}", f"fps={fps:.2f}",
+                 f"elapsed_s={elapsed:.2f}", f"left_s={'N/A' if left is None else f'{max(left, 0.0):.1f}'}",
+                 f"progress={'end' if end else 'continue'}"]
+        return "\n".join(lines) + "\n"
+
+    def _write_machine(self, done: int, end: bool) -> None:
+        now = time.perf_counter()
+        if self.machine is None or (not end and now - self._machine_last < 1.0):
+            return
+        self._machine_last = now
+        try:
+            self.machine.write(self.machine_block(done, end, now))
+            self.machine.flush()
+        except (OSError, ValueError):  # a closed pipe must not stop the filter
+            self.machine = None
+
     def update(self, done: int) -> None:
         self._done = done
+        self._write_machine(done, end=False)
         if not self.enabled:
             return
         now = time.perf_counter()
@@ -76,6 +103,7 @@ class Progress:
 
     def close(self) -> None:
         """Print the final state and end the line."""
+        self._write_machine(self._done, end=True)
         if not self.enabled:
             return
         with self._lock:

@@ -193,7 +193,23 @@ def _copy_tags(src: dict, dst) -> None:
             dst[key] = value
 
 
-def read_video(info: VideoInfo, *, check_length: bool = True) -> Iterator[Item]:
+def parse_time(text: str, fps: Fraction | None) -> float:
+    """A time in seconds from '12.5', '1:02.5', '0:01:02.5' or a frame number '300f' (at `fps`)."""
+    t = (text or "").strip()
+    try:
+        if t.endswith("f"):
+            return int(t[:-1]) / float(fps or 25)
+        parts = [float(p) for p in t.split(":")]
+        if not parts or len(parts) > 3 or any(p < 0 for p in parts):
+            raise ValueError
+        return sum(p * 60 ** k for k, p in enumerate(reversed(parts)))
+    except ValueError:
+        raise ValueError(f"expected a time like 12.5, 1:02.5 or 0:01:02.5, or a frame like 300f, "
+                         f"got {text!r}") from None
+
+
+def read_video(info: VideoInfo, *, check_length: bool = True, start: float | None = None,
+               end: float | None = None) -> Iterator[Item]:
     """Decode every frame of `info.path` to `info.sample_format`; Item.meta is a FrameTime.
 
     Raises VideoReadError naming the frame where decoding stopped, also when the stream ends well
@@ -206,13 +222,21 @@ def read_video(info: VideoInfo, *, check_length: bool = True) -> Iterator[Item]:
     except (av.error.FFmpegError, OSError) as exc:
         raise VideoReadError(f"{path}: cannot open: {exc}", 0) from exc
     n, last_time = 0, None
+    half = 0.5 / float(info.fps or 25)  # a frame counts as inside [start, end) by its timestamp
     try:
         stream = container.streams.video[0]
         stream.thread_type = "AUTO"
         sws = _sws_flags()
+        if start:  # to the keyframe before `start`; the frames before it are decoded and dropped
+            container.seek(int(start / stream.time_base), stream=stream, backward=True, any_frame=False)
         try:
             for packet in container.demux(stream):
                 for frame in packet.decode():
+                    ft = float(frame.pts * frame.time_base) if frame.pts is not None and frame.time_base else None
+                    if start and ft is not None and ft < start - half:
+                        continue
+                    if end is not None and ft is not None and ft >= end - half:
+                        return
                     if (frame.width, frame.height) != (info.width, info.height):
                         raise VideoReadError(
                             f"{path}: frame {n}: expected {info.width}x{info.height}, got "
@@ -227,7 +251,7 @@ def read_video(info: VideoInfo, *, check_length: bool = True) -> Iterator[Item]:
                     n += 1
         except (av.error.FFmpegError, EOFError) as exc:
             raise VideoReadError(f"{path}: decoding stopped at frame {n}: {exc}", n) from exc
-        if check_length:
+        if check_length and not start and end is None:
             _check_length(info, n, last_time)
     finally:
         container.close()
@@ -298,7 +322,8 @@ class VideoWriter:
     def __init__(self, path: str, info: VideoInfo, *, codec: str | None = DEFAULT_CODEC,
                  crf: int | None = DEFAULT_CRF, preset: str | None = DEFAULT_ENCODER_PRESET,
                  pix_fmt: str | None = None, copy_audio: bool = True, overwrite: bool = False,
-                 audio: str | None = None, container_format: str | None = None):
+                 audio: str | None = None, container_format: str | None = None, offset: float = 0.0,
+                 end: float | None = None):
         """`codec` None: the source's family (codec_for). `audio`: "copy" (default, with the subtitle
         streams and every tag), "aac" (audio re-encoded, subtitles copied) or "none"; `copy_audio=False`
         is "none"."""
@@ -309,6 +334,8 @@ class VideoWriter:
             raise VideoError(f"{path}: expected --audio copy, aac or none, got {audio!r}")
         self.audio = audio
         self.container_format = container_format
+        self.offset = float(offset)  # seconds of the source before the first frame (--start): cut
+        self.audio_end = None if end is None else float(end) - self.offset  # --end, in output seconds
         if codec not in av.codecs_available:
             raise VideoError(f"{path}: expected an encoder FFmpeg has (libx264, libx265, ffv1, "
                              f"libx264rgb, prores_ks ...), got {codec!r}")
@@ -428,7 +455,7 @@ class VideoWriter:
         vf = av.VideoFrame.from_ndarray(np.ascontiguousarray(frame), format=self._array_format(frame))
         tb = self._time_base
         if when is not None and when.pts is not None and when.time_base:
-            t = when.pts * Fraction(when.time_base)
+            t = when.pts * Fraction(when.time_base) - Fraction(self.offset).limit_denominator(1_000_000)
         else:
             t = self.frames_written / (self.info.fps or Fraction(25))
         vf.pts = int(round(t / tb))
@@ -470,11 +497,18 @@ class VideoWriter:
             if pkt.dts is None:  # the demuxer's end-of-stream marker
                 self._lookahead = None
                 continue
-            t = float(pkt.pts * pkt.time_base) if pkt.pts is not None else float(pkt.dts * pkt.time_base)
+            t = (float(pkt.pts * pkt.time_base) if pkt.pts is not None else float(pkt.dts * pkt.time_base)) \
+                - self.offset
             if until is not None and t >= until:
                 self._lookahead = pkt
                 return
             self._lookahead = None
+            if self.offset:
+                if t < 0:
+                    continue  # before --start
+                shift = int(round(self.offset / pkt.time_base))
+                pkt.pts = None if pkt.pts is None else pkt.pts - shift
+                pkt.dts = None if pkt.dts is None else pkt.dts - shift
             index = pkt.stream.index
             if index in self._decoders:  # --audio aac: decode, re-encode
                 for frame in pkt.decode():
@@ -492,7 +526,7 @@ class VideoWriter:
             for packet in self._stream.encode():
                 self._out.mux(packet)
             if self._audio_packets is not None:
-                self._copy_audio(until=audio_until)
+                self._copy_audio(until=audio_until if audio_until is not None else self.audio_end)
             for stream in self._decoders.values():  # flush the audio encoders
                 for packet in stream.encode(None):
                     self._out.mux(packet)
