@@ -26,6 +26,9 @@ Examples:
   mlaa-stream in.mp4 -o out.mp4                      H.264, CRF 18, preset veryfast, audio copied
   mlaa-stream in.mov -o mid.mkv --codec ffv1         lossless intermediate (also: libx264rgb --crf 0)
   mlaa-stream in.mp4 -o out.mp4 --preset soft --metric luma --threshold 0.08
+  mlaa-stream in.mp4 -o 'frames/%04d.png'            a video to images; 'shot/%04d.exr' -o out.mp4 back
+  mlaa-stream in.mkv --start 1:30 --end 2:00 -o clip.mkv   trim (seconds, h:m:s or frames like 300f)
+  vspipe -c y4m script.vpy - | mlaa-stream - -o - -f y4m | ffmpeg -i - out.mkv   pipes
 
 \b
 Images and sequences go through OpenImageIO: bit depth (8/16-bit, half, float), channels, alpha
@@ -154,6 +157,8 @@ def _kind_of(path: str) -> str:
     from mlaa_stream.io.sequence import is_pattern
     from mlaa_stream.io.video import is_video_path
 
+    if path == "-":
+        return "video"  # standard input: a stream FFmpeg can read without seeking (y4m, NUT, MKV, TS)
     if is_pattern(path) and not os.path.exists(path):
         return "pattern"
     if not os.path.exists(path):
@@ -215,6 +220,9 @@ def _job_for(kind: str, output: str) -> type:
               help="Video encoder: libx264, libx265, ffv1 / libx264rgb (lossless intermediates), "
                    "prores_ks ... (default: the source's family, HEVC -> libx265, ProRes -> prores_ks, "
                    "FFV1 -> ffv1; others libx264).")
+@click.option("-f", "--format", "container", default=None, metavar="NAME",
+              help="Output container (FFmpeg's name, or y4m / mkv / ts); needed with -o - (standard "
+                   "output): y4m (raw, 8-16 bit), nut, matroska, mpegts. Default: from the file name.")
 @click.option("--audio", type=click.Choice(["copy", "aac", "none"]), default="copy", show_default=True,
               help="Audio tracks: copied with the subtitle streams and every tag (language, title), "
                    "re-encoded to AAC (subtitles still copied), or left out.")
@@ -260,7 +268,7 @@ def _job_for(kind: str, output: str) -> type:
 def filter_command(ctx: click.Context, input_path: str, output: str, overwrite: bool, resume: bool,
                    frames: str | None, preset: str | None, threshold: float | None,
                    metric: str | None, display_space: bool, reconstruct: bool | None,
-                   bridge: bool | None, codec: str | None, audio: str,
+                   bridge: bool | None, codec: str | None, container: str | None, audio: str,
                    crf: int, encoder_preset: str, pix_fmt: str | None, start: str | None, end: str | None,
                    rate: float, video_backend: str,
                    overlay: str | None, progress_path: str | None, in_flight: int, temporal: bool | None,
@@ -279,9 +287,9 @@ def filter_command(ctx: click.Context, input_path: str, output: str, overwrite: 
             code = _filter(ctx, con, input_path, output, overwrite=overwrite, resume=resume,
                            frames=frames, preset=preset, threshold=threshold, metric=metric,
                            display_space=display_space, reconstruct=reconstruct, bridge=bridge,
-                           codec=codec, audio=audio, crf=crf,
-                           encoder_preset=encoder_preset, pix_fmt=pix_fmt, rate=rate, video_backend=video_backend,
-                           start=start, end=end,
+                           codec=codec, container=container, audio=audio, crf=crf,
+                           encoder_preset=encoder_preset, pix_fmt=pix_fmt, rate=rate,
+                           video_backend=video_backend, start=start, end=end,
                            overlay=overlay, in_flight=in_flight, device=device, progress_path=progress_path,
                            temporal=TemporalOptions(temporal, temporal_mode, temporal_k, stats_path, show))
     except Terminated as exc:
@@ -299,7 +307,7 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
             video_backend: str, overlay: str | None, in_flight: int, device: str | None,
             temporal: "TemporalOptions | None" = None, bridge: bool | None = None, rate: float = 24.0,
             audio: str = "copy", progress_path: str | None = None, start: str | None = None,
-            end: str | None = None) -> int:
+            end: str | None = None, container: str | None = None) -> int:
     """Check everything that can be checked without a device, then build the filter and run."""
     temporal = temporal or TemporalOptions()
     if overwrite and resume:
@@ -319,10 +327,10 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
                         "filtered frame by frame")
         job = _job_for(kind, output)
         runner = job(input_path, output, kind, con, overwrite=overwrite, resume=resume,
-                     frames=frames, codec=codec, audio=audio, progress_path=progress_path, crf=crf,
-                     start=start, end=end,
-                     encoder_preset=encoder_preset,
-                     pix_fmt=pix_fmt, rate=rate, video_backend=video_backend, filter_kwargs=kwargs)
+                     frames=frames, codec=codec, container=container, audio=audio,
+                     progress_path=progress_path, crf=crf, start=start, end=end,
+                     encoder_preset=encoder_preset, pix_fmt=pix_fmt, rate=rate,
+                     video_backend=video_backend, filter_kwargs=kwargs)
         runner.prepare()
     except Usage as exc:
         con.error(str(exc))
@@ -591,31 +599,23 @@ class _VideoJob(_Job):
     """A video file in, a video file out."""
 
     def prepare(self) -> None:
-        from mlaa_stream.io.sequence import same_file
-        from mlaa_stream.io.video import (CvVideoWriter, VideoError, VideoWriter, probe_video,
-                                probe_video_cv)
+        from mlaa_stream.io.video import (PIPE, CvVideoWriter, VideoError, VideoWriter, container_format_for,
+                                          open_pipe, probe_video, probe_video_cv)
 
         o = self.opts
         out = self.output
-        if os.path.isdir(out) or out.endswith(("/", os.sep)):
-            out = os.path.join(out, os.path.basename(self.input))
-        self.output = out
-        if same_file(self.input, out):
-            raise Usage(f"{out}: output is the input; choose another output")
-        if o["resume"]:
-            self.con.warn("--resume applies to folders and sequences; a video is redone")
-        if os.path.exists(out) and not o["overwrite"]:
-            raise Usage(f"{out}: exists; use --overwrite to replace it")
-        folder = os.path.dirname(os.path.abspath(out))
-        if not os.path.isdir(folder):
-            raise Failed(f"{folder}: the output folder does not exist")
-        _check_writable(folder)
-        from mlaa_stream.io.images import remove_quietly, stale_temp_files
-        for path in stale_temp_files(folder):  # left by a run that was killed
-            remove_quietly(path)
-            self.con.info(f"{path}: removed (a temporary file left by an interrupted run)")
+        if out != PIPE:
+            self._check_output_file(out)
+        elif o.get("progress_path") == PIPE:
+            raise Usage("--progress - and -o - both want standard output; give --progress a file")
+        if (self.input == PIPE or out == PIPE) and o["video_backend"] == "opencv":
+            raise Usage("pipes (-) need the pyav video backend")
+        self.pipe_in = None
         try:
-            self.info = (probe_video_cv if o["video_backend"] == "opencv" else probe_video)(self.input)
+            if self.input == PIPE:  # read once: the open container goes on to read_video
+                self.info, self.pipe_in = open_pipe()
+            else:
+                self.info = (probe_video_cv if o["video_backend"] == "opencv" else probe_video)(self.input)
         except VideoError as exc:
             raise Failed(str(exc)) from exc
         self.start, self.end = self._trim()
@@ -629,11 +629,37 @@ class _VideoJob(_Job):
                 self.writer = VideoWriter(out, self.info, codec=o["codec"], crf=o["crf"],
                                           preset=o["encoder_preset"], pix_fmt=o["pix_fmt"],
                                           overwrite=o["overwrite"], audio=o["audio"],
-                                          offset=self.start or 0.0, end=self.end)
+                                          offset=self.start or 0.0, end=self.end,
+                                          container_format=container_format_for(o.get("container"), out))
         except VideoError as exc:
             raise Failed(str(exc)) from exc
         self.con.info(f"encoding {getattr(self.writer, 'codec', 'mp4v')} "
                       f"{getattr(self.writer, 'pix_fmt', 'bgr24')} to {out}")
+
+    def _check_output_file(self, out: str) -> None:
+        """A video file out: not the input, not there already (without -y), in a writable folder;
+        temporary files of killed runs there are removed."""
+        from mlaa_stream.io.images import remove_quietly, stale_temp_files
+        from mlaa_stream.io.sequence import same_file
+        from mlaa_stream.io.video import PIPE
+
+        o = self.opts
+        if os.path.isdir(out) or out.endswith(("/", os.sep)):
+            out = os.path.join(out, os.path.basename(self.input) if self.input != PIPE else "out.mkv")
+        self.output = out
+        if self.input != PIPE and same_file(self.input, out):
+            raise Usage(f"{out}: output is the input; choose another output")
+        if o["resume"]:
+            self.con.warn("--resume applies to folders and sequences; a video is redone")
+        if os.path.exists(out) and not o["overwrite"]:
+            raise Usage(f"{out}: exists; use --overwrite to replace it")
+        folder = os.path.dirname(os.path.abspath(out))
+        if not os.path.isdir(folder):
+            raise Failed(f"{folder}: the output folder does not exist")
+        _check_writable(folder)
+        for path in stale_temp_files(folder):  # left by a run that was killed
+            remove_quietly(path)
+            self.con.info(f"{path}: removed (a temporary file left by an interrupted run)")
 
     def _trim(self) -> tuple[float | None, float | None]:
         """--start/--end in seconds (None: not given); refused when empty or backwards."""
@@ -669,7 +695,7 @@ class _VideoJob(_Job):
         if self.opts["video_backend"] == "opencv":
             source = read_video_cv(self.info)
         else:
-            source = read_video(self.info, start=self.start, end=self.end)
+            source = read_video(self.info, start=self.start, end=self.end, container=self.pipe_in)
         total = self.info.frames
         if total and self.info.fps and (self.start or self.end is not None):
             duration = (self.end if self.end is not None else total / float(self.info.fps)) - (self.start or 0)

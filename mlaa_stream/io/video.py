@@ -11,6 +11,7 @@ The output is encoded under a temporary name in its directory and renamed when c
 from __future__ import annotations
 
 import os
+import sys
 from dataclasses import dataclass
 from fractions import Fraction
 from typing import Iterator
@@ -130,34 +131,84 @@ def probe_video(path: str) -> VideoInfo:
     except (av.error.FFmpegError, OSError) as exc:
         raise VideoError(f"{path}: expected a video FFmpeg can read, got: {exc}") from exc
     try:
-        if not container.streams.video:
-            raise VideoError(f"{path}: expected a video stream, found none")
-        s = container.streams.video[0]
-        cc = s.codec_context
-        if not cc.width or not cc.height or cc.format is None:
-            raise VideoError(f"{path}: expected a video stream with a size and pixel format, got "
-                             f"{cc.width}x{cc.height} {cc.format}")
-        pix = cc.format.name
-        bits, alpha = _format_bits_alpha(pix)
-        fps = s.average_rate or s.guessed_rate or None
-        frames = s.frames or None
-        declared = frames is not None
-        duration = (float(s.duration * s.time_base) if s.duration and s.time_base else
-                    container.duration / 1e6 if container.duration else None)
-        if frames is None and fps and duration:
-            frames = int(round(duration * fps))  # an estimate (progress bar): wrong for variable rates
-        colour = {k: int(getattr(cc, k) or 0) for k in _UNSPECIFIED}
-        others = tuple(f"{st.type} stream {st.index}" for st in container.streams
-                       if st.type not in ("video", "audio", "subtitle"))
-        return VideoInfo(path=path, width=cc.width, height=cc.height,
-                         fps=Fraction(fps) if fps else None,
-                         time_base=Fraction(s.time_base) if s.time_base else None,
-                         frames=frames, pix_fmt=pix, bits=bits, has_alpha=alpha, codec=cc.name,
-                         colour=colour, audio_streams=len(container.streams.audio),
-                         frames_declared=declared, duration=duration, rotation=_rotation(path),
-                         subtitle_streams=len(container.streams.subtitles), other_streams=others)
+        return _describe(container, path, _rotation(path))
     finally:
         container.close()
+
+
+PIPE = "-"  # INPUT or OUTPUT: standard input / output
+# -f names people use -> FFmpeg's muxer/demuxer names
+FORMAT_ALIASES = {"y4m": "yuv4mpegpipe", "mkv": "matroska", "ts": "mpegts"}
+# Extensions whose container holds raw pictures: encoded with rawvideo, not a compressed codec.
+_RAW_FORMATS = {"yuv4mpegpipe": ("yuv420p", "yuv422p", "yuv444p", "gray", "yuv420p10le", "yuv422p10le",
+                                 "yuv444p10le", "yuv420p12le", "yuv444p12le", "yuv420p16le", "yuv444p16le")}
+
+
+def container_format_for(name: str | None, path: str) -> str | None:
+    """The FFmpeg muxer for `-f NAME`, or for the output's extension where FFmpeg would not guess it
+    (.y4m); None: FFmpeg picks by the file name."""
+    if name:
+        return FORMAT_ALIASES.get(name.lower(), name.lower())
+    if os.path.splitext(path)[1].lower() == ".y4m":
+        return "yuv4mpegpipe"
+    return None
+
+
+def _raw_pix_fmt(fmt: str, info: "VideoInfo") -> str:
+    """The raw container's pixel format closest to the source: its own where allowed, else 4:4:4 at the
+    source's depth (RGB frames lose no chroma)."""
+    allowed = _RAW_FORMATS[fmt]
+    if info.pix_fmt in allowed:
+        return info.pix_fmt
+    bits = info.bits
+    return "yuv444p" if bits <= 8 else ("yuv444p10le" if bits <= 10 else
+                                        "yuv444p12le" if bits <= 12 else "yuv444p16le")
+
+
+def open_pipe(fmt: str | None = None, stream=None) -> tuple[VideoInfo, object]:
+    """Open standard input (or `stream`) as a video container (y4m, NUT, Matroska, MPEG-TS: formats that
+    need no seeking) and describe it; the container is returned for read_video, as a pipe opens once."""
+    _require_av()
+    src = stream if stream is not None else sys.stdin.buffer
+    try:
+        container = av.open(src, format=container_format_for(fmt, "") if fmt else None)
+    except (av.error.FFmpegError, OSError, ValueError) as exc:
+        raise VideoError(f"standard input: expected a video stream (y4m, NUT, MKV, MPEG-TS), got: {exc}") from exc
+    try:
+        return _describe(container, PIPE, 0), container
+    except BaseException:
+        container.close()
+        raise
+
+
+def _describe(container, path: str, rotation: int) -> VideoInfo:
+    """What we keep from the first video stream of an open container."""
+    if not container.streams.video:
+        raise VideoError(f"{path}: expected a video stream, found none")
+    s = container.streams.video[0]
+    cc = s.codec_context
+    if not cc.width or not cc.height or cc.format is None:
+        raise VideoError(f"{path}: expected a video stream with a size and pixel format, got "
+                         f"{cc.width}x{cc.height} {cc.format}")
+    pix = cc.format.name
+    bits, alpha = _format_bits_alpha(pix)
+    fps = s.average_rate or s.guessed_rate or None
+    frames = s.frames or None
+    declared = frames is not None
+    duration = (float(s.duration * s.time_base) if s.duration and s.time_base else
+                container.duration / 1e6 if container.duration else None)
+    if frames is None and fps and duration:
+        frames = int(round(duration * fps))  # an estimate (progress bar): wrong for variable rates
+    colour = {k: int(getattr(cc, k) or 0) for k in _UNSPECIFIED}
+    others = tuple(f"{st.type} stream {st.index}" for st in container.streams
+                   if st.type not in ("video", "audio", "subtitle"))
+    return VideoInfo(path=path, width=cc.width, height=cc.height,
+                     fps=Fraction(fps) if fps else None,
+                     time_base=Fraction(s.time_base) if s.time_base else None,
+                     frames=frames, pix_fmt=pix, bits=bits, has_alpha=alpha, codec=cc.name,
+                     colour=colour, audio_streams=len(container.streams.audio),
+                     frames_declared=declared, duration=duration, rotation=rotation,
+                     subtitle_streams=len(container.streams.subtitles), other_streams=others)
 
 
 def _rotation(path: str) -> int:
@@ -209,18 +260,19 @@ def parse_time(text: str, fps: Fraction | None) -> float:
 
 
 def read_video(info: VideoInfo, *, check_length: bool = True, start: float | None = None,
-               end: float | None = None) -> Iterator[Item]:
+               end: float | None = None, container=None) -> Iterator[Item]:
     """Decode every frame of `info.path` to `info.sample_format`; Item.meta is a FrameTime.
 
     Raises VideoReadError naming the frame where decoding stopped, also when the stream ends well
     before the length its container declares (a truncated file that decodes without an error).
     """
     _require_av()
-    path = info.path
-    try:
-        container = av.open(path)
-    except (av.error.FFmpegError, OSError) as exc:
-        raise VideoReadError(f"{path}: cannot open: {exc}", 0) from exc
+    path = info.path if info.path != PIPE else "standard input"
+    if container is None:  # `container`: already open (a pipe, from open_pipe); closed here at the end
+        try:
+            container = av.open(info.path)
+        except (av.error.FFmpegError, OSError) as exc:
+            raise VideoReadError(f"{path}: cannot open: {exc}", 0) from exc
     n, last_time = 0, None
     half = 0.5 / float(info.fps or 25)  # a frame counts as inside [start, end) by its timestamp
     try:
@@ -328,8 +380,16 @@ class VideoWriter:
         streams and every tag), "aac" (audio re-encoded, subtitles copied) or "none"; `copy_audio=False`
         is "none"."""
         _require_av()
-        codec = codec or codec_for(info)
+        container_format = container_format or container_format_for(None, path)
+        if path == PIPE and not container_format:
+            raise VideoError("standard output: expected a container format (-f y4m, nut, matroska or mpegts)")
+        raw = container_format in _RAW_FORMATS
+        codec = codec or ("rawvideo" if raw or (path == PIPE and container_format == "nut") else codec_for(info))
+        if raw and not pix_fmt:
+            pix_fmt = _raw_pix_fmt(container_format, info)
         audio = audio or ("copy" if copy_audio else "none")
+        if info.path == PIPE or raw:
+            audio = "none"  # a pipe is read once (its audio is not there to copy); y4m holds video only
         if audio not in ("copy", "aac", "none"):
             raise VideoError(f"{path}: expected --audio copy, aac or none, got {audio!r}")
         self.audio = audio
@@ -349,7 +409,7 @@ class VideoWriter:
         self.frames_written = 0
         self.last_time: float | None = None  # seconds, end of the last frame written
         self.warnings: list[str] = []
-        self._tmp = temp_path_for(path)
+        self._tmp = None if path == PIPE else temp_path_for(path)  # standard output: written as it comes
         self._options = encoder_options(codec, crf, preset)
         self._audio_in = None
         self._audio_packets: Iterator | None = None
@@ -373,7 +433,10 @@ class VideoWriter:
         ("audio", "subtitle"); where the container cannot hold them, try again with fewer, and say so."""
         info = self.info
         try:
-            self._out = av.open(self._tmp, "w", format=self.container_format)
+            target = sys.stdout.buffer if self._tmp is None else self._tmp
+            # y4m's muxer takes more than 8 bits per sample only as a non-standard extension
+            options = {"strict": "-1"} if self.container_format in _RAW_FORMATS and info.bits > 8 else None
+            self._out = av.open(target, "w", format=self.container_format, options=options)
         except (av.error.FFmpegError, OSError, ValueError) as exc:
             raise VideoError(f"{self.path}: cannot create the output: {exc}") from exc
         rate = info.fps or Fraction(25)
@@ -383,7 +446,8 @@ class VideoWriter:
         self._copy_metadata(stream)
         stream.width, stream.height = info.width, info.height
         stream.pix_fmt = self.pix_fmt
-        if self.codec in _FPS_TIME_BASE_CODECS or info.time_base is None:
+        if self.codec in _FPS_TIME_BASE_CODECS or info.time_base is None or \
+                self.container_format in _RAW_FORMATS:  # y4m reads its frame rate from the time base
             self._time_base = Fraction(1, 1) / rate
         else:
             self._time_base = info.time_base
@@ -425,6 +489,8 @@ class VideoWriter:
 
     def _copy_metadata(self, video_stream) -> None:
         """The container's tags (title, dates, ...) and the video stream's (language, title)."""
+        if self.info.path == PIPE:
+            return
         try:
             with av.open(self.info.path) as src:
                 _copy_tags(src.metadata, self._out.metadata)
@@ -534,7 +600,8 @@ class VideoWriter:
             self._closed = True
             if self._audio_in is not None:
                 self._audio_in.close()
-            publish(self._tmp, self.path, self.overwrite)
+            if self._tmp is not None:
+                publish(self._tmp, self.path, self.overwrite)
         except BaseException:
             self.abort()
             raise
@@ -542,7 +609,8 @@ class VideoWriter:
     def abort(self) -> None:
         """Close without keeping anything: the temporary file is removed."""
         self._close_quietly()
-        remove_quietly(self._tmp)
+        if self._tmp is not None:
+            remove_quietly(self._tmp)
 
     def _close_quietly(self) -> None:
         for obj in (getattr(self, "_out", None), self._audio_in):

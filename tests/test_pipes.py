@@ -1,0 +1,106 @@
+"""Pipes (issue 17): `-` as input (y4m, NUT, ... on standard input, read once) and `-o - -f FORMAT` as
+output, chained with another process the way vspipe | mlaa-stream | ffmpeg chains are. The other end is
+PyAV in a child process (FFmpeg's own libraries), or a real `ffmpeg` where one is installed."""
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+
+import av
+import numpy as np
+import pytest
+
+DEMO_CLIP = os.path.join(os.path.dirname(__file__), "..", "fixtures", "demo", "clip.mp4")
+CLI = [sys.executable, "-c", "from mlaa_stream.cli.main import main; main()"]
+
+Y4M_WRITER = r"""
+import sys, av, numpy as np
+pix = sys.argv[1]
+out = av.open(sys.stdout.buffer, "w", format="yuv4mpegpipe", options={"strict": "-1"})
+s = out.add_stream("rawvideo", rate=25)
+s.width, s.height, s.pix_fmt = 64, 48, pix
+y, x = np.mgrid[0:48, 0:64]
+for i in range(12):
+    img = np.where(((y * 2 + i) > x)[..., None], [30, 40, 200], [230, 220, 200]).astype(np.uint8)
+    f = av.VideoFrame.from_ndarray(img, format="rgb24")
+    f.pts = i
+    for p in s.encode(f):
+        out.mux(p)
+for p in s.encode():
+    out.mux(p)
+out.close()
+"""
+
+Y4M_READER = r"""
+import sys, av
+c = av.open(sys.stdin.buffer)
+s = c.streams.video[0]
+print(c.format.name, s.codec_context.name, s.codec_context.format.name, s.average_rate, sum(1 for _ in c.decode(s)))
+"""
+
+
+def chain(first: list[str], second: list[str]) -> tuple[subprocess.CompletedProcess, subprocess.CompletedProcess]:
+    a = subprocess.Popen(first, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    b = subprocess.run(second, stdin=a.stdout, capture_output=True, timeout=300)
+    a.stdout.close()
+    a_err = a.stderr.read()
+    a.wait(timeout=60)
+    return subprocess.CompletedProcess(first, a.returncode, b"", a_err), b
+
+
+@pytest.mark.parametrize("pix", ["yuv420p", "yuv420p10le"])
+def test_y4m_on_standard_input(tmp_path, pix):
+    out = tmp_path / "out.mkv"
+    a, b = chain([sys.executable, "-c", Y4M_WRITER, pix], [*CLI, "-", "-o", str(out)])
+    assert a.returncode == 0 and b.returncode == 0, b.stderr.decode()
+    with av.open(str(out)) as c:
+        frames = [f for f in c.decode(video=0)]
+    assert len(frames) == 12 and frames[0].format.name.startswith(pix[:7])
+
+
+@pytest.mark.parametrize("fmt,expect", [("y4m", "yuv4mpegpipe rawvideo yuv420p 24 10"),
+                                        ("nut", "nut rawvideo yuv420p 24 10")])
+def test_standard_output_in_the_format_asked(fmt, expect):
+    a, b = chain([*CLI, DEMO_CLIP, "-o", "-", "-f", fmt], [sys.executable, "-c", Y4M_READER])
+    assert a.returncode == 0, a.stderr.decode()
+    assert b.stdout.decode().strip() == expect
+
+
+def test_pipe_through_pipe_keeps_ten_bits():
+    writer = subprocess.Popen([sys.executable, "-c", Y4M_WRITER, "yuv420p10le"], stdout=subprocess.PIPE)
+    filt = subprocess.Popen([*CLI, "-", "-o", "-", "-f", "y4m"], stdin=writer.stdout, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE)
+    writer.stdout.close()
+    r = subprocess.run([sys.executable, "-c", Y4M_READER], stdin=filt.stdout, capture_output=True, timeout=300)
+    filt.stdout.close()
+    assert filt.wait(timeout=60) == 0 and writer.wait(timeout=60) == 0
+    assert r.stdout.decode().split()[2:] == ["yuv420p10le", "25", "12"]
+
+
+def test_pipe_misuse_is_refused_clearly(tmp_path):
+    r = subprocess.run([*CLI, DEMO_CLIP, "-o", "-"], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 1 and "expected a container format (-f y4m" in r.stderr and r.stdout == ""
+    r = subprocess.run([*CLI, DEMO_CLIP, "-o", "-", "-f", "y4m", "--progress", "-"], capture_output=True,
+                       text=True, timeout=120)
+    assert r.returncode == 2 and "both want standard output" in r.stderr
+    r = subprocess.run([*CLI, "-", "-o", str(tmp_path / "o.mkv")], input=b"not a video", capture_output=True,
+                       timeout=120)
+    assert r.returncode == 1 and b"standard input: expected a video stream" in r.stderr
+
+
+def test_a_y4m_file_gets_its_frame_rate_in_the_header(tmp_path):
+    r = subprocess.run([*CLI, DEMO_CLIP, "-o", str(tmp_path / "o.y4m")], capture_output=True, timeout=120)
+    assert r.returncode == 0, r.stderr.decode()
+    assert (tmp_path / "o.y4m").read_bytes().startswith(b"YUV4MPEG2 W64 H48 F24:1")
+
+
+@pytest.mark.skipif(shutil.which("ffmpeg") is None, reason="no ffmpeg binary (Debian package ffmpeg); "
+                    "the PyAV chains above cover the same formats")
+def test_chained_with_a_real_ffmpeg(tmp_path):
+    a, b = chain(["ffmpeg", "-v", "error", "-i", DEMO_CLIP, "-f", "yuv4mpegpipe", "-"],
+                 [*CLI, "-", "-o", str(tmp_path / "o.mkv")])
+    assert a.returncode == 0 and b.returncode == 0, b.stderr.decode()
+    with av.open(str(tmp_path / "o.mkv")) as c:
+        assert sum(1 for _ in c.decode(video=0)) == 10
