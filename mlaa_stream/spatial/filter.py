@@ -57,6 +57,7 @@ PRESETS: dict[str, dict] = {
     "luma": {"metric": "luma"},           # luma edges (SMAA/FXAA-like), for comparison
     "reconstruct": {"reconstruct": True},  # + topological reconstruction of thin features (seed 000 §4)
     "no_bridge": {"bridge": False},        # without bridging the dash chains of sub-pixel wires (on by default)
+    "fast": {"fast": True},               # seed 004's three passes, lines up to 31 px: live loops, previews
 }
 
 
@@ -181,7 +182,15 @@ class Filter:
                  bgr: bool = False, linear_input: bool = False, rounding: float = 0.0,
                  blend_u: bool = True, ramp: float = 0.35, short_corner: float = SHORT_CORNER,
                  aa_guard: bool = True, bridge: bool = True, grain_guard: bool = True,
-                 context: Context | None = None):
+                 fast: bool = False, preset: str | None = None, context: Context | None = None):
+        """`preset`: one of PRESETS; its options replace the keywords of the same names."""
+        if preset is not None:
+            if preset not in PRESETS:
+                raise ValueError(f"preset: expected one of {', '.join(sorted(PRESETS))}, got {preset!r}")
+            opts = PRESETS[preset]
+            metric, rounding = opts.get("metric", metric), opts.get("rounding", rounding)
+            reconstruct, bridge = opts.get("reconstruct", reconstruct), opts.get("bridge", bridge)
+            fast = opts.get("fast", fast)
         if metric not in METRICS:
             raise ValueError(f"metric: expected one of {', '.join(METRICS)}, got {metric!r}")
         thr = DEFAULT_THRESHOLDS[metric] if threshold is None else float(threshold)
@@ -193,8 +202,9 @@ class Filter:
                                      float(rounding), bool(blend_u), float(ramp), float(short_corner),
                                      bool(aa_guard), bool(grain_guard))
         self.bgr = bool(bgr)
-        self.reconstruct = bool(reconstruct)
-        self.bridge = bool(bridge)
+        self.fast = bool(fast)  # spatial/fast.py: seed 004's passes instead of the default chain
+        self.reconstruct = bool(reconstruct) and not self.fast
+        self.bridge = bool(bridge) and not self.fast
         self.context = context or default_context(device)
         dev = self.context.device
         props = cl.command_queue_properties.OUT_OF_ORDER_EXEC_MODE_ENABLE
@@ -208,6 +218,7 @@ class Filter:
         self._reconstructor = None
         self._recon_buf = None
         self._bridger = None
+        self._fast = None
         self._frame_no = 0
         self._lock = threading.Lock()
         self._last_event = None
@@ -223,6 +234,10 @@ class Filter:
         self.finish()
         self._buffers = bufs = _FrameBuffers(self.context, fmt)
         defs = defines_for(fmt, **self.options.pass_defines(), QUIET_LEVELS=quiet_levels(self.options, fmt))
+        if self.fast:
+            from mlaa_stream.spatial.fast import FastPasses
+            self._fast = FastPasses(self.context, fmt, defs, self._luts)
+            return bufs
         k = self.context.kernel
         self._k_edges = k("edges", "detect_edges", defs)
         self._lin = linear_levels(self.context, "edges", defs, fmt, self._luts)
@@ -273,6 +288,8 @@ class Filter:
         W, H = np.int32(w), np.int32(h)
         q, g2 = queue or self.queue, (-(-w // SEGMENT), h)  # one work item per SEGMENT pixels of a row
         ev: dict = {} if events is None else events
+        if self._fast is not None:
+            return self._fast.enqueue(q, src, dst, self._luts, after, SEGMENT, ev)
         if self._reconstructor is not None:
             ev["reconstruct"] = self._reconstructor.enqueue(q, src, self._recon_buf, self._luts, wait_for=after)
             src, after = self._recon_buf, [ev["reconstruct"]]
@@ -339,6 +356,7 @@ class Filter:
             return 0.0
         extra = self._recon_buf.size if self._recon_buf is not None else 0
         extra += self._bridger.device_bytes() if self._bridger is not None else 0
+        extra += self._fast.device_bytes() if self._fast is not None else 0
         return (self._buffers.device_bytes() + extra) / self._buffers.fmt.pixels
 
     def finish(self) -> None:
@@ -353,6 +371,7 @@ class Filter:
             self._recon_buf = None
             self._reconstructor = None
             self._bridger = None
+            self._fast = None
 
     def __enter__(self) -> "Filter":
         return self

@@ -1,0 +1,329 @@
+// fast.cl -- the three-pass MLAA of seed 004 (Kluczek, "Antialiasing in 1 millisecond"): edges, L shapes,
+// reconstruction + blend, each a full-frame pass, with a bounded edge length (FAST_MAX_LEN). The preset
+// `fast` (mlaa_stream/spatial/fast.py, whose numpy reference mirrors this file rule for rule).
+// Work: one work item per SEGMENT pixels of a row in every pass (common.cl's SEGMENT).
+// Defines: FAST_THRESHOLD (weighted RGB difference, fraction of full scale), FAST_MAX_LEN (<= 31),
+//          BLEND_LINEAR / LINEAR_INPUT as blend.cl.
+
+#ifndef FAST_THRESHOLD
+#define FAST_THRESHOLD 0.06f
+#endif
+#ifndef FAST_MAX_LEN
+#define FAST_MAX_LEN 31
+#endif
+
+// Pass 1 edge bits (seed 004 "edge buffer"): every edge is kept in both pixels that share it, so the later
+// passes read one byte per pixel instead of colours.
+#define E_TOP 1
+#define E_RIGHT 2
+#define E_BOTTOM 4
+#define E_LEFT 8
+
+// Seed 004: an edge where the weighted sum of the RGB channels' differences exceeds the threshold
+// (Rec. 709 luma weights, on the stored encoded values).
+inline float weighted_diff(float4 a, float4 b)
+{
+    const float4 d = a - b;
+    const float x = d.x < 0.0f ? -d.x : d.x, y = d.y < 0.0f ? -d.y : d.y, z = d.z < 0.0f ? -d.z : d.z;
+    return 0.2126f * x + 0.7152f * y + 0.0722f * z;
+}
+
+#ifndef PIXEL_IS_FLOAT
+// Integer frames: the same weighted sum on the stored levels, in integers (weights 54, 183, 19 of 256: Rec. 709
+// to 0.002), so a pixel costs a few byte loads and no conversion.
+#define W_R 54
+#define W_G 183
+#define W_B 19
+#define FAST_LIMIT ((int)(FAST_THRESHOLD * PIXEL_MAX * 256.0f))
+inline int3 raw3(__global const PIXEL_T *src, int i)
+{
+#if CHANNELS < 3
+    return (int3)((int)src[i]);
+#else
+    __global const PIXEL_T *p = src + (size_t)i * CHANNELS;
+    return (int3)((int)p[0], (int)p[1], (int)p[2]);
+#endif
+}
+inline int idiff(int3 a, int3 b)
+{
+    const int3 d = a - b;
+    const int x = d.x < 0 ? -d.x : d.x, y = d.y < 0 ? -d.y : d.y, z = d.z < 0 ? -d.z : d.z;
+#if ORDER_BGR
+    return W_B * x + W_G * y + W_R * z;
+#else
+    return W_R * x + W_G * y + W_B * z;
+#endif
+}
+
+#if CHANNELS == 3 && SAMPLE_BYTES == 1
+#define FAST_QUIET (FAST_LIMIT / 256)
+// Do the 24 bytes from a and from b differ by at most FAST_QUIET each?
+inline int quiet24(__global const uchar *a, __global const uchar *b)
+{
+    const uchar16 a0 = LOAD_UCHAR16(a), b0 = LOAD_UCHAR16(b);
+    const uchar8 a1 = LOAD_UCHAR8(a + 16), b1 = LOAD_UCHAR8(b + 16);
+    const uchar16 d0 = a0 > b0 ? a0 - b0 : b0 - a0;
+    const uchar8 d1 = a1 > b1 ? a1 - b1 : b1 - a1;
+    const char16 m0 = d0 > (uchar16)(FAST_QUIET);
+    const char8 m1 = d1 > (uchar8)(FAST_QUIET);
+    const ulong2 w0 = as_ulong2(m0);
+    return ((w0.x | w0.y | as_ulong(m1)) == 0);
+}
+#endif
+#endif
+
+__kernel void fast_edges(__global const PIXEL_T *src, __global uchar *edges, const int width, const int height)
+{
+#ifndef PIXEL_IS_FLOAT
+    const int x0 = get_global_id(0) * SEGMENT, y = get_global_id(1);
+    if (x0 >= width || y >= height) return;
+    const int x1 = x0 + SEGMENT < width ? x0 + SEGMENT : width;
+    const int row = y * width;
+    int3 left = x0 > 0 ? raw3(src, row + x0 - 1) : (int3)(0);
+    int3 c = raw3(src, row + x0);
+    for (int x = x0; x < x1; ++x) {
+        const int i = row + x;
+#if CHANNELS == 3 && SAMPLE_BYTES == 1
+        // 8 pixels away from the frame's border whose bytes all differ by at most FAST_QUIET levels from the
+        // same byte of the pixel above, below, left and right can hold no edge (the weights sum to 256): one
+        // compare of 24-byte rows instead of 32 weighted differences. Most of a rendered frame is such.
+        if ((x - x0) % 8 == 0 && x > 0 && x + 8 < width && y > 0 && y + 1 < height) {
+            __global const uchar *p = (__global const uchar *)src + (size_t)i * 3;
+            if (quiet24(p, p - 3 * width) && quiet24(p, p + 3 * width) && quiet24(p, p + 3) && quiet24(p, p - 3)) {
+                for (int t = 0; t < 8; ++t) edges[i + t] = 0;
+                x += 7;
+                left = raw3(src, i + 7);
+                c = raw3(src, i + 8);
+                continue;
+            }
+        }
+#endif
+        const int3 right = x + 1 < width ? raw3(src, i + 1) : c;
+        uchar e = 0;
+        if (y > 0 && idiff(c, raw3(src, i - width)) > FAST_LIMIT) e |= E_TOP;
+        if (x + 1 < width && idiff(c, right) > FAST_LIMIT) e |= E_RIGHT;
+        if (y + 1 < height && idiff(c, raw3(src, i + width)) > FAST_LIMIT) e |= E_BOTTOM;
+        if (x > 0 && idiff(c, left) > FAST_LIMIT) e |= E_LEFT;
+        edges[i] = e;
+        left = c;
+        c = right;
+    }
+#else
+    const int x0 = get_global_id(0) * SEGMENT, y = get_global_id(1);
+    if (x0 >= width || y >= height) return;
+    const int x1 = x0 + SEGMENT < width ? x0 + SEGMENT : width;
+    const int row = y * width;
+    float4 left = x0 > 0 ? load_px(src, row + x0 - 1) : (float4)(0.0f);
+    float4 c = load_px(src, row + x0);
+    for (int x = x0; x < x1; ++x) {
+        const int i = row + x;
+        const float4 right = x + 1 < width ? load_px(src, i + 1) : c;
+        uchar e = 0;
+        if (y > 0 && weighted_diff(c, load_px(src, i - width)) > FAST_THRESHOLD) e |= E_TOP;
+        if (x + 1 < width && weighted_diff(c, right) > FAST_THRESHOLD) e |= E_RIGHT;
+        if (y + 1 < height && weighted_diff(c, load_px(src, i + width)) > FAST_THRESHOLD) e |= E_BOTTOM;
+        if (x > 0 && weighted_diff(c, left) > FAST_THRESHOLD) e |= E_LEFT;
+        edges[i] = e;
+        left = c;
+        c = right;
+    }
+#endif
+}
+
+// Pass 2 (seed 004 "L-shape buffer"): four L shapes per pixel, one byte each: from the pixel along its bottom
+// edge to the left and to the right (hshapes), and along its right edge up and down (vshapes). A shape runs
+// along its line to the line's end and ends in a crossing edge to one side, to both, or none. Byte: bits 0-4
+// the distance to the end, bits 5-6 the crossing (1 = on the side of this pixel's row or column, 2 = the
+// other side, 3 = both, 0 none), bit 7 a long crossing (3+ pixels: a real corner, kept sharp as seed 002
+// does). A line's end more than FAST_MAX_LEN - 1 pixels away is not known: distance FAST_MAX_LEN - 1, no
+// crossing (the seed's bounded edge length). Each line is walked once, by a sweep along it: one work item
+// per row for the bottom edges, one per strip of SEGMENT columns for the right edges.
+#define L_SIDE_A 1
+#define L_SIDE_B 2
+#define L_UNKNOWN (FAST_MAX_LEN - 1)
+
+inline int edge_bit(__global const uchar *edges, int x, int y, int width, int height, uchar bit)
+{
+    return x >= 0 && y >= 0 && x < width && y < height && (edges[y * width + x] & bit);
+}
+
+// The crossing at the end of a line of bottom edges in row y, across the right edge of column xc (rows y and
+// y + 1), as bits 5-7 of a shape byte.
+inline uchar h_crossing(__global const uchar *edges, int xc, int y, int width, int height)
+{
+    const int a = edge_bit(edges, xc, y, width, height, E_RIGHT), b = edge_bit(edges, xc, y + 1, width, height, E_RIGHT);
+    const int side = (a ? L_SIDE_A : 0) | (b ? L_SIDE_B : 0);
+    const int lg = side == L_SIDE_A ? (edge_bit(edges, xc, y - 1, width, height, E_RIGHT) &&
+                                       edge_bit(edges, xc, y - 2, width, height, E_RIGHT))
+                 : side == L_SIDE_B ? (edge_bit(edges, xc, y + 2, width, height, E_RIGHT) &&
+                                       edge_bit(edges, xc, y + 3, width, height, E_RIGHT)) : 0;
+    return (uchar)(side << 5 | lg << 7);
+}
+
+// The same for a line of right edges in column x ending across the bottom edge of row yc (columns x, x + 1).
+inline uchar v_crossing(__global const uchar *edges, int x, int yc, int width, int height)
+{
+    const int a = edge_bit(edges, x, yc, width, height, E_BOTTOM), b = edge_bit(edges, x + 1, yc, width, height, E_BOTTOM);
+    const int side = (a ? L_SIDE_A : 0) | (b ? L_SIDE_B : 0);
+    const int lg = side == L_SIDE_A ? (edge_bit(edges, x - 1, yc, width, height, E_BOTTOM) &&
+                                       edge_bit(edges, x - 2, yc, width, height, E_BOTTOM))
+                 : side == L_SIDE_B ? (edge_bit(edges, x + 2, yc, width, height, E_BOTTOM) &&
+                                       edge_bit(edges, x + 3, yc, width, height, E_BOTTOM)) : 0;
+    return (uchar)(side << 5 | lg << 7);
+}
+
+// A shape byte for a pixel `d` pixels from its line's end with crossing bits `cross`.
+inline uchar shape_byte(int d, uchar cross) { return d <= L_UNKNOWN ? (uchar)(d | cross) : (uchar)L_UNKNOWN; }
+
+// Does the bottom-edge line of row y go on from x to x + 1 (both edges there, no vertical edge between)?
+inline int h_continues(__global const uchar *edges, int x, int y, int width, int height)
+{
+    return x + 1 < width && (edges[y * width + x + 1] & E_BOTTOM) &&
+           !edge_bit(edges, x, y, width, height, E_RIGHT) && !edge_bit(edges, x, y + 1, width, height, E_RIGHT);
+}
+
+__kernel void fast_hshapes(__global const uchar *edges, __global uchar2 *hshapes, const int width, const int height)
+{
+    const int y = get_global_id(0);
+    if (y >= height) return;
+    __global const uchar *row = edges + y * width;
+    int x = 0;
+    while (x < width) {
+        if (x + 8 <= width && !(edge_group(row + x) & 0x0404040404040404UL)) { x += 8; continue; }
+        if (!(row[x] & E_BOTTOM)) { ++x; continue; }
+        int xe = x;   // the run of bottom edges x .. xe
+        while (h_continues(edges, xe, y, width, height)) ++xe;
+        const uchar c0 = h_crossing(edges, x - 1, y, width, height), c1 = h_crossing(edges, xe, y, width, height);
+        for (int t = x; t <= xe; ++t) hshapes[y * width + t] = (uchar2)(shape_byte(t - x, c0), shape_byte(xe - t, c1));
+        x = xe + 1;
+    }
+}
+
+// Does the right-edge line of column x go on from y to y + 1?
+inline int v_continues(__global const uchar *edges, int x, int y, int width, int height)
+{
+    return y + 1 < height && (edges[(y + 1) * width + x] & E_RIGHT) &&
+           !edge_bit(edges, x, y, width, height, E_BOTTOM) && !edge_bit(edges, x + 1, y, width, height, E_BOTTOM);
+}
+
+__kernel void fast_vshapes(__global const uchar *edges, __global uchar2 *vshapes, const int width, const int height)
+{
+    const int x0 = get_global_id(0) * SEGMENT;
+    if (x0 >= width) return;
+    const int x1 = x0 + SEGMENT < width ? x0 + SEGMENT : width;
+    int start[SEGMENT];   // per column of the strip: the first row of the run in progress, -1 for none
+    for (int c = 0; c < SEGMENT; ++c) start[c] = -1;
+    int open = 0;   // runs in progress
+    for (int y = 0; y < height; ++y) {   // row by row: the strip's bytes of a row are contiguous
+        if (!open && x1 - x0 == SEGMENT) {   // a row of the strip without right edges: nothing to do
+            ulong any = 0;
+            for (int g = 0; g < SEGMENT; g += 8) any |= edge_group(edges + y * width + x0 + g);
+            if (!(any & 0x0202020202020202UL)) continue;
+        }
+        for (int x = x0; x < x1; ++x) {
+            const int c = x - x0;
+            if (start[c] < 0) {
+                if (!(edges[y * width + x] & E_RIGHT)) continue;
+                start[c] = y;
+                ++open;
+            }
+            if (v_continues(edges, x, y, width, height)) continue;
+            const int ys = start[c];   // the run ys .. y ends here
+            const uchar c0 = v_crossing(edges, x, ys - 1, width, height), c1 = v_crossing(edges, x, y, width, height);
+            for (int t = ys; t <= y; ++t) vshapes[t * width + x] = (uchar2)(shape_byte(t - ys, c0), shape_byte(y - t, c1));
+            start[c] = -1;
+            --open;
+        }
+    }
+}
+
+// Pass 3 (seed 004 "edge reconstruction"): each edge of the pixel rebuilt from its two L shapes (the line's
+// ends and crossings) as seed 000's silhouette: from half a pixel at an end with a crossing to nothing at the
+// line's middle; where it covers this pixel, the colour across the edge is mixed in (seed 000 eq. 2's
+// trapezoid areas). U shapes (both ends turn the same way: a bump, or a box side) are left as they are.
+inline float trapezoid(int p, int len)
+{
+    if (2 * p + 2 <= len) return 0.5f * (1.0f - (float)(2 * p + 1) / (float)len);
+    if (2 * p + 1 == len) return 1.0f / (8.0f * (float)len);
+    return 0.0f;
+}
+
+// The areas (this side, the other side) a line with shapes `s0` (towards its start) and `s1` (its end) gives
+// the pixel at distance d0 from its start, for the side A pixel (`*ta`) and side B pixel (`*tb`).
+inline void line_areas(uchar s0, uchar s1, float *ta, float *tb)
+{
+    const int d0 = s0 & 31, d1 = s1 & 31;
+    int a0 = (s0 >> 5) & 3, a1 = (s1 >> 5) & 3;
+    a0 = a0 == 3 ? 0 : a0;   // crossed on both sides: a thin line across, no direction
+    a1 = a1 == 3 ? 0 : a1;
+    *ta = 0.0f;
+    *tb = 0.0f;
+    if ((a0 == 0 && a1 == 0) || a0 == a1) return;   // no crossing, or a U shape
+    const int len = d0 + d1 + 1;
+    if (a0 && !(s0 & 128)) {
+        const float t = trapezoid(d0, len);
+        if (a0 == L_SIDE_A) *ta += t; else *tb += t;
+    }
+    if (a1 && !(s1 & 128)) {
+        const float t = trapezoid(d1, len);
+        if (a1 == L_SIDE_A) *ta += t; else *tb += t;
+    }
+}
+
+// Pixel i in the mixing space: linear light (DECODE) or as stored. Integer frames decode each level with one
+// load from `lin` (common.cl's linear_levels: the same numbers as lut_read gives).
+inline float4 fast_to_mix(__global const PIXEL_T *src, __global const float *luts, __global const float *lin, int i)
+{
+#if DECODE && !defined(PIXEL_IS_FLOAT) && CHANNELS >= 3
+    __global const PIXEL_T *p = src + (size_t)i * CHANNELS;
+#if ORDER_BGR
+    return (float4)(lin[p[2]], lin[p[1]], lin[p[0]], CHANNELS == 4 ? (float)p[3] * (1.0f / PIXEL_MAX) : 1.0f);
+#else
+    return (float4)(lin[p[0]], lin[p[1]], lin[p[2]], CHANNELS == 4 ? (float)p[3] * (1.0f / PIXEL_MAX) : 1.0f);
+#endif
+#elif DECODE
+    const float4 c = load_px(src, i);
+    return (float4)(lut_read(luts, c.x), lut_read(luts, c.y), lut_read(luts, c.z), c.w);
+#else
+    return load_px(src, i);
+#endif
+}
+
+__kernel void fast_blend(__global const PIXEL_T *src, __global const uchar *edges, __global const uchar2 *hshapes,
+                         __global const uchar2 *vshapes, __global const float *luts, __global const float *lin,
+                         __global PIXEL_T *dst, const int width, const int height)
+{
+    const int x0 = get_global_id(0) * SEGMENT, y = get_global_id(1);
+    if (x0 >= width || y >= height) return;
+    const int x1 = x0 + SEGMENT < width ? x0 + SEGMENT : width;
+    for (int x = x0; x < x1; ++x) {
+        const int i = y * width + x;
+        if ((x - x0) % 8 == 0 && x + 8 <= x1 && edge_group(edges + i) == 0) {   // 8 pixels next to no edge
+            x += 7;
+            continue;
+        }
+        const uchar e = edges[i];
+        if (!e) continue;   // dst holds a copy of src (the host enqueues it)
+        float wt = 0.0f, wb = 0.0f, wl = 0.0f, wr = 0.0f, ta, tb;
+        if (e & E_BOTTOM) { const uchar2 s = hshapes[i]; line_areas(s.x, s.y, &ta, &tb); wb = ta; }
+        if (e & E_TOP) { const uchar2 s = hshapes[i - width]; line_areas(s.x, s.y, &ta, &tb); wt = tb; }
+        if (e & E_RIGHT) { const uchar2 s = vshapes[i]; line_areas(s.x, s.y, &ta, &tb); wr = ta; }
+        if (e & E_LEFT) { const uchar2 s = vshapes[i - 1]; line_areas(s.x, s.y, &ta, &tb); wl = tb; }
+        const float sum = wt + wb + wl + wr;
+        if (sum <= 0.0f) continue;
+        // each neighbour mixed in by its area; together never more than the largest area (blend.cl's rule)
+        const float4 c = fast_to_mix(src, luts, lin, i);
+        float4 acc = (float4)(0.0f);
+        if (wt > 0.0f) acc += wt * wt * (fast_to_mix(src, luts, lin, i - width) - c);
+        if (wb > 0.0f) acc += wb * wb * (fast_to_mix(src, luts, lin, i + width) - c);
+        if (wl > 0.0f) acc += wl * wl * (fast_to_mix(src, luts, lin, i - 1) - c);
+        if (wr > 0.0f) acc += wr * wr * (fast_to_mix(src, luts, lin, i + 1) - c);
+        float4 out = c + acc / sum;
+        out.w = c.w;
+#if DECODE
+        __global const float *enc = luts + 2 * (LUT_SIZE + 1);
+        out = (float4)(lut_read(enc, out.x), lut_read(enc, out.y), lut_read(enc, out.z), out.w);
+#endif
+        store_px(dst, i, out);
+    }
+}

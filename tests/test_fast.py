@@ -1,0 +1,136 @@
+"""The fast path (issue 19, seed 004): three passes with a bounded edge length, each against its numpy
+reference (mlaa_stream/spatial/fast.py) and against cases with a known answer."""
+from __future__ import annotations
+
+import numpy as np
+import pyopencl as cl
+import pytest
+
+from mlaa_stream.spatial import fast as F
+from mlaa_stream.spatial.filter import PRESETS, Filter
+
+
+def staircase(h: int, w: int, step: int, dtype=np.uint8, channels: int = 3) -> np.ndarray:
+    """A dark region below a line rising one pixel every `step` pixels, on a light ground."""
+    y, x = np.mgrid[0:h, 0:w]
+    top = np.iinfo(dtype).max if dtype != np.float32 else 1.0
+    img = np.where((y > h // 2 - x // step)[..., None], 0.1 * top, 0.9 * top)
+    img = np.repeat(img, channels, axis=2)
+    if channels == 4:
+        img[..., 3] = 0.5 * top
+    return img.astype(dtype)
+
+
+def random_blocks(seed: int, h: int = 37, w: int = 53, dtype=np.uint8) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    small = rng.integers(0, 256, (h // 4 + 1, w // 5 + 1, 3))
+    img = np.kron(small, np.ones((4, 5, 1)))[:h, :w]
+    img[rng.random((h, w)) < 0.05] = 255 - img[rng.random((h, w)) < 2][:1]
+    return (img * (np.iinfo(dtype).max / 255)).astype(dtype) if dtype != np.float32 else (img / 255).astype(dtype)
+
+
+def passes(frame: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The kernel's edge buffer and L-shape buffers for `frame`."""
+    f = Filter(fast=True)
+    f.process(frame)
+    h, w = frame.shape[:2]
+    fp = f._fast
+    e = np.empty((h, w), np.uint8)
+    hs = np.empty((h, w, 2), np.uint8)
+    vs = np.empty((h, w, 2), np.uint8)
+    for arr, buf in ((e, fp.edges), (hs, fp.hshapes), (vs, fp.vshapes)):
+        cl.enqueue_copy(f.queue, arr, buf, is_blocking=True)
+    return e, hs, vs
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_edges_and_shapes_match_the_reference_exactly(seed):
+    frame = random_blocks(seed)
+    e, hs, vs = passes(frame)
+    ref_e = F.fast_edges_reference(frame)
+    assert np.array_equal(e, ref_e)
+    ref_s = F.fast_lshapes_reference(ref_e)
+    bottom, right = (ref_e & F.E_BOTTOM) > 0, (ref_e & F.E_RIGHT) > 0  # shapes are read only there
+    assert np.array_equal(hs[bottom], ref_s[..., :2][bottom])
+    assert np.array_equal(vs[right], ref_s[..., 2:][right])
+
+
+@pytest.mark.parametrize("dtype,channels", [(np.uint8, 3), (np.uint8, 4), (np.uint16, 3), (np.float32, 3),
+                                            (np.uint8, 1)])
+def test_output_matches_the_reference(dtype, channels):
+    frame = random_blocks(7, dtype=dtype)
+    if channels == 1:
+        frame = np.ascontiguousarray(frame[..., 1])
+    elif channels == 4:
+        frame = np.dstack([frame, frame[..., :1]])
+    out = Filter(fast=True).process(frame)
+    ref = F.fast_reference(frame)
+    if dtype == np.float32:
+        np.testing.assert_allclose(out, ref, atol=2e-4)  # the kernels' colour tables vs the exact curve
+    else:
+        diff = np.abs(out.astype(np.int64) - ref.astype(np.int64))
+        assert diff.max() <= 1 and (diff == 0).mean() > 0.999  # tables vs formula: rounding ties only
+    assert (out != frame).any()
+
+
+def test_known_l_shapes_encode_exactly():
+    e = np.zeros((8, 12), np.uint8)
+    e[3, 2:9] |= F.E_BOTTOM  # a line of 7 bottom edges, row 3, x = 2..8
+    e[4, 2:9] |= F.E_TOP
+    e[3, 1] |= F.E_RIGHT  # left end: crossing in this row (side A), one pixel long
+    e[3, 2] |= F.E_LEFT
+    for y in (4, 5, 6):  # right end: crossing in the row below (side B), three pixels long: a corner
+        e[y, 8] |= F.E_RIGHT
+        e[y, 9] |= F.E_LEFT
+    s = F.fast_lshapes_reference(e)
+    assert s[3, 2, 0] == (0 | F.SIDE_A << 5) and s[3, 2, 1] == (6 | F.SIDE_B << 5 | F.LONG)
+    assert s[3, 5, 0] == (3 | F.SIDE_A << 5) and s[3, 5, 1] == (3 | F.SIDE_B << 5 | F.LONG)
+    assert F.line_areas(s[3, 2, 0], s[3, 2, 1]) == (pytest.approx(0.5 * (1 - 1 / 7)), 0.0)  # long end: no area
+    ee, hs, _ = passes(np.where(np.isin(np.arange(12), range(2, 9))[None, :, None] & (np.arange(8) > 3)[:, None, None],
+                                20, 230).astype(np.uint8).repeat(3, axis=2))
+    assert hs[3, 2, 1] & 31 == 6
+
+
+def test_a_line_longer_than_the_bound_is_left_alone_in_its_middle():
+    frame = staircase(16, 200, step=100)  # steps 100 px long: beyond FAST_MAX_LEN
+    out = Filter(fast=True).process(frame)
+    changed_x = np.nonzero((out != frame).any(-1).any(0))[0]
+    # only within the bound of each step's ends (x = 0, 100, 199)
+    assert all(min(abs(x - 0), abs(x - 99), abs(x - 100), abs(x - 199)) < F.FAST_MAX_LEN for x in changed_x)
+    assert 30 < 100 < 170 and not ((out != frame).any(-1)[:, 40:60]).any()
+
+
+@pytest.mark.parametrize("step", [2, 3, 5, 8])
+def test_a_staircase_shorter_than_the_bound_blends_as_the_default_preset(step):
+    frame = staircase(48, 96, step)
+    fast = Filter(fast=True).process(frame).astype(np.int64)
+    default = Filter(bridge=False).process(frame).astype(np.int64)
+    interior = (slice(4, -4), slice(4, -4))  # the frame's border: the default has more rules there
+    diff = np.abs(fast - default)[interior]
+    assert ((fast != frame) == (default != frame))[interior].all()  # the same pixels blended
+    # Levels. Steps of 3+ px: float rounding of the same areas. Steps of 2 px: the default scales a 2-px
+    # crossing by SHORT_CORNER (0.75) and does not blend the 1-px lines between them; the fast path's byte
+    # has no room for that rule (9 levels on a 204-level step, 1 pixel in 2 along the edge).
+    assert diff.max() <= (10 if step == 2 else 2), diff.max()
+    assert diff.mean() <= (1.5 if step == 2 else 0.1)
+
+
+@pytest.mark.parametrize("op", [np.fliplr, np.flipud, lambda a: a.transpose(1, 0, 2)])
+def test_flips_and_transposes_commute(op):
+    frame = np.ascontiguousarray(random_blocks(3, 40, 40))
+    f = Filter(fast=True)
+    a = f.process(np.ascontiguousarray(op(frame)))
+    b = np.ascontiguousarray(op(f.process(frame)))
+    assert np.array_equal(a, b)
+
+
+def test_the_preset_by_name_everywhere():
+    assert PRESETS["fast"] == {"fast": True}
+    frame = staircase(24, 40, 3)
+    assert np.array_equal(Filter(preset="fast").process(frame), Filter(fast=True).process(frame))
+    with pytest.raises(ValueError, match="preset: expected one of"):
+        Filter(preset="nope")
+    from mlaa_stream import Antialiaser
+    with Antialiaser(preset="fast") as aa:
+        bgr = np.ascontiguousarray(frame[..., ::-1])
+        assert np.array_equal(aa(bgr)[..., ::-1], Filter(fast=True).process(frame))
