@@ -242,6 +242,12 @@ def _job_for(kind: str, output: str) -> type:
               show_default=True, help="opencv: the fallback (8-bit, mp4v, no audio).")
 @click.option("--overlay", type=click.Path(dir_okay=False), default=None,
               help="Draw antialiased polylines from a JSON/GeoJSON file on every frame.")
+@click.option("--cluster", default=None, metavar="ADDRESS",
+              help="Run on a Dask cluster: a scheduler address (tcp://host:8786) or local:N (N worker "
+                   "processes here). Folders and frame patterns; each worker needs the package and an "
+                   "OpenCL device (docs/cluster.md).")
+@click.option("--chunk-frames", type=click.IntRange(min=1), default=16, show_default=True,
+              help="Frames per cluster task.")
 @click.option("--progress", "progress_path", default=None, metavar="FILE|-",
               help="Also write machine-readable progress there (- is stdout): key=value lines (frame, "
                    "total_frames, fps, elapsed_s, left_s), each block ended by progress=continue|end.")
@@ -271,7 +277,8 @@ def filter_command(ctx: click.Context, input_path: str, output: str, overwrite: 
                    bridge: bool | None, codec: str | None, container: str | None, audio: str,
                    crf: int, encoder_preset: str, pix_fmt: str | None, start: str | None, end: str | None,
                    rate: float, video_backend: str,
-                   overlay: str | None, progress_path: str | None, in_flight: int, temporal: bool | None,
+                   overlay: str | None, cluster: str | None, chunk_frames: int, progress_path: str | None,
+                   in_flight: int, temporal: bool | None,
                    temporal_mode: str,
                    temporal_k: float | None, stats_path: str | None, show: str | None,
                    device: str | None, verbose: int, quiet: bool) -> None:
@@ -291,6 +298,7 @@ def filter_command(ctx: click.Context, input_path: str, output: str, overwrite: 
                            encoder_preset=encoder_preset, pix_fmt=pix_fmt, rate=rate,
                            video_backend=video_backend, start=start, end=end,
                            overlay=overlay, in_flight=in_flight, device=device, progress_path=progress_path,
+                           cluster=cluster, chunk_frames=chunk_frames,
                            temporal=TemporalOptions(temporal, temporal_mode, temporal_k, stats_path, show))
     except Terminated as exc:
         con.error(f"terminated by {exc}; complete outputs are kept, the one in progress was removed")
@@ -307,7 +315,8 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
             video_backend: str, overlay: str | None, in_flight: int, device: str | None,
             temporal: "TemporalOptions | None" = None, bridge: bool | None = None, rate: float = 24.0,
             audio: str = "copy", progress_path: str | None = None, start: str | None = None,
-            end: str | None = None, container: str | None = None) -> int:
+            end: str | None = None, container: str | None = None, cluster: str | None = None,
+            chunk_frames: int = 16) -> int:
     """Check everything that can be checked without a device, then build the filter and run."""
     temporal = temporal or TemporalOptions()
     if overwrite and resume:
@@ -319,6 +328,16 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
         if frames is not None and kind != "pattern":
             raise Usage(f"--frames needs a frame pattern like shot/%04d.exr, got {input_path} "
                         f"(for a video: --start/--end)")
+        if cluster is not None and kind not in ("folder", "pattern"):
+            raise Usage("--cluster runs folders and frame patterns; a video or single image runs here")
+        if cluster is not None and overlay is not None:
+            raise Usage("--overlay is not available with --cluster")
+        if cluster is not None:
+            from mlaa_stream.cluster.connect import ClusterAddressError, parse_address
+            try:
+                parse_address(cluster)
+            except ClusterAddressError as exc:
+                raise Usage(str(exc)) from exc
         if (start is not None or end is not None) and kind != "video":
             raise Usage("--start/--end trim a video; for a frame pattern use --frames A-B")
         post_hooks = _load_post_hooks(overlay, device)
@@ -328,7 +347,8 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
         job = _job_for(kind, output)
         runner = job(input_path, output, kind, con, overwrite=overwrite, resume=resume,
                      frames=frames, codec=codec, container=container, audio=audio,
-                     progress_path=progress_path, crf=crf, start=start, end=end,
+                     progress_path=progress_path, crf=crf, start=start, end=end, cluster=cluster,
+                     chunk_frames=chunk_frames,
                      encoder_preset=encoder_preset, pix_fmt=pix_fmt, rate=rate,
                      video_backend=video_backend, filter_kwargs=kwargs)
         runner.prepare()
@@ -559,6 +579,8 @@ class _ImageJob(_Job):
                 self.con.warn(f"linear-light inputs filtered as display-encoded ({exc})")
                 return encoded
 
+        if self.opts.get("cluster"):
+            return self._run_on_cluster()
         filt = FilterSet(encoded, make_linear)
         progress = self._progress(len(self.plan))
         say = self.report.say
@@ -589,6 +611,34 @@ class _ImageJob(_Job):
             self.con.error(f"{len(self.report.failed)} failed, {self.written} written")
             return EXIT_FAILED
         self.con.info(f"{self.written} written, {len(self.report.skipped)} skipped")
+        return EXIT_OK
+
+    def _run_on_cluster(self) -> int:
+        """The same plan, filtered in chunks by the workers of a Dask cluster (mlaa_stream.cluster)."""
+        from mlaa_stream.cluster.connect import ClusterAddressError, connect
+        from mlaa_stream.cluster.frames import ClusterJobError, run_chunks
+
+        progress = self._progress(len(self.plan))
+        try:
+            with connect(self.opts["cluster"]) as client:
+                self.con.info(f"cluster: {len(client.scheduler_info()['workers'])} workers")
+                report = run_chunks(client, self.plan, self.opts["filter_kwargs"],
+                                    overwrite=self.opts["overwrite"], strict=self.strict,
+                                    chunk_frames=self.opts["chunk_frames"], on_frames=progress.update,
+                                    say=lambda msg: (progress.clear(), self.con.error(msg)))
+        except ClusterAddressError as exc:
+            progress.close()
+            raise Usage(str(exc)) from exc
+        except (ClusterJobError, OSError) as exc:
+            progress.close()
+            self.con.error(str(exc))
+            self.con.error("stopped: the outputs written are complete; --resume goes on from there")
+            return EXIT_FAILED
+        progress.close()
+        self.written = len(report.written) + len(report.skipped)
+        if report.failed:
+            self.con.error(f"{len(report.failed)} failed, {self.written} written")
+            return EXIT_FAILED
         return EXIT_OK
 
     def abort(self) -> None:

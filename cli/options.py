@@ -21,6 +21,8 @@ def configure_logging(verbose: int, quiet: bool) -> None:
     level = logging.ERROR if quiet else (logging.DEBUG if verbose > 1 else
                                          logging.INFO if verbose else logging.WARNING)
     logging.basicConfig(level=level, format="mlaa-stream: %(message)s")
+    # Dask's scheduler and workers (--cluster) log every connection at INFO: only with -vv
+    logging.getLogger("distributed").setLevel(logging.DEBUG if verbose > 1 else logging.WARNING)
 
 
 class CommandError(click.ClickException):

@@ -199,10 +199,12 @@ def same_file(a: str, b: str) -> bool:
         return False
 
 
-def image_source(files: list[FrameFile], report: Report, *, strict: bool) -> Iterator[Item]:
+def image_source(files: list[FrameFile], report: Report, *, strict: bool,
+                 like: tuple | None = None) -> Iterator[Item]:
     """Read each file; Item.meta = (FrameFile, Image, merge). Folder mode (not strict) reports a bad
-    file and goes on; strict (a sequence) raises at the first unreadable or mismatched frame."""
-    first: tuple | None = None
+    file and goes on; strict (a sequence) raises at the first unreadable or mismatched frame. `like`:
+    ((shape, dtype), FrameFile) every frame must match (a chunk of a longer sequence: its first frame)."""
+    first: tuple | None = like
     for ff in files:
         try:
             image = read_image(ff.src)

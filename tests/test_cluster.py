@@ -1,0 +1,108 @@
+"""Scale-out on Dask (issue 18): a LocalCluster of two worker processes gives the single-machine outputs
+bit for bit, survives a worker killed mid-job, names the chunk and frame that fails, and leaves nothing
+half-written."""
+from __future__ import annotations
+
+import os
+import signal
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from mlaa_stream.cli.main import main
+from mlaa_stream.io.images import check_complete, write_image
+
+distributed = pytest.importorskip("distributed", reason="Dask is in the [cluster] and [test] extras")
+
+
+def sequence(folder, n: int = 60, size=(40, 64)):
+    folder.mkdir(parents=True, exist_ok=True)
+    y, x = np.mgrid[0:size[0], 0:size[1]]
+    for k in range(n):
+        img = np.where(((y * (2 + k % 4)) > x + k % 7)[..., None], [20, 30, 200 - k], [230, 220, 200]).astype(np.uint8)
+        write_image(str(folder / f"shot.{1001 + k:04d}.png"), img)
+
+
+def files(folder) -> dict[str, bytes]:
+    return {n: (folder / n).read_bytes() for n in sorted(os.listdir(folder))}
+
+
+@pytest.fixture(scope="module")
+def client():
+    cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0")
+    c = distributed.Client(cluster)
+    yield c
+    c.close()
+    cluster.close()
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    """The 60-frame sequence and its single-machine outputs."""
+    root = tmp_path_factory.mktemp("seq")
+    sequence(root / "in")
+    r = CliRunner().invoke(main, [str(root / "in" / "shot.%04d.png"), "-o", str(root / "ref" / "c.%04d.png")])
+    assert r.exit_code == 0, r.output
+    return root
+
+
+def test_a_sequence_on_two_workers_equals_one_machine(client, reference, tmp_path):
+    from mlaa_stream.cluster.frames import filter_on_cluster
+
+    report = filter_on_cluster(client, str(reference / "in" / "shot.%04d.png"), str(tmp_path / "c.%04d.png"),
+                               chunk_frames=7)
+    assert len(report.written) == 60 and not report.failed
+    assert files(tmp_path) == files(reference / "ref")
+    workers = {w["name"] for w in client.scheduler_info()["workers"].values()}
+    assert len(workers) == 2
+
+
+def test_a_worker_killed_mid_job_the_job_finishes_and_nothing_is_partial(client, reference, tmp_path):
+    from mlaa_stream.cluster.frames import run_chunks
+    from mlaa_stream.io.sequence import expand_pattern, plan_images
+
+    found, _ = expand_pattern(str(reference / "in" / "shot.%04d.png"))
+    plan = plan_images([p for _, p in found], str(tmp_path / "c.%04d.png"), [n for n, _ in found])
+    pids = list(client.run(os.getpid).values())
+    killed = []
+
+    def kill_one(done: int) -> None:
+        if not killed:  # after the first chunk: one worker process dies (SIGKILL, as the OOM killer does)
+            os.kill(pids[0], signal.SIGKILL)
+            killed.append(pids[0])
+
+    report = run_chunks(client, plan, {}, overwrite=False, strict=True, chunk_frames=4, on_frames=kill_one)
+    assert killed and not report.failed
+    assert len(report.written) + len(report.skipped) == 60
+    assert files(tmp_path) == files(reference / "ref")  # every output complete and as on one machine
+    assert [n for n in os.listdir(tmp_path) if ".mlaa-tmp" in n] == []
+    client.wait_for_workers(2, timeout=60)  # the nanny restarted it
+
+
+def test_a_bad_frame_names_its_chunk_and_frame(client, tmp_path):
+    from mlaa_stream.cluster.frames import ClusterJobError, filter_on_cluster
+
+    sequence(tmp_path / "in", n=12)
+    (tmp_path / "in" / "shot.1007.png").write_bytes(b"\x89PNG\r\n\x1a\n broken")
+    with pytest.raises(ClusterJobError, match=r"chunk 1 \(frames 1005-1008\): frame 1007 .*shot.1007.png"):
+        filter_on_cluster(client, str(tmp_path / "in" / "shot.%04d.png"), str(tmp_path / "out" / "c.%04d.png"),
+                          chunk_frames=4)
+    assert [n for n in os.listdir(tmp_path / "out") if ".mlaa-tmp" in n] == []
+    for name in os.listdir(tmp_path / "out"):
+        assert check_complete(str(tmp_path / "out" / name)) is None
+
+
+def test_the_command_line_on_a_local_cluster(reference, tmp_path):
+    r = CliRunner().invoke(main, [str(reference / "in"), "-o", str(tmp_path / "o"), "--cluster", "local:2",
+                                  "--chunk-frames", "16"])
+    assert r.exit_code == 0, r.output
+    ref = files(reference / "ref")
+    got = files(tmp_path / "o")
+    assert sorted(got) == sorted(n.replace("c.", "shot.") for n in ref)
+    assert list(got.values()) == list(ref.values())
+    r = CliRunner().invoke(main, [os.path.join(os.path.dirname(__file__), "..", "fixtures", "demo", "clip.mp4"),
+                                  "-o", str(tmp_path / "v.mp4"), "--cluster", "local:2"])
+    assert r.exit_code == 2 and "--cluster runs folders and frame patterns" in r.output
+    r = CliRunner().invoke(main, [str(reference / "in"), "-o", str(tmp_path / "p"), "--cluster", "not an address"])
+    assert r.exit_code == 2 and "expected local:N or a scheduler address" in r.output
