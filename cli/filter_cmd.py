@@ -328,8 +328,10 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
         if frames is not None and kind != "pattern":
             raise Usage(f"--frames needs a frame pattern like shot/%04d.exr, got {input_path} "
                         f"(for a video: --start/--end)")
-        if cluster is not None and kind not in ("folder", "pattern"):
-            raise Usage("--cluster runs folders and frame patterns; a video or single image runs here")
+        if cluster is not None and kind not in ("folder", "pattern", "video"):
+            raise Usage("--cluster runs videos, folders and frame patterns; a single image runs here")
+        if cluster is not None and kind == "video" and (input_path == "-" or output == "-" or start or end):
+            raise Usage("--cluster needs a video file in and out (no pipes, --start or --end)")
         if cluster is not None and overlay is not None:
             raise Usage("--overlay is not available with --cluster")
         if cluster is not None:
@@ -735,9 +737,36 @@ class _VideoJob(_Job):
         if writer is not None and not getattr(self, "_finished", False):
             writer.abort()
 
+    def _run_on_cluster(self) -> int:
+        """Segments of the video filtered and encoded by the workers, joined here (mlaa_stream.cluster.video)."""
+        from mlaa_stream.cluster.connect import connect
+        from mlaa_stream.cluster.video import ClusterVideoError, filter_video_on_cluster
+
+        self.writer.abort()  # the workers encode; the join writes the output
+        self._finished = True
+        o = self.opts
+        progress = self._progress(self.info.frames)
+        try:
+            with connect(o["cluster"]) as client:
+                self.written = filter_video_on_cluster(
+                    client, self.input, self.output, codec=o["codec"], crf=o["crf"],
+                    encoder_preset=o["encoder_preset"], pix_fmt=o["pix_fmt"], overwrite=o["overwrite"],
+                    audio=o["audio"] != "none", on_frames=progress.update,
+                    segment_seconds=o["chunk_frames"] / float(self.info.fps or 25), **o["filter_kwargs"])
+        except (ClusterVideoError, OSError) as exc:
+            self.con.error(str(exc))
+            self.con.error(f"{self.output}: not written")
+            return EXIT_FAILED
+        finally:
+            progress.close()
+        return EXIT_OK
+
     def run(self, filt, post_hooks, in_flight, times, temporal=None) -> int:
         from mlaa_stream.pipeline import PipelineError
         from mlaa_stream.io.video import VideoReadError, read_video_cv
+
+        if self.opts.get("cluster"):
+            return self._run_on_cluster()
         from mlaa_stream.pipeline import filter_video
 
         from mlaa_stream.io.video import read_video

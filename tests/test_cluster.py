@@ -102,7 +102,47 @@ def test_the_command_line_on_a_local_cluster(reference, tmp_path):
     assert sorted(got) == sorted(n.replace("c.", "shot.") for n in ref)
     assert list(got.values()) == list(ref.values())
     r = CliRunner().invoke(main, [os.path.join(os.path.dirname(__file__), "..", "fixtures", "demo", "clip.mp4"),
-                                  "-o", str(tmp_path / "v.mp4"), "--cluster", "local:2"])
-    assert r.exit_code == 2 and "--cluster runs folders and frame patterns" in r.output
+                                  "-o", "-", "-f", "nut", "--cluster", "local:2"])
+    assert r.exit_code == 2 and "--cluster needs a video file in and out" in r.output
     r = CliRunner().invoke(main, [str(reference / "in"), "-o", str(tmp_path / "p"), "--cluster", "not an address"])
     assert r.exit_code == 2 and "expected local:N or a scheduler address" in r.output
+
+
+# -- video ----------------------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def clip60(tmp_path_factory):
+    import importlib.util
+    root = os.path.join(os.path.dirname(__file__), "..")
+    spec = importlib.util.spec_from_file_location("make_demo", os.path.join(root, "fixtures", "make_demo.py"))
+    md = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(md)
+    path = str(tmp_path_factory.mktemp("clip") / "c60.mkv")
+    md.write_clip(path, frames=60, audio=True)
+    return path
+
+
+def decoded(path) -> tuple[list, list]:
+    import av
+    with av.open(str(path)) as c:
+        streams = [(s.type, s.codec_context.name) for s in c.streams]
+        return [f.to_ndarray(format="rgb24") for f in c.decode(video=0)], streams
+
+
+def test_a_video_in_segments_equals_one_machine(client, clip60, tmp_path):
+    from mlaa_stream.cluster.video import filter_video_on_cluster
+
+    r = CliRunner().invoke(main, [clip60, "-o", str(tmp_path / "ref.mkv"), "--codec", "ffv1"])
+    assert r.exit_code == 0, r.output
+    n = filter_video_on_cluster(client, clip60, str(tmp_path / "cl.mkv"), codec="ffv1", segment_seconds=0.4)
+    assert n == 60
+    (a, sa), (b, sb) = decoded(tmp_path / "ref.mkv"), decoded(tmp_path / "cl.mkv")
+    assert sa == sb == [("video", "ffv1"), ("audio", "aac")]  # audio copied once, from the source
+    assert len(a) == len(b) == 60 and all(np.array_equal(x, y) for x, y in zip(a, b))  # lossless: the same frames
+    assert sorted(os.listdir(tmp_path)) == ["cl.mkv", "ref.mkv"]  # no segment or temporary file left
+
+
+def test_a_video_on_the_command_line_cluster(clip60, tmp_path):
+    r = CliRunner().invoke(main, [clip60, "-o", str(tmp_path / "o.mp4"), "--cluster", "local:2", "--chunk-frames", "20"])
+    assert r.exit_code == 0, r.output
+    frames, streams = decoded(tmp_path / "o.mp4")
+    assert len(frames) == 60 and streams == [("video", "h264"), ("audio", "aac")]

@@ -375,7 +375,7 @@ class VideoWriter:
                  crf: int | None = DEFAULT_CRF, preset: str | None = DEFAULT_ENCODER_PRESET,
                  pix_fmt: str | None = None, copy_audio: bool = True, overwrite: bool = False,
                  audio: str | None = None, container_format: str | None = None, offset: float = 0.0,
-                 end: float | None = None):
+                 end: float | None = None, extra_options: dict[str, str] | None = None):
         """`codec` None: the source's family (codec_for). `audio`: "copy" (default, with the subtitle
         streams and every tag), "aac" (audio re-encoded, subtitles copied) or "none"; `copy_audio=False`
         is "none"."""
@@ -410,7 +410,7 @@ class VideoWriter:
         self.last_time: float | None = None  # seconds, end of the last frame written
         self.warnings: list[str] = []
         self._tmp = None if path == PIPE else temp_path_for(path)  # standard output: written as it comes
-        self._options = encoder_options(codec, crf, preset)
+        self._options = {**encoder_options(codec, crf, preset), **(extra_options or {})}
         self._audio_in = None
         self._audio_packets: Iterator | None = None
         self._audio_map: dict = {}

@@ -1,0 +1,187 @@
+"""A video on a Dask cluster: the frames split into time ranges, each filtered and encoded by a worker into
+a segment file, the segments joined in order without re-encoding, the audio and subtitle streams (and the
+tags and rotation) copied once from the source.
+
+    with Client(...) as client:
+        frames = filter_video_on_cluster(client, "in.mkv", "out.mkv", codec="ffv1")
+
+A range starts at any frame: its worker seeks to the keyframe before it and decodes up to it (read_video's
+`start`), so ranges need no keyframe alignment; every frame falls in exactly one range (by its timestamp,
+to half a frame). Segments are encoded without B-frames (x264/x265: `bf=0`), so that the joined stream's
+decoding order stays monotonic across segment boundaries. Containers: whatever PyAV writes and can
+remux (MKV, MP4, MOV, NUT); the codec must be one whose packets stand alone after a keyframe (all FFmpeg
+video encoders used here).
+"""
+from __future__ import annotations
+
+import heapq
+import math
+import os
+from dataclasses import dataclass
+from fractions import Fraction
+
+from mlaa_stream.io.images import publish, remove_quietly, stale_temp_files, temp_path_for
+
+SEGMENT_SECONDS = 2.0  # default time range per task
+
+
+class ClusterVideoError(RuntimeError):
+    """A segment failed on the cluster after its retry; the message names the segment and its frames."""
+
+
+@dataclass(frozen=True)
+class Segment:
+    index: int
+    start: float  # seconds, source time
+    end: float | None  # None: to the end of the source
+    path: str  # the segment file (a temporary name beside the output)
+
+    def label(self, fps: Fraction | None) -> str:
+        rate = float(fps or 25)
+        first = int(round(self.start * rate))
+        last = "end" if self.end is None else str(int(round(self.end * rate)) - 1)
+        return f"segment {self.index} (frames {first}-{last})"
+
+
+def plan_segments(duration: float, fps: Fraction | None, output: str, seconds: float = SEGMENT_SECONDS) -> list[Segment]:
+    """Time ranges of whole frames covering [0, duration): the last one runs to the end."""
+    frame = 1.0 / float(fps or 25)
+    per = max(1, int(round(seconds / frame)))  # frames per segment
+    n = max(1, math.ceil(duration / (per * frame) - 1e-9))
+    return [Segment(k, k * per * frame, None if k == n - 1 else (k + 1) * per * frame,
+                    temp_path_for(os.path.splitext(output)[0] + f".seg{k:04d}.mkv")) for k in range(n)]
+
+
+def encode_segment(source: str, segment: Segment, filter_kwargs: dict, codec: str | None, crf: int,
+                   encoder_preset: str, pix_fmt: str | None) -> int:
+    """Run on a worker: decode the segment's frames, filter them, encode them into segment.path (video only,
+    timestamps from 0 at segment.start). Returns the frames written."""
+    from mlaa_stream.cluster.frames import _worker_filter
+    from mlaa_stream.io.video import VideoWriter, probe_video, read_video
+    from mlaa_stream.pipeline import run_pipeline
+
+    info = probe_video(source)
+    filt = _worker_filter(filter_kwargs)
+    writer = VideoWriter(segment.path, info, codec=codec, crf=crf, preset=encoder_preset, pix_fmt=pix_fmt,
+                         audio="none", overwrite=True, offset=segment.start, container_format="matroska",
+                         extra_options={"bf": "0"})
+    try:
+        n = run_pipeline(read_video(info, start=segment.start or None, end=segment.end), filt,
+                         lambda item: writer.write(item.frame, item.meta))
+        writer.commit()
+    except BaseException:
+        writer.abort()
+        raise
+    return n
+
+
+def join_segments(segments: list[Segment], info, output: str, *, overwrite: bool, audio: bool = True) -> None:
+    """Concatenate the segments' video packets in order (shifted by each segment's start) into `output`,
+    with the source's audio and subtitle streams, tags and rotation; written under a temporary name."""
+    import av
+
+    from mlaa_stream.io.video import _copy_tags
+
+    tmp = temp_path_for(output)
+    first = av.open(segments[0].path)
+    src = av.open(info.path) if audio else None
+    try:
+        out = av.open(tmp, "w")
+        vin = first.streams.video[0]
+        vout = out.add_stream_from_template(vin)
+        if info.rotation:
+            vout.set_display_rotation(info.rotation)
+        copies = {}
+        if src is not None:
+            _copy_tags(src.metadata, out.metadata)
+            _copy_tags(src.streams.video[0].metadata, vout.metadata)
+            for s in src.streams:
+                if s.type in ("audio", "subtitle"):
+                    o = out.add_stream_from_template(s)
+                    _copy_tags(s.metadata, o.metadata)
+                    copies[s.index] = o
+        out.start_encoding()
+        heap: list = []  # (time, order, packet): video and copied packets interleaved by time
+        order = 0
+
+        def video_packets():
+            for seg in segments:
+                with av.open(seg.path) as c:
+                    s = c.streams.video[0]
+                    shift = int(round(seg.start / s.time_base))
+                    for pkt in c.demux(s):
+                        if pkt.dts is None:
+                            continue
+                        pkt.pts = None if pkt.pts is None else pkt.pts + shift
+                        pkt.dts += shift
+                        yield float(pkt.dts * pkt.time_base), pkt
+
+        def copied_packets():
+            if src is None or not copies:
+                return
+            for pkt in src.demux(*[src.streams[i] for i in copies]):
+                if pkt.dts is None:
+                    continue
+                yield float(pkt.dts * pkt.time_base), pkt
+
+        for t, pkt in heapq.merge(video_packets(), copied_packets(), key=lambda tp: tp[0]):
+            pkt.stream = vout if pkt.stream.type == "video" else copies[pkt.stream.index]
+            out.mux(pkt)
+        out.close()
+        publish(tmp, output, overwrite)
+    except BaseException:
+        remove_quietly(tmp)
+        raise
+    finally:
+        first.close()
+        if src is not None:
+            src.close()
+
+
+def filter_video_on_cluster(client, source: str, output: str, *, preset: str | None = None,
+                            codec: str | None = None, crf: int = 18, encoder_preset: str = "veryfast",
+                            pix_fmt: str | None = None, overwrite: bool = False, audio: bool = True,
+                            segment_seconds: float = SEGMENT_SECONDS, on_frames=None,
+                            **filter_kwargs) -> int:
+    """Filter the video `source` into `output` on the cluster behind `client`; returns the frames written.
+    Raises ClusterVideoError naming the segment that failed twice; nothing is left under the output's name
+    or as a segment file on failure."""
+    from dask.distributed import as_completed
+
+    from mlaa_stream.io.video import probe_video
+    from mlaa_stream.spatial.filter import PRESETS
+
+    if os.path.exists(output) and not overwrite:
+        raise FileExistsError(f"{output}: exists; pass overwrite=True")
+    info = probe_video(source)
+    if not info.duration:
+        raise ClusterVideoError(f"{source}: the container declares no duration: the video cannot be split")
+    kwargs = dict(PRESETS.get(preset or "default", {}), **filter_kwargs)
+    segments = plan_segments(info.duration, info.fps, output, segment_seconds)
+    futures = {client.submit(encode_segment, source, seg, kwargs, codec, crf, encoder_preset, pix_fmt,
+                             retries=1, pure=False, key=f"mlaa-seg-{seg.index}-{os.getpid()}-{id(segments)}"): seg
+               for seg in segments}
+    frames, failure, counts = 0, None, {}
+    try:
+        for fut in as_completed(futures):
+            seg = futures[fut]
+            if fut.status != "finished":
+                failure = failure or ClusterVideoError(f"{source}: {seg.label(info.fps)} failed on the cluster: "
+                                                       f"{fut.exception()}")
+                continue
+            counts[seg.index] = fut.result()
+            frames += counts[seg.index]
+            if on_frames is not None:
+                on_frames(frames)
+        if failure is not None:
+            raise failure
+        # a last range past the last frame (the container's duration counts the audio too) holds nothing
+        join_segments([s for s in segments if counts.get(s.index)], info, output, overwrite=overwrite, audio=audio)
+    finally:
+        for fut in futures:
+            fut.cancel()
+        for seg in segments:
+            remove_quietly(seg.path)
+        for path in stale_temp_files(os.path.dirname(os.path.abspath(output))):
+            remove_quietly(path)  # segments of workers that were killed
+    return frames
