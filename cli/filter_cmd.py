@@ -394,7 +394,7 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
         runner.close_progress()
     if con.verbose and not con.quiet:
         click.echo(times.report(), err=True)
-    elif not con.quiet and not sys.stderr.isatty():  # logs and pipelines: one line, no progress bar
+    elif not con.quiet and not sys.stderr.isatty() and code == EXIT_OK:  # logs and pipes: one line, no bar
         wall = time.perf_counter() - times.started
         click.echo(f"mlaa-stream: {runner.written} frames in {wall:.1f} s "
                    f"({runner.written / wall if wall > 0 else 0:.1f} fps) -> {runner.output}", err=True)
