@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import pyopencl as cl
+import numpy as np
 import pytest
 from click.testing import CliRunner
 
@@ -80,3 +81,23 @@ def test_pocl_workers_are_pinned_only_where_the_process_may_use_every_cpu(monkey
     monkeypatch.setattr(device.os, "sched_getaffinity", lambda pid: {1, 2}, raising=False)
     env = {}
     assert not device.pin_pocl_workers(env) and env == {}
+
+
+def test_cpu_launches_get_a_fixed_work_group_and_a_padded_grid():
+    """PoCL builds a kernel per work-group size: a fixed one means no build per frame size (issue 17)."""
+    assert dev.launch_size((30, 1079), cpu=True) == ((30, 1080), (1, 8))
+    assert dev.launch_size((1079,), cpu=True) == ((1080,), (8,))
+    assert dev.launch_size((30, 1079), cpu=False) == ((30, 1079), None)
+
+
+@pytest.mark.parametrize("shape", [(13, 17), (9, 70), (41, 3), (1, 1)])
+def test_frames_of_sizes_off_the_work_group_grid_match_the_reference(shape):
+    from mlaa_stream.spatial.filter import Filter
+    from mlaa_stream.spatial.reference import mlaa_reference
+
+    rng = np.random.default_rng(sum(shape))
+    frame = np.kron(rng.integers(0, 256, (shape[0] // 3 + 1, shape[1] // 3 + 1, 3)), np.ones((3, 3, 1)))
+    frame = frame[:shape[0], :shape[1]].astype(np.uint8)
+    out = Filter(bridge=False).process(frame)
+    ref = mlaa_reference(frame)
+    assert np.abs(out.astype(int) - ref.astype(int)).max() <= 1

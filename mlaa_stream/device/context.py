@@ -228,12 +228,13 @@ class Context:
                 self._programs[key] = prg
             return prg
 
-    def kernel(self, name: str, function: str, defines: dict[str, object] | None = None):
+    def kernel(self, name: str, function: str, defines: dict[str, object] | None = None) -> "SizedKernel":
         """A kernel object, fetched once per (file, defines, function) and reused."""
         key = (name, tuple(format_defines(defines or {})), function)
         k = self._kernels.get(key)
         if k is None:
-            k = cl.Kernel(self.program(name, defines), function)
+            k = SizedKernel(cl.Kernel(self.program(name, defines), function),
+                            bool(self.device.type & cl.device_type.CPU))
             self._kernels[key] = k
         return k
 
@@ -244,6 +245,36 @@ class Context:
         if self.poison is not None:
             cl.enqueue_fill_buffer(self.queue, buf, np.uint8(self.poison), 0, buf.size).wait()
         return buf
+
+
+# PoCL compiles a kernel once per work-group size; left to choose, it derives one from the global size, so
+# every new frame size cost a build of seconds (a folder of mixed sizes, a resized capture window). On CPU
+# devices a launch without a work-group size gets this fixed one and its global size is rounded up to a
+# multiple of it (every kernel returns early past the frame's last row and column).
+CPU_LOCAL = {1: (8,), 2: (1, 8), 3: (1, 1, 8)}
+
+
+def launch_size(global_size: tuple[int, ...], cpu: bool) -> tuple[tuple[int, ...], tuple[int, ...] | None]:
+    """(global, local) for a launch without a local size: fixed and padded on CPU devices, as given on GPUs."""
+    if not cpu:
+        return tuple(global_size), None
+    local = CPU_LOCAL[len(global_size)]
+    return tuple(-(-int(g) // l) * l for g, l in zip(global_size, local)), local
+
+
+class SizedKernel:
+    """A pyopencl kernel whose launches without a local size get `launch_size`'s (see CPU_LOCAL)."""
+
+    def __init__(self, kernel, cpu: bool):
+        self.kernel, self.cpu = kernel, cpu
+
+    def __call__(self, queue, global_size, local_size, *args, **kwargs):
+        if local_size is None:
+            global_size, local_size = launch_size(global_size, self.cpu)
+        return self.kernel(queue, global_size, local_size, *args, **kwargs)
+
+    def __getattr__(self, name: str):
+        return getattr(self.kernel, name)
 
 
 def check_pass_buffers(what: str, fmt, src, dst) -> None:

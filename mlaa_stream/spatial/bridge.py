@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mlaa_stream.device.colour import device_luts, lut_read
-from mlaa_stream.device.context import Context, check_pass_buffers, default_context
+from mlaa_stream.device.context import Context, check_pass_buffers, default_context, launch_size
 from mlaa_stream.device.formats import LUT_SIZE, FrameFormat, defines_for, frame_format
 
 try:
@@ -600,7 +600,9 @@ class Bridger:
         self._verdicts = context.buffer(4 * fmt.pixels)
         cl.enqueue_fill_buffer(context.queue, self._claims, np.uint32(0xFFFFFFFF), 0, 4 * fmt.pixels).wait()
         self._global = (-(-fmt.width // SEGMENT), fmt.height)
-        self._segments = context.buffer(self._global[0] * self._global[1])  # per work item: orientations found
+        # per work item (the launch's padded grid): the orientations found
+        padded, _ = launch_size(self._global, bool(context.device.type & cl.device_type.CPU))
+        self._segments = context.buffer(padded[0] * padded[1])
         self._last = None  # this pass's previous frame: its work buffers are reused
 
     def device_bytes(self) -> int:
