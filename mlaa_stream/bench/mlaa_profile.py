@@ -18,7 +18,7 @@ import numpy as np
 
 from mlaa_stream.spatial.filter import Filter
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]  # the checkout: mlaa_stream/bench/ is two levels down
 
 
 def frames() -> dict[str, np.ndarray]:
