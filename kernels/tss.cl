@@ -1,0 +1,166 @@
+// tss.cl -- temporal supersampling resolve (issue 16; seed 002's T2x generalised to K frames).
+// Reference: mlaa_stream.temporal.tss.tss_reference (the plain statement; the module's header says why).
+//
+// Per output pixel x = (gx, gy) (pixel centres at integer coordinates):
+//   box  = the current input's 3x3 per-channel min/max (edges replicated) in linear light, widened by EPS
+//   for each ring frame j (the current frame included, identity map), oldest first:
+//     p    = x + (dx_j, dy_j)                      translation map (info kind 0)
+//          = x + field_j(x), bilinear at 1/FS       dense map (kind 1; NaN = no trusted motion)
+//     skip where valid_j (1/FS, nearest) is 0, p is NaN, or s = floor(p + 0.5) is outside the frame
+//     v    = ring frame j's sample at s (linear light); skip if outside the box (another surface)
+//     o    = s - p in [-0.5, 0.5)^2, cell = floor((o + 0.5) GRID) per axis: the sample's stratum of x's
+//            footprint; per cell: sum and count
+//   n    = filled cells, m = mean over filled cells of the cell means
+//   out  = S + (n / GRID^2) (m - S) with S the spatial output (linear), encoded by table, where n >= MIN_CELLS;
+//          elsewhere the spatial pixel is copied bit for bit. cells[x] = n (debug view, stats).
+// A gather: one tap per ring frame and pixel, no atomics.
+//
+// Buffers: ring = RING_SLOTS frames of the input's type and layout, one after another; info = 4 ints per
+// ring entry (slot, kind, field/valid slot, has valid); shift = 2 floats per entry; fields = (slot, fh, fw, 2)
+// floats; valids = (slot, fh, fw) uchar. Defines: GRID, MIN_CELLS, EPS (float literal), LINEAR_INPUT.
+#pragma OPENCL FP_CONTRACT OFF
+
+#define CELLS (GRID * GRID)
+
+inline float4 tss_linear(__global const float *luts, __global const float *dec,
+                         __global const PIXEL_T *img, int i)
+{
+#if !LINEAR_INPUT && !defined(PIXEL_IS_FLOAT)
+    // integer samples: one load of the decode table (temporal.decode_table: the table read's value)
+#if CHANNELS == 1
+    float v = dec[img[i]];
+    return (float4)(v, v, v, 1.0f);
+#else
+    __global const PIXEL_T *p = img + (size_t)i * CHANNELS;
+#if ORDER_BGR
+    return (float4)(dec[p[2]], dec[p[1]], dec[p[0]], 1.0f);
+#else
+    return (float4)(dec[p[0]], dec[p[1]], dec[p[2]], 1.0f);
+#endif
+#endif
+#else
+    float4 c = load_px(img, i);
+#if LINEAR_INPUT
+    return c;
+#else
+    return (float4)(lut_read(luts, c.x), lut_read(luts, c.y), lut_read(luts, c.z), c.w);
+#endif
+#endif
+}
+
+__kernel void tss_resolve(__global const PIXEL_T *ring, __global const PIXEL_T *spatial,
+                          __global PIXEL_T *dst, __global uchar *cells,
+                          __global const int *info, __global const float *shift,
+                          __global const float *fields, __global const uchar *valids,
+                          __global const float *luts, __global const float *dec,
+                          const int width, const int height, const int fw, const int fh, const int fs,
+                          const int n_ring, const int cur_slot)
+{
+    const int gx = get_global_id(0), gy = get_global_id(1);
+    if (gx >= width || gy >= height)
+        return;
+    const int i = gy * width + gx;
+    const size_t frame = (size_t)width * height;
+    __global const PIXEL_T *cur = ring + (size_t)cur_slot * frame * CHANNELS;
+
+    // the current input's 3x3 colour box
+    float4 lo = (float4)(INFINITY), hi = (float4)(-INFINITY);
+    for (int dy = -1; dy <= 1; ++dy) {
+        int yy = gy + dy;
+        yy = yy < 0 ? 0 : (yy > height - 1 ? height - 1 : yy);
+        for (int dx = -1; dx <= 1; ++dx) {
+            int xx = gx + dx;
+            xx = xx < 0 ? 0 : (xx > width - 1 ? width - 1 : xx);
+            float4 c = tss_linear(luts, dec, cur, yy * width + xx);
+            lo = fmin(lo, c);
+            hi = fmax(hi, c);
+        }
+    }
+    lo -= EPS;
+    hi += EPS;
+
+    float sum[CELLS * 3];
+    int cnt[CELLS];
+    for (int k = 0; k < CELLS; ++k) {
+        cnt[k] = 0;
+        sum[3 * k] = sum[3 * k + 1] = sum[3 * k + 2] = 0.0f;
+    }
+    const float xf = (float)gx, yf = (float)gy;
+    const int vx = gx / fs < fw - 1 ? gx / fs : fw - 1, vy = gy / fs < fh - 1 ? gy / fs : fh - 1;
+    for (int j = 0; j < n_ring; ++j) {
+        const int slot = info[4 * j], kind = info[4 * j + 1], fslot = info[4 * j + 2], has_valid = info[4 * j + 3];
+        if (has_valid && valids[(size_t)fslot * fw * fh + vy * fw + vx] == 0)
+            continue;
+        float px, py;
+        if (kind == 0) {
+            px = xf + shift[2 * j];
+            py = yf + shift[2 * j + 1];
+        } else {
+            // bilinear read of the field at 1/fs (mlaa_stream.temporal.tss.sample_field)
+            float fx = (xf + 0.5f) / (float)fs - 0.5f, fy = (yf + 0.5f) / (float)fs - 0.5f;
+            fx = fx > 0.0f ? (fx < (float)(fw - 1) ? fx : (float)(fw - 1)) : 0.0f;
+            fy = fy > 0.0f ? (fy < (float)(fh - 1) ? fy : (float)(fh - 1)) : 0.0f;
+            int x0 = (int)fx, y0 = (int)fy;
+            int x1 = x0 + 1 < fw - 1 ? x0 + 1 : fw - 1, y1 = y0 + 1 < fh - 1 ? y0 + 1 : fh - 1;
+            float ax = fx - (float)x0, ay = fy - (float)y0;
+            __global const float *f = fields + (size_t)fslot * fw * fh * 2;
+            float2 f00 = vload2(y0 * fw + x0, f), f01 = vload2(y0 * fw + x1, f);
+            float2 f10 = vload2(y1 * fw + x0, f), f11 = vload2(y1 * fw + x1, f);
+            float2 top = f00 + (f01 - f00) * ax, bot = f10 + (f11 - f10) * ax;
+            float2 o = top + (bot - top) * ay;
+            px = xf + o.x;
+            py = yf + o.y;
+        }
+        if (!(px == px) || !(py == py))
+            continue;   // NaN: no trusted motion (forward-backward inconsistency)
+        const float sx = floor(px + 0.5f), sy = floor(py + 0.5f);
+        if (sx < 0.0f || sx > (float)(width - 1) || sy < 0.0f || sy > (float)(height - 1))
+            continue;
+        const float4 v = tss_linear(luts, dec, ring + (size_t)slot * frame * CHANNELS,
+                                    (int)sy * width + (int)sx);
+        if (v.x < lo.x || v.x > hi.x || v.y < lo.y || v.y > hi.y || v.z < lo.z || v.z > hi.z)
+            continue;
+        float cx = floor((sx - px + 0.5f) * (float)GRID), cy = floor((sy - py + 0.5f) * (float)GRID);
+        int ix = cx < 0.0f ? 0 : (cx > (float)(GRID - 1) ? GRID - 1 : (int)cx);
+        int iy = cy < 0.0f ? 0 : (cy > (float)(GRID - 1) ? GRID - 1 : (int)cy);
+        int k = iy * GRID + ix;
+        sum[3 * k] += v.x;
+        sum[3 * k + 1] += v.y;
+        sum[3 * k + 2] += v.z;
+        cnt[k] += 1;
+    }
+    int n = 0;
+    float mr = 0.0f, mg = 0.0f, mb = 0.0f;
+    for (int k = 0; k < CELLS; ++k) {
+        if (cnt[k] > 0) {
+            float c = (float)cnt[k];
+            mr += sum[3 * k] / c;
+            mg += sum[3 * k + 1] / c;
+            mb += sum[3 * k + 2] / c;
+            ++n;
+        }
+    }
+    cells[i] = (uchar)n;
+#if CHANNELS == 1
+    const int nc = 1;
+#else
+    const int nc = CHANNELS;
+#endif
+    if (n < MIN_CELLS) {
+        for (int c = 0; c < nc; ++c)
+            dst[(size_t)i * nc + c] = spatial[(size_t)i * nc + c];
+        return;
+    }
+    const float fn = (float)n;
+    const float4 s = tss_linear(luts, dec, spatial, i);
+    const float a = fn / (float)CELLS;
+    float4 out = s + ((float4)(mr / fn, mg / fn, mb / fn, s.w) - s) * a;
+#if !LINEAR_INPUT
+    __global const float *enc = luts + 2 * (LUT_SIZE + 1);
+    out = (float4)(lut_read(enc, out.x), lut_read(enc, out.y), lut_read(enc, out.z), out.w);
+#endif
+#if CHANNELS == 4
+    out.w = load_px(spatial, i).w;   // alpha: the spatial pixel's (store_px re-encodes it exactly)
+#endif
+    store_px(dst, i, out);
+}
