@@ -11,13 +11,13 @@
 //     o    = s - p in [-0.5, 0.5)^2, cell = floor((o + 0.5) GRID) per axis: the sample's stratum of x's
 //            footprint; per cell: sum and count
 //   n    = filled cells, m = mean over filled cells of the cell means
-//   out  = S + (n / GRID^2) (m - S) with S the spatial output (linear), encoded by table, where n >= MIN_CELLS;
+//   out  = S + min(1, n / FULL_CELLS) (m - S) with S the spatial output (linear), encoded by table, where n >= MIN_CELLS;
 //          elsewhere the spatial pixel is copied bit for bit. cells[x] = n (debug view, stats).
 // A gather: one tap per ring frame and pixel, no atomics.
 //
 // Buffers: ring = RING_SLOTS frames of the input's type and layout, one after another; info = 4 ints per
 // ring entry (slot, kind, field/valid slot, has valid); shift = 2 floats per entry; fields = (slot, fh, fw, 2)
-// floats; valids = (slot, fh, fw) uchar. Defines: GRID, MIN_CELLS, EPS (float literal), LINEAR_INPUT.
+// floats; valids = (slot, fh, fw) uchar. Defines: GRID, MIN_CELLS, FULL_CELLS, EPS (float literal), LINEAR_INPUT.
 #pragma OPENCL FP_CONTRACT OFF
 
 #define CELLS (GRID * GRID)
@@ -153,7 +153,7 @@ __kernel void tss_resolve(__global const PIXEL_T *ring, __global const PIXEL_T *
     }
     const float fn = (float)n;
     const float4 s = tss_linear(luts, dec, spatial, i);
-    const float a = fn / (float)CELLS;
+    const float a = fn < (float)FULL_CELLS ? fn / (float)FULL_CELLS : 1.0f;
     float4 out = s + ((float4)(mr / fn, mg / fn, mb / fn, s.w) - s) * a;
 #if !LINEAR_INPUT
     __global const float *enc = luts + 2 * (LUT_SIZE + 1);

@@ -54,8 +54,10 @@ DEFAULT_FRAMES = 16   # K: ring frames (the current one included)
 GRID = 4              # footprint cells per side (GRID^2 strata)
 EPS = 0.03            # linear-light widening of the current 3x3 colour box (issue 16: 0.02-0.05)
 MIN_CELLS = 2         # fewer filled cells: the spatial output stands
+FULL_CELLS = 6        # filled cells at which the samples alone resolve the pixel (below: n / FULL_CELLS of it)
 FB_ABS, FB_REL = 0.5, 0.1   # forward-backward tolerance (px at full size): FB_ABS + FB_REL |v|
 ALIGN_LEVEL, ALIGN_PX, ALIGN_SIGMA, ALIGN_GROW = 10.0, 0.35, 2.0, 3   # MotionRing._alignment
+TILE, TILE_TOL, TILE_TEXTURE = 48, 0.4, 1.0   # _tile_check: flow px, px, mean squared gradient
 REFINE_ITERATIONS = 2       # direct Gauss-Newton steps per ring frame and frame (global model)
 
 
@@ -85,8 +87,9 @@ class MotionRing:
     """The ring's motion bookkeeping: which frames are kept and how the current frame maps into them."""
 
     def __init__(self, frames: int = DEFAULT_FRAMES, mode: str = "adaptive", refine: bool = True,
-                 fb_check: bool = True):
+                 fb_check: bool = True, dense_samples: bool = False):
         self.frames, self.mode, self.refine, self.fb_check = int(frames), mode, bool(refine), bool(fb_check)
+        self.dense_samples = bool(dense_samples)
         self.entries: list[RingEntry] = []
         self._dis = None
 
@@ -126,12 +129,20 @@ class MotionRing:
                     s = global_translation(e.pyr.blurred("flow"), cur_b, (e.shift[0] / fs, e.shift[1] / fs),
                                            iterations=REFINE_ITERATIONS, sigma=None)
                     e.shift = (s[0] * fs, s[1] * fs)
-        elif dec.model == "dense":
+                    e.valid = _tile_check(e.pyr.blurred("flow"), cur_b, (s[0], s[1]))
+        elif dec.model == "dense" and self.dense_samples:
             self._dense(prev, pyr, dec)
+        elif dec.model == "dense":
+            # Measured (docs/temporal.md, TSS section): DIS flow on 1-spp frames is ~0.1-0.2 px off and
+            # composing it over the ring puts samples on the wrong side of edges: rotation, orbit,
+            # dolly and the fast mover all came out worse than the spatial output. Without
+            # sub-pixel-accurate local motion the spatial output stands and the ring starts anew.
+            self.entries = []
         # static: every map stays as it is (nothing moved)
         for e in self.entries:
-            # translations were checked as a whole above; dense maps per region
-            e.valid = None if e.shift is not None else self._alignment(e, pyr)
+            # translations are checked per tile (global branch above); dense maps per region
+            if e.shift is None:
+                e.valid = self._alignment(e, pyr)
         self.entries.append(RingEntry(index, None, pyr, valid=np.ones(pyr.flow.shape, np.uint8)))
         if len(self.entries) > self.frames:
             del self.entries[0]
@@ -202,6 +213,45 @@ class MotionRing:
             e.shift = None
 
 
+def _tile_check(ring_b: np.ndarray, cur_b: np.ndarray, d: tuple[float, float]) -> np.ndarray | None:
+    """Does the one translation d hold in every part of the frame? One Gauss-Newton step per TILE x TILE
+    tile (flow size) from d: where a textured tile would move by more than TILE_TOL px, another motion
+    is there (the cut scene's second shot: a bar and a disc moving 0.3 px per frame apart pass the
+    frame-to-frame test of choose_model and drift apart over the ring) and that tile takes no samples
+    from this ring frame. Returns the (fh, fw) uint8 valid mask, or None when every tile agrees."""
+    h, w = cur_b.shape
+    gx = cv2.Sobel(cur_b, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
+    gy = cv2.Sobel(cur_b, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
+    warped = cv2.warpAffine(ring_b, np.float32([[1, 0, d[0]], [0, 1, d[1]]]), (w, h),
+                            flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE)
+    r = cur_b - warped
+    ty, tx = h // TILE, w // TILE
+    if ty < 1 or tx < 1:
+        return None
+
+    def tiles(a):
+        return a[:ty * TILE, :tx * TILE].reshape(ty, TILE, tx, TILE).sum((1, 3), dtype=np.float64)
+    a, b, c = tiles(gx * gx), tiles(gx * gy), tiles(gy * gy)
+    bx, by = tiles(gx * r), tiles(gy * r)
+    det = a * c - b * b
+    textured = (det > 1e-3 * np.maximum(a * c, 1e-12)) & (np.minimum(a, c) > TILE_TEXTURE * TILE * TILE)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        sx = (c * bx - b * by) / det
+        sy = (a * by - b * bx) / det
+    bad = textured & (np.hypot(sx, sy) > TILE_TOL)
+    if not bad.any():
+        return None
+    valid = np.ones((h, w), np.uint8)
+    big = np.kron(bad, np.ones((TILE, TILE), bool))
+    valid[:ty * TILE, :tx * TILE][big] = 0
+    # the last partial row/column of tiles follows its neighbour
+    if ty * TILE < h:
+        valid[ty * TILE:, :] = valid[ty * TILE - 1:ty * TILE, :]
+    if tx * TILE < w:
+        valid[:, tx * TILE:] = valid[:, tx * TILE - 1:tx * TILE]
+    return valid
+
+
 def _blur_align(pyr: Pyramid) -> np.ndarray:
     """The flow-size grey blurred by ALIGN_SIGMA, computed once per frame."""
     if "align" not in pyr._blur:
@@ -242,7 +292,7 @@ def sample_field(fld: np.ndarray, scale: int, xs: np.ndarray, ys: np.ndarray) ->
 
 def tss_reference(spatial_lin: np.ndarray, cur_lin: np.ndarray, ring: list[tuple],
                   flow_scale: int = 1, grid: int = GRID, eps: float = EPS,
-                  min_cells: int = MIN_CELLS) -> tuple[np.ndarray, np.ndarray]:
+                  min_cells: int = MIN_CELLS, full_cells: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The resolve in float32 numpy: returns (out linear RGB (H, W, 3), filled cells (H, W) uint8).
 
     ring: (linear frame, map, valid) triples, map = (dx, dy) translation or a (fh, fw, 2) field at
@@ -256,6 +306,7 @@ def tss_reference(spatial_lin: np.ndarray, cur_lin: np.ndarray, ring: list[tuple
     lo = np.minimum.reduce(taps) - f32(eps)
     hi = np.maximum.reduce(taps) + f32(eps)
     g2 = grid * grid
+    full_cells = FULL_CELLS if full_cells is None else full_cells
     sums = np.zeros((h, w, g2, 3), f32)
     counts = np.zeros((h, w, g2), np.int32)
     flat = np.arange(h * w)
@@ -286,7 +337,8 @@ def tss_reference(spatial_lin: np.ndarray, cur_lin: np.ndarray, ring: list[tuple
     n = filled.sum(-1)
     cellmean = np.where(filled[..., None], sums / np.maximum(counts, 1)[..., None], 0).astype(f32)
     mean = (cellmean.sum(-2) / np.maximum(n, 1)[..., None]).astype(f32)
-    a = (n.astype(f32) / f32(g2))[..., None]
+    fn = n.astype(f32)
+    a = np.where(fn < f32(full_cells), fn / f32(full_cells), f32(1.0))[..., None]
     out = np.where((n >= min_cells)[..., None], spatial_lin + a * (mean - spatial_lin), spatial_lin).astype(f32)
     return out, n.astype(np.uint8)
 
@@ -313,22 +365,24 @@ def encode_like(lin: np.ndarray, like: np.ndarray, bgr: bool, linear_input: bool
 
 def tss_frame_reference(spatial: np.ndarray, cur: np.ndarray, ring: list[tuple], bgr: bool,
                         flow_scale: int = 1, grid: int = GRID, eps: float = EPS,
-                        min_cells: int = MIN_CELLS) -> tuple[np.ndarray, np.ndarray]:
+                        min_cells: int = MIN_CELLS, full_cells: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """kernels/tss.cl on whole frames: ring = (input frame, map, valid) triples (frames in the input's
     type); returns (output frame like `spatial`, filled cells (H, W) uint8). Where fewer than
     min_cells are filled the spatial pixel is copied bit for bit."""
     rl = [(linear_of(f, bgr), m, ok) for f, m, ok in ring]
-    lin, n = tss_reference(linear_of(spatial, bgr), linear_of(cur, bgr), rl, flow_scale, grid, eps, min_cells)
+    lin, n = tss_reference(linear_of(spatial, bgr), linear_of(cur, bgr), rl, flow_scale, grid, eps, min_cells,
+                            full_cells)
     enc = encode_like(lin, spatial, bgr)
     keep = (n < min_cells).reshape(n.shape + (1,) * (np.ndim(spatial) - 2))
     return np.where(keep, spatial, enc).astype(spatial.dtype), n
 
 
 def kernel_defines(fmt, grid: int = GRID, eps: float = EPS, min_cells: int = MIN_CELLS,
-                   linear_input: bool = False) -> dict:
+                   full_cells: int | None = None, linear_input: bool = False) -> dict:
     """kernels/tss.cl's build defines."""
     from mlaa_stream.device.formats import defines_for
-    return defines_for(fmt, GRID=int(grid), MIN_CELLS=int(min_cells), EPS=f"{float(eps)!r}f",
+    full = FULL_CELLS if full_cells is None else int(full_cells)
+    return defines_for(fmt, GRID=int(grid), MIN_CELLS=int(min_cells), FULL_CELLS=full, EPS=f"{float(eps)!r}f",
                        LINEAR_INPUT=int(linear_input))
 
 
@@ -384,8 +438,8 @@ class TSSStage:
 
     def __init__(self, device: str | int | None = None, *, frames: int = DEFAULT_FRAMES, bgr: bool = True,
                  mode: str = "adaptive", grid: int = GRID, eps: float = EPS, min_cells: int = MIN_CELLS,
-                 refine: bool = True, fb_check: bool = True, show: str | None = None,
-                 context=None, backend: str = "device"):
+                 full_cells: int | None = None, refine: bool = True, fb_check: bool = True, show: str | None = None,
+                 context=None, backend: str = "device", dense_samples: bool = False):
         if int(frames) < 1:
             raise ValueError(f"frames: expected K >= 1, got {frames!r}")
         if backend not in ("device", "numpy"):
@@ -396,8 +450,9 @@ class TSSStage:
             raise ValueError(f"mode: expected adaptive, dense, global or static, got {mode!r}")
         self.frames, self.bgr, self.mode, self.show = int(frames), bool(bgr), mode, show
         self.grid, self.eps, self.min_cells = int(grid), float(eps), int(min_cells)
+        self.full_cells = FULL_CELLS if full_cells is None else int(full_cells)
         self.backend = backend
-        self.motion = MotionRing(self.frames, mode, refine, fb_check)
+        self.motion = MotionRing(self.frames, mode, refine, fb_check, dense_samples)
         self.stats: list[dict] = []
         self._lock = threading.Lock()
         self._buffers: _Buffers | None = None
@@ -465,7 +520,7 @@ class TSSStage:
             ring = [(self._frames[e.slot], e.shift if e.shift is not None else e.field, e.valid)
                     for e in fm.entries]
             out, cells = tss_frame_reference(frame_filtered, frame_in, ring, self.bgr, pyr.flow_scale,
-                                             self.grid, self.eps, self.min_cells)
+                                             self.grid, self.eps, self.min_cells, self.full_cells)
         else:
             out, cells = self._resolve(frame_in, frame_filtered, pyr, fm)
         t2 = time.perf_counter()
@@ -497,7 +552,7 @@ class TSSStage:
         self.queue.finish()
         self._buffers = _Buffers(self.context, fmt, shape, self.frames)
         self._kernel = self.context.kernel("tss", "tss_resolve",
-                                           kernel_defines(fmt, self.grid, self.eps, self.min_cells))
+                                           kernel_defines(fmt, self.grid, self.eps, self.min_cells, self.full_cells))
         return self._buffers
 
     def _upload_only(self, frame_in: np.ndarray, pyr: Pyramid, fm: FrameMotion) -> None:
