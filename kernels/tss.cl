@@ -164,3 +164,92 @@ __kernel void tss_resolve(__global const PIXEL_T *ring, __global const PIXEL_T *
 #endif
     store_px(dst, i, out);
 }
+
+// The same resolve when every ring frame's map is one translation (static and global models: the
+// default path). The tap pattern is the same for every pixel, so the host gives each ring frame its
+// whole-pixel offset (sx - x, sy - y) and its footprint cell, and orders the frames by cell (ring order
+// inside a cell): the kernel sums one cell's samples in registers and adds its mean when the cell
+// changes -- no per-pixel cell arrays, the same sums in the same order as tss_reference.
+// taps: 4 ints per ring frame (slot, dx, dy, cell), frames with a valid mask: vslot >= 0 in vslots.
+__kernel void tss_resolve_shift(__global const PIXEL_T *ring, __global const PIXEL_T *spatial,
+                                __global PIXEL_T *dst, __global uchar *cells,
+                                __global const int *taps, __global const int *vslots,
+                                __global const uchar *valids,
+                                __global const float *luts, __global const float *dec,
+                                const int width, const int height, const int fw, const int fh, const int fs,
+                                const int n_ring, const int cur_slot)
+{
+    const int gx = get_global_id(0), gy = get_global_id(1);
+    if (gx >= width || gy >= height)
+        return;
+    const int i = gy * width + gx;
+    const size_t frame = (size_t)width * height;
+    __global const PIXEL_T *cur = ring + (size_t)cur_slot * frame * CHANNELS;
+    float4 lo = (float4)(INFINITY), hi = (float4)(-INFINITY);
+    for (int dy = -1; dy <= 1; ++dy) {
+        int yy = gy + dy;
+        yy = yy < 0 ? 0 : (yy > height - 1 ? height - 1 : yy);
+        for (int dx = -1; dx <= 1; ++dx) {
+            int xx = gx + dx;
+            xx = xx < 0 ? 0 : (xx > width - 1 ? width - 1 : xx);
+            float4 c = tss_linear(luts, dec, cur, yy * width + xx);
+            lo = fmin(lo, c);
+            hi = fmax(hi, c);
+        }
+    }
+    lo -= EPS;
+    hi += EPS;
+    const int vx = gx / fs < fw - 1 ? gx / fs : fw - 1, vy = gy / fs < fh - 1 ? gy / fs : fh - 1;
+    int n = 0, cell = -1, cnt = 0;
+    float mr = 0.0f, mg = 0.0f, mb = 0.0f, sr = 0.0f, sg = 0.0f, sb = 0.0f;
+    for (int j = 0; j < n_ring; ++j) {
+        const int slot = taps[4 * j], k = taps[4 * j + 3];
+        if (k != cell) {           // a new cell: close the previous one
+            if (cnt > 0) {
+                float c = (float)cnt;
+                mr += sr / c; mg += sg / c; mb += sb / c;
+                ++n;
+            }
+            cell = k; cnt = 0; sr = sg = sb = 0.0f;
+        }
+        const int vs = vslots[j];
+        if (vs >= 0 && valids[(size_t)vs * fw * fh + vy * fw + vx] == 0)
+            continue;
+        const int sx = gx + taps[4 * j + 1], sy = gy + taps[4 * j + 2];
+        if (sx < 0 || sx > width - 1 || sy < 0 || sy > height - 1)
+            continue;
+        const float4 v = tss_linear(luts, dec, ring + (size_t)slot * frame * CHANNELS, sy * width + sx);
+        if (v.x < lo.x || v.x > hi.x || v.y < lo.y || v.y > hi.y || v.z < lo.z || v.z > hi.z)
+            continue;
+        sr += v.x; sg += v.y; sb += v.z;
+        ++cnt;
+    }
+    if (cnt > 0) {
+        float c = (float)cnt;
+        mr += sr / c; mg += sg / c; mb += sb / c;
+        ++n;
+    }
+    cells[i] = (uchar)n;
+#if CHANNELS == 1
+    const int nc = 1;
+#else
+    const int nc = CHANNELS;
+#endif
+    if (n < MIN_CELLS) {
+        for (int c = 0; c < nc; ++c)
+            dst[(size_t)i * nc + c] = spatial[(size_t)i * nc + c];
+        return;
+    }
+    const float fn = (float)n;
+    const float4 s = tss_linear(luts, dec, spatial, i);
+    const float a = fn < (float)FULL_CELLS ? fn / (float)FULL_CELLS : 1.0f;
+    float4 out = s + ((float4)(mr / fn, mg / fn, mb / fn, s.w) - s) * a;
+#if !LINEAR_INPUT
+    __global const float *enc = luts + 2 * (LUT_SIZE + 1);
+    out = (float4)(lut_read(enc, out.x), lut_read(enc, out.y), lut_read(enc, out.z), out.w);
+#endif
+#if CHANNELS == 4
+    out.w = load_px(spatial, i).w;
+#endif
+    store_px(dst, i, out);
+}

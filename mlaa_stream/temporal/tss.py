@@ -47,7 +47,7 @@ import numpy as np
 
 from mlaa_stream.device.colour import device_luts, lut_read
 from mlaa_stream.device.formats import LUT_SIZE, frame_format
-from mlaa_stream.temporal.stage import (Decision, Pyramid, _PMAX, choose_model,
+from mlaa_stream.temporal.stage import (LK_ROBUST, Decision, Pyramid, _PMAX, choose_model,
                                         decode_table, global_translation, grey8)
 
 DEFAULT_FRAMES = 16   # K: ring frames (the current one included)
@@ -58,7 +58,6 @@ FULL_CELLS = 6        # filled cells at which the samples alone resolve the pixe
 FB_ABS, FB_REL = 0.5, 0.1   # forward-backward tolerance (px at full size): FB_ABS + FB_REL |v|
 ALIGN_LEVEL, ALIGN_PX, ALIGN_SIGMA, ALIGN_GROW = 10.0, 0.35, 2.0, 3   # MotionRing._alignment
 TILE, TILE_TOL, TILE_TEXTURE = 48, 0.4, 1.0   # _tile_check: flow px, px, mean squared gradient
-REFINE_ITERATIONS = 2       # direct Gauss-Newton steps per ring frame and frame (global model)
 
 
 # --- motion of every ring frame relative to the current one ------------------------------------------
@@ -121,15 +120,15 @@ class MotionRing:
                 else:
                     e.field = self._compose_const(e.field, d, pyr)
             if self.refine:
+                # every frame, every ring frame: one direct step (a frame is refined on each of the K
+                # frames it stays in the ring, so its estimate converges; chaining alone drifts)
                 fs = pyr.flow_scale
-                cur_b = pyr.blurred("flow")
+                ref = _Refiner(pyr.blurred("flow"))
                 for e in self.entries:
                     if e.shift is None:
                         continue
-                    s = global_translation(e.pyr.blurred("flow"), cur_b, (e.shift[0] / fs, e.shift[1] / fs),
-                                           iterations=REFINE_ITERATIONS, sigma=None)
+                    s, e.valid = ref.step(e.pyr.blurred("flow"), (e.shift[0] / fs, e.shift[1] / fs))
                     e.shift = (s[0] * fs, s[1] * fs)
-                    e.valid = _tile_check(e.pyr.blurred("flow"), cur_b, (s[0], s[1]))
         elif dec.model == "dense" and self.dense_samples:
             self._dense(prev, pyr, dec)
         elif dec.model == "dense":
@@ -143,7 +142,7 @@ class MotionRing:
             # translations are checked per tile (global branch above); dense maps per region
             if e.shift is None:
                 e.valid = self._alignment(e, pyr)
-        self.entries.append(RingEntry(index, None, pyr, valid=np.ones(pyr.flow.shape, np.uint8)))
+        self.entries.append(RingEntry(index, None, pyr))
         if len(self.entries) > self.frames:
             del self.entries[0]
         return FrameMotion(dec, list(self.entries))
@@ -213,43 +212,67 @@ class MotionRing:
             e.shift = None
 
 
-def _tile_check(ring_b: np.ndarray, cur_b: np.ndarray, d: tuple[float, float]) -> np.ndarray | None:
-    """Does the one translation d hold in every part of the frame? One Gauss-Newton step per TILE x TILE
-    tile (flow size) from d: where a textured tile would move by more than TILE_TOL px, another motion
-    is there (the cut scene's second shot: a bar and a disc moving 0.3 px per frame apart pass the
-    frame-to-frame test of choose_model and drift apart over the ring) and that tile takes no samples
-    from this ring frame. Returns the (fh, fw) uint8 valid mask, or None when every tile agrees."""
-    h, w = cur_b.shape
-    gx = cv2.Sobel(cur_b, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
-    gy = cv2.Sobel(cur_b, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
-    warped = cv2.warpAffine(ring_b, np.float32([[1, 0, d[0]], [0, 1, d[1]]]), (w, h),
-                            flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE)
-    r = cur_b - warped
-    ty, tx = h // TILE, w // TILE
-    if ty < 1 or tx < 1:
-        return None
+class _Refiner:
+    """Direct Gauss-Newton refinement of ring frames' translations against one current frame, and the
+    per-tile check that the translation holds everywhere (flow-size grey blurred by LK_SIGMA).
 
-    def tiles(a):
-        return a[:ty * TILE, :tx * TILE].reshape(ty, TILE, tx, TILE).sum((1, 3), dtype=np.float64)
-    a, b, c = tiles(gx * gx), tiles(gx * gy), tiles(gy * gy)
-    bx, by = tiles(gx * r), tiles(gy * r)
-    det = a * c - b * b
-    textured = (det > 1e-3 * np.maximum(a * c, 1e-12)) & (np.minimum(a, c) > TILE_TEXTURE * TILE * TILE)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        sx = (c * bx - b * by) / det
-        sy = (a * by - b * bx) / det
-    bad = textured & (np.hypot(sx, sy) > TILE_TOL)
-    if not bad.any():
-        return None
-    valid = np.ones((h, w), np.uint8)
-    big = np.kron(bad, np.ones((TILE, TILE), bool))
-    valid[:ty * TILE, :tx * TILE][big] = 0
-    # the last partial row/column of tiles follows its neighbour
-    if ty * TILE < h:
-        valid[ty * TILE:, :] = valid[ty * TILE - 1:ty * TILE, :]
-    if tx * TILE < w:
-        valid[:, tx * TILE:] = valid[:, tx * TILE - 1:tx * TILE]
-    return valid
+    The current frame's gradients and per-tile Hessians are computed once per frame; each ring frame
+    costs one warp and a few products per step (inverse-additive, as stage.global_translation).
+    Tile check: one Gauss-Newton step per TILE x TILE tile from the same residual; where a textured
+    tile would move by more than TILE_TOL px from the whole frame's solution, another motion is there
+    (the cut scene's second shot: a bar and a disc 0.3 px per frame apart pass the frame-to-frame test
+    of choose_model and drift apart over the ring) and that tile takes no samples from that frame."""
+
+    def __init__(self, cur_b: np.ndarray):
+        self.c = cur_b
+        self.h, self.w = cur_b.shape
+        self.gx = cv2.Sobel(cur_b, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
+        self.gy = cv2.Sobel(cur_b, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
+        self.ty, self.tx = self.h // TILE, self.w // TILE
+        if self.ty and self.tx:
+            a, b, c = self._tiles(self.gx * self.gx), self._tiles(self.gx * self.gy), self._tiles(self.gy * self.gy)
+            self.ta, self.tb, self.tc = a, b, c
+            self.tdet = a * c - b * b
+            self.textured = (self.tdet > 1e-3 * np.maximum(a * c, 1e-12)) & (
+                np.minimum(a, c) > TILE_TEXTURE * TILE * TILE)
+
+    def _tiles(self, a: np.ndarray) -> np.ndarray:
+        t = TILE
+        return a[:self.ty * t, :self.tx * t].reshape(self.ty, t, self.tx, t).sum((1, 3), dtype=np.float64)
+
+    def step(self, ring_b: np.ndarray, d: tuple[float, float], check: bool = True):
+        """One step from d (flow px, cur(x) ~ ring(x + d)): returns (new d, valid mask or None)."""
+        h, w = self.h, self.w
+        pw = cv2.warpAffine(ring_b, np.float32([[1, 0, d[0]], [0, 1, d[1]]]), (w, h),
+                            flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE)
+        r = cv2.subtract(self.c, pw)
+        wr = 1.0 / (1.0 + (r * r) * np.float32(1.0 / (LK_ROBUST * LK_ROBUST)))
+        gxw, gyw = self.gx * wr, self.gy * wr
+        a, b_, e = float(np.dot(gxw.ravel(), self.gx.ravel())), float(np.dot(gxw.ravel(), self.gy.ravel())), \
+            float(np.dot(gyw.ravel(), self.gy.ravel()))
+        bx, by = float(np.dot(gxw.ravel(), r.ravel())), float(np.dot(gyw.ravel(), r.ravel()))
+        det = a * e - b_ * b_
+        step = (0.0, 0.0)
+        if det > 1e-6 * max(a * e, 1e-12):
+            step = ((e * bx - b_ * by) / det, (a * by - b_ * bx) / det)
+        new = (d[0] + step[0], d[1] + step[1])
+        if not check or not (self.ty and self.tx):
+            return new, None
+        tbx, tby = self._tiles(self.gx * r), self._tiles(self.gy * r)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            sx = (self.tc * tbx - self.tb * tby) / self.tdet
+            sy = (self.ta * tby - self.tb * tbx) / self.tdet
+        bad = self.textured & (np.hypot(sx - step[0], sy - step[1]) > TILE_TOL)
+        if not bad.any():
+            return new, None
+        valid = np.ones((h, w), np.uint8)
+        valid[:self.ty * TILE, :self.tx * TILE][np.kron(bad, np.ones((TILE, TILE), bool))] = 0
+        # the last partial row/column of tiles follows its neighbour
+        if self.ty * TILE < h:
+            valid[self.ty * TILE:, :] = valid[self.ty * TILE - 1:self.ty * TILE, :]
+        if self.tx * TILE < w:
+            valid[:, self.tx * TILE:] = valid[:, self.tx * TILE - 1:self.tx * TILE]
+        return new, valid
 
 
 def _blur_align(pyr: Pyramid) -> np.ndarray:
@@ -419,6 +442,7 @@ class _Buffers:
         self.cells = context.buffer(fmt.pixels)
         self.info = context.buffer(4 * 4 * frames)
         self.shift = context.buffer(4 * 2 * frames)
+        self.vslots = context.buffer(4 * frames)
         self.fields = context.buffer(8 * fh * fw * frames)
         self.valids = context.buffer(fh * fw * frames)
         self.decode = cl.Buffer(context.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
@@ -551,8 +575,9 @@ class TSSStage:
             return self._buffers
         self.queue.finish()
         self._buffers = _Buffers(self.context, fmt, shape, self.frames)
-        self._kernel = self.context.kernel("tss", "tss_resolve",
-                                           kernel_defines(fmt, self.grid, self.eps, self.min_cells, self.full_cells))
+        defines = kernel_defines(fmt, self.grid, self.eps, self.min_cells, self.full_cells)
+        self._kernel = self.context.kernel("tss", "tss_resolve", defines)
+        self._kernel_shift = self.context.kernel("tss", "tss_resolve_shift", defines)
         return self._buffers
 
     def _upload_only(self, frame_in: np.ndarray, pyr: Pyramid, fm: FrameMotion) -> None:
@@ -583,12 +608,31 @@ class TSSStage:
         cl.enqueue_copy(q, bufs.ring, np.ascontiguousarray(frame_in), dst_offset=fm.entries[-1].slot * fmt.nbytes,
                         is_blocking=False)
         cl.enqueue_copy(q, bufs.spatial, np.ascontiguousarray(frame_filtered), is_blocking=False)
-        cl.enqueue_copy(q, bufs.info, info, is_blocking=False)
-        cl.enqueue_copy(q, bufs.shift, shift, is_blocking=False)
-        self._kernel(q, (fmt.width, fmt.height), None, bufs.ring, bufs.spatial, bufs.dst, bufs.cells,
-                     bufs.info, bufs.shift, bufs.fields, bufs.valids, self._luts, bufs.decode,
-                     np.int32(fmt.width), np.int32(fmt.height), np.int32(fw), np.int32(fh),
-                     np.int32(pyr.flow_scale), np.int32(n), np.int32(fm.entries[-1].slot))
+        if all(e.shift is not None for e in fm.entries):
+            # one translation per ring frame: whole-pixel offsets and cells from the host, frames
+            # ordered by cell (stable: ring order inside a cell), as kernels/tss.cl's tss_resolve_shift wants
+            taps = np.zeros((n, 4), np.int32)
+            vslots = np.full(n, -1, np.int32)
+            for j, e in enumerate(fm.entries):
+                sx, sy = (int(np.floor(np.float32(d) + np.float32(0.5))) for d in e.shift)
+                cx, cy = self._cell_of(e.shift)
+                taps[j] = (e.slot, sx, sy, cy * self.grid + cx)
+                vslots[j] = e.slot if e.valid is not None else -1
+            order = np.argsort(taps[:, 3], kind="stable")
+            taps, vslots = np.ascontiguousarray(taps[order]), np.ascontiguousarray(vslots[order])
+            cl.enqueue_copy(q, bufs.info, taps, is_blocking=False)
+            cl.enqueue_copy(q, bufs.vslots, vslots, is_blocking=False)
+            self._kernel_shift(q, (fmt.width, fmt.height), None, bufs.ring, bufs.spatial, bufs.dst, bufs.cells,
+                               bufs.info, bufs.vslots, bufs.valids, self._luts, bufs.decode,
+                               np.int32(fmt.width), np.int32(fmt.height), np.int32(fw), np.int32(fh),
+                               np.int32(pyr.flow_scale), np.int32(n), np.int32(fm.entries[-1].slot))
+        else:
+            cl.enqueue_copy(q, bufs.info, info, is_blocking=False)
+            cl.enqueue_copy(q, bufs.shift, shift, is_blocking=False)
+            self._kernel(q, (fmt.width, fmt.height), None, bufs.ring, bufs.spatial, bufs.dst, bufs.cells,
+                         bufs.info, bufs.shift, bufs.fields, bufs.valids, self._luts, bufs.decode,
+                         np.int32(fmt.width), np.int32(fmt.height), np.int32(fw), np.int32(fh),
+                         np.int32(pyr.flow_scale), np.int32(n), np.int32(fm.entries[-1].slot))
         out = np.empty(frame_filtered.shape, frame_filtered.dtype)
         cl.enqueue_copy(q, out, bufs.dst, is_blocking=False)
         cl.enqueue_copy(q, bufs.host_cells, bufs.cells, is_blocking=True)
