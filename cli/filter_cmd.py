@@ -214,9 +214,10 @@ def _kind_of(path: str) -> str:
                    "default: not yet never-worse than spatial only (docs/temporal.md).")
 @click.option("--temporal-frames", "temporal_frames", type=click.IntRange(2, 64), default=None,
               help="K: input frames kept in the ring (default 16; more: steadier pans, more memory).")
-@click.option("--temporal-method", type=click.Choice(["tss", "blend"]), default="tss", show_default=True,
+@click.option("--temporal-method", type=click.Choice(["tss", "blend", "tss+blend"]), default="tss",
+              show_default=True,
               help="tss: temporal supersampling; blend: the previous output reprojected and blended "
-                   "(seed 002; kept where it measures better, docs/temporal.md).")
+                   "(seed 002; better on dense motion, docs/temporal.md); tss+blend: both in turn.")
 @click.option("--temporal-mode", type=click.Choice(["adaptive", "dense", "global", "static"]),
               default="adaptive", show_default=True,
               help="Motion model: adaptive picks per frame the cheapest that explains it "
@@ -361,9 +362,10 @@ class TemporalOptions:
             from mlaa_stream.temporal.stage import TemporalStage
             kw = {} if self.k is None else {"k": self.k}
             return TemporalStage(context=filt.context, mode=self.mode, bgr=False, show=self.show, **kw)
-        from mlaa_stream.temporal.tss import DEFAULT_FRAMES, TSSStage
-        return TSSStage(context=filt.context, frames=self.frames or DEFAULT_FRAMES, mode=self.mode,
-                        bgr=False, show=self.show)
+        from mlaa_stream.temporal.tss import DEFAULT_FRAMES, TSSStage, TSSThenBlend
+        cls = TSSThenBlend if self.method == "tss+blend" else TSSStage
+        return cls(context=filt.context, frames=self.frames or DEFAULT_FRAMES, mode=self.mode,
+                   bgr=False, show=self.show)
 
     def finish(self, stage, con: "Console") -> None:
         """Write --stats and say which motion models were used."""

@@ -33,7 +33,8 @@ class Antialiaser:
     Options are the Filter's (`preset` first, explicit keywords override it). `temporal=True`
     (or "tss") adds temporal supersampling (mlaa_stream.temporal.tss.TSSStage: the input's samples of
     the last `temporal_frames` frames accumulated along the motion; its ring is kept between calls),
-    "blend" the older reprojection blending (mlaa_stream.temporal.stage.TemporalStage), or pass any
+    "blend" the older reprojection blending (mlaa_stream.temporal.stage.TemporalStage), "tss+blend"
+    both in turn (mlaa_stream.temporal.tss.TSSThenBlend), or pass any
     `(frame_in, frame_filtered, index) -> frame` stage.
     `post_hooks` is a list of `(frame, index) -> frame` callables (overlays), applied after it.
     """
@@ -54,11 +55,14 @@ class Antialiaser:
         if temporal is True or temporal == "tss":
             from mlaa_stream.temporal.tss import DEFAULT_FRAMES, TSSStage
             temporal = TSSStage(context=self._filter.context, bgr=True, frames=temporal_frames or DEFAULT_FRAMES)
+        elif temporal == "tss+blend":
+            from mlaa_stream.temporal.tss import DEFAULT_FRAMES, TSSThenBlend
+            temporal = TSSThenBlend(context=self._filter.context, bgr=True, frames=temporal_frames or DEFAULT_FRAMES)
         elif temporal == "blend":
             from mlaa_stream.temporal.stage import TemporalStage
             temporal = TemporalStage(context=self._filter.context, bgr=True)
         elif isinstance(temporal, str):
-            raise ValueError(f"temporal: expected True, 'tss', 'blend' or a callable, got {temporal!r}")
+            raise ValueError(f"temporal: expected True, 'tss', 'blend', 'tss+blend' or a callable, got {temporal!r}")
         self.temporal = temporal or None
         self.post_hooks = list(post_hooks)
         self.in_flight = in_flight

@@ -6,6 +6,7 @@ import csv
 from pathlib import Path
 
 import numpy as np
+import pytest
 from click.testing import CliRunner
 
 from mlaa_stream.cli.main import main
@@ -24,13 +25,15 @@ def test_video_gets_the_temporal_stage_and_stats(tmp_path):
     assert {"ring", "model", "flow_ms", "resolve_ms"} <= set(rows[0])
 
 
-def test_blend_method_is_still_there(tmp_path):
+@pytest.mark.parametrize("method", ["blend", "tss+blend"])
+def test_blend_methods(tmp_path, method):
     out, stats = tmp_path / "out.mp4", tmp_path / "stats.csv"
     res = CliRunner().invoke(main, [str(DEMO / "clip.mp4"), "-o", str(out), "--temporal",
-                                    "--temporal-method", "blend", "--stats", str(stats), "-q"])
+                                    "--temporal-method", method, "--stats", str(stats), "-q"])
     assert res.exit_code == 0, res.output
     rows = list(csv.DictReader(stats.open()))
     assert len(rows) == 10 and "history_weight_mean" in rows[0]
+    assert ("ring" in rows[0]) == (method == "tss+blend")
 
 
 def test_temporal_is_off_by_default_and_stats_imply_it(tmp_path):
