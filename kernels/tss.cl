@@ -275,3 +275,103 @@ __kernel void tss_resolve_shift(__global const PIXEL_T *ring, __global const PIX
 #endif
     store_px(dst, i, out);
 }
+
+// tss_resolve_shift over a segment of SEG pixels of one row per work item (the default path): for a
+// fixed ring frame the taps of neighbouring pixels are neighbouring samples, so the inner loops over
+// the segment stream through memory without branches (accept as a 0/1 factor) and the compiler can
+// vectorise them; the sums are the same as tss_resolve_shift's, in the same order.
+#ifndef SEG
+#define SEG 32
+#endif
+__kernel void tss_resolve_shift_rows(__global const PIXEL_T *ring, __global const PIXEL_T *spatial,
+                                     __global PIXEL_T *dst, __global uchar *cells,
+                                     __global const int *taps, __global const int *vslots,
+                                     __global const uchar *valids,
+                                     __global const float *luts, __global const float *dec,
+                                     const int width, const int height, const int fw, const int fh, const int fs,
+                                     const int n_ring, const int cur_slot)
+{
+    const int x0 = get_global_id(0) * SEG, gy = get_global_id(1);
+    if (x0 >= width || gy >= height)
+        return;
+    const int len = width - x0 < SEG ? width - x0 : SEG;
+    const size_t frame = (size_t)width * height;
+    __global const PIXEL_T *cur = ring + (size_t)cur_slot * frame * CHANNELS;
+    float lo[3][SEG], hi[3][SEG], m[3][SEG], s[3][SEG];
+    int n[SEG], cnt[SEG];
+    for (int p = 0; p < len; ++p) {
+        float4 l, h;
+        colour_box(cur, luts, dec, x0 + p, gy, width, height, &l, &h);
+        lo[0][p] = l.x; lo[1][p] = l.y; lo[2][p] = l.z;
+        hi[0][p] = h.x; hi[1][p] = h.y; hi[2][p] = h.z;
+        m[0][p] = m[1][p] = m[2][p] = 0.0f;
+        s[0][p] = s[1][p] = s[2][p] = 0.0f;
+        n[p] = 0;
+        cnt[p] = 0;
+    }
+    const int vy = gy / fs < fh - 1 ? gy / fs : fh - 1;
+    int cell = -1;
+    for (int j = 0; j <= n_ring; ++j) {
+        const int k = j < n_ring ? taps[4 * j + 3] : -2;
+        if (k != cell) {          // close the previous cell (and at the end)
+            if (cell >= 0)
+                for (int p = 0; p < len; ++p) {
+                    if (cnt[p] > 0) {
+                        float c = (float)cnt[p];
+                        m[0][p] += s[0][p] / c; m[1][p] += s[1][p] / c; m[2][p] += s[2][p] / c;
+                        ++n[p];
+                    }
+                    cnt[p] = 0;
+                    s[0][p] = s[1][p] = s[2][p] = 0.0f;
+                }
+            cell = k;
+        }
+        if (j == n_ring)
+            break;
+        const int slot = taps[4 * j], dx = taps[4 * j + 1], sy = gy + taps[4 * j + 2], vs = vslots[j];
+        if (sy < 0 || sy > height - 1)
+            continue;
+        __global const PIXEL_T *row = ring + ((size_t)slot * frame + (size_t)sy * width) * CHANNELS;
+        __global const uchar *vrow = vs >= 0 ? valids + (size_t)vs * fw * fh + (size_t)vy * fw : 0;
+        // the segment's taps that stay inside the row, branch-free (accept as 0/1)
+        const int pa = -(x0 + dx) > 0 ? -(x0 + dx) : 0;
+        const int pb = width - 1 - x0 - dx + 1 < len ? width - 1 - x0 - dx + 1 : len;
+        for (int p = pa; p < pb; ++p) {
+            const int gx = x0 + p;
+            const float4 v = tss_linear(luts, dec, row, gx + dx);
+            int ok = (v.x >= lo[0][p]) & (v.x <= hi[0][p]) & (v.y >= lo[1][p]) & (v.y <= hi[1][p]) &
+                     (v.z >= lo[2][p]) & (v.z <= hi[2][p]);
+            if (vrow)
+                ok &= vrow[gx / fs < fw - 1 ? gx / fs : fw - 1] != 0;
+            const float f = ok ? 1.0f : 0.0f;
+            s[0][p] += f * v.x; s[1][p] += f * v.y; s[2][p] += f * v.z;
+            cnt[p] += ok;
+        }
+    }
+#if CHANNELS == 1
+    const int nc = 1;
+#else
+    const int nc = CHANNELS;
+#endif
+    for (int p = 0; p < len; ++p) {
+        const int i = gy * width + x0 + p;
+        cells[i] = (uchar)n[p];
+        if (n[p] < MIN_CELLS) {
+            for (int c = 0; c < nc; ++c)
+                dst[(size_t)i * nc + c] = spatial[(size_t)i * nc + c];
+            continue;
+        }
+        const float fn = (float)n[p];
+        const float4 sp = tss_linear(luts, dec, spatial, i);
+        const float a = fn < (float)FULL_CELLS ? fn / (float)FULL_CELLS : 1.0f;
+        float4 out = sp + ((float4)(m[0][p] / fn, m[1][p] / fn, m[2][p] / fn, sp.w) - sp) * a;
+#if !LINEAR_INPUT
+        __global const float *enc = luts + 2 * (LUT_SIZE + 1);
+        out = (float4)(lut_read(enc, out.x), lut_read(enc, out.y), lut_read(enc, out.z), out.w);
+#endif
+#if CHANNELS == 4
+        out.w = load_px(spatial, i).w;
+#endif
+        store_px(dst, i, out);
+    }
+}

@@ -55,6 +55,7 @@ GRID = 4              # footprint cells per side (GRID^2 strata)
 EPS = 0.03            # linear-light widening of the current 3x3 colour box (issue 16: 0.02-0.05)
 MIN_CELLS = 2         # fewer filled cells: the spatial output stands
 FULL_CELLS = 6        # filled cells at which the samples alone resolve the pixel (below: n / FULL_CELLS of it)
+SEG = 32              # pixels of a row per work item in tss_resolve_shift_rows (kernels/tss.cl)
 FB_ABS, FB_REL = 0.5, 0.1   # forward-backward tolerance (px at full size): FB_ABS + FB_REL |v|
 ALIGN_LEVEL, ALIGN_PX, ALIGN_SIGMA, ALIGN_GROW = 10.0, 0.35, 2.0, 3   # MotionRing._alignment
 TILE, TILE_TOL, TILE_TEXTURE = 48, 0.4, 1.0   # _tile_check: flow px, px, mean squared gradient
@@ -476,6 +477,7 @@ class TSSStage:
         self.grid, self.eps, self.min_cells = int(grid), float(eps), int(min_cells)
         self.full_cells = FULL_CELLS if full_cells is None else int(full_cells)
         self.backend = backend
+        self.rows = True    # tss_resolve_shift_rows (row segments); False: one pixel per work item
         self.motion = MotionRing(self.frames, mode, refine, fb_check, dense_samples)
         self.stats: list[dict] = []
         self._lock = threading.Lock()
@@ -578,6 +580,7 @@ class TSSStage:
         defines = kernel_defines(fmt, self.grid, self.eps, self.min_cells, self.full_cells)
         self._kernel = self.context.kernel("tss", "tss_resolve", defines)
         self._kernel_shift = self.context.kernel("tss", "tss_resolve_shift", defines)
+        self._kernel_rows = self.context.kernel("tss", "tss_resolve_shift_rows", defines)
         return self._buffers
 
     def _upload_only(self, frame_in: np.ndarray, pyr: Pyramid, fm: FrameMotion) -> None:
@@ -622,7 +625,9 @@ class TSSStage:
             taps, vslots = np.ascontiguousarray(taps[order]), np.ascontiguousarray(vslots[order])
             cl.enqueue_copy(q, bufs.info, taps, is_blocking=False)
             cl.enqueue_copy(q, bufs.vslots, vslots, is_blocking=False)
-            self._kernel_shift(q, (fmt.width, fmt.height), None, bufs.ring, bufs.spatial, bufs.dst, bufs.cells,
+            kern, size = ((self._kernel_rows, (-(-fmt.width // SEG), fmt.height)) if self.rows
+                          else (self._kernel_shift, (fmt.width, fmt.height)))
+            kern(q, size, None, bufs.ring, bufs.spatial, bufs.dst, bufs.cells,
                                bufs.info, bufs.vslots, bufs.valids, self._luts, bufs.decode,
                                np.int32(fmt.width), np.int32(fmt.height), np.int32(fw), np.int32(fh),
                                np.int32(pyr.flow_scale), np.int32(n), np.int32(fm.entries[-1].slot))
