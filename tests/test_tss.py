@@ -60,14 +60,23 @@ def _run_kernel(stage, cur, spatial, ring, bgr, fs):
     return out, cells.copy()
 
 
-@pytest.mark.parametrize("channels,dtype,bgr,dense,fs", [
-    (3, np.uint8, False, False, 1), (3, np.uint8, True, True, 1), (4, np.uint16, False, True, 2),
-    (1, np.float32, False, True, 2), (3, np.uint8, False, True, 2)])
-def test_kernel_matches_reference(stage_parts, channels, dtype, bgr, dense, fs):
+@pytest.mark.parametrize("channels,dtype,bgr,dense,fs,rows", [
+    (3, np.uint8, False, False, 1, True), (3, np.uint8, False, False, 1, False), (4, np.uint8, True, False, 2, True),
+    (4, np.uint16, False, False, 1, True), (1, np.float32, False, False, 2, True),
+    (3, np.uint8, True, True, 1, True), (4, np.uint16, False, True, 2, True),
+    (1, np.float32, False, True, 2, True), (3, np.uint8, False, True, 2, True)])
+def test_kernel_matches_reference(stage_parts, channels, dtype, bgr, dense, fs, rows):
+    """tss_resolve (dense maps), tss_resolve_shift (rows=False) and tss_resolve_shift_rows (the
+    default translation path; 53 px wide: one full segment and a partial one) against the reference."""
     rng = np.random.default_rng(channels * 7 + fs)
     h, w = 37, 53
     cur, spatial, ring = _random_ring(rng, h, w, channels, dtype, 7, dense, fs)
-    stage = TSSStage(frames=8, bgr=bgr, context=stage_parts)
+    if not dense:   # translation maps with valid masks on some frames (the per-tile check's output)
+        fh, fw = -(-h // fs), -(-w // fs)
+        ring = [(f, m, (rng.random((fh, fw)) > 0.2).astype(np.uint8) if j % 3 == 1 else None)
+                for j, (f, m, _) in enumerate(ring)]
+    stage = TSSStage(frames=8, bgr=bgr, context=stage_parts, dense_samples=dense)
+    stage.rows = rows
     out, cells = _run_kernel(stage, cur, spatial, ring, bgr, fs)
     ref, rcells = tss_frame_reference(spatial, cur, ring, bgr, fs)
     assert (cells == rcells).mean() > 0.999 and cells.max() >= 2

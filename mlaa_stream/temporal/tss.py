@@ -440,7 +440,7 @@ def cells_view(cells: np.ndarray, out: np.ndarray, grid: int, bgr: bool) -> np.n
 class _Buffers:
     """Device memory for one frame format and flow size: the ring of K input frames, the maps."""
 
-    def __init__(self, context, fmt, flow_shape: tuple[int, int], frames: int):
+    def __init__(self, context, fmt, flow_shape: tuple[int, int], frames: int, dense: bool = False):
         import pyopencl as cl
         self.fmt, self.flow_shape = fmt, flow_shape
         fh, fw = flow_shape
@@ -451,7 +451,8 @@ class _Buffers:
         self.info = context.buffer(4 * 4 * frames)
         self.shift = context.buffer(4 * 2 * frames)
         self.vslots = context.buffer(4 * frames)
-        self.fields = context.buffer(8 * fh * fw * frames)
+        # dense maps only with dense_samples (66 MB at 1080p, K = 16): the default path reads none
+        self.fields = context.buffer(8 * fh * fw * frames if dense else 8)
         self.valids = context.buffer(fh * fw * frames)
         self.decode = cl.Buffer(context.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
                                 hostbuf=decode_table(fmt))
@@ -583,7 +584,7 @@ class TSSStage:
         if self._buffers is not None and self._buffers.fmt == fmt and self._buffers.flow_shape == shape:
             return self._buffers
         self.queue.finish()
-        self._buffers = _Buffers(self.context, fmt, shape, self.frames)
+        self._buffers = _Buffers(self.context, fmt, shape, self.frames, self.motion.dense_samples)
         defines = kernel_defines(fmt, self.grid, self.eps, self.min_cells, self.full_cells)
         self._kernel = self.context.kernel("tss", "tss_resolve", defines)
         self._kernel_shift = self.context.kernel("tss", "tss_resolve_shift", defines)
