@@ -88,8 +88,15 @@ class SequenceToVideoJob(_Job):
             frame = np.repeat(frame, 3, axis=2) if frame.shape[2] < 3 else frame[..., rgb]
             self.writer.write(np.ascontiguousarray(frame))
 
+        self.read_order: dict = {}  # position -> FrameFile, for the temporal stage (_SequenceTemporal)
+
+        def source():
+            for position, item in enumerate(image_source(self.plan, report, strict=True)):
+                self.read_order[position] = item.meta[0]
+                yield item
+
         try:
-            run_pipeline(image_source(self.plan, report, strict=True), filt, sink, in_flight=in_flight,
+            run_pipeline(source(), filt, sink, in_flight=in_flight, temporal=temporal,
                          post_hooks=post_hooks, times=times, on_frame=progress.update)
             self.writer.commit()
             self._finished = True
@@ -146,7 +153,7 @@ class VideoToImagesJob(_Job):
 
         try:
             run_pipeline(read_video(self.info), filt, sink, in_flight=in_flight, post_hooks=post_hooks,
-                         times=times, on_frame=progress.update)
+                         temporal=temporal, times=times, on_frame=progress.update)
         except PipelineError as exc:
             cause = exc.cause
             if isinstance(cause, (VideoReadError, ImageWriteError)):

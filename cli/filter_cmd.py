@@ -254,9 +254,15 @@ def _job_for(kind: str, output: str) -> type:
 @click.option("--in-flight", type=click.IntRange(1, 3), default=2, show_default=True,
               help="Frames submitted to the device before the oldest is collected (1 = serialized).")
 @click.option("--temporal/--no-temporal", default=None,
-              help="Temporal reprojection blending along optical flow (seed 002) for video: "
-                   "steadier edges, but ~40-60 ms per 1080p frame on a CPU today, so off "
-                   "by default.")
+              help="Temporal supersampling for video, folders and frame sequences: the input's "
+                   "samples of the last K frames accumulated along the motion (issue 16). Off by "
+                   "default: not yet never-worse than spatial only (docs/temporal.md).")
+@click.option("--temporal-frames", "temporal_frames", type=click.IntRange(2, 64), default=None,
+              help="K: input frames kept in the ring (default 16; more: steadier pans, more memory).")
+@click.option("--temporal-method", type=click.Choice(["tss", "blend", "tss+blend"]), default="tss",
+              show_default=True,
+              help="tss: temporal supersampling; blend: the previous output reprojected and blended "
+                   "(seed 002; better on dense motion, docs/temporal.md); tss+blend: both in turn.")
 @click.option("--temporal-mode", type=click.Choice(["adaptive", "dense", "global", "static"]),
               default="adaptive", show_default=True,
               help="Motion model: adaptive picks per frame the cheapest that explains it "
@@ -279,7 +285,7 @@ def filter_command(ctx: click.Context, input_path: str, output: str, overwrite: 
                    rate: float, video_backend: str,
                    overlay: str | None, cluster: str | None, chunk_frames: int, progress_path: str | None,
                    in_flight: int, temporal: bool | None,
-                   temporal_mode: str,
+                   temporal_frames: int | None, temporal_method: str, temporal_mode: str,
                    temporal_k: float | None, stats_path: str | None, show: str | None,
                    device: str | None, verbose: int, quiet: bool) -> None:
     """Remove jaggies from an image, a folder of images, a frame sequence or a video.
@@ -299,7 +305,8 @@ def filter_command(ctx: click.Context, input_path: str, output: str, overwrite: 
                            video_backend=video_backend, start=start, end=end,
                            overlay=overlay, in_flight=in_flight, device=device, progress_path=progress_path,
                            cluster=cluster, chunk_frames=chunk_frames,
-                           temporal=TemporalOptions(temporal, temporal_mode, temporal_k, stats_path, show))
+                           temporal=TemporalOptions(temporal, temporal_mode, temporal_k, stats_path, show,
+                                                    temporal_frames, temporal_method))
     except Terminated as exc:
         con.error(f"terminated by {exc}; complete outputs are kept, the one in progress was removed")
         code = 128 + exc.signum
@@ -343,9 +350,11 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
         if (start is not None or end is not None) and kind != "video":
             raise Usage("--start/--end trim a video; for a frame pattern use --frames A-B")
         post_hooks = _load_post_hooks(overlay, device)
-        if (temporal.enabled or temporal.show or temporal.stats_path) and kind != "video":
-            raise Usage("--temporal works on video input for now; image folders and sequences are "
-                        "filtered frame by frame")
+        if temporal.wanted and kind == "image":
+            con.info("a single image: spatial antialiasing only (temporal needs a sequence)")
+            temporal.enabled, temporal.show, temporal.stats_path = False, None, None
+        if temporal.wanted and cluster is not None:
+            raise Usage("--temporal is not available with --cluster yet (chunks would need a warm-up)")
         job = _job_for(kind, output)
         runner = job(input_path, output, kind, con, overwrite=overwrite, resume=resume,
                      frames=frames, codec=codec, container=container, audio=audio,
@@ -382,13 +391,15 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
             return EXIT_USAGE if isinstance(exc, ValueError) else EXIT_FAILED
         con.info(f"device: {filt.device_name}")
         times = StageTimes()
-        stage = temporal.stage(filt) if kind == "video" else None
+        stage = temporal.stage(filt) if kind != "image" else None
+        if stage is not None and kind != "video":
+            stage = _SequenceTemporal(stage, runner, con)
         try:
             with filt:
                 code = runner.run(filt, post_hooks, in_flight, times, stage)
         finally:
             if stage is not None:
-                temporal.finish(stage, con)
+                temporal.finish(getattr(stage, "stage", stage), con)
     finally:
         runner.abort()  # no-op after a commit; removes a video in progress on errors and Ctrl-C
         runner.close_progress()
@@ -405,22 +416,33 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
 
 @dataclass
 class TemporalOptions:
-    """The temporal stage's command-line settings (issue 6); off unless --temporal (its kernel
-    costs ~40-60 ms per 1080p pan frame on PoCL, see docs/temporal_bench.md)."""
+    """The temporal stage's command-line settings (issues 6, 16); off unless --temporal (or --stats /
+    --show history, which imply it)."""
 
     enabled: bool | None = None
     mode: str = "adaptive"
     k: float | None = None
     stats_path: str | None = None
     show: str | None = None
+    frames: int | None = None
+    method: str = "tss"
+
+    @property
+    def wanted(self) -> bool:
+        return bool(self.enabled or self.show or self.stats_path)
 
     def stage(self, filt):
-        """A TemporalStage sharing the filter's OpenCL context, or None when off."""
+        """The temporal stage sharing the filter's OpenCL context, or None when off."""
         if self.enabled is False or (self.enabled is None and not (self.show or self.stats_path)):
             return None  # off unless asked for; --show history and --stats imply it
-        from mlaa_stream.temporal.stage import TemporalStage
-        kw = {} if self.k is None else {"k": self.k}
-        return TemporalStage(context=filt.context, mode=self.mode, bgr=False, show=self.show, **kw)
+        if self.method == "blend":
+            from mlaa_stream.temporal.stage import TemporalStage
+            kw = {} if self.k is None else {"k": self.k}
+            return TemporalStage(context=filt.context, mode=self.mode, bgr=False, show=self.show, **kw)
+        from mlaa_stream.temporal.tss import DEFAULT_FRAMES, TSSStage, TSSThenBlend
+        cls = TSSThenBlend if self.method == "tss+blend" else TSSStage
+        return cls(context=filt.context, frames=self.frames or DEFAULT_FRAMES, mode=self.mode,
+                   bgr=False, show=self.show)
 
     def finish(self, stage, con: "Console") -> None:
         """Write --stats and say which motion models were used."""
@@ -439,6 +461,31 @@ class TemporalOptions:
                 w = csv.DictWriter(fh, fieldnames=keys)
                 w.writeheader()
                 w.writerows(stats)
+
+
+class _SequenceTemporal:
+    """The temporal stage for folders and sequences: frames in name/number order; the stage is called
+    with the frame number (a gap in the numbering is a jump: the history resets) and says when it
+    resets for a gap or a change of size. Positions map to files through the runner's plan as read."""
+
+    def __init__(self, stage, runner: "_ImageJob", con: Console):
+        self.stage, self.runner, self.con = stage, runner, con
+        self._prev: tuple | None = None   # (number, shape) of the previous frame
+
+    def __call__(self, frame_in, frame_out, index: int):
+        ff = self.runner.read_order.get(index)
+        number = index if ff is None or ff.number is None else ff.number
+        shape = (frame_in.shape, frame_in.dtype)
+        if self._prev is not None:
+            label = ff.label if ff is not None else f"frame {index}"
+            if number != self._prev[0] + 1:
+                self.con.info(f"{label}: temporal history reset (gap in the numbering after "
+                              f"{self._prev[0]})")
+            elif shape != self._prev[1]:
+                self.con.info(f"{label}: temporal history reset (the frame size or type changed)")
+        self._prev = (number, shape)
+        self.runner.read_order.pop(index, None)
+        return self.stage(frame_in, frame_out, number)
 
 
 class _Job:
@@ -588,8 +635,19 @@ class _ImageJob(_Job):
         say = self.report.say
         self.report.say = lambda msg: (progress.clear(), say(msg))
         sink = image_sink(self.report, overwrite=self.opts["overwrite"], strict=self.strict)
+        self.read_order: dict = {}
+
+        def source():
+            """image_source, remembering which file each position is (for the temporal stage)."""
+            inner = image_source(self.plan, self.report, strict=self.strict)
+            try:
+                for position, item in enumerate(inner):
+                    self.read_order[position] = item.meta[0]
+                    yield item
+            finally:
+                inner.close()
         try:
-            run_pipeline(image_source(self.plan, self.report, strict=self.strict), filt, sink,
+            run_pipeline(source(), filt, sink, temporal=temporal,
                          in_flight=in_flight, post_hooks=post_hooks, times=times,
                          on_frame=progress.update)
             stopped = None

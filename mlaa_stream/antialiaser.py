@@ -31,15 +31,18 @@ class Antialiaser:
     """Antialias BGR(A) frames (uint8 as OpenCV delivers them; uint16/float also work).
 
     Options are the Filter's (`preset` first, explicit keywords override it). `temporal=True`
-    adds optical-flow reprojection blending (mlaa_stream.temporal.stage.TemporalStage; its history is
-    kept between calls), or pass any `(frame_in, frame_filtered, index) -> frame` stage.
+    (or "tss") adds temporal supersampling (mlaa_stream.temporal.tss.TSSStage: the input's samples of
+    the last `temporal_frames` frames accumulated along the motion; its ring is kept between calls),
+    "blend" the older reprojection blending (mlaa_stream.temporal.stage.TemporalStage), "tss+blend"
+    both in turn (mlaa_stream.temporal.tss.TSSThenBlend), or pass any
+    `(frame_in, frame_filtered, index) -> frame` stage.
     `post_hooks` is a list of `(frame, index) -> frame` callables (overlays), applied after it.
     """
 
     def __init__(self, device: str | int | None = None, *, preset: str | None = None,
                  threshold: float | None = None, metric: str | None = None, linear: bool | None = None,
-                 reconstruct: bool | None = None, temporal: Temporal | bool | None = None,
-                 post_hooks: Sequence[PostHook] = (), in_flight: int = 2):
+                 reconstruct: bool | None = None, temporal: Temporal | bool | str | None = None,
+                 temporal_frames: int | None = None, post_hooks: Sequence[PostHook] = (), in_flight: int = 2):
         if preset is not None and preset not in PRESETS:
             raise ValueError(f"expected a preset among {', '.join(sorted(PRESETS))}, got {preset!r}")
         kwargs = dict(PRESETS.get(preset or "default", {}))
@@ -49,9 +52,17 @@ class Antialiaser:
                 kwargs[key] = value
         self._filter = Filter(device, bgr=True, **kwargs)
         self.device_name: str = self._filter.device_name
-        if temporal is True:
+        if temporal is True or temporal == "tss":
+            from mlaa_stream.temporal.tss import DEFAULT_FRAMES, TSSStage
+            temporal = TSSStage(context=self._filter.context, bgr=True, frames=temporal_frames or DEFAULT_FRAMES)
+        elif temporal == "tss+blend":
+            from mlaa_stream.temporal.tss import DEFAULT_FRAMES, TSSThenBlend
+            temporal = TSSThenBlend(context=self._filter.context, bgr=True, frames=temporal_frames or DEFAULT_FRAMES)
+        elif temporal == "blend":
             from mlaa_stream.temporal.stage import TemporalStage
             temporal = TemporalStage(context=self._filter.context, bgr=True)
+        elif isinstance(temporal, str):
+            raise ValueError(f"temporal: expected True, 'tss', 'blend', 'tss+blend' or a callable, got {temporal!r}")
         self.temporal = temporal or None
         self.post_hooks = list(post_hooks)
         self.in_flight = in_flight

@@ -139,3 +139,21 @@ def test_temporal_true_keeps_history_between_calls():
         aa(frame)
         models = [row["model"] for row in aa.temporal.stats]
     assert models[0] == "reset" and models[1] != "reset"
+
+
+def test_temporal_supersampling_on_a_pan_and_blend_mode():
+    """Antialiaser(temporal=True) is temporal supersampling (a ring of `temporal_frames` inputs);
+    temporal="blend" the older reprojection blending."""
+    import numpy as np
+    from mlaa_stream import Antialiaser
+    from mlaa_stream.bench.temporal import scene_pan
+    frames = [np.ascontiguousarray(f[..., ::-1]) for f in scene_pan(5, 320, 180).inputs]
+    with Antialiaser(temporal=True, temporal_frames=3) as aa:
+        outs = [aa(f) for f in frames]
+        assert max(r["ring"] for r in aa.temporal.stats) == 3
+        assert all(o.shape == frames[0].shape for o in outs)
+    with Antialiaser(temporal="blend") as aa:
+        aa(frames[0])
+        assert "history_weight_mean" in aa.temporal.stats[0]
+    with pytest.raises(ValueError, match="temporal: expected"):
+        Antialiaser(temporal="nonesuch")

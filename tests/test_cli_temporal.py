@@ -1,9 +1,12 @@
-"""The temporal options of the filter command: --temporal on video, --stats, refusal elsewhere."""
+"""The temporal options of the filter command: --temporal on video, folders and sequences, --stats,
+resets at gaps in the numbering, single images spatial only."""
 from __future__ import annotations
 
 import csv
 from pathlib import Path
 
+import numpy as np
+import pytest
 from click.testing import CliRunner
 
 from mlaa_stream.cli.main import main
@@ -18,7 +21,19 @@ def test_video_gets_the_temporal_stage_and_stats(tmp_path):
     assert res.exit_code == 0, res.output
     rows = list(csv.DictReader(stats.open()))
     assert len(rows) == 10 and rows[0]["model"] == "reset"
-    assert {r["model"] for r in rows[1:]} <= {"static", "global", "dense"}
+    assert {r["model"] for r in rows[1:]} <= {"static", "global", "dense", "reset"}
+    assert {"ring", "model", "flow_ms", "resolve_ms"} <= set(rows[0])
+
+
+@pytest.mark.parametrize("method", ["blend", "tss+blend"])
+def test_blend_methods(tmp_path, method):
+    out, stats = tmp_path / "out.mp4", tmp_path / "stats.csv"
+    res = CliRunner().invoke(main, [str(DEMO / "clip.mp4"), "-o", str(out), "--temporal",
+                                    "--temporal-method", method, "--stats", str(stats), "-q"])
+    assert res.exit_code == 0, res.output
+    rows = list(csv.DictReader(stats.open()))
+    assert len(rows) == 10 and "history_weight_mean" in rows[0]
+    assert ("ring" in rows[0]) == (method == "tss+blend")
 
 
 def test_temporal_is_off_by_default_and_stats_imply_it(tmp_path):
@@ -35,8 +50,47 @@ def test_temporal_is_off_by_default_and_stats_imply_it(tmp_path):
     assert res.exit_code == 0 and not (tmp_path / "none.csv").exists()
 
 
-def test_temporal_on_a_folder_is_refused(tmp_path):
-    res = CliRunner().invoke(main, [str(DEMO / "images"), "-o", str(tmp_path / "x"), "--temporal"])
-    assert res.exit_code == 2
-    assert "--temporal works on video input" in res.output
-    assert not (tmp_path / "x").exists()
+def _pan_frames(n: int) -> list[np.ndarray]:
+    from mlaa_stream.bench.temporal import scene_pan
+    return list(scene_pan(n, 160, 90).inputs)
+
+
+def test_temporal_on_a_folder(tmp_path):
+    from mlaa_stream.io.images import write_image
+    src = tmp_path / "in"
+    src.mkdir()
+    frames = _pan_frames(5)
+    for i, f in enumerate(frames):
+        write_image(str(src / f"f{i:02d}.png"), f)
+    stats = tmp_path / "stats.csv"
+    res = CliRunner().invoke(main, [str(src), "-o", str(tmp_path / "out"), "--temporal",
+                                    "--temporal-frames", "4", "--stats", str(stats), "-v"])
+    assert res.exit_code == 0, res.output
+    assert len(list((tmp_path / "out").glob("*.png"))) == 5
+    rows = list(csv.DictReader(stats.open()))
+    assert [r["index"] for r in rows] == ["0", "1", "2", "3", "4"]
+    assert rows[0]["model"] == "reset" and "reset" not in [r["model"] for r in rows[1:]]
+    assert max(int(r["ring"]) for r in rows) <= 4
+
+
+def test_sequence_gap_resets_and_says_so(tmp_path):
+    from mlaa_stream.io.images import write_image
+    frames = _pan_frames(5)
+    for n, f in zip((1, 2, 3, 5, 6), frames):
+        write_image(str(tmp_path / f"s.{n:04d}.png"), f)
+    stats = tmp_path / "stats.csv"
+    res = CliRunner().invoke(main, [str(tmp_path / "s.%04d.png"), "-o", str(tmp_path / "o" / "s.%04d.png"),
+                                    "--temporal", "--stats", str(stats), "-v"])
+    assert res.exit_code == 0, res.output
+    assert "temporal history reset (gap in the numbering after 3)" in res.output
+    rows = list(csv.DictReader(stats.open()))
+    assert [r["index"] for r in rows] == ["1", "2", "3", "5", "6"]
+    assert [r["model"] for r in rows][3] == "reset"
+
+
+def test_single_image_is_spatial_only(tmp_path):
+    from mlaa_stream.io.images import write_image
+    write_image(str(tmp_path / "a.png"), _pan_frames(1)[0])
+    res = CliRunner().invoke(main, [str(tmp_path / "a.png"), "-o", str(tmp_path / "b.png"), "--temporal", "-v"])
+    assert res.exit_code == 0, res.output
+    assert "spatial antialiasing only" in res.output and (tmp_path / "b.png").exists()

@@ -1,12 +1,15 @@
 """Benchmark of the temporal stage: accuracy and steadiness on animated scenes, speed per 1080p frame.
 
-    python -m mlaa_stream.bench.temporal [--frames 20] [--width 480] [--height 270] [--timed 20]
+    python -m mlaa_stream.bench.temporal [--frames 24] [--width 480] [--height 270] [--timed 12] [--rendered]
 
 Writes docs/temporal_bench.md (command, device, date). Scenes are rendered here with the scene
 module's rasteriser (1 sample per pixel input, 8x8 supersampled truth in linear light), longer than
 the bench's own animated scenes so that a history can build up: slow rotation, sub-pixel pan, a
-fast mover with disocclusion, a hard cut. Metrics are mlaa_stream.yardstick.metrics' (temporal error, flicker
-energy ratio, error removed). Methods: spatial only (Filter) and Filter + TemporalStage per mode.
+fast mover with disocclusion, a hard cut; --rendered adds the rendered shots of
+mlaa_stream.yardstick.rendered (pan, dolly, orbit; cached). Metrics are mlaa_stream.yardstick.metrics'
+(temporal error, flicker energy ratio, error removed, damage away from edges). Methods: spatial only
+(Filter), + temporal supersampling (TSSStage) for several K, + the older reprojection blending
+(TemporalStage, adaptive).
 """
 from __future__ import annotations
 
@@ -27,9 +30,11 @@ from mlaa_stream.spatial.filter import Filter
 from mlaa_stream.yardstick.scenes import (Layer, Scene, build_scene, ellipse, rect, rotated_rect, text_polygons, timing_frame,
                      translate)
 from mlaa_stream.temporal.stage import TemporalStage
+from mlaa_stream.temporal.tss import DEFAULT_FRAMES, TSSStage, TSSThenBlend
 
-MODES = ["adaptive", "dense", "global", "static"]
-DOCS = Path(__file__).resolve().parent.parent / "docs" / "temporal_bench.md"
+MODES = ["adaptive", "dense", "global", "static"]   # of the blend stage (--blend-modes)
+TSS_FRAMES = (8, 16, 24)
+DOCS = Path(__file__).resolve().parent.parent.parent / "docs" / "temporal_bench.md"
 
 
 # --- scenes (T frames each) ---------------------------------------------------------------------------
@@ -133,9 +138,18 @@ def reprojected_truth(truths: np.ndarray, motion: np.ndarray) -> np.ndarray:
 # --- runs -------------------------------------------------------------------------------------------
 def run_sequence(scene: Scene, spatial: list[np.ndarray], mode: str | None,
                  device: str | None = None) -> tuple[np.ndarray, list[dict]]:
-    """Scene frames through TemporalStage(mode) after the spatial outputs; mode None = spatial only."""
+    """Scene frames through a temporal stage after the spatial outputs: mode None = spatial only,
+    "tss K" = TSSStage(frames=K), otherwise TemporalStage(mode) (the blend)."""
     if mode is None:
         return np.stack(spatial), []
+    if mode == "tss+blend":
+        with TSSThenBlend(device, bgr=False) as stage:
+            outs = [stage(f, s, i) for i, (f, s) in enumerate(zip(scene.inputs, spatial))]
+            return np.stack(outs), stage.stats
+    if mode.startswith("tss"):
+        with TSSStage(device, frames=int(mode.split()[1]), bgr=False) as stage:
+            outs = [stage(f, s, i) for i, (f, s) in enumerate(zip(scene.inputs, spatial))]
+            return np.stack(outs), stage.stats
     with TemporalStage(device, mode=mode, bgr=False) as stage:
         outs = [stage(f, s, i) for i, (f, s) in enumerate(zip(scene.inputs, spatial))]
         return np.stack(outs), stage.stats
@@ -144,7 +158,8 @@ def run_sequence(scene: Scene, spatial: list[np.ndarray], mode: str | None,
 def score(outs: np.ndarray, scene: Scene) -> dict[str, float]:
     return {"temporal_error": M.temporal_error(outs, scene.inputs, scene.truths),
             "flicker": M.flicker_ratio(outs, scene.truths),
-            "error_removed": M.error_removed(outs, scene.inputs, scene.truths)}
+            "error_removed": M.error_removed(outs, scene.inputs, scene.truths),
+            "damage": M.damage(outs, scene.inputs, scene.truths, scene.edges)}
 
 
 def _pan_frames(n: int, base: np.ndarray, step=(0.35, 0.15)) -> list[np.ndarray]:
@@ -159,7 +174,13 @@ def _pan_frames(n: int, base: np.ndarray, step=(0.35, 0.15)) -> list[np.ndarray]
 def time_stage(frames: list[np.ndarray], spatial: list[np.ndarray], mode: str, warmup: int,
                device: str | None) -> tuple[float, dict[str, int], float, float]:
     """Median wall ms of the stage per frame after warm-up, the models used, median flow/blend ms."""
-    with TemporalStage(device, mode=mode, bgr=False) as stage:
+    if mode == "tss+blend":
+        stage_cm = TSSThenBlend(device, bgr=False)
+    elif mode.startswith("tss"):
+        stage_cm = TSSStage(device, frames=int(mode.split()[1]), bgr=False)
+    else:
+        stage_cm = TemporalStage(device, mode=mode, bgr=False)
+    with stage_cm as stage:
         times = []
         for i, (f, s) in enumerate(zip(frames, spatial)):
             t0 = time.perf_counter()
@@ -171,7 +192,7 @@ def time_stage(frames: list[np.ndarray], spatial: list[np.ndarray], mode: str, w
         for r in st:
             models[r["model"]] = models.get(r["model"], 0) + 1
         return (statistics.median(times), models, statistics.median(r["flow_ms"] for r in st),
-                statistics.median(r["blend_ms"] for r in st))
+                statistics.median(r.get("blend_ms", r.get("resolve_ms", 0.0)) for r in st))
 
 
 def _fmt(v: float, digits: int = 3) -> str:
@@ -180,10 +201,13 @@ def _fmt(v: float, digits: int = 3) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m mlaa_stream.bench.temporal", description=__doc__.split("\n")[0])
-    ap.add_argument("--frames", type=int, default=20)
+    ap.add_argument("--frames", type=int, default=24)
     ap.add_argument("--width", type=int, default=480)
     ap.add_argument("--height", type=int, default=270)
-    ap.add_argument("--timed", type=int, default=20, help="timed 1080p frames after warm-up (0: skip speed)")
+    ap.add_argument("--timed", type=int, default=12, help="timed 1080p frames after warm-up (0: skip speed)")
+    ap.add_argument("--rendered", action="store_true", help="also the rendered pan, dolly and orbit shots")
+    ap.add_argument("--tss-frames", default=",".join(map(str, TSS_FRAMES)), help="K values for TSS rows")
+    ap.add_argument("--blend-modes", default="adaptive", help="modes of the older blend stage ('' for none)")
     ap.add_argument("--device", default=None)
     ap.add_argument("--scenes", default=",".join(SCENES))
     ap.add_argument("--out", default=str(DOCS))
@@ -198,15 +222,25 @@ def main(argv: list[str] | None = None) -> int:
     device = spatial_filter.device_name
     results: dict[str, dict[str, dict]] = {}
     model_use: dict[str, dict[str, dict[str, int]]] = {}
+    methods = [None] + [f"tss {k}" for k in args.tss_frames.split(",") if k] + \
+        [m for m in args.blend_modes.split(",") if m] + ["tss+blend"]
+    scenes = []
     for name in args.scenes.split(","):
         t0 = time.perf_counter()
-        scene = SCENES[name](args.frames, args.width, args.height)
-        log(f"{name}: rendered {scene.frames} frames {args.width}x{args.height} in {time.perf_counter() - t0:.1f} s")
+        scenes.append((name, SCENES[name](args.frames, args.width, args.height)))
+        log(f"{name}: rendered {args.frames} frames {args.width}x{args.height} in {time.perf_counter() - t0:.1f} s")
+    if args.rendered:
+        from mlaa_stream.yardstick.scenes import generate_scenes
+        for sc in generate_scenes(names=["rendered"]):
+            if sc.animated:
+                scenes.append((sc.name, sc))
+    for name, scene in scenes:
         spatial = [spatial_filter.process(f) for f in scene.inputs]
         results[name], model_use[name] = {}, {}
-        for mode in [None, *MODES]:
+        for mode in methods:
             outs, stats = run_sequence(scene, spatial, mode, args.device)
-            key = "spatial only" if mode is None else f"+temporal {mode}"
+            key = ("spatial only" if mode is None else f"+TSS K={DEFAULT_FRAMES} then blend" if mode == "tss+blend"
+                   else f"+TSS K={mode.split()[1]}" if mode.startswith("tss") else f"+blend {mode}")
             results[name][key] = score(outs, scene)
             counts: dict[str, int] = {}
             for r in stats:
@@ -214,7 +248,7 @@ def main(argv: list[str] | None = None) -> int:
             model_use[name][key] = counts
             s = results[name][key]
             log(f"  {key:22s} temporal error {_fmt(s['temporal_error'])}  flicker {_fmt(s['flicker'])}  "
-                f"error removed {_fmt(s['error_removed'])}  models {counts}")
+                f"error removed {_fmt(s['error_removed'])}  damage {_fmt(s['damage'], 2)}  models {counts}")
         results[name]["input"] = score(scene.inputs, scene)
         # a reference point for the metric: the truth itself, slightly blurred
         blurred = np.stack([cv2.GaussianBlur(t, (0, 0), 0.5) for t in scene.truths])
@@ -226,7 +260,7 @@ def main(argv: list[str] | None = None) -> int:
 
     speed = {}
     if args.timed > 0:
-        n = args.timed + 3
+        n = args.timed + max([int(k) for k in args.tss_frames.split(",") if k] + [3])
         base = timing_frame(1936, 1096)
         pan = _pan_frames(n, base)
         static = [base[8:1088, 8:1928].copy()] * n
@@ -242,8 +276,9 @@ def main(argv: list[str] | None = None) -> int:
         noisy_sp = [spatial_filter.process(f) for f in noisy]
         for shot, frames, sp in (("pan", pan, pan_sp), ("static", static, static_sp),
                                  ("static, codec noise", noisy, noisy_sp)):
-            for mode in ("adaptive", "dense"):
-                speed[(shot, mode)] = time_stage(frames, sp, mode, 3, args.device)
+            for mode in [f"tss {k}" for k in args.tss_frames.split(",") if k] + ["adaptive", "tss+blend"]:
+                warm = int(mode.split()[1]) if mode.startswith("tss ") else DEFAULT_FRAMES if mode == "tss+blend" else 3
+                speed[(shot, mode)] = time_stage(frames, sp, mode, warm, args.device)
                 ms, models, fms, bms = speed[(shot, mode)]
                 log(f"speed {shot} {mode}: {ms:.1f} ms per 1080p frame (flow+decision {fms:.1f}, "
                     f"upload+blend+download {bms:.1f}), models {models}")
@@ -253,26 +288,32 @@ def main(argv: list[str] | None = None) -> int:
     lines += ["# Temporal stage benchmark", "",
               f"- command: `{command.strip()}`", f"- device: {device}", f"- date: {date}",
               f"- scenes: {args.frames} frames of {args.width}x{args.height}, input 1 sample per pixel, "
-              "truth 8x8 samples resolved in linear light (rendered by mlaa_stream.bench.temporal)", "",
+              "truth 8x8 samples resolved in linear light (rendered by mlaa_stream.bench.temporal)"
+              + ("; rendered_*: the rendered shots (mlaa_stream.yardstick.rendered, 8 frames of 640x360)"
+                 if args.rendered else ""), "",
               "Temporal error = mean |(out_t - out_t-1) - (truth_t - truth_t-1)| / the same for the input "
               "(< 1 steadier than the input; goal <= 0.2 on rotation and pan). Flicker = sum (out_t - out_t-1)^2 / "
               "sum (truth_t - truth_t-1)^2 (1 ideal; goal 0.8-1.2). Error removed = 1 - MSE(out, truth) / "
-              "MSE(in, truth) (goal on mover and cut: no worse than spatial only).", ""]
+              "MSE(in, truth) (goal: above spatial only everywhere). Damage = RMSE in 8-bit levels away from edges "
+              "(lower is better). TSS = temporal supersampling (mlaa_stream.temporal.tss, the default "
+              f"K = {DEFAULT_FRAMES}); blend = the older reprojection blending (mlaa_stream.temporal.stage).", ""]
     for name, rows in results.items():
-        lines += [f"## {name}", "", "| method | temporal error | flicker energy | error removed | models used |",
-                  "| --- | --- | --- | --- | --- |"]
+        lines += [f"## {name}", "", "| method | temporal error | flicker energy | error removed | damage | models used |",
+                  "| --- | --- | --- | --- | --- | --- |"]
         for key, s in rows.items():
             used = model_use[name].get(key, {})
             lines.append(f"| {key} | {_fmt(s['temporal_error'])} | {_fmt(s['flicker'])} | "
-                         f"{_fmt(s['error_removed'])} | {', '.join(f'{k} {v}' for k, v in used.items()) or '-'} |")
+                         f"{_fmt(s['error_removed'])} | {_fmt(s['damage'], 2)} | "
+                         f"{', '.join(f'{k} {v}' for k, v in used.items()) or '-'} |")
         lines.append("")
     if speed:
         lines += ["## Speed (1920x1080, temporal stage only, wall clock)", "",
-                  f"Median over {args.timed} frames after 3 warm-up frames; the pan is the timing frame shifted "
-                  "(0.35, 0.15) px per frame; the static shot repeats one frame (identical frames: the previous "
-                  "output is returned, no flow, no kernel, in every mode); the codec-noise static shot adds "
-                  "+-1 level to 2 % of the samples of each frame (classified static: unwarped blend).", "",
-                  "| shot | mode | ms / frame | flow + decision ms | upload + kernel + download ms | models |",
+                  f"Median over {args.timed} frames after warm-up (K frames for TSS, 3 for the blend); the pan is "
+                  "the timing frame shifted (0.35, 0.15) px per frame; the static shot repeats one frame "
+                  "(identical frames: the previous output is returned, no kernel); the codec-noise static shot "
+                  "adds +-1 level to 2 % of the samples of each frame (TSS: every sample in one cell, no kernel; "
+                  "blend: unwarped blend). Machine shared with other jobs: compare rows of one run.", "",
+                  "| shot | method | ms / frame | motion ms (host) | upload + kernel + download ms | models |",
                   "| --- | --- | --- | --- | --- | --- |"]
         for (shot, mode), (ms, models, fms, bms) in speed.items():
             lines.append(f"| {shot} | {mode} | {ms:.1f} | {fms:.1f} | {bms:.1f} | "

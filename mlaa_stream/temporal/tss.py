@@ -1,0 +1,712 @@
+"""Temporal supersampling (issue 16): accumulate the input's point samples along the scene's motion.
+
+Each input pixel of frame t is a point sample of the scene at a known sub-pixel position once the
+motion is known; a moving camera puts the samples of past frames at new positions inside the current
+frame's pixels (the jitter a renderer's TAA adds on purpose; seed 002's T2x). The stage keeps a ring
+of the last K *input* frames (linear light) with a map from the current frame's pixels into each of
+them, and resolves each output pixel from the samples that land inside its footprint:
+
+    stage = TSSStage(bgr=True, frames=16)
+    out = stage(frame_in, frame_filtered, index)     # per frame, in order; ring kept inside
+
+Resolve (per output pixel x; `tss_reference` is the plain statement, kernels/tss.cl the device twin):
+  - ring frame j (the current frame is j = 0, identity map) maps x to p = M_j(x) in its own pixels;
+    its sample nearest p, at s = round(p), lies at o = s - p inside x's footprint ([-0.5, 0.5)^2:
+    the box filter the truth is defined with): one tap per ring frame, a gather, no atomics;
+  - rejection: a sample outside the current input's 3x3 per-channel min/max box widened by EPS
+    (linear light) is another surface (disocclusion, a mover, a flow error) and is dropped; a
+    position outside ring frame j, or a map marked invalid (NaN: forward-backward flow
+    inconsistency), drops the tap;
+  - stratification (seed 002: each sample's offset inside its pixel decides its coverage area): the
+    footprint is split into GRID x GRID cells; samples are averaged per cell and the filled cells are
+    averaged, so 10 frames that repeat one phase count once, not ten times;
+  - combination with the spatial estimate: the empty cells are the part of the footprint the samples
+    do not cover; the spatial (MLAA) output S stands for them:
+        out = S + (n / GRID^2) (mean of filled cells - S)          when n >= MIN_CELLS
+        out = S                                                      otherwise
+    so static content and integer-pixel motion (every sample in one cell) return the spatial output
+    exactly, and a pan that fills the cells converges toward the box-filtered truth.
+
+Motion (host, per frame; `MotionRing`): the per-frame decision of stage.choose_model (reset at a cut or
+an index jump or a size change, static, global translation, dense DIS flow). Global: each ring frame's
+translation is the previous one composed with this frame's, then refined *directly* against the
+current frame by Gauss-Newton (global Lucas-Kanade on the flow-size grey, the ring frame's blurred grey
+kept): chaining alone drifts (issue 16: 0.09 px after 16 frames against 0.016 direct). Dense: DIS flow
+current -> previous composed with each ring frame's field (remap), forward-backward checked; the
+inconsistent pixels are NaN and stay so in every older field (nothing of theirs is trusted).
+"""
+from __future__ import annotations
+
+import math
+import threading
+import time
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from mlaa_stream.device.colour import device_luts, lut_read
+from mlaa_stream.device.formats import LUT_SIZE, frame_format
+from mlaa_stream.temporal.stage import (LK_ROBUST, Decision, Pyramid, _PMAX, choose_model,
+                                        decode_table, global_translation, grey8)
+
+DEFAULT_FRAMES = 16   # K: ring frames (the current one included)
+GRID = 4              # footprint cells per side (GRID^2 strata)
+EPS = 0.03            # linear-light widening of the current 3x3 colour box (issue 16: 0.02-0.05)
+MIN_CELLS = 2         # fewer filled cells: the spatial output stands
+FULL_CELLS = 6        # filled cells at which the samples alone resolve the pixel (below: n / FULL_CELLS of it)
+REFINE_STEPS = 2       # Gauss-Newton steps per refined ring frame and frame (bench pan 0.42 -> 0.39 with 2; 3 same)
+REFINE_PER_FRAME = 64 # ring frames refined directly per frame (the longest unrefined first)
+SEG = 32              # pixels of a row per work item in tss_resolve_shift_rows (kernels/tss.cl)
+FB_ABS, FB_REL = 0.5, 0.1   # forward-backward tolerance (px at full size): FB_ABS + FB_REL |v|
+ALIGN_LEVEL, ALIGN_PX, ALIGN_SIGMA, ALIGN_GROW = 10.0, 0.35, 2.0, 3   # MotionRing._alignment
+TILE, TILE_TOL, TILE_TEXTURE = 48, 0.4, 1.0   # _tile_check: flow px, px, mean squared gradient
+
+
+# --- motion of every ring frame relative to the current one ------------------------------------------
+@dataclass
+class RingEntry:
+    """One past input frame: its linear samples, grey pyramid and map from the current frame's pixels."""
+
+    index: int
+    lin: np.ndarray | None            # (H, W, 3) float32 linear RGB (host reference path)
+    pyr: Pyramid
+    shift: tuple[float, float] | None = (0.0, 0.0)   # p = x + shift (translation map), or None: dense
+    field: np.ndarray | None = None   # (fh, fw, 2) float32 offsets in full-size px (dense map), NaN = invalid
+    slot: int = -1                    # device ring slot
+    valid: np.ndarray | None = None   # (fh, fw) uint8 at flow size: 1 where the map explains the frame
+    refined: int = -1                 # the frame index of its last direct refinement
+
+
+@dataclass
+class FrameMotion:
+    """What the ring knows for the current frame: the decision and each ring frame's map."""
+
+    decision: Decision
+    entries: list[RingEntry] = field(default_factory=list)   # oldest first, current last
+
+
+class MotionRing:
+    """The ring's motion bookkeeping: which frames are kept and how the current frame maps into them."""
+
+    def __init__(self, frames: int = DEFAULT_FRAMES, mode: str = "adaptive", refine: bool = True,
+                 fb_check: bool = True, dense_samples: bool = False):
+        self.frames, self.mode, self.refine, self.fb_check = int(frames), mode, bool(refine), bool(fb_check)
+        self.dense_samples = bool(dense_samples)
+        self.refine_per_frame = REFINE_PER_FRAME
+        self.entries: list[RingEntry] = []
+        self._dis = None
+
+    def reset(self) -> None:
+        self.entries = []
+
+    def _flow(self, a: np.ndarray, b: np.ndarray, start: tuple[float, float]) -> np.ndarray:
+        """DIS flow (FAST) with a(x) ~ b(x + flow), started from the global translation (stage.py)."""
+        if self._dis is None:
+            self._dis = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_FAST)
+        init = np.empty(a.shape[:2] + (2,), np.float32)
+        init[...] = start
+        return self._dis.calc(a, b, init)
+
+    def push(self, pyr: Pyramid, index: int, fresh: bool) -> FrameMotion:
+        """Add the current frame; returns its decision and the maps of all kept frames (current last)."""
+        prev = self.entries[-1] if self.entries else None
+        if fresh or prev is None:
+            dec = Decision("reset", measures={"cut": False})
+        else:
+            dec = choose_model(prev.pyr, pyr, self.mode)
+        if dec.model == "reset":
+            self.entries = []
+        elif dec.model == "global":
+            d = dec.translation
+            for e in self.entries:
+                if e.shift is not None:
+                    e.shift = (e.shift[0] + d[0], e.shift[1] + d[1])
+                else:
+                    e.field = self._compose_const(e.field, d, pyr)
+            if self.refine:
+                # every frame, every ring frame: one direct step (a frame is refined on each of the K
+                # frames it stays in the ring, so its estimate converges; chaining alone drifts)
+                fs = pyr.flow_scale
+                # at most REFINE_PER_FRAME of them per frame, the longest unrefined first (host time)
+                ref = _Refiner(pyr.blurred("flow"))
+                todo = sorted((e for e in self.entries if e.shift is not None), key=lambda e: e.refined)
+                for e in todo[:self.refine_per_frame]:
+                    s = (e.shift[0] / fs, e.shift[1] / fs)
+                    for k in range(REFINE_STEPS):
+                        s, e.valid = ref.step(e.pyr.blurred("flow"), s, check=k == REFINE_STEPS - 1)
+                    e.shift = (s[0] * fs, s[1] * fs)
+                    e.refined = index
+        elif dec.model == "dense" and self.dense_samples:
+            self._dense(prev, pyr, dec)
+        elif dec.model == "dense":
+            # Measured (docs/temporal.md, TSS section): DIS flow on 1-spp frames is ~0.1-0.2 px off and
+            # composing it over the ring puts samples on the wrong side of edges: rotation, orbit,
+            # dolly and the fast mover all came out worse than the spatial output. Without
+            # sub-pixel-accurate local motion the spatial output stands and the ring starts anew.
+            self.entries = []
+        # static: every map stays as it is (nothing moved)
+        for e in self.entries:
+            # translations are checked per tile (global branch above); dense maps per region
+            if e.shift is None:
+                e.valid = self._alignment(e, pyr)
+        self.entries.append(RingEntry(index, None, pyr))
+        if len(self.entries) > self.frames:
+            del self.entries[0]
+        return FrameMotion(dec, list(self.entries))
+
+    def _alignment(self, e: RingEntry, pyr: Pyramid) -> np.ndarray:
+        """1 where ring frame e, moved by its map, matches the current frame (flow size): a map that is
+        wrong over a region (a second motion that the global model averages away, a flow error) puts
+        that region's samples in the wrong place, which the colour box cannot always see. Residuals
+        of grey blurred by ALIGN_SIGMA above ALIGN_LEVEL that survive a 3x3 erosion (blobs, not the
+        thin lines that 1-spp aliasing and sub-pixel wires leave along edges under a right map),
+        grown by ALIGN_GROW texels."""
+        fh, fw = pyr.flow.shape
+        fs = pyr.flow_scale
+        gx, gy = np.meshgrid(np.arange(fw, dtype=np.float32), np.arange(fh, dtype=np.float32))
+        if e.shift is not None:
+            mx, my = gx + np.float32(e.shift[0] / fs), gy + np.float32(e.shift[1] / fs)
+        else:
+            mx, my = gx + e.field[..., 0] / np.float32(fs), gy + e.field[..., 1] / np.float32(fs)
+        warped = cv2.remap(_blur_align(e.pyr), mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        cur = _blur_align(pyr)
+        grad = cv2.magnitude(cv2.Sobel(cur, cv2.CV_32F, 1, 0, ksize=3, scale=0.125),
+                             cv2.Sobel(cur, cv2.CV_32F, 0, 1, ksize=3, scale=0.125))
+        # a residual a misplacement of under ALIGN_PX explains is motion error the cells tolerate
+        bad = ~(np.abs(warped - cur) <= ALIGN_LEVEL + ALIGN_PX * grad)     # NaN maps are bad too
+        k = np.ones((3, 3), np.uint8)
+        bad = cv2.erode(bad.astype(np.uint8), k)
+        bad = cv2.dilate(bad, np.ones((2 * ALIGN_GROW + 1,) * 2, np.uint8))
+        nan = ~np.isfinite(mx) | ~np.isfinite(my)
+        return ((1 - bad) & ~nan).astype(np.uint8)
+
+    def _compose_const(self, fld: np.ndarray, d: tuple[float, float], pyr: Pyramid) -> np.ndarray:
+        """field_new(x) = d + field(x + d), at the field's resolution."""
+        fh, fw = fld.shape[:2]
+        fs = pyr.flow_scale
+        gx, gy = np.meshgrid(np.arange(fw, dtype=np.float32), np.arange(fh, dtype=np.float32))
+        out = cv2.remap(fld, gx + d[0] / fs, gy + d[1] / fs, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        out += np.float32(d)
+        return out
+
+    def _dense(self, prev: RingEntry, pyr: Pyramid, dec: Decision) -> None:
+        fs = pyr.flow_scale
+        d = (dec.translation[0] / fs, dec.translation[1] / fs)
+        fb = self._flow(pyr.flow, prev.pyr.flow, d)                        # current -> previous, flow px
+        still = cv2.erode((cv2.absdiff(pyr.flow, prev.pyr.flow) == 0).astype(np.uint8),
+                          np.ones((3, 3), np.uint8)).astype(bool)
+        fb[still] = 0.0   # DIS spreads a mover's motion over the still background (stage.py)
+        fh, fw = fb.shape[:2]
+        gx, gy = np.meshgrid(np.arange(fw, dtype=np.float32), np.arange(fh, dtype=np.float32))
+        mx, my = gx + fb[..., 0], gy + fb[..., 1]
+        bad = np.zeros((fh, fw), bool)
+        if self.fb_check:
+            ff = self._flow(prev.pyr.flow, pyr.flow, (-d[0], -d[1]))        # previous -> current
+            ff[still] = 0.0
+            back = cv2.remap(ff, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+            err = np.hypot(fb[..., 0] + back[..., 0], fb[..., 1] + back[..., 1]) * fs
+            bad = err > FB_ABS + FB_REL * np.hypot(fb[..., 0], fb[..., 1]) * fs
+        step = fb * np.float32(fs)                                          # full-size px
+        step[bad] = np.nan
+        for e in self.entries:
+            if e.shift is not None:
+                old = np.empty((fh, fw, 2), np.float32)
+                old[...] = e.shift
+            else:
+                old = e.field
+            # NaN spreads through the bilinear remap to every tap that touches an invalid texel
+            e.field = step + cv2.remap(old, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+            e.shift = None
+
+
+class _Refiner:
+    """Direct Gauss-Newton refinement of ring frames' translations against one current frame, and the
+    per-tile check that the translation holds everywhere (flow-size grey blurred by LK_SIGMA).
+
+    The current frame's gradients and per-tile Hessians are computed once per frame; each ring frame
+    costs one warp and a few products per step (inverse-additive, as stage.global_translation).
+    Tile check: one Gauss-Newton step per TILE x TILE tile from the same residual; where a textured
+    tile would move by more than TILE_TOL px from the whole frame's solution, another motion is there
+    (the cut scene's second shot: a bar and a disc 0.3 px per frame apart pass the frame-to-frame test
+    of choose_model and drift apart over the ring) and that tile takes no samples from that frame."""
+
+    def __init__(self, cur_b: np.ndarray):
+        self.c = cur_b
+        self.h, self.w = cur_b.shape
+        self.gx = cv2.Sobel(cur_b, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
+        self.gy = cv2.Sobel(cur_b, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
+        self.ty, self.tx = self.h // TILE, self.w // TILE
+        if self.ty and self.tx:
+            a, b, c = self._tiles(self.gx * self.gx), self._tiles(self.gx * self.gy), self._tiles(self.gy * self.gy)
+            self.ta, self.tb, self.tc = a, b, c
+            self.tdet = a * c - b * b
+            self.textured = (self.tdet > 1e-3 * np.maximum(a * c, 1e-12)) & (
+                np.minimum(a, c) > TILE_TEXTURE * TILE * TILE)
+
+    def _tiles(self, a: np.ndarray) -> np.ndarray:
+        t = TILE
+        return a[:self.ty * t, :self.tx * t].reshape(self.ty, t, self.tx, t).sum((1, 3), dtype=np.float64)
+
+    def step(self, ring_b: np.ndarray, d: tuple[float, float], check: bool = True):
+        """One step from d (flow px, cur(x) ~ ring(x + d)): returns (new d, valid mask or None)."""
+        h, w = self.h, self.w
+        pw = cv2.warpAffine(ring_b, np.float32([[1, 0, d[0]], [0, 1, d[1]]]), (w, h),
+                            flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE)
+        r = cv2.subtract(self.c, pw)
+        wr = 1.0 / (1.0 + (r * r) * np.float32(1.0 / (LK_ROBUST * LK_ROBUST)))
+        gxw, gyw = self.gx * wr, self.gy * wr
+        a, b_, e = float(np.dot(gxw.ravel(), self.gx.ravel())), float(np.dot(gxw.ravel(), self.gy.ravel())), \
+            float(np.dot(gyw.ravel(), self.gy.ravel()))
+        bx, by = float(np.dot(gxw.ravel(), r.ravel())), float(np.dot(gyw.ravel(), r.ravel()))
+        det = a * e - b_ * b_
+        step = (0.0, 0.0)
+        if det > 1e-6 * max(a * e, 1e-12):
+            step = ((e * bx - b_ * by) / det, (a * by - b_ * bx) / det)
+        new = (d[0] + step[0], d[1] + step[1])
+        if not check or not (self.ty and self.tx):
+            return new, None
+        tbx, tby = self._tiles(self.gx * r), self._tiles(self.gy * r)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            sx = (self.tc * tbx - self.tb * tby) / self.tdet
+            sy = (self.ta * tby - self.tb * tbx) / self.tdet
+        bad = self.textured & (np.hypot(sx - step[0], sy - step[1]) > TILE_TOL)
+        if not bad.any():
+            return new, None
+        valid = np.ones((h, w), np.uint8)
+        valid[:self.ty * TILE, :self.tx * TILE][np.kron(bad, np.ones((TILE, TILE), bool))] = 0
+        # the last partial row/column of tiles follows its neighbour
+        if self.ty * TILE < h:
+            valid[self.ty * TILE:, :] = valid[self.ty * TILE - 1:self.ty * TILE, :]
+        if self.tx * TILE < w:
+            valid[:, self.tx * TILE:] = valid[:, self.tx * TILE - 1:self.tx * TILE]
+        return new, valid
+
+
+def _blur_align(pyr: Pyramid) -> np.ndarray:
+    """The flow-size grey blurred by ALIGN_SIGMA, computed once per frame."""
+    if "align" not in pyr._blur:
+        pyr._blur["align"] = cv2.GaussianBlur(pyr.flow.astype(np.float32), (0, 0), ALIGN_SIGMA)
+    return pyr._blur["align"]
+
+
+# --- numpy reference of the resolve --------------------------------------------------------------------
+def linear_of(frame: np.ndarray, bgr: bool, linear_input: bool = False) -> np.ndarray:
+    """(H, W, 3) float32 linear RGB of a frame, by the kernel's arithmetic (decode table / tables)."""
+    fmt = frame_format(frame, bgr)
+    h, w = fmt.height, fmt.width
+    raw = np.asarray(frame).reshape(h, w, fmt.channels)
+    if np.issubdtype(fmt.dtype, np.integer) and not linear_input:
+        lin = decode_table(fmt)[raw.astype(np.int64)]
+    else:
+        a = raw.astype(np.float32)
+        lin = a if linear_input else lut_read(device_luts(), a).astype(np.float32)
+    if fmt.channels == 1:
+        return np.repeat(lin, 3, -1).astype(np.float32)
+    rgb = lin[..., 2::-1] if fmt.bgr else lin[..., :3]
+    return np.ascontiguousarray(rgb, dtype=np.float32)
+
+
+def sample_field(fld: np.ndarray, scale: int, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
+    """Bilinear read of a (fh, fw, 2) field stored at 1/scale of the frame, at full-size positions."""
+    f32 = np.float32
+    fh, fw = fld.shape[:2]
+    fx = np.clip((xs + f32(0.5)) / f32(scale) - f32(0.5), 0, fw - 1).astype(f32)
+    fy = np.clip((ys + f32(0.5)) / f32(scale) - f32(0.5), 0, fh - 1).astype(f32)
+    x0, y0 = fx.astype(np.int64), fy.astype(np.int64)
+    x1, y1 = np.minimum(x0 + 1, fw - 1), np.minimum(y0 + 1, fh - 1)
+    ax, ay = (fx - x0)[..., None], (fy - y0)[..., None]
+    top = fld[y0, x0] + (fld[y0, x1] - fld[y0, x0]) * ax
+    bot = fld[y1, x0] + (fld[y1, x1] - fld[y1, x0]) * ax
+    return (top + (bot - top) * ay).astype(f32)
+
+
+def tss_reference(spatial_lin: np.ndarray, cur_lin: np.ndarray, ring: list[tuple],
+                  flow_scale: int = 1, grid: int = GRID, eps: float = EPS,
+                  min_cells: int = MIN_CELLS, full_cells: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The resolve in float32 numpy: returns (out linear RGB (H, W, 3), filled cells (H, W) uint8).
+
+    ring: (linear frame, map, valid) triples, map = (dx, dy) translation or a (fh, fw, 2) field at
+    1/flow_scale, valid = None or (fh, fw) uint8 at 1/flow_scale (0: no sample of that frame there, read
+    at the flow texel holding the output pixel); the current frame itself is one of them (identity)."""
+    f32 = np.float32
+    h, w = cur_lin.shape[:2]
+    ys, xs = np.mgrid[0:h, 0:w].astype(f32)
+    pad = np.pad(cur_lin, ((1, 1), (1, 1), (0, 0)), mode="edge")
+    taps = [pad[1 + dy:1 + dy + h, 1 + dx:1 + dx + w] for dy in (-1, 0, 1) for dx in (-1, 0, 1)]
+    lo = np.minimum.reduce(taps) - f32(eps)
+    hi = np.maximum.reduce(taps) + f32(eps)
+    g2 = grid * grid
+    full_cells = FULL_CELLS if full_cells is None else full_cells
+    sums = np.zeros((h, w, g2, 3), f32)
+    counts = np.zeros((h, w, g2), np.int32)
+    flat = np.arange(h * w)
+    for lin, m, ok in ring:
+        if isinstance(m, np.ndarray):
+            off = sample_field(m, flow_scale, xs, ys)
+            px, py = xs + off[..., 0], ys + off[..., 1]
+        else:
+            px, py = xs + f32(m[0]), ys + f32(m[1])
+        valid = np.isfinite(px) & np.isfinite(py)
+        if ok is not None:
+            fh, fw = ok.shape
+            valid &= ok[np.minimum(ys.astype(np.int64) // flow_scale, fh - 1),
+                        np.minimum(xs.astype(np.int64) // flow_scale, fw - 1)] > 0
+        px, py = np.where(valid, px, 0).astype(f32), np.where(valid, py, 0).astype(f32)
+        sx, sy = np.floor(px + f32(0.5)), np.floor(py + f32(0.5))
+        valid &= (sx >= 0) & (sx <= w - 1) & (sy >= 0) & (sy <= h - 1)
+        ox, oy = sx - px, sy - py                                  # in [-0.5, 0.5)
+        cx = np.clip(np.floor((ox + f32(0.5)) * f32(grid)), 0, grid - 1).astype(np.int64)
+        cy = np.clip(np.floor((oy + f32(0.5)) * f32(grid)), 0, grid - 1).astype(np.int64)
+        v = lin[np.clip(sy, 0, h - 1).astype(np.int64), np.clip(sx, 0, w - 1).astype(np.int64)]
+        valid &= ((v >= lo) & (v <= hi)).all(-1)
+        cell = (cy * grid + cx).ravel()
+        sel = valid.ravel()
+        sums.reshape(-1, g2, 3)[flat[sel], cell[sel]] += v.reshape(-1, 3)[sel]
+        counts.reshape(-1, g2)[flat[sel], cell[sel]] += 1
+    filled = counts > 0
+    n = filled.sum(-1)
+    cellmean = np.where(filled[..., None], sums / np.maximum(counts, 1)[..., None], 0).astype(f32)
+    mean = (cellmean.sum(-2) / np.maximum(n, 1)[..., None]).astype(f32)
+    fn = n.astype(f32)
+    a = np.where(fn < f32(full_cells), fn / f32(full_cells), f32(1.0))[..., None]
+    out = np.where((n >= min_cells)[..., None], spatial_lin + a * (mean - spatial_lin), spatial_lin).astype(f32)
+    return out, n.astype(np.uint8)
+
+
+def encode_like(lin: np.ndarray, like: np.ndarray, bgr: bool, linear_input: bool = False) -> np.ndarray:
+    """Linear RGB back to the frame's type and layout (alpha taken from `like`), as store_px does."""
+    f32 = np.float32
+    fmt = frame_format(like, bgr)
+    h, w = fmt.height, fmt.width
+    enc = lin if linear_input else lut_read(device_luts()[2 * (LUT_SIZE + 1):], lin).astype(f32)
+    raw = np.asarray(like).reshape(h, w, fmt.channels)
+    if np.issubdtype(fmt.dtype, np.integer):
+        pmax = f32(_PMAX[fmt.dtype])
+        stored = np.floor(np.clip(enc * pmax + f32(0.5), 0, pmax)).astype(fmt.dtype)
+    else:
+        stored = enc.astype(fmt.dtype)
+    if fmt.channels == 1:
+        out = stored[..., :1]       # grey frames: the three channels are equal by construction
+    else:
+        rgb = stored[..., ::-1] if fmt.bgr else stored
+        out = np.concatenate([rgb, raw[..., 3:4]], -1) if fmt.channels == 4 else rgb
+    return out.reshape(np.shape(like)).astype(np.asarray(like).dtype)
+
+
+def tss_frame_reference(spatial: np.ndarray, cur: np.ndarray, ring: list[tuple], bgr: bool,
+                        flow_scale: int = 1, grid: int = GRID, eps: float = EPS,
+                        min_cells: int = MIN_CELLS, full_cells: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """kernels/tss.cl on whole frames: ring = (input frame, map, valid) triples (frames in the input's
+    type); returns (output frame like `spatial`, filled cells (H, W) uint8). Where fewer than
+    min_cells are filled the spatial pixel is copied bit for bit."""
+    rl = [(linear_of(f, bgr), m, ok) for f, m, ok in ring]
+    lin, n = tss_reference(linear_of(spatial, bgr), linear_of(cur, bgr), rl, flow_scale, grid, eps, min_cells,
+                            full_cells)
+    enc = encode_like(lin, spatial, bgr)
+    keep = (n < min_cells).reshape(n.shape + (1,) * (np.ndim(spatial) - 2))
+    return np.where(keep, spatial, enc).astype(spatial.dtype), n
+
+
+def kernel_defines(fmt, grid: int = GRID, eps: float = EPS, min_cells: int = MIN_CELLS,
+                   full_cells: int | None = None, linear_input: bool = False) -> dict:
+    """kernels/tss.cl's build defines."""
+    from mlaa_stream.device.formats import defines_for
+    full = FULL_CELLS if full_cells is None else int(full_cells)
+    return defines_for(fmt, GRID=int(grid), MIN_CELLS=int(min_cells), FULL_CELLS=full, EPS=f"{float(eps)!r}f",
+                       LINEAR_INPUT=int(linear_input))
+
+
+def cells_view(cells: np.ndarray, out: np.ndarray, grid: int, bgr: bool) -> np.ndarray:
+    """Debug view (--show history): green = share of the footprint's cells filled by samples, red =
+    the spatial output stands (fewer than MIN_CELLS), over the frame's grey at 40 %."""
+    pmax = _PMAX.get(np.dtype(out.dtype), 1.0)
+    used = np.clip(cells.astype(np.float32) / float(grid * grid), 0, 1)
+    g = grey8(out, bgr).astype(np.float32) / 255.0 * 0.4
+    if out.ndim == 2 or out.shape[2] == 1:
+        vis = used.reshape(out.shape)
+    else:
+        r, gr = g + 0.6 * (used <= 0), g + 0.6 * used
+        chans = [g, gr, r] if bgr else [r, gr, g]
+        if out.shape[2] == 4:
+            chans.append(np.ones_like(g))
+        vis = np.stack(chans, -1)
+    vis = np.clip(vis, 0, 1) * pmax
+    if np.issubdtype(out.dtype, np.integer):
+        vis = vis + 0.5
+    return vis.astype(out.dtype)
+
+
+class _Buffers:
+    """Device memory for one frame format and flow size: the ring of K input frames, the maps."""
+
+    def __init__(self, context, fmt, flow_shape: tuple[int, int], frames: int, dense: bool = False):
+        import pyopencl as cl
+        self.fmt, self.flow_shape = fmt, flow_shape
+        fh, fw = flow_shape
+        self.ring = context.buffer(frames * fmt.nbytes)
+        self.spatial = context.buffer(fmt.nbytes)
+        self.dst = context.buffer(fmt.nbytes)
+        self.cells = context.buffer(fmt.pixels)
+        self.info = context.buffer(4 * 4 * frames)
+        self.shift = context.buffer(4 * 2 * frames)
+        self.vslots = context.buffer(4 * frames)
+        # dense maps only with dense_samples (66 MB at 1080p, K = 16): the default path reads none
+        self.fields = context.buffer(8 * fh * fw * frames if dense else 8)
+        self.valids = context.buffer(fh * fw * frames)
+        self.decode = cl.Buffer(context.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
+                                hostbuf=decode_table(fmt))
+        self.host_cells = np.empty((fmt.height, fmt.width), np.uint8)
+
+
+class TSSStage:
+    """Temporal supersampling after the spatial filter: `stage(frame_in, frame_filtered, index)`.
+
+    frame_in is the raw input frame (its samples are accumulated; motion and cuts are measured on
+    it), frame_filtered the spatial output of the same frame (it stands where samples are few);
+    returns frame `index`'s output (same shape and dtype as frame_filtered). Frames must come in
+    order; a jump in `index`, a new size, a cut or reset() start a new ring. `stats` gets one dict
+    per frame (index, model, ring, flow_ms, resolve_ms, cells_mean, ...). backend "device"
+    (kernels/tss.cl) or "numpy" (tss_frame_reference, slow)."""
+
+    def __init__(self, device: str | int | None = None, *, frames: int = DEFAULT_FRAMES, bgr: bool = True,
+                 mode: str = "adaptive", grid: int = GRID, eps: float = EPS, min_cells: int = MIN_CELLS,
+                 full_cells: int | None = None, refine: bool = True, fb_check: bool = True, show: str | None = None,
+                 context=None, backend: str = "device", dense_samples: bool = False):
+        if int(frames) < 1:
+            raise ValueError(f"frames: expected K >= 1, got {frames!r}")
+        if backend not in ("device", "numpy"):
+            raise ValueError(f"backend: expected 'device' or 'numpy', got {backend!r}")
+        if show not in (None, "history"):
+            raise ValueError(f"show: expected None or 'history', got {show!r}")
+        if mode not in ("adaptive", "dense", "global", "static"):
+            raise ValueError(f"mode: expected adaptive, dense, global or static, got {mode!r}")
+        self.frames, self.bgr, self.mode, self.show = int(frames), bool(bgr), mode, show
+        self.grid, self.eps, self.min_cells = int(grid), float(eps), int(min_cells)
+        self.full_cells = FULL_CELLS if full_cells is None else int(full_cells)
+        self.backend = backend
+        self.rows = True    # tss_resolve_shift_rows (row segments); False: one pixel per work item
+        self.motion = MotionRing(self.frames, mode, refine, fb_check, dense_samples)
+        self.stats: list[dict] = []
+        self._lock = threading.Lock()
+        self._buffers: _Buffers | None = None
+        self.context = None
+        if backend == "device":
+            import pyopencl as cl
+            from mlaa_stream.device.context import default_context
+            self.context = context or default_context(device)
+            self.queue = cl.CommandQueue(self.context.ctx, self.context.device)
+            self._luts = cl.Buffer(self.context.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
+                                   hostbuf=device_luts())
+        self._frames: dict[int, np.ndarray] = {}     # numpy backend: ring slot -> input frame
+        self.reset()
+
+    @property
+    def device_name(self) -> str:
+        return self.context.name if self.context is not None else "numpy reference"
+
+    def reset(self) -> None:
+        """Forget the ring: the next frame starts a new one (and returns the spatial output)."""
+        self.motion.reset()
+        self._prev_index: int | None = None
+        self._shape = None
+        self._last: tuple[np.ndarray, np.ndarray] | None = None   # (grey, output) of the previous frame
+
+    def __call__(self, frame_in: np.ndarray, frame_filtered: np.ndarray, index: int) -> np.ndarray:
+        fin, fout = np.asarray(frame_in), np.asarray(frame_filtered)
+        if fin.shape != fout.shape or fin.dtype != fout.dtype:
+            raise ValueError(f"frame {index}: expected the input and filtered frames to have the same shape "
+                             f"and type, got {fin.shape} {fin.dtype} and {fout.shape} {fout.dtype}")
+        with self._lock:
+            return self._step(fin, fout, int(index))
+
+    def _step(self, frame_in: np.ndarray, frame_filtered: np.ndarray, index: int) -> np.ndarray:
+        t0 = time.perf_counter()
+        grey = grey8(frame_in, self.bgr)
+        fresh = self._prev_index is None or index != self._prev_index + 1 or frame_in.shape != self._shape
+        if not fresh and self._last is not None and np.array_equal(grey, self._last[0]):
+            # a repeated frame (a still shot from a renderer, a duplicated frame): no new samples, no
+            # new motion; the previous output stands and the ring is kept as it is
+            self._prev_index = index
+            self.stats.append({"index": index, "model": "static", "repeat": True, "ring": len(self.motion.entries),
+                               "flow_ms": (time.perf_counter() - t0) * 1e3, "resolve_ms": 0.0,
+                               "cells_mean": self.stats[-1]["cells_mean"] if self.stats else 0.0})
+            return self._last[1].copy()
+        pyr = Pyramid.of(frame_in, self.bgr, grey)
+        fm = self.motion.push(pyr, index, fresh)
+        used = {e.slot for e in fm.entries if e.slot >= 0}
+        fm.entries[-1].slot = min(set(range(self.frames)) - used)
+        t1 = time.perf_counter()
+        self._prev_index, self._shape = index, frame_in.shape
+        # Every sample in one cell (static shot, whole-pixel motion, a single frame): nothing to
+        # resolve, the spatial output stands without a kernel.
+        trivial = all(e.shift is not None and e.valid is None for e in fm.entries) and len(
+            {self._cell_of(e.shift) for e in fm.entries}) < self.min_cells
+        cells = None
+        if trivial:
+            out = frame_filtered
+            if self.backend == "numpy":
+                self._frames[fm.entries[-1].slot] = frame_in
+            else:
+                self._upload_only(frame_in, pyr, fm)
+        elif self.backend == "numpy":
+            self._frames[fm.entries[-1].slot] = frame_in
+            ring = [(self._frames[e.slot], e.shift if e.shift is not None else e.field, e.valid)
+                    for e in fm.entries]
+            out, cells = tss_frame_reference(frame_filtered, frame_in, ring, self.bgr, pyr.flow_scale,
+                                             self.grid, self.eps, self.min_cells, self.full_cells)
+        else:
+            out, cells = self._resolve(frame_in, frame_filtered, pyr, fm)
+        t2 = time.perf_counter()
+        self._last = (grey, out)
+        self.stats.append({"index": index, "model": fm.decision.model, "ring": len(fm.entries),
+                           "flow_ms": (t1 - t0) * 1e3, "resolve_ms": (t2 - t1) * 1e3,
+                           "cells_mean": 1.0 if cells is None else float(cv2.mean(cells)[0]),
+                           "translation": fm.decision.translation, **fm.decision.measures})
+        if self.show == "history":
+            c = np.ones(grey.shape, np.uint8) if cells is None else cells
+            return cells_view(c, out, self.grid, self.bgr)
+        return out
+
+    def _cell_of(self, shift: tuple[float, float]) -> tuple[int, int]:
+        """The footprint cell every sample of a translated frame lands in (the same for all pixels)."""
+        out = []
+        for d in shift:
+            p = np.float32(d)
+            o = np.floor(p + np.float32(0.5)) - p
+            out.append(int(min(max(np.floor((o + np.float32(0.5)) * np.float32(self.grid)), 0), self.grid - 1)))
+        return tuple(out)
+
+    # -- device ------------------------------------------------------------------------------------------
+    def _prepare(self, frame: np.ndarray, pyr: Pyramid) -> _Buffers:
+        fmt = frame_format(frame, self.bgr)
+        shape = pyr.flow.shape[:2]
+        if self._buffers is not None and self._buffers.fmt == fmt and self._buffers.flow_shape == shape:
+            return self._buffers
+        self.queue.finish()
+        self._buffers = _Buffers(self.context, fmt, shape, self.frames, self.motion.dense_samples)
+        defines = kernel_defines(fmt, self.grid, self.eps, self.min_cells, self.full_cells)
+        self._kernel = self.context.kernel("tss", "tss_resolve", defines)
+        self._kernel_shift = self.context.kernel("tss", "tss_resolve_shift", defines)
+        self._kernel_rows = self.context.kernel("tss", "tss_resolve_shift_rows", defines)
+        return self._buffers
+
+    def _upload_only(self, frame_in: np.ndarray, pyr: Pyramid, fm: FrameMotion) -> None:
+        import pyopencl as cl
+        bufs = self._prepare(frame_in, pyr)
+        slot = fm.entries[-1].slot
+        cl.enqueue_copy(self.queue, bufs.ring, np.ascontiguousarray(frame_in), dst_offset=slot * bufs.fmt.nbytes,
+                        is_blocking=False)
+
+    def _resolve(self, frame_in, frame_filtered, pyr: Pyramid, fm: FrameMotion):
+        import pyopencl as cl
+        bufs = self._prepare(frame_in, pyr)
+        q, fmt = self.queue, bufs.fmt
+        fh, fw = bufs.flow_shape
+        n = len(fm.entries)
+        info = np.zeros((n, 4), np.int32)
+        shift = np.zeros((n, 2), np.float32)
+        for j, e in enumerate(fm.entries):
+            info[j] = (e.slot, 0 if e.shift is not None else 1, e.slot, int(e.valid is not None))
+            if e.shift is not None:
+                shift[j] = e.shift
+            else:
+                cl.enqueue_copy(q, bufs.fields, np.ascontiguousarray(e.field, np.float32),
+                                dst_offset=e.slot * fh * fw * 8, is_blocking=False)
+            if e.valid is not None:
+                cl.enqueue_copy(q, bufs.valids, np.ascontiguousarray(e.valid, np.uint8),
+                                dst_offset=e.slot * fh * fw, is_blocking=False)
+        cl.enqueue_copy(q, bufs.ring, np.ascontiguousarray(frame_in), dst_offset=fm.entries[-1].slot * fmt.nbytes,
+                        is_blocking=False)
+        cl.enqueue_copy(q, bufs.spatial, np.ascontiguousarray(frame_filtered), is_blocking=False)
+        if all(e.shift is not None for e in fm.entries):
+            # one translation per ring frame: whole-pixel offsets and cells from the host, frames
+            # ordered by cell (stable: ring order inside a cell), as kernels/tss.cl's tss_resolve_shift wants
+            taps = np.zeros((n, 4), np.int32)
+            vslots = np.full(n, -1, np.int32)
+            for j, e in enumerate(fm.entries):
+                sx, sy = (int(np.floor(np.float32(d) + np.float32(0.5))) for d in e.shift)
+                cx, cy = self._cell_of(e.shift)
+                taps[j] = (e.slot, sx, sy, cy * self.grid + cx)
+                vslots[j] = e.slot if e.valid is not None else -1
+            order = np.argsort(taps[:, 3], kind="stable")
+            taps, vslots = np.ascontiguousarray(taps[order]), np.ascontiguousarray(vslots[order])
+            cl.enqueue_copy(q, bufs.info, taps, is_blocking=False)
+            cl.enqueue_copy(q, bufs.vslots, vslots, is_blocking=False)
+            kern, size = ((self._kernel_rows, (-(-fmt.width // SEG), fmt.height)) if self.rows
+                          else (self._kernel_shift, (fmt.width, fmt.height)))
+            kern(q, size, None, bufs.ring, bufs.spatial, bufs.dst, bufs.cells,
+                               bufs.info, bufs.vslots, bufs.valids, self._luts, bufs.decode,
+                               np.int32(fmt.width), np.int32(fmt.height), np.int32(fw), np.int32(fh),
+                               np.int32(pyr.flow_scale), np.int32(n), np.int32(fm.entries[-1].slot))
+        else:
+            cl.enqueue_copy(q, bufs.info, info, is_blocking=False)
+            cl.enqueue_copy(q, bufs.shift, shift, is_blocking=False)
+            self._kernel(q, (fmt.width, fmt.height), None, bufs.ring, bufs.spatial, bufs.dst, bufs.cells,
+                         bufs.info, bufs.shift, bufs.fields, bufs.valids, self._luts, bufs.decode,
+                         np.int32(fmt.width), np.int32(fmt.height), np.int32(fw), np.int32(fh),
+                         np.int32(pyr.flow_scale), np.int32(n), np.int32(fm.entries[-1].slot))
+        out = np.empty(frame_filtered.shape, frame_filtered.dtype)
+        cl.enqueue_copy(q, out, bufs.dst, is_blocking=False)
+        cl.enqueue_copy(q, bufs.host_cells, bufs.cells, is_blocking=True)
+        return out, bufs.host_cells
+
+    def finish(self) -> None:
+        if self.context is not None:
+            self.queue.finish()
+
+    def close(self) -> None:
+        """Wait for work in flight and free the device buffers."""
+        try:
+            self.finish()
+        finally:
+            self._buffers = None
+            self._frames = {}
+            self.reset()
+
+    def __enter__(self) -> "TSSStage":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+class TSSThenBlend:
+    """Temporal supersampling, then the older reprojection blending on its output (method "tss+blend").
+
+    Measured (docs/temporal_bench.md): TSS alone gains only where one global motion holds and needs a
+    few frames to fill its cells; the blend (mlaa_stream.temporal.stage.TemporalStage, seed 002)
+    helps from the second frame and on dense motion. Chained, the rendered pan goes to 0.49 of the
+    input's temporal error (TSS 0.64, blend 0.54), the bench pan to 0.39 (0.42, 0.53)."""
+
+    def __init__(self, device: str | int | None = None, *, frames: int = DEFAULT_FRAMES, bgr: bool = True,
+                 mode: str = "adaptive", show: str | None = None, context=None, **blend_kwargs):
+        from mlaa_stream.temporal.stage import TemporalStage
+        self.tss = TSSStage(device, frames=frames, bgr=bgr, mode=mode, context=context)
+        self.blend = TemporalStage(device, bgr=bgr, mode=mode, show=show, context=self.tss.context,
+                                   **blend_kwargs)
+
+    @property
+    def stats(self) -> list[dict]:
+        """TSS's per-frame rows with the blend's history weight added."""
+        return [{**b, **t, "history_weight_mean": b.get("history_weight_mean", 0.0),
+                 "blend_model": b.get("model")} for t, b in zip(self.tss.stats, self.blend.stats)]
+
+    def __call__(self, frame_in: np.ndarray, frame_filtered: np.ndarray, index: int) -> np.ndarray:
+        return self.blend(frame_in, self.tss(frame_in, frame_filtered, index), index)
+
+    def reset(self) -> None:
+        self.tss.reset()
+        self.blend.reset()
+
+    def close(self) -> None:
+        try:
+            self.tss.close()
+        finally:
+            self.blend.close()
+
+    def __enter__(self) -> "TSSThenBlend":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()

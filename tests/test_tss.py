@@ -1,0 +1,170 @@
+"""Temporal supersampling (issue 16): kernels/tss.cl against tss_frame_reference, and known answers on
+scenes with supersampled truth (static shot, sub-pixel pan, hard cut, fast mover)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mlaa_stream.bench.temporal import scene_cut, scene_mover, scene_pan
+from mlaa_stream.spatial.filter import Filter
+from mlaa_stream.temporal.tss import TSSStage, tss_frame_reference
+from mlaa_stream.yardstick import metrics as M
+
+
+@pytest.fixture(scope="module")
+def stage_parts():
+    from mlaa_stream.device.context import default_context
+    return default_context(None)
+
+
+def _random_ring(rng, h, w, channels, dtype, k, dense, fs=1):
+    def frame():
+        shape = (h, w) if channels == 1 else (h, w, channels)
+        if dtype == np.float32:
+            return rng.random(shape, np.float32)
+        hi = 255 if dtype == np.uint8 else 65535
+        # blocks with noise: boxes that admit samples, edges that reject some
+        base = rng.integers(0, hi + 1, (h // 4 + 1, w // 4 + 1) + shape[2:]).repeat(4, 0).repeat(4, 1)[:h, :w]
+        return np.clip(base + rng.integers(-hi // 20, hi // 20, shape), 0, hi).astype(dtype)
+    fh, fw = -(-h // fs), -(-w // fs)
+    ring = []
+    for j in range(k - 1):
+        f = frame()
+        if dense and j % 2:
+            fld = rng.normal(0, 1.5, (fh, fw, 2)).astype(np.float32)
+            fld[rng.random((fh, fw)) < 0.05] = np.nan
+            ring.append((f, fld, (rng.random((fh, fw)) > 0.1).astype(np.uint8)))
+        else:
+            ring.append((f, (float(rng.normal(0, 2)), float(rng.normal(0, 2))), None))
+    cur = frame()
+    ring.append((cur, (0.0, 0.0), None))
+    return cur, frame(), ring
+
+
+def _run_kernel(stage, cur, spatial, ring, bgr, fs):
+    """Drive the device path of TSSStage with a hand-made ring (maps and valid masks as given)."""
+    from mlaa_stream.temporal.stage import Pyramid
+    from mlaa_stream.temporal.tss import FrameMotion, RingEntry, Decision
+    import pyopencl as cl
+    h, w = cur.shape[:2]
+    pyr = Pyramid(np.zeros((-(-h // fs), -(-w // fs)), np.uint8), np.zeros((1, 1), np.uint8), fs, 1)
+    bufs = stage._prepare(cur, pyr)
+    entries = []
+    for j, (f, m, ok) in enumerate(ring):
+        e = RingEntry(j, None, pyr, shift=None if isinstance(m, np.ndarray) else m,
+                      field=m if isinstance(m, np.ndarray) else None, slot=j, valid=ok)
+        if j < len(ring) - 1:
+            cl.enqueue_copy(stage.queue, bufs.ring, np.ascontiguousarray(f), dst_offset=j * bufs.fmt.nbytes)
+        entries.append(e)
+    out, cells = stage._resolve(cur, spatial, pyr, FrameMotion(Decision("global"), entries))
+    return out, cells.copy()
+
+
+@pytest.mark.parametrize("channels,dtype,bgr,dense,fs,rows", [
+    (3, np.uint8, False, False, 1, True), (3, np.uint8, False, False, 1, False), (4, np.uint8, True, False, 2, True),
+    (4, np.uint16, False, False, 1, True), (1, np.float32, False, False, 2, True),
+    (3, np.uint8, True, True, 1, True), (4, np.uint16, False, True, 2, True),
+    (1, np.float32, False, True, 2, True), (3, np.uint8, False, True, 2, True)])
+def test_kernel_matches_reference(stage_parts, channels, dtype, bgr, dense, fs, rows):
+    """tss_resolve (dense maps), tss_resolve_shift (rows=False) and tss_resolve_shift_rows (the
+    default translation path; 53 px wide: one full segment and a partial one) against the reference."""
+    rng = np.random.default_rng(channels * 7 + fs)
+    h, w = 37, 53
+    cur, spatial, ring = _random_ring(rng, h, w, channels, dtype, 7, dense, fs)
+    if not dense:   # translation maps with valid masks on some frames (the per-tile check's output)
+        fh, fw = -(-h // fs), -(-w // fs)
+        ring = [(f, m, (rng.random((fh, fw)) > 0.2).astype(np.uint8) if j % 3 == 1 else None)
+                for j, (f, m, _) in enumerate(ring)]
+    stage = TSSStage(frames=8, bgr=bgr, context=stage_parts, dense_samples=dense)
+    stage.rows = rows
+    out, cells = _run_kernel(stage, cur, spatial, ring, bgr, fs)
+    ref, rcells = tss_frame_reference(spatial, cur, ring, bgr, fs)
+    assert (cells == rcells).mean() > 0.999 and cells.max() >= 2
+    if dtype == np.float32:
+        np.testing.assert_allclose(out, ref, atol=1e-5)
+    else:
+        d = np.abs(out.astype(np.int64) - ref.astype(np.int64))
+        assert d.max() <= 1 and (d == 0).mean() > 0.999
+    assert np.array_equal(out[cells < 2], spatial[cells < 2])
+
+
+@pytest.fixture(scope="module")
+def filt():
+    with Filter(None, bgr=False) as f:
+        yield f
+
+
+def _run(stage, scene, spatial):
+    return np.stack([stage(f, s, i) for i, (f, s) in enumerate(zip(scene.inputs, spatial))])
+
+
+def test_static_scene_returns_the_spatial_output(filt):
+    sc = scene_pan(1, 120, 68)
+    noisy = []
+    rng = np.random.default_rng(1)
+    for _ in range(6):   # a still shot through a codec: +-1 level on a few samples
+        f = sc.inputs[0].astype(np.int16) + (rng.random(sc.inputs[0].shape) < 0.01)
+        noisy.append(np.clip(f, 0, 255).astype(np.uint8))
+    stage = TSSStage(bgr=False)
+    for i, f in enumerate(noisy):
+        sp = filt.process(f)
+        out = stage(f, sp, i)
+        assert np.array_equal(out, sp)
+    assert {r["model"] for r in stage.stats[1:]} == {"static"}
+
+
+def test_subpixel_pan_converges_toward_the_truth(filt):
+    sc = scene_pan(12, 320, 180)
+    spatial = [filt.process(f) for f in sc.inputs]
+    stage = TSSStage(bgr=False, frames=12)
+    outs = _run(stage, sc, spatial)
+    assert sum(r["model"] == "global" for r in stage.stats[1:]) >= 8
+    late = slice(8, 12)
+    tss = M.error_removed(outs[late], sc.inputs[late], sc.truths[late])
+    sp = M.error_removed(np.stack(spatial)[late], sc.inputs[late], sc.truths[late])
+    assert tss > sp + 0.1, (tss, sp)
+    assert stage.stats[-1]["cells_mean"] > 4
+
+
+def test_cut_resets_and_returns_the_spatial_frame(filt):
+    sc = scene_cut(10, 160, 90)
+    spatial = [filt.process(f) for f in sc.inputs]
+    stage = TSSStage(bgr=False)
+    outs = _run(stage, sc, spatial)
+    models = [r["model"] for r in stage.stats]
+    assert models[0] == "reset" and models[5] == "reset" and "reset" not in models[6:]
+    assert np.array_equal(outs[5], spatial[5])
+    assert stage.stats[5]["ring"] == 1
+
+
+def test_fast_mover_leaves_no_ghost(filt):
+    sc = scene_mover(8, 160, 90)
+    spatial = np.stack([filt.process(f) for f in sc.inputs])
+    stage = TSSStage(bgr=False)
+    outs = _run(stage, sc, spatial)
+    truth = sc.truths.astype(np.float32)
+    err_t = np.abs(outs.astype(np.float32) - truth).max(-1)
+    err_s = np.abs(spatial.astype(np.float32) - truth).max(-1)
+    # no pixel of a trail: nowhere much further from the truth than the spatial output
+    assert (err_t - err_s).max() < 40
+    assert M.error_removed(outs, sc.inputs, sc.truths) >= M.error_removed(spatial, sc.inputs, sc.truths) - 0.005
+
+
+def test_index_jump_and_size_change_reset(filt):
+    sc = scene_pan(4, 96, 54)
+    stage = TSSStage(bgr=False)
+    for i in (0, 1, 5):
+        stage(sc.inputs[min(i, 3)], filt.process(sc.inputs[min(i, 3)]), i)
+    models = [r["model"] for r in stage.stats]
+    assert models[0] == "reset" and models[1] != "reset" and models[2] == "reset"
+    small = np.ascontiguousarray(sc.inputs[0][:40, :60])
+    stage(small, filt.process(small), 6)
+    assert stage.stats[-1]["model"] == "reset"
+
+
+def test_numpy_backend_is_the_reference(filt):
+    sc = scene_pan(5, 96, 54)
+    spatial = [filt.process(f) for f in sc.inputs]
+    a, b = TSSStage(bgr=False), TSSStage(bgr=False, backend="numpy")
+    for i, (f, s) in enumerate(zip(sc.inputs, spatial)):
+        assert np.array_equal(a(f, s, i), b(f, s, i))
