@@ -57,7 +57,9 @@ class SequenceToVideoJob(_Job):
         bits = 16 if first.pixels.dtype.itemsize == 2 else 8
         rate = Fraction(o["rate"]).limit_denominator(1001)
         self.info = VideoInfo(path=self.input, width=w, height=h, fps=rate, time_base=1 / rate,
-                              frames=len(self.plan), pix_fmt="rgb48le" if bits > 8 else "rgb24", bits=bits,
+                              # as a player expects (4:2:0; 10-bit from 16-bit frames): the encoder's
+                              # closest format to it, 4:4:4 only where the size is odd
+                              frames=len(self.plan), pix_fmt="yuv420p10le" if bits > 8 else "yuv420p", bits=bits,
                               has_alpha=False, codec="images", colour={}, audio_streams=0)
         if c == 4 or c == 2:
             self.con.warn(f"{self.input}: alpha is not kept in the video")
