@@ -30,3 +30,13 @@ def send_signal():
         yield lambda sig=signal.SIGINT: os.kill(os.getpid(), sig)
     finally:
         signal.signal(signal.SIGINT, previous)
+
+
+# Lines the suite wants in the CI log even with -q (e.g. the kernel tests' result on a second OpenCL
+# implementation, tests/test_portability.py).
+SUMMARY_LINES: list[str] = []
+
+
+def pytest_terminal_summary(terminalreporter) -> None:
+    for line in SUMMARY_LINES:
+        terminalreporter.write_line(line)

@@ -126,7 +126,8 @@ def test_kernels_match_their_references_on_rusticl():
                        timeout=1500)
     tail = r.stdout[-3000:]
     assert r.returncode == 0, tail + r.stderr[-2000:]
-    print(tail.splitlines()[-1])  # shown with -rA / in CI logs: "N passed ... on rusticl"
+    from conftest import SUMMARY_LINES
+    SUMMARY_LINES.append(f"kernel tests on Mesa rusticl (llvmpipe): {tail.strip().splitlines()[-1]}")
 
 
 # -- no kernel reads memory it never wrote -----------------------------------------------------------
