@@ -512,3 +512,23 @@ def _edges_and_distances(img: np.ndarray):
     e = edges_reference(img)
     hd, vd = distances_reference(e)
     return e, hd, vd
+
+
+def test_antialiased_guard_ignores_texture_beside_a_1spp_edge(filt):
+    """The antialiased guard's narrow window (kernels/edges.cl `antialiased`, AA_NEAR and AA_OFF): a
+    1-spp edge between grey 90 (above) and grey 200 (below) whose upper side holds texture -- a pixel
+    a fifth of the way towards the other side (x = 5, float path; x = 12, lane path), or a colour
+    half-way in value but far off the grey segment (x = 28) -- keeps the edge beside it; a coverage
+    mix half-way on the segment (x = 20: already antialiased) still turns it off."""
+    img = np.full((16, 40, 3), 90, np.uint8)
+    img[8:] = 200
+    img[7, 5] = img[7, 12] = 112          # t = 0.2 < AA_NEAR: texture, not coverage
+    img[7, 20] = 145                      # t = 0.5 on the segment: a coverage ramp
+    img[7, 28] = (180, 100, 145)          # t = 0.47, off the segment by 0.3 of the step (> AA_OFF)
+    got = filt.intermediates(img)["edges"]
+    want = edges_reference(img, filt.options.threshold)
+    np.testing.assert_array_equal(got, want)
+    for x in (4, 6, 11, 13, 27, 29):
+        assert got[7, x] & 1, f"edge beside texture at x = {x} lost"
+    for x in (19, 21):
+        assert not got[7, x] & 1, f"edge beside a coverage mix at x = {x} kept"

@@ -40,9 +40,11 @@ SHORT_CORNER = 0.75
 # (kernels/weights.cl).
 STROKE_END_MIN_L = 8
 # Already antialiased edges (kernels/edges.cl `antialiased`): a neighbour along the step whose colour
-# projects on p -> q at t in (AA_LO, 1 - AA_LO), within AA_OFF of the step off the segment, or p (q)
-# between its neighbour across the step and q (p), marks a rendered coverage ramp, not a 1-spp jaggy.
-AA_LO, AA_OFF = 0.1, 0.35
+# projects on p -> q at t in (AA_NEAR, 1 - AA_LO) beside p, (AA_LO, 1 - AA_NEAR) beside q, within AA_OFF
+# of the step off the segment, or p (q) between its neighbour across the step and q (p) at t in
+# (AA_LO, 1 - AA_LO), marks a rendered coverage ramp, not a 1-spp jaggy. AA_OFF and AA_NEAR keep texture
+# and shading beside 1-spp edges out of it (docs/spatial_tuning.md).
+AA_LO, AA_OFF, AA_NEAR = 0.1, 0.08, 0.3
 # Grain and fine texture (film grain, sensor noise) are not jaggies (kernels/blend.cl `in_grain`): a pixel
 # whose 3x3 window holds only pixels that differ from at least GRAIN_MIN of their 8 neighbours, by
 # GRAIN_STEP / 255 of full scale or more in some channel, is left as it is.
@@ -125,7 +127,7 @@ class FilterOptions:
             "ROUNDING": float(self.rounding),
             "BLEND_U": int(self.blend_u),
             "SHORT_CORNER": float(self.short_corner), "CAP_MIN_L": STROKE_END_MIN_L,
-            "AA_GUARD": int(self.aa_guard), "AA_LO": float(AA_LO), "AA_OFF": float(AA_OFF),
+            "AA_GUARD": int(self.aa_guard), "AA_LO": float(AA_LO), "AA_OFF": float(AA_OFF), "AA_NEAR": float(AA_NEAR),
             "GRAIN_GUARD": int(self.grain_guard), "GRAIN_STEP": GRAIN_STEP, "GRAIN_MIN": GRAIN_MIN,
             "SEGMENT": SEGMENT, "EDGE_ROWS": EDGE_ROWS,
             "RAMP_TEST": int(self.ramp > 0),

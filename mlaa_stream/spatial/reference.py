@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from mlaa_stream.device.colour import LUMA, linear_to_srgb, rgb_to_lab, srgb_to_linear
-from mlaa_stream.spatial.filter import AA_LO, AA_OFF, DEFAULT_THRESHOLDS, SHORT_CORNER, ramp_fraction, trapezoid_area
+from mlaa_stream.spatial.filter import AA_LO, AA_NEAR, AA_OFF, DEFAULT_THRESHOLDS, SHORT_CORNER, ramp_fraction, trapezoid_area
 
 BOTTOM, RIGHT = 1, 2
 BOTH = 2  # an end crossed on both sides
@@ -76,17 +76,19 @@ def edges_reference(frame: np.ndarray, threshold: float | None = None, metric: s
         lim = ramp * np.abs(d1)
         return ((d0 * d1 > 0) & (np.abs(d0) > lim)) | ((d2 * d1 > 0) & (np.abs(d2) > lim))
 
-    def between(m: np.ndarray, p: np.ndarray, d: np.ndarray, dd: np.ndarray) -> np.ndarray:
+    def between(m: np.ndarray, p: np.ndarray, d: np.ndarray, dd: np.ndarray,
+                lo: float = AA_LO, hi: float = 1.0 - AA_LO) -> np.ndarray:
         v = m - p
         with np.errstate(divide="ignore", invalid="ignore"):
             t = (v * d).sum(-1) / dd
         r = v - t[..., None] * d
-        return (t > AA_LO) & (t < 1.0 - AA_LO) & ((r * r).sum(-1) <= AA_OFF * AA_OFF * dd) & (dd > 0)
+        return (t > lo) & (t < hi) & ((r * r).sum(-1) <= AA_OFF * AA_OFF * dd) & (dd > 0)
 
     def antialiased_along(c: np.ndarray) -> np.ndarray:
         """For steps c[k] -> c[k+1] along axis 0: does a neighbour along the step (axis 1) of
-        either pixel hold a colour between the two, or is either pixel between its neighbours
-        across the step (an already antialiased edge)?"""
+        either pixel hold a colour between the two (beside p: more than AA_NEAR of the way from p;
+        beside q: more than AA_NEAR from q), or is either pixel between its neighbours across the
+        step (an already antialiased edge)?"""
         p, q = c[:-1], c[1:]
         d = q - p
         dd = (d * d).sum(-1)
@@ -100,8 +102,8 @@ def edges_reference(frame: np.ndarray, threshold: float | None = None, metric: s
         out |= between(q, p, da, (da * da).sum(-1))
         for sl_m, sl_o in ((np.s_[:, :-1], np.s_[:, 1:]), (np.s_[:, 1:], np.s_[:, :-1])):
             # neighbours at axis-1 offset -1 (for columns 1..) and +1 (for columns ..-2)
-            out[sl_o] |= between(p[sl_m], p[sl_o], d[sl_o], dd[sl_o])
-            out[sl_o] |= between(q[sl_m], p[sl_o], d[sl_o], dd[sl_o])
+            out[sl_o] |= between(p[sl_m], p[sl_o], d[sl_o], dd[sl_o], AA_NEAR, 1.0 - AA_LO)
+            out[sl_o] |= between(q[sl_m], p[sl_o], d[sl_o], dd[sl_o], AA_LO, 1.0 - AA_NEAR)
         return out
 
     e = np.zeros(rgb.shape[:2], np.uint8)
