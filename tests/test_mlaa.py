@@ -532,3 +532,27 @@ def test_antialiased_guard_ignores_texture_beside_a_1spp_edge(filt):
         assert got[7, x] & 1, f"edge beside texture at x = {x} lost"
     for x in (19, 21):
         assert not got[7, x] & 1, f"edge beside a coverage mix at x = {x} kept"
+
+
+@pytest.mark.parametrize("value", [230, 20])
+def test_subpixel_dot_moves_towards_its_surroundings(value):
+    """A lone 1-spp dot (edges on four sides; a cable or fence wire far away), bright or dark, on grey 120:
+    blend.cl's SUBPIXEL rule moves it half-way (in linear light) to the mean of its 3x3 window, as the
+    reference does; with subpixel=0 it stays as MLAA leaves it. A pixel with edges on three sides that lies
+    between its neighbours (a coverage step of antialiased content) is not a feature and is left alone."""
+    from mlaa_stream.device.colour import linear_to_srgb, srgb_to_linear
+    img = np.full((12, 24, 3), 120, np.uint8)
+    img[5, 10] = value
+    img[:, 18] = 240                            # a light stripe, and beside it a 1-px green line whose
+    img[2:9, 17] = (40, 160, 40)                # ends (2, 17) and (8, 17) lie between 120 and 240 in luma
+    with Filter(bridge=False) as f:
+        out = f.process(img)
+    with Filter(bridge=False, subpixel=0.0) as f:
+        plain = f.process(img)
+    np.testing.assert_array_equal(out, mlaa_reference(img))
+    lin_c, lin_bg = srgb_to_linear(value / 255.0), srgb_to_linear(120 / 255.0)
+    plain_c = srgb_to_linear(plain[5, 10, 0] / 255.0)
+    want = linear_to_srgb(plain_c + 0.5 * ((lin_c + 8 * lin_bg) / 9 - plain_c)) * 255
+    assert abs(int(out[5, 10, 0]) - want) <= 1
+    assert abs(int(out[5, 10, 0]) - 120) < abs(int(plain[5, 10, 0]) - 120)
+    np.testing.assert_array_equal(out[:, 15:20], plain[:, 15:20])

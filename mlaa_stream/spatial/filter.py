@@ -49,6 +49,9 @@ AA_LO, AA_OFF, AA_NEAR = 0.1, 0.08, 0.3
 # whose 3x3 window holds only pixels that differ from at least GRAIN_MIN of their 8 neighbours, by
 # GRAIN_STEP / 255 of full scale or more in some channel, is left as it is.
 GRAIN_STEP, GRAIN_MIN = 12, 5
+# Sub-pixel features (kernels/blend.cl SUBPIXEL): a pixel bordered by edges on three or four sides moves this
+# far from its blended colour to the mean of its 3x3 window, in linear light (docs/spatial_tuning.md).
+SUBPIXEL = 0.5
 SEGMENT = 64  # pixels of a row per work item in the per-pixel passes (kernels/common.cl)
 EDGE_ROWS = 4  # rows per work item in detect_edges (kernels/edges.cl): each row's CIELAB and samples shared
 
@@ -116,6 +119,7 @@ class FilterOptions:
     short_corner: float = SHORT_CORNER
     aa_guard: bool = True
     grain_guard: bool = True
+    subpixel: float = SUBPIXEL
 
     def pass_defines(self) -> dict[str, object]:
         return {
@@ -128,6 +132,7 @@ class FilterOptions:
             "BLEND_U": int(self.blend_u),
             "SHORT_CORNER": float(self.short_corner), "CAP_MIN_L": STROKE_END_MIN_L,
             "AA_GUARD": int(self.aa_guard), "AA_LO": float(AA_LO), "AA_OFF": float(AA_OFF), "AA_NEAR": float(AA_NEAR),
+            "SUBPIXEL": float(self.subpixel), "SUBPIXEL_ON": int(self.subpixel > 0),
             "GRAIN_GUARD": int(self.grain_guard), "GRAIN_STEP": GRAIN_STEP, "GRAIN_MIN": GRAIN_MIN,
             "SEGMENT": SEGMENT, "EDGE_ROWS": EDGE_ROWS,
             "RAMP_TEST": int(self.ramp > 0),
@@ -183,7 +188,7 @@ class Filter:
                  bgr: bool = False, linear_input: bool = False, rounding: float = 0.0,
                  blend_u: bool = True, ramp: float = 0.35, short_corner: float = SHORT_CORNER,
                  aa_guard: bool = True, bridge: bool = True, grain_guard: bool = True,
-                 context: Context | None = None):
+                 subpixel: float = SUBPIXEL, context: Context | None = None):
         if metric not in METRICS:
             raise ValueError(f"metric: expected one of {', '.join(METRICS)}, got {metric!r}")
         thr = DEFAULT_THRESHOLDS[metric] if threshold is None else float(threshold)
@@ -191,9 +196,11 @@ class Filter:
             raise ValueError(f"threshold: expected a positive number, got {threshold!r}")
         if not 0.0 <= float(short_corner) <= 1.0:
             raise ValueError(f"short_corner: expected a factor in [0, 1], got {short_corner!r}")
+        if not 0.0 <= float(subpixel) <= 1.0:
+            raise ValueError(f"subpixel: expected a factor in [0, 1], got {subpixel!r}")
         self.options = FilterOptions(thr, metric, bool(linear), bool(linear_input),
                                      float(rounding), bool(blend_u), float(ramp), float(short_corner),
-                                     bool(aa_guard), bool(grain_guard))
+                                     bool(aa_guard), bool(grain_guard), float(subpixel))
         self.bgr = bool(bgr)
         self.reconstruct = bool(reconstruct)
         self.bridge = bool(bridge)

@@ -7,7 +7,8 @@ from __future__ import annotations
 import numpy as np
 
 from mlaa_stream.device.colour import LUMA, linear_to_srgb, rgb_to_lab, srgb_to_linear
-from mlaa_stream.spatial.filter import AA_LO, AA_NEAR, AA_OFF, DEFAULT_THRESHOLDS, SHORT_CORNER, ramp_fraction, trapezoid_area
+from mlaa_stream.spatial.filter import (AA_LO, AA_NEAR, AA_OFF, DEFAULT_THRESHOLDS, SHORT_CORNER, SUBPIXEL,
+                                        ramp_fraction, trapezoid_area)
 
 BOTTOM, RIGHT = 1, 2
 BOTH = 2  # an end crossed on both sides
@@ -279,9 +280,11 @@ def grain_mask(frame: np.ndarray) -> np.ndarray:
 
 
 def blend_reference(frame: np.ndarray, weights: np.ndarray, linear: bool = True,
-                    linear_input: bool = False, bgr: bool = False, grain_guard: bool = True) -> np.ndarray:
-    """out = c + sum w_k^2 (n_k - c) / sum w_k over the four neighbours (seed 000 §3.5); pixels in grain
-    (grain_mask) keep their colour."""
+                    linear_input: bool = False, bgr: bool = False, grain_guard: bool = True,
+                    edges: np.ndarray | None = None, subpixel: float = SUBPIXEL) -> np.ndarray:
+    """out = c + sum w_k^2 (n_k - c) / sum w_k over the four neighbours (seed 000 §3.5); with `edges`, a
+    pixel bordered by edges on three or four sides and lighter (or darker) than every neighbour across
+    them (a sub-pixel feature) then moves `subpixel` of the way to the mean of its 3x3 window (clamped); pixels in grain (grain_mask) keep their colour."""
     rgb, alpha = normalised_rgb(frame, False)  # channel order does not matter for mixing
     decode = linear and not linear_input
     m = srgb_to_linear(rgb) if decode else rgb
@@ -290,6 +293,25 @@ def blend_reference(frame: np.ndarray, weights: np.ndarray, linear: bool = True,
     acc = sum(weights[..., k, None] ** 2 * (neighbours[k] - m) for k in range(4))
     total = weights.sum(-1)[..., None]
     out = m + np.divide(acc, total, out=np.zeros_like(m), where=total > 0)
+    if edges is not None and subpixel > 0:
+        b, r = (edges & BOTTOM) > 0, (edges & RIGHT) > 0
+        sides = b.astype(np.int64) + r
+        sides[1:] += b[:-1]
+        sides[:, 1:] += r[:, :-1]
+        h, w = edges.shape
+        box = sum(pad[dy:dy + h, dx:dx + w] for dy in range(3) for dx in range(3)) / 9.0
+        # a local extremum in luma (Rec. 709, mix space) against every neighbour across its edges
+        y = (m * np.array([0.2126, 0.7152, 0.0722])).sum(-1)
+        ypad = np.pad(y, 1, mode="edge")
+        lower = np.zeros((h, w), bool)
+        higher = np.zeros((h, w), bool)
+        across = ((np.pad(b, ((1, 0), (0, 0)))[:-1], ypad[:-2, 1:-1]), (b, ypad[2:, 1:-1]),
+                  (np.pad(r, ((0, 0), (1, 0)))[:, :-1], ypad[1:-1, :-2]), (r, ypad[1:-1, 2:]))
+        for has, yn in across:
+            lower |= has & (yn < y)
+            higher |= has & (yn > y)
+        dot = ((sides >= 3) & ~(lower & higher))[..., None]
+        out = np.where(dot, out + subpixel * (box - out), out)
     out = linear_to_srgb(out) if decode else out
     res = _to_dtype(out, alpha, frame)
     if grain_guard:
@@ -317,9 +339,9 @@ def mlaa_reference(frame: np.ndarray, threshold: float | None = None, metric: st
                    linear: bool = True, bgr: bool = False, linear_input: bool = False,
                    rounding: float = 0.0, blend_u: bool = True, ramp: float = 0.35,
                    short_corner: float = SHORT_CORNER, aa_guard: bool = True,
-                   grain_guard: bool = True) -> np.ndarray:
+                   grain_guard: bool = True, subpixel: float = SUBPIXEL) -> np.ndarray:
     """The whole spatial filter, pass after pass (without the bridging pass: mlaa_stream.spatial.bridge.bridge_reference)."""
     e = edges_reference(frame, threshold, metric, bgr, linear_input, ramp, aa_guard)
     hd, vd = distances_reference(e)
     wts = weights_reference(e, hd, vd, rounding, blend_u, frame, short_corner)
-    return blend_reference(frame, wts, linear, linear_input, bgr, grain_guard)
+    return blend_reference(frame, wts, linear, linear_input, bgr, grain_guard, e, subpixel)
