@@ -17,7 +17,7 @@
 // longer: the gap runs past it and the band leaves its pixels as they are. Mirrors bridge_reference.
 // Defines: MAX_GAP, MAX_RUN (pixels), GAP_PER_RUN, GAP_SLACK (gap <= GAP_PER_RUN * mean dash + GAP_SLACK),
 // INK_MIN, BG_TOL, INK_TOL (max-channel, normalised), MIN_DASHES, MAX_SKIP, POKE_RUN, POKE_DASH, XING_RUN,
-// XING_DASH, BLEND_LINEAR, LINEAR_INPUT (as blend.cl).
+// XING_DASH, MESH_DASH (0: off), BLEND_LINEAR, LINEAR_INPUT (as blend.cl).
 #pragma OPENCL FP_CONTRACT OFF
 #ifndef MAX_GAP
 #define MAX_GAP 24
@@ -57,6 +57,9 @@
 #endif
 #ifndef XING_DASH
 #define XING_DASH 4
+#endif
+#ifndef MESH_DASH
+#define MESH_DASH 2
 #endif
 #ifdef PIXEL_IS_FLOAT
 #define FLAT_LEVELS INK_MIN
@@ -237,6 +240,16 @@ inline int finish_link(__global const PIXEL_T *src, const lattice L, int x, int 
     if (crossed && (n1 < XING_DASH || n2 < XING_DASH)) return 0;  // a crossing: likewise
     // a wire at least 1 / (GAP_PER_RUN + 1) px wide: gap <= GAP_PER_RUN * mean dash + GAP_SLACK
     if (2 * (s - 1) > GAP_PER_RUN * (n1 + n2) + 2 * GAP_SLACK) return 0;
+#if MESH_DASH > 0
+    // a mesh of wires (a chain-link fence far away, #15): dots (both dashes MESH_DASH px or shorter) with more of
+    // the ink (or a mix of it) one row further out, in row -2d or 3d over steps a - 1 .. b + 1, are the fence's
+    // scattered samples, not one wire's dashes: no link (bridging them drew false bands across the fence's cells)
+    if (n1 <= MESH_DASH && n2 <= MESH_DASH)
+        for (int k = a - 1; k <= b + 1; ++k) {
+            const int u = CLSO(k, -2 * d), v = CLSO(k, 3 * d);
+            if (u == 0 || u == 2 || v == 0 || v == 2) return 0;
+        }
+#endif
     out->x = x; out->y = y; out->d = d; out->a = a; out->s = s; out->b = b;
     return 1;
 }

@@ -40,6 +40,7 @@ POKE_RUN = 2  # another wire's end of the link's ink beside a dash, two rows fro
 POKE_DASH = 3  # ... and only for links whose dashes are both at least this long
 XING_RUN = 3  # another wire of the link's ink crossing the gap: at most this many steps along each row (0: off)
 XING_DASH = 4  # ... and only for links whose dashes are both at least this long
+MESH_DASH = 2  # links of dots this long or shorter need rows -2d and 3d free of the ink: not a mesh (0: off)
 
 
 @dataclass(frozen=True)
@@ -59,6 +60,7 @@ class BridgeOptions:
     poke_dash: int = POKE_DASH
     xing_run: int = XING_RUN
     xing_dash: int = XING_DASH
+    mesh_dash: int = MESH_DASH
     linear: bool = True
     linear_input: bool = False
 
@@ -68,7 +70,7 @@ class BridgeOptions:
                 "GAP_PER_RUN": int(self.gap_per_run), "GAP_SLACK": int(self.gap_slack),
                 "MIN_DASHES": int(self.min_dashes), "MAX_SKIP": int(self.max_skip), "POKE_RUN": int(self.poke_run),
                 "POKE_DASH": int(self.poke_dash), "XING_RUN": int(self.xing_run),
-                "XING_DASH": int(self.xing_dash), "BLEND_LINEAR": int(self.linear),
+                "XING_DASH": int(self.xing_dash), "MESH_DASH": int(self.mesh_dash), "BLEND_LINEAR": int(self.linear),
                 "LINEAR_INPUT": int(self.linear_input)}
 
 
@@ -153,7 +155,8 @@ class _Scan:
         both dashes are at least POKE_DASH long. Over steps 2 .. s - 2 of the gap, another wire of the same ink
         crossing the rows (`xing`) counts as clear when both dashes are at least XING_DASH long, and the gap in row d
         runs past a run of it that could not start dash 2 (the ink beside it in row 0 or 2d would refuse that
-        link: so no link found before is lost)."""
+        link: so no link found before is lost). Dots (both dashes MESH_DASH px or shorter) need rows -2d and 3d
+        over steps a - 1 .. b + 1 free of the ink and its mixes: else they are a mesh's samples (a fence)."""
         o = self.o
         ink, bgc = self.px(x, y, 0, 0), self.px(x, y, 1, 0)
         if ink is None or bgc is None or _diff(ink, bgc) < self.ink_min:
@@ -251,7 +254,11 @@ class _Scan:
             if all(ok(i, j) for i, j in win) and (not xs or max(xs) <= s - 2) and \
                     (any(self.cuts(ln)) or all(self.inside(x, y, i, j) for i, j in win)) and \
                     ("poke" not in used or min(n1, n2) >= o.poke_dash) and \
-                    ("xing" not in used or min(n1, n2) >= o.xing_dash):
+                    ("xing" not in used or min(n1, n2) >= o.xing_dash) and \
+                    not (max(n1, n2) <= o.mesh_dash and any(
+                        self.inside(x, y, i, j) and c(i, j) in (0, 2)
+                        for i in range(a - 1, b + 2) for j in (-2 * d, 3 * d))):
+                # (the last: dots with more of the ink one row further out are a mesh's samples: a fence far away)
                 found.append(ln)
         return found[0] if len(found) == 1 else None
 
