@@ -37,7 +37,7 @@ inline float4 from_mix_space(__global const float *luts, float4 c)
 #define GRAIN_GUARD 1
 #endif
 #ifndef GRAIN_STEP
-#define GRAIN_STEP 12
+#define GRAIN_STEP 8
 #endif
 #ifndef GRAIN_MIN
 #define GRAIN_MIN 5
@@ -96,13 +96,17 @@ inline int in_grain(__global const PIXEL_T *src, int x, int y, int width, int he
 // missed (cables, fence wires, leaves and highlights far away, both dark and bright). The sample says
 // nothing about how much of the pixel it covers: the expected colour lies between the sample and its
 // surroundings. Such a pixel moves SUBPIXEL of the way from its blended colour to the mean of its 3x3
-// window (itself included, clamped at the frame's edge), in linear light. 0 = off. Measured
-// (docs/spatial_tuning.md): rendered scenes +2..+9 points error removed, aliased text +4, wires -3.
+// window (itself included, clamped at the frame's edge), in linear light. 0 = off. Only a luma extremum
+// on one background (SUBPIXEL_BG, below): speckle of photographs and textures is left alone. Measured
+// (docs/spatial_tuning.md): rendered scenes +1.5..+9 points error removed, aliased text +4, wires -1.
 #ifndef SUBPIXEL
 #define SUBPIXEL 0.5f
 #endif
 #ifndef SUBPIXEL_ON
 #define SUBPIXEL_ON 1
+#endif
+#ifndef SUBPIXEL_BG
+#define SUBPIXEL_BG 2.0f
 #endif
 inline float luma(float4 c) { return 0.2126f * c.x + 0.7152f * c.y + 0.0722f * c.z; }   // Rec. 709
 inline __attribute__((always_inline)) void blend_pixel(__global const PIXEL_T *src, __global const uchar *edges,
@@ -140,10 +144,18 @@ inline __attribute__((always_inline)) void blend_pixel(__global const PIXEL_T *s
         // feature is -- a coverage mix of already antialiased content sits between its neighbours
         const float yc = luma(m);
         int lo = 0, hi = 0;
-        if (top) { const float yn = luma(to_mix_space(luts, load_px(src, i - width))); lo |= yn < yc; hi |= yn > yc; }
-        if (e & EDGE_BOTTOM) { const float yn = luma(to_mix_space(luts, load_px(src, i + width))); lo |= yn < yc; hi |= yn > yc; }
-        if (left) { const float yn = luma(to_mix_space(luts, load_px(src, i - 1))); lo |= yn < yc; hi |= yn > yc; }
-        if (e & EDGE_RIGHT) { const float yn = luma(to_mix_space(luts, load_px(src, i + 1))); lo |= yn < yc; hi |= yn > yc; }
+        float ymin = 1e30f, ymax = -1e30f;
+#define ACROSS_LUMA(has, k) if (has) { const float yn = luma(to_mix_space(luts, load_px(src, k))); lo |= yn < yc; hi |= yn > yc; \
+                                       ymin = yn < ymin ? yn : ymin; ymax = yn > ymax ? yn : ymax; }
+        ACROSS_LUMA(top, i - width)
+        ACROSS_LUMA(e & EDGE_BOTTOM, i + width)
+        ACROSS_LUMA(left, i - 1)
+        ACROSS_LUMA(e & EDGE_RIGHT, i + 1)
+#undef ACROSS_LUMA
+        // ... on one background: the neighbours across its edges spread by at most SUBPIXEL_BG times the
+        // feature's own contrast to the nearest of them (texture and photographs' speckle have no such background)
+        const float contrast = hi ? ymin - yc : yc - ymax;
+        if (ymax - ymin > SUBPIXEL_BG * contrast) lo = hi = 1;
         if (!(lo && hi)) {
             float4 box = (float4)(0.0f);
             for (int dy = -1; dy <= 1; ++dy)

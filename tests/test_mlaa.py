@@ -420,11 +420,12 @@ def test_grain_mask_known_answers():
     assert not grain_mask(line).any()
     noise = (128 + rng.integers(-60, 61, (20, 24, 3))).astype(np.uint8)     # grain: almost every pixel
     assert grain_mask(noise).mean() > 0.95
-    # 11 levels do not count, 12 do (GRAIN_STEP): a checker of +-6 around grey in every channel is not grain
-    soft = (np.indices((20, 24)).sum(0) % 2 * 11 + 100).astype(np.uint8)
+    # GRAIN_STEP - 1 levels do not count, GRAIN_STEP do: a checker of +-(GRAIN_STEP - 1) / 2 around grey is not grain
+    from mlaa_stream.spatial.filter import GRAIN_STEP
+    soft = (np.indices((20, 24)).sum(0) % 2 * (GRAIN_STEP - 1) + 100).astype(np.uint8)
     rnd = rng.integers(0, 2, (20, 24)).astype(np.uint8)
     assert not grain_mask(soft).any()
-    assert grain_mask(rnd * 12 + 100).sum() > grain_mask(rnd * 11 + 100).sum() == 0
+    assert grain_mask(rnd * GRAIN_STEP + 100).sum() > grain_mask(rnd * (GRAIN_STEP - 1) + 100).sum() == 0
 
 
 def test_grain_is_left_untouched():
@@ -539,12 +540,15 @@ def test_subpixel_dot_moves_towards_its_surroundings(value):
     """A lone 1-spp dot (edges on four sides; a cable or fence wire far away), bright or dark, on grey 120:
     blend.cl's SUBPIXEL rule moves it half-way (in linear light) to the mean of its 3x3 window, as the
     reference does; with subpixel=0 it stays as MLAA leaves it. A pixel with edges on three sides that lies
-    between its neighbours (a coverage step of antialiased content) is not a feature and is left alone."""
+    between its neighbours (a coverage step of antialiased content) is not a feature and is left alone, nor is
+    speckle whose neighbours share no background (a photograph's or a texture's own detail: SUBPIXEL_BG)."""
     from mlaa_stream.device.colour import linear_to_srgb, srgb_to_linear
     img = np.full((12, 24, 3), 120, np.uint8)
     img[5, 10] = value
     img[:, 18] = 240                            # a light stripe, and beside it a 1-px green line whose
     img[2:9, 17] = (40, 160, 40)                # ends (2, 17) and (8, 17) lie between 120 and 240 in luma
+    img[5, 4], img[4, 4], img[6, 4], img[7, 4] = 250, (30, 30, 200), 225, 250   # speckle: a light pixel
+    img[5, 3], img[5, 5] = (200, 40, 40), (40, 160, 40)                         # (5, 4) on no one background
     with Filter(bridge=False) as f:
         out = f.process(img)
     with Filter(bridge=False, subpixel=0.0) as f:
@@ -556,3 +560,5 @@ def test_subpixel_dot_moves_towards_its_surroundings(value):
     assert abs(int(out[5, 10, 0]) - want) <= 1
     assert abs(int(out[5, 10, 0]) - 120) < abs(int(plain[5, 10, 0]) - 120)
     np.testing.assert_array_equal(out[:, 15:20], plain[:, 15:20])
+    np.testing.assert_array_equal(out[:, :7], plain[:, :7])
+    assert (out[5, 4] == 250).all()

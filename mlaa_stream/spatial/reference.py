@@ -8,7 +8,7 @@ import numpy as np
 
 from mlaa_stream.device.colour import LUMA, linear_to_srgb, rgb_to_lab, srgb_to_linear
 from mlaa_stream.spatial.filter import (AA_LO, AA_NEAR, AA_OFF, DEFAULT_THRESHOLDS, SHORT_CORNER, SUBPIXEL,
-                                        ramp_fraction, trapezoid_area)
+                                        SUBPIXEL_BG, ramp_fraction, trapezoid_area)
 
 BOTTOM, RIGHT = 1, 2
 BOTH = 2  # an end crossed on both sides
@@ -283,8 +283,8 @@ def blend_reference(frame: np.ndarray, weights: np.ndarray, linear: bool = True,
                     linear_input: bool = False, bgr: bool = False, grain_guard: bool = True,
                     edges: np.ndarray | None = None, subpixel: float = SUBPIXEL) -> np.ndarray:
     """out = c + sum w_k^2 (n_k - c) / sum w_k over the four neighbours (seed 000 §3.5); with `edges`, a
-    pixel bordered by edges on three or four sides and lighter (or darker) than every neighbour across
-    them (a sub-pixel feature) then moves `subpixel` of the way to the mean of its 3x3 window (clamped); pixels in grain (grain_mask) keep their colour."""
+    pixel bordered by edges on three or four sides, lighter (or darker) than every neighbour across
+    them, which spread by at most SUBPIXEL_BG times its contrast to them (a sub-pixel feature on one background) then moves `subpixel` of the way to the mean of its 3x3 window (clamped); pixels in grain (grain_mask) keep their colour."""
     rgb, alpha = normalised_rgb(frame, False)  # channel order does not matter for mixing
     decode = linear and not linear_input
     m = srgb_to_linear(rgb) if decode else rgb
@@ -305,12 +305,19 @@ def blend_reference(frame: np.ndarray, weights: np.ndarray, linear: bool = True,
         ypad = np.pad(y, 1, mode="edge")
         lower = np.zeros((h, w), bool)
         higher = np.zeros((h, w), bool)
+        ymin, ymax = np.full((h, w), np.inf), np.full((h, w), -np.inf)
         across = ((np.pad(b, ((1, 0), (0, 0)))[:-1], ypad[:-2, 1:-1]), (b, ypad[2:, 1:-1]),
                   (np.pad(r, ((0, 0), (1, 0)))[:, :-1], ypad[1:-1, :-2]), (r, ypad[1:-1, 2:]))
         for has, yn in across:
             lower |= has & (yn < y)
             higher |= has & (yn > y)
-        dot = ((sides >= 3) & ~(lower & higher))[..., None]
+            ymin = np.where(has, np.minimum(ymin, yn), ymin)
+            ymax = np.where(has, np.maximum(ymax, yn), ymax)
+        # ... on one background: those neighbours spread by at most SUBPIXEL_BG times its contrast to them
+        with np.errstate(invalid="ignore"):
+            contrast = np.where(higher, ymin - y, y - ymax)
+            background = ~(ymax - ymin > SUBPIXEL_BG * contrast)
+        dot = ((sides >= 3) & ~(lower & higher) & background)[..., None]
         out = np.where(dot, out + subpixel * (box - out), out)
     out = linear_to_srgb(out) if decode else out
     res = _to_dtype(out, alpha, frame)
