@@ -95,8 +95,9 @@ inline int in_grain(__global const PIXEL_T *src, int x, int y, int width, int he
 // 1-px line or a 1-px bump -- a feature smaller than the pixel that the single sample either hit or
 // missed (cables, fence wires, leaves and highlights far away, both dark and bright). The sample says
 // nothing about how much of the pixel it covers: the expected colour lies between the sample and its
-// surroundings. Such a pixel moves SUBPIXEL of the way from its blended colour to the mean of its 3x3
-// window (itself included, clamped at the frame's edge), in linear light. 0 = off. Only a luma extremum
+// surroundings. Such a pixel moves SUBPIXEL (four sides: a dot) or SUBPIXEL_END (three: a line's end or a
+// bump, whose fourth side continues into more of it) of the way from its blended colour to the mean of its
+// 3x3 window (itself included, clamped at the frame's edge), in linear light. 0 = off. Only a luma extremum
 // on one background (SUBPIXEL_BG, below): speckle of photographs and textures is left alone. Measured
 // (docs/spatial_tuning.md): rendered scenes +1.5..+9 points error removed, aliased text +4, wires -1.
 #ifndef SUBPIXEL
@@ -107,6 +108,9 @@ inline int in_grain(__global const PIXEL_T *src, int x, int y, int width, int he
 #endif
 #ifndef SUBPIXEL_BG
 #define SUBPIXEL_BG 2.0f
+#endif
+#ifndef SUBPIXEL_END
+#define SUBPIXEL_END SUBPIXEL
 #endif
 inline float luma(float4 c) { return 0.2126f * c.x + 0.7152f * c.y + 0.0722f * c.z; }   // Rec. 709
 inline __attribute__((always_inline)) void blend_pixel(__global const PIXEL_T *src, __global const uchar *edges,
@@ -122,7 +126,7 @@ inline __attribute__((always_inline)) void blend_pixel(__global const PIXEL_T *s
     float4 w = (float4)(top ? w16.x : 0, (e & EDGE_BOTTOM) ? w16.y : 0,
                         left ? w16.z : 0, (e & EDGE_RIGHT) ? w16.w : 0) * (1.0f / 65535.0f);
 #if SUBPIXEL_ON
-    const int feature = top + left + (e & EDGE_BOTTOM) + ((e & EDGE_RIGHT) >> 1) >= 3;
+    const int sides = top + left + (e & EDGE_BOTTOM) + ((e & EDGE_RIGHT) >> 1), feature = sides >= 3;
 #else
     const int feature = 0;
 #endif
@@ -161,7 +165,7 @@ inline __attribute__((always_inline)) void blend_pixel(__global const PIXEL_T *s
             for (int dy = -1; dy <= 1; ++dy)
                 for (int dx = -1; dx <= 1; ++dx)
                     box += to_mix_space(luts, load_px(src, IDX(clampi(x + dx, width - 1), clampi(y + dy, height - 1), width)));
-            b += SUBPIXEL * (box * (1.0f / 9.0f) - b);
+            b += (sides == 4 ? SUBPIXEL : SUBPIXEL_END) * (box * (1.0f / 9.0f) - b);
         } else if (ws == 0.0f) return;
     }
 #endif

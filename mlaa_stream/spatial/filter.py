@@ -49,12 +49,14 @@ AA_LO, AA_OFF, AA_NEAR = 0.1, 0.08, 0.3
 # whose 3x3 window holds only pixels that differ from at least GRAIN_MIN of their 8 neighbours, by
 # GRAIN_STEP / 255 of full scale or more in some channel, is left as it is.
 GRAIN_STEP, GRAIN_MIN = 8, 5
-# Sub-pixel features (kernels/blend.cl SUBPIXEL): a pixel bordered by edges on three or four sides moves this
+# Sub-pixel features (kernels/blend.cl SUBPIXEL): a pixel bordered by edges on four sides (a dot) moves this
 # far from its blended colour to the mean of its 3x3 window, in linear light (docs/spatial_tuning.md).
 SUBPIXEL = 0.5
 # ... only on one background: the neighbours across its edges spread (luma, linear) by at most SUBPIXEL_BG times
 # the feature's contrast to the nearest of them.
 SUBPIXEL_BG = 2.0
+# A feature with three sides (a line's end, a 1-px bump: the fourth side continues into more of it) moves less.
+SUBPIXEL_END = 0.25
 SEGMENT = 64  # pixels of a row per work item in the per-pixel passes (kernels/common.cl)
 EDGE_ROWS = 4  # rows per work item in detect_edges (kernels/edges.cl): each row's CIELAB and samples shared
 
@@ -136,6 +138,7 @@ class FilterOptions:
             "SHORT_CORNER": float(self.short_corner), "CAP_MIN_L": STROKE_END_MIN_L,
             "AA_GUARD": int(self.aa_guard), "AA_LO": float(AA_LO), "AA_OFF": float(AA_OFF), "AA_NEAR": float(AA_NEAR),
             "SUBPIXEL": float(self.subpixel), "SUBPIXEL_ON": int(self.subpixel > 0), "SUBPIXEL_BG": float(SUBPIXEL_BG),
+            "SUBPIXEL_END": float(self.subpixel * SUBPIXEL_END / SUBPIXEL) if SUBPIXEL > 0 else 0.0,
             "GRAIN_GUARD": int(self.grain_guard), "GRAIN_STEP": GRAIN_STEP, "GRAIN_MIN": GRAIN_MIN,
             "SEGMENT": SEGMENT, "EDGE_ROWS": EDGE_ROWS,
             "RAMP_TEST": int(self.ramp > 0),

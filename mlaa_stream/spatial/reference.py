@@ -8,7 +8,7 @@ import numpy as np
 
 from mlaa_stream.device.colour import LUMA, linear_to_srgb, rgb_to_lab, srgb_to_linear
 from mlaa_stream.spatial.filter import (AA_LO, AA_NEAR, AA_OFF, DEFAULT_THRESHOLDS, SHORT_CORNER, SUBPIXEL,
-                                        SUBPIXEL_BG, ramp_fraction, trapezoid_area)
+                                        SUBPIXEL_BG, SUBPIXEL_END, ramp_fraction, trapezoid_area)
 
 BOTTOM, RIGHT = 1, 2
 BOTH = 2  # an end crossed on both sides
@@ -283,8 +283,10 @@ def blend_reference(frame: np.ndarray, weights: np.ndarray, linear: bool = True,
                     linear_input: bool = False, bgr: bool = False, grain_guard: bool = True,
                     edges: np.ndarray | None = None, subpixel: float = SUBPIXEL) -> np.ndarray:
     """out = c + sum w_k^2 (n_k - c) / sum w_k over the four neighbours (seed 000 §3.5); with `edges`, a
-    pixel bordered by edges on three or four sides, lighter (or darker) than every neighbour across
-    them, which spread by at most SUBPIXEL_BG times its contrast to them (a sub-pixel feature on one background) then moves `subpixel` of the way to the mean of its 3x3 window (clamped); pixels in grain (grain_mask) keep their colour."""
+    pixel bordered by edges on three or four sides, lighter (or darker) than every neighbour across them,
+    which spread by at most SUBPIXEL_BG times its contrast to them (a sub-pixel feature on one background),
+    then moves `subpixel` (four sides; three: `subpixel` * SUBPIXEL_END / SUBPIXEL) of the way to the mean
+    of its 3x3 window (clamped); pixels in grain (grain_mask) keep their colour."""
     rgb, alpha = normalised_rgb(frame, False)  # channel order does not matter for mixing
     decode = linear and not linear_input
     m = srgb_to_linear(rgb) if decode else rgb
@@ -318,7 +320,8 @@ def blend_reference(frame: np.ndarray, weights: np.ndarray, linear: bool = True,
             contrast = np.where(higher, ymin - y, y - ymax)
             background = ~(ymax - ymin > SUBPIXEL_BG * contrast)
         dot = ((sides >= 3) & ~(lower & higher) & background)[..., None]
-        out = np.where(dot, out + subpixel * (box - out), out)
+        amount = np.where(sides >= 4, subpixel, subpixel * SUBPIXEL_END / SUBPIXEL)[..., None]
+        out = np.where(dot, out + amount * (box - out), out)
     out = linear_to_srgb(out) if decode else out
     res = _to_dtype(out, alpha, frame)
     if grain_guard:
