@@ -368,16 +368,16 @@ inline link_t unpack_link(int x, int y, uint v)
     return ln;
 }
 
-// Does a link end at dash 1 of `ln` (a dash before it, one lattice row to either side, past background, other
-// colours and, before a dash 1 of XING_DASH or more, a wire of the same ink crossing the gap)? 1 and that link in
-// *prev, or 0.
+// Does a link of the same direction end at dash 1 of `ln` (a dash before it, one lattice row back, past
+// background, other colours and, before a dash 1 of XING_DASH or more, a wire of the same ink crossing the gap)? 1
+// and that link in *prev, or 0.
 inline int incoming(__global const PIXEL_T *src, __global const uchar *found, __global const ushort *links,
                     const lattice L, const int o, const link_t ln, link_t *prev)
 {
     const int x = ln.x, y = ln.y;
     const float3 ink = rgb_at(src, lat(L, x, y, 0, 0)), bgc = rgb_at(src, lat(L, x, y, 1, 0));
-    for (int t = 0; t < 2; ++t) {
-        const int j = t == 0 ? -1 : 1;
+    {
+        const int j = -ln.d;   // a straight wire's chain steps one way: the dash before lies in row -d (#15)
         for (int k = 1; k <= MAX_GAP + 1; ++k) {
             const int c = CLS(ln.a - k, j);
             if (CLEAR(c)) continue;
@@ -395,10 +395,13 @@ inline int incoming(__global const PIXEL_T *src, __global const uchar *found, __
     return 0;
 }
 
-// Does a link start at the end of dash 2 of `ln`?
-inline int outgoing(__global const uchar *found, const lattice L, const int o, const link_t ln)
+// Does a link of the same direction start at the end of dash 2 of `ln`? (A straight wire's chain steps one way;
+// dots that zig-zag between two rows are a mesh's samples -- a fence far away -- not a wire: #15.)
+inline int outgoing(__global const uchar *found, __global const ushort *links, const lattice L, const int o,
+                    const link_t ln)
 {
-    return found[lat(L, ln.x, ln.y, ln.b, ln.d)] >> o & 1u;
+    const int q = lat(L, ln.x, ln.y, ln.b, ln.d);
+    return (found[q] >> o & 1u) && ((links[4 * q + o] & 1u) ? -1 : 1) == ln.d;
 }
 
 // Does the line go on without a gap: a dash of the same ink touching dash 1 diagonally one row before it, or

@@ -541,3 +541,16 @@ def test_mesh_of_wires_is_not_bridged(device, seed):
     lone = canvas()
     dash_chain(lone, 4, 4, 1, 2, 8)
     assert (both(lone) != lone).any(), "a lone wire of 1-px dashes is bridged"
+
+
+def test_zigzag_dots_are_not_a_wire(device):
+    """A straight wire's dashes step one way (row r, r + d, r + 2d, ...): 2-px dashes alternating between two rows
+    (a mesh's samples, e.g. a fence far away) have no chain of one direction, so nothing is drawn (the old rule,
+    which let the previous link come from either row, drew 44 pixels here); kernel as reference."""
+    img = canvas()
+    for k in range(8):
+        img[8 + k % 2, 4 + 4 * k:6 + 4 * k] = INK
+    assert (both(img) == img).all()
+    straight = canvas()
+    dash_chain(straight, 4, 4, 2, 2, 8)
+    assert (both(straight) != straight).any()

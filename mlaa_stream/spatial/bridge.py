@@ -319,11 +319,12 @@ class _Scan:
         return (max(n1, n2) if c1 else n1), (max(n1, n2) if c2 else n2)
 
     def incoming(self, ln: Link) -> Link | None:
-        """The link that ends at dash 1 of `ln` (a dash before it, one lattice row to either side, past background,
-        other colours and, before a dash 1 of XING_DASH or more, a wire of the same ink crossing the gap), or None."""
+        """The link of the same direction that ends at dash 1 of `ln` (a dash before it, one lattice row back, past
+        background, other colours and, before a dash 1 of XING_DASH or more, a wire of the same ink crossing the
+        gap), or None. A straight wire's chain steps one way: dots that zig-zag are a mesh's samples (a fence)."""
         o, P = self.o, self.px
         ink, bgc = P(ln.x, ln.y, 0, 0), P(ln.x, ln.y, 1, 0)
-        for j in (-1, 1):
+        for j in (-ln.d,):
             for k in range(1, o.max_gap + 2):
                 c = self.cls(ln.x, ln.y, ln.a - k, j, ink, bgc)
                 if c in (1, 3):  # background, or a wire of another colour crossing the gap
@@ -340,8 +341,9 @@ class _Scan:
         return None
 
     def outgoing(self, ln: Link) -> bool:
-        """Does a link start at the end of dash 2 of `ln`?"""
-        return self.link(*self.at(ln.x, ln.y, ln.b, ln.d)) is not None
+        """Does a link of the same direction start at the end of dash 2 of `ln`?"""
+        nxt = self.link(*self.at(ln.x, ln.y, ln.b, ln.d))
+        return nxt is not None and nxt.d == ln.d
 
     def touches(self, ln: Link) -> bool:
         """Does the line go on without a gap: a dash of the same ink touching dash 1 diagonally one row
