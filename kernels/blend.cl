@@ -37,7 +37,7 @@ inline float4 from_mix_space(__global const float *luts, float4 c)
 #define GRAIN_GUARD 1
 #endif
 #ifndef GRAIN_STEP
-#define GRAIN_STEP 12
+#define GRAIN_STEP 8
 #endif
 #ifndef GRAIN_MIN
 #define GRAIN_MIN 5
@@ -90,6 +90,29 @@ inline int in_grain(__global const PIXEL_T *src, int x, int y, int width, int he
     return 1;
 }
 
+// Sub-pixel features (beyond seed 000, the role of FXAA's sub-pixel pass and seed 000 §4's
+// reconstruction for dots): a pixel bordered by edges on three or four sides is a dot, the end of a
+// 1-px line or a 1-px bump -- a feature smaller than the pixel that the single sample either hit or
+// missed (cables, fence wires, leaves and highlights far away, both dark and bright). The sample says
+// nothing about how much of the pixel it covers: the expected colour lies between the sample and its
+// surroundings. Such a pixel moves SUBPIXEL (four sides: a dot) or SUBPIXEL_END (three: a line's end or a
+// bump, whose fourth side continues into more of it) of the way from its blended colour to the mean of its
+// 3x3 window (itself included, clamped at the frame's edge), in linear light. 0 = off. Only a luma extremum
+// on one background (SUBPIXEL_BG, below): speckle of photographs and textures is left alone. Measured
+// (docs/spatial_tuning.md): rendered scenes +1.5..+9 points error removed, aliased text +4, wires -1.
+#ifndef SUBPIXEL
+#define SUBPIXEL 0.5f
+#endif
+#ifndef SUBPIXEL_ON
+#define SUBPIXEL_ON 1
+#endif
+#ifndef SUBPIXEL_BG
+#define SUBPIXEL_BG 2.0f
+#endif
+#ifndef SUBPIXEL_END
+#define SUBPIXEL_END SUBPIXEL
+#endif
+inline float luma(float4 c) { return 0.2126f * c.x + 0.7152f * c.y + 0.0722f * c.z; }   // Rec. 709
 inline __attribute__((always_inline)) void blend_pixel(__global const PIXEL_T *src, __global const uchar *edges,
                         __global const ushort *weights, __global const float *luts,
                         __global PIXEL_T *dst, int x, int y, int width, int height)
@@ -102,17 +125,51 @@ inline __attribute__((always_inline)) void blend_pixel(__global const PIXEL_T *s
     ushort4 w16 = LOAD_USHORT4(weights + 4 * i);  // (top, bottom, left, right), valid where the edge exists
     float4 w = (float4)(top ? w16.x : 0, (e & EDGE_BOTTOM) ? w16.y : 0,
                         left ? w16.z : 0, (e & EDGE_RIGHT) ? w16.w : 0) * (1.0f / 65535.0f);
-    if (w.x == 0.0f && w.y == 0.0f && w.z == 0.0f && w.w == 0.0f) return;
+#if SUBPIXEL_ON
+    const int sides = top + left + (e & EDGE_BOTTOM) + ((e & EDGE_RIGHT) >> 1), feature = sides >= 3;
+#else
+    const int feature = 0;
+#endif
+    if (w.x == 0.0f && w.y == 0.0f && w.z == 0.0f && w.w == 0.0f && !feature) return;
 #if GRAIN_GUARD
     if (in_grain(src, x, y, width, height)) return;
 #endif
     float4 c = load_px(src, i);
     float4 m = to_mix_space(luts, c), acc = (float4)(0.0f);
+    const float ws = w.x + w.y + w.z + w.w;
     if (w.x > 0.0f) acc += w.x * w.x * (to_mix_space(luts, load_px(src, i - width)) - m);
     if (w.y > 0.0f) acc += w.y * w.y * (to_mix_space(luts, load_px(src, i + width)) - m);
     if (w.z > 0.0f) acc += w.z * w.z * (to_mix_space(luts, load_px(src, i - 1)) - m);
     if (w.w > 0.0f) acc += w.w * w.w * (to_mix_space(luts, load_px(src, i + 1)) - m);
-    float4 out = from_mix_space(luts, m + acc / (w.x + w.y + w.z + w.w));
+    float4 b = ws > 0.0f ? m + acc / ws : m;
+#if SUBPIXEL_ON
+    if (feature) {
+        // only a local extremum: lighter (or darker) than every neighbour across its edges, as a thin
+        // feature is -- a coverage mix of already antialiased content sits between its neighbours
+        const float yc = luma(m);
+        int lo = 0, hi = 0;
+        float ymin = 1e30f, ymax = -1e30f;
+#define ACROSS_LUMA(has, k) if (has) { const float yn = luma(to_mix_space(luts, load_px(src, k))); lo |= yn < yc; hi |= yn > yc; \
+                                       ymin = yn < ymin ? yn : ymin; ymax = yn > ymax ? yn : ymax; }
+        ACROSS_LUMA(top, i - width)
+        ACROSS_LUMA(e & EDGE_BOTTOM, i + width)
+        ACROSS_LUMA(left, i - 1)
+        ACROSS_LUMA(e & EDGE_RIGHT, i + 1)
+#undef ACROSS_LUMA
+        // ... on one background: the neighbours across its edges spread by at most SUBPIXEL_BG times the
+        // feature's own contrast to the nearest of them (texture and photographs' speckle have no such background)
+        const float contrast = hi ? ymin - yc : yc - ymax;
+        if (ymax - ymin > SUBPIXEL_BG * contrast) lo = hi = 1;
+        if (!(lo && hi)) {
+            float4 box = (float4)(0.0f);
+            for (int dy = -1; dy <= 1; ++dy)
+                for (int dx = -1; dx <= 1; ++dx)
+                    box += to_mix_space(luts, load_px(src, IDX(clampi(x + dx, width - 1), clampi(y + dy, height - 1), width)));
+            b += (sides == 4 ? SUBPIXEL : SUBPIXEL_END) * (box * (1.0f / 9.0f) - b);
+        } else if (ws == 0.0f) return;
+    }
+#endif
+    float4 out = from_mix_space(luts, b);
     out.w = c.w;
     store_px(dst, i, out);
 }

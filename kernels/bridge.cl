@@ -94,7 +94,7 @@ inline int chained(__global const PIXEL_T *src, __global const uchar *found, __g
     link_t prev;
     *ln = unpack_link(x, y, links[4 * IDX(x, y, L.w) + o]);
     *inc = incoming(src, found, links, L, o, *ln, &prev);
-    *out = outgoing(found, L, o, *ln);
+    *out = outgoing(found, links, L, o, *ln);
     const int cf = cuts(L, *ln);
     if (cf ? !((cf & 1) ? *out : *inc) : (MIN_DASHES >= 3 && !*inc && !*out && !touches(src, L, *ln))) return 0;
     // a chain of three links or more that starts (ends) within a gap of the frame's edge
@@ -103,7 +103,7 @@ inline int chained(__global const PIXEL_T *src, __global const uchar *found, __g
         const int q = lat(L, x, y, ln->b, ln->d);
         const link_t next = unpack_link(x + ln->b * L.ax + ln->d * L.bx, y + ln->b * L.ay + ln->d * L.by,
                                         links[4 * q + o]);
-        if (outgoing(found, L, o, next)) *e0 = to_edge(src, L, *ln, ln->a - 1, -1, 0, -ln->d);
+        if (outgoing(found, links, L, o, next)) *e0 = to_edge(src, L, *ln, ln->a - 1, -1, 0, -ln->d);
     }
     link_t pp;
     if (*inc && !*out && !(cf & 2) && incoming(src, found, links, L, o, prev, &pp))
@@ -131,7 +131,7 @@ inline int resumes(__global const PIXEL_T *src, __global const uchar *found, __g
             const link_t s = unpack_link(x + i * L.ax + j * L.bx, y + i * L.ay + j * L.by, links[4 * k + o]);
             const int e1 = 2 * i + s.a - c, e2 = s.s + s.b - s.a - p2;
             if (s.d != d || 4 * (e1 < 0 ? -e1 : e1) > q || 4 * (e2 < 0 ? -e2 : e2) > q || cuts(L, s) ||
-                !outgoing(found, L, o, s))
+                !outgoing(found, links, L, o, s))
                 continue;
             *m_out = m; *is_out = i; *sl = s;
             return 1;

@@ -17,7 +17,7 @@
 // longer: the gap runs past it and the band leaves its pixels as they are. Mirrors bridge_reference.
 // Defines: MAX_GAP, MAX_RUN (pixels), GAP_PER_RUN, GAP_SLACK (gap <= GAP_PER_RUN * mean dash + GAP_SLACK),
 // INK_MIN, BG_TOL, INK_TOL (max-channel, normalised), MIN_DASHES, MAX_SKIP, POKE_RUN, POKE_DASH, XING_RUN,
-// XING_DASH, BLEND_LINEAR, LINEAR_INPUT (as blend.cl).
+// XING_DASH, MESH_DASH (0: off), BLEND_LINEAR, LINEAR_INPUT (as blend.cl).
 #pragma OPENCL FP_CONTRACT OFF
 #ifndef MAX_GAP
 #define MAX_GAP 24
@@ -57,6 +57,9 @@
 #endif
 #ifndef XING_DASH
 #define XING_DASH 4
+#endif
+#ifndef MESH_DASH
+#define MESH_DASH 2
 #endif
 #ifdef PIXEL_IS_FLOAT
 #define FLAT_LEVELS INK_MIN
@@ -237,6 +240,16 @@ inline int finish_link(__global const PIXEL_T *src, const lattice L, int x, int 
     if (crossed && (n1 < XING_DASH || n2 < XING_DASH)) return 0;  // a crossing: likewise
     // a wire at least 1 / (GAP_PER_RUN + 1) px wide: gap <= GAP_PER_RUN * mean dash + GAP_SLACK
     if (2 * (s - 1) > GAP_PER_RUN * (n1 + n2) + 2 * GAP_SLACK) return 0;
+#if MESH_DASH > 0
+    // a mesh of wires (a chain-link fence far away, #15): dots (both dashes MESH_DASH px or shorter) with more of
+    // the ink (or a mix of it) one row further out, in row -2d or 3d over steps a - 1 .. b + 1, are the fence's
+    // scattered samples, not one wire's dashes: no link (bridging them drew false bands across the fence's cells)
+    if (n1 <= MESH_DASH && n2 <= MESH_DASH)
+        for (int k = a - 1; k <= b + 1; ++k) {
+            const int u = CLSO(k, -2 * d), v = CLSO(k, 3 * d);
+            if (u == 0 || u == 2 || v == 0 || v == 2) return 0;
+        }
+#endif
     out->x = x; out->y = y; out->d = d; out->a = a; out->s = s; out->b = b;
     return 1;
 }
@@ -355,16 +368,16 @@ inline link_t unpack_link(int x, int y, uint v)
     return ln;
 }
 
-// Does a link end at dash 1 of `ln` (a dash before it, one lattice row to either side, past background, other
-// colours and, before a dash 1 of XING_DASH or more, a wire of the same ink crossing the gap)? 1 and that link in
-// *prev, or 0.
+// Does a link of the same direction end at dash 1 of `ln` (a dash before it, one lattice row back, past
+// background, other colours and, before a dash 1 of XING_DASH or more, a wire of the same ink crossing the gap)? 1
+// and that link in *prev, or 0.
 inline int incoming(__global const PIXEL_T *src, __global const uchar *found, __global const ushort *links,
                     const lattice L, const int o, const link_t ln, link_t *prev)
 {
     const int x = ln.x, y = ln.y;
     const float3 ink = rgb_at(src, lat(L, x, y, 0, 0)), bgc = rgb_at(src, lat(L, x, y, 1, 0));
-    for (int t = 0; t < 2; ++t) {
-        const int j = t == 0 ? -1 : 1;
+    {
+        const int j = -ln.d;   // a straight wire's chain steps one way: the dash before lies in row -d (#15)
         for (int k = 1; k <= MAX_GAP + 1; ++k) {
             const int c = CLS(ln.a - k, j);
             if (CLEAR(c)) continue;
@@ -382,10 +395,13 @@ inline int incoming(__global const PIXEL_T *src, __global const uchar *found, __
     return 0;
 }
 
-// Does a link start at the end of dash 2 of `ln`?
-inline int outgoing(__global const uchar *found, const lattice L, const int o, const link_t ln)
+// Does a link of the same direction start at the end of dash 2 of `ln`? (A straight wire's chain steps one way;
+// dots that zig-zag between two rows are a mesh's samples -- a fence far away -- not a wire: #15.)
+inline int outgoing(__global const uchar *found, __global const ushort *links, const lattice L, const int o,
+                    const link_t ln)
 {
-    return found[lat(L, ln.x, ln.y, ln.b, ln.d)] >> o & 1u;
+    const int q = lat(L, ln.x, ln.y, ln.b, ln.d);
+    return (found[q] >> o & 1u) && ((links[4 * q + o] & 1u) ? -1 : 1) == ln.d;
 }
 
 // Does the line go on without a gap: a dash of the same ink touching dash 1 diagonally one row before it, or

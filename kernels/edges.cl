@@ -163,10 +163,17 @@ inline int is_ramp_int(__global const PIXEL_T *src, int ib, int has_before, int 
 }
 
 // Already antialiased content (AA text, AA lines, downscaled images): a step between p and q whose
-// neighbours along the step hold a colour *between* p's and q's (projected on p -> q at t in
-// (AA_LO, 1 - AA_LO), off the segment by at most AA_OFF of the step), or where p lies between the
-// pixel before it and q, or q between p and the pixel after it, is a rendered coverage ramp, not a
-// 1-spp jaggy: it is not an edge. 1-spp renders have the two sides' colours there.
+// neighbours along the step hold a colour *between* p's and q's, or where p lies between the pixel
+// before it and q, or q between p and the pixel after it, is a rendered coverage ramp, not a 1-spp
+// jaggy: it is not an edge. 1-spp renders have the two sides' colours there.
+// "Between" is narrow (seed 002's local contrast adaptation: a colour is judged against what texture and
+// shading alone would give): projected on the step at t in (lo, hi), and off the segment by at most
+// AA_OFF of the step. A coverage mix of two colours lies on the segment up to the sRGB curve and
+// rounding (measured on the antialiased bench scenes: 75 % within 0.02 of the step), a textured or
+// shaded surface beside a 1-spp edge anywhere near it (rendered scenes: median 0.04, a quarter over
+// 0.1): AA_OFF 0.08. A neighbour along the step beside p that stays within AA_NEAR of p (beside q:
+// within AA_NEAR of q) is p's own surface varying -- texture, lighting -- not a coverage ramp: the
+// window is (AA_NEAR, 1 - AA_LO) beside p, (AA_LO, 1 - AA_NEAR) beside q (tuning: docs/spatial_tuning.md).
 #ifndef AA_GUARD
 #define AA_GUARD 1
 #endif
@@ -174,13 +181,16 @@ inline int is_ramp_int(__global const PIXEL_T *src, int ib, int has_before, int 
 #define AA_LO 0.1f
 #endif
 #ifndef AA_OFF
-#define AA_OFF 0.35f
-#endif   // (the host passes mlaa.AA_LO / AA_OFF)
-inline int between(float4 m, float4 p, float4 d, float dd)
+#define AA_OFF 0.08f
+#endif
+#ifndef AA_NEAR
+#define AA_NEAR 0.3f
+#endif   // (the host passes filter.AA_LO / AA_OFF / AA_NEAR)
+inline int between(float4 m, float4 p, float4 d, float dd, float lo, float hi)
 {
     const float4 v = m - p;
     const float t = (v.x * d.x + v.y * d.y + v.z * d.z) / dd;
-    if (t <= AA_LO || t >= 1.0f - AA_LO) return 0;
+    if (t <= lo || t >= hi) return 0;
     const float4 r = v - t * d;
     return r.x * r.x + r.y * r.y + r.z * r.z <= AA_OFF * AA_OFF * dd;
 }
@@ -197,16 +207,16 @@ inline int antialiased(__global const PIXEL_T *src, __global const float *luts, 
     const int t = j - i;
     if (has_before) {
         const float4 b = to_encoded(luts, load_px(src, i - t)), db = q - b;
-        if (between(p, b, db, db.x * db.x + db.y * db.y + db.z * db.z)) return 1;
+        if (between(p, b, db, db.x * db.x + db.y * db.y + db.z * db.z, AA_LO, 1.0f - AA_LO)) return 1;
     }
     if (has_after) {
         const float4 a = to_encoded(luts, load_px(src, j + t)), da = a - p;
-        if (between(q, p, da, da.x * da.x + da.y * da.y + da.z * da.z)) return 1;
+        if (between(q, p, da, da.x * da.x + da.y * da.y + da.z * da.z, AA_LO, 1.0f - AA_LO)) return 1;
     }
-    if (has_a && (between(to_encoded(luts, load_px(src, i - s)), p, d, dd) ||
-                  between(to_encoded(luts, load_px(src, j - s)), p, d, dd))) return 1;
-    if (has_b && (between(to_encoded(luts, load_px(src, i + s)), p, d, dd) ||
-                  between(to_encoded(luts, load_px(src, j + s)), p, d, dd))) return 1;
+    if (has_a && (between(to_encoded(luts, load_px(src, i - s)), p, d, dd, AA_NEAR, 1.0f - AA_LO) ||
+                  between(to_encoded(luts, load_px(src, j - s)), p, d, dd, AA_LO, 1.0f - AA_NEAR))) return 1;
+    if (has_b && (between(to_encoded(luts, load_px(src, i + s)), p, d, dd, AA_NEAR, 1.0f - AA_LO) ||
+                  between(to_encoded(luts, load_px(src, j + s)), p, d, dd, AA_LO, 1.0f - AA_NEAR))) return 1;
 #endif
     return 0;
 }
@@ -295,16 +305,16 @@ inline int quiet_px(__global const PIXEL_T *src, int i, int j)
 // yes: between() is 1 whatever the rounding; no: it is 0; neither: the float path decides.
 #define VB_A ((float)PIXEL_MAX * (1.0f / 4194304.0f))
 #define VABSF(v) ((v) < 0.0f ? -(v) : (v))
-#define VBETWEEN(mx, my, mz, px, py, pz, qx, qy, qz, yes, no) {                                            \
+#define VBETWEEN(mx, my, mz, px, py, pz, qx, qy, qz, LO, HI, yes, no) {                                            \
         const float8 vx_ = convert_float8((mx) - (px)), vy_ = convert_float8((my) - (py));                 \
         const float8 vz_ = convert_float8((mz) - (pz)), dx_ = convert_float8((qx) - (px));                 \
         const float8 dy_ = convert_float8((qy) - (py)), dz_ = convert_float8((qz) - (pz));                 \
         const float8 sv_ = VABSF(vx_) + VABSF(vy_) + VABSF(vz_), sd_ = VABSF(dx_) + VABSF(dy_) + VABSF(dz_); \
         const float8 vd_ = vx_ * dx_ + vy_ * dy_ + vz_ * dz_, dd_ = dx_ * dx_ + dy_ * dy_ + dz_ * dz_;     \
         const float8 s_ = VABSF(vx_ * dx_) + VABSF(vy_ * dy_) + VABSF(vz_ * dz_);                          \
-        /* t within (AA_LO, 1 - AA_LO), as the float path sees it: both sides by mt of the bounds */     \
+        /* t within (LO, HI), as the float path sees it: both sides by mt of the bounds */               \
         const float8 mt_ = VB_A * (sv_ + 3.0f * sd_) + 6.0f * VB_A * VB_A + (1.0f / 1048576.0f) * (s_ + dd_); \
-        const float8 lo_ = vd_ - AA_LO * dd_, hi_ = (1.0f - AA_LO) * dd_ - vd_;                            \
+        const float8 lo_ = vd_ - (LO) * dd_, hi_ = (HI) * dd_ - vd_;                            \
         const int8 tin_ = (lo_ > mt_) & (hi_ > mt_), tout_ = (lo_ < -mt_) | (hi_ < -mt_) | (dd_ == 0.0f);  \
         const float8 cx_ = vy_ * dz_ - vz_ * dy_, cy_ = vz_ * dx_ - vx_ * dz_, cz_ = vx_ * dy_ - vy_ * dx_;  \
         const float8 inv_ = 1.0f / dd_, r2_ = (cx_ * cx_ + cy_ * cy_ + cz_ * cz_) * inv_;                  \
@@ -320,13 +330,13 @@ inline int quiet_px(__global const PIXEL_T *src, int i, int j)
 // beside q (the four neighbours of an interior group exist). aa_yes: certainly 1; aa_no: certainly 0.
 #define VANTIALIASED(P, Q, BEF, AFT, A0, A1, B0, B1, aa_yes, aa_no) {                                     \
         int8 y_, n_;                                                                                       \
-        VBETWEEN(P##x, P##y, P##z, BEF##x, BEF##y, BEF##z, Q##x, Q##y, Q##z, aa_yes, aa_no)               \
-        VBETWEEN(Q##x, Q##y, Q##z, P##x, P##y, P##z, AFT##x, AFT##y, AFT##z, y_, n_)                      \
+        VBETWEEN(P##x, P##y, P##z, BEF##x, BEF##y, BEF##z, Q##x, Q##y, Q##z, AA_LO, 1.0f - AA_LO, aa_yes, aa_no)               \
+        VBETWEEN(Q##x, Q##y, Q##z, P##x, P##y, P##z, AFT##x, AFT##y, AFT##z, AA_LO, 1.0f - AA_LO, y_, n_)                      \
         aa_yes |= y_; aa_no &= n_;                                                                         \
-        VBETWEEN(A0##x, A0##y, A0##z, P##x, P##y, P##z, Q##x, Q##y, Q##z, y_, n_) aa_yes |= y_; aa_no &= n_; \
-        VBETWEEN(A1##x, A1##y, A1##z, P##x, P##y, P##z, Q##x, Q##y, Q##z, y_, n_) aa_yes |= y_; aa_no &= n_; \
-        VBETWEEN(B0##x, B0##y, B0##z, P##x, P##y, P##z, Q##x, Q##y, Q##z, y_, n_) aa_yes |= y_; aa_no &= n_; \
-        VBETWEEN(B1##x, B1##y, B1##z, P##x, P##y, P##z, Q##x, Q##y, Q##z, y_, n_) aa_yes |= y_; aa_no &= n_; }
+        VBETWEEN(A0##x, A0##y, A0##z, P##x, P##y, P##z, Q##x, Q##y, Q##z, AA_NEAR, 1.0f - AA_LO, y_, n_) aa_yes |= y_; aa_no &= n_; \
+        VBETWEEN(A1##x, A1##y, A1##z, P##x, P##y, P##z, Q##x, Q##y, Q##z, AA_LO, 1.0f - AA_NEAR, y_, n_) aa_yes |= y_; aa_no &= n_; \
+        VBETWEEN(B0##x, B0##y, B0##z, P##x, P##y, P##z, Q##x, Q##y, Q##z, AA_NEAR, 1.0f - AA_LO, y_, n_) aa_yes |= y_; aa_no &= n_; \
+        VBETWEEN(B1##x, B1##y, B1##z, P##x, P##y, P##z, Q##x, Q##y, Q##z, AA_LO, 1.0f - AA_NEAR, y_, n_) aa_yes |= y_; aa_no &= n_; }
 // CIELAB of 8 pixels: common.cl's LAB8.
 #if CHANNELS >= 3
 #define C0 CH_R

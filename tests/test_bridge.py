@@ -513,3 +513,44 @@ def test_host_checks(device):
         Bridger(device, frame_format(img), BridgeOptions(min_dashes=4))
     with pytest.raises(ValueError, match="max_skip in 0..3"):
         Bridger(device, frame_format(img), BridgeOptions(max_skip=4))
+
+
+def fence(seed: int, w: int = 96, h: int = 64) -> np.ndarray:
+    """1-spp samples of a chain-link fence far away: two families of thin diagonal wires (0.15-0.3 px) a few
+    pixels apart, over a flat background: scattered dots of one ink."""
+    rng = np.random.default_rng(seed)
+    layers = [Layer(None, BG)]
+    pitch, width = rng.uniform(2.5, 4.0), rng.uniform(0.15, 0.3)
+    for k in range(-40, 40):
+        for slope in (1.0, -1.0):
+            x0 = k * pitch * 1.41
+            layers.append(Layer((stroke(np.array([[x0, -5.0], [x0 + slope * (h + 10), h + 5.0]]), width),), INK))
+    return encode8(render(layers, w, h, 1))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 3, 4])
+def test_mesh_of_wires_is_not_bridged(device, seed):
+    """A fence (a mesh of sub-pixel wires) is sampled as scattered dots: links between 1-2 px dots with more of
+    the ink one row further out (MESH_DASH) are refused, so no false bands cross its cells; kernel as reference.
+    Without the rule the same frame gets links; a lone wire of 1-px dashes is still bridged."""
+    img = fence(seed)
+    out = both(img)
+    loose = both(img, options=BridgeOptions(mesh_dash=0))
+    assert (loose != img).any(), "without the mesh rule the fence gets links"
+    assert (out == img).all(), "no link across the fence"
+    lone = canvas()
+    dash_chain(lone, 4, 4, 1, 2, 8)
+    assert (both(lone) != lone).any(), "a lone wire of 1-px dashes is bridged"
+
+
+def test_zigzag_dots_are_not_a_wire(device):
+    """A straight wire's dashes step one way (row r, r + d, r + 2d, ...): 2-px dashes alternating between two rows
+    (a mesh's samples, e.g. a fence far away) have no chain of one direction, so nothing is drawn (the old rule,
+    which let the previous link come from either row, drew 44 pixels here); kernel as reference."""
+    img = canvas()
+    for k in range(8):
+        img[8 + k % 2, 4 + 4 * k:6 + 4 * k] = INK
+    assert (both(img) == img).all()
+    straight = canvas()
+    dash_chain(straight, 4, 4, 2, 2, 8)
+    assert (both(straight) != straight).any()

@@ -420,11 +420,12 @@ def test_grain_mask_known_answers():
     assert not grain_mask(line).any()
     noise = (128 + rng.integers(-60, 61, (20, 24, 3))).astype(np.uint8)     # grain: almost every pixel
     assert grain_mask(noise).mean() > 0.95
-    # 11 levels do not count, 12 do (GRAIN_STEP): a checker of +-6 around grey in every channel is not grain
-    soft = (np.indices((20, 24)).sum(0) % 2 * 11 + 100).astype(np.uint8)
+    # GRAIN_STEP - 1 levels do not count, GRAIN_STEP do: a checker of +-(GRAIN_STEP - 1) / 2 around grey is not grain
+    from mlaa_stream.spatial.filter import GRAIN_STEP
+    soft = (np.indices((20, 24)).sum(0) % 2 * (GRAIN_STEP - 1) + 100).astype(np.uint8)
     rnd = rng.integers(0, 2, (20, 24)).astype(np.uint8)
     assert not grain_mask(soft).any()
-    assert grain_mask(rnd * 12 + 100).sum() > grain_mask(rnd * 11 + 100).sum() == 0
+    assert grain_mask(rnd * GRAIN_STEP + 100).sum() > grain_mask(rnd * (GRAIN_STEP - 1) + 100).sum() == 0
 
 
 def test_grain_is_left_untouched():
@@ -512,3 +513,52 @@ def _edges_and_distances(img: np.ndarray):
     e = edges_reference(img)
     hd, vd = distances_reference(e)
     return e, hd, vd
+
+
+def test_antialiased_guard_ignores_texture_beside_a_1spp_edge(filt):
+    """The antialiased guard's narrow window (kernels/edges.cl `antialiased`, AA_NEAR and AA_OFF): a
+    1-spp edge between grey 90 (above) and grey 200 (below) whose upper side holds texture -- a pixel
+    a fifth of the way towards the other side (x = 5, float path; x = 12, lane path), or a colour
+    half-way in value but far off the grey segment (x = 28) -- keeps the edge beside it; a coverage
+    mix half-way on the segment (x = 20: already antialiased) still turns it off."""
+    img = np.full((16, 40, 3), 90, np.uint8)
+    img[8:] = 200
+    img[7, 5] = img[7, 12] = 112          # t = 0.2 < AA_NEAR: texture, not coverage
+    img[7, 20] = 145                      # t = 0.5 on the segment: a coverage ramp
+    img[7, 28] = (180, 100, 145)          # t = 0.47, off the segment by 0.3 of the step (> AA_OFF)
+    got = filt.intermediates(img)["edges"]
+    want = edges_reference(img, filt.options.threshold)
+    np.testing.assert_array_equal(got, want)
+    for x in (4, 6, 11, 13, 27, 29):
+        assert got[7, x] & 1, f"edge beside texture at x = {x} lost"
+    for x in (19, 21):
+        assert not got[7, x] & 1, f"edge beside a coverage mix at x = {x} kept"
+
+
+@pytest.mark.parametrize("value", [230, 20])
+def test_subpixel_dot_moves_towards_its_surroundings(value):
+    """A lone 1-spp dot (edges on four sides; a cable or fence wire far away), bright or dark, on grey 120:
+    blend.cl's SUBPIXEL rule moves it half-way (in linear light) to the mean of its 3x3 window, as the
+    reference does; with subpixel=0 it stays as MLAA leaves it. A pixel with edges on three sides that lies
+    between its neighbours (a coverage step of antialiased content) is not a feature and is left alone, nor is
+    speckle whose neighbours share no background (a photograph's or a texture's own detail: SUBPIXEL_BG)."""
+    from mlaa_stream.device.colour import linear_to_srgb, srgb_to_linear
+    img = np.full((12, 24, 3), 120, np.uint8)
+    img[5, 10] = value
+    img[:, 18] = 240                            # a light stripe, and beside it a 1-px green line whose
+    img[2:9, 17] = (40, 160, 40)                # ends (2, 17) and (8, 17) lie between 120 and 240 in luma
+    img[5, 4], img[4, 4], img[6, 4], img[7, 4] = 250, (30, 30, 200), 225, 250   # speckle: a light pixel
+    img[5, 3], img[5, 5] = (200, 40, 40), (40, 160, 40)                         # (5, 4) on no one background
+    with Filter(bridge=False) as f:
+        out = f.process(img)
+    with Filter(bridge=False, subpixel=0.0) as f:
+        plain = f.process(img)
+    np.testing.assert_array_equal(out, mlaa_reference(img))
+    lin_c, lin_bg = srgb_to_linear(value / 255.0), srgb_to_linear(120 / 255.0)
+    plain_c = srgb_to_linear(plain[5, 10, 0] / 255.0)
+    want = linear_to_srgb(plain_c + 0.5 * ((lin_c + 8 * lin_bg) / 9 - plain_c)) * 255
+    assert abs(int(out[5, 10, 0]) - want) <= 1
+    assert abs(int(out[5, 10, 0]) - 120) < abs(int(plain[5, 10, 0]) - 120)
+    np.testing.assert_array_equal(out[:, 15:20], plain[:, 15:20])
+    np.testing.assert_array_equal(out[:, :7], plain[:, :7])
+    assert (out[5, 4] == 250).all()

@@ -40,6 +40,7 @@ POKE_RUN = 2  # another wire's end of the link's ink beside a dash, two rows fro
 POKE_DASH = 3  # ... and only for links whose dashes are both at least this long
 XING_RUN = 3  # another wire of the link's ink crossing the gap: at most this many steps along each row (0: off)
 XING_DASH = 4  # ... and only for links whose dashes are both at least this long
+MESH_DASH = 2  # links of dots this long or shorter need rows -2d and 3d free of the ink: not a mesh (0: off)
 
 
 @dataclass(frozen=True)
@@ -59,6 +60,7 @@ class BridgeOptions:
     poke_dash: int = POKE_DASH
     xing_run: int = XING_RUN
     xing_dash: int = XING_DASH
+    mesh_dash: int = MESH_DASH
     linear: bool = True
     linear_input: bool = False
 
@@ -68,7 +70,7 @@ class BridgeOptions:
                 "GAP_PER_RUN": int(self.gap_per_run), "GAP_SLACK": int(self.gap_slack),
                 "MIN_DASHES": int(self.min_dashes), "MAX_SKIP": int(self.max_skip), "POKE_RUN": int(self.poke_run),
                 "POKE_DASH": int(self.poke_dash), "XING_RUN": int(self.xing_run),
-                "XING_DASH": int(self.xing_dash), "BLEND_LINEAR": int(self.linear),
+                "XING_DASH": int(self.xing_dash), "MESH_DASH": int(self.mesh_dash), "BLEND_LINEAR": int(self.linear),
                 "LINEAR_INPUT": int(self.linear_input)}
 
 
@@ -153,7 +155,8 @@ class _Scan:
         both dashes are at least POKE_DASH long. Over steps 2 .. s - 2 of the gap, another wire of the same ink
         crossing the rows (`xing`) counts as clear when both dashes are at least XING_DASH long, and the gap in row d
         runs past a run of it that could not start dash 2 (the ink beside it in row 0 or 2d would refuse that
-        link: so no link found before is lost)."""
+        link: so no link found before is lost). Dots (both dashes MESH_DASH px or shorter) need rows -2d and 3d
+        over steps a - 1 .. b + 1 free of the ink and its mixes: else they are a mesh's samples (a fence)."""
         o = self.o
         ink, bgc = self.px(x, y, 0, 0), self.px(x, y, 1, 0)
         if ink is None or bgc is None or _diff(ink, bgc) < self.ink_min:
@@ -251,7 +254,11 @@ class _Scan:
             if all(ok(i, j) for i, j in win) and (not xs or max(xs) <= s - 2) and \
                     (any(self.cuts(ln)) or all(self.inside(x, y, i, j) for i, j in win)) and \
                     ("poke" not in used or min(n1, n2) >= o.poke_dash) and \
-                    ("xing" not in used or min(n1, n2) >= o.xing_dash):
+                    ("xing" not in used or min(n1, n2) >= o.xing_dash) and \
+                    not (max(n1, n2) <= o.mesh_dash and any(
+                        self.inside(x, y, i, j) and c(i, j) in (0, 2)
+                        for i in range(a - 1, b + 2) for j in (-2 * d, 3 * d))):
+                # (the last: dots with more of the ink one row further out are a mesh's samples: a fence far away)
                 found.append(ln)
         return found[0] if len(found) == 1 else None
 
@@ -312,11 +319,12 @@ class _Scan:
         return (max(n1, n2) if c1 else n1), (max(n1, n2) if c2 else n2)
 
     def incoming(self, ln: Link) -> Link | None:
-        """The link that ends at dash 1 of `ln` (a dash before it, one lattice row to either side, past background,
-        other colours and, before a dash 1 of XING_DASH or more, a wire of the same ink crossing the gap), or None."""
+        """The link of the same direction that ends at dash 1 of `ln` (a dash before it, one lattice row back, past
+        background, other colours and, before a dash 1 of XING_DASH or more, a wire of the same ink crossing the
+        gap), or None. A straight wire's chain steps one way: dots that zig-zag are a mesh's samples (a fence)."""
         o, P = self.o, self.px
         ink, bgc = P(ln.x, ln.y, 0, 0), P(ln.x, ln.y, 1, 0)
-        for j in (-1, 1):
+        for j in (-ln.d,):
             for k in range(1, o.max_gap + 2):
                 c = self.cls(ln.x, ln.y, ln.a - k, j, ink, bgc)
                 if c in (1, 3):  # background, or a wire of another colour crossing the gap
@@ -333,8 +341,9 @@ class _Scan:
         return None
 
     def outgoing(self, ln: Link) -> bool:
-        """Does a link start at the end of dash 2 of `ln`?"""
-        return self.link(*self.at(ln.x, ln.y, ln.b, ln.d)) is not None
+        """Does a link of the same direction start at the end of dash 2 of `ln`?"""
+        nxt = self.link(*self.at(ln.x, ln.y, ln.b, ln.d))
+        return nxt is not None and nxt.d == ln.d
 
     def touches(self, ln: Link) -> bool:
         """Does the line go on without a gap: a dash of the same ink touching dash 1 diagonally one row

@@ -40,13 +40,23 @@ SHORT_CORNER = 0.75
 # (kernels/weights.cl).
 STROKE_END_MIN_L = 8
 # Already antialiased edges (kernels/edges.cl `antialiased`): a neighbour along the step whose colour
-# projects on p -> q at t in (AA_LO, 1 - AA_LO), within AA_OFF of the step off the segment, or p (q)
-# between its neighbour across the step and q (p), marks a rendered coverage ramp, not a 1-spp jaggy.
-AA_LO, AA_OFF = 0.1, 0.35
+# projects on p -> q at t in (AA_NEAR, 1 - AA_LO) beside p, (AA_LO, 1 - AA_NEAR) beside q, within AA_OFF
+# of the step off the segment, or p (q) between its neighbour across the step and q (p) at t in
+# (AA_LO, 1 - AA_LO), marks a rendered coverage ramp, not a 1-spp jaggy. AA_OFF and AA_NEAR keep texture
+# and shading beside 1-spp edges out of it (docs/spatial_tuning.md).
+AA_LO, AA_OFF, AA_NEAR = 0.1, 0.08, 0.3
 # Grain and fine texture (film grain, sensor noise) are not jaggies (kernels/blend.cl `in_grain`): a pixel
 # whose 3x3 window holds only pixels that differ from at least GRAIN_MIN of their 8 neighbours, by
 # GRAIN_STEP / 255 of full scale or more in some channel, is left as it is.
-GRAIN_STEP, GRAIN_MIN = 12, 5
+GRAIN_STEP, GRAIN_MIN = 8, 5
+# Sub-pixel features (kernels/blend.cl SUBPIXEL): a pixel bordered by edges on four sides (a dot) moves this
+# far from its blended colour to the mean of its 3x3 window, in linear light (docs/spatial_tuning.md).
+SUBPIXEL = 0.5
+# ... only on one background: the neighbours across its edges spread (luma, linear) by at most SUBPIXEL_BG times
+# the feature's contrast to the nearest of them.
+SUBPIXEL_BG = 2.0
+# A feature with three sides (a line's end, a 1-px bump: the fourth side continues into more of it) moves less.
+SUBPIXEL_END = 0.25
 SEGMENT = 64  # pixels of a row per work item in the per-pixel passes (kernels/common.cl)
 EDGE_ROWS = 4  # rows per work item in detect_edges (kernels/edges.cl): each row's CIELAB and samples shared
 
@@ -115,6 +125,7 @@ class FilterOptions:
     short_corner: float = SHORT_CORNER
     aa_guard: bool = True
     grain_guard: bool = True
+    subpixel: float = SUBPIXEL
 
     def pass_defines(self) -> dict[str, object]:
         return {
@@ -126,7 +137,9 @@ class FilterOptions:
             "ROUNDING": float(self.rounding),
             "BLEND_U": int(self.blend_u),
             "SHORT_CORNER": float(self.short_corner), "CAP_MIN_L": STROKE_END_MIN_L,
-            "AA_GUARD": int(self.aa_guard), "AA_LO": float(AA_LO), "AA_OFF": float(AA_OFF),
+            "AA_GUARD": int(self.aa_guard), "AA_LO": float(AA_LO), "AA_OFF": float(AA_OFF), "AA_NEAR": float(AA_NEAR),
+            "SUBPIXEL": float(self.subpixel), "SUBPIXEL_ON": int(self.subpixel > 0), "SUBPIXEL_BG": float(SUBPIXEL_BG),
+            "SUBPIXEL_END": float(self.subpixel * SUBPIXEL_END / SUBPIXEL) if SUBPIXEL > 0 else 0.0,
             "GRAIN_GUARD": int(self.grain_guard), "GRAIN_STEP": GRAIN_STEP, "GRAIN_MIN": GRAIN_MIN,
             "SEGMENT": SEGMENT, "EDGE_ROWS": EDGE_ROWS,
             "RAMP_TEST": int(self.ramp > 0),
@@ -182,7 +195,8 @@ class Filter:
                  bgr: bool = False, linear_input: bool = False, rounding: float = 0.0,
                  blend_u: bool = True, ramp: float = 0.35, short_corner: float = SHORT_CORNER,
                  aa_guard: bool = True, bridge: bool = True, grain_guard: bool = True,
-                 fast: bool = False, preset: str | None = None, context: Context | None = None):
+                 subpixel: float = SUBPIXEL, fast: bool = False, preset: str | None = None,
+                 context: Context | None = None):
         """`preset`: one of PRESETS; its options replace the keywords of the same names."""
         if preset is not None:
             if preset not in PRESETS:
@@ -198,9 +212,11 @@ class Filter:
             raise ValueError(f"threshold: expected a positive number, got {threshold!r}")
         if not 0.0 <= float(short_corner) <= 1.0:
             raise ValueError(f"short_corner: expected a factor in [0, 1], got {short_corner!r}")
+        if not 0.0 <= float(subpixel) <= 1.0:
+            raise ValueError(f"subpixel: expected a factor in [0, 1], got {subpixel!r}")
         self.options = FilterOptions(thr, metric, bool(linear), bool(linear_input),
                                      float(rounding), bool(blend_u), float(ramp), float(short_corner),
-                                     bool(aa_guard), bool(grain_guard))
+                                     bool(aa_guard), bool(grain_guard), float(subpixel))
         self.bgr = bool(bgr)
         self.fast = bool(fast)  # spatial/fast.py: seed 004's passes instead of the default chain
         self.reconstruct = bool(reconstruct) and not self.fast

@@ -7,7 +7,8 @@ from __future__ import annotations
 import numpy as np
 
 from mlaa_stream.device.colour import LUMA, linear_to_srgb, rgb_to_lab, srgb_to_linear
-from mlaa_stream.spatial.filter import AA_LO, AA_OFF, DEFAULT_THRESHOLDS, SHORT_CORNER, ramp_fraction, trapezoid_area
+from mlaa_stream.spatial.filter import (AA_LO, AA_NEAR, AA_OFF, DEFAULT_THRESHOLDS, SHORT_CORNER, SUBPIXEL,
+                                        SUBPIXEL_BG, SUBPIXEL_END, ramp_fraction, trapezoid_area)
 
 BOTTOM, RIGHT = 1, 2
 BOTH = 2  # an end crossed on both sides
@@ -76,17 +77,19 @@ def edges_reference(frame: np.ndarray, threshold: float | None = None, metric: s
         lim = ramp * np.abs(d1)
         return ((d0 * d1 > 0) & (np.abs(d0) > lim)) | ((d2 * d1 > 0) & (np.abs(d2) > lim))
 
-    def between(m: np.ndarray, p: np.ndarray, d: np.ndarray, dd: np.ndarray) -> np.ndarray:
+    def between(m: np.ndarray, p: np.ndarray, d: np.ndarray, dd: np.ndarray,
+                lo: float = AA_LO, hi: float = 1.0 - AA_LO) -> np.ndarray:
         v = m - p
         with np.errstate(divide="ignore", invalid="ignore"):
             t = (v * d).sum(-1) / dd
         r = v - t[..., None] * d
-        return (t > AA_LO) & (t < 1.0 - AA_LO) & ((r * r).sum(-1) <= AA_OFF * AA_OFF * dd) & (dd > 0)
+        return (t > lo) & (t < hi) & ((r * r).sum(-1) <= AA_OFF * AA_OFF * dd) & (dd > 0)
 
     def antialiased_along(c: np.ndarray) -> np.ndarray:
         """For steps c[k] -> c[k+1] along axis 0: does a neighbour along the step (axis 1) of
-        either pixel hold a colour between the two, or is either pixel between its neighbours
-        across the step (an already antialiased edge)?"""
+        either pixel hold a colour between the two (beside p: more than AA_NEAR of the way from p;
+        beside q: more than AA_NEAR from q), or is either pixel between its neighbours across the
+        step (an already antialiased edge)?"""
         p, q = c[:-1], c[1:]
         d = q - p
         dd = (d * d).sum(-1)
@@ -100,8 +103,8 @@ def edges_reference(frame: np.ndarray, threshold: float | None = None, metric: s
         out |= between(q, p, da, (da * da).sum(-1))
         for sl_m, sl_o in ((np.s_[:, :-1], np.s_[:, 1:]), (np.s_[:, 1:], np.s_[:, :-1])):
             # neighbours at axis-1 offset -1 (for columns 1..) and +1 (for columns ..-2)
-            out[sl_o] |= between(p[sl_m], p[sl_o], d[sl_o], dd[sl_o])
-            out[sl_o] |= between(q[sl_m], p[sl_o], d[sl_o], dd[sl_o])
+            out[sl_o] |= between(p[sl_m], p[sl_o], d[sl_o], dd[sl_o], AA_NEAR, 1.0 - AA_LO)
+            out[sl_o] |= between(q[sl_m], p[sl_o], d[sl_o], dd[sl_o], AA_LO, 1.0 - AA_NEAR)
         return out
 
     e = np.zeros(rgb.shape[:2], np.uint8)
@@ -277,9 +280,13 @@ def grain_mask(frame: np.ndarray) -> np.ndarray:
 
 
 def blend_reference(frame: np.ndarray, weights: np.ndarray, linear: bool = True,
-                    linear_input: bool = False, bgr: bool = False, grain_guard: bool = True) -> np.ndarray:
-    """out = c + sum w_k^2 (n_k - c) / sum w_k over the four neighbours (seed 000 §3.5); pixels in grain
-    (grain_mask) keep their colour."""
+                    linear_input: bool = False, bgr: bool = False, grain_guard: bool = True,
+                    edges: np.ndarray | None = None, subpixel: float = SUBPIXEL) -> np.ndarray:
+    """out = c + sum w_k^2 (n_k - c) / sum w_k over the four neighbours (seed 000 §3.5); with `edges`, a
+    pixel bordered by edges on three or four sides, lighter (or darker) than every neighbour across them,
+    which spread by at most SUBPIXEL_BG times its contrast to them (a sub-pixel feature on one background),
+    then moves `subpixel` (four sides; three: `subpixel` * SUBPIXEL_END / SUBPIXEL) of the way to the mean
+    of its 3x3 window (clamped); pixels in grain (grain_mask) keep their colour."""
     rgb, alpha = normalised_rgb(frame, False)  # channel order does not matter for mixing
     decode = linear and not linear_input
     m = srgb_to_linear(rgb) if decode else rgb
@@ -288,6 +295,33 @@ def blend_reference(frame: np.ndarray, weights: np.ndarray, linear: bool = True,
     acc = sum(weights[..., k, None] ** 2 * (neighbours[k] - m) for k in range(4))
     total = weights.sum(-1)[..., None]
     out = m + np.divide(acc, total, out=np.zeros_like(m), where=total > 0)
+    if edges is not None and subpixel > 0:
+        b, r = (edges & BOTTOM) > 0, (edges & RIGHT) > 0
+        sides = b.astype(np.int64) + r
+        sides[1:] += b[:-1]
+        sides[:, 1:] += r[:, :-1]
+        h, w = edges.shape
+        box = sum(pad[dy:dy + h, dx:dx + w] for dy in range(3) for dx in range(3)) / 9.0
+        # a local extremum in luma (Rec. 709, mix space) against every neighbour across its edges
+        y = (m * np.array([0.2126, 0.7152, 0.0722])).sum(-1)
+        ypad = np.pad(y, 1, mode="edge")
+        lower = np.zeros((h, w), bool)
+        higher = np.zeros((h, w), bool)
+        ymin, ymax = np.full((h, w), np.inf), np.full((h, w), -np.inf)
+        across = ((np.pad(b, ((1, 0), (0, 0)))[:-1], ypad[:-2, 1:-1]), (b, ypad[2:, 1:-1]),
+                  (np.pad(r, ((0, 0), (1, 0)))[:, :-1], ypad[1:-1, :-2]), (r, ypad[1:-1, 2:]))
+        for has, yn in across:
+            lower |= has & (yn < y)
+            higher |= has & (yn > y)
+            ymin = np.where(has, np.minimum(ymin, yn), ymin)
+            ymax = np.where(has, np.maximum(ymax, yn), ymax)
+        # ... on one background: those neighbours spread by at most SUBPIXEL_BG times its contrast to them
+        with np.errstate(invalid="ignore"):
+            contrast = np.where(higher, ymin - y, y - ymax)
+            background = ~(ymax - ymin > SUBPIXEL_BG * contrast)
+        dot = ((sides >= 3) & ~(lower & higher) & background)[..., None]
+        amount = np.where(sides >= 4, subpixel, subpixel * SUBPIXEL_END / SUBPIXEL)[..., None]
+        out = np.where(dot, out + amount * (box - out), out)
     out = linear_to_srgb(out) if decode else out
     res = _to_dtype(out, alpha, frame)
     if grain_guard:
@@ -315,9 +349,9 @@ def mlaa_reference(frame: np.ndarray, threshold: float | None = None, metric: st
                    linear: bool = True, bgr: bool = False, linear_input: bool = False,
                    rounding: float = 0.0, blend_u: bool = True, ramp: float = 0.35,
                    short_corner: float = SHORT_CORNER, aa_guard: bool = True,
-                   grain_guard: bool = True) -> np.ndarray:
+                   grain_guard: bool = True, subpixel: float = SUBPIXEL) -> np.ndarray:
     """The whole spatial filter, pass after pass (without the bridging pass: mlaa_stream.spatial.bridge.bridge_reference)."""
     e = edges_reference(frame, threshold, metric, bgr, linear_input, ramp, aa_guard)
     hd, vd = distances_reference(e)
     wts = weights_reference(e, hd, vd, rounding, blend_u, frame, short_corner)
-    return blend_reference(frame, wts, linear, linear_input, bgr, grain_guard)
+    return blend_reference(frame, wts, linear, linear_input, bgr, grain_guard, e, subpixel)
