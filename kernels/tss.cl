@@ -94,6 +94,37 @@ inline void colour_box(__global const PIXEL_T *cur, __global const float *luts, 
     *hi_out = hi + EPS;
 }
 
+// The end of every resolve: pixel i's filled-cell count n and the sum of its cells' means (linear light)
+// give out = S + min(1, n / FULL_CELLS) (mean - S) over the spatial output S; with fewer than MIN_CELLS
+// cells the spatial pixel is copied bit for bit. Alpha stays the spatial pixel's.
+inline void tss_store(__global const float *luts, __global const float *dec, __global const PIXEL_T *spatial,
+                      __global PIXEL_T *dst, __global uchar *cells, int i, int n, float mr, float mg, float mb)
+{
+    cells[i] = (uchar)n;
+#if CHANNELS == 1
+    const int nc = 1;
+#else
+    const int nc = CHANNELS;
+#endif
+    if (n < MIN_CELLS) {
+        for (int c = 0; c < nc; ++c)
+            dst[(size_t)i * nc + c] = spatial[(size_t)i * nc + c];
+        return;
+    }
+    const float fn = (float)n;
+    const float4 s = tss_linear(luts, dec, spatial, i);
+    const float a = fn < (float)FULL_CELLS ? fn / (float)FULL_CELLS : 1.0f;
+    float4 out = s + ((float4)(mr / fn, mg / fn, mb / fn, s.w) - s) * a;
+#if !LINEAR_INPUT
+    __global const float *enc = luts + 2 * (LUT_SIZE + 1);
+    out = (float4)(lut_read(enc, out.x), lut_read(enc, out.y), lut_read(enc, out.z), out.w);
+#endif
+#if CHANNELS == 4
+    out.w = load_px(spatial, i).w;   // store_px re-encodes it exactly
+#endif
+    store_px(dst, i, out);
+}
+
 __kernel void tss_resolve(__global const PIXEL_T *ring, __global const PIXEL_T *spatial,
                           __global PIXEL_T *dst, __global uchar *cells,
                           __global const int *info, __global const float *shift,
@@ -174,29 +205,7 @@ __kernel void tss_resolve(__global const PIXEL_T *ring, __global const PIXEL_T *
             ++n;
         }
     }
-    cells[i] = (uchar)n;
-#if CHANNELS == 1
-    const int nc = 1;
-#else
-    const int nc = CHANNELS;
-#endif
-    if (n < MIN_CELLS) {
-        for (int c = 0; c < nc; ++c)
-            dst[(size_t)i * nc + c] = spatial[(size_t)i * nc + c];
-        return;
-    }
-    const float fn = (float)n;
-    const float4 s = tss_linear(luts, dec, spatial, i);
-    const float a = fn < (float)FULL_CELLS ? fn / (float)FULL_CELLS : 1.0f;
-    float4 out = s + ((float4)(mr / fn, mg / fn, mb / fn, s.w) - s) * a;
-#if !LINEAR_INPUT
-    __global const float *enc = luts + 2 * (LUT_SIZE + 1);
-    out = (float4)(lut_read(enc, out.x), lut_read(enc, out.y), lut_read(enc, out.z), out.w);
-#endif
-#if CHANNELS == 4
-    out.w = load_px(spatial, i).w;   // alpha: the spatial pixel's (store_px re-encodes it exactly)
-#endif
-    store_px(dst, i, out);
+    tss_store(luts, dec, spatial, dst, cells, i, n, mr, mg, mb);
 }
 
 // The same resolve when every ring frame's map is one translation (static and global models: the
@@ -251,29 +260,7 @@ __kernel void tss_resolve_shift(__global const PIXEL_T *ring, __global const PIX
         mr += sr / c; mg += sg / c; mb += sb / c;
         ++n;
     }
-    cells[i] = (uchar)n;
-#if CHANNELS == 1
-    const int nc = 1;
-#else
-    const int nc = CHANNELS;
-#endif
-    if (n < MIN_CELLS) {
-        for (int c = 0; c < nc; ++c)
-            dst[(size_t)i * nc + c] = spatial[(size_t)i * nc + c];
-        return;
-    }
-    const float fn = (float)n;
-    const float4 s = tss_linear(luts, dec, spatial, i);
-    const float a = fn < (float)FULL_CELLS ? fn / (float)FULL_CELLS : 1.0f;
-    float4 out = s + ((float4)(mr / fn, mg / fn, mb / fn, s.w) - s) * a;
-#if !LINEAR_INPUT
-    __global const float *enc = luts + 2 * (LUT_SIZE + 1);
-    out = (float4)(lut_read(enc, out.x), lut_read(enc, out.y), lut_read(enc, out.z), out.w);
-#endif
-#if CHANNELS == 4
-    out.w = load_px(spatial, i).w;
-#endif
-    store_px(dst, i, out);
+    tss_store(luts, dec, spatial, dst, cells, i, n, mr, mg, mb);
 }
 
 // tss_resolve_shift over a segment of SEG pixels of one row per work item (the default path): for a
@@ -348,30 +335,6 @@ __kernel void tss_resolve_shift_rows(__global const PIXEL_T *ring, __global cons
             cnt[p] += ok;
         }
     }
-#if CHANNELS == 1
-    const int nc = 1;
-#else
-    const int nc = CHANNELS;
-#endif
-    for (int p = 0; p < len; ++p) {
-        const int i = gy * width + x0 + p;
-        cells[i] = (uchar)n[p];
-        if (n[p] < MIN_CELLS) {
-            for (int c = 0; c < nc; ++c)
-                dst[(size_t)i * nc + c] = spatial[(size_t)i * nc + c];
-            continue;
-        }
-        const float fn = (float)n[p];
-        const float4 sp = tss_linear(luts, dec, spatial, i);
-        const float a = fn < (float)FULL_CELLS ? fn / (float)FULL_CELLS : 1.0f;
-        float4 out = sp + ((float4)(m[0][p] / fn, m[1][p] / fn, m[2][p] / fn, sp.w) - sp) * a;
-#if !LINEAR_INPUT
-        __global const float *enc = luts + 2 * (LUT_SIZE + 1);
-        out = (float4)(lut_read(enc, out.x), lut_read(enc, out.y), lut_read(enc, out.z), out.w);
-#endif
-#if CHANNELS == 4
-        out.w = load_px(spatial, i).w;
-#endif
-        store_px(dst, i, out);
-    }
+    for (int p = 0; p < len; ++p)
+        tss_store(luts, dec, spatial, dst, cells, gy * width + x0 + p, n[p], m[0][p], m[1][p], m[2][p]);
 }
