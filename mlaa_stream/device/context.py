@@ -116,7 +116,7 @@ def list_devices() -> list[DeviceInfo]:
 # Devices that report themselves as GPUs but are not hardware (debugging tools): never the default.
 SIMULATORS = ("oclgrind",)
 # CPU runtimes in order of preference when there is no GPU: PoCL is the one the kernels are tuned for
-# (measured here: rusticl on llvmpipe runs the test suite ~3x slower); others after it, in listing order.
+# (their inline loads, builtins and work-group shapes were measured on it); others after it, in listing order.
 CPU_PREFERENCE = ("portable computing language",)
 
 
