@@ -10,7 +10,9 @@ A range starts at any frame: its worker seeks to the keyframe before it and deco
 to half a frame). Segments are encoded without B-frames (x264/x265: `bf=0`), so that the joined stream's
 decoding order stays monotonic across segment boundaries. Containers: whatever PyAV writes and can
 remux (MKV, MP4, MOV, NUT); the codec must be one whose packets stand alone after a keyframe (all FFmpeg
-video encoders used here).
+video encoders used here). With the temporal stage (`temporal=`, a TemporalSpec) a worker starts its
+decoding `warmup` frames before its range and runs them through the filter and the stage unwritten
+(mlaa_stream/cluster/temporal.py).
 """
 from __future__ import annotations
 
@@ -53,9 +55,11 @@ def plan_segments(duration: float, fps: Fraction | None, output: str, seconds: f
 
 
 def encode_segment(source: str, segment: Segment, filter_kwargs: dict, codec: str | None, crf: int,
-                   encoder_preset: str, pix_fmt: str | None) -> int:
+                   encoder_preset: str, pix_fmt: str | None, temporal=None) -> int:
     """Run on a worker: decode the segment's frames, filter them, encode them into segment.path (video only,
-    timestamps from 0 at segment.start). Returns the frames written."""
+    timestamps from 0 at segment.start). Returns the frames written. `temporal` (a TemporalSpec): a new
+    stage runs over the `temporal.warmup` frames before the segment (decoded, filtered, not written)
+    and then over the segment's."""
     from mlaa_stream.cluster.frames import _worker_filter
     from mlaa_stream.io.video import VideoWriter, probe_video, read_video
     from mlaa_stream.pipeline import run_pipeline
@@ -65,14 +69,31 @@ def encode_segment(source: str, segment: Segment, filter_kwargs: dict, codec: st
     writer = VideoWriter(segment.path, info, codec=codec, crf=crf, preset=encoder_preset, pix_fmt=pix_fmt,
                          audio="none", overwrite=True, offset=segment.start, container_format="matroska",
                          extra_options={"bf": "0"})
+    half = 0.5 / float(info.fps or 25)
+    start = segment.start
+    stage = temporal.stage(filt.context) if temporal is not None else None
+    if temporal is not None:
+        start = max(0.0, segment.start - temporal.warmup / float(info.fps or 25))
+    written = [0]
+
+    def sink(item) -> None:
+        ft = item.meta
+        if ft.pts is not None and ft.time_base and float(ft.pts * ft.time_base) < segment.start - half:
+            return  # warm-up: through the temporal stage, not written
+        writer.write(item.frame, item.meta)
+        written[0] += 1
+
     try:
-        n = run_pipeline(read_video(info, start=segment.start or None, end=segment.end), filt,
-                         lambda item: writer.write(item.frame, item.meta))
+        run_pipeline(read_video(info, start=start if start > half else None, end=segment.end), filt, sink,
+                     temporal=stage)
         writer.commit()
     except BaseException:
         writer.abort()
         raise
-    return n
+    finally:
+        if stage is not None:
+            stage.close()
+    return written[0]
 
 
 def join_segments(segments: list[Segment], info, output: str, *, overwrite: bool, audio: bool = True) -> None:
@@ -141,9 +162,11 @@ def join_segments(segments: list[Segment], info, output: str, *, overwrite: bool
 def filter_video_on_cluster(client, source: str, output: str, *, preset: str | None = None,
                             codec: str | None = None, crf: int = 18, encoder_preset: str = "veryfast",
                             pix_fmt: str | None = None, overwrite: bool = False, audio: bool = True,
-                            segment_seconds: float = SEGMENT_SECONDS, on_frames=None,
+                            segment_seconds: float = SEGMENT_SECONDS, on_frames=None, temporal=None,
                             **filter_kwargs) -> int:
     """Filter the video `source` into `output` on the cluster behind `client`; returns the frames written.
+    `temporal`: a TemporalSpec (mlaa_stream.cluster.temporal) turns the temporal stage on, with a warm-up
+    per segment.
     Raises ClusterVideoError naming the segment that failed twice; nothing is left under the output's name
     or as a segment file on failure."""
     from dask.distributed import as_completed
@@ -158,7 +181,7 @@ def filter_video_on_cluster(client, source: str, output: str, *, preset: str | N
         raise ClusterVideoError(f"{source}: the container declares no duration: the video cannot be split")
     kwargs = dict(PRESETS.get(preset or "default", {}), **filter_kwargs)
     segments = plan_segments(info.duration, info.fps, output, segment_seconds)
-    futures = {client.submit(encode_segment, source, seg, kwargs, codec, crf, encoder_preset, pix_fmt,
+    futures = {client.submit(encode_segment, source, seg, kwargs, codec, crf, encoder_preset, pix_fmt, temporal,
                              retries=1, pure=False, key=f"mlaa-seg-{seg.index}-{os.getpid()}-{id(segments)}"): seg
                for seg in segments}
     frames, failure, counts = 0, None, {}
