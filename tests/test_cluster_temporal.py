@@ -58,14 +58,36 @@ def single_machine(seq, name: str, *args: str) -> list[np.ndarray]:
     return frames_of(out)
 
 
-def test_the_warm_up_matters_on_this_sequence(pan):
-    """Without a warm-up the chunks' first frames differ: the equality below checks the warm-up."""
+def paused(pan: np.ndarray) -> np.ndarray:
+    """The pan held on frame 12 for 3 more frames: they sit inside the K before the third chunk."""
+    return np.concatenate([pan[:13], np.repeat(pan[12:13], 3, 0), pan[13:N - 3]])
+
+
+def test_the_warm_up_matters_on_these_sequences(pan):
+    """Without a warm-up the chunks' first frames differ, and K frames are not enough where frames are
+    held (TSS does not push a repeated frame): the equalities below check the warm-up and its extension."""
     from mlaa_stream.bench.warmup import measure
     from mlaa_stream.spatial.filter import Filter
 
     with Filter(bgr=False) as filt:
         res = measure(TemporalSpec("tss", K), filt, pan, CHUNK, [0, K])
+        held = measure(TemporalSpec("tss", K), filt, paused(pan), CHUNK, [K, 2 * K])
     assert res[0][0] > 10 and res[K] == (0, 0.0)
+    assert held[K][0] > 10 and held[2 * K] == (0, 0.0)
+
+
+def test_held_frames_before_a_chunk_lengthen_its_warm_up(client, pan, tmp_path):
+    from mlaa_stream.cluster.frames import filter_on_cluster
+
+    (tmp_path / "in").mkdir()
+    for k, img in enumerate(paused(pan)):
+        write_image(str(tmp_path / "in" / f"p.{101 + k:04d}.png"), img)
+    ref = single_machine(tmp_path, "ref", "--temporal-frames", str(K))
+    report = filter_on_cluster(client, str(tmp_path / "in" / "p.%04d.png"), str(tmp_path / "c" / "c.%04d.png"),
+                               chunk_frames=CHUNK, temporal=TemporalSpec("tss", K))
+    assert len(report.written) == N and not report.warnings
+    got = frames_of(tmp_path / "c")
+    assert len(got) == N and all(np.array_equal(a, b) for a, b in zip(got, ref))
 
 
 def test_tss_chunks_equal_one_machine(client, seq, tmp_path):
@@ -110,7 +132,7 @@ def test_the_command_line_runs_temporal_on_the_cluster(seq, tmp_path):
 # -- video ----------------------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def pan_video(tmp_path_factory, pan) -> str:
-    """The pan as a lossless video (FFV1, RGB): what the workers decode is the PNGs' pixels."""
+    """The paused pan as a lossless video (FFV1, RGB): the third segment's warm-up must reach further back."""
     import av
     from fractions import Fraction
 
@@ -118,7 +140,7 @@ def pan_video(tmp_path_factory, pan) -> str:
     with av.open(path, "w") as out:
         vs = out.add_stream("ffv1", rate=24)
         vs.width, vs.height, vs.pix_fmt = pan.shape[2], pan.shape[1], "bgr0"
-        for i, img in enumerate(pan):
+        for i, img in enumerate(paused(pan)):
             f = av.VideoFrame.from_ndarray(img, format="rgb24")
             f.pts, f.time_base = i, Fraction(1, 24)
             for p in vs.encode(f):
@@ -147,3 +169,29 @@ def test_tss_video_segments_equal_one_machine(client, pan_video, tmp_path):
     assert len(a) == len(b) == N and all(np.array_equal(x, y) for x, y in zip(a, b))
     assert not np.array_equal(b[-1], decoded(pan_video)[-1])  # filtered
     assert sorted(os.listdir(tmp_path)) == ["cl.mkv", "ref.mkv"]
+
+
+def test_a_warm_up_that_cannot_reach_back_far_enough_says_so():
+    """WarmedStage without a device: held frames are not counted; short of `need` changes it asks for more
+    frames, or (at the limit) records how many were missing; from the stream's start nothing is missing."""
+    from mlaa_stream.cluster.temporal import ShortWarmup, WarmedStage
+
+    class Echo:
+        def __call__(self, frame_in, frame_out, index):
+            return frame_out
+
+        def close(self):
+            pass
+
+    rng = np.random.default_rng(18)
+    a, b = (rng.integers(1, 255, (6, 8, 3), dtype=np.uint8) for _ in range(2))
+    frames = [a, a, a, b]  # 3 warm-up frames, two of them held, then the chunk's first: one change of 3
+    for can_extend, from_start, expect in [(True, False, ShortWarmup), (False, False, 2), (False, True, 0)]:
+        st = WarmedStage(Echo(), 3, can_extend=can_extend, from_start=from_start)
+        try:
+            for i, f in enumerate(frames):
+                assert st(f, f, i, i < 3) is f
+        except ShortWarmup as exc:
+            assert expect is ShortWarmup and exc.missing == 2
+            continue
+        assert st.short == expect and st.changes == 1

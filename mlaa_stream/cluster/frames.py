@@ -37,7 +37,8 @@ class Chunk:
 
     index: int
     files: tuple[FrameFile, ...]
-    warmup: tuple[FrameFile, ...] = ()  # the frames before it, run through the temporal stage unwritten
+    warmup: tuple[FrameFile, ...] = ()  # frames before it, the last ones run through the temporal stage unwritten
+    starts_stream: bool = True  # `warmup` begins at the job's first frame
 
     @property
     def label(self) -> str:
@@ -60,7 +61,7 @@ def plan_chunks(files: list[FrameFile], chunk_frames: int = CHUNK_FRAMES, warmup
     """Consecutive chunks of `chunk_frames`, each with up to `warmup` frames before it."""
     if chunk_frames < 1:
         raise ValueError(f"chunk_frames: expected >= 1, got {chunk_frames}")
-    return [Chunk(k, tuple(files[i:i + chunk_frames]), tuple(files[max(0, i - warmup):i]))
+    return [Chunk(k, tuple(files[i:i + chunk_frames]), tuple(files[max(0, i - warmup):i]), i <= warmup)
             for k, i in enumerate(range(0, len(files), chunk_frames))]
 
 
@@ -95,38 +96,52 @@ def filter_chunk(chunk: Chunk, filter_kwargs: dict, overwrite: bool, strict: boo
             result.skipped.append(ff.dst)
         else:
             todo.append(ff)
-    report = Report()
     linear_kwargs = dict(filter_kwargs, linear_input=True)
     encoded = _worker_filter(filter_kwargs)
     filt = FilterSet(encoded, lambda: _worker_filter(linear_kwargs))
-    sink = image_sink(report, overwrite=True, strict=strict)
-    stage = hook = None
-    read = todo
-    if temporal is not None:
-        stage = temporal.stage(encoded.context)
-        read = list(chunk.warmup) + list(chunk.files)
-        hook, source, sink = _with_temporal(stage, read, report, strict, like, set(todo), sink)
-    else:
-        source = image_source(todo, report, strict=strict, like=like)
-    try:
-        run_pipeline(source, filt, sink, temporal=hook)
-    except PipelineError as exc:
-        ff = exc.meta[0] if exc.meta else (read[exc.index] if 0 <= exc.index < len(read) else None)
-        raise ClusterJobError(f"{chunk.label}: {ff.label if ff else f'frame {exc.index}'}: {exc.stage} failed: "
-                              f"{exc.cause}") from exc
-    finally:
-        if stage is not None:
-            stage.close()
-    if chunk.warmup and temporal is not None:  # an unreadable warm-up frame is its own chunk's failure
-        report.failed = [m for m in report.failed if not any(ff.src in m for ff in chunk.warmup)]
+    w = temporal.warmup if temporal is not None else 0
+    while True:
+        report = Report()
+        warmup = chunk.warmup[max(0, len(chunk.warmup) - w):] if w else ()
+        sink = image_sink(report, overwrite=True, strict=strict)
+        stage = hook = None
+        read = todo
+        if temporal is not None:
+            from mlaa_stream.cluster.temporal import WarmedStage
+            stage = WarmedStage(temporal.stage(encoded.context), temporal.warmup, can_extend=w < len(chunk.warmup),
+                                from_start=len(warmup) == len(chunk.warmup) and chunk.starts_stream)
+            read = list(warmup) + list(chunk.files)
+            hook, source, sink = _with_temporal(stage, read, set(warmup), report, strict, like, set(todo), sink)
+        else:
+            source = image_source(todo, report, strict=strict, like=like)
+        try:
+            run_pipeline(source, filt, sink, temporal=hook)
+            break
+        except PipelineError as exc:
+            from mlaa_stream.cluster.temporal import ShortWarmup
+            if isinstance(exc.cause, ShortWarmup):  # held frames before the chunk: read further back
+                w = min(len(chunk.warmup), w + max(exc.cause.missing, w))
+                continue
+            ff = exc.meta[0] if exc.meta else (read[exc.index] if 0 <= exc.index < len(read) else None)
+            raise ClusterJobError(f"{chunk.label}: {ff.label if ff else f'frame {exc.index}'}: {exc.stage} failed: "
+                                  f"{exc.cause}") from exc
+        finally:
+            if stage is not None:
+                stage.close()
+    if stage is not None and stage.short:
+        report.warn(f"{chunk.label}: the {len(warmup)} frames before it hold {stage.changes} changes (held "
+                    f"frames), {temporal.warmup} are needed: its first outputs may differ from one machine's")
+    if warmup:  # an unreadable warm-up frame is its own chunk's failure
+        report.failed = [m for m in report.failed if not any(ff.src in m for ff in warmup)]
     result.written, result.failed, result.warnings = report.written, report.failed, report.warnings
     return result
 
 
-def _with_temporal(stage, files: list[FrameFile], report: Report, strict: bool, like, write: set, sink):
-    """(temporal hook, source, sink) for a chunk read with its warm-up: the stage is called with the frame
-    number (a folder: the position read), as on one machine (cli/filter_cmd._SequenceTemporal), and only
-    the frames in `write` reach the sink."""
+def _with_temporal(stage, files: list[FrameFile], warm: set, report: Report, strict: bool, like, write: set,
+                   sink):
+    """(temporal hook, source, sink) for a chunk read with its warm-up (`warm`): the stage (a WarmedStage)
+    is called with the frame number (a folder: the position read), as on one machine
+    (cli/filter_cmd._SequenceTemporal), and only the frames in `write` reach the sink."""
     read_order: dict[int, FrameFile] = {}
 
     def source():
@@ -141,7 +156,7 @@ def _with_temporal(stage, files: list[FrameFile], report: Report, strict: bool, 
     def hook(frame_in, frame_out, index: int):
         ff = read_order.pop(index, None)
         number = index if ff is None or ff.number is None else ff.number
-        return stage(frame_in, frame_out, number)
+        return stage(frame_in, frame_out, number, ff in warm)
 
     def only_written(item) -> None:
         if item.meta[0] in write:
@@ -160,7 +175,8 @@ def run_chunks(client, files: list[FrameFile], filter_kwargs: dict, *, overwrite
 
     say = say or (lambda msg: None)
     report = Report(say=say)
-    chunks = plan_chunks(files, chunk_frames, temporal.warmup if temporal is not None else 0)
+    from mlaa_stream.cluster.temporal import MAX_WARMUP_FACTOR
+    chunks = plan_chunks(files, chunk_frames, MAX_WARMUP_FACTOR * temporal.warmup if temporal is not None else 0)
     like = None
     if strict and files:
         from mlaa_stream.io.images import read_image

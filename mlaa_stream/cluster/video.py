@@ -58,41 +58,76 @@ def encode_segment(source: str, segment: Segment, filter_kwargs: dict, codec: st
                    encoder_preset: str, pix_fmt: str | None, temporal=None) -> int:
     """Run on a worker: decode the segment's frames, filter them, encode them into segment.path (video only,
     timestamps from 0 at segment.start). Returns the frames written. `temporal` (a TemporalSpec): a new
-    stage runs over the `temporal.warmup` frames before the segment (decoded, filtered, not written)
-    and then over the segment's."""
+    stage runs over the `temporal.warmup` frames before the segment (decoded, filtered, not written; more
+    where frames are held: WarmedStage) and then over the segment's."""
     from mlaa_stream.cluster.frames import _worker_filter
-    from mlaa_stream.io.video import VideoWriter, probe_video, read_video
-    from mlaa_stream.pipeline import run_pipeline
+    from mlaa_stream.cluster.temporal import MAX_WARMUP_FACTOR, ShortWarmup, WarmedStage
+    from mlaa_stream.io.video import VideoWriter, probe_video
+    from mlaa_stream.pipeline import PipelineError
 
     info = probe_video(source)
     filt = _worker_filter(filter_kwargs)
-    writer = VideoWriter(segment.path, info, codec=codec, crf=crf, preset=encoder_preset, pix_fmt=pix_fmt,
-                         audio="none", overwrite=True, offset=segment.start, container_format="matroska",
-                         extra_options={"bf": "0"})
-    half = 0.5 / float(info.fps or 25)
-    start = segment.start
-    stage = temporal.stage(filt.context) if temporal is not None else None
-    if temporal is not None:
-        start = max(0.0, segment.start - temporal.warmup / float(info.fps or 25))
+    frame = 1.0 / float(info.fps or 25)
+    w = temporal.warmup if temporal is not None else 0
+    while True:
+        start = max(0.0, segment.start - w * frame)
+        stage = None
+        if temporal is not None:
+            stage = WarmedStage(temporal.stage(filt.context), temporal.warmup, from_start=start < frame / 2,
+                                can_extend=start >= frame / 2 and w < MAX_WARMUP_FACTOR * temporal.warmup)
+        writer = VideoWriter(segment.path, info, codec=codec, crf=crf, preset=encoder_preset, pix_fmt=pix_fmt,
+                             audio="none", overwrite=True, offset=segment.start, container_format="matroska",
+                             extra_options={"bf": "0"})
+        try:
+            n = _run_segment(info, segment, start if start >= frame / 2 else None, filt, writer, stage)
+            writer.commit()
+            return n
+        except PipelineError as exc:
+            writer.abort()
+            if isinstance(exc.cause, ShortWarmup):  # held frames before the segment: decode from further back
+                w += max(exc.cause.missing, w)
+                continue
+            raise
+        except BaseException:
+            writer.abort()
+            raise
+        finally:
+            if stage is not None:
+                stage.close()
+
+
+def _run_segment(info, segment: Segment, start: float | None, filt, writer, stage) -> int:
+    """Decode from `start`, filter, run the temporal stage (if any) and write the frames of `segment`
+    (those before it are its warm-up). Returns the frames written."""
+    from mlaa_stream.io.video import read_video
+    from mlaa_stream.pipeline import run_pipeline
+
+    first = segment.start - 0.5 / float(info.fps or 25)  # a frame belongs to the range by its timestamp
+    warm: dict[int, bool] = {}
     written = [0]
 
-    def sink(item) -> None:
+    def is_warm(item) -> bool:
         ft = item.meta
-        if ft.pts is not None and ft.time_base and float(ft.pts * ft.time_base) < segment.start - half:
-            return  # warm-up: through the temporal stage, not written
-        writer.write(item.frame, item.meta)
-        written[0] += 1
+        return ft.pts is not None and bool(ft.time_base) and float(ft.pts * ft.time_base) < first
 
-    try:
-        run_pipeline(read_video(info, start=start if start > half else None, end=segment.end), filt, sink,
-                     temporal=stage)
-        writer.commit()
-    except BaseException:
-        writer.abort()
-        raise
-    finally:
-        if stage is not None:
-            stage.close()
+    def source():
+        inner = read_video(info, start=start, end=segment.end)
+        try:
+            for position, item in enumerate(inner):
+                warm[position] = is_warm(item)
+                yield item
+        finally:
+            inner.close()
+
+    def hook(frame_in, frame_out, index: int):
+        return stage(frame_in, frame_out, index, warm.pop(index, False))
+
+    def sink(item) -> None:
+        if not is_warm(item):
+            writer.write(item.frame, item.meta)
+            written[0] += 1
+
+    run_pipeline(source(), filt, sink, temporal=hook if stage is not None else None)
     return written[0]
 
 
