@@ -244,10 +244,11 @@ def _job_for(kind: str, output: str) -> type:
               help="Draw antialiased polylines from a JSON/GeoJSON file on every frame.")
 @click.option("--cluster", default=None, metavar="ADDRESS",
               help="Run on a Dask cluster: a scheduler address (tcp://host:8786) or local:N (N worker "
-                   "processes here). Folders and frame patterns; each worker needs the package and an "
-                   "OpenCL device (docs/cluster.md).")
+                   "processes here). Videos, folders and frame patterns (with --temporal each chunk first "
+                   "runs the frames before it, unwritten); each worker needs the package and an OpenCL "
+                   "device (docs/cluster.md).")
 @click.option("--chunk-frames", type=click.IntRange(min=1), default=16, show_default=True,
-              help="Frames per cluster task.")
+              help="Frames per cluster task (with --temporal: several times the warm-up, e.g. 64).")
 @click.option("--progress", "progress_path", default=None, metavar="FILE|-",
               help="Also write machine-readable progress there (- is stdout): key=value lines (frame, "
                    "total_frames, fps, elapsed_s, left_s), each block ended by progress=continue|end.")
@@ -810,7 +811,7 @@ class _VideoJob(_Job):
                     encoder_preset=o["encoder_preset"], pix_fmt=o["pix_fmt"], overwrite=o["overwrite"],
                     audio=o["audio"] != "none", on_frames=progress.update,
                     segment_seconds=o["chunk_frames"] / float(self.info.fps or 25),
-                    temporal=o.get("temporal_spec"), **o["filter_kwargs"])
+                    temporal=o.get("temporal_spec"), warn=self.con.warn, **o["filter_kwargs"])
         except (ClusterVideoError, OSError) as exc:
             self.con.error(str(exc))
             self.con.error(f"{self.output}: not written")

@@ -131,16 +131,17 @@ def _run_segment(info, segment: Segment, start: float | None, filt, writer, stag
     return written[0]
 
 
-def join_segments(segments: list[Segment], info, output: str, *, overwrite: bool, audio: bool = True) -> None:
+def join_segments(segments: list[Segment], info, output: str, *, overwrite: bool, audio: bool = True) -> list[str]:
     """Concatenate the segments' video packets in order (shifted by each segment's start) into `output`,
-    with the source's audio and subtitle streams, tags and rotation; written under a temporary name."""
+    with the source's audio and subtitle streams (unless `audio` is False), tags, rotation, chapters and
+    attachments; written under a temporary name. Returns warnings naming what was not kept."""
     import av
 
-    from mlaa_stream.io.video import _copy_tags
+    from mlaa_stream.io.video import _copy_tags, copy_chapters_and_attachments
 
     tmp = temp_path_for(output)
     first = av.open(segments[0].path)
-    src = av.open(info.path) if audio else None
+    src = av.open(info.path)
     try:
         out = av.open(tmp, "w")
         vin = first.streams.video[0]
@@ -148,9 +149,10 @@ def join_segments(segments: list[Segment], info, output: str, *, overwrite: bool
         if info.rotation:
             vout.set_display_rotation(info.rotation)
         copies = {}
-        if src is not None:
-            _copy_tags(src.metadata, out.metadata)
-            _copy_tags(src.streams.video[0].metadata, vout.metadata)
+        _copy_tags(src.metadata, out.metadata)
+        _copy_tags(src.streams.video[0].metadata, vout.metadata)
+        _kept, warnings = copy_chapters_and_attachments(src, out)
+        if audio:
             for s in src.streams:
                 if s.type in ("audio", "subtitle"):
                     o = out.add_stream_from_template(s)
@@ -173,7 +175,7 @@ def join_segments(segments: list[Segment], info, output: str, *, overwrite: bool
                         yield float(pkt.dts * pkt.time_base), pkt
 
         def copied_packets():
-            if src is None or not copies:
+            if not copies:
                 return
             for pkt in src.demux(*[src.streams[i] for i in copies]):
                 if pkt.dts is None:
@@ -190,18 +192,18 @@ def join_segments(segments: list[Segment], info, output: str, *, overwrite: bool
         raise
     finally:
         first.close()
-        if src is not None:
-            src.close()
+        src.close()
+    return [f"{output}: {w}" for w in warnings]
 
 
 def filter_video_on_cluster(client, source: str, output: str, *, preset: str | None = None,
                             codec: str | None = None, crf: int = 18, encoder_preset: str = "veryfast",
                             pix_fmt: str | None = None, overwrite: bool = False, audio: bool = True,
                             segment_seconds: float = SEGMENT_SECONDS, on_frames=None, temporal=None,
-                            **filter_kwargs) -> int:
+                            warn=None, **filter_kwargs) -> int:
     """Filter the video `source` into `output` on the cluster behind `client`; returns the frames written.
     `temporal`: a TemporalSpec (mlaa_stream.cluster.temporal) turns the temporal stage on, with a warm-up
-    per segment.
+    per segment. `warn(message)`: what of the source was not kept (chapters, attachments).
     Raises ClusterVideoError naming the segment that failed twice; nothing is left under the output's name
     or as a segment file on failure."""
     from dask.distributed import as_completed
@@ -234,7 +236,9 @@ def filter_video_on_cluster(client, source: str, output: str, *, preset: str | N
         if failure is not None:
             raise failure
         # a last range past the last frame (the container's duration counts the audio too) holds nothing
-        join_segments([s for s in segments if counts.get(s.index)], info, output, overwrite=overwrite, audio=audio)
+        for w in join_segments([s for s in segments if counts.get(s.index)], info, output, overwrite=overwrite,
+                               audio=audio):
+            (warn or (lambda msg: None))(w)
     finally:
         for fut in futures:
             fut.cancel()
