@@ -77,7 +77,7 @@ def encode_segment(source: str, segment: Segment, filter_kwargs: dict, codec: st
                                 can_extend=start >= frame / 2 and w < MAX_WARMUP_FACTOR * temporal.warmup)
         writer = VideoWriter(segment.path, info, codec=codec, crf=crf, preset=encoder_preset, pix_fmt=pix_fmt,
                              audio="none", overwrite=True, offset=segment.start, container_format="matroska",
-                             extra_options={"bf": "0"})
+                             extra_options={"bf": "0"}, copy_extras=False)
         try:
             n = _run_segment(info, segment, start if start >= frame / 2 else None, filt, writer, stage)
             writer.commit()

@@ -416,10 +416,11 @@ class VideoWriter:
                  crf: int | None = DEFAULT_CRF, preset: str | None = DEFAULT_ENCODER_PRESET,
                  pix_fmt: str | None = None, copy_audio: bool = True, overwrite: bool = False,
                  audio: str | None = None, container_format: str | None = None, offset: float = 0.0,
-                 end: float | None = None, extra_options: dict[str, str] | None = None):
+                 end: float | None = None, extra_options: dict[str, str] | None = None,
+                 copy_extras: bool = True):
         """`codec` None: the source's family (codec_for). `audio`: "copy" (default, with the subtitle
         streams and every tag), "aac" (audio re-encoded, subtitles copied) or "none"; `copy_audio=False`
-        is "none"."""
+        is "none". `copy_extras`: the chapters and attachments too (False: a cluster's segment files)."""
         _require_av()
         container_format = container_format or container_format_for(None, path)
         if path == PIPE and not container_format:
@@ -458,6 +459,7 @@ class VideoWriter:
         self._lookahead = None
         self._closed = False
         self._decoders: dict = {}  # source audio stream index -> output stream, when re-encoding
+        self._copy_extras_too = copy_extras
         kinds = ("audio", "subtitle") if audio != "none" else ()
         try:
             self._open(tuple(k for k in kinds if (info.audio_streams if k == "audio" else info.subtitle_streams)))
@@ -533,8 +535,10 @@ class VideoWriter:
     def _copy_extras(self) -> set[str]:
         """The source's chapters and attachments (copy_chapters_and_attachments); returns the streams
         dealt with, as info.other_streams names them."""
+        if not self._copy_extras_too:
+            return set(self.info.other_streams)  # the caller copies them (the cluster's join)
         if self.info.path == PIPE:
-            return set()
+            return set()  # read once: nothing to copy them from
         try:
             with av.open(self.info.path) as src:
                 kept, warnings = copy_chapters_and_attachments(src, self._out, self.offset, self.audio_end)
