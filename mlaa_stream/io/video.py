@@ -256,7 +256,9 @@ def copy_chapters_and_attachments(src, out, offset: float = 0.0, end: float | No
     a warning, as VideoInfo.other_streams names them; warnings naming what was not kept)."""
     warnings: list[str] = []
     chapters = []
-    for ch in src.chapters():
+    if not hasattr(src, "chapters") or not hasattr(out, "set_chapters"):  # an older PyAV (18 has both)
+        warnings.append(f"chapters, if any, not kept: PyAV {av.__version__} cannot copy them")
+    for ch in src.chapters() if hasattr(src, "chapters") and hasattr(out, "set_chapters") else ():
         tb = Fraction(ch["time_base"])
         start, stop = ch["start"] * tb - Fraction(offset), ch["end"] * tb - Fraction(offset)
         if stop <= 0 or (end is not None and start >= end):
@@ -280,7 +282,7 @@ def copy_chapters_and_attachments(src, out, offset: float = 0.0, end: float | No
     for st in attachments:
         try:
             out.add_attachment(st.name, st.mimetype, bytes(st.data))
-        except Exception as exc:  # noqa: BLE001 - e.g. a PyAV without add_attachment
+        except Exception as exc:  # noqa: BLE001 - e.g. a PyAV without add_attachment (before 14)
             warnings.append(f"attachment {st.name} not kept ({exc})")
     return named, warnings
 
