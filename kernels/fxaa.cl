@@ -65,9 +65,9 @@ inline float3 blend_rgb(__global const PIXEL_T *img, __global const float *luts,
 #endif
 }
 
-// Bilinear colour at pixel-space position p, mixed in linear light when DECODE.
-inline float3 colour_at(__global const PIXEL_T *img, __global const float *luts, float2 p,
-                        int w, int h)
+// Bilinear colour at pixel-space position p in mix space (linear light when DECODE).
+inline float3 colour_at_mix(__global const PIXEL_T *img, __global const float *luts, float2 p,
+                            int w, int h)
 {
     float fx = p.x - 0.5f, fy = p.y - 0.5f;
     float x0f = floor(fx), y0f = floor(fy);
@@ -77,7 +77,12 @@ inline float3 colour_at(__global const PIXEL_T *img, __global const float *luts,
     float3 c01 = blend_rgb(img, luts, x0, y0 + 1, w, h), c11 = blend_rgb(img, luts, x0 + 1, y0 + 1, w, h);
     float3 top = c00 + (c10 - c00) * tx;
     float3 bot = c01 + (c11 - c01) * tx;
-    float3 c = top + (bot - top) * ty;
+    return top + (bot - top) * ty;
+}
+
+// Mix space -> stored (sRGB-encoded when DECODE).
+inline float3 fxaa_encode(__global const float *luts, float3 c)
+{
 #if DECODE
     __global const float *enc = luts + 2 * (LUT_SIZE + 1);
     c = (float3)(lut_read(enc, c.x), lut_read(enc, c.y), lut_read(enc, c.z));
@@ -85,14 +90,11 @@ inline float3 colour_at(__global const PIXEL_T *img, __global const float *luts,
     return c;
 }
 
-__kernel void fxaa(__global const PIXEL_T *src, __global const float *luts,
-                   __global PIXEL_T *dst, int w, int h)
+// FXAA 3.11 at pixel (x, y): 0 where the local-contrast early exit keeps the pixel, else 1 with *out its
+// new colour in mix space (linear light when DECODE).
+inline int fxaa_pixel(__global const PIXEL_T *src, __global const float *luts, int x, int y, int w, int h,
+                      float3 *out)
 {
-    int x = get_global_id(0), y = get_global_id(1);
-    if (x >= w || y >= h)
-        return;
-    int i = IDX(x, y, w);
-    float4 rgbyM = load_px(src, i);
     float lumaM = px_luma(src, x, y, w, h);
     float lumaS = px_luma(src, x, y + 1, w, h);
     float lumaE = px_luma(src, x + 1, y, w, h);
@@ -107,10 +109,8 @@ __kernel void fxaa(__global const PIXEL_T *src, __global const float *luts,
     float rangeMaxScaled = rangeMax * FXAA_EDGE_THRESHOLD;
     float range = rangeMax - rangeMin;
     float rangeMaxClamped = fmax(FXAA_EDGE_THRESHOLD_MIN, rangeMaxScaled);
-    if (range < rangeMaxClamped) {
-        store_px(dst, i, rgbyM);
-        return;
-    }
+    if (range < rangeMaxClamped)
+        return 0;
 
     float lumaNW = px_luma(src, x - 1, y - 1, w, h);
     float lumaSE = px_luma(src, x + 1, y + 1, w, h);
@@ -225,6 +225,20 @@ __kernel void fxaa(__global const PIXEL_T *src, __global const float *luts,
     else
         posM.y += pixelOffsetSubpix * lengthSign;
 
-    float3 c = colour_at(src, luts, posM, w, h);
-    store_px(dst, i, (float4)(c, rgbyM.w));
+    *out = colour_at_mix(src, luts, posM, w, h);
+    return 1;
+}
+
+__kernel void fxaa(__global const PIXEL_T *src, __global const float *luts,
+                   __global PIXEL_T *dst, int w, int h)
+{
+    int x = get_global_id(0), y = get_global_id(1);
+    if (x >= w || y >= h)
+        return;
+    int i = IDX(x, y, w);
+    float4 rgbyM = load_px(src, i);
+    float3 c;
+    if (fxaa_pixel(src, luts, x, y, w, h, &c))
+        rgbyM.xyz = fxaa_encode(luts, c);
+    store_px(dst, i, rgbyM);
 }
