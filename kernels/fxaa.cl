@@ -29,10 +29,13 @@
 
 __constant float fxaa_steps[FXAA_PS] = { FXAA_STEPS };
 
+// v clamped to [0, hi] (inline: PoCL calls the built-in clamp out of line).
+inline int clamp_to(int v, int hi) { return v < 0 ? 0 : (v > hi ? hi : v); }
+
 // Luma of pixel (x, y), clamped to the frame: Rec. 601 weights on the stored (gamma) values.
 inline float px_luma(__global const PIXEL_T *img, int x, int y, int w, int h)
 {
-    float4 c = load_px(img, IDX(clamp(x, 0, w - 1), clamp(y, 0, h - 1), w));
+    float4 c = load_px(img, IDX(clamp_to(x, w - 1), clamp_to(y, h - 1), w));
     float l = 0.299f * c.x + 0.587f * c.y + 0.114f * c.z;
 #if LINEAR_INPUT
     l = sqrt(fmax(l, 0.0f));
@@ -57,7 +60,7 @@ inline float luma_at(__global const PIXEL_T *img, float2 p, int w, int h)
 inline float3 blend_rgb(__global const PIXEL_T *img, __global const float *luts, int x, int y,
                         int w, int h)
 {
-    float4 c = load_px(img, IDX(clamp(x, 0, w - 1), clamp(y, 0, h - 1), w));
+    float4 c = load_px(img, IDX(clamp_to(x, w - 1), clamp_to(y, h - 1), w));
 #if DECODE
     return (float3)(srgb_to_linear(luts, c.x), srgb_to_linear(luts, c.y), srgb_to_linear(luts, c.z));
 #else
@@ -92,6 +95,17 @@ inline float3 fxaa_encode(__global const float *luts, float3 c)
 
 // FXAA 3.11 at pixel (x, y): 0 where the local-contrast early exit keeps the pixel, else 1 with *out its
 // new colour in mix space (linear light when DECODE).
+// FXAA's local-contrast early exit at (x, y): 1 where the pixel keeps its colour (fxaa_pixel returns 0).
+inline int fxaa_keeps(__global const PIXEL_T *src, int x, int y, int w, int h)
+{
+    const float lumaM = px_luma(src, x, y, w, h), lumaS = px_luma(src, x, y + 1, w, h);
+    const float lumaE = px_luma(src, x + 1, y, w, h), lumaN = px_luma(src, x, y - 1, w, h);
+    const float lumaW = px_luma(src, x - 1, y, w, h);
+    const float rangeMax = fmax(fmax(lumaN, lumaW), fmax(lumaE, fmax(lumaS, lumaM)));
+    const float rangeMin = fmin(fmin(lumaN, lumaW), fmin(lumaE, fmin(lumaS, lumaM)));
+    return rangeMax - rangeMin < fmax(FXAA_EDGE_THRESHOLD_MIN, rangeMax * FXAA_EDGE_THRESHOLD);
+}
+
 inline int fxaa_pixel(__global const PIXEL_T *src, __global const float *luts, int x, int y, int w, int h,
                       float3 *out)
 {
