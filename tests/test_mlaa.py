@@ -3,6 +3,8 @@
 Tolerances: edge masks agree exactly except where ΔE lies within 0.1 of the threshold (the kernel
 reads colour tables with linear interpolation, the reference uses the exact formulas); distances
 exactly; weights within 1e-4 (16-bit storage); 8-bit output within 1 level, >= 99% of pixels exact.
+The whole-filter comparisons run without the FXAA fallback (Filter(fallback="off")): mlaa_reference is
+the MLAA passes; tests/test_fallback.py checks the fallback on top of them.
 """
 from __future__ import annotations
 
@@ -181,7 +183,7 @@ def test_filter_matches_reference(dtype, channels, bgr):
     img = blocky(11, dtype=dtype, channels=channels)
     if channels == 1:
         img = img[..., 0]
-    with Filter(bgr=bgr) as f:
+    with Filter(bgr=bgr, fallback="off") as f:
         got = f.process(img)
     want = mlaa_reference(img, bgr=bgr)
     assert got.shape == img.shape and got.dtype == img.dtype
@@ -367,7 +369,7 @@ def test_linear_integer_frames_match_reference(dtype):
     """Integer frames in linear light (16-bit linear TIFF): CIELAB from the per-level table, which encodes
     each level first (common.cl linear_levels), must give the reference's edges and output."""
     img = blocky(17, dtype=dtype)
-    with Filter(linear_input=True) as f:
+    with Filter(linear_input=True, fallback="off") as f:
         got = f.process(img)
     want = mlaa_reference(img, linear_input=True)
     d = np.abs(got.astype(np.int64) - want.astype(np.int64))
@@ -446,7 +448,7 @@ def test_grain_guard_matches_reference(dtype, channels):
     img = grainy(21, dtype, channels)
     if channels == 1:
         img = img[..., 0]
-    with Filter(bridge=False) as f:
+    with Filter(bridge=False, fallback="off") as f:
         got = f.process(img)
     want = mlaa_reference(img)
     scale = {np.uint8: 1.0, np.uint16: 1 / 257.0, np.float32: 255.0}[dtype]
