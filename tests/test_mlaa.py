@@ -500,6 +500,58 @@ def test_a_2px_step_of_a_filled_shape_is_still_blended():
     assert want[:12, 5:7].any() and (got["out"] != img).any()
 
 
+# ---- 1-px strokes (kernels/weights.cl STEM_MIN_L, STEM_K) -----------------------------------------------
+
+def _stem(transpose: bool = False, bump: bool = False) -> np.ndarray:
+    """A 1-px stem 12 px tall at column 9, rows 4..15 (small text's 'l'); with `bump`, the same column sits on
+    a filled block below instead (a 1-px plateau of a shape: the bump of a curve, not a stroke)."""
+    img = np.full((24, 20, 3), 240, np.uint8)
+    img[4:16, 9] = 30
+    if bump:
+        img[4:16, 9] = 240
+        img[8, 4:16] = 30      # the plateau: 12 px wide, 1 px high
+        img[9:20, 1:19] = 30   # the block under it
+    return np.ascontiguousarray(img.transpose(1, 0, 2)) if transpose else img
+
+
+@pytest.mark.parametrize("transpose", [False, True])
+def test_long_1px_stem_is_not_tapered_as_a_bump(transpose, monkeypatch):
+    """Known answer: each side of a 1-px stem of length L = 12 is a U shape whose 1-px crossings are the stem's
+    ends; the stem pixel at distances (d0, d1) from them takes STEM_K * (A(d0, L) + A(d1, L)) of its neighbour
+    (seed 000 eq. 2), the neighbour nothing. Without the rule (STEM_MIN_L huge) the full areas."""
+    import mlaa_stream.spatial.filter as mlaa_module
+    img = _stem(transpose)
+    with Filter(bridge=False, subpixel=0.0) as f:
+        got = f.intermediates(img)
+    want = weights_reference(*_edges_and_distances(img), frame=img)
+    _assert_weights_match(got, want)
+    k = mlaa_module.STEM_K
+    area = np.array([trapezoid_area(d, 12) + trapezoid_area(11 - d, 12) for d in range(12)])
+    w = want if not transpose else want.transpose(1, 0, 2)[..., [2, 3, 0, 1]]
+    np.testing.assert_allclose(w[4:16, 9, 2], k * area, atol=1e-12)   # the stem takes from its left ...
+    np.testing.assert_allclose(w[4:16, 9, 3], k * area, atol=1e-12)   # ... and right neighbour
+    assert not w[4:16, 8, 3].any() and not w[4:16, 10, 2].any()       # they take nothing from it
+    monkeypatch.setattr(mlaa_module, "STEM_MIN_L", 10 ** 6)
+    w = weights_reference(*_edges_and_distances(img), frame=img)
+    w = w if not transpose else w.transpose(1, 0, 2)[..., [2, 3, 0, 1]]
+    np.testing.assert_allclose(w[4:16, 9, 2], area, atol=1e-12)
+    with Filter(bridge=False, subpixel=0.0) as f:
+        _assert_weights_match(f.intermediates(img), w if not transpose else w.transpose(1, 0, 2)[..., [2, 3, 0, 1]])
+
+
+@pytest.mark.parametrize("transpose", [False, True])
+def test_1px_bump_of_a_filled_shape_is_still_blended_in_full(transpose):
+    """The same U shape on a plateau whose far side is the shape itself (no edge there): a curve's bump."""
+    img = _stem(transpose, bump=True)
+    with Filter(bridge=False, subpixel=0.0) as f:
+        got = f.intermediates(img)
+    want = weights_reference(*_edges_and_distances(img), frame=img)
+    _assert_weights_match(got, want)
+    w = want if not transpose else want.transpose(1, 0, 2)[..., [2, 3, 0, 1]]
+    area = np.array([trapezoid_area(d, 12) + trapezoid_area(11 - d, 12) for d in range(12)])
+    np.testing.assert_allclose(w[8, 4:16, 0], area, atol=1e-12)   # the plateau takes from above, unscaled
+
+
 def _assert_weights_match(got: dict, want: np.ndarray) -> None:
     """The kernel's weights equal the reference's in the slots it writes (next to an edge)."""
     b, rt = (got["edges"] & 1) > 0, (got["edges"] & 2) > 0
