@@ -616,3 +616,32 @@ def test_subpixel_dot_moves_towards_its_surroundings(value):
     np.testing.assert_array_equal(out[:, 15:20], plain[:, 15:20])
     np.testing.assert_array_equal(out[:, :7], plain[:, :7])
     assert (out[5, 4] == 250).all()
+
+
+@pytest.mark.parametrize("value", [20, 235])
+def test_subpixel_move_is_shared_by_the_neighbours_across_its_edges(value):
+    """Known answer (blend.cl SUBPIXEL_SHARE): the ink a lone dot loses (or gains) goes to the four neighbours
+    across its edges, a quarter each, in linear light -- a thin feature keeps its weight instead of fading.
+    With b the dot's colour after the line blends (subpixel=0), the dot moves by delta = SUBPIXEL (box - b);
+    each neighbour moves by -SUBPIXEL_SHARE delta / 4 from where the line blends left it, so the five moves
+    sum to 0 up to rounding; kernel and reference agree exactly."""
+    from mlaa_stream.device.colour import linear_to_srgb, srgb_to_linear
+    from mlaa_stream.spatial.filter import SUBPIXEL, SUBPIXEL_SHARE
+    img = np.full((12, 16, 3), 120, np.uint8)
+    img[5, 7] = value
+    with Filter(bridge=False) as f:
+        out = f.process(img)
+    with Filter(bridge=False, subpixel=0.0) as f:
+        plain = f.process(img)
+    np.testing.assert_array_equal(out, mlaa_reference(img))
+    lin = lambda v: srgb_to_linear(np.asarray(v, np.float64) / 255.0)
+    b = lin(plain[5, 7, 0])
+    delta = SUBPIXEL * ((lin(value) + 8 * lin(120)) / 9 - b)
+    assert abs(int(out[5, 7, 0]) - linear_to_srgb(b + delta) * 255) <= 1
+    sides = ((4, 7), (6, 7), (5, 6), (5, 8))
+    for y, x in sides:
+        want = linear_to_srgb(lin(plain[y, x, 0]) - SUBPIXEL_SHARE * delta / 4) * 255
+        assert abs(int(out[y, x, 0]) - want) <= 1, (y, x, out[y, x, 0], want)
+    moves = [lin(out[y, x, 0]) - lin(plain[y, x, 0]) for y, x in [(5, 7), *sides]]
+    assert abs(sum(moves)) < abs(delta) * 0.05 + 5 * 0.5 / 255   # ink kept, up to rounding
+    assert out[4, 6, 0] == plain[4, 6, 0] and out[6, 8, 0] == plain[6, 8, 0]  # diagonals share no edge

@@ -8,7 +8,7 @@ import numpy as np
 
 from mlaa_stream.device.colour import LUMA, linear_to_srgb, rgb_to_lab, srgb_to_linear
 from mlaa_stream.spatial.filter import (AA_LO, AA_NEAR, AA_OFF, DEFAULT_THRESHOLDS, SHORT_CORNER, SUBPIXEL,
-                                        SUBPIXEL_BG, SUBPIXEL_END, ramp_fraction, trapezoid_area)
+                                        SUBPIXEL_BG, SUBPIXEL_END, SUBPIXEL_SHARE, ramp_fraction, trapezoid_area)
 
 BOTTOM, RIGHT = 1, 2
 BOTH = 2  # an end crossed on both sides
@@ -295,7 +295,8 @@ def blend_reference(frame: np.ndarray, weights: np.ndarray, linear: bool = True,
     pixel bordered by edges on three or four sides, lighter (or darker) than every neighbour across them,
     which spread by at most SUBPIXEL_BG times its contrast to them (a sub-pixel feature on one background),
     then moves `subpixel` (four sides; three: `subpixel` * SUBPIXEL_END / SUBPIXEL) of the way to the mean
-    of its 3x3 window (clamped); pixels in grain (grain_mask) keep their colour."""
+    of its 3x3 window (clamped), and each neighbour across those edges moves by -SUBPIXEL_SHARE / sides of
+    that; pixels in grain (grain_mask) keep their colour."""
     rgb, alpha = normalised_rgb(frame, False)  # channel order does not matter for mixing
     decode = linear and not linear_input
     m = srgb_to_linear(rgb) if decode else rgb
@@ -328,9 +329,19 @@ def blend_reference(frame: np.ndarray, weights: np.ndarray, linear: bool = True,
         with np.errstate(invalid="ignore"):
             contrast = np.where(higher, ymin - y, y - ymax)
             background = ~(ymax - ymin > SUBPIXEL_BG * contrast)
-        dot = ((sides >= 3) & ~(lower & higher) & background)[..., None]
+        dot = (sides >= 3) & ~(lower & higher) & background
         amount = np.where(sides >= 4, subpixel, subpixel * SUBPIXEL_END / SUBPIXEL)[..., None]
-        out = np.where(dot, out + amount * (box - out), out)
+        delta = np.where(dot[..., None], amount * (box - out), 0.0)
+        # ... and the neighbours across its edges take SUBPIXEL_SHARE of that move, negated, split among them
+        # (a feature in grain does not move, so it gives nothing)
+        moved = dot & ~grain_mask(frame) if grain_guard else dot
+        give = np.where(moved[..., None], -SUBPIXEL_SHARE * delta / np.maximum(sides, 1)[..., None], 0.0)
+        share = np.zeros_like(out)
+        share[1:] += np.where(b[:-1, :, None], give[:-1], 0.0)     # the feature above, across its bottom edge
+        share[:-1] += np.where(b[:-1, :, None], give[1:], 0.0)     # the feature below, across this pixel's bottom
+        share[:, 1:] += np.where(r[:, :-1, None], give[:, :-1], 0.0)  # the feature to the left
+        share[:, :-1] += np.where(r[:, :-1, None], give[:, 1:], 0.0)  # the feature to the right
+        out = out + delta + share
     out = linear_to_srgb(out) if decode else out
     res = _to_dtype(out, alpha, frame)
     if grain_guard:
