@@ -107,8 +107,10 @@ def no_op(frame: np.ndarray) -> np.ndarray:
 
 
 # Every preset but `fast`, which trades these guarantees for speed by design (no guards, lines up to 31 px:
-# docs/fast.md; its own tests are tests/test_fast.py).
-MLAA_METHODS = [m for m in B.METHODS if (m == "mlaa" or m.startswith("mlaa:")) and m != "mlaa:fast"]
+# docs/fast.md; its own tests are tests/test_fast.py), and `rendered`, which trades them for 1-spp renders
+# (FXAA on every pixel MLAA leaves: tests/test_fallback.py).
+MLAA_METHODS = [m for m in B.METHODS
+                if (m == "mlaa" or m.startswith("mlaa:")) and m not in ("mlaa:fast", "mlaa:rendered")]
 
 
 @pytest.fixture(scope="module", params=MLAA_METHODS)

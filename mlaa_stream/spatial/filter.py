@@ -69,7 +69,9 @@ EDGE_ROWS = 4  # rows per work item in detect_edges (kernels/edges.cl): each row
 # Named quality presets -> Filter keyword arguments (the CLI's --preset).
 PRESETS: dict[str, dict] = {
     "default": {},                        # corners kept sharp, CIELAB edges, linear-light blending, wires bridged
-    "soft": {"rounding": 0.25},           # corners rounded by seed 002's factor r: smoother text and wires
+    # corners rounded by seed 002's factor r: smoother text and wires; without the FXAA fallback, whose evidence
+    # gate counts on MLAA leaving photographs alone (rounded corners blend inside them: photo damage 1.0 -> 2.1)
+    "soft": {"rounding": 0.25, "fallback": "off"},
     "luma": {"metric": "luma"},           # luma edges (SMAA/FXAA-like), for comparison
     "reconstruct": {"reconstruct": True},  # + topological reconstruction of thin features (seed 000 §4)
     "no_bridge": {"bridge": False},        # without bridging the dash chains of sub-pixel wires (on by default)
