@@ -56,48 +56,74 @@ inline int idiff(int3 a, int3 b)
 }
 
 #if CHANNELS == 3 && SAMPLE_BYTES == 1
-#define FAST_QUIET (FAST_LIMIT / 256)
-// Do the 24 bytes from a and from b differ by at most FAST_QUIET each?
-inline int quiet24(__global const uchar *a, __global const uchar *b)
+#define FAST_VECTOR 1
+#ifdef POCL_DEVICE_ADDRESS_BITS
+#define STORE_UCHAR16(v, p) (*(__global uchar16_a1 *)(p) = (v))
+#else
+#define STORE_UCHAR16(v, p) vstore16(v, 0, p)
+#endif
+// The weighted differences of 8 RGB pixels at a and at b (24 bytes each), lane k for pixel k: the bytes'
+// absolute differences, regrouped by channel, weighted in 16 bits (at most 256 * 255 = 65280).
+inline short8 edge8(uchar16 a0, uchar8 a1, __global const uchar *b)
 {
-    const uchar16 a0 = LOAD_UCHAR16(a), b0 = LOAD_UCHAR16(b);
-    const uchar8 a1 = LOAD_UCHAR8(a + 16), b1 = LOAD_UCHAR8(b + 16);
+    const uchar16 b0 = LOAD_UCHAR16(b);
+    const uchar8 b1 = LOAD_UCHAR8(b + 16);
     const uchar16 d0 = a0 > b0 ? a0 - b0 : b0 - a0;
     const uchar8 d1 = a1 > b1 ? a1 - b1 : b1 - a1;
-    const char16 m0 = d0 > (uchar16)(FAST_QUIET);
-    const char8 m1 = d1 > (uchar8)(FAST_QUIET);
-    const ulong2 w0 = as_ulong2(m0);
-    return ((w0.x | w0.y | as_ulong(m1)) == 0);
+    const ushort8 c0 = convert_ushort8((uchar8)(d0.s0, d0.s3, d0.s6, d0.s9, d0.sc, d0.sf, d1.s2, d1.s5));
+    const ushort8 c1 = convert_ushort8((uchar8)(d0.s1, d0.s4, d0.s7, d0.sa, d0.sd, d1.s0, d1.s3, d1.s6));
+    const ushort8 c2 = convert_ushort8((uchar8)(d0.s2, d0.s5, d0.s8, d0.sb, d0.se, d1.s1, d1.s4, d1.s7));
+#if ORDER_BGR
+    const ushort8 s = (ushort8)(W_B) * c0 + (ushort8)(W_G) * c1 + (ushort8)(W_R) * c2;
+#else
+    const ushort8 s = (ushort8)(W_R) * c0 + (ushort8)(W_G) * c1 + (ushort8)(W_B) * c2;
+#endif
+    return s > (ushort8)(FAST_LIMIT);   // -1 where an edge
 }
 #endif
 #endif
 
-__kernel void fast_edges(__global const PIXEL_T *src, __global uchar *edges, const int width, const int height)
+// Pass 1, and the copy of the frame into dst (pass 3 then writes only the pixels it changes): the source
+// row is read here anyway, so the copy costs a store instead of a separate full-frame copy.
+__kernel void fast_edges(__global const PIXEL_T *src, __global uchar *edges, __global PIXEL_T *dst,
+                         const int width, const int height)
 {
-#ifndef PIXEL_IS_FLOAT
     const int x0 = get_global_id(0) * SEGMENT, y = get_global_id(1);
     if (x0 >= width || y >= height) return;
     const int x1 = x0 + SEGMENT < width ? x0 + SEGMENT : width;
     const int row = y * width;
-    int3 left = x0 > 0 ? raw3(src, row + x0 - 1) : (int3)(0);
-    int3 c = raw3(src, row + x0);
-    for (int x = x0; x < x1; ++x) {
-        const int i = row + x;
-#if CHANNELS == 3 && SAMPLE_BYTES == 1
-        // 8 pixels away from the frame's border whose bytes all differ by at most FAST_QUIET levels from the
-        // same byte of the pixel above, below, left and right can hold no edge (the weights sum to 256): one
-        // compare of 24-byte rows instead of 32 weighted differences. Most of a rendered frame is such.
-        if ((x - x0) % 8 == 0 && x > 0 && x + 8 < width && y > 0 && y + 1 < height) {
-            __global const uchar *p = (__global const uchar *)src + (size_t)i * 3;
-            if (quiet24(p, p - 3 * width) && quiet24(p, p + 3 * width) && quiet24(p, p + 3) && quiet24(p, p - 3)) {
-                for (int t = 0; t < 8; ++t) edges[i + t] = 0;
-                x += 7;
-                left = raw3(src, i + 7);
-                c = raw3(src, i + 8);
-                continue;
-            }
+    int x = x0;
+#ifdef FAST_VECTOR
+    // 8 pixels at a time while pixel x + 8 (the right neighbour of the group's last) is in the row: three
+    // weighted differences of 8 lanes (right, up, down); the left edges are the right ones shifted by a
+    // pixel. Integer sums: the same bits as the scalar path below.
+    if (x + 8 < width) {
+        __global const uchar *s8 = (__global const uchar *)src;
+        __global uchar *d8 = (__global uchar *)dst;
+        const size_t stride = 3 * (size_t)width;
+        uchar prev = x > 0 && idiff(raw3(src, row + x - 1), raw3(src, row + x)) > FAST_LIMIT;   // left of x
+        for (; x < x1 && x + 8 < width; x += 8) {
+            const size_t o = 3 * (size_t)(row + x);
+            const uchar16 c0 = LOAD_UCHAR16(s8 + o);
+            const uchar8 c1 = LOAD_UCHAR8(s8 + o + 16);
+            STORE_UCHAR16(c0, d8 + o);
+            STORE_UCHAR8(c1, d8 + o + 16);
+            const uchar8 r = convert_uchar8(-edge8(c0, c1, s8 + o + 3));
+            const uchar8 t = y > 0 ? convert_uchar8(-edge8(c0, c1, s8 + o - stride)) : (uchar8)(0);
+            const uchar8 b = y + 1 < height ? convert_uchar8(-edge8(c0, c1, s8 + o + stride)) : (uchar8)(0);
+            const uchar8 l = (uchar8)(prev, r.s0, r.s1, r.s2, r.s3, r.s4, r.s5, r.s6);
+            prev = r.s7;
+            STORE_UCHAR8(t * (uchar8)(E_TOP) | r * (uchar8)(E_RIGHT) | b * (uchar8)(E_BOTTOM) | l * (uchar8)(E_LEFT),
+                         edges + row + x);
         }
+    }
 #endif
+#ifndef PIXEL_IS_FLOAT
+    int3 left = x > 0 ? raw3(src, row + x - 1) : (int3)(0);
+    int3 c = x < x1 ? raw3(src, row + x) : (int3)(0);
+    for (; x < x1; ++x) {
+        const int i = row + x;
+        for (int k = 0; k < CHANNELS; ++k) dst[(size_t)i * CHANNELS + k] = src[(size_t)i * CHANNELS + k];
         const int3 right = x + 1 < width ? raw3(src, i + 1) : c;
         uchar e = 0;
         if (y > 0 && idiff(c, raw3(src, i - width)) > FAST_LIMIT) e |= E_TOP;
@@ -109,14 +135,11 @@ __kernel void fast_edges(__global const PIXEL_T *src, __global uchar *edges, con
         c = right;
     }
 #else
-    const int x0 = get_global_id(0) * SEGMENT, y = get_global_id(1);
-    if (x0 >= width || y >= height) return;
-    const int x1 = x0 + SEGMENT < width ? x0 + SEGMENT : width;
-    const int row = y * width;
     float4 left = x0 > 0 ? load_px(src, row + x0 - 1) : (float4)(0.0f);
     float4 c = load_px(src, row + x0);
-    for (int x = x0; x < x1; ++x) {
+    for (; x < x1; ++x) {
         const int i = row + x;
+        for (int k = 0; k < CHANNELS; ++k) dst[(size_t)i * CHANNELS + k] = src[(size_t)i * CHANNELS + k];
         const float4 right = x + 1 < width ? load_px(src, i + 1) : c;
         uchar e = 0;
         if (y > 0 && weighted_diff(c, load_px(src, i - width)) > FAST_THRESHOLD) e |= E_TOP;
@@ -303,7 +326,7 @@ __kernel void fast_blend(__global const PIXEL_T *src, __global const uchar *edge
             continue;
         }
         const uchar e = edges[i];
-        if (!e) continue;   // dst holds a copy of src (the host enqueues it)
+        if (!e) continue;   // dst holds a copy of src (fast_edges writes it)
         float wt = 0.0f, wb = 0.0f, wl = 0.0f, wr = 0.0f, ta, tb;
         if (e & E_BOTTOM) { const uchar2 s = hshapes[i]; line_areas(s.x, s.y, &ta, &tb); wb = ta; }
         if (e & E_TOP) { const uchar2 s = hshapes[i - width]; line_areas(s.x, s.y, &ta, &tb); wt = tb; }

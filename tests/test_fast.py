@@ -55,6 +55,28 @@ def test_edges_and_shapes_match_the_reference_exactly(seed):
     assert np.array_equal(vs[right], ref_s[..., 2:][right])
 
 
+def passes_of(f: Filter, frame: np.ndarray) -> np.ndarray:
+    """The edge buffer the kernel left for `frame`."""
+    f.process(frame)
+    e = np.empty(frame.shape[:2], np.uint8)
+    cl.enqueue_copy(f.queue, e, f._fast.edges, is_blocking=True)
+    return e
+
+
+@pytest.mark.parametrize("bgr", [False, True])
+def test_edges_near_the_threshold_match_the_reference_across_segments(bgr):
+    """8-bit RGB takes the 8-pixel vector path: differences straddling the limit (15 levels on one channel,
+    mixes of channels), widths that are no multiple of 8 and rows of several work items (SEGMENT 64)."""
+    rng = np.random.default_rng(11)
+    for h, w in ((21, 150), (9, 129), (5, 9)):
+        frame = (np.full((h, w, 3), 100) + rng.integers(0, 40, (h, w, 3)) * (rng.random((h, w, 1)) < 0.5)
+                 ).astype(np.uint8)
+        e = passes_of(Filter(fast=True, bgr=bgr), np.ascontiguousarray(frame[..., ::-1]) if bgr else frame)
+        ref = F.fast_edges_reference(frame)
+        assert 0.1 < (ref > 0).mean() < 0.9
+        assert np.array_equal(e, ref)
+
+
 @pytest.mark.parametrize("dtype,channels", [(np.uint8, 3), (np.uint8, 4), (np.uint16, 3), (np.float32, 3),
                                             (np.uint8, 1)])
 def test_output_matches_the_reference(dtype, channels):

@@ -203,8 +203,8 @@ def fast_reference(frame: np.ndarray, threshold: float = FAST_THRESHOLD, max_len
 
 
 class FastPasses:
-    """The three kernels of kernels/fast.cl and their buffers for one frame format, enqueued after a
-    copy of src into dst (pixels next to no edge keep their value)."""
+    """The three kernels of kernels/fast.cl and their buffers for one frame format. The edge pass also
+    copies src into dst, and the blend writes only the pixels it changes."""
 
     def __init__(self, context, fmt, base_defines: dict[str, object], luts, threshold: float = FAST_THRESHOLD,
                  max_len: int = FAST_MAX_LEN):
@@ -223,18 +223,15 @@ class FastPasses:
         return self.edges.size + self.hshapes.size + self.vshapes.size
 
     def enqueue(self, queue, src, dst, luts, wait_for: list, segment: int, events: dict | None = None):
-        import pyopencl as cl
-
         ev = {} if events is None else events
         w, h = self.fmt.width, self.fmt.height
         W, H = np.int32(w), np.int32(h)
         g2 = (-(-w // segment), h)
-        ev["fast_edges"] = self._k_edges(queue, g2, None, src, self.edges, W, H, wait_for=wait_for)
+        ev["fast_edges"] = self._k_edges(queue, g2, None, src, self.edges, dst, W, H, wait_for=wait_for)
         ev["fast_hshapes"] = self._k_hshapes(queue, (h,), None, self.edges, self.hshapes, W, H,
                                              wait_for=[ev["fast_edges"]])
         ev["fast_vshapes"] = self._k_vshapes(queue, (g2[0],), None, self.edges, self.vshapes, W, H,
                                              wait_for=[ev["fast_edges"]])
-        ev["copy"] = cl.enqueue_copy(queue, dst, src, byte_count=self.fmt.nbytes, wait_for=wait_for)
         ev["fast_blend"] = self._k_blend(queue, g2, None, src, self.edges, self.hshapes, self.vshapes, luts, self._lin,
-                                         dst, W, H, wait_for=[ev["fast_hshapes"], ev["fast_vshapes"], ev["copy"]])
+                                         dst, W, H, wait_for=[ev["fast_hshapes"], ev["fast_vshapes"]])
         return ev["fast_blend"]
