@@ -271,28 +271,6 @@ inline float trapezoid(int p, int len)
     return 0.0f;
 }
 
-// The areas (this side, the other side) a line with shapes `s0` (towards its start) and `s1` (its end) gives
-// the pixel at distance d0 from its start, for the side A pixel (`*ta`) and side B pixel (`*tb`).
-inline void line_areas(uchar s0, uchar s1, float *ta, float *tb)
-{
-    const int d0 = s0 & 31, d1 = s1 & 31;
-    int a0 = (s0 >> 5) & 3, a1 = (s1 >> 5) & 3;
-    a0 = a0 == 3 ? 0 : a0;   // crossed on both sides: a thin line across, no direction
-    a1 = a1 == 3 ? 0 : a1;
-    *ta = 0.0f;
-    *tb = 0.0f;
-    if ((a0 == 0 && a1 == 0) || a0 == a1) return;   // no crossing, or a U shape
-    const int len = d0 + d1 + 1;
-    if (a0 && !(s0 & 128)) {
-        const float t = trapezoid(d0, len);
-        if (a0 == L_SIDE_A) *ta += t; else *tb += t;
-    }
-    if (a1 && !(s1 & 128)) {
-        const float t = trapezoid(d1, len);
-        if (a1 == L_SIDE_A) *ta += t; else *tb += t;
-    }
-}
-
 // Pixel i in the mixing space: linear light (DECODE) or as stored. Integer frames decode each level with one
 // load from `lin` (common.cl's linear_levels: the same numbers as lut_read gives).
 inline float4 fast_to_mix(__global const PIXEL_T *src, __global const float *luts, __global const float *lin, int i)
@@ -312,6 +290,18 @@ inline float4 fast_to_mix(__global const PIXEL_T *src, __global const float *lut
 #endif
 }
 
+// The area a line with shapes `s0` (towards its start) and `s1` (its end) gives the pixel on `side`
+// (L_SIDE_A or L_SIDE_B): the rule of line_areas in spatial/fast.py for one side, with the integer tests first (most edge pixels
+// lie on lines that give their side nothing: no crossing, a U shape, a corner).
+inline float side_area(uchar s0, uchar s1, int side)
+{
+    const int a0 = (s0 >> 5) & 3, a1 = (s1 >> 5) & 3;
+    const int e0 = a0 == side && a1 != side && !(s0 & 128), e1 = a1 == side && a0 != side && !(s1 & 128);
+    if (!(e0 | e1)) return 0.0f;
+    const int d0 = s0 & 31, d1 = s1 & 31, len = d0 + d1 + 1;
+    return (e0 ? trapezoid(d0, len) : 0.0f) + (e1 ? trapezoid(d1, len) : 0.0f);
+}
+
 __kernel void fast_blend(__global const PIXEL_T *src, __global const uchar *edges, __global const uchar2 *hshapes,
                          __global const uchar2 *vshapes, __global const float *luts, __global const float *lin,
                          __global PIXEL_T *dst, const int width, const int height)
@@ -319,34 +309,35 @@ __kernel void fast_blend(__global const PIXEL_T *src, __global const uchar *edge
     const int x0 = get_global_id(0) * SEGMENT, y = get_global_id(1);
     if (x0 >= width || y >= height) return;
     const int x1 = x0 + SEGMENT < width ? x0 + SEGMENT : width;
-    for (int x = x0; x < x1; ++x) {
-        const int i = y * width + x;
-        if ((x - x0) % 8 == 0 && x + 8 <= x1 && edge_group(edges + i) == 0) {   // 8 pixels next to no edge
-            x += 7;
-            continue;
+    for (int g = x0; g < x1; g += 8) {   // 8 pixels at a time: their edge bytes as one word
+        ulong m = 0;
+        if (g + 8 <= width) m = edge_group(edges + y * width + g);
+        else for (int k = 0; g + k < width; ++k) m |= (ulong)edges[y * width + g + k] << (8 * k);
+        for (int x = g; m; ++x, m >>= 8) {   // pixels up to the group's last with an edge
+            const uchar e = (uchar)m;
+            if (!e) continue;   // dst holds a copy of src (fast_edges writes it)
+            const int i = y * width + x;
+            float wt = 0.0f, wb = 0.0f, wl = 0.0f, wr = 0.0f;
+            if (e & E_BOTTOM) { const uchar2 s = hshapes[i]; wb = side_area(s.x, s.y, L_SIDE_A); }
+            if (e & E_TOP) { const uchar2 s = hshapes[i - width]; wt = side_area(s.x, s.y, L_SIDE_B); }
+            if (e & E_RIGHT) { const uchar2 s = vshapes[i]; wr = side_area(s.x, s.y, L_SIDE_A); }
+            if (e & E_LEFT) { const uchar2 s = vshapes[i - 1]; wl = side_area(s.x, s.y, L_SIDE_B); }
+            const float sum = wt + wb + wl + wr;
+            if (sum <= 0.0f) continue;
+            // each neighbour mixed in by its area; together never more than the largest area (blend.cl's rule)
+            const float4 c = fast_to_mix(src, luts, lin, i);
+            float4 acc = (float4)(0.0f);
+            if (wt > 0.0f) acc += wt * wt * (fast_to_mix(src, luts, lin, i - width) - c);
+            if (wb > 0.0f) acc += wb * wb * (fast_to_mix(src, luts, lin, i + width) - c);
+            if (wl > 0.0f) acc += wl * wl * (fast_to_mix(src, luts, lin, i - 1) - c);
+            if (wr > 0.0f) acc += wr * wr * (fast_to_mix(src, luts, lin, i + 1) - c);
+            float4 out = c + acc / sum;
+            out.w = c.w;
+    #if DECODE
+            __global const float *enc = luts + 2 * (LUT_SIZE + 1);
+            out = (float4)(lut_read(enc, out.x), lut_read(enc, out.y), lut_read(enc, out.z), out.w);
+    #endif
+            store_px(dst, i, out);
         }
-        const uchar e = edges[i];
-        if (!e) continue;   // dst holds a copy of src (fast_edges writes it)
-        float wt = 0.0f, wb = 0.0f, wl = 0.0f, wr = 0.0f, ta, tb;
-        if (e & E_BOTTOM) { const uchar2 s = hshapes[i]; line_areas(s.x, s.y, &ta, &tb); wb = ta; }
-        if (e & E_TOP) { const uchar2 s = hshapes[i - width]; line_areas(s.x, s.y, &ta, &tb); wt = tb; }
-        if (e & E_RIGHT) { const uchar2 s = vshapes[i]; line_areas(s.x, s.y, &ta, &tb); wr = ta; }
-        if (e & E_LEFT) { const uchar2 s = vshapes[i - 1]; line_areas(s.x, s.y, &ta, &tb); wl = tb; }
-        const float sum = wt + wb + wl + wr;
-        if (sum <= 0.0f) continue;
-        // each neighbour mixed in by its area; together never more than the largest area (blend.cl's rule)
-        const float4 c = fast_to_mix(src, luts, lin, i);
-        float4 acc = (float4)(0.0f);
-        if (wt > 0.0f) acc += wt * wt * (fast_to_mix(src, luts, lin, i - width) - c);
-        if (wb > 0.0f) acc += wb * wb * (fast_to_mix(src, luts, lin, i + width) - c);
-        if (wl > 0.0f) acc += wl * wl * (fast_to_mix(src, luts, lin, i - 1) - c);
-        if (wr > 0.0f) acc += wr * wr * (fast_to_mix(src, luts, lin, i + 1) - c);
-        float4 out = c + acc / sum;
-        out.w = c.w;
-#if DECODE
-        __global const float *enc = luts + 2 * (LUT_SIZE + 1);
-        out = (float4)(lut_read(enc, out.x), lut_read(enc, out.y), lut_read(enc, out.z), out.w);
-#endif
-        store_px(dst, i, out);
     }
 }

@@ -156,3 +156,32 @@ def test_the_preset_by_name_everywhere():
     with Antialiaser(preset="fast") as aa:
         bgr = np.ascontiguousarray(frame[..., ::-1])
         assert np.array_equal(aa(bgr)[..., ::-1], Filter(fast=True).process(frame))
+
+
+@pytest.mark.parametrize("dtype,channels", [(np.uint8, 3), (np.uint8, 4), (np.uint16, 3), (np.uint8, 1),
+                                            (np.float32, 3)])
+def test_the_zero_copy_filter_gives_the_filters_output(dtype, channels):
+    """FastFilter (kernels on the caller's array and a new one, on PoCL's CPU driver; float frames through
+    Filter.submit) against Filter(fast=True); also non-contiguous and read-only frames."""
+    from mlaa_stream.spatial.fast_filter import FastFilter
+    frame = random_blocks(5, 45, 77, dtype=dtype)
+    frame = np.ascontiguousarray(frame[..., 1]) if channels == 1 else \
+        np.dstack([frame, frame[..., :1]]) if channels == 4 else frame
+    expected = Filter(fast=True).process(frame)
+    with FastFilter() as f:
+        assert np.array_equal(f.process(frame), expected)
+        assert np.array_equal(f.process(np.asfortranarray(frame)), expected)
+        ro = frame.copy()
+        ro.flags.writeable = False
+        assert np.array_equal(f.process(ro), expected)
+
+
+def test_the_zero_copy_filter_keeps_frames_in_flight_apart():
+    from mlaa_stream.spatial.fast_filter import FastFilter
+    frames = [random_blocks(s, 40, 70) for s in range(4)] + [staircase(24, 90, 3)]
+    expected = [Filter(fast=True).process(fr) for fr in frames]
+    with FastFilter() as f:
+        pending = [f.submit(fr) for fr in frames]  # all enqueued before any result is read
+        assert all(np.array_equal(p.result(), e) for p, e in zip(pending, expected))
+        assert f.direct == ("Portable Computing Language" in f.context.device.platform.name
+                            and bool(f.context.device.type & cl.device_type.CPU))
