@@ -160,7 +160,7 @@ __kernel void fast_edges(__global const PIXEL_T *src, __global uchar *edges, __g
 // other side, 3 = both, 0 none), bit 7 a long crossing (3+ pixels: a real corner, kept sharp as seed 002
 // does). A line's end more than FAST_MAX_LEN - 1 pixels away is not known: distance FAST_MAX_LEN - 1, no
 // crossing (the seed's bounded edge length). Each line is walked once, by a sweep along it: one work item
-// per row for the bottom edges, one per strip of SEGMENT columns for the right edges.
+// per row for the bottom edges, one per strip of 64 columns for the right edges.
 #define L_SIDE_A 1
 #define L_SIDE_B 2
 #define L_UNKNOWN (FAST_MAX_LEN - 1)
@@ -222,41 +222,62 @@ __kernel void fast_hshapes(__global const uchar *edges, __global uchar2 *hshapes
     }
 }
 
-// Does the right-edge line of column x go on from y to y + 1?
-inline int v_continues(__global const uchar *edges, int x, int y, int width, int height)
+// Bit b of each of 8 edge bytes (a word as edge_group loads it), as bits 0-7 of a byte.
+inline uint gather8(ulong g, int b) { return (uint)((((g >> b) & 0x0101010101010101UL) * 0x0102040810204080UL) >> 56); }
+
+// Bit c of the result: edge bit b (1: E_RIGHT, 2: E_BOTTOM) of pixel x0 + c of row y, for n <= 64 columns.
+inline ulong strip_bits(__global const uchar *edges, int x0, int n, int y, int width, int b)
 {
-    return y + 1 < height && (edges[(y + 1) * width + x] & E_RIGHT) &&
-           !edge_bit(edges, x, y, width, height, E_BOTTOM) && !edge_bit(edges, x + 1, y, width, height, E_BOTTOM);
+    __global const uchar *p = edges + y * width + x0;
+    ulong m = 0;
+    if (n == 64) {
+        for (int g = 0; g < 8; ++g) m |= (ulong)gather8(edge_group(p + 8 * g), b) << (8 * g);
+    } else {
+        for (int c = 0; c < n; ++c) m |= (ulong)((p[c] >> b) & 1) << c;
+    }
+    return m;
 }
+
+#ifdef POCL_DEVICE_ADDRESS_BITS
+#define LOWEST_BIT(m) __builtin_ctzl(m)
+#else
+#define LOWEST_BIT(m) (63 - (int)clz((m) & (~(m) + 1)))
+#endif
 
 __kernel void fast_vshapes(__global const uchar *edges, __global uchar2 *vshapes, const int width, const int height)
 {
-    const int x0 = get_global_id(0) * SEGMENT;
+    // One strip of up to 64 columns, row by row, each row's right and bottom edges as 64-bit masks: a column
+    // costs something only where its run of right edges starts or ends. Global size ceil(width / 64).
+    const int x0 = get_global_id(0) * 64;
     if (x0 >= width) return;
-    const int x1 = x0 + SEGMENT < width ? x0 + SEGMENT : width;
-    int start[SEGMENT];   // per column of the strip: the first row of the run in progress, -1 for none
-    for (int c = 0; c < SEGMENT; ++c) start[c] = -1;
-    int open = 0;   // runs in progress
-    for (int y = 0; y < height; ++y) {   // row by row: the strip's bytes of a row are contiguous
-        if (!open && x1 - x0 == SEGMENT) {   // a row of the strip without right edges: nothing to do
-            ulong any = 0;
-            for (int g = 0; g < SEGMENT; g += 8) any |= edge_group(edges + y * width + x0 + g);
-            if (!(any & 0x0202020202020202UL)) continue;
+    const int n = x0 + 64 < width ? 64 : width - x0;
+    int start[64];   // per column of the strip: the first row of the run in progress (where `open` has it)
+    ulong open = 0;
+    ulong right = strip_bits(edges, x0, n, 0, width, 1);
+    for (int y = 0; y < height; ++y) {
+        const ulong next = y + 1 < height ? strip_bits(edges, x0, n, y + 1, width, 1) : 0;
+        if (!(right | open)) { right = next; continue; }
+        ulong fresh = right & ~open;
+        while (fresh) {
+            const int c = LOWEST_BIT(fresh);
+            start[c] = y;
+            fresh &= fresh - 1;
         }
-        for (int x = x0; x < x1; ++x) {
-            const int c = x - x0;
-            if (start[c] < 0) {
-                if (!(edges[y * width + x] & E_RIGHT)) continue;
-                start[c] = y;
-                ++open;
-            }
-            if (v_continues(edges, x, y, width, height)) continue;
-            const int ys = start[c];   // the run ys .. y ends here
+        open |= right;
+        // a run goes on to the next row where that has a right edge and no bottom edge is under this pixel or
+        // its right neighbour (no crossing line between)
+        const ulong bottom = strip_bits(edges, x0, n, y, width, 2);
+        const ulong beyond = x0 + n < width ? (ulong)((edges[y * width + x0 + n] >> 2) & 1) << (n - 1) : 0;
+        const ulong cont = next & ~bottom & ~((bottom >> 1) | beyond);
+        ulong ends = open & ~cont;
+        open &= cont;
+        while (ends) {   // the runs start[c] .. y end here
+            const int c = LOWEST_BIT(ends), x = x0 + c, ys = start[c];
             const uchar c0 = v_crossing(edges, x, ys - 1, width, height), c1 = v_crossing(edges, x, y, width, height);
             for (int t = ys; t <= y; ++t) vshapes[t * width + x] = (uchar2)(shape_byte(t - ys, c0), shape_byte(y - t, c1));
-            start[c] = -1;
-            --open;
+            ends &= ends - 1;
         }
+        right = next;
     }
 }
 

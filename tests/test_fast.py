@@ -43,9 +43,10 @@ def passes(frame: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return e, hs, vs
 
 
-@pytest.mark.parametrize("seed", range(4))
-def test_edges_and_shapes_match_the_reference_exactly(seed):
-    frame = random_blocks(seed)
+@pytest.mark.parametrize("seed,size", [(0, (37, 53)), (1, (37, 53)), (2, (70, 150)), (3, (70, 150))])
+def test_edges_and_shapes_match_the_reference_exactly(seed, size):
+    """(70, 150): lines across the vertical sweep's 64-column strips and a part strip."""
+    frame = random_blocks(seed, *size)
     e, hs, vs = passes(frame)
     ref_e = F.fast_edges_reference(frame)
     assert np.array_equal(e, ref_e)

@@ -230,7 +230,7 @@ class FastPasses:
         ev["fast_edges"] = self._k_edges(queue, g2, None, src, self.edges, dst, W, H, wait_for=wait_for)
         ev["fast_hshapes"] = self._k_hshapes(queue, (h,), None, self.edges, self.hshapes, W, H,
                                              wait_for=[ev["fast_edges"]])
-        ev["fast_vshapes"] = self._k_vshapes(queue, (g2[0],), None, self.edges, self.vshapes, W, H,
+        ev["fast_vshapes"] = self._k_vshapes(queue, (-(-w // 64),), None, self.edges, self.vshapes, W, H,
                                              wait_for=[ev["fast_edges"]])
         ev["fast_blend"] = self._k_blend(queue, g2, None, src, self.edges, self.hshapes, self.vshapes, luts, self._lin,
                                          dst, W, H, wait_for=[ev["fast_hshapes"], ev["fast_vshapes"]])
