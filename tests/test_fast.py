@@ -56,6 +56,20 @@ def test_edges_and_shapes_match_the_reference_exactly(seed, size):
     assert np.array_equal(vs[right], ref_s[..., 2:][right])
 
 
+def test_a_vertical_line_on_a_strip_border_ends_at_a_crossing_in_the_next_strip():
+    """Right edges of column 63 (the last of the first 64-column strip), cut by a bottom edge under column 64
+    only: the run ends there, as in the reference."""
+    frame = np.full((30, 100, 3), 40, np.uint8)
+    frame[:, 64:] = (200, 200, 200)
+    frame[15:, 64:] = (120, 30, 200)
+    e, _, vs = passes(frame)
+    ref_e = F.fast_edges_reference(frame)
+    ref_s = F.fast_lshapes_reference(ref_e)
+    assert ref_s[14, 63, 3] & 31 == 0 and ref_s[15, 63, 2] & 31 == 0  # the line splits between rows 14 and 15
+    right = (ref_e & F.E_RIGHT) > 0
+    assert np.array_equal(e, ref_e) and np.array_equal(vs[right], ref_s[..., 2:][right])
+
+
 def passes_of(f: Filter, frame: np.ndarray) -> np.ndarray:
     """The edge buffer the kernel left for `frame`."""
     f.process(frame)
