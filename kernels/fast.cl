@@ -57,6 +57,7 @@ inline int idiff(int3 a, int3 b)
 
 #if CHANNELS == 3 && SAMPLE_BYTES == 1
 #define FAST_VECTOR 1
+#define FAST_QUIET (FAST_LIMIT / 256)
 #ifdef POCL_DEVICE_ADDRESS_BITS
 #define STORE_UCHAR16(v, p) (*(__global uchar16_a1 *)(p) = (v))
 #else
@@ -70,6 +71,9 @@ inline short8 edge8(uchar16 a0, uchar8 a1, __global const uchar *b)
     const uchar8 b1 = LOAD_UCHAR8(b + 16);
     const uchar16 d0 = a0 > b0 ? a0 - b0 : b0 - a0;
     const uchar8 d1 = a1 > b1 ? a1 - b1 : b1 - a1;
+    // no byte differs by more than FAST_QUIET levels: no edge (the weights sum to 256); most of a frame
+    const ulong2 q0 = as_ulong2(d0 > (uchar16)(FAST_QUIET));
+    if (!(q0.x | q0.y | as_ulong(d1 > (uchar8)(FAST_QUIET)))) return (short8)(0);
     const ushort8 c0 = convert_ushort8((uchar8)(d0.s0, d0.s3, d0.s6, d0.s9, d0.sc, d0.sf, d1.s2, d1.s5));
     const ushort8 c1 = convert_ushort8((uchar8)(d0.s1, d0.s4, d0.s7, d0.sa, d0.sd, d1.s0, d1.s3, d1.s6));
     const ushort8 c2 = convert_ushort8((uchar8)(d0.s2, d0.s5, d0.s8, d0.sb, d0.se, d1.s1, d1.s4, d1.s7));
@@ -284,14 +288,8 @@ __kernel void fast_vshapes(__global const uchar *edges, __global uchar2 *vshapes
 // Pass 3 (seed 004 "edge reconstruction"): each edge of the pixel rebuilt from its two L shapes (the line's
 // ends and crossings) as seed 000's silhouette: from half a pixel at an end with a crossing to nothing at the
 // line's middle; where it covers this pixel, the colour across the edge is mixed in (seed 000 eq. 2's
-// trapezoid areas). U shapes (both ends turn the same way: a bump, or a box side) are left as they are.
-inline float trapezoid(int p, int len)
-{
-    if (2 * p + 2 <= len) return 0.5f * (1.0f - (float)(2 * p + 1) / (float)len);
-    if (2 * p + 1 == len) return 1.0f / (8.0f * (float)len);
-    return 0.0f;
-}
-
+// trapezoid areas, tabled on the host: spatial/fast.py trapezoid). U shapes (both ends turn the same way: a bump,
+// or a box side) are left as they are.
 // Pixel i in the mixing space: linear light (DECODE) or as stored. Integer frames decode each level with one
 // load from `lin` (common.cl's linear_levels: the same numbers as lut_read gives).
 inline float4 fast_to_mix(__global const PIXEL_T *src, __global const float *luts, __global const float *lin, int i)
@@ -311,21 +309,22 @@ inline float4 fast_to_mix(__global const PIXEL_T *src, __global const float *lut
 #endif
 }
 
-// The area a line with shapes `s0` (towards its start) and `s1` (its end) gives the pixel on `side`
-// (L_SIDE_A or L_SIDE_B): the rule of line_areas in spatial/fast.py for one side, with the integer tests first (most edge pixels
-// lie on lines that give their side nothing: no crossing, a U shape, a corner).
-inline float side_area(uchar s0, uchar s1, int side)
+// The area a line with shapes s.x (towards its start) and s.y (its end) gives the pixel on `side` (L_SIDE_A or
+// L_SIDE_B): the rule of line_areas in spatial/fast.py for one side (an end counts where its crossing is on
+// this side alone, the other end's is not, and it is no corner), its trapezoids read from `trap`
+// (trapezoid(p, len) at len * 32 + p: spatial/fast.py trapezoid_table) without branches.
+inline float side_area(__global const float *trap, uchar2 s, int side)
 {
-    const int a0 = (s0 >> 5) & 3, a1 = (s1 >> 5) & 3;
-    const int e0 = a0 == side && a1 != side && !(s0 & 128), e1 = a1 == side && a0 != side && !(s1 & 128);
-    if (!(e0 | e1)) return 0.0f;
-    const int d0 = s0 & 31, d1 = s1 & 31, len = d0 + d1 + 1;
-    return (e0 ? trapezoid(d0, len) : 0.0f) + (e1 ? trapezoid(d1, len) : 0.0f);
+    const int a0 = (s.x >> 5) & 3, a1 = (s.y >> 5) & 3;
+    const int e0 = a0 == side && a1 != side && !(s.x & 128), e1 = a1 == side && a0 != side && !(s.y & 128);
+    const int d0 = s.x & 31, d1 = s.y & 31, row = (d0 + d1 + 1) * 32;
+    const float t0 = trap[row + d0], t1 = trap[row + d1];
+    return (e0 ? t0 : 0.0f) + (e1 ? t1 : 0.0f);
 }
 
 __kernel void fast_blend(__global const PIXEL_T *src, __global const uchar *edges, __global const uchar2 *hshapes,
                          __global const uchar2 *vshapes, __global const float *luts, __global const float *lin,
-                         __global PIXEL_T *dst, const int width, const int height)
+                         __global const float *trap, __global PIXEL_T *dst, const int width, const int height)
 {
     const int x0 = get_global_id(0) * SEGMENT, y = get_global_id(1);
     if (x0 >= width || y >= height) return;
@@ -334,15 +333,17 @@ __kernel void fast_blend(__global const PIXEL_T *src, __global const uchar *edge
         ulong m = 0;
         if (g + 8 <= width) m = edge_group(edges + y * width + g);
         else for (int k = 0; g + k < width; ++k) m |= (ulong)edges[y * width + g + k] << (8 * k);
-        for (int x = g; m; ++x, m >>= 8) {   // pixels up to the group's last with an edge
-            const uchar e = (uchar)m;
-            if (!e) continue;   // dst holds a copy of src (fast_edges writes it)
+        ulong any = m | (m >> 4);
+        any |= any >> 2;
+        any |= any >> 1;   // bit 0 of each byte: the byte is not 0
+        for (uint nz = gather8(any, 0); nz; nz &= nz - 1) {   // the group's pixels with an edge
+            const int k = LOWEST_BIT(nz), x = g + k;
+            const uchar e = (uchar)(m >> (8 * k));
             const int i = y * width + x;
-            float wt = 0.0f, wb = 0.0f, wl = 0.0f, wr = 0.0f;
-            if (e & E_BOTTOM) { const uchar2 s = hshapes[i]; wb = side_area(s.x, s.y, L_SIDE_A); }
-            if (e & E_TOP) { const uchar2 s = hshapes[i - width]; wt = side_area(s.x, s.y, L_SIDE_B); }
-            if (e & E_RIGHT) { const uchar2 s = vshapes[i]; wr = side_area(s.x, s.y, L_SIDE_A); }
-            if (e & E_LEFT) { const uchar2 s = vshapes[i - 1]; wl = side_area(s.x, s.y, L_SIDE_B); }
+            const float wb = (e & E_BOTTOM) ? side_area(trap, hshapes[i], L_SIDE_A) : 0.0f;
+            const float wt = (e & E_TOP) ? side_area(trap, hshapes[y > 0 ? i - width : i], L_SIDE_B) : 0.0f;
+            const float wr = (e & E_RIGHT) ? side_area(trap, vshapes[i], L_SIDE_A) : 0.0f;
+            const float wl = (e & E_LEFT) ? side_area(trap, vshapes[x > 0 ? i - 1 : i], L_SIDE_B) : 0.0f;
             const float sum = wt + wb + wl + wr;
             if (sum <= 0.0f) continue;
             // each neighbour mixed in by its area; together never more than the largest area (blend.cl's rule)
@@ -354,10 +355,10 @@ __kernel void fast_blend(__global const PIXEL_T *src, __global const uchar *edge
             if (wr > 0.0f) acc += wr * wr * (fast_to_mix(src, luts, lin, i + 1) - c);
             float4 out = c + acc / sum;
             out.w = c.w;
-    #if DECODE
+#if DECODE
             __global const float *enc = luts + 2 * (LUT_SIZE + 1);
             out = (float4)(lut_read(enc, out.x), lut_read(enc, out.y), lut_read(enc, out.z), out.w);
-    #endif
+#endif
             store_px(dst, i, out);
         }
     }

@@ -12,6 +12,7 @@ longer than FAST_MAX_LEN pixels left as they are.
 from __future__ import annotations
 
 import numpy as np
+import pyopencl as cl
 
 from mlaa_stream.device.colour import linear_to_srgb, srgb_to_linear
 from mlaa_stream.device.context import linear_levels
@@ -125,12 +126,18 @@ def fast_lshapes_reference(edges: np.ndarray, max_len: int = FAST_MAX_LEN) -> np
 
 
 def trapezoid(p: int, length: int) -> float:
-    """Seed 000 eq. (2), as kernels/fast.cl computes it (float32)."""
+    """Seed 000 eq. (2) in float32 (kernels/fast.cl reads it from trapezoid_table)."""
     if 2 * p + 2 <= length:
         return float(np.float32(0.5) * (np.float32(1) - np.float32(2 * p + 1) / np.float32(length)))
     if 2 * p + 1 == length:
         return float(np.float32(1) / (np.float32(8) * np.float32(length)))
     return 0.0
+
+
+def trapezoid_table() -> np.ndarray:
+    """(64 * 32,) float32: trapezoid(p, length) at [length * 32 + p], every p < 32 and length < 64 a pair of
+    shape bytes can give (kernels/fast.cl reads the areas from it)."""
+    return np.array([[trapezoid(p, n) if n else 0.0 for p in range(32)] for n in range(64)], np.float32).ravel()
 
 
 def line_areas(s0: int, s1: int) -> tuple[float, float]:
@@ -218,6 +225,8 @@ class FastPasses:
         self._k_vshapes = context.kernel("fast", "fast_vshapes", defs)
         self._k_blend = context.kernel("fast", "fast_blend", defs)
         self._lin = linear_levels(context, "fast", defs, fmt, luts)  # integer frames: one load per level
+        self._trap = cl.Buffer(context.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
+                               hostbuf=trapezoid_table())
 
     def device_bytes(self) -> int:
         return self.edges.size + self.hshapes.size + self.vshapes.size
@@ -233,5 +242,5 @@ class FastPasses:
         ev["fast_vshapes"] = self._k_vshapes(queue, (-(-w // 64),), None, self.edges, self.vshapes, W, H,
                                              wait_for=[ev["fast_edges"]])
         ev["fast_blend"] = self._k_blend(queue, g2, None, src, self.edges, self.hshapes, self.vshapes, luts, self._lin,
-                                         dst, W, H, wait_for=[ev["fast_hshapes"], ev["fast_vshapes"]])
+                                         self._trap, dst, W, H, wait_for=[ev["fast_hshapes"], ev["fast_vshapes"]])
         return ev["fast_blend"]
