@@ -1,7 +1,8 @@
 // fast.cl -- the three-pass MLAA of seed 004 (Kluczek, "Antialiasing in 1 millisecond"): edges, L shapes,
 // reconstruction + blend, each a full-frame pass, with a bounded edge length (FAST_MAX_LEN). The preset
 // `fast` (mlaa_stream/spatial/fast.py, whose numpy reference mirrors this file rule for rule).
-// Work: one work item per SEGMENT pixels of a row in every pass (common.cl's SEGMENT).
+// Work: one work item per SEGMENT pixels of FAST_ROWS rows (edges), of a row (blend), a row (bottom-edge
+// shapes), a strip of 64 columns (right-edge shapes).
 // Defines: FAST_THRESHOLD (weighted RGB difference, fraction of full scale), FAST_MAX_LEN (<= 31),
 //          BLEND_LINEAR / LINEAR_INPUT as blend.cl.
 
@@ -10,6 +11,9 @@
 #endif
 #ifndef FAST_MAX_LEN
 #define FAST_MAX_LEN 31
+#endif
+#ifndef FAST_ROWS
+#define FAST_ROWS 8
 #endif
 
 // Pass 1 edge bits (seed 004 "edge buffer"): every edge is kept in both pixels that share it, so the later
@@ -92,69 +96,78 @@ inline short8 edge8(uchar16 a0, uchar8 a1, __global const uchar *b)
 __kernel void fast_edges(__global const PIXEL_T *src, __global uchar *edges, __global PIXEL_T *dst,
                          const int width, const int height)
 {
-    const int x0 = get_global_id(0) * SEGMENT, y = get_global_id(1);
-    if (x0 >= width || y >= height) return;
-    const int x1 = x0 + SEGMENT < width ? x0 + SEGMENT : width;
-    const int row = y * width;
-    int x = x0;
+    // FAST_ROWS rows of SEGMENT pixels per work item: global size (ceil(width / SEGMENT), ceil(height / FAST_ROWS))
+    const int x0 = get_global_id(0) * SEGMENT, y0 = get_global_id(1) * FAST_ROWS;
+    if (x0 >= width || y0 >= height) return;
+    const int x1 = x0 + SEGMENT < width ? x0 + SEGMENT : width, y1 = y0 + FAST_ROWS < height ? y0 + FAST_ROWS : height;
 #ifdef FAST_VECTOR
-    // 8 pixels at a time while pixel x + 8 (the right neighbour of the group's last) is in the row: three
-    // weighted differences of 8 lanes (right, up, down); the left edges are the right ones shifted by a
-    // pixel. Integer sums: the same bits as the scalar path below.
-    if (x + 8 < width) {
-        __global const uchar *s8 = (__global const uchar *)src;
-        __global uchar *d8 = (__global uchar *)dst;
-        const size_t stride = 3 * (size_t)width;
-        uchar prev = x > 0 && idiff(raw3(src, row + x - 1), raw3(src, row + x)) > FAST_LIMIT;   // left of x
-        for (; x < x1 && x + 8 < width; x += 8) {
-            const size_t o = 3 * (size_t)(row + x);
-            const uchar16 c0 = LOAD_UCHAR16(s8 + o);
-            const uchar8 c1 = LOAD_UCHAR8(s8 + o + 16);
-            STORE_UCHAR16(c0, d8 + o);
-            STORE_UCHAR8(c1, d8 + o + 16);
-            const uchar8 r = convert_uchar8(-edge8(c0, c1, s8 + o + 3));
-            const uchar8 t = y > 0 ? convert_uchar8(-edge8(c0, c1, s8 + o - stride)) : (uchar8)(0);
-            const uchar8 b = y + 1 < height ? convert_uchar8(-edge8(c0, c1, s8 + o + stride)) : (uchar8)(0);
-            const uchar8 l = (uchar8)(prev, r.s0, r.s1, r.s2, r.s3, r.s4, r.s5, r.s6);
-            prev = r.s7;
-            STORE_UCHAR8(t * (uchar8)(E_TOP) | r * (uchar8)(E_RIGHT) | b * (uchar8)(E_BOTTOM) | l * (uchar8)(E_LEFT),
-                         edges + row + x);
+    uchar8 under[SEGMENT / 8];   // per group: the row above's bottom edges, which are this row's top edges
+#endif
+    for (int y = y0; y < y1; ++y) {
+        const int row = y * width;
+        int x = x0;
+#ifdef FAST_VECTOR
+        // 8 pixels at a time while pixel x + 8 (the right neighbour of the group's last) is in the row: two
+        // weighted differences of 8 lanes (right, down; up is the row above's down, but in a work item's first
+        // row); the left edges are the right ones shifted by a pixel. Integer sums: the scalar path's bits.
+        if (x + 8 < width) {
+            __global const uchar *s8 = (__global const uchar *)src;
+            __global uchar *d8 = (__global uchar *)dst;
+            const size_t stride = 3 * (size_t)width;
+            uchar prev = x > 0 && idiff(raw3(src, row + x - 1), raw3(src, row + x)) > FAST_LIMIT;   // left of x
+            for (int g = 0; x < x1 && x + 8 < width; x += 8, ++g) {
+                const size_t o = 3 * (size_t)(row + x);
+                const uchar16 c0 = LOAD_UCHAR16(s8 + o);
+                const uchar8 c1 = LOAD_UCHAR8(s8 + o + 16);
+                STORE_UCHAR16(c0, d8 + o);
+                STORE_UCHAR8(c1, d8 + o + 16);
+                const uchar8 r = convert_uchar8(-edge8(c0, c1, s8 + o + 3));
+                uchar8 t = (uchar8)(0);
+                if (y > y0) t = under[g];
+                else if (y > 0) t = convert_uchar8(-edge8(c0, c1, s8 + o - stride));
+                const uchar8 b = y + 1 < height ? convert_uchar8(-edge8(c0, c1, s8 + o + stride)) : (uchar8)(0);
+                under[g] = b;
+                const uchar8 l = (uchar8)(prev, r.s0, r.s1, r.s2, r.s3, r.s4, r.s5, r.s6);
+                prev = r.s7;
+                STORE_UCHAR8(t * (uchar8)(E_TOP) | r * (uchar8)(E_RIGHT) | b * (uchar8)(E_BOTTOM) | l * (uchar8)(E_LEFT),
+                             edges + row + x);
+            }
         }
-    }
 #endif
 #ifndef PIXEL_IS_FLOAT
-    int3 left = x > 0 ? raw3(src, row + x - 1) : (int3)(0);
-    int3 c = x < x1 ? raw3(src, row + x) : (int3)(0);
-    for (; x < x1; ++x) {
-        const int i = row + x;
-        for (int k = 0; k < CHANNELS; ++k) dst[(size_t)i * CHANNELS + k] = src[(size_t)i * CHANNELS + k];
-        const int3 right = x + 1 < width ? raw3(src, i + 1) : c;
-        uchar e = 0;
-        if (y > 0 && idiff(c, raw3(src, i - width)) > FAST_LIMIT) e |= E_TOP;
-        if (x + 1 < width && idiff(c, right) > FAST_LIMIT) e |= E_RIGHT;
-        if (y + 1 < height && idiff(c, raw3(src, i + width)) > FAST_LIMIT) e |= E_BOTTOM;
-        if (x > 0 && idiff(c, left) > FAST_LIMIT) e |= E_LEFT;
-        edges[i] = e;
-        left = c;
-        c = right;
-    }
+        int3 left = x > 0 ? raw3(src, row + x - 1) : (int3)(0);
+        int3 c = x < x1 ? raw3(src, row + x) : (int3)(0);
+        for (; x < x1; ++x) {
+            const int i = row + x;
+            for (int k = 0; k < CHANNELS; ++k) dst[(size_t)i * CHANNELS + k] = src[(size_t)i * CHANNELS + k];
+            const int3 right = x + 1 < width ? raw3(src, i + 1) : c;
+            uchar e = 0;
+            if (y > 0 && idiff(c, raw3(src, i - width)) > FAST_LIMIT) e |= E_TOP;
+            if (x + 1 < width && idiff(c, right) > FAST_LIMIT) e |= E_RIGHT;
+            if (y + 1 < height && idiff(c, raw3(src, i + width)) > FAST_LIMIT) e |= E_BOTTOM;
+            if (x > 0 && idiff(c, left) > FAST_LIMIT) e |= E_LEFT;
+            edges[i] = e;
+            left = c;
+            c = right;
+        }
 #else
-    float4 left = x0 > 0 ? load_px(src, row + x0 - 1) : (float4)(0.0f);
-    float4 c = load_px(src, row + x0);
-    for (; x < x1; ++x) {
-        const int i = row + x;
-        for (int k = 0; k < CHANNELS; ++k) dst[(size_t)i * CHANNELS + k] = src[(size_t)i * CHANNELS + k];
-        const float4 right = x + 1 < width ? load_px(src, i + 1) : c;
-        uchar e = 0;
-        if (y > 0 && weighted_diff(c, load_px(src, i - width)) > FAST_THRESHOLD) e |= E_TOP;
-        if (x + 1 < width && weighted_diff(c, right) > FAST_THRESHOLD) e |= E_RIGHT;
-        if (y + 1 < height && weighted_diff(c, load_px(src, i + width)) > FAST_THRESHOLD) e |= E_BOTTOM;
-        if (x > 0 && weighted_diff(c, left) > FAST_THRESHOLD) e |= E_LEFT;
-        edges[i] = e;
-        left = c;
-        c = right;
-    }
+        float4 left = x0 > 0 ? load_px(src, row + x0 - 1) : (float4)(0.0f);
+        float4 c = load_px(src, row + x0);
+        for (; x < x1; ++x) {
+            const int i = row + x;
+            for (int k = 0; k < CHANNELS; ++k) dst[(size_t)i * CHANNELS + k] = src[(size_t)i * CHANNELS + k];
+            const float4 right = x + 1 < width ? load_px(src, i + 1) : c;
+            uchar e = 0;
+            if (y > 0 && weighted_diff(c, load_px(src, i - width)) > FAST_THRESHOLD) e |= E_TOP;
+            if (x + 1 < width && weighted_diff(c, right) > FAST_THRESHOLD) e |= E_RIGHT;
+            if (y + 1 < height && weighted_diff(c, load_px(src, i + width)) > FAST_THRESHOLD) e |= E_BOTTOM;
+            if (x > 0 && weighted_diff(c, left) > FAST_THRESHOLD) e |= E_LEFT;
+            edges[i] = e;
+            left = c;
+            c = right;
+        }
 #endif
+    }
 }
 
 // Pass 2 (seed 004 "L-shape buffer"): four L shapes per pixel, one byte each: from the pixel along its bottom

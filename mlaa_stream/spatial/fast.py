@@ -19,6 +19,7 @@ from mlaa_stream.device.context import linear_levels
 
 FAST_THRESHOLD = 0.06  # weighted RGB difference (Rec. 709 weights), fraction of full scale (seed 004)
 FAST_MAX_LEN = 31  # longest line an L shape follows, in pixels (5 bits of its byte)
+FAST_ROWS = 8  # rows per work item of the edge pass (each row's bottom edges are the next one's top edges)
 E_TOP, E_RIGHT, E_BOTTOM, E_LEFT = 1, 2, 4, 8
 SIDE_A, SIDE_B, LONG = 1, 2, 128
 LUMA_WEIGHTS = np.array([0.2126, 0.7152, 0.0722])
@@ -27,7 +28,7 @@ LUMA_WEIGHTS = np.array([0.2126, 0.7152, 0.0722])
 def fast_defines(threshold: float = FAST_THRESHOLD, max_len: int = FAST_MAX_LEN) -> dict[str, object]:
     if not 2 <= int(max_len) <= 31:
         raise ValueError(f"max_len: expected 2..31 pixels (5 bits per L shape), got {max_len}")
-    return {"FAST_THRESHOLD": float(threshold), "FAST_MAX_LEN": int(max_len)}
+    return {"FAST_THRESHOLD": float(threshold), "FAST_MAX_LEN": int(max_len), "FAST_ROWS": FAST_ROWS}
 
 
 def _rgb(frame: np.ndarray) -> np.ndarray:
@@ -221,6 +222,8 @@ class FastPasses:
         self.hshapes = context.buffer(2 * fmt.pixels)
         self.vshapes = context.buffer(2 * fmt.pixels)
         self._k_edges = context.kernel("fast", "fast_edges", defs)
+        # the edge pass in work groups of one work item on a CPU: with 8 (CPU_LOCAL) it is slower (docs/fast.md)
+        self._edges_local = (1, 1) if context.device.type & cl.device_type.CPU else None
         self._k_hshapes = context.kernel("fast", "fast_hshapes", defs)
         self._k_vshapes = context.kernel("fast", "fast_vshapes", defs)
         self._k_blend = context.kernel("fast", "fast_blend", defs)
@@ -236,7 +239,7 @@ class FastPasses:
         w, h = self.fmt.width, self.fmt.height
         W, H = np.int32(w), np.int32(h)
         g2 = (-(-w // segment), h)
-        ev["fast_edges"] = self._k_edges(queue, g2, None, src, self.edges, dst, W, H, wait_for=wait_for)
+        ev["fast_edges"] = self._k_edges(queue, (g2[0], -(-h // FAST_ROWS)), self._edges_local, src, self.edges, dst, W, H, wait_for=wait_for)
         ev["fast_hshapes"] = self._k_hshapes(queue, (h,), None, self.edges, self.hshapes, W, H,
                                              wait_for=[ev["fast_edges"]])
         ev["fast_vshapes"] = self._k_vshapes(queue, (-(-w // 64),), None, self.edges, self.vshapes, W, H,
