@@ -215,30 +215,6 @@ inline uchar v_crossing(__global const uchar *edges, int x, int yc, int width, i
 // A shape byte for a pixel `d` pixels from its line's end with crossing bits `cross`.
 inline uchar shape_byte(int d, uchar cross) { return d <= L_UNKNOWN ? (uchar)(d | cross) : (uchar)L_UNKNOWN; }
 
-// Does the bottom-edge line of row y go on from x to x + 1 (both edges there, no vertical edge between)?
-inline int h_continues(__global const uchar *edges, int x, int y, int width, int height)
-{
-    return x + 1 < width && (edges[y * width + x + 1] & E_BOTTOM) &&
-           !edge_bit(edges, x, y, width, height, E_RIGHT) && !edge_bit(edges, x, y + 1, width, height, E_RIGHT);
-}
-
-__kernel void fast_hshapes(__global const uchar *edges, __global uchar2 *hshapes, const int width, const int height)
-{
-    const int y = get_global_id(0);
-    if (y >= height) return;
-    __global const uchar *row = edges + y * width;
-    int x = 0;
-    while (x < width) {
-        if (x + 8 <= width && !(edge_group(row + x) & 0x0404040404040404UL)) { x += 8; continue; }
-        if (!(row[x] & E_BOTTOM)) { ++x; continue; }
-        int xe = x;   // the run of bottom edges x .. xe
-        while (h_continues(edges, xe, y, width, height)) ++xe;
-        const uchar c0 = h_crossing(edges, x - 1, y, width, height), c1 = h_crossing(edges, xe, y, width, height);
-        for (int t = x; t <= xe; ++t) hshapes[y * width + t] = (uchar2)(shape_byte(t - x, c0), shape_byte(xe - t, c1));
-        x = xe + 1;
-    }
-}
-
 // Bit b of each of 8 edge bytes (a word as edge_group loads it), as bits 0-7 of a byte.
 inline uint gather8(ulong g, int b) { return (uint)((((g >> b) & 0x0101010101010101UL) * 0x0102040810204080UL) >> 56); }
 
@@ -260,6 +236,38 @@ inline ulong strip_bits(__global const uchar *edges, int x0, int n, int y, int w
 #else
 #define LOWEST_BIT(m) (63 - (int)clz((m) & (~(m) + 1)))
 #endif
+
+__kernel void fast_hshapes(__global const uchar *edges, __global uchar2 *hshapes, const int width, const int height)
+{
+    // One row, 64 columns at a time as bit masks (as fast_vshapes): a bottom-edge line goes on from x to x + 1
+    // where x + 1 has a bottom edge and no right edge at x crosses it in this row or the next.
+    const int y = get_global_id(0);
+    if (y >= height) return;
+    int start = -1;   // the first column of a line that goes on past the previous 64 columns
+    for (int x0 = 0; x0 < width; x0 += 64) {
+        const int n = x0 + 64 < width ? 64 : width - x0;
+        const ulong bottom = strip_bits(edges, x0, n, y, width, 2);
+        if (!bottom) continue;   // (a line going on from before would have its next pixel here)
+        const ulong right = strip_bits(edges, x0, n, y, width, 1) |
+                            (y + 1 < height ? strip_bits(edges, x0, n, y + 1, width, 1) : 0);
+        const ulong beyond = x0 + n < width ? (ulong)((edges[y * width + x0 + n] >> 2) & 1) << (n - 1) : 0;
+        const ulong cont = bottom & ((bottom >> 1) | beyond) & ~right;
+        ulong starts = bottom & ~((cont << 1) | (start >= 0 ? 1UL : 0UL)), ends = bottom & ~cont;
+        while (ends) {   // lines alternate: each end's start is the lowest start left, or the one carried in
+            const int ce = LOWEST_BIT(ends), xe = x0 + ce;
+            int x = start;
+            if (starts && LOWEST_BIT(starts) <= ce) {
+                x = x0 + LOWEST_BIT(starts);
+                starts &= starts - 1;
+            }
+            start = -1;
+            const uchar c0 = h_crossing(edges, x - 1, y, width, height), c1 = h_crossing(edges, xe, y, width, height);
+            for (int t = x; t <= xe; ++t) hshapes[y * width + t] = (uchar2)(shape_byte(t - x, c0), shape_byte(xe - t, c1));
+            ends &= ends - 1;
+        }
+        if (starts) start = x0 + LOWEST_BIT(starts);   // a line going on into the next 64 columns
+    }
+}
 
 __kernel void fast_vshapes(__global const uchar *edges, __global uchar2 *vshapes, const int width, const int height)
 {

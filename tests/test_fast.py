@@ -56,18 +56,30 @@ def test_edges_and_shapes_match_the_reference_exactly(seed, size):
     assert np.array_equal(vs[right], ref_s[..., 2:][right])
 
 
-def test_a_vertical_line_on_a_strip_border_ends_at_a_crossing_in_the_next_strip():
-    """Right edges of column 63 (the last of the first 64-column strip), cut by a bottom edge under column 64
-    only: the run ends there, as in the reference."""
-    frame = np.full((30, 100, 3), 40, np.uint8)
-    frame[:, 64:] = (200, 200, 200)
-    frame[15:, 64:] = (120, 30, 200)
-    e, _, vs = passes(frame)
+def assert_shapes_exact(frame: np.ndarray) -> np.ndarray:
+    e, hs, vs = passes(frame)
     ref_e = F.fast_edges_reference(frame)
     ref_s = F.fast_lshapes_reference(ref_e)
+    bottom, right = (ref_e & F.E_BOTTOM) > 0, (ref_e & F.E_RIGHT) > 0
+    assert np.array_equal(e, ref_e)
+    assert np.array_equal(hs[bottom], ref_s[..., :2][bottom]) and np.array_equal(vs[right], ref_s[..., 2:][right])
+    return ref_s
+
+
+def test_lines_across_the_64_column_masks_end_where_the_reference_ends_them():
+    """The shape sweeps take 64 columns at a time as bit masks. Right edges of column 63 (the last of the first
+    64), cut by a bottom edge under column 64 only; bottom edges of row 9 from x = 10 to 150 (across two
+    borders), cut by a right edge at x = 64 in the row below only, and a line beyond the bound."""
+    frame = np.full((30, 200, 3), 40, np.uint8)
+    frame[:, 64:] = (200, 200, 200)
+    frame[15:, 64:] = (120, 30, 200)
+    ref_s = assert_shapes_exact(frame)
     assert ref_s[14, 63, 3] & 31 == 0 and ref_s[15, 63, 2] & 31 == 0  # the line splits between rows 14 and 15
-    right = (ref_e & F.E_RIGHT) > 0
-    assert np.array_equal(e, ref_e) and np.array_equal(vs[right], ref_s[..., 2:][right])
+    frame = np.full((20, 200, 3), 40, np.uint8)
+    frame[10:, 10:151] = (200, 200, 200)
+    frame[10:, 65:151] = (30, 200, 90)
+    ref_s = assert_shapes_exact(frame)
+    assert ref_s[9, 64, 1] & 31 == 0 and ref_s[9, 65, 0] & 31 == 0  # the line splits between x = 64 and 65
 
 
 def passes_of(f: Filter, frame: np.ndarray) -> np.ndarray:
