@@ -1,8 +1,9 @@
 // fast.cl -- the three-pass MLAA of seed 004 (Kluczek, "Antialiasing in 1 millisecond"): edges, L shapes,
 // reconstruction + blend, each a full-frame pass, with a bounded edge length (FAST_MAX_LEN). The preset
 // `fast` (mlaa_stream/spatial/fast.py, whose numpy reference mirrors this file rule for rule).
-// Work: one work item per SEGMENT pixels of FAST_ROWS rows (edges), of a row (blend), a row (bottom-edge
-// shapes), a strip of 64 columns (right-edge shapes).
+// Work in blocks of 64 columns x FAST_ROWS rows: a work item per block (edges), per 64 pixels of a row (blend),
+// per row (bottom-edge shapes), per strip of 64 columns (right-edge shapes). The edge pass marks the blocks
+// that hold an edge (`blocks`, a byte per block, row-major); the later passes skip the others.
 // Defines: FAST_THRESHOLD (weighted RGB difference, fraction of full scale), FAST_MAX_LEN (<= 31),
 //          BLEND_LINEAR / LINEAR_INPUT as blend.cl.
 
@@ -15,6 +16,8 @@
 #ifndef FAST_ROWS
 #define FAST_ROWS 8
 #endif
+#define FAST_COLS 64   // the 64-bit masks of the shape sweeps
+#define BLOCKS_X(width) (((width) + FAST_COLS - 1) / FAST_COLS)
 
 // Pass 1 edge bits (seed 004 "edge buffer"): every edge is kept in both pixels that share it, so the later
 // passes read one byte per pixel instead of colours.
@@ -94,14 +97,15 @@ inline short8 edge8(uchar16 a0, uchar8 a1, __global const uchar *b)
 // Pass 1, and the copy of the frame into dst (pass 3 then writes only the pixels it changes): the source
 // row is read here anyway, so the copy costs a store instead of a separate full-frame copy.
 __kernel void fast_edges(__global const PIXEL_T *src, __global uchar *edges, __global PIXEL_T *dst,
-                         const int width, const int height)
+                         __global uchar *blocks, const int width, const int height)
 {
-    // FAST_ROWS rows of SEGMENT pixels per work item: global size (ceil(width / SEGMENT), ceil(height / FAST_ROWS))
-    const int x0 = get_global_id(0) * SEGMENT, y0 = get_global_id(1) * FAST_ROWS;
+    // a block per work item: global size (ceil(width / FAST_COLS), ceil(height / FAST_ROWS))
+    const int x0 = get_global_id(0) * FAST_COLS, y0 = get_global_id(1) * FAST_ROWS;
     if (x0 >= width || y0 >= height) return;
-    const int x1 = x0 + SEGMENT < width ? x0 + SEGMENT : width, y1 = y0 + FAST_ROWS < height ? y0 + FAST_ROWS : height;
+    const int x1 = x0 + FAST_COLS < width ? x0 + FAST_COLS : width, y1 = y0 + FAST_ROWS < height ? y0 + FAST_ROWS : height;
+    uint seen = 0;   // any edge in the block
 #ifdef FAST_VECTOR
-    uchar8 under[SEGMENT / 8];   // per group: the row above's bottom edges, which are this row's top edges
+    uchar8 under[FAST_COLS / 8];   // per group: the row above's bottom edges, which are this row's top edges
 #endif
     for (int y = y0; y < y1; ++y) {
         const int row = y * width;
@@ -129,8 +133,9 @@ __kernel void fast_edges(__global const PIXEL_T *src, __global uchar *edges, __g
                 under[g] = b;
                 const uchar8 l = (uchar8)(prev, r.s0, r.s1, r.s2, r.s3, r.s4, r.s5, r.s6);
                 prev = r.s7;
-                STORE_UCHAR8(t * (uchar8)(E_TOP) | r * (uchar8)(E_RIGHT) | b * (uchar8)(E_BOTTOM) | l * (uchar8)(E_LEFT),
-                             edges + row + x);
+                const uchar8 e = t * (uchar8)(E_TOP) | r * (uchar8)(E_RIGHT) | b * (uchar8)(E_BOTTOM) | l * (uchar8)(E_LEFT);
+                STORE_UCHAR8(e, edges + row + x);
+                seen |= as_ulong(e) != 0;
             }
         }
 #endif
@@ -147,6 +152,7 @@ __kernel void fast_edges(__global const PIXEL_T *src, __global uchar *edges, __g
             if (y + 1 < height && idiff(c, raw3(src, i + width)) > FAST_LIMIT) e |= E_BOTTOM;
             if (x > 0 && idiff(c, left) > FAST_LIMIT) e |= E_LEFT;
             edges[i] = e;
+            seen |= e;
             left = c;
             c = right;
         }
@@ -163,11 +169,13 @@ __kernel void fast_edges(__global const PIXEL_T *src, __global uchar *edges, __g
             if (y + 1 < height && weighted_diff(c, load_px(src, i + width)) > FAST_THRESHOLD) e |= E_BOTTOM;
             if (x > 0 && weighted_diff(c, left) > FAST_THRESHOLD) e |= E_LEFT;
             edges[i] = e;
+            seen |= e;
             left = c;
             c = right;
         }
 #endif
     }
+    blocks[get_global_id(1) * BLOCKS_X(width) + get_global_id(0)] = seen != 0;
 }
 
 // Pass 2 (seed 004 "L-shape buffer"): four L shapes per pixel, one byte each: from the pixel along its bottom
@@ -237,7 +245,8 @@ inline ulong strip_bits(__global const uchar *edges, int x0, int n, int y, int w
 #define LOWEST_BIT(m) (63 - (int)clz((m) & (~(m) + 1)))
 #endif
 
-__kernel void fast_hshapes(__global const uchar *edges, __global uchar2 *hshapes, const int width, const int height)
+__kernel void fast_hshapes(__global const uchar *edges, __global const uchar *blocks, __global uchar2 *hshapes,
+                           const int width, const int height)
 {
     // One row, 64 columns at a time as bit masks (as fast_vshapes): a bottom-edge line goes on from x to x + 1
     // where x + 1 has a bottom edge and no right edge at x crosses it in this row or the next.
@@ -246,6 +255,7 @@ __kernel void fast_hshapes(__global const uchar *edges, __global uchar2 *hshapes
     int start = -1;   // the first column of a line that goes on past the previous 64 columns
     for (int x0 = 0; x0 < width; x0 += 64) {
         const int n = x0 + 64 < width ? 64 : width - x0;
+        if (!blocks[(y / FAST_ROWS) * BLOCKS_X(width) + x0 / FAST_COLS]) continue;   // (as !bottom below)
         const ulong bottom = strip_bits(edges, x0, n, y, width, 2);
         if (!bottom) continue;   // (a line going on from before would have its next pixel here)
         const ulong right = strip_bits(edges, x0, n, y, width, 1) |
@@ -269,18 +279,22 @@ __kernel void fast_hshapes(__global const uchar *edges, __global uchar2 *hshapes
     }
 }
 
-__kernel void fast_vshapes(__global const uchar *edges, __global uchar2 *vshapes, const int width, const int height)
+__kernel void fast_vshapes(__global const uchar *edges, __global const uchar *blocks, __global uchar2 *vshapes,
+                           const int width, const int height)
 {
     // One strip of up to 64 columns, row by row, each row's right and bottom edges as 64-bit masks: a column
     // costs something only where its run of right edges starts or ends. Global size ceil(width / 64).
-    const int x0 = get_global_id(0) * 64;
+    const int x0 = get_global_id(0) * FAST_COLS;
     if (x0 >= width) return;
     const int n = x0 + 64 < width ? 64 : width - x0;
     int start[64];   // per column of the strip: the first row of the run in progress (where `open` has it)
     ulong open = 0;
-    ulong right = strip_bits(edges, x0, n, 0, width, 1);
+    __global const uchar *marks = blocks + get_global_id(0);   // this strip's blocks, a row of blocks apart
+    const int stride = BLOCKS_X(width);
+    ulong right = marks[0] ? strip_bits(edges, x0, n, 0, width, 1) : 0;
     for (int y = 0; y < height; ++y) {
-        const ulong next = y + 1 < height ? strip_bits(edges, x0, n, y + 1, width, 1) : 0;
+        const ulong next = y + 1 < height && marks[((y + 1) / FAST_ROWS) * stride] ?
+                           strip_bits(edges, x0, n, y + 1, width, 1) : 0;
         if (!(right | open)) { right = next; continue; }
         ulong fresh = right & ~open;
         while (fresh) {
@@ -291,7 +305,7 @@ __kernel void fast_vshapes(__global const uchar *edges, __global uchar2 *vshapes
         open |= right;
         // a run goes on to the next row where that has a right edge and no bottom edge is under this pixel or
         // its right neighbour (no crossing line between)
-        const ulong bottom = strip_bits(edges, x0, n, y, width, 2);
+        const ulong bottom = strip_bits(edges, x0, n, y, width, 2);   // (this block has edges: `right | open`)
         const ulong beyond = x0 + n < width ? (ulong)((edges[y * width + x0 + n] >> 2) & 1) << (n - 1) : 0;
         const ulong cont = next & ~bottom & ~((bottom >> 1) | beyond);
         ulong ends = open & ~cont;
@@ -343,13 +357,15 @@ inline float side_area(__global const float *trap, uchar2 s, int side)
     return (e0 ? t0 : 0.0f) + (e1 ? t1 : 0.0f);
 }
 
-__kernel void fast_blend(__global const PIXEL_T *src, __global const uchar *edges, __global const uchar2 *hshapes,
-                         __global const uchar2 *vshapes, __global const float *luts, __global const float *lin,
-                         __global const float *trap, __global PIXEL_T *dst, const int width, const int height)
+__kernel void fast_blend(__global const PIXEL_T *src, __global const uchar *edges, __global const uchar *blocks,
+                         __global const uchar2 *hshapes, __global const uchar2 *vshapes, __global const float *luts,
+                         __global const float *lin, __global const float *trap, __global PIXEL_T *dst,
+                         const int width, const int height)
 {
-    const int x0 = get_global_id(0) * SEGMENT, y = get_global_id(1);
-    if (x0 >= width || y >= height) return;
-    const int x1 = x0 + SEGMENT < width ? x0 + SEGMENT : width;
+    // 64 pixels of a row per work item: global size (ceil(width / FAST_COLS), height)
+    const int x0 = get_global_id(0) * FAST_COLS, y = get_global_id(1);
+    if (x0 >= width || y >= height || !blocks[(y / FAST_ROWS) * BLOCKS_X(width) + get_global_id(0)]) return;
+    const int x1 = x0 + FAST_COLS < width ? x0 + FAST_COLS : width;
     for (int g = x0; g < x1; g += 8) {   // 8 pixels at a time: their edge bytes as one word
         ulong m = 0;
         if (g + 8 <= width) m = edge_group(edges + y * width + g);

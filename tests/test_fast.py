@@ -212,3 +212,18 @@ def test_the_zero_copy_filter_keeps_frames_in_flight_apart():
         assert all(np.array_equal(p.result(), e) for p, e in zip(pending, expected))
         assert f.direct == ("Portable Computing Language" in f.context.device.platform.name
                             and bool(f.context.device.type & cl.device_type.CPU))
+
+
+def test_a_sparse_frame_skips_blocks_without_edges_and_matches_the_reference():
+    """A few shapes on a flat ground: most 64 x 8 blocks hold no edge and every pass skips them."""
+    rng = np.random.default_rng(21)
+    frame = np.full((90, 330, 3), 70, np.uint8)
+    yy, xx = np.mgrid[:90, :330]
+    for _ in range(5):
+        cx, cy, r = rng.integers(10, 320), rng.integers(5, 85), rng.integers(3, 12)
+        frame[(xx - cx) ** 2 + 3 * (yy - cy) ** 2 <= r * r] = rng.integers(0, 256, 3)
+    assert_shapes_exact(frame)
+    out = Filter(fast=True).process(frame)
+    ref = F.fast_reference(frame)
+    diff = np.abs(out.astype(np.int64) - ref.astype(np.int64))
+    assert diff.max() <= 1 and (diff == 0).mean() > 0.999 and (out != frame).any()

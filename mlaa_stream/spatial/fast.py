@@ -20,6 +20,7 @@ from mlaa_stream.device.context import linear_levels
 FAST_THRESHOLD = 0.06  # weighted RGB difference (Rec. 709 weights), fraction of full scale (seed 004)
 FAST_MAX_LEN = 31  # longest line an L shape follows, in pixels (5 bits of its byte)
 FAST_ROWS = 8  # rows per work item of the edge pass (each row's bottom edges are the next one's top edges)
+FAST_COLS = 64  # columns of a block (kernels/fast.cl: the shape sweeps' 64-bit masks)
 E_TOP, E_RIGHT, E_BOTTOM, E_LEFT = 1, 2, 4, 8
 SIDE_A, SIDE_B, LONG = 1, 2, 128
 LUMA_WEIGHTS = np.array([0.2126, 0.7152, 0.0722])
@@ -221,6 +222,7 @@ class FastPasses:
         self.edges = context.buffer(fmt.pixels)
         self.hshapes = context.buffer(2 * fmt.pixels)
         self.vshapes = context.buffer(2 * fmt.pixels)
+        self.blocks = context.buffer(-(-fmt.width // FAST_COLS) * -(-fmt.height // FAST_ROWS))  # a byte per block
         self._k_edges = context.kernel("fast", "fast_edges", defs)
         # the edge pass in work groups of one work item on a CPU: with 8 (CPU_LOCAL) it is slower (docs/fast.md)
         self._edges_local = (1, 1) if context.device.type & cl.device_type.CPU else None
@@ -232,18 +234,23 @@ class FastPasses:
                                hostbuf=trapezoid_table())
 
     def device_bytes(self) -> int:
-        return self.edges.size + self.hshapes.size + self.vshapes.size
+        return self.edges.size + self.hshapes.size + self.vshapes.size + self.blocks.size
 
-    def enqueue(self, queue, src, dst, luts, wait_for: list, segment: int, events: dict | None = None):
+    def enqueue(self, queue, src, dst, luts, wait_for: list, segment: int | None = None,
+                events: dict | None = None):
+        """The passes of one frame after `wait_for`; returns the last event. `segment` (the default passes'
+        work size) is not used: these passes work in blocks of FAST_COLS x FAST_ROWS pixels."""
         ev = {} if events is None else events
         w, h = self.fmt.width, self.fmt.height
         W, H = np.int32(w), np.int32(h)
-        g2 = (-(-w // segment), h)
-        ev["fast_edges"] = self._k_edges(queue, (g2[0], -(-h // FAST_ROWS)), self._edges_local, src, self.edges, dst, W, H, wait_for=wait_for)
-        ev["fast_hshapes"] = self._k_hshapes(queue, (h,), None, self.edges, self.hshapes, W, H,
+        bx = -(-w // FAST_COLS)
+        ev["fast_edges"] = self._k_edges(queue, (bx, -(-h // FAST_ROWS)), self._edges_local, src, self.edges, dst,
+                                         self.blocks, W, H, wait_for=wait_for)
+        ev["fast_hshapes"] = self._k_hshapes(queue, (h,), None, self.edges, self.blocks, self.hshapes, W, H,
                                              wait_for=[ev["fast_edges"]])
-        ev["fast_vshapes"] = self._k_vshapes(queue, (-(-w // 64),), None, self.edges, self.vshapes, W, H,
+        ev["fast_vshapes"] = self._k_vshapes(queue, (bx,), None, self.edges, self.blocks, self.vshapes, W, H,
                                              wait_for=[ev["fast_edges"]])
-        ev["fast_blend"] = self._k_blend(queue, g2, None, src, self.edges, self.hshapes, self.vshapes, luts, self._lin,
-                                         self._trap, dst, W, H, wait_for=[ev["fast_hshapes"], ev["fast_vshapes"]])
+        ev["fast_blend"] = self._k_blend(queue, (bx, h), None, src, self.edges, self.blocks, self.hshapes,
+                                         self.vshapes, luts, self._lin, self._trap, dst, W, H,
+                                         wait_for=[ev["fast_hshapes"], ev["fast_vshapes"]])
         return ev["fast_blend"]

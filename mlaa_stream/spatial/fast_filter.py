@@ -17,7 +17,7 @@ import numpy as np
 import pyopencl as cl
 
 from mlaa_stream.device.formats import frame_format
-from mlaa_stream.spatial.filter import SEGMENT, Filter, PendingFrame
+from mlaa_stream.spatial.filter import Filter, PendingFrame
 
 
 class FastFilter(Filter):
@@ -45,7 +45,7 @@ class FastFilter(Filter):
             dst = cl.Buffer(self.context.ctx, mf.WRITE_ONLY | mf.USE_HOST_PTR, hostbuf=out)
             # after the previous frame: the passes' own buffers (edges, shapes) are shared by all frames
             after = [self._last_event] if self._last_event is not None else []
-            done = self._fast.enqueue(self.queue, src, dst, self._luts, after, SEGMENT)
+            done = self._fast.enqueue(self.queue, src, dst, self._luts, after)
             self._last_event = done
             # the caller may drop the PendingFrame: the arrays stay referenced until the kernels are done
             complete = cl.command_execution_status.COMPLETE
