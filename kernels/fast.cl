@@ -357,6 +357,47 @@ inline float side_area(__global const float *trap, uchar2 s, int side)
     return (e0 ? t0 : 0.0f) + (e1 ? t1 : 0.0f);
 }
 
+#if SUBPIXEL_ON
+// blend.cl's sub-pixel rule (SUBPIXEL, SUBPIXEL_END, SUBPIXEL_BG from the filter's options): a pixel with edges
+// on three or four sides -- a dot, a 1-px line's end or bump, smaller than the pixel -- that is a luma extremum
+// on one background moves SUBPIXEL (four sides) or SUBPIXEL_END (three) of the way from `*out` to the mean of
+// its 3x3 window (clamped at the frame's edge), in the mixing space. Returns whether it moved. In place of the
+// default's grain guard, the feature must be isolated: no neighbour across its edges has three or four edges
+// itself (noise and fine texture are such clusters; docs/fast.md has the numbers).
+inline float fast_luma(float4 c) { return 0.2126f * c.x + 0.7152f * c.y + 0.0722f * c.z; }   // Rec. 709
+inline int subpixel(__global const PIXEL_T *src, __global const uchar *edges, __global const float *luts, __global const float *lin, uchar e,
+                    int x, int y, int width, int height, float4 c, int sides, float4 *out)
+{
+    const int i = y * width + x;
+    const float yc = fast_luma(c);
+    int lo = 0, hi = 0;
+    float ymin = 1e30f, ymax = -1e30f;
+    for (int k = 0; k < 4; ++k) {   // the neighbours across its edges: top, right, bottom, left
+        if (!(e & (1 << k))) continue;
+        const int j = k == 0 ? i - width : k == 1 ? i + 1 : k == 2 ? i + width : i - 1;
+        const uchar en = edges[j];
+        if ((en & 1) + ((en >> 1) & 1) + ((en >> 2) & 1) + ((en >> 3) & 1) >= 3) return 0;   // not isolated
+        const float yn = fast_luma(fast_to_mix(src, luts, lin, j));
+        lo |= yn < yc;
+        hi |= yn > yc;
+        ymin = yn < ymin ? yn : ymin;
+        ymax = yn > ymax ? yn : ymax;
+    }
+    const float contrast = hi ? ymin - yc : yc - ymax;
+    if ((lo && hi) || ymax - ymin > SUBPIXEL_BG * contrast) return 0;
+    float4 box = (float4)(0.0f);
+    for (int dy = -1; dy <= 1; ++dy) {
+        const int yy = y + dy < 0 ? 0 : (y + dy >= height ? height - 1 : y + dy);
+        for (int dx = -1; dx <= 1; ++dx) {
+            const int xx = x + dx < 0 ? 0 : (x + dx >= width ? width - 1 : x + dx);
+            box += fast_to_mix(src, luts, lin, yy * width + xx);
+        }
+    }
+    *out += (sides == 4 ? SUBPIXEL : SUBPIXEL_END) * (box * (1.0f / 9.0f) - *out);
+    return 1;
+}
+#endif
+
 __kernel void fast_blend(__global const PIXEL_T *src, __global const uchar *edges, __global const uchar *blocks,
                          __global const uchar2 *hshapes, __global const uchar2 *vshapes, __global const float *luts,
                          __global const float *lin, __global const float *trap, __global PIXEL_T *dst,
@@ -382,7 +423,12 @@ __kernel void fast_blend(__global const PIXEL_T *src, __global const uchar *edge
             const float wr = (e & E_RIGHT) ? side_area(trap, vshapes[i], L_SIDE_A) : 0.0f;
             const float wl = (e & E_LEFT) ? side_area(trap, vshapes[x > 0 ? i - 1 : i], L_SIDE_B) : 0.0f;
             const float sum = wt + wb + wl + wr;
+#if SUBPIXEL_ON
+            const int sides = (e & 1) + ((e >> 1) & 1) + ((e >> 2) & 1) + ((e >> 3) & 1);
+            if (sum <= 0.0f && sides < 3) continue;
+#else
             if (sum <= 0.0f) continue;
+#endif
             // each neighbour mixed in by its area; together never more than the largest area (blend.cl's rule)
             const float4 c = fast_to_mix(src, luts, lin, i);
             float4 acc = (float4)(0.0f);
@@ -390,7 +436,10 @@ __kernel void fast_blend(__global const PIXEL_T *src, __global const uchar *edge
             if (wb > 0.0f) acc += wb * wb * (fast_to_mix(src, luts, lin, i + width) - c);
             if (wl > 0.0f) acc += wl * wl * (fast_to_mix(src, luts, lin, i - 1) - c);
             if (wr > 0.0f) acc += wr * wr * (fast_to_mix(src, luts, lin, i + 1) - c);
-            float4 out = c + acc / sum;
+            float4 out = sum > 0.0f ? c + acc / sum : c;
+#if SUBPIXEL_ON
+            if (sides >= 3 && !subpixel(src, edges, luts, lin, e, x, y, width, height, c, sides, &out) && sum <= 0.0f) continue;
+#endif
             out.w = c.w;
 #if DECODE
             __global const float *enc = luts + 2 * (LUT_SIZE + 1);

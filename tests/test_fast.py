@@ -227,3 +227,47 @@ def test_a_sparse_frame_skips_blocks_without_edges_and_matches_the_reference():
     ref = F.fast_reference(frame)
     diff = np.abs(out.astype(np.int64) - ref.astype(np.int64))
     assert diff.max() <= 1 and (diff == 0).mean() > 0.999 and (out != frame).any()
+
+
+def dots_frame(seed: int = 4) -> np.ndarray:
+    """Isolated 1-px dots and 1-px line ends (sub-pixel features) on a flat ground, and a patch of noise."""
+    rng = np.random.default_rng(seed)
+    frame = np.full((48, 96, 3), 150, np.uint8)
+    for _ in range(30):
+        y, x = rng.integers(1, 47), rng.integers(1, 60)
+        frame[y, x] = rng.integers(0, 256, 3)
+    frame[10, 62:70] = 20  # a 1-px line: its ends have edges on three sides
+    frame[20:40, 70:90] = rng.integers(0, 256, (20, 20, 3))
+    return frame
+
+
+def test_an_isolated_dot_moves_towards_its_3x3_mean():
+    from mlaa_stream.device.colour import linear_to_srgb, srgb_to_linear
+    from mlaa_stream.spatial.filter import SUBPIXEL
+    frame = np.full((9, 9, 3), 200, np.uint8)
+    frame[4, 4] = 30
+    out = Filter(fast=True).process(frame)
+    dot, ground = srgb_to_linear(30 / 255), srgb_to_linear(200 / 255)
+    expected = linear_to_srgb(dot + SUBPIXEL * ((dot + 8 * ground) / 9 - dot)) * 255
+    assert np.abs(out[4, 4].astype(float) - expected).max() <= 1, (out[4, 4], expected)
+    assert np.array_equal(Filter(fast=True, subpixel=0).process(frame)[4, 4], frame[4, 4])
+
+
+def test_a_cluster_of_features_is_left_alone():
+    """A 1-px checkerboard: every pixel has four edges, so does every neighbour: noise, not a dot."""
+    frame = np.full((16, 16, 3), 128, np.uint8)
+    frame[4:12, 4:12] = np.where(((np.indices((8, 8)).sum(0)) % 2 == 0)[..., None], 20, 230)
+    out = Filter(fast=True).process(frame)
+    assert np.array_equal(out[5:11, 5:11], frame[5:11, 5:11])
+
+
+@pytest.mark.parametrize("subpixel", [0.0, 0.5])
+def test_sub_pixel_features_match_the_reference(subpixel):
+    frame = dots_frame()
+    out = Filter(fast=True, subpixel=subpixel).process(frame)
+    ref = F.fast_reference(frame, subpixel=subpixel)
+    moved = (F.fast_reference(frame, subpixel=0.5) != F.fast_reference(frame, subpixel=0.0)).any(-1)
+    assert moved.sum() >= 20  # the dots and line ends, not the noise patch
+    assert not moved[21:39, 71:89].any()
+    diff = np.abs(out.astype(np.int64) - ref.astype(np.int64))
+    assert diff.max() <= 1 and (diff == 0).mean() > 0.999

@@ -16,6 +16,7 @@ import pyopencl as cl
 
 from mlaa_stream.device.colour import linear_to_srgb, srgb_to_linear
 from mlaa_stream.device.context import linear_levels
+from mlaa_stream.spatial.filter import SUBPIXEL, SUBPIXEL_BG, SUBPIXEL_END  # the default preset's sub-pixel rule
 
 FAST_THRESHOLD = 0.06  # weighted RGB difference (Rec. 709 weights), fraction of full scale (seed 004)
 FAST_MAX_LEN = 31  # longest line an L shape follows, in pixels (5 bits of its byte)
@@ -175,10 +176,42 @@ def fast_weights_reference(edges: np.ndarray, shapes: np.ndarray) -> np.ndarray:
     return out
 
 
+def _sides(edges: np.ndarray) -> np.ndarray:
+    return sum((edges >> k) & 1 for k in range(4)).astype(np.int64)
+
+
+def fast_subpixel_reference(mix: np.ndarray, edges: np.ndarray, out: np.ndarray, subpixel: float = SUBPIXEL,
+                            subpixel_end: float = SUBPIXEL_END, subpixel_bg: float = SUBPIXEL_BG) -> np.ndarray:
+    """The sub-pixel rule (kernels/fast.cl `subpixel`, blend.cl's with isolation in place of the grain guard):
+    isolated pixels with edges on 3-4 sides that are a luma extremum on one background move from `out` towards
+    their 3x3 mean (in the mixing space `mix`). Returns the mask of pixels moved; `out` is updated in place."""
+    h, w = edges.shape
+    sides = _sides(edges)
+    moved = np.zeros((h, w), bool)
+    if subpixel <= 0:
+        return moved
+    pad = np.pad(mix, ((1, 1), (1, 1), (0, 0)), mode="edge")
+    luma = mix @ LUMA_WEIGHTS
+    for y, x in zip(*np.nonzero(sides >= 3)):
+        across = [(y + dy, x + dx) for bit, dy, dx in ((E_TOP, -1, 0), (E_RIGHT, 0, 1), (E_BOTTOM, 1, 0),
+                                                       (E_LEFT, 0, -1)) if edges[y, x] & bit]
+        if any(sides[p] >= 3 for p in across):  # a cluster of features: noise, fine texture
+            continue
+        yc, yn = luma[y, x], np.array([luma[p] for p in across])
+        lo, hi = (yn < yc).any(), (yn > yc).any()
+        contrast = yn.min() - yc if hi else yc - yn.max()
+        if (lo and hi) or yn.max() - yn.min() > subpixel_bg * contrast:
+            continue
+        box = pad[y:y + 3, x:x + 3].reshape(9, -1).sum(0) / 9
+        out[y, x] += (subpixel if sides[y, x] == 4 else subpixel_end) * (box - out[y, x])
+        moved[y, x] = True
+    return moved
+
+
 def fast_blend_reference(frame: np.ndarray, edges: np.ndarray, shapes: np.ndarray, linear: bool = True,
-                         linear_input: bool = False) -> np.ndarray:
+                         linear_input: bool = False, subpixel: float = SUBPIXEL) -> np.ndarray:
     """Pass 3: c + sum_k w_k^2 (n_k - c) / sum_k w_k over the four neighbours, in linear light (blend.cl's
-    rule), alpha and other channels as they were."""
+    rule), then the sub-pixel rule (`subpixel` 0: off); alpha and other channels as they were."""
     wts = fast_weights_reference(edges, shapes)
     rgb = _rgb(frame)
     mix = srgb_to_linear(rgb) if linear and not linear_input else rgb
@@ -188,9 +221,10 @@ def fast_blend_reference(frame: np.ndarray, edges: np.ndarray, shapes: np.ndarra
     total = wts.sum(-1)
     acc = sum(wts[..., k:k + 1] ** 2 * (neighbours[k] - mix) for k in range(4))
     out = np.where(total[..., None] > 0, mix + acc / np.maximum(total, 1e-30)[..., None], mix)
+    moved = fast_subpixel_reference(mix, edges, out, subpixel, SUBPIXEL_END * subpixel / SUBPIXEL)
     out = linear_to_srgb(out) if linear and not linear_input else out
     result = frame.copy()
-    changed = total > 0
+    changed = (total > 0) | moved
     if frame.dtype.kind in "ui":
         top = np.iinfo(frame.dtype).max
         vals = np.clip(np.floor(out * top + 0.5), 0, top).astype(frame.dtype)
@@ -205,10 +239,11 @@ def fast_blend_reference(frame: np.ndarray, edges: np.ndarray, shapes: np.ndarra
 
 
 def fast_reference(frame: np.ndarray, threshold: float = FAST_THRESHOLD, max_len: int = FAST_MAX_LEN,
-                   linear: bool = True, linear_input: bool = False) -> np.ndarray:
+                   linear: bool = True, linear_input: bool = False, subpixel: float = SUBPIXEL) -> np.ndarray:
     """The whole fast path, pass after pass."""
     edges = fast_edges_reference(frame, threshold)
-    return fast_blend_reference(frame, edges, fast_lshapes_reference(edges, max_len), linear, linear_input)
+    return fast_blend_reference(frame, edges, fast_lshapes_reference(edges, max_len), linear, linear_input,
+                                subpixel)
 
 
 class FastPasses:
