@@ -239,10 +239,11 @@ inline ulong strip_bits(__global const uchar *edges, int x0, int n, int y, int w
     return m;
 }
 
+// The index of the lowest set bit of a nonzero word (taken as 64 bits).
 #ifdef POCL_DEVICE_ADDRESS_BITS
-#define LOWEST_BIT(m) __builtin_ctzl(m)
+#define LOWEST_BIT(m) __builtin_ctzl((ulong)(m))
 #else
-#define LOWEST_BIT(m) (63 - (int)clz((m) & (~(m) + 1)))
+#define LOWEST_BIT(m) (63 - (int)clz((ulong)(m) & (~(ulong)(m) + 1)))
 #endif
 
 __kernel void fast_hshapes(__global const uchar *edges, __global const uchar *blocks, __global uchar2 *hshapes,
