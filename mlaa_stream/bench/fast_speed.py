@@ -14,6 +14,7 @@ A benchmark, never a unit test; machines here are noisy: compare the ratios.
 from __future__ import annotations
 
 import argparse
+import os
 import time
 
 import numpy as np
@@ -86,7 +87,8 @@ def main(argv: list[str] | None = None) -> None:
     from mlaa_stream.spatial.fast_filter import FastFilter
     direct, fast, default = FastFilter(), Filter(preset="fast"), Filter(preset="default")
     try:
-        print(f"device: {fast.device_name}; median of {args.runs} frames after 3 warm-up, interleaved")
+        print(f"device: {fast.device_name}; median of {args.runs} frames after 3 warm-up, interleaved; "
+              f"load average {os.getloadavg()[0]:.1f} at the start")
         print("| frame | edge pixels (fast) | FastFilter (ms) | Filter fast (ms) | default (ms) | FastFilter / default "
               "| Filter fast / default | fast passes, device ms |")
         print("| --- | --- | --- | --- | --- | --- | --- | --- |")
@@ -97,6 +99,7 @@ def main(argv: list[str] | None = None) -> None:
             shares = ", ".join(f"{k} {v:.2f}" for k, v in passes.items())
             print(f"| {name} | {100 * share:.1f} % | {tz:.1f} | {tf:.1f} | {td:.1f} | **{tz / td:.2f}x** "
                   f"| {tf / td:.2f}x | {shares} |", flush=True)
+        print(f"load average {os.getloadavg()[0]:.1f} at the end")
     finally:
         for f in (direct, fast, default):
             f.close()
