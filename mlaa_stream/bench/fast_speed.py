@@ -5,7 +5,8 @@ Frames: the yardstick's mixed timing frame; a rendered frame (the first frame of
 tiled 3x3; left out when the rendered cache is missing and no EGL context can draw it); a frame with few
 edges (a smooth photograph, 2x upscaled, with a dozen aliased discs and bars: under 3 % of its pixels
 have a fast-preset edge); and a flat frame. For each frame three filters' `process` (host to host) run
-interleaved in one process -- FastFilter (the fast preset without host copies: Antialiaser(preset="fast")),
+interleaved in one process (wall time, and the process's CPU time, less disturbed by other processes' load)
+-- FastFilter (the fast preset without host copies: Antialiaser(preset="fast")),
 Filter(preset="fast") (staging copy, upload, download) and Filter(preset="default") -- and the median of
 `--runs` frames after warm-up is taken; then the fast passes are timed on a serialised profiling queue
 (`Filter.profile`, the copying path: upload and download included).
@@ -15,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import resource
 import time
 
 import numpy as np
@@ -67,16 +69,25 @@ def frames() -> dict[str, np.ndarray]:
     return out
 
 
-def interleaved(filters: list[Filter], frame: np.ndarray, runs: int, warmup: int = 3) -> list[float]:
-    """Median `process` milliseconds of each filter, run in turn frame after frame."""
-    times: list[list[float]] = [[] for _ in filters]
+def _cpu_s() -> float:
+    r = resource.getrusage(resource.RUSAGE_SELF)  # this process and its threads (PoCL's workers)
+    return r.ru_utime + r.ru_stime
+
+
+def interleaved(filters: list[Filter], frame: np.ndarray, runs: int, warmup: int = 3
+                ) -> tuple[list[float], list[float]]:
+    """Median `process` milliseconds of each filter, run in turn frame after frame: wall time, and CPU time
+    of the process (all threads), which other processes' load disturbs less."""
+    wall: list[list[float]] = [[] for _ in filters]
+    cpu: list[list[float]] = [[] for _ in filters]
     for k in range(warmup + runs):
-        for f, t in zip(filters, times):
-            t0 = time.perf_counter()
+        for f, tw, tc in zip(filters, wall, cpu):
+            t0, c0 = time.perf_counter(), _cpu_s()
             f.process(frame)
             if k >= warmup:
-                t.append((time.perf_counter() - t0) * 1e3)
-    return [float(np.median(t)) for t in times]
+                tw.append((time.perf_counter() - t0) * 1e3)
+                tc.append((_cpu_s() - c0) * 1e3)
+    return [float(np.median(t)) for t in wall], [float(np.median(t)) for t in cpu]
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -90,15 +101,15 @@ def main(argv: list[str] | None = None) -> None:
         print(f"device: {fast.device_name}; median of {args.runs} frames after 3 warm-up, interleaved; "
               f"load average {os.getloadavg()[0]:.1f} at the start")
         print("| frame | edge pixels (fast) | FastFilter (ms) | Filter fast (ms) | default (ms) | FastFilter / default "
-              "| Filter fast / default | fast passes, device ms |")
-        print("| --- | --- | --- | --- | --- | --- | --- | --- |")
+              "| Filter fast / default | CPU ms: FastFilter, default (ratio) | fast passes, device ms |")
+        print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
         for name, frame in frames().items():
             share = float((fast_edges_reference(frame) > 0).mean())
-            tz, tf, td = interleaved([direct, fast, default], frame, args.runs)
+            (tz, tf, td), (cz, _, cd) = interleaved([direct, fast, default], frame, args.runs)
             passes = fast.profile(frame, runs=args.runs)
             shares = ", ".join(f"{k} {v:.2f}" for k, v in passes.items())
             print(f"| {name} | {100 * share:.1f} % | {tz:.1f} | {tf:.1f} | {td:.1f} | **{tz / td:.2f}x** "
-                  f"| {tf / td:.2f}x | {shares} |", flush=True)
+                  f"| {tf / td:.2f}x | {cz:.1f}, {cd:.1f} ({cz / cd:.2f}x) | {shares} |", flush=True)
         print(f"load average {os.getloadavg()[0]:.1f} at the end")
     finally:
         for f in (direct, fast, default):
