@@ -215,7 +215,8 @@ def test_the_zero_copy_filter_keeps_frames_in_flight_apart():
 
 
 def test_a_sparse_frame_skips_blocks_without_edges_and_matches_the_reference():
-    """A few shapes on a flat ground: most 64 x 8 blocks hold no edge and every pass skips them."""
+    """A few shapes on a flat ground: most 64 x 8 blocks hold no edge and every pass skips them (and the edge
+    pass tests the flat rows 64 pixels at a time)."""
     rng = np.random.default_rng(21)
     frame = np.full((90, 330, 3), 70, np.uint8)
     yy, xx = np.mgrid[:90, :330]
@@ -223,6 +224,10 @@ def test_a_sparse_frame_skips_blocks_without_edges_and_matches_the_reference():
         cx, cy, r = rng.integers(10, 320), rng.integers(5, 85), rng.integers(3, 12)
         frame[(xx - cx) ** 2 + 3 * (yy - cy) ** 2 <= r * r] = rng.integers(0, 256, 3)
     assert_shapes_exact(frame)
+    # a boundary on a block's first row (8) between flat areas: the 64-pixel quiet test looks up there too
+    flat = np.full((20, 200, 3), 60, np.uint8)
+    flat[8:, 30:] = 190
+    assert_shapes_exact(flat)
     out = Filter(fast=True).process(frame)
     ref = F.fast_reference(frame)
     diff = np.abs(out.astype(np.int64) - ref.astype(np.int64))
