@@ -276,3 +276,14 @@ def test_sub_pixel_features_match_the_reference(subpixel):
     assert not moved[21:39, 71:89].any()
     diff = np.abs(out.astype(np.int64) - ref.astype(np.int64))
     assert diff.max() <= 1 and (diff == 0).mean() > 0.999
+
+
+def test_the_zero_copy_filter_lets_the_caller_reuse_a_submitted_frame():
+    """Filter.submit's contract: the caller may overwrite its array as soon as submit returns."""
+    from mlaa_stream.spatial.fast_filter import FastFilter
+    frame = random_blocks(8, 40, 70)
+    expected = Filter(fast=True).process(frame)
+    with FastFilter() as f:
+        pending = f.submit(frame)
+        frame[:] = 0
+        assert np.array_equal(pending.result(), expected)

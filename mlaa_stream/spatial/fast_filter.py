@@ -3,9 +3,9 @@ memory (PoCL's CPU driver).
 
 Filter.submit copies a frame into a staging array, uploads it, and downloads the result: three copies of
 the frame per call, about 2 ms of a 1080p frame here, which is most of what the fast passes cost on a frame
-with few edges (docs/fast.md). Here the kernels read the caller's array and write a new array directly
-(buffers over host memory, USE_HOST_PTR): fast_edges copies the frame into it and fast_blend writes the
-pixels it changes. Frames this cannot take (float frames, whose non-finite samples are replaced on the way
+with few edges (docs/fast.md). Here the kernels read the frame and write a new array directly (buffers over
+host memory, USE_HOST_PTR): fast_edges copies the frame into it and fast_blend writes the pixels it changes.
+`process` reads the caller's array itself; `submit` (the caller may reuse its array at once) one copy of it. Frames this cannot take (float frames, whose non-finite samples are replaced on the way
 in; arrays that are not C-contiguous in the device's sample type; other devices) go through Filter.submit.
 
     with FastFilter() as f:                  # Filter(preset="fast") options
@@ -32,14 +32,24 @@ class FastFilter(Filter):
             "Portable Computing Language" in dev.platform.name
         self._held: list = []  # (event, arrays and buffers the kernels use until it completes)
 
-    def submit(self, frame: np.ndarray) -> PendingFrame:
+    def _direct_ok(self, frame: np.ndarray) -> bool:
         fmt = frame_format(frame, self.bgr)
-        if not (self.direct and frame.dtype.kind in "ui" and frame.dtype == fmt.dtype
-                and frame.flags.c_contiguous):
-            return super().submit(frame)
+        return self.direct and frame.dtype.kind in "ui" and frame.dtype == fmt.dtype and frame.flags.c_contiguous
+
+    def process(self, frame: np.ndarray) -> np.ndarray:
+        """Filter one frame: the kernels read `frame` itself (nothing else runs on it until this returns)."""
+        return self._enqueue_direct(frame).result() if self._direct_ok(frame) else super().process(frame)
+
+    def submit(self, frame: np.ndarray) -> PendingFrame:
+        """As Filter.submit: the caller may change `frame` as soon as this returns, so the kernels read a copy
+        (one copy instead of Filter's staging copy, upload and download)."""
+        return self._enqueue_direct(frame.copy()) if self._direct_ok(frame) else super().submit(frame)
+
+    def _enqueue_direct(self, frame: np.ndarray) -> PendingFrame:
+        """Enqueue the passes on `frame` and a new output array, both wrapped as device buffers."""
         mf = cl.mem_flags
         with self._lock:
-            self._prepare(fmt)
+            self._prepare(frame_format(frame, self.bgr))
             out = np.empty_like(frame)
             src = cl.Buffer(self.context.ctx, mf.READ_ONLY | mf.USE_HOST_PTR, hostbuf=frame)
             dst = cl.Buffer(self.context.ctx, mf.WRITE_ONLY | mf.USE_HOST_PTR, hostbuf=out)
