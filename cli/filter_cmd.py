@@ -244,10 +244,11 @@ def _job_for(kind: str, output: str) -> type:
               help="Draw antialiased polylines from a JSON/GeoJSON file on every frame.")
 @click.option("--cluster", default=None, metavar="ADDRESS",
               help="Run on a Dask cluster: a scheduler address (tcp://host:8786) or local:N (N worker "
-                   "processes here). Folders and frame patterns; each worker needs the package and an "
-                   "OpenCL device (docs/cluster.md).")
+                   "processes here). Videos, folders and frame patterns (with --temporal each chunk first "
+                   "runs the frames before it, unwritten); each worker needs the package and an OpenCL "
+                   "device (docs/cluster.md).")
 @click.option("--chunk-frames", type=click.IntRange(min=1), default=16, show_default=True,
-              help="Frames per cluster task.")
+              help="Frames per cluster task (with --temporal: several times the warm-up, e.g. 64).")
 @click.option("--progress", "progress_path", default=None, metavar="FILE|-",
               help="Also write machine-readable progress there (- is stdout): key=value lines (frame, "
                    "total_frames, fps, elapsed_s, left_s), each block ended by progress=continue|end.")
@@ -353,13 +354,13 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
         if temporal.wanted and kind == "image":
             con.info("a single image: spatial antialiasing only (temporal needs a sequence)")
             temporal.enabled, temporal.show, temporal.stats_path = False, None, None
-        if temporal.wanted and cluster is not None:
-            raise Usage("--temporal is not available with --cluster yet (chunks would need a warm-up)")
+        if cluster is not None and (temporal.show or temporal.stats_path):
+            raise Usage("--stats and --show are not available with --cluster (each worker has its own stage)")
         job = _job_for(kind, output)
         runner = job(input_path, output, kind, con, overwrite=overwrite, resume=resume,
                      frames=frames, codec=codec, container=container, audio=audio,
                      progress_path=progress_path, crf=crf, start=start, end=end, cluster=cluster,
-                     chunk_frames=chunk_frames,
+                     chunk_frames=chunk_frames, temporal_spec=temporal.spec() if cluster else None,
                      encoder_preset=encoder_preset, pix_fmt=pix_fmt, rate=rate,
                      video_backend=video_backend, filter_kwargs=kwargs)
         runner.prepare()
@@ -391,7 +392,7 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
             return EXIT_USAGE if isinstance(exc, ValueError) else EXIT_FAILED
         con.info(f"device: {filt.device_name}")
         times = StageTimes()
-        stage = temporal.stage(filt) if kind != "image" else None
+        stage = temporal.stage(filt) if kind != "image" and cluster is None else None  # workers: their own
         if stage is not None and kind != "video":
             stage = _SequenceTemporal(stage, runner, con)
         try:
@@ -433,16 +434,15 @@ class TemporalOptions:
 
     def stage(self, filt):
         """The temporal stage sharing the filter's OpenCL context, or None when off."""
+        spec = self.spec()
+        return None if spec is None else spec.stage(filt.context, show=self.show)
+
+    def spec(self):
+        """The settings as a TemporalSpec (what the cluster's workers get), or None when off."""
         if self.enabled is False or (self.enabled is None and not (self.show or self.stats_path)):
             return None  # off unless asked for; --show history and --stats imply it
-        if self.method == "blend":
-            from mlaa_stream.temporal.stage import TemporalStage
-            kw = {} if self.k is None else {"k": self.k}
-            return TemporalStage(context=filt.context, mode=self.mode, bgr=False, show=self.show, **kw)
-        from mlaa_stream.temporal.tss import DEFAULT_FRAMES, TSSStage, TSSThenBlend
-        cls = TSSThenBlend if self.method == "tss+blend" else TSSStage
-        return cls(context=filt.context, frames=self.frames or DEFAULT_FRAMES, mode=self.mode,
-                   bgr=False, show=self.show)
+        from mlaa_stream.cluster.temporal import TemporalSpec
+        return TemporalSpec(self.method, self.frames, self.mode, self.k)
 
     def finish(self, stage, con: "Console") -> None:
         """Write --stats and say which motion models were used."""
@@ -685,7 +685,7 @@ class _ImageJob(_Job):
                 report = run_chunks(client, self.plan, self.opts["filter_kwargs"],
                                     overwrite=self.opts["overwrite"], strict=self.strict,
                                     chunk_frames=self.opts["chunk_frames"], on_frames=progress.update,
-                                    say=lambda msg: (progress.clear(), self.con.error(msg)))
+                                    temporal=self.opts.get("temporal_spec"), say=lambda msg: (progress.clear(), self.con.error(msg)))
         except ClusterAddressError as exc:
             progress.close()
             raise Usage(str(exc)) from exc
@@ -810,7 +810,8 @@ class _VideoJob(_Job):
                     client, self.input, self.output, codec=o["codec"], crf=o["crf"],
                     encoder_preset=o["encoder_preset"], pix_fmt=o["pix_fmt"], overwrite=o["overwrite"],
                     audio=o["audio"] != "none", on_frames=progress.update,
-                    segment_seconds=o["chunk_frames"] / float(self.info.fps or 25), **o["filter_kwargs"])
+                    segment_seconds=o["chunk_frames"] / float(self.info.fps or 25),
+                    temporal=o.get("temporal_spec"), warn=self.con.warn, **o["filter_kwargs"])
         except (ClusterVideoError, OSError) as exc:
             self.con.error(str(exc))
             self.con.error(f"{self.output}: not written")

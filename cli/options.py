@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import logging
+import os
 
 import click
 
@@ -21,8 +22,12 @@ def configure_logging(verbose: int, quiet: bool) -> None:
     level = logging.ERROR if quiet else (logging.DEBUG if verbose > 1 else
                                          logging.INFO if verbose else logging.WARNING)
     logging.basicConfig(level=level, format="mlaa-stream: %(message)s")
-    # Dask's scheduler and workers (--cluster) log every connection at INFO: only with -vv
-    logging.getLogger("distributed").setLevel(logging.DEBUG if verbose > 1 else logging.WARNING)
+    # Dask's scheduler and workers (--cluster) log every connection at INFO: only with -vv. Importing
+    # distributed sets its loggers from Dask's config (INFO), so the level goes in there too (the
+    # environment also reaches the worker processes); distributed is imported only by --cluster.
+    dask_level = "debug" if verbose > 1 else "error" if quiet else "warning"
+    os.environ.setdefault("DASK_LOGGING__DISTRIBUTED", dask_level)  # a user's own setting wins
+    logging.getLogger("distributed").setLevel(dask_level.upper())
 
 
 class CommandError(click.ClickException):

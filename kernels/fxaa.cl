@@ -29,10 +29,13 @@
 
 __constant float fxaa_steps[FXAA_PS] = { FXAA_STEPS };
 
+// v clamped to [0, hi] (inline: PoCL calls the built-in clamp out of line).
+inline int clamp_to(int v, int hi) { return v < 0 ? 0 : (v > hi ? hi : v); }
+
 // Luma of pixel (x, y), clamped to the frame: Rec. 601 weights on the stored (gamma) values.
 inline float px_luma(__global const PIXEL_T *img, int x, int y, int w, int h)
 {
-    float4 c = load_px(img, IDX(clamp(x, 0, w - 1), clamp(y, 0, h - 1), w));
+    float4 c = load_px(img, IDX(clamp_to(x, w - 1), clamp_to(y, h - 1), w));
     float l = 0.299f * c.x + 0.587f * c.y + 0.114f * c.z;
 #if LINEAR_INPUT
     l = sqrt(fmax(l, 0.0f));
@@ -57,7 +60,7 @@ inline float luma_at(__global const PIXEL_T *img, float2 p, int w, int h)
 inline float3 blend_rgb(__global const PIXEL_T *img, __global const float *luts, int x, int y,
                         int w, int h)
 {
-    float4 c = load_px(img, IDX(clamp(x, 0, w - 1), clamp(y, 0, h - 1), w));
+    float4 c = load_px(img, IDX(clamp_to(x, w - 1), clamp_to(y, h - 1), w));
 #if DECODE
     return (float3)(srgb_to_linear(luts, c.x), srgb_to_linear(luts, c.y), srgb_to_linear(luts, c.z));
 #else
@@ -65,9 +68,9 @@ inline float3 blend_rgb(__global const PIXEL_T *img, __global const float *luts,
 #endif
 }
 
-// Bilinear colour at pixel-space position p, mixed in linear light when DECODE.
-inline float3 colour_at(__global const PIXEL_T *img, __global const float *luts, float2 p,
-                        int w, int h)
+// Bilinear colour at pixel-space position p in mix space (linear light when DECODE).
+inline float3 colour_at_mix(__global const PIXEL_T *img, __global const float *luts, float2 p,
+                            int w, int h)
 {
     float fx = p.x - 0.5f, fy = p.y - 0.5f;
     float x0f = floor(fx), y0f = floor(fy);
@@ -77,7 +80,12 @@ inline float3 colour_at(__global const PIXEL_T *img, __global const float *luts,
     float3 c01 = blend_rgb(img, luts, x0, y0 + 1, w, h), c11 = blend_rgb(img, luts, x0 + 1, y0 + 1, w, h);
     float3 top = c00 + (c10 - c00) * tx;
     float3 bot = c01 + (c11 - c01) * tx;
-    float3 c = top + (bot - top) * ty;
+    return top + (bot - top) * ty;
+}
+
+// Mix space -> stored (sRGB-encoded when DECODE).
+inline float3 fxaa_encode(__global const float *luts, float3 c)
+{
 #if DECODE
     __global const float *enc = luts + 2 * (LUT_SIZE + 1);
     c = (float3)(lut_read(enc, c.x), lut_read(enc, c.y), lut_read(enc, c.z));
@@ -85,14 +93,22 @@ inline float3 colour_at(__global const PIXEL_T *img, __global const float *luts,
     return c;
 }
 
-__kernel void fxaa(__global const PIXEL_T *src, __global const float *luts,
-                   __global PIXEL_T *dst, int w, int h)
+// FXAA 3.11 at pixel (x, y): 0 where the local-contrast early exit keeps the pixel, else 1 with *out its
+// new colour in mix space (linear light when DECODE).
+// FXAA's local-contrast early exit at (x, y): 1 where the pixel keeps its colour (fxaa_pixel returns 0).
+inline int fxaa_keeps(__global const PIXEL_T *src, int x, int y, int w, int h)
 {
-    int x = get_global_id(0), y = get_global_id(1);
-    if (x >= w || y >= h)
-        return;
-    int i = IDX(x, y, w);
-    float4 rgbyM = load_px(src, i);
+    const float lumaM = px_luma(src, x, y, w, h), lumaS = px_luma(src, x, y + 1, w, h);
+    const float lumaE = px_luma(src, x + 1, y, w, h), lumaN = px_luma(src, x, y - 1, w, h);
+    const float lumaW = px_luma(src, x - 1, y, w, h);
+    const float rangeMax = fmax(fmax(lumaN, lumaW), fmax(lumaE, fmax(lumaS, lumaM)));
+    const float rangeMin = fmin(fmin(lumaN, lumaW), fmin(lumaE, fmin(lumaS, lumaM)));
+    return rangeMax - rangeMin < fmax(FXAA_EDGE_THRESHOLD_MIN, rangeMax * FXAA_EDGE_THRESHOLD);
+}
+
+inline int fxaa_pixel(__global const PIXEL_T *src, __global const float *luts, int x, int y, int w, int h,
+                      float3 *out)
+{
     float lumaM = px_luma(src, x, y, w, h);
     float lumaS = px_luma(src, x, y + 1, w, h);
     float lumaE = px_luma(src, x + 1, y, w, h);
@@ -107,10 +123,8 @@ __kernel void fxaa(__global const PIXEL_T *src, __global const float *luts,
     float rangeMaxScaled = rangeMax * FXAA_EDGE_THRESHOLD;
     float range = rangeMax - rangeMin;
     float rangeMaxClamped = fmax(FXAA_EDGE_THRESHOLD_MIN, rangeMaxScaled);
-    if (range < rangeMaxClamped) {
-        store_px(dst, i, rgbyM);
-        return;
-    }
+    if (range < rangeMaxClamped)
+        return 0;
 
     float lumaNW = px_luma(src, x - 1, y - 1, w, h);
     float lumaSE = px_luma(src, x + 1, y + 1, w, h);
@@ -225,6 +239,20 @@ __kernel void fxaa(__global const PIXEL_T *src, __global const float *luts,
     else
         posM.y += pixelOffsetSubpix * lengthSign;
 
-    float3 c = colour_at(src, luts, posM, w, h);
-    store_px(dst, i, (float4)(c, rgbyM.w));
+    *out = colour_at_mix(src, luts, posM, w, h);
+    return 1;
+}
+
+__kernel void fxaa(__global const PIXEL_T *src, __global const float *luts,
+                   __global PIXEL_T *dst, int w, int h)
+{
+    int x = get_global_id(0), y = get_global_id(1);
+    if (x >= w || y >= h)
+        return;
+    int i = IDX(x, y, w);
+    float4 rgbyM = load_px(src, i);
+    float3 c;
+    if (fxaa_pixel(src, luts, x, y, w, h, &c))
+        rgbyM.xyz = fxaa_encode(luts, c);
+    store_px(dst, i, rgbyM);
 }

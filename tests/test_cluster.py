@@ -146,3 +146,16 @@ def test_a_video_on_the_command_line_cluster(clip60, tmp_path):
     assert r.exit_code == 0, r.output
     frames, streams = decoded(tmp_path / "o.mp4")
     assert len(frames) == 60 and streams == [("video", "h264"), ("audio", "aac")]
+
+
+def test_a_joined_video_keeps_chapters_and_attachments(client, tmp_path):
+    from mlaa_stream.cluster.video import filter_video_on_cluster
+    from test_video_streams import FONT, attachments, chapters, make_chaptered
+
+    make_chaptered(str(tmp_path / "c.mkv"))
+    warnings = []
+    n = filter_video_on_cluster(client, str(tmp_path / "c.mkv"), str(tmp_path / "o.mkv"), codec="ffv1",
+                                segment_seconds=0.25, warn=warnings.append)
+    assert n == 24 and warnings == []
+    assert chapters(tmp_path / "o.mkv") == [(0.0, 0.5, "One"), (0.5, 1.0, "Two")]
+    assert attachments(tmp_path / "o.mkv") == [("Font One.ttf", "application/x-truetype-font", FONT)]

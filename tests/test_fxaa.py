@@ -12,7 +12,7 @@ import pytest
 
 from mlaa_stream.yardstick import scenes as S
 from mlaa_stream.device.colour import linear_to_srgb
-from mlaa_stream.yardstick.fxaa import FXAA, QUALITY_STEPS, fxaa_reference
+from mlaa_stream.spatial.fxaa import FXAA, QUALITY_STEPS, fxaa_reference
 
 
 @pytest.fixture(scope="module")

@@ -187,7 +187,7 @@ def test_truth_passes_every_check(scenes):
 
 def test_fxaa_fails_where_expected(scenes):
     """The FXAA baseline blurs texture and text: the bounds catch it (documents the baseline)."""
-    from mlaa_stream.yardstick.fxaa import FXAA
+    from mlaa_stream.spatial.fxaa import FXAA
 
     with FXAA() as f:
         failed = _failed_checks(f.process, scenes)

@@ -116,3 +116,69 @@ def test_the_codec_family_follows_the_source(tmp_path):
     assert streams(tmp_path / "out.mkv")[0][1] == "hevc"
     assert run(src, "-o", tmp_path / "h264.mkv", "--codec", "libx264").exit_code == 0
     assert streams(tmp_path / "h264.mkv")[0][1] == "h264"
+
+
+FONT = b"\x00\x01\x00\x00" + bytes(range(256)) * 4  # stands for a TrueType font: bytes copied as they are
+
+
+def make_chaptered(path: str, frames: int = 24) -> None:
+    """An MKV with two chapters (0-0.5 s "One", 0.5-1 s "Two") and a font attachment, by PyAV."""
+    from fractions import Fraction
+
+    if not hasattr(av.container.OutputContainer, "set_chapters") or \
+            not hasattr(av.container.OutputContainer, "add_attachment"):
+        pytest.skip(f"PyAV {av.__version__} cannot write chapters and attachments (18 can)")
+
+    with av.open(path, "w") as out:
+        v = out.add_stream("ffv1", rate=24)
+        v.width, v.height, v.pix_fmt = 32, 16, "yuv444p"
+        out.add_attachment("Font One.ttf", "application/x-truetype-font", FONT)
+        out.set_chapters([{"id": k + 1, "start": 12 * k, "end": 12 * k + 12, "time_base": Fraction(1, 24),
+                           "metadata": {"title": t}} for k, t in enumerate(("One", "Two"))])
+        for i in range(frames):
+            f = av.VideoFrame.from_ndarray(np.full((16, 32, 3), 10 + i * 9, np.uint8), format="rgb24")
+            f.pts, f.time_base = i, Fraction(1, 24)
+            for p in v.encode(f):
+                out.mux(p)
+        for p in v.encode():
+            out.mux(p)
+
+
+def chapters(path) -> list[tuple[float, float, str]]:
+    with av.open(str(path)) as c:
+        return [(round(float(ch["start"] * ch["time_base"]), 3), round(float(ch["end"] * ch["time_base"]), 3),
+                 ch["metadata"].get("title")) for ch in c.chapters()]
+
+
+def attachments(path) -> list[tuple[str, str, bytes]]:
+    with av.open(str(path)) as c:
+        return [(s.name, s.mimetype, bytes(s.data)) for s in c.streams if s.type == "attachment"]
+
+
+@pytest.fixture(scope="module")
+def chaptered(tmp_path_factory):
+    path = str(tmp_path_factory.mktemp("chap") / "chap.mkv")
+    make_chaptered(path)
+    assert chapters(path) == [(0.0, 0.5, "One"), (0.5, 1.0, "Two")]
+    assert attachments(path) == [("Font One.ttf", "application/x-truetype-font", FONT)]
+    return path
+
+
+def test_chapters_and_attachments_are_kept(chaptered, tmp_path):
+    r = run(chaptered, "-o", tmp_path / "o.mkv")
+    assert r.exit_code == 0, r.output
+    assert chapters(tmp_path / "o.mkv") == [(0.0, 0.5, "One"), (0.5, 1.0, "Two")]
+    assert attachments(tmp_path / "o.mkv") == [("Font One.ttf", "application/x-truetype-font", FONT)]
+    assert "not kept" not in r.output
+
+
+def test_trimmed_chapters_shift_and_mp4_names_the_attachments_it_drops(chaptered, tmp_path):
+    r = run(chaptered, "-o", tmp_path / "o.mkv", "--start", "0.25", "--end", "0.75")
+    assert r.exit_code == 0, r.output
+    assert chapters(tmp_path / "o.mkv") == [(0.0, 0.25, "One"), (0.25, 0.5, "Two")]
+    r = run(chaptered, "-o", tmp_path / "o.mp4", "--end", "12f")
+    assert r.exit_code == 0, r.output
+    assert chapters(tmp_path / "o.mp4") == [(0.0, 0.5, "One")]  # the second starts at the end: left out
+    assert attachments(tmp_path / "o.mp4") == []
+    assert "o.mp4: 1 attachment (Font One.ttf) not kept: mp4 cannot hold them" in r.output
+    assert "attachment stream 1" not in r.output  # named once

@@ -18,8 +18,8 @@ from typing import Callable, Protocol
 import numpy as np
 
 from mlaa_stream.yardstick import metrics as M
-from mlaa_stream.yardstick.fxaa import FXAA
 from mlaa_stream.spatial.fast_filter import FastFilter
+from mlaa_stream.spatial.fxaa import FXAA
 from mlaa_stream.spatial.filter import PRESETS, Filter
 from mlaa_stream.yardstick.scenes import Scene, generate_scenes, timing_frame
 

@@ -10,7 +10,9 @@ and writes its frames through the same pipeline as one machine (temporary name, 
 own OpenCL device and one Filter per worker process. A task that fails is retried once; a worker that dies
 has its chunks run again elsewhere (an output its first run completed is kept, not written twice); the
 temporary file a killed worker left behind is removed at the end. Outputs equal the single-machine ones
-bit for bit (the spatial filter reads nothing across frames).
+bit for bit (the spatial filter reads nothing across frames). With the temporal stage (`temporal=`, a
+TemporalSpec) each chunk first runs the frames before it through the filter and the stage, unwritten
+(warm-up: mlaa_stream/cluster/temporal.py says how many and what equality that gives).
 """
 from __future__ import annotations
 
@@ -35,6 +37,8 @@ class Chunk:
 
     index: int
     files: tuple[FrameFile, ...]
+    warmup: tuple[FrameFile, ...] = ()  # frames before it, the last ones run through the temporal stage unwritten
+    starts_stream: bool = True  # `warmup` begins at the job's first frame
 
     @property
     def label(self) -> str:
@@ -53,10 +57,12 @@ class ChunkResult:
     warnings: list[str] = field(default_factory=list)
 
 
-def plan_chunks(files: list[FrameFile], chunk_frames: int = CHUNK_FRAMES) -> list[Chunk]:
+def plan_chunks(files: list[FrameFile], chunk_frames: int = CHUNK_FRAMES, warmup: int = 0) -> list[Chunk]:
+    """Consecutive chunks of `chunk_frames`, each with up to `warmup` frames before it."""
     if chunk_frames < 1:
         raise ValueError(f"chunk_frames: expected >= 1, got {chunk_frames}")
-    return [Chunk(k, tuple(files[i:i + chunk_frames])) for k, i in enumerate(range(0, len(files), chunk_frames))]
+    return [Chunk(k, tuple(files[i:i + chunk_frames]), tuple(files[max(0, i - warmup):i]), i <= warmup)
+            for k, i in enumerate(range(0, len(files), chunk_frames))]
 
 
 _worker_filters: dict[tuple, object] = {}
@@ -76,10 +82,11 @@ def _worker_filter(kwargs: dict):
 
 
 def filter_chunk(chunk: Chunk, filter_kwargs: dict, overwrite: bool, strict: bool,
-                 like: tuple | None = None) -> ChunkResult:
+                 like: tuple | None = None, temporal=None) -> ChunkResult:
     """Run on a worker: read, filter and write the chunk's frames. Outputs a previous run of this chunk
     completed are kept (a rerun after a worker died). Raises (and the task is retried) where a sequence
-    would stop on one machine."""
+    would stop on one machine. `temporal` (a TemporalSpec): a new stage runs over the chunk's warm-up
+    frames and then all its frames (kept outputs too: the history must not skip them)."""
     from mlaa_stream.pipeline import PipelineError, run_pipeline
 
     result = ChunkResult(chunk.index)
@@ -90,36 +97,93 @@ def filter_chunk(chunk: Chunk, filter_kwargs: dict, overwrite: bool, strict: boo
             result.skipped.append(ff.dst)
         else:
             todo.append(ff)
-    report = Report()
     linear_kwargs = dict(filter_kwargs, linear_input=True)
-    filt = FilterSet(_worker_filter(filter_kwargs), lambda: _worker_filter(linear_kwargs))
-    try:
-        run_pipeline(image_source(todo, report, strict=strict, like=like), filt,
-                     image_sink(report, overwrite=True, strict=strict))
-    except PipelineError as exc:
-        ff = exc.meta[0] if exc.meta else (todo[exc.index] if 0 <= exc.index < len(todo) else None)
-        raise ClusterJobError(f"{chunk.label}: {ff.label if ff else f'frame {exc.index}'}: {exc.stage} failed: "
-                              f"{exc.cause}") from exc
+    encoded = _worker_filter(filter_kwargs)
+    filt = FilterSet(encoded, lambda: _worker_filter(linear_kwargs))
+    w = temporal.warmup if temporal is not None else 0
+    while True:
+        report = Report()
+        warmup = chunk.warmup[max(0, len(chunk.warmup) - w):] if w else ()
+        sink = image_sink(report, overwrite=True, strict=strict)
+        stage = hook = None
+        read = todo
+        if temporal is not None:
+            from mlaa_stream.cluster.temporal import WarmedStage
+            stage = WarmedStage(temporal.stage(encoded.context), temporal.warmup, can_extend=w < len(chunk.warmup),
+                                from_start=len(warmup) == len(chunk.warmup) and chunk.starts_stream)
+            read = list(warmup) + list(chunk.files)
+            hook, source, sink = _with_temporal(stage, read, set(warmup), report, strict, like, set(todo), sink)
+        else:
+            source = image_source(todo, report, strict=strict, like=like)
+        try:
+            run_pipeline(source, filt, sink, temporal=hook)
+            break
+        except PipelineError as exc:
+            from mlaa_stream.cluster.temporal import ShortWarmup
+            if isinstance(exc.cause, ShortWarmup):  # held frames before the chunk: read further back
+                w = min(len(chunk.warmup), w + max(exc.cause.missing, w))
+                continue
+            ff = exc.meta[0] if exc.meta else (read[exc.index] if 0 <= exc.index < len(read) else None)
+            raise ClusterJobError(f"{chunk.label}: {ff.label if ff else f'frame {exc.index}'}: {exc.stage} failed: "
+                                  f"{exc.cause}") from exc
+        finally:
+            if stage is not None:
+                stage.close()
+    if stage is not None and stage.short:
+        report.warn(f"{chunk.label}: the {len(warmup)} frames before it hold {stage.changes} changes (held "
+                    f"frames), {temporal.warmup} are needed: its first outputs may differ from one machine's")
+    if warmup:  # an unreadable warm-up frame is its own chunk's failure
+        report.failed = [m for m in report.failed if not any(ff.src in m for ff in warmup)]
     result.written, result.failed, result.warnings = report.written, report.failed, report.warnings
     return result
 
 
+def _with_temporal(stage, files: list[FrameFile], warm: set, report: Report, strict: bool, like, write: set,
+                   sink):
+    """(temporal hook, source, sink) for a chunk read with its warm-up (`warm`): the stage (a WarmedStage)
+    is called with the frame number (a folder: the position read), as on one machine
+    (cli/filter_cmd._SequenceTemporal), and only the frames in `write` reach the sink."""
+    read_order: dict[int, FrameFile] = {}
+
+    def source():
+        inner = image_source(files, report, strict=strict, like=like)
+        try:
+            for position, item in enumerate(inner):
+                read_order[position] = item.meta[0]
+                yield item
+        finally:
+            inner.close()
+
+    def hook(frame_in, frame_out, index: int):
+        ff = read_order.pop(index, None)
+        number = index if ff is None or ff.number is None else ff.number
+        return stage(frame_in, frame_out, number, ff in warm)
+
+    def only_written(item) -> None:
+        if item.meta[0] in write:
+            sink(item)
+
+    return hook, source(), only_written
+
+
 def run_chunks(client, files: list[FrameFile], filter_kwargs: dict, *, overwrite: bool, strict: bool,
                chunk_frames: int = CHUNK_FRAMES, on_frames: Callable[[int], None] | None = None,
-               say: Callable[[str], None] | None = None) -> Report:
+               say: Callable[[str], None] | None = None, temporal=None) -> Report:
     """Filter `files` on the cluster behind `client`; returns what happened to each file. Progress:
-    `on_frames(done)` after each chunk. Raises ClusterJobError naming the chunk that failed twice."""
+    `on_frames(done)` after each chunk. Raises ClusterJobError naming the chunk that failed twice.
+    `temporal`: a TemporalSpec (mlaa_stream/cluster/temporal.py), or None for the spatial filter only."""
     from dask.distributed import as_completed
 
     say = say or (lambda msg: None)
     report = Report(say=say)
-    chunks = plan_chunks(files, chunk_frames)
+    from mlaa_stream.cluster.temporal import MAX_WARMUP_FACTOR
+    chunks = plan_chunks(files, chunk_frames, MAX_WARMUP_FACTOR * temporal.warmup if temporal is not None else 0)
     like = None
     if strict and files:
         from mlaa_stream.io.images import read_image
         first = read_image(files[0].src)
         like = ((first.pixels.shape, first.pixels.dtype), files[0])
-    futures = {client.submit(filter_chunk, c, filter_kwargs, overwrite, strict, like, retries=1, pure=False,
+    futures = {client.submit(filter_chunk, c, filter_kwargs, overwrite, strict, like, temporal, retries=1, pure=False,
                              key=f"mlaa-chunk-{c.index}-{os.getpid()}-{id(files)}"): c for c in chunks}
     done = 0
     failure: BaseException | None = None
@@ -155,10 +219,11 @@ def run_chunks(client, files: list[FrameFile], filter_kwargs: dict, *, overwrite
 
 def filter_on_cluster(client, input_path: str, output: str, *, preset: str | None = None,
                       overwrite: bool = False, resume: bool = False, chunk_frames: int = CHUNK_FRAMES,
-                      **filter_kwargs) -> Report:
+                      temporal=None, **filter_kwargs) -> Report:
     """The Python API: filter a folder or a printf frame pattern into `output` (a folder or a pattern) on
     the cluster behind `client` (a dask.distributed.Client you made). `resume` skips complete outputs;
-    without it or `overwrite`, an existing output is an error."""
+    without it or `overwrite`, an existing output is an error. `temporal`: a TemporalSpec
+    (mlaa_stream.cluster.temporal) turns the temporal stage on, with a warm-up per chunk."""
     from mlaa_stream.io.sequence import (expand_pattern, is_pattern, list_folder, plan_images)
     from mlaa_stream.spatial.filter import PRESETS
 
@@ -181,4 +246,5 @@ def filter_on_cluster(client, input_path: str, output: str, *, preset: str | Non
         plan = [f for f in plan if f not in existing or check_complete(f.dst, *image_shape(f.src), decode=False)]
     elif existing and not overwrite:
         raise FileExistsError(f"{existing[0].dst}: exists; pass overwrite=True or resume=True")
-    return run_chunks(client, plan, kwargs, overwrite=overwrite, strict=strict, chunk_frames=chunk_frames)
+    return run_chunks(client, plan, kwargs, overwrite=overwrite, strict=strict, chunk_frames=chunk_frames,
+                      temporal=temporal)

@@ -10,7 +10,9 @@ A range starts at any frame: its worker seeks to the keyframe before it and deco
 to half a frame). Segments are encoded without B-frames (x264/x265: `bf=0`), so that the joined stream's
 decoding order stays monotonic across segment boundaries. Containers: whatever PyAV writes and can
 remux (MKV, MP4, MOV, NUT); the codec must be one whose packets stand alone after a keyframe (all FFmpeg
-video encoders used here).
+video encoders used here). With the temporal stage (`temporal=`, a TemporalSpec) a worker starts its
+decoding `warmup` frames before its range and runs them through the filter and the stage unwritten
+(mlaa_stream/cluster/temporal.py).
 """
 from __future__ import annotations
 
@@ -53,38 +55,93 @@ def plan_segments(duration: float, fps: Fraction | None, output: str, seconds: f
 
 
 def encode_segment(source: str, segment: Segment, filter_kwargs: dict, codec: str | None, crf: int,
-                   encoder_preset: str, pix_fmt: str | None) -> int:
+                   encoder_preset: str, pix_fmt: str | None, temporal=None) -> int:
     """Run on a worker: decode the segment's frames, filter them, encode them into segment.path (video only,
-    timestamps from 0 at segment.start). Returns the frames written."""
+    timestamps from 0 at segment.start). Returns the frames written. `temporal` (a TemporalSpec): a new
+    stage runs over the `temporal.warmup` frames before the segment (decoded, filtered, not written; more
+    where frames are held: WarmedStage) and then over the segment's."""
     from mlaa_stream.cluster.frames import _worker_filter
-    from mlaa_stream.io.video import VideoWriter, probe_video, read_video
-    from mlaa_stream.pipeline import run_pipeline
+    from mlaa_stream.cluster.temporal import MAX_WARMUP_FACTOR, ShortWarmup, WarmedStage
+    from mlaa_stream.io.video import VideoWriter, probe_video
+    from mlaa_stream.pipeline import PipelineError
 
     info = probe_video(source)
     filt = _worker_filter(filter_kwargs)
-    writer = VideoWriter(segment.path, info, codec=codec, crf=crf, preset=encoder_preset, pix_fmt=pix_fmt,
-                         audio="none", overwrite=True, offset=segment.start, container_format="matroska",
-                         extra_options={"bf": "0"})
-    try:
-        n = run_pipeline(read_video(info, start=segment.start or None, end=segment.end), filt,
-                         lambda item: writer.write(item.frame, item.meta))
-        writer.commit()
-    except BaseException:
-        writer.abort()
-        raise
-    return n
+    frame = 1.0 / float(info.fps or 25)
+    w = temporal.warmup if temporal is not None else 0
+    while True:
+        start = max(0.0, segment.start - w * frame)
+        stage = None
+        if temporal is not None:
+            stage = WarmedStage(temporal.stage(filt.context), temporal.warmup, from_start=start < frame / 2,
+                                can_extend=start >= frame / 2 and w < MAX_WARMUP_FACTOR * temporal.warmup)
+        writer = VideoWriter(segment.path, info, codec=codec, crf=crf, preset=encoder_preset, pix_fmt=pix_fmt,
+                             audio="none", overwrite=True, offset=segment.start, container_format="matroska",
+                             extra_options={"bf": "0"}, copy_extras=False)
+        try:
+            n = _run_segment(info, segment, start if start >= frame / 2 else None, filt, writer, stage)
+            writer.commit()
+            return n
+        except PipelineError as exc:
+            writer.abort()
+            if isinstance(exc.cause, ShortWarmup):  # held frames before the segment: decode from further back
+                w += max(exc.cause.missing, w)
+                continue
+            raise
+        except BaseException:
+            writer.abort()
+            raise
+        finally:
+            if stage is not None:
+                stage.close()
 
 
-def join_segments(segments: list[Segment], info, output: str, *, overwrite: bool, audio: bool = True) -> None:
+def _run_segment(info, segment: Segment, start: float | None, filt, writer, stage) -> int:
+    """Decode from `start`, filter, run the temporal stage (if any) and write the frames of `segment`
+    (those before it are its warm-up). Returns the frames written."""
+    from mlaa_stream.io.video import read_video
+    from mlaa_stream.pipeline import run_pipeline
+
+    first = segment.start - 0.5 / float(info.fps or 25)  # a frame belongs to the range by its timestamp
+    warm: dict[int, bool] = {}
+    written = [0]
+
+    def is_warm(item) -> bool:
+        ft = item.meta
+        return ft.pts is not None and bool(ft.time_base) and float(ft.pts * ft.time_base) < first
+
+    def source():
+        inner = read_video(info, start=start, end=segment.end)
+        try:
+            for position, item in enumerate(inner):
+                warm[position] = is_warm(item)
+                yield item
+        finally:
+            inner.close()
+
+    def hook(frame_in, frame_out, index: int):
+        return stage(frame_in, frame_out, index, warm.pop(index, False))
+
+    def sink(item) -> None:
+        if not is_warm(item):
+            writer.write(item.frame, item.meta)
+            written[0] += 1
+
+    run_pipeline(source(), filt, sink, temporal=hook if stage is not None else None)
+    return written[0]
+
+
+def join_segments(segments: list[Segment], info, output: str, *, overwrite: bool, audio: bool = True) -> list[str]:
     """Concatenate the segments' video packets in order (shifted by each segment's start) into `output`,
-    with the source's audio and subtitle streams, tags and rotation; written under a temporary name."""
+    with the source's audio and subtitle streams (unless `audio` is False), tags, rotation, chapters and
+    attachments; written under a temporary name. Returns warnings naming what was not kept."""
     import av
 
-    from mlaa_stream.io.video import _copy_tags
+    from mlaa_stream.io.video import _copy_tags, copy_chapters_and_attachments
 
     tmp = temp_path_for(output)
     first = av.open(segments[0].path)
-    src = av.open(info.path) if audio else None
+    src = av.open(info.path)
     try:
         out = av.open(tmp, "w")
         vin = first.streams.video[0]
@@ -92,9 +149,10 @@ def join_segments(segments: list[Segment], info, output: str, *, overwrite: bool
         if info.rotation:
             vout.set_display_rotation(info.rotation)
         copies = {}
-        if src is not None:
-            _copy_tags(src.metadata, out.metadata)
-            _copy_tags(src.streams.video[0].metadata, vout.metadata)
+        _copy_tags(src.metadata, out.metadata)
+        _copy_tags(src.streams.video[0].metadata, vout.metadata)
+        _kept, warnings = copy_chapters_and_attachments(src, out)
+        if audio:
             for s in src.streams:
                 if s.type in ("audio", "subtitle"):
                     o = out.add_stream_from_template(s)
@@ -117,7 +175,7 @@ def join_segments(segments: list[Segment], info, output: str, *, overwrite: bool
                         yield float(pkt.dts * pkt.time_base), pkt
 
         def copied_packets():
-            if src is None or not copies:
+            if not copies:
                 return
             for pkt in src.demux(*[src.streams[i] for i in copies]):
                 if pkt.dts is None:
@@ -134,16 +192,18 @@ def join_segments(segments: list[Segment], info, output: str, *, overwrite: bool
         raise
     finally:
         first.close()
-        if src is not None:
-            src.close()
+        src.close()
+    return [f"{output}: {w}" for w in warnings]
 
 
 def filter_video_on_cluster(client, source: str, output: str, *, preset: str | None = None,
                             codec: str | None = None, crf: int = 18, encoder_preset: str = "veryfast",
                             pix_fmt: str | None = None, overwrite: bool = False, audio: bool = True,
-                            segment_seconds: float = SEGMENT_SECONDS, on_frames=None,
-                            **filter_kwargs) -> int:
+                            segment_seconds: float = SEGMENT_SECONDS, on_frames=None, temporal=None,
+                            warn=None, **filter_kwargs) -> int:
     """Filter the video `source` into `output` on the cluster behind `client`; returns the frames written.
+    `temporal`: a TemporalSpec (mlaa_stream.cluster.temporal) turns the temporal stage on, with a warm-up
+    per segment. `warn(message)`: what of the source was not kept (chapters, attachments).
     Raises ClusterVideoError naming the segment that failed twice; nothing is left under the output's name
     or as a segment file on failure."""
     from dask.distributed import as_completed
@@ -158,7 +218,7 @@ def filter_video_on_cluster(client, source: str, output: str, *, preset: str | N
         raise ClusterVideoError(f"{source}: the container declares no duration: the video cannot be split")
     kwargs = dict(PRESETS.get(preset or "default", {}), **filter_kwargs)
     segments = plan_segments(info.duration, info.fps, output, segment_seconds)
-    futures = {client.submit(encode_segment, source, seg, kwargs, codec, crf, encoder_preset, pix_fmt,
+    futures = {client.submit(encode_segment, source, seg, kwargs, codec, crf, encoder_preset, pix_fmt, temporal,
                              retries=1, pure=False, key=f"mlaa-seg-{seg.index}-{os.getpid()}-{id(segments)}"): seg
                for seg in segments}
     frames, failure, counts = 0, None, {}
@@ -176,7 +236,9 @@ def filter_video_on_cluster(client, source: str, output: str, *, preset: str | N
         if failure is not None:
             raise failure
         # a last range past the last frame (the container's duration counts the audio too) holds nothing
-        join_segments([s for s in segments if counts.get(s.index)], info, output, overwrite=overwrite, audio=audio)
+        for w in join_segments([s for s in segments if counts.get(s.index)], info, output, overwrite=overwrite,
+                               audio=audio):
+            (warn or (lambda msg: None))(w)
     finally:
         for fut in futures:
             fut.cancel()

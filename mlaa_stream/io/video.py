@@ -244,6 +244,49 @@ def _copy_tags(src: dict, dst) -> None:
             dst[key] = value
 
 
+# Output formats whose muxer stores attachment streams (fonts for subtitles, cover art) in its header.
+_ATTACHMENT_FORMATS = ("matroska",)
+
+
+def copy_chapters_and_attachments(src, out, offset: float = 0.0, end: float | None = None) -> tuple[set[str], list[str]]:
+    """Copy the chapters and attachment streams of the open input `src` into the output `out` (before its
+    header is written). Chapters are shifted by -`offset` seconds (a trimmed start) and cut at `end`
+    (output seconds); those outside are left out. Attachments (MKV fonts, cover art) only where the
+    output's format stores them (Matroska). Returns (the attachment streams dealt with, kept or named in
+    a warning, as VideoInfo.other_streams names them; warnings naming what was not kept)."""
+    warnings: list[str] = []
+    chapters = []
+    if not hasattr(src, "chapters") or not hasattr(out, "set_chapters"):  # an older PyAV (18 has both)
+        warnings.append(f"chapters, if any, not kept: PyAV {av.__version__} cannot copy them")
+    for ch in src.chapters() if hasattr(src, "chapters") and hasattr(out, "set_chapters") else ():
+        tb = Fraction(ch["time_base"])
+        start, stop = ch["start"] * tb - Fraction(offset), ch["end"] * tb - Fraction(offset)
+        if stop <= 0 or (end is not None and start >= end):
+            continue
+        if end is not None:
+            stop = min(stop, Fraction(end))
+        chapters.append({**ch, "start": int(round(max(start, 0) / tb)), "end": int(round(stop / tb))})
+    if chapters:
+        try:
+            out.set_chapters(chapters)
+        except Exception as exc:  # noqa: BLE001 - a muxer or PyAV without chapters: say so, go on
+            warnings.append(f"{len(chapters)} chapters not kept ({exc})")
+    kept: set[str] = set()
+    attachments = [st for st in src.streams if st.type == "attachment"]
+    named = {f"attachment stream {st.index}" for st in attachments}
+    if attachments and not any(f in out.format.name.split(",") for f in _ATTACHMENT_FORMATS):
+        n = len(attachments)
+        warnings.append(f"{n} attachment{'s' if n > 1 else ''} ({', '.join(str(a.name) for a in attachments)}) "
+                        f"not kept: {out.format.name} cannot hold them (MKV does)")
+        attachments = []
+    for st in attachments:
+        try:
+            out.add_attachment(st.name, st.mimetype, bytes(st.data))
+        except Exception as exc:  # noqa: BLE001 - e.g. a PyAV without add_attachment (before 14)
+            warnings.append(f"attachment {st.name} not kept ({exc})")
+    return named, warnings
+
+
 def parse_time(text: str, fps: Fraction | None) -> float:
     """A time in seconds from '12.5', '1:02.5', '0:01:02.5' or a frame number '300f' (at `fps`)."""
     t = (text or "").strip()
@@ -375,10 +418,11 @@ class VideoWriter:
                  crf: int | None = DEFAULT_CRF, preset: str | None = DEFAULT_ENCODER_PRESET,
                  pix_fmt: str | None = None, copy_audio: bool = True, overwrite: bool = False,
                  audio: str | None = None, container_format: str | None = None, offset: float = 0.0,
-                 end: float | None = None, extra_options: dict[str, str] | None = None):
+                 end: float | None = None, extra_options: dict[str, str] | None = None,
+                 copy_extras: bool = True):
         """`codec` None: the source's family (codec_for). `audio`: "copy" (default, with the subtitle
         streams and every tag), "aac" (audio re-encoded, subtitles copied) or "none"; `copy_audio=False`
-        is "none"."""
+        is "none". `copy_extras`: the chapters and attachments too (False: a cluster's segment files)."""
         _require_av()
         container_format = container_format or container_format_for(None, path)
         if path == PIPE and not container_format:
@@ -417,6 +461,7 @@ class VideoWriter:
         self._lookahead = None
         self._closed = False
         self._decoders: dict = {}  # source audio stream index -> output stream, when re-encoding
+        self._copy_extras_too = copy_extras
         kinds = ("audio", "subtitle") if audio != "none" else ()
         try:
             self._open(tuple(k for k in kinds if (info.audio_streams if k == "audio" else info.subtitle_streams)))
@@ -469,6 +514,7 @@ class VideoWriter:
                                  f"{self.pix_fmt} ({self.codec} has no deeper format)")
         if info.has_alpha and not _format_bits_alpha(self.pix_fmt)[1]:
             self.warnings.append(f"{self.path}: {self.codec} ({self.pix_fmt}) has no alpha; alpha dropped")
+        kept = self._copy_extras()
         if keep:
             try:
                 self._start_audio(keep)
@@ -485,7 +531,23 @@ class VideoWriter:
         else:
             self._out.start_encoding()
         for what in self.info.other_streams:
-            self.warnings.append(f"{self.path}: {what} of {self.info.path} not kept")
+            if what not in kept:  # data streams, or attachments of a source this could not open
+                self.warnings.append(f"{self.path}: {what} of {self.info.path} not kept")
+
+    def _copy_extras(self) -> set[str]:
+        """The source's chapters and attachments (copy_chapters_and_attachments); returns the streams
+        dealt with, as info.other_streams names them."""
+        if not self._copy_extras_too:
+            return set(self.info.other_streams)  # the caller copies them (the cluster's join)
+        if self.info.path == PIPE:
+            return set()  # read once: nothing to copy them from
+        try:
+            with av.open(self.info.path) as src:
+                kept, warnings = copy_chapters_and_attachments(src, self._out, self.offset, self.audio_end)
+        except (av.error.FFmpegError, OSError):
+            return set()  # a source that is not a video file (frames encoded into one)
+        self.warnings += [f"{self.path}: {w}" for w in warnings]
+        return kept
 
     def _copy_metadata(self, video_stream) -> None:
         """The container's tags (title, dates, ...) and the video stream's (language, title)."""

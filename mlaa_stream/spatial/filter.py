@@ -57,6 +57,7 @@ SUBPIXEL = 0.5
 SUBPIXEL_BG = 2.0
 # A feature with three sides (a line's end, a 1-px bump: the fourth side continues into more of it) moves less.
 SUBPIXEL_END = 0.25
+FALLBACK_MODES = ("auto", "everywhere", "off")  # Filter(fallback=...): spatial/fallback.py
 SEGMENT = 64  # pixels of a row per work item in the per-pixel passes (kernels/common.cl)
 EDGE_ROWS = 4  # rows per work item in detect_edges (kernels/edges.cl): each row's CIELAB and samples shared
 
@@ -68,6 +69,7 @@ PRESETS: dict[str, dict] = {
     "reconstruct": {"reconstruct": True},  # + topological reconstruction of thin features (seed 000 §4)
     "no_bridge": {"bridge": False},        # without bridging the dash chains of sub-pixel wires (on by default)
     "fast": {"fast": True},               # seed 004's three passes, lines up to 31 px: live loops, previews
+    "rendered": {"fallback": "everywhere"},  # 1-spp 3D renders only: the FXAA fallback on every pixel MLAA leaves
 }
 
 
@@ -195,16 +197,18 @@ class Filter:
                  bgr: bool = False, linear_input: bool = False, rounding: float = 0.0,
                  blend_u: bool = True, ramp: float = 0.35, short_corner: float = SHORT_CORNER,
                  aa_guard: bool = True, bridge: bool = True, grain_guard: bool = True,
-                 subpixel: float = SUBPIXEL, fast: bool = False, preset: str | None = None,
-                 context: Context | None = None):
-        """`preset`: one of PRESETS; its options replace the keywords of the same names."""
+                 subpixel: float = SUBPIXEL, fallback: str | bool = "auto", fast: bool = False,
+                 preset: str | None = None, context: Context | None = None):
+        """`preset`: one of PRESETS; its options replace the keywords of the same names. `fallback`: FXAA
+        for the pixels MLAA leaves (spatial/fallback.py): "auto" where the neighbourhood shows 1-spp
+        aliasing and is no flat-colour art, "everywhere" (frames known to be 1-spp renders), "off"."""
         if preset is not None:
             if preset not in PRESETS:
                 raise ValueError(f"preset: expected one of {', '.join(sorted(PRESETS))}, got {preset!r}")
             opts = PRESETS[preset]
             metric, rounding = opts.get("metric", metric), opts.get("rounding", rounding)
             reconstruct, bridge = opts.get("reconstruct", reconstruct), opts.get("bridge", bridge)
-            fast = opts.get("fast", fast)
+            fast, fallback = opts.get("fast", fast), opts.get("fallback", fallback)
         if metric not in METRICS:
             raise ValueError(f"metric: expected one of {', '.join(METRICS)}, got {metric!r}")
         thr = DEFAULT_THRESHOLDS[metric] if threshold is None else float(threshold)
@@ -221,6 +225,10 @@ class Filter:
         self.fast = bool(fast)  # spatial/fast.py: seed 004's passes instead of the default chain
         self.reconstruct = bool(reconstruct) and not self.fast
         self.bridge = bool(bridge) and not self.fast
+        fallback = {True: "auto", False: "off"}.get(fallback, fallback) if isinstance(fallback, bool) else fallback
+        if fallback not in FALLBACK_MODES:
+            raise ValueError(f"fallback: expected one of {', '.join(FALLBACK_MODES)}, got {fallback!r}")
+        self.fallback = "off" if self.fast else fallback
         self.context = context or default_context(device)
         dev = self.context.device
         props = cl.command_queue_properties.OUT_OF_ORDER_EXEC_MODE_ENABLE
@@ -234,6 +242,7 @@ class Filter:
         self._reconstructor = None
         self._recon_buf = None
         self._bridger = None
+        self._fallback = None
         self._fast = None
         self._frame_no = 0
         self._lock = threading.Lock()
@@ -269,6 +278,10 @@ class Filter:
             from mlaa_stream.spatial.bridge import BridgeOptions, Bridger
             self._bridger = Bridger(self.context, fmt, BridgeOptions(linear=self.options.linear,
                                                                      linear_input=self.options.linear_input))
+        if self.fallback != "off":
+            from mlaa_stream.spatial.fallback import FallbackPass
+            self._fallback = FallbackPass(self.context, fmt, self.options.linear, self.options.linear_input,
+                                          everywhere=self.fallback == "everywhere")
         return bufs
 
     # -- per frame ---------------------------------------------------------------------------
@@ -324,9 +337,12 @@ class Filter:
         ev["copy"] = cl.enqueue_copy(q, dst, src, byte_count=bufs.fmt.nbytes, wait_for=after)
         ev["blend"] = self._k_blend(q, g2, None, src, bufs.edges, bufs.weights, self._luts, dst, W, H,
                                     wait_for=[ev["weights"], ev["copy"]])
+        last = ev["blend"]
         if self._bridger is not None:  # dash chains found in src, drawn over the blended frame
-            return self._bridger.enqueue(q, src, dst, self._luts, wait_for=[ev["blend"]], events=ev)
-        return ev["blend"]
+            last = self._bridger.enqueue(q, src, dst, self._luts, wait_for=[last], events=ev)
+        if self._fallback is not None:  # FXAA where MLAA left pixels of an aliased neighbourhood
+            last = self._fallback.enqueue(q, src, dst, bufs.edges, self._luts, wait_for=[last], events=ev)
+        return last
 
     def profile(self, frame: np.ndarray, runs: int = 20, warmup: int = 3) -> dict[str, float]:
         """Median device milliseconds of each pass (and of upload/download) over `runs` frames,
@@ -373,6 +389,7 @@ class Filter:
         extra = self._recon_buf.size if self._recon_buf is not None else 0
         extra += self._bridger.device_bytes() if self._bridger is not None else 0
         extra += self._fast.device_bytes() if self._fast is not None else 0
+        extra += self._fallback.device_bytes() if self._fallback is not None else 0
         return (self._buffers.device_bytes() + extra) / self._buffers.fmt.pixels
 
     def finish(self) -> None:
@@ -387,6 +404,7 @@ class Filter:
             self._recon_buf = None
             self._reconstructor = None
             self._bridger = None
+            self._fallback = None
             self._fast = None
 
     def __enter__(self) -> "Filter":

@@ -151,6 +151,34 @@ def fxaa_reference(frame: np.ndarray, *, edge_threshold: float = EDGE_THRESHOLD,
                    quality: int = QUALITY, linear: bool = True, linear_input: bool = False,
                    bgr: bool = False) -> np.ndarray:
     """What kernels/fxaa.cl computes, in float32 numpy with the same operation order (slow, plain)."""
+    fmt = frame_format(frame, bgr)
+    f32 = np.float32
+    pmax = f32(_MAX[fmt.dtype])
+    early, c = fxaa_mix_reference(frame, edge_threshold=edge_threshold, edge_threshold_min=edge_threshold_min,
+                                  subpix=subpix, quality=quality, linear=linear, linear_input=linear_input,
+                                  bgr=bgr)
+    if linear and not linear_input:
+        c = lut_read(device_luts()[2 * (LUT_SIZE + 1):], c).astype(f32)
+    a = np.asarray(frame).reshape(fmt.height, fmt.width, fmt.channels).astype(f32) * (f32(1.0) / pmax)
+    res = a.copy()
+    if fmt.channels == 1:
+        res[..., 0] = np.where(early, a[..., 0], c[..., 0])
+    else:
+        c = c[..., ::-1] if fmt.bgr else c
+        res[..., :3] = np.where(early[..., None], a[..., :3], c)
+    if fmt.dtype == np.float32:
+        out = res
+    else:
+        out = np.clip(np.rint(res * pmax), 0, pmax)
+    return out.astype(frame.dtype).reshape(frame.shape)
+
+
+def fxaa_mix_reference(frame: np.ndarray, *, edge_threshold: float = EDGE_THRESHOLD,
+                       edge_threshold_min: float = EDGE_THRESHOLD_MIN, subpix: float = SUBPIX,
+                       quality: int = QUALITY, linear: bool = True,
+                       linear_input: bool = False, bgr: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """kernels/fxaa.cl's fxaa_pixel for every pixel: (early, colour), `early` where the local-contrast
+    exit keeps the pixel, `colour` (h, w, 3) in RGB order in mix space (linear light where sRGB is decoded)."""
     _check_options(edge_threshold, edge_threshold_min, subpix, quality)
     fmt = frame_format(frame, bgr)
     f32 = np.float32
@@ -265,18 +293,4 @@ def fxaa_reference(frame: np.ndarray, *, edge_threshold: float = EDGE_THRESHOLD,
     pixelOffsetSubpix = np.maximum(np.where(goodSpan, pixelOffset, f32(0.0)), subpixH)
     qx = np.where(horz, mx, mx + pixelOffsetSubpix * lengthSign)
     qy = np.where(horz, my + pixelOffsetSubpix * lengthSign, my)
-    c = bilinear(blend_rgb, qx, qy).astype(f32)
-    if decode:
-        c = lut_read(luts[2 * (LUT_SIZE + 1):], c).astype(f32)
-
-    res = a.copy()
-    if fmt.channels == 1:
-        res[..., 0] = np.where(early, a[..., 0], c[..., 0])
-    else:
-        c = c[..., ::-1] if fmt.bgr else c
-        res[..., :3] = np.where(early[..., None], a[..., :3], c)
-    if fmt.dtype == np.float32:
-        out = res
-    else:
-        out = np.clip(np.rint(res * pmax), 0, pmax)
-    return out.astype(frame.dtype).reshape(frame.shape)
+    return early, bilinear(blend_rgb, qx, qy).astype(f32)

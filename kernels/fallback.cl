@@ -1,0 +1,178 @@
+// fallback.cl -- FXAA 3.11 (fxaa.cl, built into the same program) for the pixels the MLAA passes left,
+// where the frame shows 1-spp aliasing: the pass after blending (and bridging) in the default chain. It reads
+// the edge buffer of the MLAA passes (edges.cl): a pixel that borders no edge is neither counted nor changed.
+//
+// Why (beyond the seeds; SMAA and CMAA2 pair a line search with a local fallback in the same way): on
+// rendered frames a third of the input's error sits on edge pixels that no line of the MLAA search
+// covers -- short texture edges, foliage, outlines of lit surfaces -- and FXAA's local gradient blend
+// removes about 40 % of it there, while MLAA removes more than FXAA where it blends (docs/spatial_tuning.md,
+// FALLBACK_*). FXAA alone would blur text and photographs, so a pixel takes FALLBACK_WEIGHT of FXAA's
+// colour (linear light) only where
+//   - it borders an edge of the MLAA passes and they left it unchanged,
+//   - its tile of FALLBACK_TILE^2 pixels and the eight around it hold at least FALLBACK_MIN_CHANGED pixels
+//     that border an edge and that the MLAA passes changed (evidence of 1-spp aliasing nearby: antialiased content, photographs
+//     and flat regions have few), and
+//   - its 3x3 window holds at least FALLBACK_COLOURS distinct colours (equal: every channel within
+//     FALLBACK_SAME of full scale): flat-colour art -- text, UI boxes, vector drawings -- has fewer.
+// FALLBACK_MIN_CHANGED 0 and FALLBACK_COLOURS 0 drop the gates (Filter(fallback="everywhere"): frames known
+// to be 1-spp renders). Numpy reference: mlaa_stream.spatial.fallback.fallback_reference.
+
+#ifndef FALLBACK_TILE
+#define FALLBACK_TILE 8
+#endif
+#ifndef FALLBACK_MIN_CHANGED
+#define FALLBACK_MIN_CHANGED 24
+#endif
+#ifndef FALLBACK_COLOURS
+#define FALLBACK_COLOURS 4
+#endif
+#ifndef FALLBACK_SAME
+#define FALLBACK_SAME (2.5f / 255.0f)
+#endif
+#ifndef FALLBACK_WEIGHT
+#define FALLBACK_WEIGHT 0.8f
+#endif
+
+// Any stored channel (alpha included) of pixel i differs between a and b.
+inline int px_differs(__global const PIXEL_T *a, __global const PIXEL_T *b, int i)
+{
+    __global const PIXEL_T *p = a + (size_t)i * CHANNELS, *q = b + (size_t)i * CHANNELS;
+    int d = 0;
+    for (int c = 0; c < CHANNELS; ++c) d |= p[c] != q[c];
+    return d;
+}
+
+#define EDGE_BOTTOM 1
+#define EDGE_RIGHT 2
+
+// Pixel (x, y) borders an edge of the MLAA passes (its own bottom or right, the bottom of the pixel above,
+// the right of the pixel to the left): only such pixels can be blended, and only such pixels are left to FXAA.
+inline int borders_edge(__global const uchar *edges, int x, int y, int w)
+{
+    const int i = IDX(x, y, w);
+    return edges[i] != 0 || (y > 0 && (edges[i - w] & EDGE_BOTTOM)) || (x > 0 && (edges[i - 1] & EDGE_RIGHT));
+}
+
+// Eight pixels from (x, y) border no edge (the test of blend.cl's group skip); x + 8 <= w.
+inline int group_is_quiet(__global const uchar *edges, int x, int y, int w)
+{
+    const int i = IDX(x, y, w);
+    const ulong above = y > 0 ? edge_group(edges + i - w) & 0x0101010101010101UL : 0;
+    return (edge_group(edges + i) | above) == 0 && !(x > 0 && (edges[i - 1] & EDGE_RIGHT));
+}
+
+// counts[ty * tiles_x + tx] = pixels of tile (tx, ty) that border an edge and that the MLAA passes changed
+// (dst != src). One work item per SEGMENT pixels (a multiple of FALLBACK_TILE) of a band of FALLBACK_TILE rows.
+__kernel void count_changed(__global const PIXEL_T *src, __global const PIXEL_T *dst,
+                            __global const uchar *edges, __global uchar *counts,
+                            const int w, const int h, const int tiles_x)
+{
+    const int x0 = get_global_id(0) * SEGMENT, ty = get_global_id(1), y0 = ty * FALLBACK_TILE;
+    if (x0 >= w || y0 >= h) return;
+    const int x1 = min(x0 + SEGMENT, w), y1 = min(y0 + FALLBACK_TILE, h);
+    for (int t0 = x0; t0 < x1; t0 += FALLBACK_TILE) {
+        const int t1 = min(t0 + FALLBACK_TILE, x1);
+        int n = 0;
+        for (int y = y0; y < y1; ++y)
+            if (!(t1 - t0 == 8 && group_is_quiet(edges, t0, y, w)))
+                for (int x = t0; x < t1; ++x)
+                    n += borders_edge(edges, x, y, w) && px_differs(src, dst, IDX(x, y, w));
+        counts[ty * tiles_x + t0 / FALLBACK_TILE] = (uchar)n;
+    }
+}
+
+// Two stored pixels are one colour: every colour channel within FALLBACK_SAME of full scale (integer
+// frames compare whole levels: FALLBACK_SAME_LEVELS = the largest difference within it).
+#ifdef PIXEL_IS_FLOAT
+typedef float sample_t;
+#define SAME_LIMIT FALLBACK_SAME
+#else
+typedef int sample_t;
+#define SAME_LIMIT FALLBACK_SAME_LEVELS
+#endif
+#define COLOUR_CH (CHANNELS < 3 ? 1 : 3)
+
+// At least FALLBACK_COLOURS distinct colours in the 3x3 window of (x, y), clamped at the frame's edge,
+// counted in row order (a pixel counts when no earlier pixel of the window equals it); stops once settled.
+inline int window_has_colours(__global const PIXEL_T *src, int x, int y, int w, int h)
+{
+    int idx[9];
+    for (int k = 0; k < 9; ++k)
+        idx[k] = IDX(clamp_to(x + k % 3 - 1, w - 1), clamp_to(y + k / 3 - 1, h - 1), w);
+    // bit-identical colours first: merging within FALLBACK_SAME can only lower the count, so a window of
+    // fewer exact colours (flat-colour art, most of the pixels that get here) is settled at once
+    int exact = 0;
+    for (int a = 0; a < 9 && exact < FALLBACK_COLOURS; ++a) {
+        int twin = 0;
+        for (int o = 0; o < a && !twin; ++o) twin = same_px(src, idx[a], idx[o]);
+        exact += !twin;
+    }
+    if (exact < FALLBACK_COLOURS) return 0;
+    sample_t px[9][COLOUR_CH];
+    for (int k = 0; k < 9; ++k)
+        for (int c = 0; c < COLOUR_CH; ++c) px[k][c] = src[(size_t)idx[k] * CHANNELS + c];
+    int distinct = 0;
+    for (int a = 0; a < 9; ++a) {
+        int twin = 0;
+        for (int o = 0; o < a && !twin; ++o) {
+            int same = 1;
+            for (int c = 0; c < COLOUR_CH; ++c) {
+                const sample_t d = px[a][c] > px[o][c] ? px[a][c] - px[o][c] : px[o][c] - px[a][c];
+                same &= d <= SAME_LIMIT;
+            }
+            twin = same;
+        }
+        distinct += !twin;
+        if (distinct >= FALLBACK_COLOURS) return 1;
+        if (distinct + 8 - a < FALLBACK_COLOURS) return 0;
+    }
+    return 0;
+}
+
+// Tile (tx, ty): nothing to do unless the 3x3 tiles around it hold FALLBACK_MIN_CHANGED changed pixels; then
+// each pixel that borders an edge, was left by the MLAA passes, has a busy window and that FXAA would change
+// moves FALLBACK_WEIGHT of the way to FXAA's colour.
+inline void fallback_tile(__global const PIXEL_T *src, __global const float *luts, __global const uchar *edges,
+                          __global const uchar *counts, __global PIXEL_T *dst, int w, int h, int tiles_x,
+                          int tiles_y, int tx, int ty)
+{
+#if FALLBACK_MIN_CHANGED > 0
+    int changed = 0;
+    for (int j = max(ty - 1, 0); j <= min(ty + 1, tiles_y - 1); ++j)
+        for (int k = max(tx - 1, 0); k <= min(tx + 1, tiles_x - 1); ++k)
+            changed += counts[j * tiles_x + k];
+    if (changed < FALLBACK_MIN_CHANGED) return;
+#endif
+    const int x0 = tx * FALLBACK_TILE, y0 = ty * FALLBACK_TILE;
+    const int x1 = min(x0 + FALLBACK_TILE, w), y1 = min(y0 + FALLBACK_TILE, h);
+    for (int y = y0; y < y1; ++y) {
+        if (x1 - x0 == 8 && group_is_quiet(edges, x0, y, w)) continue;
+        for (int x = x0; x < x1; ++x) {
+            const int i = IDX(x, y, w);
+            if (!borders_edge(edges, x, y, w) || px_differs(src, dst, i)) continue;
+#if FALLBACK_COLOURS > 0
+            if (!window_has_colours(src, x, y, w, h)) continue;   // flat-colour art: most pixels stop here
+#endif
+            if (fxaa_keeps(src, x, y, w, h)) continue;
+            float3 f;
+            if (!fxaa_pixel(src, luts, x, y, w, h, &f)) continue;
+            float4 c = load_px(src, i);
+            float3 m = blend_rgb(src, luts, x, y, w, h);
+            c.xyz = fxaa_encode(luts, m + FALLBACK_WEIGHT * (f - m));
+            store_px(dst, i, c);
+        }
+    }
+}
+
+// One work item per SEGMENT / FALLBACK_TILE tiles of a tile row (few work items: PoCL's cost per work group
+// is felt at one item per tile).
+__kernel void fxaa_fallback(__global const PIXEL_T *src, __global const float *luts,
+                            __global const uchar *edges, __global const uchar *counts, __global PIXEL_T *dst,
+                            const int w, const int h, const int tiles_x, const int tiles_y)
+{
+    const int t0 = get_global_id(0) * (SEGMENT / FALLBACK_TILE), ty = get_global_id(1);
+    if (t0 >= tiles_x || ty >= tiles_y) return;
+    const int t1 = min(t0 + SEGMENT / FALLBACK_TILE, tiles_x);
+    for (int tx = t0; tx < t1; ++tx)
+        fallback_tile(src, luts, edges, counts, dst, w, h, tiles_x, tiles_y, tx, ty);
+}

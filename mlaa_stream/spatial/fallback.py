@@ -1,0 +1,123 @@
+"""The FXAA fallback: FXAA 3.11 for the pixels the MLAA passes left, where the frame shows 1-spp aliasing.
+
+Runs after blending (and bridging) in the default chain (Filter(fallback=True)); kernels/fallback.cl says
+what it does and why. `fallback_reference` computes the same in numpy.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pyopencl as cl
+
+from mlaa_stream.device.colour import device_luts, lut_read
+from mlaa_stream.device.context import Context
+from mlaa_stream.device.formats import LUT_SIZE, FrameFormat, frame_format
+from mlaa_stream.spatial.fxaa import fxaa_defines, fxaa_mix_reference
+
+SEGMENT = 64  # pixels of a tile band per work item of count_changed (a multiple of FALLBACK_TILE)
+
+# Tiles of FALLBACK_TILE^2 pixels; a pixel is eligible where its tile and the eight around it hold at least
+# FALLBACK_MIN_CHANGED pixels that MLAA changed, and its 3x3 window at least FALLBACK_COLOURS colours
+# (equal within FALLBACK_SAME / 255 of full scale per channel). It takes FALLBACK_WEIGHT of FXAA's colour.
+FALLBACK_TILE, FALLBACK_MIN_CHANGED, FALLBACK_COLOURS, FALLBACK_SAME, FALLBACK_WEIGHT = 8, 24, 4, 2.5, 0.8
+
+_MAX = {np.dtype(np.uint8): 255.0, np.dtype(np.uint16): 65535.0, np.dtype(np.float32): 1.0}
+
+
+def fallback_defines(fmt: FrameFormat, linear: bool, linear_input: bool, everywhere: bool = False) -> dict:
+    """Defines for kernels/fallback.cl (FXAA's own at the shader's defaults, plus FALLBACK_*); `everywhere`
+    drops both gates (the aliasing evidence and the colour count)."""
+    return {**fxaa_defines(fmt, linear=linear, linear_input=linear_input), "SEGMENT": SEGMENT,
+            "FALLBACK_TILE": FALLBACK_TILE, "FALLBACK_MIN_CHANGED": 0 if everywhere else FALLBACK_MIN_CHANGED,
+            "FALLBACK_COLOURS": 0 if everywhere else FALLBACK_COLOURS, "FALLBACK_SAME": float(FALLBACK_SAME / 255.0),
+            "FALLBACK_SAME_LEVELS": int(np.floor(FALLBACK_SAME / 255.0 * _MAX[np.dtype(fmt.dtype)])),
+            "FALLBACK_WEIGHT": float(FALLBACK_WEIGHT)}
+
+
+class FallbackPass:
+    """The two kernels of kernels/fallback.cl and their tile-count buffer, for one frame format."""
+
+    def __init__(self, context: Context, fmt: FrameFormat, linear: bool, linear_input: bool,
+                 everywhere: bool = False):
+        defs = fallback_defines(fmt, linear, linear_input, everywhere)
+        self.fmt = fmt
+        self.tiles = (-(-fmt.width // FALLBACK_TILE), -(-fmt.height // FALLBACK_TILE))
+        self._count = context.kernel("fallback", "count_changed", defs)
+        self._fxaa = context.kernel("fallback", "fxaa_fallback", defs)
+        self._counts = context.buffer(self.tiles[0] * self.tiles[1])  # changed pixels per tile
+
+    def device_bytes(self) -> int:
+        return self._counts.size
+
+    def enqueue(self, queue, src, dst, edges, luts, wait_for: list, events: dict) -> cl.Event:
+        """dst holds the MLAA passes' output of src, `edges` their edge buffer; returns the event after which
+        dst holds the result."""
+        W, H = np.int32(self.fmt.width), np.int32(self.fmt.height)
+        tx, ty = np.int32(self.tiles[0]), np.int32(self.tiles[1])
+        events["fallback_count"] = self._count(queue, (-(-self.fmt.width // SEGMENT), self.tiles[1]), None,
+                                               src, dst, edges, self._counts, W, H, tx, wait_for=wait_for)
+        events["fallback"] = self._fxaa(queue, (-(-self.fmt.width // SEGMENT), self.tiles[1]), None,
+                                        src, luts, edges, self._counts, dst, W, H, tx, ty,
+                                        wait_for=[events["fallback_count"]])
+        return events["fallback"]
+
+
+def _window_colours(rgb: np.ndarray) -> np.ndarray:
+    """kernels/fallback.cl window_colours for every pixel (rgb normalised, (h, w, 3))."""
+    h, w = rgb.shape[:2]
+    pad = np.pad(rgb, ((1, 1), (1, 1), (0, 0)), mode="edge")
+    win = [pad[dy:dy + h, dx:dx + w] for dy in range(3) for dx in range(3)]
+    same = np.float32(FALLBACK_SAME / 255.0)
+    distinct = np.zeros((h, w), np.int32)
+    for a in range(9):
+        twin = np.zeros((h, w), bool)
+        for o in range(a):
+            twin |= np.all(np.abs(win[a] - win[o]) <= same, -1)
+        distinct += ~twin
+    return distinct
+
+
+def fallback_reference(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray, *, linear: bool = True,
+                       linear_input: bool = False, bgr: bool = False, everywhere: bool = False) -> np.ndarray:
+    """What kernels/fallback.cl makes of `mlaa_out`, the MLAA passes' output of `src` with edge buffer
+    `edges` ((h, w) uint8, EDGE_BOTTOM 1 | EDGE_RIGHT 2), in numpy."""
+    min_changed, colours = (0, 0) if everywhere else (FALLBACK_MIN_CHANGED, FALLBACK_COLOURS)
+    fmt = frame_format(src, bgr)
+    f32 = np.float32
+    pmax = f32(_MAX[fmt.dtype])
+    h, w, ch = fmt.height, fmt.width, fmt.channels
+    a = np.asarray(src).reshape(h, w, ch)
+    out = np.asarray(mlaa_out).reshape(h, w, ch).copy()
+    e = np.asarray(edges)
+    borders = e != 0
+    borders[1:] |= (e[:-1] & 1) > 0
+    borders[:, 1:] |= (e[:, :-1] & 2) > 0
+    changed = np.any(a != out, -1)
+    t = FALLBACK_TILE
+    th, tw = -(-h // t), -(-w // t)
+    tiles = np.zeros((th * t, tw * t), np.int32)
+    tiles[:h, :w] = changed & borders
+    tiles = tiles.reshape(th, t, tw, t).sum((1, 3))
+    pad = np.pad(tiles, 1)
+    busy = sum(pad[dy:dy + th, dx:dx + tw] for dy in range(3) for dx in range(3)) >= min_changed
+    busy = np.repeat(np.repeat(busy, t, 0), t, 1)[:h, :w]
+    norm = a.astype(f32) * (f32(1.0) / pmax)
+    rgb = np.repeat(norm[..., :1], 3, -1) if ch == 1 else norm[..., :3]
+    rgb = rgb[..., ::-1] if fmt.bgr else rgb
+    early, fx = fxaa_mix_reference(src, linear=linear, linear_input=linear_input, bgr=bgr)
+    take = busy & borders & ~changed & ~early & (_window_colours(rgb) >= colours)
+    decode = linear and not linear_input
+    luts = device_luts()
+    m = lut_read(luts, rgb).astype(f32) if decode else rgb
+    c = m + f32(FALLBACK_WEIGHT) * (fx - m)
+    if decode:
+        c = lut_read(luts[2 * (LUT_SIZE + 1):], c).astype(f32)
+    c = c[..., ::-1] if fmt.bgr else c
+    new = norm.copy()
+    if ch == 1:
+        new[..., 0] = c[..., 0]
+    else:
+        new[..., :3] = c
+    if fmt.dtype != np.float32:
+        new = np.clip(np.rint(new * pmax), 0, pmax)
+    out[take] = new.astype(out.dtype)[take]
+    return out.reshape(np.asarray(mlaa_out).shape)
