@@ -112,62 +112,145 @@ inline int in_grain(__global const PIXEL_T *src, int x, int y, int width, int he
 #ifndef SUBPIXEL_END
 #define SUBPIXEL_END SUBPIXEL
 #endif
+#ifndef SUBPIXEL_SHARE
+#define SUBPIXEL_SHARE 1.0f
+#endif
 inline float luma(float4 c) { return 0.2126f * c.x + 0.7152f * c.y + 0.0722f * c.z; }   // Rec. 709
+// Edge sides of pixel (x, y): bit 0 top, 1 bottom, 2 left, 3 right.
+inline int edge_sides(__global const uchar *edges, int x, int y, int width)
+{
+    const int i = IDX(x, y, width);
+    const uchar e = edges[i];
+    return (y > 0 && (edges[i - width] & EDGE_BOTTOM)) | ((e & EDGE_BOTTOM) << 1)
+         | ((x > 0 && (edges[i - 1] & EDGE_RIGHT)) << 2) | ((e & EDGE_RIGHT) << 2);
+}
+
+inline int count_sides(int s) { return (s & 1) + ((s >> 1) & 1) + ((s >> 2) & 1) + ((s >> 3) & 1); }
+
+// Seed 000 §3.5's blend of pixel i with the neighbours across its edges (`sides`), in mix space; *ws = the
+// weights' sum (0: no line covers the pixel).
+inline __attribute__((always_inline)) float4 line_blend(__global const PIXEL_T *src, __global const ushort *weights,
+                                                       __global const float *luts, int i, int width, int sides,
+                                                       float4 m, float *ws)
+{
+    ushort4 w16 = LOAD_USHORT4(weights + 4 * i);  // (top, bottom, left, right), valid where the edge exists
+    float4 w = (float4)((sides & 1) ? w16.x : 0, (sides & 2) ? w16.y : 0,
+                        (sides & 4) ? w16.z : 0, (sides & 8) ? w16.w : 0) * (1.0f / 65535.0f);
+    *ws = w.x + w.y + w.z + w.w;
+    if (*ws == 0.0f) return m;
+    float4 acc = (float4)(0.0f);
+    if (w.x > 0.0f) acc += w.x * w.x * (to_mix_space(luts, load_px(src, i - width)) - m);
+    if (w.y > 0.0f) acc += w.y * w.y * (to_mix_space(luts, load_px(src, i + width)) - m);
+    if (w.z > 0.0f) acc += w.z * w.z * (to_mix_space(luts, load_px(src, i - 1)) - m);
+    if (w.w > 0.0f) acc += w.w * w.w * (to_mix_space(luts, load_px(src, i + 1)) - m);
+    return m + acc / *ws;
+}
+
+#if SUBPIXEL_ON
+// The sub-pixel move of pixel (x, y) with edge sides `sides` (3 or 4) and blended colour b: *delta, returns 1
+// where the pixel is a feature as described above (0: no move).
+inline __attribute__((always_inline)) int subpixel_move(__global const PIXEL_T *src, __global const float *luts,
+                                                       int x, int y, int width, int height, int sides, float4 m,
+                                                       float4 b, float4 *delta)
+{
+    const int i = IDX(x, y, width);
+    // only a local extremum: lighter (or darker) than every neighbour across its edges, as a thin
+    // feature is -- a coverage mix of already antialiased content sits between its neighbours
+    const float yc = luma(m);
+    int lo = 0, hi = 0;
+    float ymin = 1e30f, ymax = -1e30f;
+#define ACROSS_LUMA(has, k) if (has) { const float yn = luma(to_mix_space(luts, load_px(src, k))); lo |= yn < yc; hi |= yn > yc; \
+                                       ymin = yn < ymin ? yn : ymin; ymax = yn > ymax ? yn : ymax; }
+    ACROSS_LUMA(sides & 1, i - width)
+    ACROSS_LUMA(sides & 2, i + width)
+    ACROSS_LUMA(sides & 4, i - 1)
+    ACROSS_LUMA(sides & 8, i + 1)
+#undef ACROSS_LUMA
+    // ... on one background: the neighbours across its edges spread by at most SUBPIXEL_BG times the
+    // feature's own contrast to the nearest of them (texture and photographs' speckle have no such background)
+    const float contrast = hi ? ymin - yc : yc - ymax;
+    if (ymax - ymin > SUBPIXEL_BG * contrast) lo = hi = 1;
+    if (lo && hi) return 0;
+    float4 box = (float4)(0.0f);
+    for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx)
+            box += to_mix_space(luts, load_px(src, IDX(clampi(x + dx, width - 1), clampi(y + dy, height - 1), width)));
+    *delta = (count_sides(sides) == 4 ? SUBPIXEL : SUBPIXEL_END) * (box * (1.0f / 9.0f) - b);
+    return 1;
+}
+
+// What the feature at (x, y) -- if it is one -- gives to each neighbour across its edges: SUBPIXEL_SHARE of
+// its move, negated and split among those neighbours (the ink a dot loses goes to its surroundings, so a
+// thin feature keeps its weight; measured in docs/spatial_tuning.md). 0 where (x, y) is no moved feature.
+inline float4 feature_share(__global const PIXEL_T *src, __global const ushort *weights, __global const float *luts,
+                            __global const uchar *edges, int x, int y, int width, int height)
+{
+    const int sides = edge_sides(edges, x, y, width), n = count_sides(sides);
+    if (n < 3) return (float4)(0.0f);
+#if GRAIN_GUARD
+    if (in_grain(src, x, y, width, height)) return (float4)(0.0f);
+#endif
+    const int i = IDX(x, y, width);
+    const float4 m = to_mix_space(luts, load_px(src, i));
+    float ws;
+    const float4 b = line_blend(src, weights, luts, i, width, sides, m, &ws);
+    float4 delta;
+    if (!subpixel_move(src, luts, x, y, width, height, sides, m, b, &delta)) return (float4)(0.0f);
+    return delta * (-SUBPIXEL_SHARE / (float)n);
+}
+#endif
+
 inline __attribute__((always_inline)) void blend_pixel(__global const PIXEL_T *src, __global const uchar *edges,
                         __global const ushort *weights, __global const float *luts,
                         __global PIXEL_T *dst, int x, int y, int width, int height)
 {
     const int i = IDX(x, y, width);
-    const uchar e = edges[i];
-    const int top = y > 0 && (edges[i - width] & EDGE_BOTTOM);
-    const int left = x > 0 && (edges[i - 1] & EDGE_RIGHT);
-    if (e == 0 && !top && !left) return;
-    ushort4 w16 = LOAD_USHORT4(weights + 4 * i);  // (top, bottom, left, right), valid where the edge exists
-    float4 w = (float4)(top ? w16.x : 0, (e & EDGE_BOTTOM) ? w16.y : 0,
-                        left ? w16.z : 0, (e & EDGE_RIGHT) ? w16.w : 0) * (1.0f / 65535.0f);
+    const int sides = edge_sides(edges, x, y, width);
+    if (sides == 0) return;
+    const ushort4 w16 = LOAD_USHORT4(weights + 4 * i);
+    const int weighted = ((sides & 1) && w16.x) || ((sides & 2) && w16.y) || ((sides & 4) && w16.z) || ((sides & 8) && w16.w);
 #if SUBPIXEL_ON
-    const int sides = top + left + (e & EDGE_BOTTOM) + ((e & EDGE_RIGHT) >> 1), feature = sides >= 3;
+    const int n = count_sides(sides);
+    // neighbours across this pixel's edges that may be features (3+ sides)
+    const int near = ((sides & 1) && count_sides(edge_sides(edges, x, y - 1, width)) >= 3)
+                   | (((sides & 2) && count_sides(edge_sides(edges, x, y + 1, width)) >= 3) << 1)
+                   | (((sides & 4) && count_sides(edge_sides(edges, x - 1, y, width)) >= 3) << 2)
+                   | (((sides & 8) && count_sides(edge_sides(edges, x + 1, y, width)) >= 3) << 3);
+    if (!weighted && n < 3 && !near) return;
 #else
-    const int feature = 0;
+    if (!weighted) return;
 #endif
-    if (w.x == 0.0f && w.y == 0.0f && w.z == 0.0f && w.w == 0.0f && !feature) return;
+    float4 c = load_px(src, i);
+    float4 m = to_mix_space(luts, c);
+    float ws;
+    float4 b = line_blend(src, weights, luts, i, width, sides, m, &ws);
+    int moved = ws > 0.0f;
+#if SUBPIXEL_ON
+    // neighbours across this pixel's edges that are moved features give it a share of their move
+    float4 share = (float4)(0.0f);
+    if (near & 1) share += feature_share(src, weights, luts, edges, x, y - 1, width, height);
+    if (near & 2) share += feature_share(src, weights, luts, edges, x, y + 1, width, height);
+    if (near & 4) share += feature_share(src, weights, luts, edges, x - 1, y, width, height);
+    if (near & 8) share += feature_share(src, weights, luts, edges, x + 1, y, width, height);
+    const int shared = share.x != 0.0f || share.y != 0.0f || share.z != 0.0f;
+    if (!moved && n < 3 && !shared) return;
+#endif
 #if GRAIN_GUARD
     if (in_grain(src, x, y, width, height)) return;
 #endif
-    float4 c = load_px(src, i);
-    float4 m = to_mix_space(luts, c), acc = (float4)(0.0f);
-    const float ws = w.x + w.y + w.z + w.w;
-    if (w.x > 0.0f) acc += w.x * w.x * (to_mix_space(luts, load_px(src, i - width)) - m);
-    if (w.y > 0.0f) acc += w.y * w.y * (to_mix_space(luts, load_px(src, i + width)) - m);
-    if (w.z > 0.0f) acc += w.z * w.z * (to_mix_space(luts, load_px(src, i - 1)) - m);
-    if (w.w > 0.0f) acc += w.w * w.w * (to_mix_space(luts, load_px(src, i + 1)) - m);
-    float4 b = ws > 0.0f ? m + acc / ws : m;
 #if SUBPIXEL_ON
-    if (feature) {
-        // only a local extremum: lighter (or darker) than every neighbour across its edges, as a thin
-        // feature is -- a coverage mix of already antialiased content sits between its neighbours
-        const float yc = luma(m);
-        int lo = 0, hi = 0;
-        float ymin = 1e30f, ymax = -1e30f;
-#define ACROSS_LUMA(has, k) if (has) { const float yn = luma(to_mix_space(luts, load_px(src, k))); lo |= yn < yc; hi |= yn > yc; \
-                                       ymin = yn < ymin ? yn : ymin; ymax = yn > ymax ? yn : ymax; }
-        ACROSS_LUMA(top, i - width)
-        ACROSS_LUMA(e & EDGE_BOTTOM, i + width)
-        ACROSS_LUMA(left, i - 1)
-        ACROSS_LUMA(e & EDGE_RIGHT, i + 1)
-#undef ACROSS_LUMA
-        // ... on one background: the neighbours across its edges spread by at most SUBPIXEL_BG times the
-        // feature's own contrast to the nearest of them (texture and photographs' speckle have no such background)
-        const float contrast = hi ? ymin - yc : yc - ymax;
-        if (ymax - ymin > SUBPIXEL_BG * contrast) lo = hi = 1;
-        if (!(lo && hi)) {
-            float4 box = (float4)(0.0f);
-            for (int dy = -1; dy <= 1; ++dy)
-                for (int dx = -1; dx <= 1; ++dx)
-                    box += to_mix_space(luts, load_px(src, IDX(clampi(x + dx, width - 1), clampi(y + dy, height - 1), width)));
-            b += (sides == 4 ? SUBPIXEL : SUBPIXEL_END) * (box * (1.0f / 9.0f) - b);
-        } else if (ws == 0.0f) return;
+    if (n >= 3) {
+        float4 delta;
+        if (subpixel_move(src, luts, x, y, width, height, sides, m, b, &delta)) {
+            b += delta;
+            moved = 1;
+        }
     }
+    if (shared) {
+        b += share;
+        moved = 1;
+    }
+    if (!moved) return;
 #endif
     float4 out = from_mix_space(luts, b);
     out.w = c.w;

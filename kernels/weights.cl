@@ -12,6 +12,9 @@
 // or the side of a box when a crossing is long) are blended only when BLEND_U is 1 and not a box side. An end crossed on both sides (a thin
 // line stepping across this one) continues the silhouette opposite to the other end, which makes
 // a Z shape (as SMAA's area patterns do); with no single crossing at the other end it stays unblended.
+// A U shape of STEM_MIN_L or more pixels on a 1-px line (the bump's pixels at both ends also have an edge on
+// their far side) is a 1-px stroke -- a text stem, a rule -- not a bump of a curve: its ends are square,
+// and the U's taper would shave ink off both sides of it; its areas are scaled by STEM_K.
 // Output weights[i] = (top, bottom, left, right) as 16-bit fractions: how much pixel i takes from
 // each neighbour. Only slots next to an edge are written (and read, by blend.cl): a pixel with a
 // bottom edge writes its own bottom slot and the top slot of the pixel below; with a right edge,
@@ -29,6 +32,12 @@
 #endif
 #ifndef SHORT_CORNER
 #define SHORT_CORNER 0.75f
+#endif
+#ifndef STEM_MIN_L
+#define STEM_MIN_L 8
+#endif
+#ifndef STEM_K
+#define STEM_K 0.25f
 #endif
 #define IMAX(a, b) ((a) > (b) ? (a) : (b))
 #ifndef VALIDATE_CROSSINGS
@@ -69,7 +78,7 @@ inline int crossing(int a, int b, int a2, int b2, int *long_edge)
 // SHORT_CORNER (2 px) or ROUNDING (3+ px).
 // (always_inline here and below: PoCL's CPU build otherwise calls these per pixel; mixed frame 0.95x)
 inline __attribute__((always_inline)) void line_areas(__global const float *table, int d0, int d1, int s0, int s1,
-                       int long0, int long1, float *ta, float *tb)
+                       int long0, int long1, int stem, float *ta, float *tb)
 {
     *ta = 0.0f; *tb = 0.0f;
     if (s0 == BOTH && s1 != BOTH) s0 = -s1;   // a thin line steps across: continue as a Z
@@ -81,6 +90,7 @@ inline __attribute__((always_inline)) void line_areas(__global const float *tabl
     float k1 = long1 == 2 ? ROUNDING : (long1 == 1 ? SHORT_CORNER : 1.0f);
     if (s0 == s1) {
         if (!BLEND_U || long0 || long1) return;
+        if (stem) { k0 *= STEM_K; k1 *= STEM_K; }   // a 1-px stroke (caller's test), not a bump
     }
     int L = d0 + d1 + 1;
     // A line of length 1 between crossing edges two pixels long is a step of a steep staircase
@@ -166,7 +176,11 @@ inline __attribute__((always_inline)) void pixel_weights(__global const PIXEL_T 
             if ((s1 == 1 || s1 == -1) && k1 == 1 && stroke_end_h(edges, x1, s1 == 1 ? y - 2 : y + 2, -1, width, height))
                 k1 = 2;
         }
-        line_areas(table, d.x, d.y, s0, s1, k0, k1, &up, &down);
+        // a 1-px stroke: a U whose bump row (y for side a, y + 1 for side b) is bordered on its far side too
+        const int stem = s0 == s1 && (s0 == 1 || s0 == -1) && (int)d.x + (int)d.y + 1 >= STEM_MIN_L &&
+                         has(edges, x0, s0 == 1 ? y - 1 : y + 1, width, height, EDGE_BOTTOM) &&
+                         has(edges, x1, s0 == 1 ? y - 1 : y + 1, width, height, EDGE_BOTTOM);
+        line_areas(table, d.x, d.y, s0, s1, k0, k1, stem, &up, &down);
     }
     if (e & EDGE_RIGHT) {    // vertical line between columns x and x+1, ends at y0 and y1
         ushort2 d = vdist[i];
@@ -190,7 +204,10 @@ inline __attribute__((always_inline)) void pixel_weights(__global const PIXEL_T 
             if ((s1 == 1 || s1 == -1) && k1 == 1 && stroke_end_v(edges, s1 == 1 ? x - 2 : x + 2, y1, -1, width, height))
                 k1 = 2;
         }
-        line_areas(table, d.x, d.y, s0, s1, k0, k1, &left, &right);
+        const int stem = s0 == s1 && (s0 == 1 || s0 == -1) && (int)d.x + (int)d.y + 1 >= STEM_MIN_L &&
+                         has(edges, s0 == 1 ? x - 1 : x + 1, y0, width, height, EDGE_RIGHT) &&
+                         has(edges, s0 == 1 ? x - 1 : x + 1, y1, width, height, EDGE_RIGHT);
+        line_areas(table, d.x, d.y, s0, s1, k0, k1, stem, &left, &right);
     }
     __global ushort *w = weights + (size_t)i * 4;   // (top, bottom, left, right)
     if (e & EDGE_BOTTOM) {

@@ -3,6 +3,8 @@
 Tolerances: edge masks agree exactly except where ΔE lies within 0.1 of the threshold (the kernel
 reads colour tables with linear interpolation, the reference uses the exact formulas); distances
 exactly; weights within 1e-4 (16-bit storage); 8-bit output within 1 level, >= 99% of pixels exact.
+The whole-filter comparisons run without the FXAA fallback (Filter(fallback="off")): mlaa_reference is
+the MLAA passes; tests/test_fallback.py checks the fallback on top of them.
 """
 from __future__ import annotations
 
@@ -181,7 +183,7 @@ def test_filter_matches_reference(dtype, channels, bgr):
     img = blocky(11, dtype=dtype, channels=channels)
     if channels == 1:
         img = img[..., 0]
-    with Filter(bgr=bgr) as f:
+    with Filter(bgr=bgr, fallback="off") as f:
         got = f.process(img)
     want = mlaa_reference(img, bgr=bgr)
     assert got.shape == img.shape and got.dtype == img.dtype
@@ -367,7 +369,7 @@ def test_linear_integer_frames_match_reference(dtype):
     """Integer frames in linear light (16-bit linear TIFF): CIELAB from the per-level table, which encodes
     each level first (common.cl linear_levels), must give the reference's edges and output."""
     img = blocky(17, dtype=dtype)
-    with Filter(linear_input=True) as f:
+    with Filter(linear_input=True, fallback="off") as f:
         got = f.process(img)
     want = mlaa_reference(img, linear_input=True)
     d = np.abs(got.astype(np.int64) - want.astype(np.int64))
@@ -446,7 +448,7 @@ def test_grain_guard_matches_reference(dtype, channels):
     img = grainy(21, dtype, channels)
     if channels == 1:
         img = img[..., 0]
-    with Filter(bridge=False) as f:
+    with Filter(bridge=False, fallback="off") as f:
         got = f.process(img)
     want = mlaa_reference(img)
     scale = {np.uint8: 1.0, np.uint16: 1 / 257.0, np.float32: 255.0}[dtype]
@@ -496,6 +498,58 @@ def test_a_2px_step_of_a_filled_shape_is_still_blended():
     want = weights_reference(*_edges_and_distances(img), frame=img)
     _assert_weights_match(got, want)
     assert want[:12, 5:7].any() and (got["out"] != img).any()
+
+
+# ---- 1-px strokes (kernels/weights.cl STEM_MIN_L, STEM_K) -----------------------------------------------
+
+def _stem(transpose: bool = False, bump: bool = False) -> np.ndarray:
+    """A 1-px stem 12 px tall at column 9, rows 4..15 (small text's 'l'); with `bump`, the same column sits on
+    a filled block below instead (a 1-px plateau of a shape: the bump of a curve, not a stroke)."""
+    img = np.full((24, 20, 3), 240, np.uint8)
+    img[4:16, 9] = 30
+    if bump:
+        img[4:16, 9] = 240
+        img[8, 4:16] = 30      # the plateau: 12 px wide, 1 px high
+        img[9:20, 1:19] = 30   # the block under it
+    return np.ascontiguousarray(img.transpose(1, 0, 2)) if transpose else img
+
+
+@pytest.mark.parametrize("transpose", [False, True])
+def test_long_1px_stem_is_not_tapered_as_a_bump(transpose, monkeypatch):
+    """Known answer: each side of a 1-px stem of length L = 12 is a U shape whose 1-px crossings are the stem's
+    ends; the stem pixel at distances (d0, d1) from them takes STEM_K * (A(d0, L) + A(d1, L)) of its neighbour
+    (seed 000 eq. 2), the neighbour nothing. Without the rule (STEM_MIN_L huge) the full areas."""
+    import mlaa_stream.spatial.filter as mlaa_module
+    img = _stem(transpose)
+    with Filter(bridge=False, subpixel=0.0) as f:
+        got = f.intermediates(img)
+    want = weights_reference(*_edges_and_distances(img), frame=img)
+    _assert_weights_match(got, want)
+    k = mlaa_module.STEM_K
+    area = np.array([trapezoid_area(d, 12) + trapezoid_area(11 - d, 12) for d in range(12)])
+    w = want if not transpose else want.transpose(1, 0, 2)[..., [2, 3, 0, 1]]
+    np.testing.assert_allclose(w[4:16, 9, 2], k * area, atol=1e-12)   # the stem takes from its left ...
+    np.testing.assert_allclose(w[4:16, 9, 3], k * area, atol=1e-12)   # ... and right neighbour
+    assert not w[4:16, 8, 3].any() and not w[4:16, 10, 2].any()       # they take nothing from it
+    monkeypatch.setattr(mlaa_module, "STEM_MIN_L", 10 ** 6)
+    w = weights_reference(*_edges_and_distances(img), frame=img)
+    w = w if not transpose else w.transpose(1, 0, 2)[..., [2, 3, 0, 1]]
+    np.testing.assert_allclose(w[4:16, 9, 2], area, atol=1e-12)
+    with Filter(bridge=False, subpixel=0.0) as f:
+        _assert_weights_match(f.intermediates(img), w if not transpose else w.transpose(1, 0, 2)[..., [2, 3, 0, 1]])
+
+
+@pytest.mark.parametrize("transpose", [False, True])
+def test_1px_bump_of_a_filled_shape_is_still_blended_in_full(transpose):
+    """The same U shape on a plateau whose far side is the shape itself (no edge there): a curve's bump."""
+    img = _stem(transpose, bump=True)
+    with Filter(bridge=False, subpixel=0.0) as f:
+        got = f.intermediates(img)
+    want = weights_reference(*_edges_and_distances(img), frame=img)
+    _assert_weights_match(got, want)
+    w = want if not transpose else want.transpose(1, 0, 2)[..., [2, 3, 0, 1]]
+    area = np.array([trapezoid_area(d, 12) + trapezoid_area(11 - d, 12) for d in range(12)])
+    np.testing.assert_allclose(w[8, 4:16, 0], area, atol=1e-12)   # the plateau takes from above, unscaled
 
 
 def _assert_weights_match(got: dict, want: np.ndarray) -> None:
@@ -562,3 +616,32 @@ def test_subpixel_dot_moves_towards_its_surroundings(value):
     np.testing.assert_array_equal(out[:, 15:20], plain[:, 15:20])
     np.testing.assert_array_equal(out[:, :7], plain[:, :7])
     assert (out[5, 4] == 250).all()
+
+
+@pytest.mark.parametrize("value", [20, 235])
+def test_subpixel_move_is_shared_by_the_neighbours_across_its_edges(value):
+    """Known answer (blend.cl SUBPIXEL_SHARE): the ink a lone dot loses (or gains) goes to the four neighbours
+    across its edges, a quarter each, in linear light -- a thin feature keeps its weight instead of fading.
+    With b the dot's colour after the line blends (subpixel=0), the dot moves by delta = SUBPIXEL (box - b);
+    each neighbour moves by -SUBPIXEL_SHARE delta / 4 from where the line blends left it, so the five moves
+    sum to 0 up to rounding; kernel and reference agree exactly."""
+    from mlaa_stream.device.colour import linear_to_srgb, srgb_to_linear
+    from mlaa_stream.spatial.filter import SUBPIXEL, SUBPIXEL_SHARE
+    img = np.full((12, 16, 3), 120, np.uint8)
+    img[5, 7] = value
+    with Filter(bridge=False) as f:
+        out = f.process(img)
+    with Filter(bridge=False, subpixel=0.0) as f:
+        plain = f.process(img)
+    np.testing.assert_array_equal(out, mlaa_reference(img))
+    lin = lambda v: srgb_to_linear(np.asarray(v, np.float64) / 255.0)
+    b = lin(plain[5, 7, 0])
+    delta = SUBPIXEL * ((lin(value) + 8 * lin(120)) / 9 - b)
+    assert abs(int(out[5, 7, 0]) - linear_to_srgb(b + delta) * 255) <= 1
+    sides = ((4, 7), (6, 7), (5, 6), (5, 8))
+    for y, x in sides:
+        want = linear_to_srgb(lin(plain[y, x, 0]) - SUBPIXEL_SHARE * delta / 4) * 255
+        assert abs(int(out[y, x, 0]) - want) <= 1, (y, x, out[y, x, 0], want)
+    moves = [lin(out[y, x, 0]) - lin(plain[y, x, 0]) for y, x in [(5, 7), *sides]]
+    assert abs(sum(moves)) < abs(delta) * 0.05 + 5 * 0.5 / 255   # ink kept, up to rounding
+    assert out[4, 6, 0] == plain[4, 6, 0] and out[6, 8, 0] == plain[6, 8, 0]  # diagonals share no edge

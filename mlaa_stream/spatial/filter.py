@@ -57,7 +57,12 @@ SUBPIXEL = 0.5
 SUBPIXEL_BG = 2.0
 # A feature with three sides (a line's end, a 1-px bump: the fourth side continues into more of it) moves less.
 SUBPIXEL_END = 0.25
+# ... and the neighbours across its edges take SUBPIXEL_SHARE of its move, negated, split among them (ink kept).
+SUBPIXEL_SHARE = 1.0
 FALLBACK_MODES = ("auto", "everywhere", "off")  # Filter(fallback=...): spatial/fallback.py
+# A U shape (a bump) of STEM_MIN_L or more pixels on a 1-px line is a 1-px stroke -- small text's stems, rules --
+# with square ends, not a curve's bump: its areas are scaled by STEM_K (kernels/weights.cl, docs/spatial_tuning.md).
+STEM_MIN_L, STEM_K = 8, 0.25
 SEGMENT = 64  # pixels of a row per work item in the per-pixel passes (kernels/common.cl)
 EDGE_ROWS = 4  # rows per work item in detect_edges (kernels/edges.cl): each row's CIELAB and samples shared
 
@@ -139,8 +144,10 @@ class FilterOptions:
             "ROUNDING": float(self.rounding),
             "BLEND_U": int(self.blend_u),
             "SHORT_CORNER": float(self.short_corner), "CAP_MIN_L": STROKE_END_MIN_L,
+            "STEM_MIN_L": STEM_MIN_L, "STEM_K": float(STEM_K),
             "AA_GUARD": int(self.aa_guard), "AA_LO": float(AA_LO), "AA_OFF": float(AA_OFF), "AA_NEAR": float(AA_NEAR),
             "SUBPIXEL": float(self.subpixel), "SUBPIXEL_ON": int(self.subpixel > 0), "SUBPIXEL_BG": float(SUBPIXEL_BG),
+            "SUBPIXEL_SHARE": float(SUBPIXEL_SHARE),
             "SUBPIXEL_END": float(self.subpixel * SUBPIXEL_END / SUBPIXEL) if SUBPIXEL > 0 else 0.0,
             "GRAIN_GUARD": int(self.grain_guard), "GRAIN_STEP": GRAIN_STEP, "GRAIN_MIN": GRAIN_MIN,
             "SEGMENT": SEGMENT, "EDGE_ROWS": EDGE_ROWS,

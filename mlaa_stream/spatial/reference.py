@@ -8,7 +8,7 @@ import numpy as np
 
 from mlaa_stream.device.colour import LUMA, linear_to_srgb, rgb_to_lab, srgb_to_linear
 from mlaa_stream.spatial.filter import (AA_LO, AA_NEAR, AA_OFF, DEFAULT_THRESHOLDS, SHORT_CORNER, SUBPIXEL,
-                                        SUBPIXEL_BG, SUBPIXEL_END, ramp_fraction, trapezoid_area)
+                                        SUBPIXEL_BG, SUBPIXEL_END, SUBPIXEL_SHARE, ramp_fraction, trapezoid_area)
 
 BOTTOM, RIGHT = 1, 2
 BOTH = 2  # an end crossed on both sides
@@ -163,8 +163,9 @@ def weights_reference(edges: np.ndarray, hdist: np.ndarray, vdist: np.ndarray,
     """(top, bottom, left, right) fractions each pixel takes from its neighbours (seed 000 eq. 2).
     With `frame`, a crossing edge counts only if the pixel beyond it has the other side's colour. A 2-px
     crossing at the end of a line of STROKE_END_MIN_L+ pixels whose far end turns back along the line for
-    three pixels is a 2-px stroke's square end: a corner, like a 3-px crossing."""
-    from mlaa_stream.spatial.filter import STROKE_END_MIN_L
+    three pixels is a 2-px stroke's square end: a corner, like a 3-px crossing. A U shape of STEM_MIN_L+ pixels
+    whose bump is a 1-px line (an edge on its far side at both ends) is a 1-px stroke: areas times STEM_K."""
+    from mlaa_stream.spatial.filter import STEM_K, STEM_MIN_L, STROKE_END_MIN_L
     h, w = edges.shape
     out = np.zeros((h, w, 4))
     rgb = None if frame is None else normalised_rgb(frame)[0]
@@ -188,7 +189,7 @@ def weights_reference(edges: np.ndarray, hdist: np.ndarray, vdist: np.ndarray,
         long_edge = max(a2 if a else 0, b2 if b else 0)
         return (BOTH if a and b else 1 if a else -1 if b else 0), long_edge
 
-    def areas(d0: int, d1: int, s0: int, long0: int, s1: int, long1: int) -> tuple[float, float]:
+    def areas(d0: int, d1: int, s0: int, long0: int, s1: int, long1: int, stem: bool = False) -> tuple[float, float]:
         ta = tb = 0.0
         if s0 == BOTH and s1 != BOTH:  # a thin line crossing: continue opposite to the other end (Z)
             s0 = -s1
@@ -199,13 +200,14 @@ def weights_reference(edges: np.ndarray, hdist: np.ndarray, vdist: np.ndarray,
             return ta, tb
         if s0 == s1 and (not blend_u or long0 or long1):  # U shape: a bump, or the side of a box
             return ta, tb
+        scale = STEM_K if s0 == s1 and stem else 1.0  # a U on a 1-px stroke: its ends are square
         length = d0 + d1 + 1
         for s, long_edge, d in ((s0, long0, d0), (s1, long1, d1)):
             if s:
                 # 3+ px crossing: a corner (rounding); 2 px: short_corner, none on a 1-px line
                 k = (rounding if long_edge == 2 else
                      (0.0 if length == 1 else short_corner) if long_edge == 1 else 1.0)
-                a = k * trapezoid_area(d, length)
+                a = scale * k * trapezoid_area(d, length)
                 if s > 0:
                     ta += a
                 else:
@@ -228,7 +230,11 @@ def weights_reference(edges: np.ndarray, hdist: np.ndarray, vdist: np.ndarray,
                         k0 = 2
                     if s1 in (1, -1) and k1 == 1 and all(has(x1 - t, y - 2 * s1, BOTTOM) for t in range(3)):
                         k1 = 2
-                up, down = areas(dl, dr, s0, k0, s1, k1)
+                # a U of STEM_MIN_L+ px whose bump row is bordered on its far side at both ends: a 1-px stroke
+                row = y - 1 if s0 == 1 else y + 1
+                stem = (s0 == s1 and s0 in (1, -1) and dl + dr + 1 >= STEM_MIN_L and
+                        has(x0, row, BOTTOM) and has(x1, row, BOTTOM))
+                up, down = areas(dl, dr, s0, k0, s1, k1, stem)
                 out[y, x, 1] = up
                 out[y + 1, x, 0] = down
             if edges[y, x] & RIGHT:
@@ -245,7 +251,10 @@ def weights_reference(edges: np.ndarray, hdist: np.ndarray, vdist: np.ndarray,
                         k0 = 2
                     if s1 in (1, -1) and k1 == 1 and all(has(x - 2 * s1, y1 - t, RIGHT) for t in range(3)):
                         k1 = 2
-                left, right = areas(du, dd, s0, k0, s1, k1)
+                col = x - 1 if s0 == 1 else x + 1
+                stem = (s0 == s1 and s0 in (1, -1) and du + dd + 1 >= STEM_MIN_L and
+                        has(col, y0, RIGHT) and has(col, y1, RIGHT))
+                left, right = areas(du, dd, s0, k0, s1, k1, stem)
                 out[y, x, 3] = left
                 out[y, x + 1, 2] = right
     return out
@@ -286,7 +295,8 @@ def blend_reference(frame: np.ndarray, weights: np.ndarray, linear: bool = True,
     pixel bordered by edges on three or four sides, lighter (or darker) than every neighbour across them,
     which spread by at most SUBPIXEL_BG times its contrast to them (a sub-pixel feature on one background),
     then moves `subpixel` (four sides; three: `subpixel` * SUBPIXEL_END / SUBPIXEL) of the way to the mean
-    of its 3x3 window (clamped); pixels in grain (grain_mask) keep their colour."""
+    of its 3x3 window (clamped), and each neighbour across those edges moves by -SUBPIXEL_SHARE / sides of
+    that; pixels in grain (grain_mask) keep their colour."""
     rgb, alpha = normalised_rgb(frame, False)  # channel order does not matter for mixing
     decode = linear and not linear_input
     m = srgb_to_linear(rgb) if decode else rgb
@@ -319,9 +329,19 @@ def blend_reference(frame: np.ndarray, weights: np.ndarray, linear: bool = True,
         with np.errstate(invalid="ignore"):
             contrast = np.where(higher, ymin - y, y - ymax)
             background = ~(ymax - ymin > SUBPIXEL_BG * contrast)
-        dot = ((sides >= 3) & ~(lower & higher) & background)[..., None]
+        dot = (sides >= 3) & ~(lower & higher) & background
         amount = np.where(sides >= 4, subpixel, subpixel * SUBPIXEL_END / SUBPIXEL)[..., None]
-        out = np.where(dot, out + amount * (box - out), out)
+        delta = np.where(dot[..., None], amount * (box - out), 0.0)
+        # ... and the neighbours across its edges take SUBPIXEL_SHARE of that move, negated, split among them
+        # (a feature in grain does not move, so it gives nothing)
+        moved = dot & ~grain_mask(frame) if grain_guard else dot
+        give = np.where(moved[..., None], -SUBPIXEL_SHARE * delta / np.maximum(sides, 1)[..., None], 0.0)
+        share = np.zeros_like(out)
+        share[1:] += np.where(b[:-1, :, None], give[:-1], 0.0)     # the feature above, across its bottom edge
+        share[:-1] += np.where(b[:-1, :, None], give[1:], 0.0)     # the feature below, across this pixel's bottom
+        share[:, 1:] += np.where(r[:, :-1, None], give[:, :-1], 0.0)  # the feature to the left
+        share[:, :-1] += np.where(r[:, :-1, None], give[:, 1:], 0.0)  # the feature to the right
+        out = out + delta + share
     out = linear_to_srgb(out) if decode else out
     res = _to_dtype(out, alpha, frame)
     if grain_guard:
