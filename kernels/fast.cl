@@ -4,8 +4,9 @@
 // Work in blocks of 64 columns x FAST_ROWS rows: a work item per block (edges), per 64 pixels of a row (blend),
 // per row (bottom-edge shapes), per strip of 64 columns (right-edge shapes). The edge pass marks the blocks
 // that hold an edge (`blocks`, a byte per block, row-major); the later passes skip the others.
-// Defines: FAST_THRESHOLD (weighted RGB difference, fraction of full scale), FAST_MAX_LEN (<= 31),
-//          BLEND_LINEAR / LINEAR_INPUT as blend.cl.
+// Defines: FAST_THRESHOLD (weighted RGB difference, fraction of full scale), FAST_MAX_LEN (<= 31), FAST_ROWS
+//          (rows of a block), BLEND_LINEAR / LINEAR_INPUT and SUBPIXEL_ON / SUBPIXEL / SUBPIXEL_END /
+//          SUBPIXEL_BG as blend.cl (the Filter's options).
 
 #ifndef FAST_THRESHOLD
 #define FAST_THRESHOLD 0.06f
