@@ -1,9 +1,12 @@
 // fast.cl -- the three-pass MLAA of seed 004 (Kluczek, "Antialiasing in 1 millisecond"): edges, L shapes,
 // reconstruction + blend, each a full-frame pass, with a bounded edge length (FAST_MAX_LEN). The preset
 // `fast` (mlaa_stream/spatial/fast.py, whose numpy reference mirrors this file rule for rule).
-// Work: one work item per SEGMENT pixels of a row in every pass (common.cl's SEGMENT).
-// Defines: FAST_THRESHOLD (weighted RGB difference, fraction of full scale), FAST_MAX_LEN (<= 31),
-//          BLEND_LINEAR / LINEAR_INPUT as blend.cl.
+// Work in blocks of 64 columns x FAST_ROWS rows: a work item per block (edges), per 64 pixels of a row (blend),
+// per row (bottom-edge shapes), per strip of 64 columns (right-edge shapes). The edge pass marks the blocks
+// that hold an edge (`blocks`, a byte per block, row-major); the later passes skip the others.
+// Defines: FAST_THRESHOLD (weighted RGB difference, fraction of full scale), FAST_MAX_LEN (<= 31), FAST_ROWS
+//          (rows of a block), BLEND_LINEAR / LINEAR_INPUT and SUBPIXEL_ON / SUBPIXEL / SUBPIXEL_END /
+//          SUBPIXEL_BG as blend.cl (the Filter's options).
 
 #ifndef FAST_THRESHOLD
 #define FAST_THRESHOLD 0.06f
@@ -11,6 +14,11 @@
 #ifndef FAST_MAX_LEN
 #define FAST_MAX_LEN 31
 #endif
+#ifndef FAST_ROWS
+#define FAST_ROWS 8
+#endif
+#define FAST_COLS 64   // the 64-bit masks of the shape sweeps
+#define BLOCKS_X(width) (((width) + FAST_COLS - 1) / FAST_COLS)
 
 // Pass 1 edge bits (seed 004 "edge buffer"): every edge is kept in both pixels that share it, so the later
 // passes read one byte per pixel instead of colours.
@@ -56,78 +64,155 @@ inline int idiff(int3 a, int3 b)
 }
 
 #if CHANNELS == 3 && SAMPLE_BYTES == 1
+#define FAST_VECTOR 1
 #define FAST_QUIET (FAST_LIMIT / 256)
-// Do the 24 bytes from a and from b differ by at most FAST_QUIET each?
-inline int quiet24(__global const uchar *a, __global const uchar *b)
+#ifdef POCL_DEVICE_ADDRESS_BITS
+#define STORE_UCHAR16(v, p) (*(__global uchar16_a1 *)(p) = (v))
+#else
+#define STORE_UCHAR16(v, p) vstore16(v, 0, p)
+#endif
+// Does some byte of a differ from the same byte of b by more than FAST_QUIET levels? (nonzero: yes)
+inline ulong louder16(uchar16 a, uchar16 b)
 {
-    const uchar16 a0 = LOAD_UCHAR16(a), b0 = LOAD_UCHAR16(b);
-    const uchar8 a1 = LOAD_UCHAR8(a + 16), b1 = LOAD_UCHAR8(b + 16);
+    const uchar16 d = a > b ? a - b : b - a;
+    const ulong2 m = as_ulong2(d > (uchar16)(FAST_QUIET));
+    return m.x | m.y;
+}
+
+// The weighted differences of 8 RGB pixels at a and at b (24 bytes each), lane k for pixel k: the bytes'
+// absolute differences, regrouped by channel, weighted in 16 bits (at most 256 * 255 = 65280).
+inline short8 edge8(uchar16 a0, uchar8 a1, __global const uchar *b)
+{
+    const uchar16 b0 = LOAD_UCHAR16(b);
+    const uchar8 b1 = LOAD_UCHAR8(b + 16);
     const uchar16 d0 = a0 > b0 ? a0 - b0 : b0 - a0;
     const uchar8 d1 = a1 > b1 ? a1 - b1 : b1 - a1;
-    const char16 m0 = d0 > (uchar16)(FAST_QUIET);
-    const char8 m1 = d1 > (uchar8)(FAST_QUIET);
-    const ulong2 w0 = as_ulong2(m0);
-    return ((w0.x | w0.y | as_ulong(m1)) == 0);
+    // no byte differs by more than FAST_QUIET levels: no edge (the weights sum to 256); most of a frame
+    const ulong2 q0 = as_ulong2(d0 > (uchar16)(FAST_QUIET));
+    if (!(q0.x | q0.y | as_ulong(d1 > (uchar8)(FAST_QUIET)))) return (short8)(0);
+    const ushort8 c0 = convert_ushort8((uchar8)(d0.s0, d0.s3, d0.s6, d0.s9, d0.sc, d0.sf, d1.s2, d1.s5));
+    const ushort8 c1 = convert_ushort8((uchar8)(d0.s1, d0.s4, d0.s7, d0.sa, d0.sd, d1.s0, d1.s3, d1.s6));
+    const ushort8 c2 = convert_ushort8((uchar8)(d0.s2, d0.s5, d0.s8, d0.sb, d0.se, d1.s1, d1.s4, d1.s7));
+#if ORDER_BGR
+    const ushort8 s = (ushort8)(W_B) * c0 + (ushort8)(W_G) * c1 + (ushort8)(W_R) * c2;
+#else
+    const ushort8 s = (ushort8)(W_R) * c0 + (ushort8)(W_G) * c1 + (ushort8)(W_B) * c2;
+#endif
+    return s > (ushort8)(FAST_LIMIT);   // -1 where an edge
 }
 #endif
 #endif
 
-__kernel void fast_edges(__global const PIXEL_T *src, __global uchar *edges, const int width, const int height)
+// Pass 1, and the copy of the frame into dst (pass 3 then writes only the pixels it changes): the source
+// row is read here anyway, so the copy costs a store instead of a separate full-frame copy.
+__kernel void fast_edges(__global const PIXEL_T *src, __global uchar *edges, __global PIXEL_T *dst,
+                         __global uchar *blocks, const int width, const int height)
 {
-#ifndef PIXEL_IS_FLOAT
-    const int x0 = get_global_id(0) * SEGMENT, y = get_global_id(1);
-    if (x0 >= width || y >= height) return;
-    const int x1 = x0 + SEGMENT < width ? x0 + SEGMENT : width;
-    const int row = y * width;
-    int3 left = x0 > 0 ? raw3(src, row + x0 - 1) : (int3)(0);
-    int3 c = raw3(src, row + x0);
-    for (int x = x0; x < x1; ++x) {
-        const int i = row + x;
-#if CHANNELS == 3 && SAMPLE_BYTES == 1
-        // 8 pixels away from the frame's border whose bytes all differ by at most FAST_QUIET levels from the
-        // same byte of the pixel above, below, left and right can hold no edge (the weights sum to 256): one
-        // compare of 24-byte rows instead of 32 weighted differences. Most of a rendered frame is such.
-        if ((x - x0) % 8 == 0 && x > 0 && x + 8 < width && y > 0 && y + 1 < height) {
-            __global const uchar *p = (__global const uchar *)src + (size_t)i * 3;
-            if (quiet24(p, p - 3 * width) && quiet24(p, p + 3 * width) && quiet24(p, p + 3) && quiet24(p, p - 3)) {
-                for (int t = 0; t < 8; ++t) edges[i + t] = 0;
-                x += 7;
-                left = raw3(src, i + 7);
-                c = raw3(src, i + 8);
-                continue;
+    // a block per work item: global size (ceil(width / FAST_COLS), ceil(height / FAST_ROWS))
+    const int x0 = get_global_id(0) * FAST_COLS, y0 = get_global_id(1) * FAST_ROWS;
+    if (x0 >= width || y0 >= height) return;
+    const int x1 = x0 + FAST_COLS < width ? x0 + FAST_COLS : width, y1 = y0 + FAST_ROWS < height ? y0 + FAST_ROWS : height;
+    uint seen = 0;   // any edge in the block
+#ifdef FAST_VECTOR
+    uchar8 under[FAST_COLS / 8];   // per group: the row above's bottom edges, which are this row's top edges
+    ulong under_any = 0;           // any of them
+#endif
+    for (int y = y0; y < y1; ++y) {
+        const int row = y * width;
+        int x = x0;
+#ifdef FAST_VECTOR
+        // 8 pixels at a time while pixel x + 8 (the right neighbour of the group's last) is in the row: two
+        // weighted differences of 8 lanes (right, down; up is the row above's down, but in a work item's first
+        // row); the left edges are the right ones shifted by a pixel. Integer sums: the scalar path's bits.
+        if (x + 8 < width) {
+            __global const uchar *s8 = (__global const uchar *)src;
+            __global uchar *d8 = (__global uchar *)dst;
+            const size_t stride = 3 * (size_t)width;
+            uchar prev = x > 0 && idiff(raw3(src, row + x - 1), raw3(src, row + x)) > FAST_LIMIT;   // left of x
+            int copied = 0;
+            // The block's 64 pixels of this row at once, 16 bytes at a time: where no byte differs from the
+            // right or lower neighbour's (in the block's first row the upper's too) by more than FAST_QUIET,
+            // and no edge comes from the left or above, the row has no edge (most of a frame).
+            if (!prev && !under_any && x1 - x0 == FAST_COLS && x1 < width) {
+                ulong loud = 0;
+                for (int k = 0; k < 3 * FAST_COLS; k += 16) {
+                    const size_t o = 3 * (size_t)row + 3 * x0 + k;
+                    const uchar16 a = LOAD_UCHAR16(s8 + o);
+                    STORE_UCHAR16(a, d8 + o);
+                    loud |= louder16(a, LOAD_UCHAR16(s8 + o + 3));
+                    if (y + 1 < height) loud |= louder16(a, LOAD_UCHAR16(s8 + o + stride));
+                    if (y == y0 && y > 0) loud |= louder16(a, LOAD_UCHAR16(s8 + o - stride));
+                }
+                copied = 1;
+                if (!loud) {
+                    for (int g = 0; g < FAST_COLS / 8; ++g) {
+                        STORE_UCHAR8((uchar8)(0), edges + row + x0 + 8 * g);
+                        under[g] = (uchar8)(0);
+                    }
+                    x = x1;
+                }
+            }
+            under_any = 0;
+            for (int g = 0; x < x1 && x + 8 < width; x += 8, ++g) {
+                const size_t o = 3 * (size_t)(row + x);
+                const uchar16 c0 = LOAD_UCHAR16(s8 + o);
+                const uchar8 c1 = LOAD_UCHAR8(s8 + o + 16);
+                if (!copied) {
+                    STORE_UCHAR16(c0, d8 + o);
+                    STORE_UCHAR8(c1, d8 + o + 16);
+                }
+                const uchar8 r = convert_uchar8(-edge8(c0, c1, s8 + o + 3));
+                uchar8 t = (uchar8)(0);
+                if (y > y0) t = under[g];
+                else if (y > 0) t = convert_uchar8(-edge8(c0, c1, s8 + o - stride));
+                const uchar8 b = y + 1 < height ? convert_uchar8(-edge8(c0, c1, s8 + o + stride)) : (uchar8)(0);
+                under[g] = b;
+                under_any |= as_ulong(b);
+                const uchar8 l = (uchar8)(prev, r.s0, r.s1, r.s2, r.s3, r.s4, r.s5, r.s6);
+                prev = r.s7;
+                const uchar8 e = t * (uchar8)(E_TOP) | r * (uchar8)(E_RIGHT) | b * (uchar8)(E_BOTTOM) | l * (uchar8)(E_LEFT);
+                STORE_UCHAR8(e, edges + row + x);
+                seen |= as_ulong(e) != 0;
             }
         }
 #endif
-        const int3 right = x + 1 < width ? raw3(src, i + 1) : c;
-        uchar e = 0;
-        if (y > 0 && idiff(c, raw3(src, i - width)) > FAST_LIMIT) e |= E_TOP;
-        if (x + 1 < width && idiff(c, right) > FAST_LIMIT) e |= E_RIGHT;
-        if (y + 1 < height && idiff(c, raw3(src, i + width)) > FAST_LIMIT) e |= E_BOTTOM;
-        if (x > 0 && idiff(c, left) > FAST_LIMIT) e |= E_LEFT;
-        edges[i] = e;
-        left = c;
-        c = right;
-    }
+#ifndef PIXEL_IS_FLOAT
+        int3 left = x > 0 ? raw3(src, row + x - 1) : (int3)(0);
+        int3 c = x < x1 ? raw3(src, row + x) : (int3)(0);
+        for (; x < x1; ++x) {
+            const int i = row + x;
+            for (int k = 0; k < CHANNELS; ++k) dst[(size_t)i * CHANNELS + k] = src[(size_t)i * CHANNELS + k];
+            const int3 right = x + 1 < width ? raw3(src, i + 1) : c;
+            uchar e = 0;
+            if (y > 0 && idiff(c, raw3(src, i - width)) > FAST_LIMIT) e |= E_TOP;
+            if (x + 1 < width && idiff(c, right) > FAST_LIMIT) e |= E_RIGHT;
+            if (y + 1 < height && idiff(c, raw3(src, i + width)) > FAST_LIMIT) e |= E_BOTTOM;
+            if (x > 0 && idiff(c, left) > FAST_LIMIT) e |= E_LEFT;
+            edges[i] = e;
+            seen |= e;
+            left = c;
+            c = right;
+        }
 #else
-    const int x0 = get_global_id(0) * SEGMENT, y = get_global_id(1);
-    if (x0 >= width || y >= height) return;
-    const int x1 = x0 + SEGMENT < width ? x0 + SEGMENT : width;
-    const int row = y * width;
-    float4 left = x0 > 0 ? load_px(src, row + x0 - 1) : (float4)(0.0f);
-    float4 c = load_px(src, row + x0);
-    for (int x = x0; x < x1; ++x) {
-        const int i = row + x;
-        const float4 right = x + 1 < width ? load_px(src, i + 1) : c;
-        uchar e = 0;
-        if (y > 0 && weighted_diff(c, load_px(src, i - width)) > FAST_THRESHOLD) e |= E_TOP;
-        if (x + 1 < width && weighted_diff(c, right) > FAST_THRESHOLD) e |= E_RIGHT;
-        if (y + 1 < height && weighted_diff(c, load_px(src, i + width)) > FAST_THRESHOLD) e |= E_BOTTOM;
-        if (x > 0 && weighted_diff(c, left) > FAST_THRESHOLD) e |= E_LEFT;
-        edges[i] = e;
-        left = c;
-        c = right;
-    }
+        float4 left = x0 > 0 ? load_px(src, row + x0 - 1) : (float4)(0.0f);
+        float4 c = load_px(src, row + x0);
+        for (; x < x1; ++x) {
+            const int i = row + x;
+            for (int k = 0; k < CHANNELS; ++k) dst[(size_t)i * CHANNELS + k] = src[(size_t)i * CHANNELS + k];
+            const float4 right = x + 1 < width ? load_px(src, i + 1) : c;
+            uchar e = 0;
+            if (y > 0 && weighted_diff(c, load_px(src, i - width)) > FAST_THRESHOLD) e |= E_TOP;
+            if (x + 1 < width && weighted_diff(c, right) > FAST_THRESHOLD) e |= E_RIGHT;
+            if (y + 1 < height && weighted_diff(c, load_px(src, i + width)) > FAST_THRESHOLD) e |= E_BOTTOM;
+            if (x > 0 && weighted_diff(c, left) > FAST_THRESHOLD) e |= E_LEFT;
+            edges[i] = e;
+            seen |= e;
+            left = c;
+            c = right;
+        }
 #endif
+    }
+    blocks[get_global_id(1) * BLOCKS_X(width) + get_global_id(0)] = seen != 0;
 }
 
 // Pass 2 (seed 004 "L-shape buffer"): four L shapes per pixel, one byte each: from the pixel along its bottom
@@ -137,7 +222,7 @@ __kernel void fast_edges(__global const PIXEL_T *src, __global uchar *edges, con
 // other side, 3 = both, 0 none), bit 7 a long crossing (3+ pixels: a real corner, kept sharp as seed 002
 // does). A line's end more than FAST_MAX_LEN - 1 pixels away is not known: distance FAST_MAX_LEN - 1, no
 // crossing (the seed's bounded edge length). Each line is walked once, by a sweep along it: one work item
-// per row for the bottom edges, one per strip of SEGMENT columns for the right edges.
+// per row for the bottom edges, one per strip of 64 columns for the right edges.
 #define L_SIDE_A 1
 #define L_SIDE_B 2
 #define L_UNKNOWN (FAST_MAX_LEN - 1)
@@ -175,101 +260,109 @@ inline uchar v_crossing(__global const uchar *edges, int x, int yc, int width, i
 // A shape byte for a pixel `d` pixels from its line's end with crossing bits `cross`.
 inline uchar shape_byte(int d, uchar cross) { return d <= L_UNKNOWN ? (uchar)(d | cross) : (uchar)L_UNKNOWN; }
 
-// Does the bottom-edge line of row y go on from x to x + 1 (both edges there, no vertical edge between)?
-inline int h_continues(__global const uchar *edges, int x, int y, int width, int height)
+// Bit b of each of 8 edge bytes (a word as edge_group loads it), as bits 0-7 of a byte.
+inline uint gather8(ulong g, int b) { return (uint)((((g >> b) & 0x0101010101010101UL) * 0x0102040810204080UL) >> 56); }
+
+// Bit c of the result: edge bit b (1: E_RIGHT, 2: E_BOTTOM) of pixel x0 + c of row y, for n <= 64 columns.
+inline ulong strip_bits(__global const uchar *edges, int x0, int n, int y, int width, int b)
 {
-    return x + 1 < width && (edges[y * width + x + 1] & E_BOTTOM) &&
-           !edge_bit(edges, x, y, width, height, E_RIGHT) && !edge_bit(edges, x, y + 1, width, height, E_RIGHT);
+    __global const uchar *p = edges + y * width + x0;
+    ulong m = 0;
+    if (n == 64) {
+        for (int g = 0; g < 8; ++g) m |= (ulong)gather8(edge_group(p + 8 * g), b) << (8 * g);
+    } else {
+        for (int c = 0; c < n; ++c) m |= (ulong)((p[c] >> b) & 1) << c;
+    }
+    return m;
 }
 
-__kernel void fast_hshapes(__global const uchar *edges, __global uchar2 *hshapes, const int width, const int height)
+// The index of the lowest set bit of a nonzero word (taken as 64 bits).
+#ifdef POCL_DEVICE_ADDRESS_BITS
+#define LOWEST_BIT(m) __builtin_ctzl((ulong)(m))
+#else
+#define LOWEST_BIT(m) (63 - (int)clz((ulong)(m) & (~(ulong)(m) + 1)))
+#endif
+
+__kernel void fast_hshapes(__global const uchar *edges, __global const uchar *blocks, __global uchar2 *hshapes,
+                           const int width, const int height)
 {
+    // One row, 64 columns at a time as bit masks (as fast_vshapes): a bottom-edge line goes on from x to x + 1
+    // where x + 1 has a bottom edge and no right edge at x crosses it in this row or the next.
     const int y = get_global_id(0);
     if (y >= height) return;
-    __global const uchar *row = edges + y * width;
-    int x = 0;
-    while (x < width) {
-        if (x + 8 <= width && !(edge_group(row + x) & 0x0404040404040404UL)) { x += 8; continue; }
-        if (!(row[x] & E_BOTTOM)) { ++x; continue; }
-        int xe = x;   // the run of bottom edges x .. xe
-        while (h_continues(edges, xe, y, width, height)) ++xe;
-        const uchar c0 = h_crossing(edges, x - 1, y, width, height), c1 = h_crossing(edges, xe, y, width, height);
-        for (int t = x; t <= xe; ++t) hshapes[y * width + t] = (uchar2)(shape_byte(t - x, c0), shape_byte(xe - t, c1));
-        x = xe + 1;
+    int start = -1;   // the first column of a line that goes on past the previous 64 columns
+    for (int x0 = 0; x0 < width; x0 += 64) {
+        const int n = x0 + 64 < width ? 64 : width - x0;
+        if (!blocks[(y / FAST_ROWS) * BLOCKS_X(width) + x0 / FAST_COLS]) continue;   // (as !bottom below)
+        const ulong bottom = strip_bits(edges, x0, n, y, width, 2);
+        if (!bottom) continue;   // (a line going on from before would have its next pixel here)
+        const ulong right = strip_bits(edges, x0, n, y, width, 1) |
+                            (y + 1 < height ? strip_bits(edges, x0, n, y + 1, width, 1) : 0);
+        const ulong beyond = x0 + n < width ? (ulong)((edges[y * width + x0 + n] >> 2) & 1) << (n - 1) : 0;
+        const ulong cont = bottom & ((bottom >> 1) | beyond) & ~right;
+        ulong starts = bottom & ~((cont << 1) | (start >= 0 ? 1UL : 0UL)), ends = bottom & ~cont;
+        while (ends) {   // lines alternate: each end's start is the lowest start left, or the one carried in
+            const int ce = LOWEST_BIT(ends), xe = x0 + ce;
+            int x = start;
+            if (starts && LOWEST_BIT(starts) <= ce) {
+                x = x0 + LOWEST_BIT(starts);
+                starts &= starts - 1;
+            }
+            start = -1;
+            const uchar c0 = h_crossing(edges, x - 1, y, width, height), c1 = h_crossing(edges, xe, y, width, height);
+            for (int t = x; t <= xe; ++t) hshapes[y * width + t] = (uchar2)(shape_byte(t - x, c0), shape_byte(xe - t, c1));
+            ends &= ends - 1;
+        }
+        if (starts) start = x0 + LOWEST_BIT(starts);   // a line going on into the next 64 columns
     }
 }
 
-// Does the right-edge line of column x go on from y to y + 1?
-inline int v_continues(__global const uchar *edges, int x, int y, int width, int height)
+__kernel void fast_vshapes(__global const uchar *edges, __global const uchar *blocks, __global uchar2 *vshapes,
+                           const int width, const int height)
 {
-    return y + 1 < height && (edges[(y + 1) * width + x] & E_RIGHT) &&
-           !edge_bit(edges, x, y, width, height, E_BOTTOM) && !edge_bit(edges, x + 1, y, width, height, E_BOTTOM);
-}
-
-__kernel void fast_vshapes(__global const uchar *edges, __global uchar2 *vshapes, const int width, const int height)
-{
-    const int x0 = get_global_id(0) * SEGMENT;
+    // One strip of up to 64 columns, row by row, each row's right and bottom edges as 64-bit masks: a column
+    // costs something only where its run of right edges starts or ends. Global size ceil(width / 64).
+    const int x0 = get_global_id(0) * FAST_COLS;
     if (x0 >= width) return;
-    const int x1 = x0 + SEGMENT < width ? x0 + SEGMENT : width;
-    int start[SEGMENT];   // per column of the strip: the first row of the run in progress, -1 for none
-    for (int c = 0; c < SEGMENT; ++c) start[c] = -1;
-    int open = 0;   // runs in progress
-    for (int y = 0; y < height; ++y) {   // row by row: the strip's bytes of a row are contiguous
-        if (!open && x1 - x0 == SEGMENT) {   // a row of the strip without right edges: nothing to do
-            ulong any = 0;
-            for (int g = 0; g < SEGMENT; g += 8) any |= edge_group(edges + y * width + x0 + g);
-            if (!(any & 0x0202020202020202UL)) continue;
+    const int n = x0 + 64 < width ? 64 : width - x0;
+    int start[64];   // per column of the strip: the first row of the run in progress (where `open` has it)
+    ulong open = 0;
+    __global const uchar *marks = blocks + get_global_id(0);   // this strip's blocks, a row of blocks apart
+    const int stride = BLOCKS_X(width);
+    ulong right = marks[0] ? strip_bits(edges, x0, n, 0, width, 1) : 0;
+    for (int y = 0; y < height; ++y) {
+        const ulong next = y + 1 < height && marks[((y + 1) / FAST_ROWS) * stride] ?
+                           strip_bits(edges, x0, n, y + 1, width, 1) : 0;
+        if (!(right | open)) { right = next; continue; }
+        ulong fresh = right & ~open;
+        while (fresh) {
+            const int c = LOWEST_BIT(fresh);
+            start[c] = y;
+            fresh &= fresh - 1;
         }
-        for (int x = x0; x < x1; ++x) {
-            const int c = x - x0;
-            if (start[c] < 0) {
-                if (!(edges[y * width + x] & E_RIGHT)) continue;
-                start[c] = y;
-                ++open;
-            }
-            if (v_continues(edges, x, y, width, height)) continue;
-            const int ys = start[c];   // the run ys .. y ends here
+        open |= right;
+        // a run goes on to the next row where that has a right edge and no bottom edge is under this pixel or
+        // its right neighbour (no crossing line between)
+        const ulong bottom = strip_bits(edges, x0, n, y, width, 2);   // (this block has edges: `right | open`)
+        const ulong beyond = x0 + n < width ? (ulong)((edges[y * width + x0 + n] >> 2) & 1) << (n - 1) : 0;
+        const ulong cont = next & ~bottom & ~((bottom >> 1) | beyond);
+        ulong ends = open & ~cont;
+        open &= cont;
+        while (ends) {   // the runs start[c] .. y end here
+            const int c = LOWEST_BIT(ends), x = x0 + c, ys = start[c];
             const uchar c0 = v_crossing(edges, x, ys - 1, width, height), c1 = v_crossing(edges, x, y, width, height);
             for (int t = ys; t <= y; ++t) vshapes[t * width + x] = (uchar2)(shape_byte(t - ys, c0), shape_byte(y - t, c1));
-            start[c] = -1;
-            --open;
+            ends &= ends - 1;
         }
+        right = next;
     }
 }
 
 // Pass 3 (seed 004 "edge reconstruction"): each edge of the pixel rebuilt from its two L shapes (the line's
 // ends and crossings) as seed 000's silhouette: from half a pixel at an end with a crossing to nothing at the
 // line's middle; where it covers this pixel, the colour across the edge is mixed in (seed 000 eq. 2's
-// trapezoid areas). U shapes (both ends turn the same way: a bump, or a box side) are left as they are.
-inline float trapezoid(int p, int len)
-{
-    if (2 * p + 2 <= len) return 0.5f * (1.0f - (float)(2 * p + 1) / (float)len);
-    if (2 * p + 1 == len) return 1.0f / (8.0f * (float)len);
-    return 0.0f;
-}
-
-// The areas (this side, the other side) a line with shapes `s0` (towards its start) and `s1` (its end) gives
-// the pixel at distance d0 from its start, for the side A pixel (`*ta`) and side B pixel (`*tb`).
-inline void line_areas(uchar s0, uchar s1, float *ta, float *tb)
-{
-    const int d0 = s0 & 31, d1 = s1 & 31;
-    int a0 = (s0 >> 5) & 3, a1 = (s1 >> 5) & 3;
-    a0 = a0 == 3 ? 0 : a0;   // crossed on both sides: a thin line across, no direction
-    a1 = a1 == 3 ? 0 : a1;
-    *ta = 0.0f;
-    *tb = 0.0f;
-    if ((a0 == 0 && a1 == 0) || a0 == a1) return;   // no crossing, or a U shape
-    const int len = d0 + d1 + 1;
-    if (a0 && !(s0 & 128)) {
-        const float t = trapezoid(d0, len);
-        if (a0 == L_SIDE_A) *ta += t; else *tb += t;
-    }
-    if (a1 && !(s1 & 128)) {
-        const float t = trapezoid(d1, len);
-        if (a1 == L_SIDE_A) *ta += t; else *tb += t;
-    }
-}
-
+// trapezoid areas, tabled on the host: spatial/fast.py trapezoid). U shapes (both ends turn the same way: a bump,
+// or a box side) are left as they are.
 // Pixel i in the mixing space: linear light (DECODE) or as stored. Integer frames decode each level with one
 // load from `lin` (common.cl's linear_levels: the same numbers as lut_read gives).
 inline float4 fast_to_mix(__global const PIXEL_T *src, __global const float *luts, __global const float *lin, int i)
@@ -289,41 +382,108 @@ inline float4 fast_to_mix(__global const PIXEL_T *src, __global const float *lut
 #endif
 }
 
-__kernel void fast_blend(__global const PIXEL_T *src, __global const uchar *edges, __global const uchar2 *hshapes,
-                         __global const uchar2 *vshapes, __global const float *luts, __global const float *lin,
-                         __global PIXEL_T *dst, const int width, const int height)
+// The area a line with shapes s.x (towards its start) and s.y (its end) gives the pixel on `side` (L_SIDE_A or
+// L_SIDE_B): the rule of line_areas in spatial/fast.py for one side (an end counts where its crossing is on
+// this side alone, the other end's is not, and it is no corner), its trapezoids read from `trap`
+// (trapezoid(p, len) at len * 32 + p: spatial/fast.py trapezoid_table) without branches.
+inline float side_area(__global const float *trap, uchar2 s, int side)
 {
-    const int x0 = get_global_id(0) * SEGMENT, y = get_global_id(1);
-    if (x0 >= width || y >= height) return;
-    const int x1 = x0 + SEGMENT < width ? x0 + SEGMENT : width;
-    for (int x = x0; x < x1; ++x) {
-        const int i = y * width + x;
-        if ((x - x0) % 8 == 0 && x + 8 <= x1 && edge_group(edges + i) == 0) {   // 8 pixels next to no edge
-            x += 7;
-            continue;
+    const int a0 = (s.x >> 5) & 3, a1 = (s.y >> 5) & 3;
+    const int e0 = a0 == side && a1 != side && !(s.x & 128), e1 = a1 == side && a0 != side && !(s.y & 128);
+    const int d0 = s.x & 31, d1 = s.y & 31, row = (d0 + d1 + 1) * 32;
+    const float t0 = trap[row + d0], t1 = trap[row + d1];
+    return (e0 ? t0 : 0.0f) + (e1 ? t1 : 0.0f);
+}
+
+#if SUBPIXEL_ON
+// blend.cl's sub-pixel rule (SUBPIXEL, SUBPIXEL_END, SUBPIXEL_BG from the filter's options): a pixel with edges
+// on three or four sides -- a dot, a 1-px line's end or bump, smaller than the pixel -- that is a luma extremum
+// on one background moves SUBPIXEL (four sides) or SUBPIXEL_END (three) of the way from `*out` to the mean of
+// its 3x3 window (clamped at the frame's edge), in the mixing space. Returns whether it moved. In place of the
+// default's grain guard, the feature must be isolated: no neighbour across its edges has three or four edges
+// itself (noise and fine texture are such clusters; docs/fast.md has the numbers).
+inline float fast_luma(float4 c) { return 0.2126f * c.x + 0.7152f * c.y + 0.0722f * c.z; }   // Rec. 709
+inline int subpixel(__global const PIXEL_T *src, __global const uchar *edges, __global const float *luts, __global const float *lin, uchar e,
+                    int x, int y, int width, int height, float4 c, int sides, float4 *out)
+{
+    const int i = y * width + x;
+    const float yc = fast_luma(c);
+    int lo = 0, hi = 0;
+    float ymin = 1e30f, ymax = -1e30f;
+    for (int k = 0; k < 4; ++k) {   // the neighbours across its edges: top, right, bottom, left
+        if (!(e & (1 << k))) continue;
+        const int j = k == 0 ? i - width : k == 1 ? i + 1 : k == 2 ? i + width : i - 1;
+        const uchar en = edges[j];
+        if ((en & 1) + ((en >> 1) & 1) + ((en >> 2) & 1) + ((en >> 3) & 1) >= 3) return 0;   // not isolated
+        const float yn = fast_luma(fast_to_mix(src, luts, lin, j));
+        lo |= yn < yc;
+        hi |= yn > yc;
+        ymin = yn < ymin ? yn : ymin;
+        ymax = yn > ymax ? yn : ymax;
+    }
+    const float contrast = hi ? ymin - yc : yc - ymax;
+    if ((lo && hi) || ymax - ymin > SUBPIXEL_BG * contrast) return 0;
+    float4 box = (float4)(0.0f);
+    for (int dy = -1; dy <= 1; ++dy) {
+        const int yy = y + dy < 0 ? 0 : (y + dy >= height ? height - 1 : y + dy);
+        for (int dx = -1; dx <= 1; ++dx) {
+            const int xx = x + dx < 0 ? 0 : (x + dx >= width ? width - 1 : x + dx);
+            box += fast_to_mix(src, luts, lin, yy * width + xx);
         }
-        const uchar e = edges[i];
-        if (!e) continue;   // dst holds a copy of src (the host enqueues it)
-        float wt = 0.0f, wb = 0.0f, wl = 0.0f, wr = 0.0f, ta, tb;
-        if (e & E_BOTTOM) { const uchar2 s = hshapes[i]; line_areas(s.x, s.y, &ta, &tb); wb = ta; }
-        if (e & E_TOP) { const uchar2 s = hshapes[i - width]; line_areas(s.x, s.y, &ta, &tb); wt = tb; }
-        if (e & E_RIGHT) { const uchar2 s = vshapes[i]; line_areas(s.x, s.y, &ta, &tb); wr = ta; }
-        if (e & E_LEFT) { const uchar2 s = vshapes[i - 1]; line_areas(s.x, s.y, &ta, &tb); wl = tb; }
-        const float sum = wt + wb + wl + wr;
-        if (sum <= 0.0f) continue;
-        // each neighbour mixed in by its area; together never more than the largest area (blend.cl's rule)
-        const float4 c = fast_to_mix(src, luts, lin, i);
-        float4 acc = (float4)(0.0f);
-        if (wt > 0.0f) acc += wt * wt * (fast_to_mix(src, luts, lin, i - width) - c);
-        if (wb > 0.0f) acc += wb * wb * (fast_to_mix(src, luts, lin, i + width) - c);
-        if (wl > 0.0f) acc += wl * wl * (fast_to_mix(src, luts, lin, i - 1) - c);
-        if (wr > 0.0f) acc += wr * wr * (fast_to_mix(src, luts, lin, i + 1) - c);
-        float4 out = c + acc / sum;
-        out.w = c.w;
-#if DECODE
-        __global const float *enc = luts + 2 * (LUT_SIZE + 1);
-        out = (float4)(lut_read(enc, out.x), lut_read(enc, out.y), lut_read(enc, out.z), out.w);
+    }
+    *out += (sides == 4 ? SUBPIXEL : SUBPIXEL_END) * (box * (1.0f / 9.0f) - *out);
+    return 1;
+}
 #endif
-        store_px(dst, i, out);
+
+__kernel void fast_blend(__global const PIXEL_T *src, __global const uchar *edges, __global const uchar *blocks,
+                         __global const uchar2 *hshapes, __global const uchar2 *vshapes, __global const float *luts,
+                         __global const float *lin, __global const float *trap, __global PIXEL_T *dst,
+                         const int width, const int height)
+{
+    // 64 pixels of a row per work item: global size (ceil(width / FAST_COLS), height)
+    const int x0 = get_global_id(0) * FAST_COLS, y = get_global_id(1);
+    if (x0 >= width || y >= height || !blocks[(y / FAST_ROWS) * BLOCKS_X(width) + get_global_id(0)]) return;
+    const int x1 = x0 + FAST_COLS < width ? x0 + FAST_COLS : width;
+    for (int g = x0; g < x1; g += 8) {   // 8 pixels at a time: their edge bytes as one word
+        ulong m = 0;
+        if (g + 8 <= width) m = edge_group(edges + y * width + g);
+        else for (int k = 0; g + k < width; ++k) m |= (ulong)edges[y * width + g + k] << (8 * k);
+        ulong any = m | (m >> 4);
+        any |= any >> 2;
+        any |= any >> 1;   // bit 0 of each byte: the byte is not 0
+        for (uint nz = gather8(any, 0); nz; nz &= nz - 1) {   // the group's pixels with an edge
+            const int k = LOWEST_BIT(nz), x = g + k;
+            const uchar e = (uchar)(m >> (8 * k));
+            const int i = y * width + x;
+            const float wb = (e & E_BOTTOM) ? side_area(trap, hshapes[i], L_SIDE_A) : 0.0f;
+            const float wt = (e & E_TOP) ? side_area(trap, hshapes[y > 0 ? i - width : i], L_SIDE_B) : 0.0f;
+            const float wr = (e & E_RIGHT) ? side_area(trap, vshapes[i], L_SIDE_A) : 0.0f;
+            const float wl = (e & E_LEFT) ? side_area(trap, vshapes[x > 0 ? i - 1 : i], L_SIDE_B) : 0.0f;
+            const float sum = wt + wb + wl + wr;
+#if SUBPIXEL_ON
+            const int sides = (e & 1) + ((e >> 1) & 1) + ((e >> 2) & 1) + ((e >> 3) & 1);
+            if (sum <= 0.0f && sides < 3) continue;
+#else
+            if (sum <= 0.0f) continue;
+#endif
+            // each neighbour mixed in by its area; together never more than the largest area (blend.cl's rule)
+            const float4 c = fast_to_mix(src, luts, lin, i);
+            float4 acc = (float4)(0.0f);
+            if (wt > 0.0f) acc += wt * wt * (fast_to_mix(src, luts, lin, i - width) - c);
+            if (wb > 0.0f) acc += wb * wb * (fast_to_mix(src, luts, lin, i + width) - c);
+            if (wl > 0.0f) acc += wl * wl * (fast_to_mix(src, luts, lin, i - 1) - c);
+            if (wr > 0.0f) acc += wr * wr * (fast_to_mix(src, luts, lin, i + 1) - c);
+            float4 out = sum > 0.0f ? c + acc / sum : c;
+#if SUBPIXEL_ON
+            if (sides >= 3 && !subpixel(src, edges, luts, lin, e, x, y, width, height, c, sides, &out) && sum <= 0.0f) continue;
+#endif
+            out.w = c.w;
+#if DECODE
+            __global const float *enc = luts + 2 * (LUT_SIZE + 1);
+            out = (float4)(lut_read(enc, out.x), lut_read(enc, out.y), lut_read(enc, out.z), out.w);
+#endif
+            store_px(dst, i, out);
+        }
     }
 }

@@ -15,6 +15,7 @@ from typing import Any, Iterable, Iterator, Sequence
 import numpy as np
 
 from mlaa_stream.spatial.filter import PRESETS, Filter
+from mlaa_stream.spatial.fast_filter import FastFilter
 from mlaa_stream.pipeline import PostHook, Temporal, stream_items
 
 
@@ -50,7 +51,8 @@ class Antialiaser:
                            ("reconstruct", reconstruct)):
             if value is not None:
                 kwargs[key] = value
-        self._filter = Filter(device, bgr=True, **kwargs)
+        # the fast preset without host copies on CPU devices (spatial/fast_filter.py)
+        self._filter = (FastFilter if kwargs.get("fast") else Filter)(device, bgr=True, **kwargs)
         self.device_name: str = self._filter.device_name
         if temporal is True or temporal == "tss":
             from mlaa_stream.temporal.tss import DEFAULT_FRAMES, TSSStage

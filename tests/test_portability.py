@@ -107,15 +107,16 @@ def test_a_build_that_ends_the_driver_process_is_a_kernel_build_error():
     assert "ended the build process (exit status 8)" in r.stdout and "llvm.prefetch" in r.stdout
 
 
-# Every test of the core passes, and the kernel-vs-reference tests of bridging, reconstruction, GRLAA,
-# FXAA and the FXAA fallback (all of those files on rusticl took 11.5 min here: too long for every CI run).
+# Every test of the core passes and of the fast preset (~30 s), and the kernel-vs-reference tests of bridging,
+# reconstruction, GRLAA, FXAA and the FXAA fallback (all of those files on rusticl took 11.5 min here: too long
+# for every CI run).
 KERNEL_TESTS = ["tests/test_mlaa.py", "tests/test_bridge.py::test_kernel_matches_reference_on_random_wires",
                 "tests/test_reconstruct.py::test_kernel_matches_reference",
                 "tests/test_overlay.py::test_kernel_matches_reference",
                 "tests/test_overlay.py::test_thin_and_outlined_strokes_match_reference",
                 "tests/test_fxaa.py::test_random_blocks_match_reference",
                 "tests/test_fxaa.py::test_pixel_formats_match_reference",
-                "tests/test_fallback.py::test_kernel_matches_reference"]
+                "tests/test_fallback.py::test_kernel_matches_reference", "tests/test_fast.py"]
 
 
 @needs_rusticl

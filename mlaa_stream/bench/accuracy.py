@@ -18,6 +18,7 @@ from typing import Callable, Protocol
 import numpy as np
 
 from mlaa_stream.yardstick import metrics as M
+from mlaa_stream.spatial.fast_filter import FastFilter
 from mlaa_stream.spatial.fxaa import FXAA
 from mlaa_stream.spatial.filter import PRESETS, Filter
 from mlaa_stream.yardstick.scenes import Scene, generate_scenes, timing_frame
@@ -73,7 +74,8 @@ METHODS: dict[str, Callable[[str | None], Processor]] = {
     "mlaa+temporal:dense": lambda device: SpatialTemporal(device, mode="dense"),
 }
 # Every quality preset of the MLAA filter, as "mlaa:<preset>" (one with no options is "mlaa" itself).
-METHODS.update({f"mlaa:{name}": (lambda device, kw=kw: Filter(device=device, **kw))
+# The fast preset as Antialiaser(preset="fast") runs it: FastFilter, without host copies on CPU devices.
+METHODS.update({f"mlaa:{name}": (lambda device, kw=kw: (FastFilter if kw.get("fast") else Filter)(device=device, **kw))
                 for name, kw in PRESETS.items() if kw})
 TRUTH = "truth"  # a reference row: the supersampled truth itself (no timing)
 # Categories whose input already equals the truth almost everywhere: they measure damage, and their

@@ -71,12 +71,13 @@ _worker_lock = threading.Lock()
 
 def _worker_filter(kwargs: dict):
     """One Filter per worker process and option set, kept between tasks (kernels built once)."""
+    from mlaa_stream.spatial.fast_filter import FastFilter
     from mlaa_stream.spatial.filter import Filter
 
     key = tuple(sorted(kwargs.items()))
     with _worker_lock:
-        if key not in _worker_filters:
-            _worker_filters[key] = Filter(bgr=False, **kwargs)
+        if key not in _worker_filters:  # the fast preset without host copies on CPU devices
+            _worker_filters[key] = (FastFilter if kwargs.get("fast") else Filter)(bgr=False, **kwargs)
         return _worker_filters[key]
 
 

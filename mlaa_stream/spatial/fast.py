@@ -12,12 +12,16 @@ longer than FAST_MAX_LEN pixels left as they are.
 from __future__ import annotations
 
 import numpy as np
+import pyopencl as cl
 
 from mlaa_stream.device.colour import linear_to_srgb, srgb_to_linear
 from mlaa_stream.device.context import linear_levels
+from mlaa_stream.spatial.filter import SUBPIXEL, SUBPIXEL_BG, SUBPIXEL_END  # the default preset's sub-pixel rule
 
 FAST_THRESHOLD = 0.06  # weighted RGB difference (Rec. 709 weights), fraction of full scale (seed 004)
 FAST_MAX_LEN = 31  # longest line an L shape follows, in pixels (5 bits of its byte)
+FAST_ROWS = 8  # rows per work item of the edge pass (each row's bottom edges are the next one's top edges)
+FAST_COLS = 64  # columns of a block (kernels/fast.cl: the shape sweeps' 64-bit masks)
 E_TOP, E_RIGHT, E_BOTTOM, E_LEFT = 1, 2, 4, 8
 SIDE_A, SIDE_B, LONG = 1, 2, 128
 LUMA_WEIGHTS = np.array([0.2126, 0.7152, 0.0722])
@@ -26,7 +30,7 @@ LUMA_WEIGHTS = np.array([0.2126, 0.7152, 0.0722])
 def fast_defines(threshold: float = FAST_THRESHOLD, max_len: int = FAST_MAX_LEN) -> dict[str, object]:
     if not 2 <= int(max_len) <= 31:
         raise ValueError(f"max_len: expected 2..31 pixels (5 bits per L shape), got {max_len}")
-    return {"FAST_THRESHOLD": float(threshold), "FAST_MAX_LEN": int(max_len)}
+    return {"FAST_THRESHOLD": float(threshold), "FAST_MAX_LEN": int(max_len), "FAST_ROWS": FAST_ROWS}
 
 
 def _rgb(frame: np.ndarray) -> np.ndarray:
@@ -125,12 +129,18 @@ def fast_lshapes_reference(edges: np.ndarray, max_len: int = FAST_MAX_LEN) -> np
 
 
 def trapezoid(p: int, length: int) -> float:
-    """Seed 000 eq. (2), as kernels/fast.cl computes it (float32)."""
+    """Seed 000 eq. (2) in float32 (kernels/fast.cl reads it from trapezoid_table)."""
     if 2 * p + 2 <= length:
         return float(np.float32(0.5) * (np.float32(1) - np.float32(2 * p + 1) / np.float32(length)))
     if 2 * p + 1 == length:
         return float(np.float32(1) / (np.float32(8) * np.float32(length)))
     return 0.0
+
+
+def trapezoid_table() -> np.ndarray:
+    """(64 * 32,) float32: trapezoid(p, length) at [length * 32 + p], every p < 32 and length < 64 a pair of
+    shape bytes can give (kernels/fast.cl reads the areas from it)."""
+    return np.array([[trapezoid(p, n) if n else 0.0 for p in range(32)] for n in range(64)], np.float32).ravel()
 
 
 def line_areas(s0: int, s1: int) -> tuple[float, float]:
@@ -166,10 +176,42 @@ def fast_weights_reference(edges: np.ndarray, shapes: np.ndarray) -> np.ndarray:
     return out
 
 
+def _sides(edges: np.ndarray) -> np.ndarray:
+    return sum((edges >> k) & 1 for k in range(4)).astype(np.int64)
+
+
+def fast_subpixel_reference(mix: np.ndarray, edges: np.ndarray, out: np.ndarray, subpixel: float = SUBPIXEL,
+                            subpixel_end: float = SUBPIXEL_END, subpixel_bg: float = SUBPIXEL_BG) -> np.ndarray:
+    """The sub-pixel rule (kernels/fast.cl `subpixel`, blend.cl's with isolation in place of the grain guard):
+    isolated pixels with edges on 3-4 sides that are a luma extremum on one background move from `out` towards
+    their 3x3 mean (in the mixing space `mix`). Returns the mask of pixels moved; `out` is updated in place."""
+    h, w = edges.shape
+    sides = _sides(edges)
+    moved = np.zeros((h, w), bool)
+    if subpixel <= 0:
+        return moved
+    pad = np.pad(mix, ((1, 1), (1, 1), (0, 0)), mode="edge")
+    luma = mix @ LUMA_WEIGHTS
+    for y, x in zip(*np.nonzero(sides >= 3)):
+        across = [(y + dy, x + dx) for bit, dy, dx in ((E_TOP, -1, 0), (E_RIGHT, 0, 1), (E_BOTTOM, 1, 0),
+                                                       (E_LEFT, 0, -1)) if edges[y, x] & bit]
+        if any(sides[p] >= 3 for p in across):  # a cluster of features: noise, fine texture
+            continue
+        yc, yn = luma[y, x], np.array([luma[p] for p in across])
+        lo, hi = (yn < yc).any(), (yn > yc).any()
+        contrast = yn.min() - yc if hi else yc - yn.max()
+        if (lo and hi) or yn.max() - yn.min() > subpixel_bg * contrast:
+            continue
+        box = pad[y:y + 3, x:x + 3].reshape(9, -1).sum(0) / 9
+        out[y, x] += (subpixel if sides[y, x] == 4 else subpixel_end) * (box - out[y, x])
+        moved[y, x] = True
+    return moved
+
+
 def fast_blend_reference(frame: np.ndarray, edges: np.ndarray, shapes: np.ndarray, linear: bool = True,
-                         linear_input: bool = False) -> np.ndarray:
+                         linear_input: bool = False, subpixel: float = SUBPIXEL) -> np.ndarray:
     """Pass 3: c + sum_k w_k^2 (n_k - c) / sum_k w_k over the four neighbours, in linear light (blend.cl's
-    rule), alpha and other channels as they were."""
+    rule), then the sub-pixel rule (`subpixel` 0: off); alpha and other channels as they were."""
     wts = fast_weights_reference(edges, shapes)
     rgb = _rgb(frame)
     mix = srgb_to_linear(rgb) if linear and not linear_input else rgb
@@ -179,9 +221,10 @@ def fast_blend_reference(frame: np.ndarray, edges: np.ndarray, shapes: np.ndarra
     total = wts.sum(-1)
     acc = sum(wts[..., k:k + 1] ** 2 * (neighbours[k] - mix) for k in range(4))
     out = np.where(total[..., None] > 0, mix + acc / np.maximum(total, 1e-30)[..., None], mix)
+    moved = fast_subpixel_reference(mix, edges, out, subpixel, SUBPIXEL_END * subpixel / SUBPIXEL)
     out = linear_to_srgb(out) if linear and not linear_input else out
     result = frame.copy()
-    changed = total > 0
+    changed = (total > 0) | moved
     if frame.dtype.kind in "ui":
         top = np.iinfo(frame.dtype).max
         vals = np.clip(np.floor(out * top + 0.5), 0, top).astype(frame.dtype)
@@ -196,15 +239,16 @@ def fast_blend_reference(frame: np.ndarray, edges: np.ndarray, shapes: np.ndarra
 
 
 def fast_reference(frame: np.ndarray, threshold: float = FAST_THRESHOLD, max_len: int = FAST_MAX_LEN,
-                   linear: bool = True, linear_input: bool = False) -> np.ndarray:
+                   linear: bool = True, linear_input: bool = False, subpixel: float = SUBPIXEL) -> np.ndarray:
     """The whole fast path, pass after pass."""
     edges = fast_edges_reference(frame, threshold)
-    return fast_blend_reference(frame, edges, fast_lshapes_reference(edges, max_len), linear, linear_input)
+    return fast_blend_reference(frame, edges, fast_lshapes_reference(edges, max_len), linear, linear_input,
+                                subpixel)
 
 
 class FastPasses:
-    """The three kernels of kernels/fast.cl and their buffers for one frame format, enqueued after a
-    copy of src into dst (pixels next to no edge keep their value)."""
+    """The three kernels of kernels/fast.cl and their buffers for one frame format. The edge pass also
+    copies src into dst, and the blend writes only the pixels it changes."""
 
     def __init__(self, context, fmt, base_defines: dict[str, object], luts, threshold: float = FAST_THRESHOLD,
                  max_len: int = FAST_MAX_LEN):
@@ -213,28 +257,35 @@ class FastPasses:
         self.edges = context.buffer(fmt.pixels)
         self.hshapes = context.buffer(2 * fmt.pixels)
         self.vshapes = context.buffer(2 * fmt.pixels)
+        self.blocks = context.buffer(-(-fmt.width // FAST_COLS) * -(-fmt.height // FAST_ROWS))  # a byte per block
         self._k_edges = context.kernel("fast", "fast_edges", defs)
+        # the edge pass in work groups of one work item on a CPU: with 8 (CPU_LOCAL) it is slower (docs/fast.md)
+        self._edges_local = (1, 1) if context.device.type & cl.device_type.CPU else None
         self._k_hshapes = context.kernel("fast", "fast_hshapes", defs)
         self._k_vshapes = context.kernel("fast", "fast_vshapes", defs)
         self._k_blend = context.kernel("fast", "fast_blend", defs)
         self._lin = linear_levels(context, "fast", defs, fmt, luts)  # integer frames: one load per level
+        self._trap = cl.Buffer(context.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
+                               hostbuf=trapezoid_table())
 
     def device_bytes(self) -> int:
-        return self.edges.size + self.hshapes.size + self.vshapes.size
+        return self.edges.size + self.hshapes.size + self.vshapes.size + self.blocks.size
 
-    def enqueue(self, queue, src, dst, luts, wait_for: list, segment: int, events: dict | None = None):
-        import pyopencl as cl
-
+    def enqueue(self, queue, src, dst, luts, wait_for: list, segment: int | None = None,
+                events: dict | None = None):
+        """The passes of one frame after `wait_for`; returns the last event. `segment` (the default passes'
+        work size) is not used: these passes work in blocks of FAST_COLS x FAST_ROWS pixels."""
         ev = {} if events is None else events
         w, h = self.fmt.width, self.fmt.height
         W, H = np.int32(w), np.int32(h)
-        g2 = (-(-w // segment), h)
-        ev["fast_edges"] = self._k_edges(queue, g2, None, src, self.edges, W, H, wait_for=wait_for)
-        ev["fast_hshapes"] = self._k_hshapes(queue, (h,), None, self.edges, self.hshapes, W, H,
+        bx = -(-w // FAST_COLS)
+        ev["fast_edges"] = self._k_edges(queue, (bx, -(-h // FAST_ROWS)), self._edges_local, src, self.edges, dst,
+                                         self.blocks, W, H, wait_for=wait_for)
+        ev["fast_hshapes"] = self._k_hshapes(queue, (h,), None, self.edges, self.blocks, self.hshapes, W, H,
                                              wait_for=[ev["fast_edges"]])
-        ev["fast_vshapes"] = self._k_vshapes(queue, (g2[0],), None, self.edges, self.vshapes, W, H,
+        ev["fast_vshapes"] = self._k_vshapes(queue, (bx,), None, self.edges, self.blocks, self.vshapes, W, H,
                                              wait_for=[ev["fast_edges"]])
-        ev["copy"] = cl.enqueue_copy(queue, dst, src, byte_count=self.fmt.nbytes, wait_for=wait_for)
-        ev["fast_blend"] = self._k_blend(queue, g2, None, src, self.edges, self.hshapes, self.vshapes, luts, self._lin,
-                                         dst, W, H, wait_for=[ev["fast_hshapes"], ev["fast_vshapes"], ev["copy"]])
+        ev["fast_blend"] = self._k_blend(queue, (bx, h), None, src, self.edges, self.blocks, self.hshapes,
+                                         self.vshapes, luts, self._lin, self._trap, dst, W, H,
+                                         wait_for=[ev["fast_hshapes"], ev["fast_vshapes"]])
         return ev["fast_blend"]
