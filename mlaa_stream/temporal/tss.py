@@ -57,7 +57,9 @@ MIN_CELLS = 2         # fewer filled cells: the spatial output stands
 FULL_CELLS = 6        # filled cells at which the samples alone resolve the pixel (below: n / FULL_CELLS of it)
 REFINE_STEPS = 2       # Gauss-Newton steps per refined ring frame and frame (bench pan 0.42 -> 0.39 with 2; 3 same)
 REFINE_PER_FRAME = 64 # ring frames refined directly per frame (the longest unrefined first)
-SEG = 32              # pixels of a row per work item in tss_resolve_shift_rows (kernels/tss.cl)
+ONE = 65535           # ring samples: linear light in 16-bit fixed point (kernels/tss.cl, ring_of)
+LANES = 16            # pixels of a row per work item of tss_resolve_shift (int16 / float16 vectors)
+TSS_LOCAL = 8         # CPU work-group of tss_resolve_shift along the row (docs/temporal.md: speed)
 FB_ABS, FB_REL = 0.5, 0.1   # forward-backward tolerance (px at full size): FB_ABS + FB_REL |v|
 ALIGN_LEVEL, ALIGN_PX, ALIGN_SIGMA, ALIGN_GROW = 10.0, 0.35, 2.0, 3   # MotionRing._alignment
 TILE, TILE_TOL, TILE_TEXTURE = 48, 0.4, 1.0   # _tile_check: flow px, px, mean squared gradient
@@ -307,6 +309,41 @@ def linear_of(frame: np.ndarray, bgr: bool, linear_input: bool = False) -> np.nd
     return np.ascontiguousarray(rgb, dtype=np.float32)
 
 
+def level_table(fmt) -> np.ndarray:
+    """ltab: the ring sample L of every stored code of an integer format (one entry for float frames):
+    linear light (the decode table) in 16-bit fixed point, L = floor(clamp(lin, 0, 1) 65535 + 0.5)."""
+    if not np.issubdtype(fmt.dtype, np.integer):
+        return np.zeros(1, np.uint16)
+    lin = decode_table(fmt)
+    return np.floor(np.clip(lin, 0, 1) * np.float32(ONE) + np.float32(0.5)).astype(np.uint16)
+
+
+def encode_table(fmt) -> np.ndarray:
+    """etab: the stored code of every L (65536 entries) for an integer format (one entry for float frames):
+    the encode table read at L / 65535 (colour.lut_read), rounded as store_px does."""
+    if not np.issubdtype(fmt.dtype, np.integer):
+        return np.zeros(1, fmt.dtype)
+    f32 = np.float32
+    x = np.arange(ONE + 1, dtype=f32) * f32(1.0 / ONE)
+    enc = lut_read(device_luts()[2 * (LUT_SIZE + 1):], x).astype(f32)
+    pmax = f32(_PMAX[fmt.dtype])
+    return np.floor(np.clip(enc * pmax + f32(0.5), 0, pmax)).astype(fmt.dtype)
+
+
+def ring_of(frame: np.ndarray, bgr: bool) -> np.ndarray:
+    """(H, W, 3) int32 ring samples L of a frame, as kernels/tss.cl's tss_ingest stores them."""
+    fmt = frame_format(frame, bgr)
+    if np.issubdtype(fmt.dtype, np.integer):
+        raw = np.asarray(frame).reshape(fmt.height, fmt.width, fmt.channels).astype(np.int64)
+        q = level_table(fmt)[raw].astype(np.int32)
+        if fmt.channels == 1:
+            return np.repeat(q, 3, -1)
+        return np.ascontiguousarray(q[..., 2::-1] if fmt.bgr else q[..., :3])
+    lin = linear_of(frame, bgr)
+    t = lin * np.float32(ONE) + np.float32(0.5)
+    return np.where(lin > 0, np.where(lin < 1, t, np.float32(ONE)), np.float32(0)).astype(np.int32)
+
+
 def sample_field(fld: np.ndarray, scale: int, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
     """Bilinear read of a (fh, fw, 2) field stored at 1/scale of the frame, at full-size positions."""
     f32 = np.float32
@@ -321,27 +358,30 @@ def sample_field(fld: np.ndarray, scale: int, xs: np.ndarray, ys: np.ndarray) ->
     return (top + (bot - top) * ay).astype(f32)
 
 
-def tss_reference(spatial_lin: np.ndarray, cur_lin: np.ndarray, ring: list[tuple],
+def tss_reference(spatial_q: np.ndarray, cur_q: np.ndarray, ring: list[tuple],
                   flow_scale: int = 1, grid: int = GRID, eps: float = EPS,
                   min_cells: int = MIN_CELLS, full_cells: int | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """The resolve in float32 numpy: returns (out linear RGB (H, W, 3), filled cells (H, W) uint8).
+    """The resolve in numpy: returns (out L (H, W, 3) int32, filled cells (H, W) uint8); spatial_q and
+    cur_q are the spatial output's and the current input's ring samples (ring_of).
 
-    ring: (linear frame, map, valid) triples, map = (dx, dy) translation or a (fh, fw, 2) field at
-    1/flow_scale, valid = None or (fh, fw) uint8 at 1/flow_scale (0: no sample of that frame there, read
-    at the flow texel holding the output pixel); the current frame itself is one of them (identity)."""
+    ring: (ring samples, map, valid) triples: samples as ring_of gives them (16-bit fixed-point linear),
+    map = (dx, dy) translation or a (fh, fw, 2) field at 1/flow_scale, valid = None or (fh, fw) uint8 at
+    1/flow_scale (0: no sample of that frame there, read at the flow texel holding the output pixel); the
+    current frame itself is one of them (identity); cur_q = its ring samples (the colour box)."""
     f32 = np.float32
-    h, w = cur_lin.shape[:2]
+    h, w = cur_q.shape[:2]
     ys, xs = np.mgrid[0:h, 0:w].astype(f32)
-    pad = np.pad(cur_lin, ((1, 1), (1, 1), (0, 0)), mode="edge")
+    pad = np.pad(cur_q, ((1, 1), (1, 1), (0, 0)), mode="edge")
     taps = [pad[1 + dy:1 + dy + h, 1 + dx:1 + dx + w] for dy in (-1, 0, 1) for dx in (-1, 0, 1)]
-    lo = np.minimum.reduce(taps) - f32(eps)
-    hi = np.maximum.reduce(taps) + f32(eps)
+    epsq = eps_q(eps)
+    lo = np.minimum.reduce(taps) - epsq
+    hi = np.maximum.reduce(taps) + epsq
     g2 = grid * grid
     full_cells = FULL_CELLS if full_cells is None else full_cells
-    sums = np.zeros((h, w, g2, 3), f32)
+    sums = np.zeros((h, w, g2, 3), np.int64)
     counts = np.zeros((h, w, g2), np.int32)
     flat = np.arange(h * w)
-    for lin, m, ok in ring:
+    for q, m, ok in ring:
         if isinstance(m, np.ndarray):
             off = sample_field(m, flow_scale, xs, ys)
             px, py = xs + off[..., 0], ys + off[..., 1]
@@ -358,34 +398,42 @@ def tss_reference(spatial_lin: np.ndarray, cur_lin: np.ndarray, ring: list[tuple
         ox, oy = sx - px, sy - py                                  # in [-0.5, 0.5)
         cx = np.clip(np.floor((ox + f32(0.5)) * f32(grid)), 0, grid - 1).astype(np.int64)
         cy = np.clip(np.floor((oy + f32(0.5)) * f32(grid)), 0, grid - 1).astype(np.int64)
-        v = lin[np.clip(sy, 0, h - 1).astype(np.int64), np.clip(sx, 0, w - 1).astype(np.int64)]
+        v = q[np.clip(sy, 0, h - 1).astype(np.int64), np.clip(sx, 0, w - 1).astype(np.int64)]
         valid &= ((v >= lo) & (v <= hi)).all(-1)
         cell = (cy * grid + cx).ravel()
         sel = valid.ravel()
         sums.reshape(-1, g2, 3)[flat[sel], cell[sel]] += v.reshape(-1, 3)[sel]
         counts.reshape(-1, g2)[flat[sel], cell[sel]] += 1
-    filled = counts > 0
-    n = filled.sum(-1)
-    cellmean = np.where(filled[..., None], sums / np.maximum(counts, 1)[..., None], 0).astype(f32)
-    mean = (cellmean.sum(-2) / np.maximum(n, 1)[..., None]).astype(f32)
-    fn = n.astype(f32)
-    a = np.where(fn < f32(full_cells), fn / f32(full_cells), f32(1.0))[..., None]
-    out = np.where((n >= min_cells)[..., None], spatial_lin + a * (mean - spatial_lin), spatial_lin).astype(f32)
+    n = (counts > 0).sum(-1)
+    m = np.zeros((h, w, 3), f32)
+    for k in range(g2):     # cells in ascending order, each (float)sum * (1 / count), as the kernels add them
+        c = counts[..., k]
+        inv = (f32(1.0) / np.maximum(c, 1).astype(f32))[..., None]
+        m = np.where((c > 0)[..., None], m + sums[..., k, :].astype(f32) * inv, m).astype(f32)
+    fn = np.maximum(n, 1).astype(f32)[..., None]
+    a = np.where(n < full_cells, n.astype(f32) / f32(full_cells), f32(1.0)).astype(f32)[..., None]
+    sp = spatial_q.astype(f32)
+    t = (sp + (m / fn - sp) * a + f32(0.5)).astype(f32)
+    out = np.where(t > 0, np.where(t < f32(ONE), t, f32(ONE)), f32(0)).astype(np.int32)
     return out, n.astype(np.uint8)
 
 
-def encode_like(lin: np.ndarray, like: np.ndarray, bgr: bool, linear_input: bool = False) -> np.ndarray:
-    """Linear RGB back to the frame's type and layout (alpha taken from `like`), as store_px does."""
+def eps_q(eps: float) -> int:
+    """The colour box's widening in ring units (16-bit fixed-point linear)."""
+    return int(round(float(eps) * ONE))
+
+
+def encode_levels(q: np.ndarray, like: np.ndarray, bgr: bool) -> np.ndarray:
+    """Ring samples L (H, W, 3) back to the frame's type and layout (alpha taken from `like`), as
+    tss_store does: etab for integer frames, the encode table for float frames."""
     f32 = np.float32
     fmt = frame_format(like, bgr)
     h, w = fmt.height, fmt.width
-    enc = lin if linear_input else lut_read(device_luts()[2 * (LUT_SIZE + 1):], lin).astype(f32)
     raw = np.asarray(like).reshape(h, w, fmt.channels)
     if np.issubdtype(fmt.dtype, np.integer):
-        pmax = f32(_PMAX[fmt.dtype])
-        stored = np.floor(np.clip(enc * pmax + f32(0.5), 0, pmax)).astype(fmt.dtype)
+        stored = encode_table(fmt)[q]
     else:
-        stored = enc.astype(fmt.dtype)
+        stored = lut_read(device_luts()[2 * (LUT_SIZE + 1):], q.astype(f32) * f32(1.0 / ONE)).astype(fmt.dtype)
     if fmt.channels == 1:
         out = stored[..., :1]       # grey frames: the three channels are equal by construction
     else:
@@ -400,12 +448,28 @@ def tss_frame_reference(spatial: np.ndarray, cur: np.ndarray, ring: list[tuple],
     """kernels/tss.cl on whole frames: ring = (input frame, map, valid) triples (frames in the input's
     type); returns (output frame like `spatial`, filled cells (H, W) uint8). Where fewer than
     min_cells are filled the spatial pixel is copied bit for bit."""
-    rl = [(linear_of(f, bgr), m, ok) for f, m, ok in ring]
-    lin, n = tss_reference(linear_of(spatial, bgr), linear_of(cur, bgr), rl, flow_scale, grid, eps, min_cells,
-                            full_cells)
-    enc = encode_like(lin, spatial, bgr)
+    rq = [(ring_of(f, bgr), m, ok) for f, m, ok in ring]
+    q, n = tss_reference(ring_of(spatial, bgr), ring_of(cur, bgr), rq, flow_scale, grid, eps, min_cells,
+                         full_cells)
+    enc = encode_levels(q, spatial, bgr)
     keep = (n < min_cells).reshape(n.shape + (1,) * (np.ndim(spatial) - 2))
     return np.where(keep, spatial, enc).astype(spatial.dtype), n
+
+
+def shift_launch(width: int, height: int, context) -> tuple[tuple[int, int], tuple[int, int] | None]:
+    """(global, local) of tss_resolve_shift: one work item per LANES pixels of a row; on CPU devices
+    work-groups of TSS_LOCAL work items along the row (kernels/tss.cl), elsewhere the driver's choice."""
+    gx = -(-width // LANES)
+    import pyopencl as cl
+    if context.device.type & cl.device_type.CPU:
+        return (-(-gx // TSS_LOCAL) * TSS_LOCAL, height), (TSS_LOCAL, 1)
+    return (gx, height), None
+
+
+def vrows_of(valid: np.ndarray, flow_scale: int, width: int) -> np.ndarray:
+    """A flow-size valid mask with each column repeated flow_scale times, cut to the frame's width: the
+    form tss_resolve_shift reads (a pixel's mask byte at its own column, no division)."""
+    return np.ascontiguousarray(np.repeat(np.asarray(valid, np.uint8), flow_scale, 1)[:, :width])
 
 
 def kernel_defines(fmt, grid: int = GRID, eps: float = EPS, min_cells: int = MIN_CELLS,
@@ -413,7 +477,7 @@ def kernel_defines(fmt, grid: int = GRID, eps: float = EPS, min_cells: int = MIN
     """kernels/tss.cl's build defines."""
     from mlaa_stream.device.formats import defines_for
     full = FULL_CELLS if full_cells is None else int(full_cells)
-    return defines_for(fmt, GRID=int(grid), MIN_CELLS=int(min_cells), FULL_CELLS=full, EPS=f"{float(eps)!r}f",
+    return defines_for(fmt, GRID=int(grid), MIN_CELLS=int(min_cells), FULL_CELLS=full, EPSQ=eps_q(eps),
                        LINEAR_INPUT=int(linear_input))
 
 
@@ -444,7 +508,10 @@ class _Buffers:
         import pyopencl as cl
         self.fmt, self.flow_shape = fmt, flow_shape
         fh, fw = flow_shape
-        self.ring = context.buffer(frames * fmt.nbytes)
+        self.planes = 1 if fmt.channels == 1 else 3
+        self.slot_bytes = 2 * self.planes * fmt.pixels       # one ring slot: 16-bit linear planes
+        self.ring = context.buffer(frames * self.slot_bytes)
+        self.src = context.buffer(fmt.nbytes)                # the current input, before tss_ingest
         self.spatial = context.buffer(fmt.nbytes)
         self.dst = context.buffer(fmt.nbytes)
         self.cells = context.buffer(fmt.pixels)
@@ -454,8 +521,10 @@ class _Buffers:
         # dense maps only with dense_samples (66 MB at 1080p, K = 16): the default path reads none
         self.fields = context.buffer(8 * fh * fw * frames if dense else 8)
         self.valids = context.buffer(fh * fw * frames)
-        self.decode = cl.Buffer(context.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
-                                hostbuf=decode_table(fmt))
+        self.vrows = context.buffer(fh * fmt.width * frames)   # the same masks widened (vrows_of)
+        ro = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
+        self.ltab = cl.Buffer(context.ctx, ro, hostbuf=level_table(fmt))
+        self.etab = cl.Buffer(context.ctx, ro, hostbuf=encode_table(fmt))
         self.host_cells = np.empty((fmt.height, fmt.width), np.uint8)
 
 
@@ -485,7 +554,6 @@ class TSSStage:
         self.grid, self.eps, self.min_cells = int(grid), float(eps), int(min_cells)
         self.full_cells = FULL_CELLS if full_cells is None else int(full_cells)
         self.backend = backend
-        self.rows = True    # tss_resolve_shift_rows (row segments); False: one pixel per work item
         self.motion = MotionRing(self.frames, mode, refine, fb_check, dense_samples)
         self.stats: list[dict] = []
         self._lock = threading.Lock()
@@ -588,68 +656,87 @@ class TSSStage:
         defines = kernel_defines(fmt, self.grid, self.eps, self.min_cells, self.full_cells)
         self._kernel = self.context.kernel("tss", "tss_resolve", defines)
         self._kernel_shift = self.context.kernel("tss", "tss_resolve_shift", defines)
-        self._kernel_rows = self.context.kernel("tss", "tss_resolve_shift_rows", defines)
+        self._kernel_ingest = self.context.kernel("tss", "tss_ingest", defines)
         return self._buffers
 
-    def _upload_only(self, frame_in: np.ndarray, pyr: Pyramid, fm: FrameMotion) -> None:
+    def _ingest(self, frame_in: np.ndarray, pyr: Pyramid, slot: int) -> _Buffers:
+        """The current input into ring slot `slot` (tss_ingest: 16-bit linear planes)."""
         import pyopencl as cl
         bufs = self._prepare(frame_in, pyr)
-        slot = fm.entries[-1].slot
-        cl.enqueue_copy(self.queue, bufs.ring, np.ascontiguousarray(frame_in), dst_offset=slot * bufs.fmt.nbytes,
-                        is_blocking=False)
+        fmt = bufs.fmt
+        cl.enqueue_copy(self.queue, bufs.src, np.ascontiguousarray(frame_in), is_blocking=False)
+        self._kernel_ingest(self.queue, (-(-fmt.width // LANES), fmt.height), None, bufs.src, bufs.ring, self._luts,
+                            bufs.ltab,
+                            np.int32(fmt.width), np.int32(fmt.height), np.int32(slot))
+        return bufs
+
+    def _upload_only(self, frame_in: np.ndarray, pyr: Pyramid, fm: FrameMotion) -> None:
+        self._ingest(frame_in, pyr, fm.entries[-1].slot)
 
     def _resolve(self, frame_in, frame_filtered, pyr: Pyramid, fm: FrameMotion):
         import pyopencl as cl
-        bufs = self._prepare(frame_in, pyr)
+        bufs = self._ingest(frame_in, pyr, fm.entries[-1].slot)
         q, fmt = self.queue, bufs.fmt
         fh, fw = bufs.flow_shape
         n = len(fm.entries)
-        info = np.zeros((n, 4), np.int32)
-        shift = np.zeros((n, 2), np.float32)
-        for j, e in enumerate(fm.entries):
-            info[j] = (e.slot, 0 if e.shift is not None else 1, e.slot, int(e.valid is not None))
-            if e.shift is not None:
-                shift[j] = e.shift
-            else:
+        for e in fm.entries:
+            if e.shift is None:
                 cl.enqueue_copy(q, bufs.fields, np.ascontiguousarray(e.field, np.float32),
                                 dst_offset=e.slot * fh * fw * 8, is_blocking=False)
-            if e.valid is not None:
+        shift_path = all(e.shift is not None for e in fm.entries)
+        for e in fm.entries:
+            if e.valid is not None and shift_path:
+                cl.enqueue_copy(q, bufs.vrows, vrows_of(e.valid, pyr.flow_scale, fmt.width),
+                                dst_offset=e.slot * fh * fmt.width, is_blocking=False)
+            elif e.valid is not None:
                 cl.enqueue_copy(q, bufs.valids, np.ascontiguousarray(e.valid, np.uint8),
                                 dst_offset=e.slot * fh * fw, is_blocking=False)
-        cl.enqueue_copy(q, bufs.ring, np.ascontiguousarray(frame_in), dst_offset=fm.entries[-1].slot * fmt.nbytes,
-                        is_blocking=False)
         cl.enqueue_copy(q, bufs.spatial, np.ascontiguousarray(frame_filtered), is_blocking=False)
-        if all(e.shift is not None for e in fm.entries):
-            # one translation per ring frame: whole-pixel offsets and cells from the host, frames
-            # ordered by cell (stable: ring order inside a cell), as kernels/tss.cl's tss_resolve_shift wants
-            taps = np.zeros((n, 4), np.int32)
-            vslots = np.full(n, -1, np.int32)
-            for j, e in enumerate(fm.entries):
-                sx, sy = (int(np.floor(np.float32(d) + np.float32(0.5))) for d in e.shift)
-                cx, cy = self._cell_of(e.shift)
-                taps[j] = (e.slot, sx, sy, cy * self.grid + cx)
-                vslots[j] = e.slot if e.valid is not None else -1
-            order = np.argsort(taps[:, 3], kind="stable")
-            taps, vslots = np.ascontiguousarray(taps[order]), np.ascontiguousarray(vslots[order])
+        if shift_path:
+            taps, vslots = self._taps(fm.entries)
             cl.enqueue_copy(q, bufs.info, taps, is_blocking=False)
             cl.enqueue_copy(q, bufs.vslots, vslots, is_blocking=False)
-            kern, size = ((self._kernel_rows, (-(-fmt.width // SEG), fmt.height)) if self.rows
-                          else (self._kernel_shift, (fmt.width, fmt.height)))
-            kern(q, size, None, bufs.ring, bufs.spatial, bufs.dst, bufs.cells,
-                               bufs.info, bufs.vslots, bufs.valids, self._luts, bufs.decode,
+            self._kernel_shift(q, *shift_launch(fmt.width, fmt.height, self.context), bufs.ring, bufs.spatial, bufs.dst,
+                               bufs.cells, bufs.info, bufs.vslots, bufs.vrows, self._luts, bufs.ltab, bufs.etab,
                                np.int32(fmt.width), np.int32(fmt.height), np.int32(fw), np.int32(fh),
                                np.int32(pyr.flow_scale), np.int32(n), np.int32(fm.entries[-1].slot))
         else:
+            info = np.zeros((n, 4), np.int32)
+            shift = np.zeros((n, 2), np.float32)
+            for j, e in enumerate(fm.entries):
+                info[j] = (e.slot, 0 if e.shift is not None else 1, e.slot, int(e.valid is not None))
+                if e.shift is not None:
+                    shift[j] = e.shift
             cl.enqueue_copy(q, bufs.info, info, is_blocking=False)
             cl.enqueue_copy(q, bufs.shift, shift, is_blocking=False)
             self._kernel(q, (fmt.width, fmt.height), None, bufs.ring, bufs.spatial, bufs.dst, bufs.cells,
-                         bufs.info, bufs.shift, bufs.fields, bufs.valids, self._luts, bufs.decode,
+                         bufs.info, bufs.shift, bufs.fields, bufs.valids, self._luts, bufs.ltab, bufs.etab,
                          np.int32(fmt.width), np.int32(fmt.height), np.int32(fw), np.int32(fh),
                          np.int32(pyr.flow_scale), np.int32(n), np.int32(fm.entries[-1].slot))
         out = np.empty(frame_filtered.shape, frame_filtered.dtype)
         cl.enqueue_copy(q, out, bufs.dst, is_blocking=False)
         cl.enqueue_copy(q, bufs.host_cells, bufs.cells, is_blocking=True)
         return out, bufs.host_cells
+
+    def _taps(self, entries: list[RingEntry]) -> tuple[np.ndarray, np.ndarray]:
+        """tss_resolve_shift's table: per ring frame (slot, dx, dy, close) with (dx, dy) its whole-pixel
+        offset, frames ordered by footprint cell (stable: ring order inside a cell), close = the cell's
+        frame count on its last frame, else 0; and each frame's valid-mask slot (-1: none)."""
+        taps = np.zeros((len(entries), 4), np.int32)
+        cell = np.zeros(len(entries), np.int32)
+        vslots = np.full(len(entries), -1, np.int32)
+        for j, e in enumerate(entries):
+            sx, sy = (int(np.floor(np.float32(d) + np.float32(0.5))) for d in e.shift)
+            cx, cy = self._cell_of(e.shift)
+            taps[j, :3] = (e.slot, sx, sy)
+            cell[j] = cy * self.grid + cx
+            vslots[j] = e.slot if e.valid is not None else -1
+        order = np.argsort(cell, kind="stable")
+        taps, vslots, cell = taps[order], vslots[order], cell[order]
+        for j in range(len(entries)):
+            if j == len(entries) - 1 or cell[j + 1] != cell[j]:
+                taps[j, 3] = int((cell == cell[j]).sum())
+        return np.ascontiguousarray(taps), np.ascontiguousarray(vslots)
 
     def finish(self) -> None:
         if self.context is not None:
