@@ -55,14 +55,16 @@ GRID = 4              # footprint cells per side (GRID^2 strata)
 EPS = 0.03            # linear-light widening of the current 3x3 colour box (issue 16: 0.02-0.05)
 MIN_CELLS = 2         # fewer filled cells: the spatial output stands
 FULL_CELLS = 6        # filled cells at which the samples alone resolve the pixel (below: n / FULL_CELLS of it)
-REFINE_STEPS = 2       # Gauss-Newton steps per refined ring frame and frame (bench pan 0.42 -> 0.39 with 2; 3 same)
-REFINE_PER_FRAME = 64 # ring frames refined directly per frame (the longest unrefined first)
+NEWEST_STEPS = 2      # Gauss-Newton steps per frame for the newest ring frame (MotionRing._refine)
+REFINE_STEPS = 2      # ... and for each older ring frame refined in that frame
+REFINE_PER_FRAME = 64 # older ring frames refined directly per frame (the longest unrefined first)
 ONE = 65535           # ring samples: linear light in 16-bit fixed point (kernels/tss.cl, ring_of)
 LANES = 16            # pixels of a row per work item of tss_resolve_shift (int16 / float16 vectors)
 TSS_LOCAL = 8         # CPU work-group of tss_resolve_shift along the row (docs/temporal.md: speed)
 FB_ABS, FB_REL = 0.5, 0.1   # forward-backward tolerance (px at full size): FB_ABS + FB_REL |v|
 ALIGN_LEVEL, ALIGN_PX, ALIGN_SIGMA, ALIGN_GROW = 10.0, 0.35, 2.0, 3   # MotionRing._alignment
-TILE, TILE_TOL, TILE_TEXTURE = 48, 0.4, 1.0   # _tile_check: flow px, px, mean squared gradient
+TILE, TILE_TOL, TILE_TEXTURE = 48, 0.4, 1.0   # _Refiner's tile check: flow px, px, mean squared gradient
+REFINE_POINTS = 16384 # _Refiner: points in all (the largest gradients of each tile, at most a whole tile)
 
 
 # --- motion of every ring frame relative to the current one ------------------------------------------
@@ -127,18 +129,7 @@ class MotionRing:
                 else:
                     e.field = self._compose_const(e.field, d, pyr)
             if self.refine:
-                # every frame, every ring frame: one direct step (a frame is refined on each of the K
-                # frames it stays in the ring, so its estimate converges; chaining alone drifts)
-                fs = pyr.flow_scale
-                # at most REFINE_PER_FRAME of them per frame, the longest unrefined first (host time)
-                ref = _Refiner(pyr.blurred("flow"))
-                todo = sorted((e for e in self.entries if e.shift is not None), key=lambda e: e.refined)
-                for e in todo[:self.refine_per_frame]:
-                    s = (e.shift[0] / fs, e.shift[1] / fs)
-                    for k in range(REFINE_STEPS):
-                        s, e.valid = ref.step(e.pyr.blurred("flow"), s, check=k == REFINE_STEPS - 1)
-                    e.shift = (s[0] * fs, s[1] * fs)
-                    e.refined = index
+                self._refine(pyr, index, d)
         elif dec.model == "dense" and self.dense_samples:
             self._dense(prev, pyr, dec)
         elif dec.model == "dense":
@@ -156,6 +147,36 @@ class MotionRing:
         if len(self.entries) > self.frames:
             del self.entries[0]
         return FrameMotion(dec, list(self.entries))
+
+    def _refine(self, pyr: Pyramid, index: int, d: tuple[float, float]) -> None:
+        """Direct Gauss-Newton refinement of the translated ring frames against the current frame (chaining
+        alone drifts: issue 16). The newest ring frame (the previous input) gets NEWEST_STEPS steps; what
+        they change is this frame's chaining error, the same for every older frame, so it is added to them
+        all; then up to refine_per_frame older frames, the longest unrefined first, get REFINE_STEPS steps
+        each (a frame is refined on each of the K frames it stays in the ring, so its estimate converges).
+        The last step of each refined frame also runs the per-tile check (its valid mask)."""
+        fs = pyr.flow_scale
+        ref = _Refiner(pyr.blurred("flow"))
+        todo = [e for e in self.entries if e.shift is not None]
+        if not todo:
+            return
+
+        def refine(e: RingEntry, steps: int) -> None:
+            s = (e.shift[0] / fs, e.shift[1] / fs)
+            for k in range(steps):
+                s, e.valid = ref.step(e.pyr.blurred("flow"), s, check=k == steps - 1)
+            e.shift = (s[0] * fs, s[1] * fs)
+            e.refined = index
+
+        newest = todo[-1]
+        before = newest.shift
+        refine(newest, NEWEST_STEPS)
+        corr = (newest.shift[0] - before[0], newest.shift[1] - before[1])
+        older = todo[:-1]
+        for e in older:
+            e.shift = (e.shift[0] + corr[0], e.shift[1] + corr[1])
+        for e in sorted(older, key=lambda e: e.refined)[:self.refine_per_frame]:
+            refine(e, REFINE_STEPS)
 
     def _alignment(self, e: RingEntry, pyr: Pyramid) -> np.ndarray:
         """1 where ring frame e, moved by its map, matches the current frame (flow size): a map that is
@@ -226,41 +247,85 @@ class _Refiner:
     """Direct Gauss-Newton refinement of ring frames' translations against one current frame, and the
     per-tile check that the translation holds everywhere (flow-size grey blurred by LK_SIGMA).
 
-    The current frame's gradients and per-tile Hessians are computed once per frame; each ring frame
-    costs one warp and a few products per step (inverse-additive, as stage.global_translation).
-    Tile check: one Gauss-Newton step per TILE x TILE tile from the same residual; where a textured
-    tile would move by more than TILE_TOL px from the whole frame's solution, another motion is there
-    (the cut scene's second shot: a bar and a disc 0.3 px per frame apart pass the frame-to-frame test
-    of choose_model and drift apart over the ring) and that tile takes no samples from that frame."""
+    Sparse: the current frame's gradients, once per frame, pick in every TILE x TILE tile its pixels of
+    largest squared gradient, REFINE_POINTS in all (flat pixels add nothing to a Gauss-Newton step; at
+    1080p 16k of the 518k flow-size pixels, 68 per tile); a step samples the ring frame at those points
+    only, by exact bilinear interpolation (cv2's warps quantise positions to 1/32 px), so it costs
+    ~1 ms instead of a whole-frame warp (inverse-additive, as stage.global_translation).
+    Tile check: one Gauss-Newton step per tile from the same residuals; where a textured tile (the
+    whole tile's gradients) would move by more than TILE_TOL px from the whole frame's solution,
+    another motion is there (the cut scene's second shot: a bar and a disc 0.3 px per frame apart pass
+    the frame-to-frame test of choose_model and drift apart over the ring) and that tile takes no samples
+    from that frame."""
 
-    def __init__(self, cur_b: np.ndarray):
-        self.c = cur_b
-        self.h, self.w = cur_b.shape
-        self.gx = cv2.Sobel(cur_b, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
-        self.gy = cv2.Sobel(cur_b, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
-        self.ty, self.tx = self.h // TILE, self.w // TILE
-        if self.ty and self.tx:
-            a, b, c = self._tiles(self.gx * self.gx), self._tiles(self.gx * self.gy), self._tiles(self.gy * self.gy)
-            self.ta, self.tb, self.tc = a, b, c
-            self.tdet = a * c - b * b
-            self.textured = (self.tdet > 1e-3 * np.maximum(a * c, 1e-12)) & (
-                np.minimum(a, c) > TILE_TEXTURE * TILE * TILE)
-
-    def _tiles(self, a: np.ndarray) -> np.ndarray:
+    def __init__(self, cur_b: np.ndarray, points: int | None = None):
+        points = REFINE_POINTS if points is None else int(points)
+        self.h, self.w = h, w = cur_b.shape
+        points = -(-points // max(-(-h // TILE) * -(-w // TILE), 1))    # per tile
+        gx = cv2.Sobel(cur_b, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
+        gy = cv2.Sobel(cur_b, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
+        self.ty, self.tx = h // TILE, w // TILE
+        energy = gx * gx + gy * gy
+        # the points: each tile's largest gradients (partial tiles at the right and bottom count too)
         t = TILE
-        return a[:self.ty * t, :self.tx * t].reshape(self.ty, t, self.tx, t).sum((1, 3), dtype=np.float64)
+        ny, nx = -(-h // t), -(-w // t)
+        pad = np.zeros((ny * t, nx * t), np.float32)
+        pad[:h, :w] = energy
+        blocks = pad.reshape(ny, t, nx, t).transpose(0, 2, 1, 3).reshape(ny, nx, t * t)
+        k = min(points, t * t)
+        top = np.argpartition(-blocks, k - 1, axis=-1)[..., :k] if k < t * t else np.broadcast_to(
+            np.arange(t * t), blocks.shape)
+        by, bx = np.meshgrid(np.arange(ny), np.arange(nx), indexing="ij")
+        ys = (by[..., None] * t + top // t).ravel()
+        xs = (bx[..., None] * t + top % t).ravel()
+        keep = (ys < h) & (xs < w)
+        ys, xs = ys[keep], xs[keep]
+        keep = energy[ys, xs] > 0
+        ys, xs = ys[keep], xs[keep]
+        self.ys, self.xs = ys.astype(np.float64), xs.astype(np.float64)
+        self.c = cur_b[ys, xs].astype(np.float64)
+        self.gx, self.gy = gx[ys, xs].astype(np.float64), gy[ys, xs].astype(np.float64)
+        self.gxx, self.gxy, self.gyy = self.gx * self.gx, self.gx * self.gy, self.gy * self.gy
+        if self.ty and self.tx:
+            # per-tile Hessians: the whole tile's for the texture test, the points' for the tile's step
+            def tiles(a):
+                return a[:self.ty * t, :self.tx * t].reshape(self.ty, t, self.tx, t).sum((1, 3), dtype=np.float64)
+            fa, fb, fc = tiles(gx * gx), tiles(gx * gy), tiles(gy * gy)
+            self.textured = (fa * fc - fb * fb > 1e-3 * np.maximum(fa * fc, 1e-12)) & (
+                np.minimum(fa, fc) > TILE_TEXTURE * t * t)
+            self.tile = (np.minimum(ys // t, self.ty - 1) * self.tx + np.minimum(xs // t, self.tx - 1))
+            nt = self.ty * self.tx
+            self.ta = np.bincount(self.tile, self.gxx, nt).reshape(self.ty, self.tx)
+            self.tb = np.bincount(self.tile, self.gxy, nt).reshape(self.ty, self.tx)
+            self.tc = np.bincount(self.tile, self.gyy, nt).reshape(self.ty, self.tx)
+            self.tdet = self.ta * self.tc - self.tb * self.tb
+
+    def _sample(self, img: np.ndarray, d: tuple[float, float]) -> np.ndarray:
+        """img at the points moved by d, bilinear, positions clamped to the frame (replicated border)."""
+        h, w = self.h, self.w
+        x = np.clip(self.xs + d[0], 0, w - 1)
+        y = np.clip(self.ys + d[1], 0, h - 1)
+        x0 = np.minimum(x.astype(np.intp), max(w - 2, 0))
+        y0 = np.minimum(y.astype(np.intp), max(h - 2, 0))
+        ax, ay = x - x0, y - y0
+        flat = img.ravel()
+        i = y0 * w + x0
+        dx, dy = (1 if w > 1 else 0), (w if h > 1 else 0)
+        p00, p01 = flat.take(i), flat.take(i + dx)
+        p10, p11 = flat.take(i + dy), flat.take(i + dy + dx)
+        top = p00 + ax * (p01 - p00)
+        return top + ay * (p10 + ax * (p11 - p10) - top)
 
     def step(self, ring_b: np.ndarray, d: tuple[float, float], check: bool = True):
         """One step from d (flow px, cur(x) ~ ring(x + d)): returns (new d, valid mask or None)."""
         h, w = self.h, self.w
-        pw = cv2.warpAffine(ring_b, np.float32([[1, 0, d[0]], [0, 1, d[1]]]), (w, h),
-                            flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE)
-        r = cv2.subtract(self.c, pw)
-        wr = 1.0 / (1.0 + (r * r) * np.float32(1.0 / (LK_ROBUST * LK_ROBUST)))
-        gxw, gyw = self.gx * wr, self.gy * wr
-        a, b_, e = float(np.dot(gxw.ravel(), self.gx.ravel())), float(np.dot(gxw.ravel(), self.gy.ravel())), \
-            float(np.dot(gyw.ravel(), self.gy.ravel()))
-        bx, by = float(np.dot(gxw.ravel(), r.ravel())), float(np.dot(gyw.ravel(), r.ravel()))
+        r = self.c - self._sample(ring_b, d)
+        wr = 1.0 / (1.0 + (r * r) * (1.0 / (LK_ROBUST * LK_ROBUST)))
+        # sums by numpy's own reductions: a BLAS dot product (`@`) ran 30x slower on this shared
+        # machine (its threads)
+        a, b_, e = (float(np.add.reduce(wr * g)) for g in (self.gxx, self.gxy, self.gyy))
+        wrr = wr * r
+        bx, by = float(np.add.reduce(wrr * self.gx)), float(np.add.reduce(wrr * self.gy))
         det = a * e - b_ * b_
         step = (0.0, 0.0)
         if det > 1e-6 * max(a * e, 1e-12):
@@ -268,7 +333,9 @@ class _Refiner:
         new = (d[0] + step[0], d[1] + step[1])
         if not check or not (self.ty and self.tx):
             return new, None
-        tbx, tby = self._tiles(self.gx * r), self._tiles(self.gy * r)
+        nt = self.ty * self.tx
+        tbx = np.bincount(self.tile, self.gx * r, nt).reshape(self.ty, self.tx)
+        tby = np.bincount(self.tile, self.gy * r, nt).reshape(self.ty, self.tx)
         with np.errstate(divide="ignore", invalid="ignore"):
             sx = (self.tc * tbx - self.tb * tby) / self.tdet
             sy = (self.ta * tby - self.tb * tbx) / self.tdet
