@@ -38,11 +38,14 @@
 // and clang's vector conversion are inline, with the same results.
 #ifdef POCL_DEVICE_ADDRESS_BITS
 typedef ushort16 tss_ushort16_a2 __attribute__((aligned(2)));
+typedef uchar16 tss_uchar16_a1 __attribute__((aligned(1)));
 #define TSS_LOAD16(p) (*(__global const tss_ushort16_a2 *)(p))
+#define TSS_LOADU16(p) (*(__global const tss_uchar16_a1 *)(p))
 #define TSS_INT16(v) __builtin_convertvector((v), int16)
 #define TSS_FLOAT16(v) __builtin_convertvector((v), float16)
 #else
 #define TSS_LOAD16(p) vload16(0, p)
+#define TSS_LOADU16(p) vload16(0, p)
 #define TSS_INT16(v) convert_int16(v)
 #define TSS_FLOAT16(v) convert_float16(v)
 #endif
@@ -257,6 +260,20 @@ inline int16 tss_row16(__global const ushort *row, int x, int width)
     return TSS_INT16(t);
 }
 
+// -1 where the 16 mask bytes from x on (clamped to the row) are non-zero, else 0.
+inline int16 tss_mask16(__global const uchar *row, int x, int width)
+{
+    uchar16 t;
+    if (x + 16 <= width) {
+        t = TSS_LOADU16(row + x);
+    } else {
+        __private uchar *e = (__private uchar *)&t;
+        for (int p = 0; p < 16; ++p)
+            e[p] = row[x + p < width ? x + p : width - 1];
+    }
+    return TSS_INT16(t) != (int16)(0);
+}
+
 #define TSS_MIN(a, b) ((a) < (b) ? (a) : (b))
 #define TSS_MAX(a, b) ((a) > (b) ? (a) : (b))
 
@@ -319,12 +336,7 @@ __kernel void tss_resolve_shift(__global const ushort *ring, __global const PIXE
             sy = sy < 0 ? 0 : height - 1;
         }
         if (vs >= 0) {                      // the mask's row, widened to full-size columns on the host
-            int16 vm;
-            __private int *e = (__private int *)&vm;
-            __global const uchar *vrow = valids + ((size_t)vs * fh + (size_t)vy) * width;
-            for (int p = 0; p < 16; ++p)
-                e[p] = vrow[x0 + p < width ? x0 + p : width - 1] != 0 ? -1 : 0;
-            ok &= vm;
+            ok &= tss_mask16(valids + ((size_t)vs * fh + (size_t)vy) * width, x0, width);
         }
         __global const ushort *r = ring + ((size_t)slot * height + (size_t)sy) * rowlen;
         int16 v[TSS_PLANES];
