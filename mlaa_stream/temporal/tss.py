@@ -643,6 +643,8 @@ class TSSStage:
     def reset(self) -> None:
         """Forget the ring: the next frame starts a new one (and returns the spatial output)."""
         self.motion.reset()
+        self._pending: dict[int, np.ndarray] = {}   # ring slot -> input frame not yet ingested (_upload_only)
+        self._vrows_sent: dict[int, np.ndarray] = {}   # ring slot -> the valid mask on the device
         self._prev_index: int | None = None
         self._shape = None
         self._last: tuple[np.ndarray, np.ndarray] | None = None   # (grey, output) of the previous frame
@@ -720,6 +722,7 @@ class TSSStage:
             return self._buffers
         self.queue.finish()
         self._buffers = _Buffers(self.context, fmt, shape, self.frames, self.motion.dense_samples)
+        self._vrows_sent = {}
         defines = kernel_defines(fmt, self.grid, self.eps, self.min_cells, self.full_cells)
         self._kernel = self.context.kernel("tss", "tss_resolve", defines)
         self._kernel_shift = self.context.kernel("tss", "tss_resolve_shift", defines)
@@ -738,10 +741,19 @@ class TSSStage:
         return bufs
 
     def _upload_only(self, frame_in: np.ndarray, pyr: Pyramid, fm: FrameMotion) -> None:
-        self._ingest(frame_in, pyr, fm.entries[-1].slot)
+        """A frame whose resolve is trivial (static shot): kept on the host until a resolve reads it
+        (a still shot with codec noise then costs a copy, not an ingest, per frame)."""
+        self._prepare(frame_in, pyr)
+        live = {e.slot for e in fm.entries}
+        self._pending = {k: v for k, v in self._pending.items() if k in live}
+        self._pending[fm.entries[-1].slot] = np.array(frame_in, copy=True)
 
     def _resolve(self, frame_in, frame_filtered, pyr: Pyramid, fm: FrameMotion):
         import pyopencl as cl
+        for e in fm.entries[:-1]:
+            if e.slot in self._pending:
+                self._ingest(self._pending.pop(e.slot), pyr, e.slot)
+        self._pending = {}
         bufs = self._ingest(frame_in, pyr, fm.entries[-1].slot)
         q, fmt = self.queue, bufs.fmt
         fh, fw = bufs.flow_shape
@@ -753,8 +765,11 @@ class TSSStage:
         shift_path = all(e.shift is not None for e in fm.entries)
         for e in fm.entries:
             if e.valid is not None and shift_path:
-                cl.enqueue_copy(q, bufs.vrows, vrows_of(e.valid, pyr.flow_scale, fmt.width),
-                                dst_offset=e.slot * fh * fmt.width, is_blocking=False)
+                if not (e.slot in self._vrows_sent and np.array_equal(self._vrows_sent[e.slot], e.valid)):
+                    # masks change rarely (a tile's verdict): upload only a changed one
+                    cl.enqueue_copy(q, bufs.vrows, vrows_of(e.valid, pyr.flow_scale, fmt.width),
+                                    dst_offset=e.slot * fh * fmt.width, is_blocking=False)
+                    self._vrows_sent[e.slot] = e.valid
             elif e.valid is not None:
                 cl.enqueue_copy(q, bufs.valids, np.ascontiguousarray(e.valid, np.uint8),
                                 dst_offset=e.slot * fh * fw, is_blocking=False)
