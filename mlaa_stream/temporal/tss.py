@@ -3,8 +3,9 @@
 Each input pixel of frame t is a point sample of the scene at a known sub-pixel position once the
 motion is known; a moving camera puts the samples of past frames at new positions inside the current
 frame's pixels (the jitter a renderer's TAA adds on purpose; seed 002's T2x). The stage keeps a ring
-of the last K *input* frames (linear light) with a map from the current frame's pixels into each of
-them, and resolves each output pixel from the samples that land inside its footprint:
+of the last K *input* frames (linear light in 16-bit fixed point, L = floor(clamp(lin, 0, 1) 65535 + 0.5):
+`ring_of`) with a map from the current frame's pixels into each of them, and resolves each output pixel
+from the samples that land inside its footprint:
 
     stage = TSSStage(bgr=True, frames=16)
     out = stage(frame_in, frame_filtered, index)     # per frame, in order; ring kept inside
@@ -13,25 +14,28 @@ Resolve (per output pixel x; `tss_reference` is the plain statement, kernels/tss
   - ring frame j (the current frame is j = 0, identity map) maps x to p = M_j(x) in its own pixels;
     its sample nearest p, at s = round(p), lies at o = s - p inside x's footprint ([-0.5, 0.5)^2:
     the box filter the truth is defined with): one tap per ring frame, a gather, no atomics;
-  - rejection: a sample outside the current input's 3x3 per-channel min/max box widened by EPS
-    (linear light) is another surface (disocclusion, a mover, a flow error) and is dropped; a
+  - rejection: a sample outside the current input's 3x3 per-channel min/max box of L widened by EPS
+    (linear light; EPSQ in L units) is another surface (disocclusion, a mover, a flow error) and is dropped; a
     position outside ring frame j, or a map marked invalid (NaN: forward-backward flow
     inconsistency), drops the tap;
   - stratification (seed 002: each sample's offset inside its pixel decides its coverage area): the
-    footprint is split into GRID x GRID cells; samples are averaged per cell and the filled cells are
-    averaged, so 10 frames that repeat one phase count once, not ten times;
+    footprint is split into GRID x GRID cells; samples are averaged per cell (integer sum times
+    1 / count) and the filled cells are averaged (in ascending cell order), so 10 frames that repeat one
+    phase count once, not ten times;
   - combination with the spatial estimate: the empty cells are the part of the footprint the samples
     do not cover; the spatial (MLAA) output S stands for them:
-        out = S + (n / GRID^2) (mean of filled cells - S)          when n >= MIN_CELLS
-        out = S                                                      otherwise
-    so static content and integer-pixel motion (every sample in one cell) return the spatial output
-    exactly, and a pan that fills the cells converges toward the box-filtered truth.
+        out = S + min(1, n / FULL_CELLS) (mean of filled cells - S)   when n >= MIN_CELLS
+        out = S (the spatial pixel, bit for bit)                         otherwise
+    with S the spatial output's L, rounded to L and encoded by table (`encode_table`); so static
+    content and integer-pixel motion (every sample in one cell) return the spatial output exactly, and
+    a pan that fills the cells converges toward the box-filtered truth.
 
 Motion (host, per frame; `MotionRing`): the per-frame decision of stage.choose_model (reset at a cut or
 an index jump or a size change, static, global translation, dense DIS flow). Global: each ring frame's
 translation is the previous one composed with this frame's, then refined *directly* against the
-current frame by Gauss-Newton (global Lucas-Kanade on the flow-size grey, the ring frame's blurred grey
-kept): chaining alone drifts (issue 16: 0.09 px after 16 frames against 0.016 direct). Dense: DIS flow
+current frame by sparse Gauss-Newton (`_Refiner`: the current frame's largest gradients on the flow-size
+grey, the ring frame's blurred grey kept): chaining alone drifts (issue 16: 0.09 px after 16 frames
+against 0.016 direct). Dense: DIS flow
 current -> previous composed with each ring frame's field (remap), forward-backward checked; the
 inconsistent pixels are NaN and stay so in every older field (nothing of theirs is trusted).
 """
