@@ -39,7 +39,9 @@ read or written is reported and the others are still processed. A sequence (%04d
 one size, channel count and sample type; the first frame that differs stops it. Gaps in the
 numbering are reported. Every output is written under a temporary name beside it, checked (it
 reopens and decodes to the end) and renamed: --resume skips an existing output only when it is
-complete and writes an incomplete one again. NaN and infinite samples pass through unchanged.
+complete and writes an incomplete one again; with --temporal on a sequence it first runs the frames
+just before the first one to write through the temporal stage (its history, outputs not written).
+NaN and infinite samples pass through unchanged.
 
 \b
 Video goes through PyAV (FFmpeg): frame rate, timestamps, resolution, colour tags and audio are
@@ -199,7 +201,8 @@ def _job_for(kind: str, output: str) -> type:
               help="Output file, folder (same names as the inputs) or frame pattern (clean/%04d.png).")
 @click.option("-y", "--overwrite", is_flag=True, help="Replace outputs that exist (never an input).")
 @click.option("--resume", is_flag=True,
-              help="Skip inputs whose output exists already (folders and sequences).")
+              help="Skip inputs whose output exists already (folders and sequences); --temporal on a "
+                   "sequence warms up from the skipped frames just before the first one to write.")
 @click.option("--frames", metavar="A-B", help="Frame numbers of a %04d pattern, e.g. 1001-1100 "
               "(default: every number found; gaps are reported).")
 @click.option("--preset", type=click.Choice(sorted(PRESETS)), default=None,

@@ -528,7 +528,7 @@ def tss_frame_reference(spatial: np.ndarray, cur: np.ndarray, ring: list[tuple],
 
 
 def shift_launch(width: int, height: int, context) -> tuple[tuple[int, int], tuple[int, int] | None]:
-    """(global, local) of tss_resolve_shift: one work item per LANES pixels of a row; on CPU devices
+    """(global, local) of tss_resolve_shift and tss_ingest: one work item per LANES pixels of a row; on CPU devices
     work-groups of TSS_LOCAL work items along the row (kernels/tss.cl), elsewhere the driver's choice."""
     gx = -(-width // LANES)
     import pyopencl as cl
@@ -739,7 +739,8 @@ class TSSStage:
         bufs = self._prepare(frame_in, pyr)
         fmt = bufs.fmt
         cl.enqueue_copy(self.queue, bufs.src, np.ascontiguousarray(frame_in), is_blocking=False)
-        self._kernel_ingest(self.queue, (-(-fmt.width // LANES), fmt.height), None, bufs.src, bufs.ring, self._luts,
+        self._kernel_ingest(self.queue, *shift_launch(fmt.width, fmt.height, self.context), bufs.src, bufs.ring,
+                            self._luts,
                             bufs.ltab,
                             np.int32(fmt.width), np.int32(fmt.height), np.int32(slot))
         return bufs
