@@ -41,7 +41,6 @@ inconsistent pixels are NaN and stay so in every older field (nothing of theirs 
 """
 from __future__ import annotations
 
-import math
 import threading
 import time
 from dataclasses import dataclass, field
@@ -52,13 +51,13 @@ import numpy as np
 from mlaa_stream.device.colour import device_luts, lut_read
 from mlaa_stream.device.formats import LUT_SIZE, frame_format
 from mlaa_stream.temporal.stage import (LK_ROBUST, Decision, Pyramid, _PMAX, choose_model,
-                                        decode_table, global_translation, grey8)
+                                        decode_table, grey8)
 
 DEFAULT_FRAMES = 16   # K: ring frames (the current one included)
 GRID = 4              # footprint cells per side (GRID^2 strata)
 EPS = 0.03            # linear-light widening of the current 3x3 colour box (issue 16: 0.02-0.05)
 MIN_CELLS = 2         # fewer filled cells: the spatial output stands
-FULL_CELLS = 9         # filled cells at which the samples alone resolve the pixel (below: n / FULL_CELLS of it; docs/temporal.md)
+FULL_CELLS = 9        # filled cells at which the samples alone resolve the pixel (below: n / 9 of it)
 NEWEST_STEPS = 2      # Gauss-Newton steps per frame for the newest ring frame (MotionRing._refine)
 REFINE_STEPS = 2      # ... and for each older ring frame refined in that frame
 REFINE_PER_FRAME = 8  # older ring frames refined directly per frame (the longest unrefined first; docs/temporal.md)
