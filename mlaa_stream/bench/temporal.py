@@ -198,7 +198,7 @@ def time_stage(frames: list[np.ndarray], spatial: list[np.ndarray], mode: str, w
 def _set_tss_constants(pairs: list[str]) -> None:
     """--tss-set NAME=VALUE: the tuning runs of docs/temporal.md, by command."""
     import mlaa_stream.temporal.tss as tss
-    names = ("FULL_CELLS", "REFINE_POINTS", "REFINE_STEPS", "NEWEST_STEPS", "REFINE_PER_FRAME", "TILE_TOL")
+    names = ("FULL_CELLS", "REFINE_POINTS", "REFINE_STEPS", "NEWEST_STEPS", "REFINE_EVERY", "TILE_TOL")
     for pair in pairs:
         name, _, value = pair.partition("=")
         if name not in names:
@@ -224,7 +224,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", default=str(DOCS))
     ap.add_argument("--tss-set", action="append", default=[], metavar="NAME=VALUE",
                     help="tuning: set a constant of mlaa_stream.temporal.tss for this run (FULL_CELLS, "
-                         "REFINE_POINTS, REFINE_STEPS, NEWEST_STEPS, REFINE_PER_FRAME, TILE_TOL; repeatable)")
+                         "REFINE_POINTS, REFINE_STEPS, NEWEST_STEPS, REFINE_EVERY, TILE_TOL; repeatable)")
     args = ap.parse_args(argv)
     _set_tss_constants(args.tss_set)
     command = "python -m mlaa_stream.bench.temporal " + " ".join(argv if argv is not None else sys.argv[1:])

@@ -60,7 +60,7 @@ MIN_CELLS = 2         # fewer filled cells: the spatial output stands
 FULL_CELLS = 9        # filled cells at which the samples alone resolve the pixel (below: n / 9 of it)
 NEWEST_STEPS = 2      # Gauss-Newton steps per frame for the newest ring frame (MotionRing._refine)
 REFINE_STEPS = 2      # ... and for each older ring frame refined in that frame
-REFINE_PER_FRAME = 8  # older ring frames refined directly per frame (the longest unrefined first; docs/temporal.md)
+REFINE_EVERY = 2      # older ring frames refined directly at ages 1 + a multiple of this (docs/temporal.md)
 ONE = 65535           # ring samples: linear light in 16-bit fixed point (kernels/tss.cl, ring_of)
 LANES = 16            # pixels of a row per work item of tss_resolve_shift (int16 / float16 vectors)
 TSS_LOCAL = 8         # CPU work-group of tss_resolve_shift along the row (docs/temporal.md: speed)
@@ -82,7 +82,6 @@ class RingEntry:
     field: np.ndarray | None = None   # (fh, fw, 2) float32 offsets in full-size px (dense map), NaN = invalid
     slot: int = -1                    # device ring slot
     valid: np.ndarray | None = None   # (fh, fw) uint8 at flow size: 1 where the map explains the frame
-    refined: int = -1                 # the frame index of its last direct refinement
 
 
 @dataclass
@@ -100,7 +99,6 @@ class MotionRing:
                  fb_check: bool = True, dense_samples: bool = False):
         self.frames, self.mode, self.refine, self.fb_check = int(frames), mode, bool(refine), bool(fb_check)
         self.dense_samples = bool(dense_samples)
-        self.refine_per_frame = REFINE_PER_FRAME
         self.entries: list[RingEntry] = []
         self._dis = None
 
@@ -155,8 +153,9 @@ class MotionRing:
         """Direct Gauss-Newton refinement of the translated ring frames against the current frame (chaining
         alone drifts: issue 16). The newest ring frame (the previous input) gets NEWEST_STEPS steps; what
         they change is this frame's chaining error, the same for every older frame, so it is added to them
-        all; then up to refine_per_frame older frames, the longest unrefined first, get REFINE_STEPS steps
-        each (a frame is refined on each of the K frames it stays in the ring, so its estimate converges).
+        all; then the older frames of age 1 + a multiple of REFINE_EVERY get REFINE_STEPS steps each (a
+        frame is refined on every REFINE_EVERY-th of the K frames it stays in the ring, so its estimate
+        converges; refining all of them every frame made the output less steady).
         The last step of each refined frame also runs the per-tile check (its valid mask)."""
         fs = pyr.flow_scale
         ref = _Refiner(pyr.blurred("flow"))
@@ -169,7 +168,6 @@ class MotionRing:
             for k in range(steps):
                 s, e.valid = ref.step(e.pyr.blurred("flow"), s, check=k == steps - 1)
             e.shift = (s[0] * fs, s[1] * fs)
-            e.refined = index
 
         newest = todo[-1]
         before = newest.shift
@@ -178,8 +176,11 @@ class MotionRing:
         older = todo[:-1]
         for e in older:
             e.shift = (e.shift[0] + corr[0], e.shift[1] + corr[1])
-        for e in sorted(older, key=lambda e: e.refined)[:self.refine_per_frame]:
-            refine(e, REFINE_STEPS)
+        for e in older:
+            # by age alone, not by what was refined before: the state after K frames is then the same
+            # however the run started (--resume's warm-up, a cluster chunk's: docs/cluster.md)
+            if (index - e.index - 1) % REFINE_EVERY == 0:
+                refine(e, REFINE_STEPS)
 
     def _alignment(self, e: RingEntry, pyr: Pyramid) -> np.ndarray:
         """1 where ring frame e, moved by its map, matches the current frame (flow size): a map that is
