@@ -39,7 +39,9 @@ read or written is reported and the others are still processed. A sequence (%04d
 one size, channel count and sample type; the first frame that differs stops it. Gaps in the
 numbering are reported. Every output is written under a temporary name beside it, checked (it
 reopens and decodes to the end) and renamed: --resume skips an existing output only when it is
-complete and writes an incomplete one again. NaN and infinite samples pass through unchanged.
+complete and writes an incomplete one again; with --temporal on a sequence it first runs the frames
+just before the first one to write through the temporal stage (its history, outputs not written).
+NaN and infinite samples pass through unchanged.
 
 \b
 Video goes through PyAV (FFmpeg): frame rate, timestamps, resolution, colour tags and audio are
@@ -199,7 +201,8 @@ def _job_for(kind: str, output: str) -> type:
               help="Output file, folder (same names as the inputs) or frame pattern (clean/%04d.png).")
 @click.option("-y", "--overwrite", is_flag=True, help="Replace outputs that exist (never an input).")
 @click.option("--resume", is_flag=True,
-              help="Skip inputs whose output exists already (folders and sequences).")
+              help="Skip inputs whose output exists already (folders and sequences); --temporal on a "
+                   "sequence warms up from the skipped frames just before the first one to write.")
 @click.option("--frames", metavar="A-B", help="Frame numbers of a %04d pattern, e.g. 1001-1100 "
               "(default: every number found; gaps are reported).")
 @click.option("--preset", type=click.Choice(sorted(PRESETS)), default=None,
@@ -487,6 +490,12 @@ class _SequenceTemporal:
         self.runner.read_order.pop(index, None)
         return self.stage(frame_in, frame_out, number)
 
+    def warm(self, frame_in, frame_out, ff) -> None:
+        """A frame before the first one to write (--resume): through the stage, output discarded."""
+        number = ff.number if ff.number is not None else (self._prev[0] + 1 if self._prev else 0)
+        self._prev = (number, (frame_in.shape, frame_in.dtype))
+        self.stage(frame_in, frame_out, number)
+
 
 class _Job:
     def __init__(self, input_path: str, output: str, kind: str, con: Console, **opts):
@@ -580,7 +589,20 @@ class _ImageJob(_Job):
             existing = self._keep_complete(existing)
             self.report.skipped.extend(ff.dst for ff in existing)
             con.info(f"--resume: {len(existing)} outputs exist and are skipped")
-            self.plan = [ff for ff in self.plan if ff not in existing]
+            skipped = set(id(ff) for ff in existing)
+            first = next((i for i, ff in enumerate(self.plan) if id(ff) not in skipped), None)
+            # the temporal stage's warm-up: the skipped frames just before the first one to write,
+            # consecutive in number (issue 16: --resume warms up from the K frames before it)
+            warm: list = []
+            if first is not None:
+                for ff in reversed(self.plan[:first]):
+                    nxt = warm[0] if warm else self.plan[first]
+                    if id(ff) not in skipped or ff.number is None or nxt.number is None \
+                            or ff.number != nxt.number - 1:
+                        break   # folders (no numbers) start anew: their positions restart at 0
+                    warm.insert(0, ff)
+            self.warm_up = warm
+            self.plan = [ff for ff in self.plan if id(ff) not in skipped]
         elif existing and not o["overwrite"]:
             more = f" (and {len(existing) - 1} more)" if len(existing) > 1 else ""
             raise Usage(f"{existing[0].dst}: exists{more}; use --overwrite to replace "
@@ -589,6 +611,9 @@ class _ImageJob(_Job):
             if not os.path.isdir(d):
                 raise Failed(f"{d}: the output folder does not exist")
             _check_writable(d)
+
+    def _warm_up(self, filt, temporal) -> None:
+        _warm_up_images(self, filt, temporal)
 
     def _keep_complete(self, existing: list) -> list:
         """--resume: the existing outputs that are complete (header of the input's size, PNG/JPEG end
@@ -646,6 +671,8 @@ class _ImageJob(_Job):
                     yield item
             finally:
                 inner.close()
+        if temporal is not None and getattr(self, "warm_up", None):
+            self._warm_up(filt, temporal)
         try:
             run_pipeline(source(), filt, sink, temporal=temporal,
                          in_flight=in_flight, post_hooks=post_hooks, times=times,
@@ -703,6 +730,35 @@ class _ImageJob(_Job):
 
     def abort(self) -> None:
         pass
+
+
+def _ring_frames(stage) -> int:
+    """How many frames before the first one to write the temporal stage wants (its ring; the blend: 3)."""
+    inner = getattr(stage, "tss", stage)
+    return int(getattr(inner, "frames", 3))
+
+
+def _warm_up_images(job: "_ImageJob", filt, temporal: "_SequenceTemporal") -> None:
+    """--resume with the temporal stage: the inputs of the last skipped frames before the first one to
+    write go through the spatial filter and the stage (outputs discarded, not in --stats), so the
+    first written frame has the history it would have had in an uninterrupted run."""
+    from mlaa_stream.io.sequence import image_source
+    warm = job.warm_up[-_ring_frames(temporal.stage):]
+    stage = temporal.stage
+    keep = [(o, len(o.stats)) for o in (stage, getattr(stage, "tss", None), getattr(stage, "blend", None))
+            if o is not None and isinstance(getattr(o, "stats", None), list)]
+    done = 0
+    try:
+        for item in image_source(warm, job.report, strict=job.strict):
+            f = filt.for_item(item) if hasattr(filt, "for_item") else filt
+            temporal.warm(item.frame, f.process(item.frame), item.meta[0])
+            done += 1
+    finally:
+        for o, n in keep:
+            del o.stats[n:]
+    if done:
+        job.con.info(f"--resume: temporal history warmed up from {done} frames before "
+                     f"{job.plan[0].label if job.plan else 'the end'}")
 
 
 class _VideoJob(_Job):

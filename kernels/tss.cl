@@ -1,104 +1,109 @@
 // tss.cl -- temporal supersampling resolve (issue 16; seed 002's T2x generalised to K frames).
 // Reference: mlaa_stream.temporal.tss.tss_reference (the plain statement; the module's header says why).
 //
+// The ring: K input frames as linear light in 16-bit fixed point, L = floor(clamp(lin, 0, 1) 65535 + 0.5)
+// (ltab: the stored code's L, one load), planar by row (row y of a slot: width Ls of R, then G, then B;
+// grey frames one plane), written once per frame by tss_ingest. So the resolve reads contiguous 16-bit
+// samples, compares and sums integers and decodes nothing per tap; the output is encoded from L by one
+// load of etab (integer frames: 65536 entries; float frames read the tables).
+//
 // Per output pixel x = (gx, gy) (pixel centres at integer coordinates):
-//   box  = the current input's 3x3 per-channel min/max (edges replicated) in linear light, widened by EPS
-//   for each ring frame j (the current frame included, identity map), oldest first:
-//     p    = x + (dx_j, dy_j)                      translation map (info kind 0)
-//          = x + field_j(x), bilinear at 1/FS       dense map (kind 1; NaN = no trusted motion)
+//   box  = the current frame's 3x3 per-plane min/max of L (edges replicated), widened by EPSQ
+//   for each ring frame j (the current frame included, identity map):
+//     p    = x + (dx_j, dy_j)                      translation map (tss_resolve_shift; info kind 0)
+//          = x + field_j(x), bilinear at 1/FS       dense map (tss_resolve, kind 1; NaN = no trusted motion)
 //     skip where valid_j (1/FS, nearest) is 0, p is NaN, or s = floor(p + 0.5) is outside the frame
-//     v    = ring frame j's sample at s (linear light); skip if outside the box (another surface)
+//     v    = ring frame j's L at s; skip if outside the box (another surface)
 //     o    = s - p in [-0.5, 0.5)^2, cell = floor((o + 0.5) GRID) per axis: the sample's stratum of x's
-//            footprint; per cell: sum and count
-//   n    = filled cells, m = mean over filled cells of the cell means
-//   out  = S + min(1, n / FULL_CELLS) (m - S) with S the spatial output (linear), encoded by table, where n >= MIN_CELLS;
-//          elsewhere the spatial pixel is copied bit for bit. cells[x] = n (debug view, stats).
+//            footprint; per cell: integer sum and count
+//   n    = filled cells, m = sum over filled cells, ascending, of (float)sum * (1 / count)
+//   out  = S + (m / n - S) min(1, n / FULL_CELLS) with S the spatial output's L, rounded to L and encoded
+//          (etab), where n >= MIN_CELLS; elsewhere the spatial pixel is copied bit for bit. cells[x] = n.
 // A gather: one tap per ring frame and pixel, no atomics.
 //
-// Buffers: ring = RING_SLOTS frames of the input's type and layout, one after another; info = 4 ints per
-// ring entry (slot, kind, field/valid slot, has valid); shift = 2 floats per entry; fields = (slot, fh, fw, 2)
-// floats; valids = (slot, fh, fw) uchar. Defines: GRID, MIN_CELLS, FULL_CELLS, EPS (float literal), LINEAR_INPUT.
+// Buffers: ring = RING_SLOTS slots of height * TSS_PLANES * width ushorts; info = 4 ints per ring entry (slot, kind,
+// field/valid slot, has valid); shift = 2 floats per entry; fields = (slot, fh, fw, 2) floats; valids =
+// (slot, fh, fw) uchar. Defines: GRID, MIN_CELLS, FULL_CELLS, EPSQ (int), LINEAR_INPUT.
 #pragma OPENCL FP_CONTRACT OFF
 
 #define CELLS (GRID * GRID)
-
-inline float4 tss_linear(__global const float *luts, __global const float *dec,
-                         __global const PIXEL_T *img, int i)
-{
-#if !LINEAR_INPUT && !defined(PIXEL_IS_FLOAT)
-    // integer samples: one load of the decode table (temporal.decode_table: the table read's value)
 #if CHANNELS == 1
-    float v = dec[img[i]];
-    return (float4)(v, v, v, 1.0f);
+#define TSS_PLANES 1
 #else
-    __global const PIXEL_T *p = img + (size_t)i * CHANNELS;
-#if ORDER_BGR
-    return (float4)(dec[p[2]], dec[p[1]], dec[p[0]], 1.0f);
-#else
-    return (float4)(dec[p[0]], dec[p[1]], dec[p[2]], 1.0f);
+#define TSS_PLANES 3
 #endif
-#endif
+#define TSS_ONE 65535.0f
+
+// PoCL calls vload16 / convert_* out of line (common.cl's note); a load through an aligned vector type
+// and clang's vector conversion are inline, with the same results.
+#ifdef POCL_DEVICE_ADDRESS_BITS
+typedef ushort16 tss_ushort16_a2 __attribute__((aligned(2)));
+typedef uchar16 tss_uchar16_a1 __attribute__((aligned(1)));
+#define TSS_LOAD16(p) (*(__global const tss_ushort16_a2 *)(p))
+#define TSS_LOADU16(p) (*(__global const tss_uchar16_a1 *)(p))
+#define TSS_INT16(v) __builtin_convertvector((v), int16)
+#define TSS_FLOAT16(v) __builtin_convertvector((v), float16)
 #else
+#define TSS_LOAD16(p) vload16(0, p)
+#define TSS_LOADU16(p) vload16(0, p)
+#define TSS_INT16(v) convert_int16(v)
+#define TSS_FLOAT16(v) convert_float16(v)
+#endif
+
+#if LINEAR_INPUT || defined(PIXEL_IS_FLOAT)
+// Linear light of pixel i of a float frame (the tables; linear input as it is).
+inline float4 tss_linear(__global const float *luts, __global const PIXEL_T *img, int i)
+{
     float4 c = load_px(img, i);
 #if LINEAR_INPUT
     return c;
 #else
     return (float4)(lut_read(luts, c.x), lut_read(luts, c.y), lut_read(luts, c.z), c.w);
 #endif
+}
 #endif
-}
 
-// min/max by plain comparisons: PoCL calls fmin/fmax out of line (common.cl's note on built-ins)
-inline void box_add(float4 *lo, float4 *hi, float4 c)
+// The L of sample (plane c) of pixel i of a frame in its own type: ltab for integer frames, the tables
+// and the rounding of ring_of for float frames.
+inline int tss_level(__global const float *luts, __global const ushort *ltab, __global const PIXEL_T *img,
+                     int i, int c)
 {
-    lo->x = c.x < lo->x ? c.x : lo->x; hi->x = c.x > hi->x ? c.x : hi->x;
-    lo->y = c.y < lo->y ? c.y : lo->y; hi->y = c.y > hi->y ? c.y : hi->y;
-    lo->z = c.z < lo->z ? c.z : lo->z; hi->z = c.z > hi->z ? c.z : hi->z;
-}
-
-// The current input's 3x3 per-channel min/max (edges replicated) in linear light, widened by EPS.
-// Integer frames: min/max of the stored codes, decoded once (the decode table is non-decreasing, so
-// this is the min/max of the decoded samples, bit for bit): 6 table reads instead of 27.
-inline void colour_box(__global const PIXEL_T *cur, __global const float *luts, __global const float *dec,
-                       int gx, int gy, int width, int height, float4 *lo_out, float4 *hi_out)
-{
-    const int x0 = gx > 0 ? gx - 1 : 0, x2 = gx < width - 1 ? gx + 1 : width - 1;
-    const int y0 = gy > 0 ? gy - 1 : 0, y2 = gy < height - 1 ? gy + 1 : height - 1;
-    const int xs[3] = {x0, gx, x2}, ys[3] = {y0, gy, y2};
 #if !LINEAR_INPUT && !defined(PIXEL_IS_FLOAT)
-    const int nch = CHANNELS == 1 ? 1 : 3;
-    uint mn[3] = {0xffffffffu, 0xffffffffu, 0xffffffffu}, mx[3] = {0u, 0u, 0u};
-    for (int a = 0; a < 3; ++a)
-        for (int b = 0; b < 3; ++b) {
-            __global const PIXEL_T *p = cur + (size_t)(ys[a] * width + xs[b]) * CHANNELS;
-            for (int c = 0; c < nch; ++c) {
-                uint v = p[c];
-                mn[c] = v < mn[c] ? v : mn[c];
-                mx[c] = v > mx[c] ? v : mx[c];
-            }
-        }
 #if CHANNELS == 1
-    float4 lo = (float4)(dec[mn[0]], dec[mn[0]], dec[mn[0]], 0.0f), hi = (float4)(dec[mx[0]], dec[mx[0]], dec[mx[0]], 0.0f);
+    return ltab[img[i]];
 #elif ORDER_BGR
-    float4 lo = (float4)(dec[mn[2]], dec[mn[1]], dec[mn[0]], 0.0f), hi = (float4)(dec[mx[2]], dec[mx[1]], dec[mx[0]], 0.0f);
+    return ltab[img[(size_t)i * CHANNELS + 2 - c]];
 #else
-    float4 lo = (float4)(dec[mn[0]], dec[mn[1]], dec[mn[2]], 0.0f), hi = (float4)(dec[mx[0]], dec[mx[1]], dec[mx[2]], 0.0f);
+    return ltab[img[(size_t)i * CHANNELS + c]];
 #endif
 #else
-    float4 lo = (float4)(INFINITY), hi = (float4)(-INFINITY);
-    for (int a = 0; a < 3; ++a)
-        for (int b = 0; b < 3; ++b)
-            box_add(&lo, &hi, tss_linear(luts, dec, cur, ys[a] * width + xs[b]));
+    const float4 v = tss_linear(luts, img, i);
+    const float x = c == 0 ? v.x : (c == 1 ? v.y : v.z);
+    return (int)(x > 0.0f ? (x < 1.0f ? x * TSS_ONE + 0.5f : TSS_ONE) : 0.0f);
 #endif
-    *lo_out = lo - EPS;
-    *hi_out = hi + EPS;
 }
 
-// The end of every resolve: pixel i's filled-cell count n and the sum of its cells' means (linear light)
-// give out = S + min(1, n / FULL_CELLS) (mean - S) over the spatial output S; with fewer than MIN_CELLS
-// cells the spatial pixel is copied bit for bit. Alpha stays the spatial pixel's.
-inline void tss_store(__global const float *luts, __global const float *dec, __global const PIXEL_T *spatial,
-                      __global PIXEL_T *dst, __global uchar *cells, int i, int n, float mr, float mg, float mb)
+// The current frame into ring slot `slot`: one work item per 16 pixels of a row.
+__kernel void tss_ingest(__global const PIXEL_T *src, __global ushort *ring, __global const float *luts,
+                         __global const ushort *ltab, const int width, const int height, const int slot)
+{
+    const int x0 = get_global_id(0) * 16, gy = get_global_id(1);
+    if (x0 >= width || gy >= height)
+        return;
+    const int len = width - x0 < 16 ? width - x0 : 16;
+    __global ushort *r = ring + ((size_t)slot * height + gy) * TSS_PLANES * width + x0;
+    for (int p = 0; p < len; ++p)
+        for (int c = 0; c < TSS_PLANES; ++c)
+            r[c * width + p] = (ushort)tss_level(luts, ltab, src, gy * width + x0 + p, c);
+}
+
+// The end of every resolve: pixel i's filled-cell count n and the sum m of its cells' means (L units)
+// give out = S + (m / n - S) min(1, n / FULL_CELLS) over the spatial output's L, S, rounded to L and
+// encoded; with fewer than MIN_CELLS cells the spatial pixel is copied bit for bit. Alpha stays the
+// spatial pixel's.
+inline void tss_store(__global const float *luts, __global const ushort *ltab, __global const PIXEL_T *etab,
+                      __global const PIXEL_T *spatial, __global PIXEL_T *dst, __global uchar *cells,
+                      int i, int n, float mr, float mg, float mb)
 {
     cells[i] = (uchar)n;
 #if CHANNELS == 1
@@ -106,30 +111,46 @@ inline void tss_store(__global const float *luts, __global const float *dec, __g
 #else
     const int nc = CHANNELS;
 #endif
+    __global PIXEL_T *d = dst + (size_t)i * nc;
+    __global const PIXEL_T *sp = spatial + (size_t)i * nc;
     if (n < MIN_CELLS) {
         for (int c = 0; c < nc; ++c)
-            dst[(size_t)i * nc + c] = spatial[(size_t)i * nc + c];
+            d[c] = sp[c];
         return;
     }
     const float fn = (float)n;
-    const float4 s = tss_linear(luts, dec, spatial, i);
     const float a = fn < (float)FULL_CELLS ? fn / (float)FULL_CELLS : 1.0f;
-    float4 out = s + ((float4)(mr / fn, mg / fn, mb / fn, s.w) - s) * a;
-#if !LINEAR_INPUT
-    __global const float *enc = luts + 2 * (LUT_SIZE + 1);
-    out = (float4)(lut_read(enc, out.x), lut_read(enc, out.y), lut_read(enc, out.z), out.w);
+    const float mm[3] = {mr, mg, mb};
+    for (int c = 0; c < TSS_PLANES; ++c) {
+        const float s = (float)tss_level(luts, ltab, spatial, i, c);
+        float t = s + (mm[c] / fn - s) * a + 0.5f;
+        const int q = (int)(t > 0.0f ? (t < TSS_ONE ? t : TSS_ONE) : 0.0f);
+#if !LINEAR_INPUT && !defined(PIXEL_IS_FLOAT)
+        const PIXEL_T e = etab[q];
+#elif LINEAR_INPUT
+        const PIXEL_T e = to_pixel((float)q * (1.0f / TSS_ONE));
+#else
+        const PIXEL_T e = to_pixel(lut_read(luts + 2 * (LUT_SIZE + 1), (float)q * (1.0f / TSS_ONE)));
 #endif
+#if CHANNELS == 1
+        d[0] = e;
+#elif ORDER_BGR
+        d[2 - c] = e;
+#else
+        d[c] = e;
+#endif
+    }
 #if CHANNELS == 4
-    out.w = load_px(spatial, i).w;   // store_px re-encodes it exactly
+    d[3] = sp[3];
 #endif
-    store_px(dst, i, out);
 }
 
-__kernel void tss_resolve(__global const PIXEL_T *ring, __global const PIXEL_T *spatial,
+// General maps (dense fields with NaN, valid masks): one work item per pixel, per-pixel cell arrays.
+__kernel void tss_resolve(__global const ushort *ring, __global const PIXEL_T *spatial,
                           __global PIXEL_T *dst, __global uchar *cells,
                           __global const int *info, __global const float *shift,
                           __global const float *fields, __global const uchar *valids,
-                          __global const float *luts, __global const float *dec,
+                          __global const float *luts, __global const ushort *ltab, __global const PIXEL_T *etab,
                           const int width, const int height, const int fw, const int fh, const int fs,
                           const int n_ring, const int cur_slot)
 {
@@ -138,17 +159,31 @@ __kernel void tss_resolve(__global const PIXEL_T *ring, __global const PIXEL_T *
         return;
     const int i = gy * width + gx;
     const size_t frame = (size_t)width * height;
-    __global const PIXEL_T *cur = ring + (size_t)cur_slot * frame * CHANNELS;
+    const int rowlen = TSS_PLANES * width;
+    __global const ushort *cur = ring + (size_t)cur_slot * height * rowlen;
 
-    // the current input's 3x3 colour box
-    float4 lo, hi;
-    colour_box(cur, luts, dec, gx, gy, width, height, &lo, &hi);
+    // the current frame's 3x3 box of L per plane
+    const int x0 = gx > 0 ? gx - 1 : 0, x2 = gx < width - 1 ? gx + 1 : width - 1;
+    const int y0 = gy > 0 ? gy - 1 : 0, y2 = gy < height - 1 ? gy + 1 : height - 1;
+    int lo[3], hi[3];
+    for (int c = 0; c < TSS_PLANES; ++c) {
+        __global const ushort *pl = cur + c * width;
+        int mn = 65536, mx = -1;
+        for (int yy = y0; yy <= y2; ++yy)
+            for (int xx = x0; xx <= x2; ++xx) {
+                int v = pl[yy * rowlen + xx];
+                mn = v < mn ? v : mn;
+                mx = v > mx ? v : mx;
+            }
+        lo[c] = mn - EPSQ;
+        hi[c] = mx + EPSQ;
+    }
 
-    float sum[CELLS * 3];
+    int sum[CELLS * 3];
     int cnt[CELLS];
     for (int k = 0; k < CELLS; ++k) {
         cnt[k] = 0;
-        sum[3 * k] = sum[3 * k + 1] = sum[3 * k + 2] = 0.0f;
+        sum[3 * k] = sum[3 * k + 1] = sum[3 * k + 2] = 0;
     }
     const float xf = (float)gx, yf = (float)gy;
     const int vx = gx / fs < fw - 1 ? gx / fs : fw - 1, vy = gy / fs < fh - 1 ? gy / fs : fh - 1;
@@ -181,160 +216,162 @@ __kernel void tss_resolve(__global const PIXEL_T *ring, __global const PIXEL_T *
         const float sx = floor(px + 0.5f), sy = floor(py + 0.5f);
         if (sx < 0.0f || sx > (float)(width - 1) || sy < 0.0f || sy > (float)(height - 1))
             continue;
-        const float4 v = tss_linear(luts, dec, ring + (size_t)slot * frame * CHANNELS,
-                                    (int)sy * width + (int)sx);
-        if (v.x < lo.x || v.x > hi.x || v.y < lo.y || v.y > hi.y || v.z < lo.z || v.z > hi.z)
+        __global const ushort *r = ring + ((size_t)slot * height + (size_t)sy) * rowlen + (size_t)sx;
+        int v[3];
+        int ok = 1;
+        for (int c = 0; c < TSS_PLANES; ++c) {
+            v[c] = r[c * width];
+            ok &= (v[c] >= lo[c]) & (v[c] <= hi[c]);
+        }
+        if (!ok)
             continue;
         float cx = floor((sx - px + 0.5f) * (float)GRID), cy = floor((sy - py + 0.5f) * (float)GRID);
         int ix = cx < 0.0f ? 0 : (cx > (float)(GRID - 1) ? GRID - 1 : (int)cx);
         int iy = cy < 0.0f ? 0 : (cy > (float)(GRID - 1) ? GRID - 1 : (int)cy);
         int k = iy * GRID + ix;
-        sum[3 * k] += v.x;
-        sum[3 * k + 1] += v.y;
-        sum[3 * k + 2] += v.z;
+        for (int c = 0; c < TSS_PLANES; ++c)
+            sum[3 * k + c] += v[c];
         cnt[k] += 1;
     }
     int n = 0;
-    float mr = 0.0f, mg = 0.0f, mb = 0.0f;
+    float m[3] = {0.0f, 0.0f, 0.0f};
     for (int k = 0; k < CELLS; ++k) {
         if (cnt[k] > 0) {
-            float c = (float)cnt[k];
-            mr += sum[3 * k] / c;
-            mg += sum[3 * k + 1] / c;
-            mb += sum[3 * k + 2] / c;
+            const float inv = 1.0f / (float)cnt[k];
+            for (int c = 0; c < TSS_PLANES; ++c)
+                m[c] += (float)sum[3 * k + c] * inv;
             ++n;
         }
     }
-    tss_store(luts, dec, spatial, dst, cells, i, n, mr, mg, mb);
+    tss_store(luts, ltab, etab, spatial, dst, cells, i, n, m[0], m[1], m[2]);
 }
 
-// The same resolve when every ring frame's map is one translation (static and global models: the
-// default path). The tap pattern is the same for every pixel, so the host gives each ring frame its
-// whole-pixel offset (sx - x, sy - y) and its footprint cell, and orders the frames by cell (ring order
-// inside a cell): the kernel sums one cell's samples in registers and adds its mean when the cell
-// changes -- no per-pixel cell arrays, the same sums in the same order as tss_reference.
-// taps: 4 ints per ring frame (slot, dx, dy, cell), frames with a valid mask: vslot >= 0 in vslots.
-__kernel void tss_resolve_shift(__global const PIXEL_T *ring, __global const PIXEL_T *spatial,
+// 16 samples of a ring row from x on, clamped to the row (the caller masks the clamped ones).
+inline int16 tss_row16(__global const ushort *row, int x, int width)
+{
+    if (x >= 0 && x + 16 <= width)
+        return TSS_INT16(TSS_LOAD16(row + x));
+    ushort16 t;
+    __private ushort *e = (__private ushort *)&t;
+    for (int p = 0; p < 16; ++p) {
+        int xx = x + p;
+        e[p] = row[xx < 0 ? 0 : (xx > width - 1 ? width - 1 : xx)];
+    }
+    return TSS_INT16(t);
+}
+
+// -1 where the 16 mask bytes from x on (clamped to the row) are non-zero, else 0.
+inline int16 tss_mask16(__global const uchar *row, int x, int width)
+{
+    uchar16 t;
+    if (x + 16 <= width) {
+        t = TSS_LOADU16(row + x);
+    } else {
+        __private uchar *e = (__private uchar *)&t;
+        for (int p = 0; p < 16; ++p)
+            e[p] = row[x + p < width ? x + p : width - 1];
+    }
+    return TSS_INT16(t) != (int16)(0);
+}
+
+#define TSS_MIN(a, b) ((a) < (b) ? (a) : (b))
+#define TSS_MAX(a, b) ((a) > (b) ? (a) : (b))
+
+// The resolve when every ring frame's map is one translation (static and global models: the default
+// path). The tap pattern is the same for every pixel, so the host gives each ring frame its whole-pixel
+// offset (sx - x, sy - y), orders the frames by footprint cell (ring order inside a cell) and marks the
+// last frame of each cell with the cell's frame count: a small table read alike by every work item.
+// One work item = 16 pixels of a row as int16 / float16 vectors: per ring frame one contiguous load per
+// plane, integer compares against the box and masked integer sums; a one-frame cell (a well-spread pan)
+// adds its sample, no division. The sums and their order are tss_reference's (and tss_resolve's).
+// taps: 4 ints per ring frame (slot, dx, dy, close: 0 inside a cell, the cell's frame count on its last
+// frame); vslots[j] >= 0: ring frame j has a valid mask (the per-tile check's output) in that slot of
+// valids, (fh, width) per slot: the flow-size mask with each column repeated FS times (vrows_of).
+// Global size (ceil(width / 16), height); on CPUs work-groups along the row (TSS_LOCAL in tss.py: the
+// neighbouring work items read the neighbouring 32 bytes of every stream; (1, 8) ran 1.5-3x slower).
+__kernel void tss_resolve_shift(__global const ushort *ring, __global const PIXEL_T *spatial,
                                 __global PIXEL_T *dst, __global uchar *cells,
                                 __global const int *taps, __global const int *vslots,
                                 __global const uchar *valids,
-                                __global const float *luts, __global const float *dec,
+                                __global const float *luts, __global const ushort *ltab,
+                                __global const PIXEL_T *etab,
                                 const int width, const int height, const int fw, const int fh, const int fs,
                                 const int n_ring, const int cur_slot)
 {
-    const int gx = get_global_id(0), gy = get_global_id(1);
-    if (gx >= width || gy >= height)
-        return;
-    const int i = gy * width + gx;
-    const size_t frame = (size_t)width * height;
-    __global const PIXEL_T *cur = ring + (size_t)cur_slot * frame * CHANNELS;
-    float4 lo, hi;
-    colour_box(cur, luts, dec, gx, gy, width, height, &lo, &hi);
-    const int vx = gx / fs < fw - 1 ? gx / fs : fw - 1, vy = gy / fs < fh - 1 ? gy / fs : fh - 1;
-    int n = 0, cell = -1, cnt = 0;
-    float mr = 0.0f, mg = 0.0f, mb = 0.0f, sr = 0.0f, sg = 0.0f, sb = 0.0f;
-    for (int j = 0; j < n_ring; ++j) {
-        const int slot = taps[4 * j], k = taps[4 * j + 3];
-        if (k != cell) {           // a new cell: close the previous one
-            if (cnt > 0) {
-                float c = (float)cnt;
-                mr += sr / c; mg += sg / c; mb += sb / c;
-                ++n;
-            }
-            cell = k; cnt = 0; sr = sg = sb = 0.0f;
-        }
-        const int vs = vslots[j];
-        if (vs >= 0 && valids[(size_t)vs * fw * fh + vy * fw + vx] == 0)
-            continue;
-        const int sx = gx + taps[4 * j + 1], sy = gy + taps[4 * j + 2];
-        if (sx < 0 || sx > width - 1 || sy < 0 || sy > height - 1)
-            continue;
-        const float4 v = tss_linear(luts, dec, ring + (size_t)slot * frame * CHANNELS, sy * width + sx);
-        if (v.x < lo.x || v.x > hi.x || v.y < lo.y || v.y > hi.y || v.z < lo.z || v.z > hi.z)
-            continue;
-        sr += v.x; sg += v.y; sb += v.z;
-        ++cnt;
-    }
-    if (cnt > 0) {
-        float c = (float)cnt;
-        mr += sr / c; mg += sg / c; mb += sb / c;
-        ++n;
-    }
-    tss_store(luts, dec, spatial, dst, cells, i, n, mr, mg, mb);
-}
-
-// tss_resolve_shift over a segment of SEG pixels of one row per work item (the default path): for a
-// fixed ring frame the taps of neighbouring pixels are neighbouring samples, so the inner loops over
-// the segment stream through memory without branches (accept as a 0/1 factor) and the compiler can
-// vectorise them; the sums are the same as tss_resolve_shift's, in the same order.
-#ifndef SEG
-#define SEG 32
-#endif
-__kernel void tss_resolve_shift_rows(__global const PIXEL_T *ring, __global const PIXEL_T *spatial,
-                                     __global PIXEL_T *dst, __global uchar *cells,
-                                     __global const int *taps, __global const int *vslots,
-                                     __global const uchar *valids,
-                                     __global const float *luts, __global const float *dec,
-                                     const int width, const int height, const int fw, const int fh, const int fs,
-                                     const int n_ring, const int cur_slot)
-{
-    const int x0 = get_global_id(0) * SEG, gy = get_global_id(1);
+    const int x0 = get_global_id(0) * 16, gy = get_global_id(1);
     if (x0 >= width || gy >= height)
         return;
-    const int len = width - x0 < SEG ? width - x0 : SEG;
     const size_t frame = (size_t)width * height;
-    __global const PIXEL_T *cur = ring + (size_t)cur_slot * frame * CHANNELS;
-    float lo[3][SEG], hi[3][SEG], m[3][SEG], s[3][SEG];
-    int n[SEG], cnt[SEG];
-    for (int p = 0; p < len; ++p) {
-        float4 l, h;
-        colour_box(cur, luts, dec, x0 + p, gy, width, height, &l, &h);
-        lo[0][p] = l.x; lo[1][p] = l.y; lo[2][p] = l.z;
-        hi[0][p] = h.x; hi[1][p] = h.y; hi[2][p] = h.z;
-        m[0][p] = m[1][p] = m[2][p] = 0.0f;
-        s[0][p] = s[1][p] = s[2][p] = 0.0f;
-        n[p] = 0;
-        cnt[p] = 0;
+    const int16 lane = (int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+    const int rowlen = TSS_PLANES * width;
+    __global const ushort *cur = ring + (size_t)cur_slot * height * rowlen;
+    const int y0 = gy > 0 ? gy - 1 : 0, y2 = gy < height - 1 ? gy + 1 : height - 1;
+    int16 lo[TSS_PLANES], hi[TSS_PLANES], s[TSS_PLANES];
+    float16 m[TSS_PLANES];
+    for (int c = 0; c < TSS_PLANES; ++c) {
+        __global const ushort *pl = cur + c * width;
+        int16 mn = (int16)(65536), mx = (int16)(-1);
+        for (int yy = 0; yy < 3; ++yy) {
+            __global const ushort *row = pl + (yy == 0 ? y0 : yy == 1 ? gy : y2) * rowlen;
+            for (int dx = -1; dx <= 1; ++dx) {
+                const int16 v = tss_row16(row, x0 + dx, width);
+                mn = TSS_MIN(v, mn);
+                mx = TSS_MAX(v, mx);
+            }
+        }
+        lo[c] = mn - (int16)(EPSQ);
+        hi[c] = mx + (int16)(EPSQ);
+        s[c] = (int16)(0);
+        m[c] = (float16)(0.0f);
     }
+    int16 n = (int16)(0), cnt = (int16)(0);
     const int vy = gy / fs < fh - 1 ? gy / fs : fh - 1;
-    int cell = -1;
-    for (int j = 0; j <= n_ring; ++j) {
-        const int k = j < n_ring ? taps[4 * j + 3] : -2;
-        if (k != cell) {          // close the previous cell (and at the end)
-            if (cell >= 0)
-                for (int p = 0; p < len; ++p) {
-                    if (cnt[p] > 0) {
-                        float c = (float)cnt[p];
-                        m[0][p] += s[0][p] / c; m[1][p] += s[1][p] / c; m[2][p] += s[2][p] / c;
-                        ++n[p];
-                    }
-                    cnt[p] = 0;
-                    s[0][p] = s[1][p] = s[2][p] = 0.0f;
-                }
-            cell = k;
+    for (int j = 0; j < n_ring; ++j) {
+        const int slot = taps[4 * j], dx = taps[4 * j + 1], close = taps[4 * j + 3], vs = vslots[j];
+        int sy = gy + taps[4 * j + 2];
+        const int16 xs = lane + (int16)(x0 + dx);
+        int16 ok = (xs >= (int16)(0)) & (xs < (int16)(width));
+        if (sy < 0 || sy > height - 1) {
+            ok = (int16)(0);
+            sy = sy < 0 ? 0 : height - 1;
         }
-        if (j == n_ring)
-            break;
-        const int slot = taps[4 * j], dx = taps[4 * j + 1], sy = gy + taps[4 * j + 2], vs = vslots[j];
-        if (sy < 0 || sy > height - 1)
-            continue;
-        __global const PIXEL_T *row = ring + ((size_t)slot * frame + (size_t)sy * width) * CHANNELS;
-        __global const uchar *vrow = vs >= 0 ? valids + (size_t)vs * fw * fh + (size_t)vy * fw : 0;
-        // the segment's taps that stay inside the row, branch-free (accept as 0/1)
-        const int pa = -(x0 + dx) > 0 ? -(x0 + dx) : 0;
-        const int pb = width - 1 - x0 - dx + 1 < len ? width - 1 - x0 - dx + 1 : len;
-        for (int p = pa; p < pb; ++p) {
-            const int gx = x0 + p;
-            const float4 v = tss_linear(luts, dec, row, gx + dx);
-            int ok = (v.x >= lo[0][p]) & (v.x <= hi[0][p]) & (v.y >= lo[1][p]) & (v.y <= hi[1][p]) &
-                     (v.z >= lo[2][p]) & (v.z <= hi[2][p]);
-            if (vrow)
-                ok &= vrow[gx / fs < fw - 1 ? gx / fs : fw - 1] != 0;
-            const float f = ok ? 1.0f : 0.0f;
-            s[0][p] += f * v.x; s[1][p] += f * v.y; s[2][p] += f * v.z;
-            cnt[p] += ok;
+        if (vs >= 0) {                      // the mask's row, widened to full-size columns on the host
+            ok &= tss_mask16(valids + ((size_t)vs * fh + (size_t)vy) * width, x0, width);
+        }
+        __global const ushort *r = ring + ((size_t)slot * height + (size_t)sy) * rowlen;
+        int16 v[TSS_PLANES];
+        for (int c = 0; c < TSS_PLANES; ++c) {
+            v[c] = tss_row16(r + c * width, x0 + dx, width);
+            ok &= (v[c] >= lo[c]) & (v[c] <= hi[c]);
+        }
+        for (int c = 0; c < TSS_PLANES; ++c)
+            s[c] += v[c] & ok;
+        cnt -= ok;                          // ok is -1 where the sample is taken
+        if (close == 1) {                   // a one-frame cell: its mean is its sample (0 where rejected)
+            for (int c = 0; c < TSS_PLANES; ++c) {
+                m[c] += TSS_FLOAT16(s[c]);
+                s[c] = (int16)(0);
+            }
+            n += cnt;
+            cnt = (int16)(0);
+        } else if (close > 1) {
+            const float16 inv = (float16)(1.0f) / TSS_FLOAT16(cnt + ((cnt == (int16)(0)) & (int16)(1)));
+            for (int c = 0; c < TSS_PLANES; ++c) {
+                m[c] += TSS_FLOAT16(s[c]) * inv;
+                s[c] = (int16)(0);
+            }
+            n += (cnt > (int16)(0)) & (int16)(1);
+            cnt = (int16)(0);
         }
     }
+    const int len = width - x0 < 16 ? width - x0 : 16;
+    __private const int *ne = (__private const int *)&n;
+    __private const float *m0 = (__private const float *)&m[0];
+#if TSS_PLANES == 3
+    __private const float *m1 = (__private const float *)&m[1], *m2 = (__private const float *)&m[2];
+#else
+    __private const float *m1 = m0, *m2 = m0;
+#endif
     for (int p = 0; p < len; ++p)
-        tss_store(luts, dec, spatial, dst, cells, gy * width + x0 + p, n[p], m[0][p], m[1][p], m[2][p]);
+        tss_store(luts, ltab, etab, spatial, dst, cells, gy * width + x0 + p, ne[p], m0[p], m1[p], m2[p]);
 }

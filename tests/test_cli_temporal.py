@@ -94,3 +94,29 @@ def test_single_image_is_spatial_only(tmp_path):
     res = CliRunner().invoke(main, [str(tmp_path / "a.png"), "-o", str(tmp_path / "b.png"), "--temporal", "-v"])
     assert res.exit_code == 0, res.output
     assert "spatial antialiasing only" in res.output and (tmp_path / "b.png").exists()
+
+
+def test_sequence_resume_warms_up_the_temporal_stage(tmp_path):
+    """--resume (issue 16): the frames before the first one to write go through the stage first, so the
+    written frames get the models and rings of an uninterrupted run (without the warm-up the first one
+    is a reset with a ring of 1) and --stats lists only the written frames."""
+    from mlaa_stream.io.images import write_image
+    frames = _pan_frames(7)
+    for n, f in enumerate(frames, start=1):
+        write_image(str(tmp_path / f"s.{n:04d}.png"), f)
+    out = tmp_path / "o"
+    args = [str(tmp_path / "s.%04d.png"), "-o", str(out / "s.%04d.png"), "--temporal", "--temporal-frames", "4"]
+    full = tmp_path / "full.csv"
+    res = CliRunner().invoke(main, args + ["--stats", str(full)])
+    assert res.exit_code == 0, res.output
+    for n in (6, 7):
+        (out / f"s.{n:04d}.png").unlink()
+    stats = tmp_path / "stats.csv"
+    res = CliRunner().invoke(main, args + ["--resume", "--stats", str(stats), "-v"])
+    assert res.exit_code == 0, res.output
+    assert "temporal history warmed up from 4 frames before" in res.output
+    rows = list(csv.DictReader(stats.open()))
+    assert [r["index"] for r in rows] == ["6", "7"]
+    expected = [r for r in csv.DictReader(full.open()) if r["index"] in ("6", "7")]
+    assert [(r["model"], r["ring"]) for r in rows] == [(r["model"], r["ring"]) for r in expected]
+    assert rows[0]["model"] != "reset"

@@ -195,6 +195,17 @@ def time_stage(frames: list[np.ndarray], spatial: list[np.ndarray], mode: str, w
                 statistics.median(r.get("blend_ms", r.get("resolve_ms", 0.0)) for r in st))
 
 
+def _set_tss_constants(pairs: list[str]) -> None:
+    """--tss-set NAME=VALUE: the tuning runs of docs/temporal.md, by command."""
+    import mlaa_stream.temporal.tss as tss
+    names = ("FULL_CELLS", "REFINE_POINTS", "REFINE_STEPS", "NEWEST_STEPS", "REFINE_EVERY", "TILE_TOL")
+    for pair in pairs:
+        name, _, value = pair.partition("=")
+        if name not in names:
+            raise SystemExit(f"--tss-set: expected one of {', '.join(names)}, got {name!r}")
+        setattr(tss, name, type(getattr(tss, name))(value))
+
+
 def _fmt(v: float, digits: int = 3) -> str:
     return "n/a" if v is None or (isinstance(v, float) and math.isnan(v)) else f"{v:.{digits}f}"
 
@@ -211,7 +222,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--device", default=None)
     ap.add_argument("--scenes", default=",".join(SCENES))
     ap.add_argument("--out", default=str(DOCS))
+    ap.add_argument("--tss-set", action="append", default=[], metavar="NAME=VALUE",
+                    help="tuning: set a constant of mlaa_stream.temporal.tss for this run (FULL_CELLS, "
+                         "REFINE_POINTS, REFINE_STEPS, NEWEST_STEPS, REFINE_EVERY, TILE_TOL; repeatable)")
     args = ap.parse_args(argv)
+    _set_tss_constants(args.tss_set)
     command = "python -m mlaa_stream.bench.temporal " + " ".join(argv if argv is not None else sys.argv[1:])
     lines: list[str] = []
 

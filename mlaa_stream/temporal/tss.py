@@ -3,8 +3,9 @@
 Each input pixel of frame t is a point sample of the scene at a known sub-pixel position once the
 motion is known; a moving camera puts the samples of past frames at new positions inside the current
 frame's pixels (the jitter a renderer's TAA adds on purpose; seed 002's T2x). The stage keeps a ring
-of the last K *input* frames (linear light) with a map from the current frame's pixels into each of
-them, and resolves each output pixel from the samples that land inside its footprint:
+of the last K *input* frames (linear light in 16-bit fixed point, L = floor(clamp(lin, 0, 1) 65535 + 0.5):
+`ring_of`) with a map from the current frame's pixels into each of them, and resolves each output pixel
+from the samples that land inside its footprint:
 
     stage = TSSStage(bgr=True, frames=16)
     out = stage(frame_in, frame_filtered, index)     # per frame, in order; ring kept inside
@@ -13,31 +14,33 @@ Resolve (per output pixel x; `tss_reference` is the plain statement, kernels/tss
   - ring frame j (the current frame is j = 0, identity map) maps x to p = M_j(x) in its own pixels;
     its sample nearest p, at s = round(p), lies at o = s - p inside x's footprint ([-0.5, 0.5)^2:
     the box filter the truth is defined with): one tap per ring frame, a gather, no atomics;
-  - rejection: a sample outside the current input's 3x3 per-channel min/max box widened by EPS
-    (linear light) is another surface (disocclusion, a mover, a flow error) and is dropped; a
+  - rejection: a sample outside the current input's 3x3 per-channel min/max box of L widened by EPS
+    (linear light; EPSQ in L units) is another surface (disocclusion, a mover, a flow error) and is dropped; a
     position outside ring frame j, or a map marked invalid (NaN: forward-backward flow
     inconsistency), drops the tap;
   - stratification (seed 002: each sample's offset inside its pixel decides its coverage area): the
-    footprint is split into GRID x GRID cells; samples are averaged per cell and the filled cells are
-    averaged, so 10 frames that repeat one phase count once, not ten times;
+    footprint is split into GRID x GRID cells; samples are averaged per cell (integer sum times
+    1 / count) and the filled cells are averaged (in ascending cell order), so 10 frames that repeat one
+    phase count once, not ten times;
   - combination with the spatial estimate: the empty cells are the part of the footprint the samples
     do not cover; the spatial (MLAA) output S stands for them:
-        out = S + (n / GRID^2) (mean of filled cells - S)          when n >= MIN_CELLS
-        out = S                                                      otherwise
-    so static content and integer-pixel motion (every sample in one cell) return the spatial output
-    exactly, and a pan that fills the cells converges toward the box-filtered truth.
+        out = S + min(1, n / FULL_CELLS) (mean of filled cells - S)   when n >= MIN_CELLS
+        out = S (the spatial pixel, bit for bit)                         otherwise
+    with S the spatial output's L, rounded to L and encoded by table (`encode_table`); so static
+    content and integer-pixel motion (every sample in one cell) return the spatial output exactly, and
+    a pan that fills the cells converges toward the box-filtered truth.
 
 Motion (host, per frame; `MotionRing`): the per-frame decision of stage.choose_model (reset at a cut or
 an index jump or a size change, static, global translation, dense DIS flow). Global: each ring frame's
 translation is the previous one composed with this frame's, then refined *directly* against the
-current frame by Gauss-Newton (global Lucas-Kanade on the flow-size grey, the ring frame's blurred grey
-kept): chaining alone drifts (issue 16: 0.09 px after 16 frames against 0.016 direct). Dense: DIS flow
+current frame by sparse Gauss-Newton (`_Refiner`: the current frame's largest gradients on the flow-size
+grey, the ring frame's blurred grey kept): chaining alone drifts (issue 16: 0.09 px after 16 frames
+against 0.016 direct). Dense: DIS flow
 current -> previous composed with each ring frame's field (remap), forward-backward checked; the
 inconsistent pixels are NaN and stay so in every older field (nothing of theirs is trusted).
 """
 from __future__ import annotations
 
-import math
 import threading
 import time
 from dataclasses import dataclass, field
@@ -48,19 +51,23 @@ import numpy as np
 from mlaa_stream.device.colour import device_luts, lut_read
 from mlaa_stream.device.formats import LUT_SIZE, frame_format
 from mlaa_stream.temporal.stage import (LK_ROBUST, Decision, Pyramid, _PMAX, choose_model,
-                                        decode_table, global_translation, grey8)
+                                        decode_table, grey8)
 
 DEFAULT_FRAMES = 16   # K: ring frames (the current one included)
 GRID = 4              # footprint cells per side (GRID^2 strata)
 EPS = 0.03            # linear-light widening of the current 3x3 colour box (issue 16: 0.02-0.05)
 MIN_CELLS = 2         # fewer filled cells: the spatial output stands
-FULL_CELLS = 6        # filled cells at which the samples alone resolve the pixel (below: n / FULL_CELLS of it)
-REFINE_STEPS = 2       # Gauss-Newton steps per refined ring frame and frame (bench pan 0.42 -> 0.39 with 2; 3 same)
-REFINE_PER_FRAME = 64 # ring frames refined directly per frame (the longest unrefined first)
-SEG = 32              # pixels of a row per work item in tss_resolve_shift_rows (kernels/tss.cl)
+FULL_CELLS = 9        # filled cells at which the samples alone resolve the pixel (below: n / 9 of it)
+NEWEST_STEPS = 2      # Gauss-Newton steps per frame for the newest ring frame (MotionRing._refine)
+REFINE_STEPS = 2      # ... and for each older ring frame refined in that frame
+REFINE_EVERY = 3      # older ring frames refined directly at ages 1 + a multiple of this (docs/temporal.md)
+ONE = 65535           # ring samples: linear light in 16-bit fixed point (kernels/tss.cl, ring_of)
+LANES = 16            # pixels of a row per work item of tss_resolve_shift (int16 / float16 vectors)
+TSS_LOCAL = 8         # CPU work-group of tss_resolve_shift along the row (docs/temporal.md: speed)
 FB_ABS, FB_REL = 0.5, 0.1   # forward-backward tolerance (px at full size): FB_ABS + FB_REL |v|
 ALIGN_LEVEL, ALIGN_PX, ALIGN_SIGMA, ALIGN_GROW = 10.0, 0.35, 2.0, 3   # MotionRing._alignment
-TILE, TILE_TOL, TILE_TEXTURE = 48, 0.4, 1.0   # _tile_check: flow px, px, mean squared gradient
+TILE, TILE_TOL, TILE_TEXTURE = 48, 0.4, 1.0   # _Refiner's tile check: flow px, px, mean squared gradient
+REFINE_POINTS = 16384 # _Refiner: points in all (the largest gradients of each tile, at most a whole tile)
 
 
 # --- motion of every ring frame relative to the current one ------------------------------------------
@@ -75,7 +82,6 @@ class RingEntry:
     field: np.ndarray | None = None   # (fh, fw, 2) float32 offsets in full-size px (dense map), NaN = invalid
     slot: int = -1                    # device ring slot
     valid: np.ndarray | None = None   # (fh, fw) uint8 at flow size: 1 where the map explains the frame
-    refined: int = -1                 # the frame index of its last direct refinement
 
 
 @dataclass
@@ -93,7 +99,6 @@ class MotionRing:
                  fb_check: bool = True, dense_samples: bool = False):
         self.frames, self.mode, self.refine, self.fb_check = int(frames), mode, bool(refine), bool(fb_check)
         self.dense_samples = bool(dense_samples)
-        self.refine_per_frame = REFINE_PER_FRAME
         self.entries: list[RingEntry] = []
         self._dis = None
 
@@ -125,18 +130,7 @@ class MotionRing:
                 else:
                     e.field = self._compose_const(e.field, d, pyr)
             if self.refine:
-                # every frame, every ring frame: one direct step (a frame is refined on each of the K
-                # frames it stays in the ring, so its estimate converges; chaining alone drifts)
-                fs = pyr.flow_scale
-                # at most REFINE_PER_FRAME of them per frame, the longest unrefined first (host time)
-                ref = _Refiner(pyr.blurred("flow"))
-                todo = sorted((e for e in self.entries if e.shift is not None), key=lambda e: e.refined)
-                for e in todo[:self.refine_per_frame]:
-                    s = (e.shift[0] / fs, e.shift[1] / fs)
-                    for k in range(REFINE_STEPS):
-                        s, e.valid = ref.step(e.pyr.blurred("flow"), s, check=k == REFINE_STEPS - 1)
-                    e.shift = (s[0] * fs, s[1] * fs)
-                    e.refined = index
+                self._refine(pyr, index, d)
         elif dec.model == "dense" and self.dense_samples:
             self._dense(prev, pyr, dec)
         elif dec.model == "dense":
@@ -154,6 +148,39 @@ class MotionRing:
         if len(self.entries) > self.frames:
             del self.entries[0]
         return FrameMotion(dec, list(self.entries))
+
+    def _refine(self, pyr: Pyramid, index: int, d: tuple[float, float]) -> None:
+        """Direct Gauss-Newton refinement of the translated ring frames against the current frame (chaining
+        alone drifts: issue 16). The newest ring frame (the previous input) gets NEWEST_STEPS steps; what
+        they change is this frame's chaining error, the same for every older frame, so it is added to them
+        all; then the older frames of age 1 + a multiple of REFINE_EVERY get REFINE_STEPS steps each (a
+        frame is refined on every REFINE_EVERY-th of the K frames it stays in the ring, so its estimate
+        converges; refining all of them every frame made the output less steady).
+        The last step of each refined frame also runs the per-tile check (its valid mask)."""
+        fs = pyr.flow_scale
+        ref = _Refiner(pyr.blurred("flow"))
+        todo = [e for e in self.entries if e.shift is not None]
+        if not todo:
+            return
+
+        def refine(e: RingEntry, steps: int) -> None:
+            s = (e.shift[0] / fs, e.shift[1] / fs)
+            for k in range(steps):
+                s, e.valid = ref.step(e.pyr.blurred("flow"), s, check=k == steps - 1)
+            e.shift = (s[0] * fs, s[1] * fs)
+
+        newest = todo[-1]
+        before = newest.shift
+        refine(newest, NEWEST_STEPS)
+        corr = (newest.shift[0] - before[0], newest.shift[1] - before[1])
+        older = todo[:-1]
+        for e in older:
+            e.shift = (e.shift[0] + corr[0], e.shift[1] + corr[1])
+        for e in older:
+            # by age alone, not by what was refined before: the state after K frames is then the same
+            # however the run started (--resume's warm-up, a cluster chunk's: docs/cluster.md)
+            if (index - e.index - 1) % REFINE_EVERY == 0:
+                refine(e, REFINE_STEPS)
 
     def _alignment(self, e: RingEntry, pyr: Pyramid) -> np.ndarray:
         """1 where ring frame e, moved by its map, matches the current frame (flow size): a map that is
@@ -224,41 +251,85 @@ class _Refiner:
     """Direct Gauss-Newton refinement of ring frames' translations against one current frame, and the
     per-tile check that the translation holds everywhere (flow-size grey blurred by LK_SIGMA).
 
-    The current frame's gradients and per-tile Hessians are computed once per frame; each ring frame
-    costs one warp and a few products per step (inverse-additive, as stage.global_translation).
-    Tile check: one Gauss-Newton step per TILE x TILE tile from the same residual; where a textured
-    tile would move by more than TILE_TOL px from the whole frame's solution, another motion is there
-    (the cut scene's second shot: a bar and a disc 0.3 px per frame apart pass the frame-to-frame test
-    of choose_model and drift apart over the ring) and that tile takes no samples from that frame."""
+    Sparse: the current frame's gradients, once per frame, pick in every TILE x TILE tile its pixels of
+    largest squared gradient, REFINE_POINTS in all (flat pixels add nothing to a Gauss-Newton step; at
+    1080p 16k of the 518k flow-size pixels, 68 per tile); a step samples the ring frame at those points
+    only, by exact bilinear interpolation (cv2's warps quantise positions to 1/32 px), so it costs
+    ~1 ms instead of a whole-frame warp (inverse-additive, as stage.global_translation).
+    Tile check: one Gauss-Newton step per tile from the same residuals; where a textured tile (the
+    whole tile's gradients) would move by more than TILE_TOL px from the whole frame's solution,
+    another motion is there (the cut scene's second shot: a bar and a disc 0.3 px per frame apart pass
+    the frame-to-frame test of choose_model and drift apart over the ring) and that tile takes no samples
+    from that frame."""
 
-    def __init__(self, cur_b: np.ndarray):
-        self.c = cur_b
-        self.h, self.w = cur_b.shape
-        self.gx = cv2.Sobel(cur_b, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
-        self.gy = cv2.Sobel(cur_b, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
-        self.ty, self.tx = self.h // TILE, self.w // TILE
-        if self.ty and self.tx:
-            a, b, c = self._tiles(self.gx * self.gx), self._tiles(self.gx * self.gy), self._tiles(self.gy * self.gy)
-            self.ta, self.tb, self.tc = a, b, c
-            self.tdet = a * c - b * b
-            self.textured = (self.tdet > 1e-3 * np.maximum(a * c, 1e-12)) & (
-                np.minimum(a, c) > TILE_TEXTURE * TILE * TILE)
-
-    def _tiles(self, a: np.ndarray) -> np.ndarray:
+    def __init__(self, cur_b: np.ndarray, points: int | None = None):
+        points = REFINE_POINTS if points is None else int(points)
+        self.h, self.w = h, w = cur_b.shape
+        points = -(-points // max(-(-h // TILE) * -(-w // TILE), 1))    # per tile
+        gx = cv2.Sobel(cur_b, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
+        gy = cv2.Sobel(cur_b, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
+        self.ty, self.tx = h // TILE, w // TILE
+        energy = gx * gx + gy * gy
+        # the points: each tile's largest gradients (partial tiles at the right and bottom count too)
         t = TILE
-        return a[:self.ty * t, :self.tx * t].reshape(self.ty, t, self.tx, t).sum((1, 3), dtype=np.float64)
+        ny, nx = -(-h // t), -(-w // t)
+        pad = np.zeros((ny * t, nx * t), np.float32)
+        pad[:h, :w] = energy
+        blocks = pad.reshape(ny, t, nx, t).transpose(0, 2, 1, 3).reshape(ny, nx, t * t)
+        k = min(points, t * t)
+        top = np.argpartition(-blocks, k - 1, axis=-1)[..., :k] if k < t * t else np.broadcast_to(
+            np.arange(t * t), blocks.shape)
+        by, bx = np.meshgrid(np.arange(ny), np.arange(nx), indexing="ij")
+        ys = (by[..., None] * t + top // t).ravel()
+        xs = (bx[..., None] * t + top % t).ravel()
+        keep = (ys < h) & (xs < w)
+        ys, xs = ys[keep], xs[keep]
+        keep = energy[ys, xs] > 0
+        ys, xs = ys[keep], xs[keep]
+        self.ys, self.xs = ys.astype(np.float64), xs.astype(np.float64)
+        self.c = cur_b[ys, xs].astype(np.float64)
+        self.gx, self.gy = gx[ys, xs].astype(np.float64), gy[ys, xs].astype(np.float64)
+        self.gxx, self.gxy, self.gyy = self.gx * self.gx, self.gx * self.gy, self.gy * self.gy
+        if self.ty and self.tx:
+            # per-tile Hessians: the whole tile's for the texture test, the points' for the tile's step
+            def tiles(a):
+                return a[:self.ty * t, :self.tx * t].reshape(self.ty, t, self.tx, t).sum((1, 3), dtype=np.float64)
+            fa, fb, fc = tiles(gx * gx), tiles(gx * gy), tiles(gy * gy)
+            self.textured = (fa * fc - fb * fb > 1e-3 * np.maximum(fa * fc, 1e-12)) & (
+                np.minimum(fa, fc) > TILE_TEXTURE * t * t)
+            self.tile = (np.minimum(ys // t, self.ty - 1) * self.tx + np.minimum(xs // t, self.tx - 1))
+            nt = self.ty * self.tx
+            self.ta = np.bincount(self.tile, self.gxx, nt).reshape(self.ty, self.tx)
+            self.tb = np.bincount(self.tile, self.gxy, nt).reshape(self.ty, self.tx)
+            self.tc = np.bincount(self.tile, self.gyy, nt).reshape(self.ty, self.tx)
+            self.tdet = self.ta * self.tc - self.tb * self.tb
+
+    def _sample(self, img: np.ndarray, d: tuple[float, float]) -> np.ndarray:
+        """img at the points moved by d, bilinear, positions clamped to the frame (replicated border)."""
+        h, w = self.h, self.w
+        x = np.clip(self.xs + d[0], 0, w - 1)
+        y = np.clip(self.ys + d[1], 0, h - 1)
+        x0 = np.minimum(x.astype(np.intp), max(w - 2, 0))
+        y0 = np.minimum(y.astype(np.intp), max(h - 2, 0))
+        ax, ay = x - x0, y - y0
+        flat = img.ravel()
+        i = y0 * w + x0
+        dx, dy = (1 if w > 1 else 0), (w if h > 1 else 0)
+        p00, p01 = flat.take(i), flat.take(i + dx)
+        p10, p11 = flat.take(i + dy), flat.take(i + dy + dx)
+        top = p00 + ax * (p01 - p00)
+        return top + ay * (p10 + ax * (p11 - p10) - top)
 
     def step(self, ring_b: np.ndarray, d: tuple[float, float], check: bool = True):
         """One step from d (flow px, cur(x) ~ ring(x + d)): returns (new d, valid mask or None)."""
         h, w = self.h, self.w
-        pw = cv2.warpAffine(ring_b, np.float32([[1, 0, d[0]], [0, 1, d[1]]]), (w, h),
-                            flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE)
-        r = cv2.subtract(self.c, pw)
-        wr = 1.0 / (1.0 + (r * r) * np.float32(1.0 / (LK_ROBUST * LK_ROBUST)))
-        gxw, gyw = self.gx * wr, self.gy * wr
-        a, b_, e = float(np.dot(gxw.ravel(), self.gx.ravel())), float(np.dot(gxw.ravel(), self.gy.ravel())), \
-            float(np.dot(gyw.ravel(), self.gy.ravel()))
-        bx, by = float(np.dot(gxw.ravel(), r.ravel())), float(np.dot(gyw.ravel(), r.ravel()))
+        r = self.c - self._sample(ring_b, d)
+        wr = 1.0 / (1.0 + (r * r) * (1.0 / (LK_ROBUST * LK_ROBUST)))
+        # sums by numpy's own reductions: a BLAS dot product (`@`) ran 30x slower on this shared
+        # machine (its threads)
+        a, b_, e = (float(np.add.reduce(wr * g)) for g in (self.gxx, self.gxy, self.gyy))
+        wrr = wr * r
+        bx, by = float(np.add.reduce(wrr * self.gx)), float(np.add.reduce(wrr * self.gy))
         det = a * e - b_ * b_
         step = (0.0, 0.0)
         if det > 1e-6 * max(a * e, 1e-12):
@@ -266,7 +337,9 @@ class _Refiner:
         new = (d[0] + step[0], d[1] + step[1])
         if not check or not (self.ty and self.tx):
             return new, None
-        tbx, tby = self._tiles(self.gx * r), self._tiles(self.gy * r)
+        nt = self.ty * self.tx
+        tbx = np.bincount(self.tile, self.gx * r, nt).reshape(self.ty, self.tx)
+        tby = np.bincount(self.tile, self.gy * r, nt).reshape(self.ty, self.tx)
         with np.errstate(divide="ignore", invalid="ignore"):
             sx = (self.tc * tbx - self.tb * tby) / self.tdet
             sy = (self.ta * tby - self.tb * tbx) / self.tdet
@@ -307,6 +380,41 @@ def linear_of(frame: np.ndarray, bgr: bool, linear_input: bool = False) -> np.nd
     return np.ascontiguousarray(rgb, dtype=np.float32)
 
 
+def level_table(fmt) -> np.ndarray:
+    """ltab: the ring sample L of every stored code of an integer format (one entry for float frames):
+    linear light (the decode table) in 16-bit fixed point, L = floor(clamp(lin, 0, 1) 65535 + 0.5)."""
+    if not np.issubdtype(fmt.dtype, np.integer):
+        return np.zeros(1, np.uint16)
+    lin = decode_table(fmt)
+    return np.floor(np.clip(lin, 0, 1) * np.float32(ONE) + np.float32(0.5)).astype(np.uint16)
+
+
+def encode_table(fmt) -> np.ndarray:
+    """etab: the stored code of every L (65536 entries) for an integer format (one entry for float frames):
+    the encode table read at L / 65535 (colour.lut_read), rounded as store_px does."""
+    if not np.issubdtype(fmt.dtype, np.integer):
+        return np.zeros(1, fmt.dtype)
+    f32 = np.float32
+    x = np.arange(ONE + 1, dtype=f32) * f32(1.0 / ONE)
+    enc = lut_read(device_luts()[2 * (LUT_SIZE + 1):], x).astype(f32)
+    pmax = f32(_PMAX[fmt.dtype])
+    return np.floor(np.clip(enc * pmax + f32(0.5), 0, pmax)).astype(fmt.dtype)
+
+
+def ring_of(frame: np.ndarray, bgr: bool) -> np.ndarray:
+    """(H, W, 3) int32 ring samples L of a frame, as kernels/tss.cl's tss_ingest stores them."""
+    fmt = frame_format(frame, bgr)
+    if np.issubdtype(fmt.dtype, np.integer):
+        raw = np.asarray(frame).reshape(fmt.height, fmt.width, fmt.channels).astype(np.int64)
+        q = level_table(fmt)[raw].astype(np.int32)
+        if fmt.channels == 1:
+            return np.repeat(q, 3, -1)
+        return np.ascontiguousarray(q[..., 2::-1] if fmt.bgr else q[..., :3])
+    lin = linear_of(frame, bgr)
+    t = lin * np.float32(ONE) + np.float32(0.5)
+    return np.where(lin > 0, np.where(lin < 1, t, np.float32(ONE)), np.float32(0)).astype(np.int32)
+
+
 def sample_field(fld: np.ndarray, scale: int, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
     """Bilinear read of a (fh, fw, 2) field stored at 1/scale of the frame, at full-size positions."""
     f32 = np.float32
@@ -321,27 +429,30 @@ def sample_field(fld: np.ndarray, scale: int, xs: np.ndarray, ys: np.ndarray) ->
     return (top + (bot - top) * ay).astype(f32)
 
 
-def tss_reference(spatial_lin: np.ndarray, cur_lin: np.ndarray, ring: list[tuple],
+def tss_reference(spatial_q: np.ndarray, cur_q: np.ndarray, ring: list[tuple],
                   flow_scale: int = 1, grid: int = GRID, eps: float = EPS,
                   min_cells: int = MIN_CELLS, full_cells: int | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """The resolve in float32 numpy: returns (out linear RGB (H, W, 3), filled cells (H, W) uint8).
+    """The resolve in numpy: returns (out L (H, W, 3) int32, filled cells (H, W) uint8); spatial_q and
+    cur_q are the spatial output's and the current input's ring samples (ring_of).
 
-    ring: (linear frame, map, valid) triples, map = (dx, dy) translation or a (fh, fw, 2) field at
-    1/flow_scale, valid = None or (fh, fw) uint8 at 1/flow_scale (0: no sample of that frame there, read
-    at the flow texel holding the output pixel); the current frame itself is one of them (identity)."""
+    ring: (ring samples, map, valid) triples: samples as ring_of gives them (16-bit fixed-point linear),
+    map = (dx, dy) translation or a (fh, fw, 2) field at 1/flow_scale, valid = None or (fh, fw) uint8 at
+    1/flow_scale (0: no sample of that frame there, read at the flow texel holding the output pixel); the
+    current frame itself is one of them (identity); cur_q = its ring samples (the colour box)."""
     f32 = np.float32
-    h, w = cur_lin.shape[:2]
+    h, w = cur_q.shape[:2]
     ys, xs = np.mgrid[0:h, 0:w].astype(f32)
-    pad = np.pad(cur_lin, ((1, 1), (1, 1), (0, 0)), mode="edge")
+    pad = np.pad(cur_q, ((1, 1), (1, 1), (0, 0)), mode="edge")
     taps = [pad[1 + dy:1 + dy + h, 1 + dx:1 + dx + w] for dy in (-1, 0, 1) for dx in (-1, 0, 1)]
-    lo = np.minimum.reduce(taps) - f32(eps)
-    hi = np.maximum.reduce(taps) + f32(eps)
+    epsq = eps_q(eps)
+    lo = np.minimum.reduce(taps) - epsq
+    hi = np.maximum.reduce(taps) + epsq
     g2 = grid * grid
     full_cells = FULL_CELLS if full_cells is None else full_cells
-    sums = np.zeros((h, w, g2, 3), f32)
+    sums = np.zeros((h, w, g2, 3), np.int64)
     counts = np.zeros((h, w, g2), np.int32)
     flat = np.arange(h * w)
-    for lin, m, ok in ring:
+    for q, m, ok in ring:
         if isinstance(m, np.ndarray):
             off = sample_field(m, flow_scale, xs, ys)
             px, py = xs + off[..., 0], ys + off[..., 1]
@@ -358,34 +469,42 @@ def tss_reference(spatial_lin: np.ndarray, cur_lin: np.ndarray, ring: list[tuple
         ox, oy = sx - px, sy - py                                  # in [-0.5, 0.5)
         cx = np.clip(np.floor((ox + f32(0.5)) * f32(grid)), 0, grid - 1).astype(np.int64)
         cy = np.clip(np.floor((oy + f32(0.5)) * f32(grid)), 0, grid - 1).astype(np.int64)
-        v = lin[np.clip(sy, 0, h - 1).astype(np.int64), np.clip(sx, 0, w - 1).astype(np.int64)]
+        v = q[np.clip(sy, 0, h - 1).astype(np.int64), np.clip(sx, 0, w - 1).astype(np.int64)]
         valid &= ((v >= lo) & (v <= hi)).all(-1)
         cell = (cy * grid + cx).ravel()
         sel = valid.ravel()
         sums.reshape(-1, g2, 3)[flat[sel], cell[sel]] += v.reshape(-1, 3)[sel]
         counts.reshape(-1, g2)[flat[sel], cell[sel]] += 1
-    filled = counts > 0
-    n = filled.sum(-1)
-    cellmean = np.where(filled[..., None], sums / np.maximum(counts, 1)[..., None], 0).astype(f32)
-    mean = (cellmean.sum(-2) / np.maximum(n, 1)[..., None]).astype(f32)
-    fn = n.astype(f32)
-    a = np.where(fn < f32(full_cells), fn / f32(full_cells), f32(1.0))[..., None]
-    out = np.where((n >= min_cells)[..., None], spatial_lin + a * (mean - spatial_lin), spatial_lin).astype(f32)
+    n = (counts > 0).sum(-1)
+    m = np.zeros((h, w, 3), f32)
+    for k in range(g2):     # cells in ascending order, each (float)sum * (1 / count), as the kernels add them
+        c = counts[..., k]
+        inv = (f32(1.0) / np.maximum(c, 1).astype(f32))[..., None]
+        m = np.where((c > 0)[..., None], m + sums[..., k, :].astype(f32) * inv, m).astype(f32)
+    fn = np.maximum(n, 1).astype(f32)[..., None]
+    a = np.where(n < full_cells, n.astype(f32) / f32(full_cells), f32(1.0)).astype(f32)[..., None]
+    sp = spatial_q.astype(f32)
+    t = (sp + (m / fn - sp) * a + f32(0.5)).astype(f32)
+    out = np.where(t > 0, np.where(t < f32(ONE), t, f32(ONE)), f32(0)).astype(np.int32)
     return out, n.astype(np.uint8)
 
 
-def encode_like(lin: np.ndarray, like: np.ndarray, bgr: bool, linear_input: bool = False) -> np.ndarray:
-    """Linear RGB back to the frame's type and layout (alpha taken from `like`), as store_px does."""
+def eps_q(eps: float) -> int:
+    """The colour box's widening in ring units (16-bit fixed-point linear)."""
+    return int(round(float(eps) * ONE))
+
+
+def encode_levels(q: np.ndarray, like: np.ndarray, bgr: bool) -> np.ndarray:
+    """Ring samples L (H, W, 3) back to the frame's type and layout (alpha taken from `like`), as
+    tss_store does: etab for integer frames, the encode table for float frames."""
     f32 = np.float32
     fmt = frame_format(like, bgr)
     h, w = fmt.height, fmt.width
-    enc = lin if linear_input else lut_read(device_luts()[2 * (LUT_SIZE + 1):], lin).astype(f32)
     raw = np.asarray(like).reshape(h, w, fmt.channels)
     if np.issubdtype(fmt.dtype, np.integer):
-        pmax = f32(_PMAX[fmt.dtype])
-        stored = np.floor(np.clip(enc * pmax + f32(0.5), 0, pmax)).astype(fmt.dtype)
+        stored = encode_table(fmt)[q]
     else:
-        stored = enc.astype(fmt.dtype)
+        stored = lut_read(device_luts()[2 * (LUT_SIZE + 1):], q.astype(f32) * f32(1.0 / ONE)).astype(fmt.dtype)
     if fmt.channels == 1:
         out = stored[..., :1]       # grey frames: the three channels are equal by construction
     else:
@@ -400,12 +519,28 @@ def tss_frame_reference(spatial: np.ndarray, cur: np.ndarray, ring: list[tuple],
     """kernels/tss.cl on whole frames: ring = (input frame, map, valid) triples (frames in the input's
     type); returns (output frame like `spatial`, filled cells (H, W) uint8). Where fewer than
     min_cells are filled the spatial pixel is copied bit for bit."""
-    rl = [(linear_of(f, bgr), m, ok) for f, m, ok in ring]
-    lin, n = tss_reference(linear_of(spatial, bgr), linear_of(cur, bgr), rl, flow_scale, grid, eps, min_cells,
-                            full_cells)
-    enc = encode_like(lin, spatial, bgr)
+    rq = [(ring_of(f, bgr), m, ok) for f, m, ok in ring]
+    q, n = tss_reference(ring_of(spatial, bgr), ring_of(cur, bgr), rq, flow_scale, grid, eps, min_cells,
+                         full_cells)
+    enc = encode_levels(q, spatial, bgr)
     keep = (n < min_cells).reshape(n.shape + (1,) * (np.ndim(spatial) - 2))
     return np.where(keep, spatial, enc).astype(spatial.dtype), n
+
+
+def shift_launch(width: int, height: int, context) -> tuple[tuple[int, int], tuple[int, int] | None]:
+    """(global, local) of tss_resolve_shift and tss_ingest: one work item per LANES pixels of a row; on CPU devices
+    work-groups of TSS_LOCAL work items along the row (kernels/tss.cl), elsewhere the driver's choice."""
+    gx = -(-width // LANES)
+    import pyopencl as cl
+    if context.device.type & cl.device_type.CPU:
+        return (-(-gx // TSS_LOCAL) * TSS_LOCAL, height), (TSS_LOCAL, 1)
+    return (gx, height), None
+
+
+def vrows_of(valid: np.ndarray, flow_scale: int, width: int) -> np.ndarray:
+    """A flow-size valid mask with each column repeated flow_scale times, cut to the frame's width: the
+    form tss_resolve_shift reads (a pixel's mask byte at its own column, no division)."""
+    return np.ascontiguousarray(np.repeat(np.asarray(valid, np.uint8), flow_scale, 1)[:, :width])
 
 
 def kernel_defines(fmt, grid: int = GRID, eps: float = EPS, min_cells: int = MIN_CELLS,
@@ -413,7 +548,7 @@ def kernel_defines(fmt, grid: int = GRID, eps: float = EPS, min_cells: int = MIN
     """kernels/tss.cl's build defines."""
     from mlaa_stream.device.formats import defines_for
     full = FULL_CELLS if full_cells is None else int(full_cells)
-    return defines_for(fmt, GRID=int(grid), MIN_CELLS=int(min_cells), FULL_CELLS=full, EPS=f"{float(eps)!r}f",
+    return defines_for(fmt, GRID=int(grid), MIN_CELLS=int(min_cells), FULL_CELLS=full, EPSQ=eps_q(eps),
                        LINEAR_INPUT=int(linear_input))
 
 
@@ -444,7 +579,10 @@ class _Buffers:
         import pyopencl as cl
         self.fmt, self.flow_shape = fmt, flow_shape
         fh, fw = flow_shape
-        self.ring = context.buffer(frames * fmt.nbytes)
+        self.planes = 1 if fmt.channels == 1 else 3
+        self.slot_bytes = 2 * self.planes * fmt.pixels       # one ring slot: 16-bit linear planes
+        self.ring = context.buffer(frames * self.slot_bytes)
+        self.src = context.buffer(fmt.nbytes)                # the current input, before tss_ingest
         self.spatial = context.buffer(fmt.nbytes)
         self.dst = context.buffer(fmt.nbytes)
         self.cells = context.buffer(fmt.pixels)
@@ -454,8 +592,10 @@ class _Buffers:
         # dense maps only with dense_samples (66 MB at 1080p, K = 16): the default path reads none
         self.fields = context.buffer(8 * fh * fw * frames if dense else 8)
         self.valids = context.buffer(fh * fw * frames)
-        self.decode = cl.Buffer(context.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
-                                hostbuf=decode_table(fmt))
+        self.vrows = context.buffer(fh * fmt.width * frames)   # the same masks widened (vrows_of)
+        ro = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
+        self.ltab = cl.Buffer(context.ctx, ro, hostbuf=level_table(fmt))
+        self.etab = cl.Buffer(context.ctx, ro, hostbuf=encode_table(fmt))
         self.host_cells = np.empty((fmt.height, fmt.width), np.uint8)
 
 
@@ -485,7 +625,6 @@ class TSSStage:
         self.grid, self.eps, self.min_cells = int(grid), float(eps), int(min_cells)
         self.full_cells = FULL_CELLS if full_cells is None else int(full_cells)
         self.backend = backend
-        self.rows = True    # tss_resolve_shift_rows (row segments); False: one pixel per work item
         self.motion = MotionRing(self.frames, mode, refine, fb_check, dense_samples)
         self.stats: list[dict] = []
         self._lock = threading.Lock()
@@ -508,6 +647,8 @@ class TSSStage:
     def reset(self) -> None:
         """Forget the ring: the next frame starts a new one (and returns the spatial output)."""
         self.motion.reset()
+        self._pending: dict[int, np.ndarray] = {}   # ring slot -> input frame not yet ingested (_upload_only)
+        self._vrows_sent: dict[int, np.ndarray] = {}   # ring slot -> the valid mask on the device
         self._prev_index: int | None = None
         self._shape = None
         self._last: tuple[np.ndarray, np.ndarray] | None = None   # (grey, output) of the previous frame
@@ -585,71 +726,104 @@ class TSSStage:
             return self._buffers
         self.queue.finish()
         self._buffers = _Buffers(self.context, fmt, shape, self.frames, self.motion.dense_samples)
+        self._vrows_sent = {}
         defines = kernel_defines(fmt, self.grid, self.eps, self.min_cells, self.full_cells)
         self._kernel = self.context.kernel("tss", "tss_resolve", defines)
         self._kernel_shift = self.context.kernel("tss", "tss_resolve_shift", defines)
-        self._kernel_rows = self.context.kernel("tss", "tss_resolve_shift_rows", defines)
+        self._kernel_ingest = self.context.kernel("tss", "tss_ingest", defines)
         return self._buffers
 
-    def _upload_only(self, frame_in: np.ndarray, pyr: Pyramid, fm: FrameMotion) -> None:
+    def _ingest(self, frame_in: np.ndarray, pyr: Pyramid, slot: int) -> _Buffers:
+        """The current input into ring slot `slot` (tss_ingest: 16-bit linear planes)."""
         import pyopencl as cl
         bufs = self._prepare(frame_in, pyr)
-        slot = fm.entries[-1].slot
-        cl.enqueue_copy(self.queue, bufs.ring, np.ascontiguousarray(frame_in), dst_offset=slot * bufs.fmt.nbytes,
-                        is_blocking=False)
+        fmt = bufs.fmt
+        cl.enqueue_copy(self.queue, bufs.src, np.ascontiguousarray(frame_in), is_blocking=False)
+        self._kernel_ingest(self.queue, *shift_launch(fmt.width, fmt.height, self.context), bufs.src, bufs.ring,
+                            self._luts,
+                            bufs.ltab,
+                            np.int32(fmt.width), np.int32(fmt.height), np.int32(slot))
+        return bufs
+
+    def _upload_only(self, frame_in: np.ndarray, pyr: Pyramid, fm: FrameMotion) -> None:
+        """A frame whose resolve is trivial (static shot): kept on the host until a resolve reads it
+        (a still shot with codec noise then costs a copy, not an ingest, per frame)."""
+        self._prepare(frame_in, pyr)
+        live = {e.slot for e in fm.entries}
+        self._pending = {k: v for k, v in self._pending.items() if k in live}
+        self._pending[fm.entries[-1].slot] = np.array(frame_in, copy=True)
 
     def _resolve(self, frame_in, frame_filtered, pyr: Pyramid, fm: FrameMotion):
         import pyopencl as cl
-        bufs = self._prepare(frame_in, pyr)
+        for e in fm.entries[:-1]:
+            if e.slot in self._pending:
+                self._ingest(self._pending.pop(e.slot), pyr, e.slot)
+        self._pending = {}
+        bufs = self._ingest(frame_in, pyr, fm.entries[-1].slot)
         q, fmt = self.queue, bufs.fmt
         fh, fw = bufs.flow_shape
         n = len(fm.entries)
-        info = np.zeros((n, 4), np.int32)
-        shift = np.zeros((n, 2), np.float32)
-        for j, e in enumerate(fm.entries):
-            info[j] = (e.slot, 0 if e.shift is not None else 1, e.slot, int(e.valid is not None))
-            if e.shift is not None:
-                shift[j] = e.shift
-            else:
+        for e in fm.entries:
+            if e.shift is None:
                 cl.enqueue_copy(q, bufs.fields, np.ascontiguousarray(e.field, np.float32),
                                 dst_offset=e.slot * fh * fw * 8, is_blocking=False)
-            if e.valid is not None:
+        shift_path = all(e.shift is not None for e in fm.entries)
+        for e in fm.entries:
+            if e.valid is not None and shift_path:
+                if not (e.slot in self._vrows_sent and np.array_equal(self._vrows_sent[e.slot], e.valid)):
+                    # masks change rarely (a tile's verdict): upload only a changed one
+                    cl.enqueue_copy(q, bufs.vrows, vrows_of(e.valid, pyr.flow_scale, fmt.width),
+                                    dst_offset=e.slot * fh * fmt.width, is_blocking=False)
+                    self._vrows_sent[e.slot] = e.valid
+            elif e.valid is not None:
                 cl.enqueue_copy(q, bufs.valids, np.ascontiguousarray(e.valid, np.uint8),
                                 dst_offset=e.slot * fh * fw, is_blocking=False)
-        cl.enqueue_copy(q, bufs.ring, np.ascontiguousarray(frame_in), dst_offset=fm.entries[-1].slot * fmt.nbytes,
-                        is_blocking=False)
         cl.enqueue_copy(q, bufs.spatial, np.ascontiguousarray(frame_filtered), is_blocking=False)
-        if all(e.shift is not None for e in fm.entries):
-            # one translation per ring frame: whole-pixel offsets and cells from the host, frames
-            # ordered by cell (stable: ring order inside a cell), as kernels/tss.cl's tss_resolve_shift wants
-            taps = np.zeros((n, 4), np.int32)
-            vslots = np.full(n, -1, np.int32)
-            for j, e in enumerate(fm.entries):
-                sx, sy = (int(np.floor(np.float32(d) + np.float32(0.5))) for d in e.shift)
-                cx, cy = self._cell_of(e.shift)
-                taps[j] = (e.slot, sx, sy, cy * self.grid + cx)
-                vslots[j] = e.slot if e.valid is not None else -1
-            order = np.argsort(taps[:, 3], kind="stable")
-            taps, vslots = np.ascontiguousarray(taps[order]), np.ascontiguousarray(vslots[order])
+        if shift_path:
+            taps, vslots = self._taps(fm.entries)
             cl.enqueue_copy(q, bufs.info, taps, is_blocking=False)
             cl.enqueue_copy(q, bufs.vslots, vslots, is_blocking=False)
-            kern, size = ((self._kernel_rows, (-(-fmt.width // SEG), fmt.height)) if self.rows
-                          else (self._kernel_shift, (fmt.width, fmt.height)))
-            kern(q, size, None, bufs.ring, bufs.spatial, bufs.dst, bufs.cells,
-                               bufs.info, bufs.vslots, bufs.valids, self._luts, bufs.decode,
+            self._kernel_shift(q, *shift_launch(fmt.width, fmt.height, self.context), bufs.ring, bufs.spatial, bufs.dst,
+                               bufs.cells, bufs.info, bufs.vslots, bufs.vrows, self._luts, bufs.ltab, bufs.etab,
                                np.int32(fmt.width), np.int32(fmt.height), np.int32(fw), np.int32(fh),
                                np.int32(pyr.flow_scale), np.int32(n), np.int32(fm.entries[-1].slot))
         else:
+            info = np.zeros((n, 4), np.int32)
+            shift = np.zeros((n, 2), np.float32)
+            for j, e in enumerate(fm.entries):
+                info[j] = (e.slot, 0 if e.shift is not None else 1, e.slot, int(e.valid is not None))
+                if e.shift is not None:
+                    shift[j] = e.shift
             cl.enqueue_copy(q, bufs.info, info, is_blocking=False)
             cl.enqueue_copy(q, bufs.shift, shift, is_blocking=False)
             self._kernel(q, (fmt.width, fmt.height), None, bufs.ring, bufs.spatial, bufs.dst, bufs.cells,
-                         bufs.info, bufs.shift, bufs.fields, bufs.valids, self._luts, bufs.decode,
+                         bufs.info, bufs.shift, bufs.fields, bufs.valids, self._luts, bufs.ltab, bufs.etab,
                          np.int32(fmt.width), np.int32(fmt.height), np.int32(fw), np.int32(fh),
                          np.int32(pyr.flow_scale), np.int32(n), np.int32(fm.entries[-1].slot))
         out = np.empty(frame_filtered.shape, frame_filtered.dtype)
         cl.enqueue_copy(q, out, bufs.dst, is_blocking=False)
         cl.enqueue_copy(q, bufs.host_cells, bufs.cells, is_blocking=True)
         return out, bufs.host_cells
+
+    def _taps(self, entries: list[RingEntry]) -> tuple[np.ndarray, np.ndarray]:
+        """tss_resolve_shift's table: per ring frame (slot, dx, dy, close) with (dx, dy) its whole-pixel
+        offset, frames ordered by footprint cell (stable: ring order inside a cell), close = the cell's
+        frame count on its last frame, else 0; and each frame's valid-mask slot (-1: none)."""
+        taps = np.zeros((len(entries), 4), np.int32)
+        cell = np.zeros(len(entries), np.int32)
+        vslots = np.full(len(entries), -1, np.int32)
+        for j, e in enumerate(entries):
+            sx, sy = (int(np.floor(np.float32(d) + np.float32(0.5))) for d in e.shift)
+            cx, cy = self._cell_of(e.shift)
+            taps[j, :3] = (e.slot, sx, sy)
+            cell[j] = cy * self.grid + cx
+            vslots[j] = e.slot if e.valid is not None else -1
+        order = np.argsort(cell, kind="stable")
+        taps, vslots, cell = taps[order], vslots[order], cell[order]
+        for j in range(len(entries)):
+            if j == len(entries) - 1 or cell[j + 1] != cell[j]:
+                taps[j, 3] = int((cell == cell[j]).sum())
+        return np.ascontiguousarray(taps), np.ascontiguousarray(vslots)
 
     def finish(self) -> None:
         if self.context is not None:
