@@ -13,6 +13,7 @@ from typing import Iterator
 import click
 
 from mlaa_stream.spatial.filter import PRESETS
+from mlaa_stream.spatial.fast_filter import FastFilter
 from mlaa_stream.cli.options import configure_logging, device_option, verbosity_options
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_NO_DEVICE, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
@@ -386,7 +387,7 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
 
     try:
         try:
-            filt = Filter(device, bgr=False, **kwargs)
+            filt = (FastFilter if kwargs.get("fast") else Filter)(device, bgr=False, **kwargs)  # fast: no host copies
         except DeviceError as exc:
             con.error(str(exc))
             return EXIT_NO_DEVICE
@@ -648,7 +649,7 @@ class _ImageJob(_Job):
             """Linear-light inputs (EXR, untagged float) are not sRGB-decoded before blending."""
             kwargs = dict(self.opts["filter_kwargs"], linear_input=True)
             try:
-                return Filter(context=encoded.context, bgr=False, **kwargs)
+                return (FastFilter if kwargs.get("fast") else Filter)(context=encoded.context, bgr=False, **kwargs)
             except TypeError as exc:  # a Filter without linear_input: treat them as encoded
                 self.con.warn(f"linear-light inputs filtered as display-encoded ({exc})")
                 return encoded
