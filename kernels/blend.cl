@@ -149,7 +149,7 @@ inline __attribute__((always_inline)) float4 line_blend(__global const PIXEL_T *
 #if SUBPIXEL_ON
 // The sub-pixel move of pixel (x, y) with edge sides `sides` (3 or 4) and blended colour b: *delta, returns 1
 // where the pixel is a feature as described above (0: no move).
-inline __attribute__((always_inline)) int subpixel_move(__global const PIXEL_T *src, __global const float *luts,
+RARELY_CALLED int subpixel_move(__global const PIXEL_T *src, __global const float *luts,
                                                        int x, int y, int width, int height, int sides, float4 m,
                                                        float4 b, float4 *delta)
 {
@@ -182,7 +182,7 @@ inline __attribute__((always_inline)) int subpixel_move(__global const PIXEL_T *
 // What the feature at (x, y) -- if it is one -- gives to each neighbour across its edges: SUBPIXEL_SHARE of
 // its move, negated and split among those neighbours (the ink a dot loses goes to its surroundings, so a
 // thin feature keeps its weight; measured in docs/spatial_tuning.md). 0 where (x, y) is no moved feature.
-inline float4 feature_share(__global const PIXEL_T *src, __global const ushort *weights, __global const float *luts,
+RARELY_CALLED float4 feature_share(__global const PIXEL_T *src, __global const ushort *weights, __global const float *luts,
                             __global const uchar *edges, int x, int y, int width, int height)
 {
     const int sides = edge_sides(edges, x, y, width), n = count_sides(sides);
@@ -212,10 +212,16 @@ inline __attribute__((always_inline)) void blend_pixel(__global const PIXEL_T *s
 #if SUBPIXEL_ON
     const int n = count_sides(sides);
     // neighbours across this pixel's edges that may be features (3+ sides)
-    const int near = ((sides & 1) && count_sides(edge_sides(edges, x, y - 1, width)) >= 3)
-                   | (((sides & 2) && count_sides(edge_sides(edges, x, y + 1, width)) >= 3) << 1)
-                   | (((sides & 4) && count_sides(edge_sides(edges, x - 1, y, width)) >= 3) << 2)
-                   | (((sides & 8) && count_sides(edge_sides(edges, x + 1, y, width)) >= 3) << 3);
+    // (a neighbour with 3+ sides has, besides the one it shares with this pixel, at least one of the two
+    // sides across the line between them: one edge byte settles most pixels)
+    const int near = ((sides & 1) && (edges[i - width] & EDGE_RIGHT || (x > 0 && (edges[i - width - 1] & EDGE_RIGHT)))
+                      && count_sides(edge_sides(edges, x, y - 1, width)) >= 3)
+                   | (((sides & 2) && (edges[i + width] & EDGE_RIGHT || (x > 0 && (edges[i + width - 1] & EDGE_RIGHT)))
+                       && count_sides(edge_sides(edges, x, y + 1, width)) >= 3) << 1)
+                   | (((sides & 4) && (edges[i - 1] & EDGE_BOTTOM || (y > 0 && (edges[i - width - 1] & EDGE_BOTTOM)))
+                       && count_sides(edge_sides(edges, x - 1, y, width)) >= 3) << 2)
+                   | (((sides & 8) && (edges[i + 1] & EDGE_BOTTOM || (y > 0 && (edges[i - width + 1] & EDGE_BOTTOM)))
+                       && count_sides(edge_sides(edges, x + 1, y, width)) >= 3) << 3);
     if (!weighted && n < 3 && !near) return;
 #else
     if (!weighted) return;

@@ -94,7 +94,7 @@ typedef int sample_t;
 
 // At least FALLBACK_COLOURS distinct colours in the 3x3 window of (x, y), clamped at the frame's edge,
 // counted in row order (a pixel counts when no earlier pixel of the window equals it); stops once settled.
-inline int window_has_colours(__global const PIXEL_T *src, int x, int y, int w, int h)
+RARELY_CALLED int window_has_colours(__global const PIXEL_T *src, int x, int y, int w, int h)
 {
     int idx[9];
     for (int k = 0; k < 9; ++k)
@@ -129,6 +129,20 @@ inline int window_has_colours(__global const PIXEL_T *src, int x, int y, int w, 
     return 0;
 }
 
+// FXAA's colour for pixel i mixed FALLBACK_WEIGHT of the way from the source's, stored in dst where FXAA
+// changes the pixel (out of line: FXAA's search is long and few pixels get here).
+RARELY_CALLED void fallback_pixel(__global const PIXEL_T *src, __global const float *luts, __global PIXEL_T *dst,
+                                  int x, int y, int w, int h)
+{
+    float3 f;
+    if (!fxaa_pixel(src, luts, x, y, w, h, &f)) return;
+    const int i = IDX(x, y, w);
+    float4 c = load_px(src, i);
+    float3 m = blend_rgb(src, luts, x, y, w, h);
+    c.xyz = fxaa_encode(luts, m + FALLBACK_WEIGHT * (f - m));
+    store_px(dst, i, c);
+}
+
 // Tile (tx, ty): nothing to do unless the 3x3 tiles around it hold FALLBACK_MIN_CHANGED changed pixels; then
 // each pixel that borders an edge, was left by the MLAA passes, has a busy window and that FXAA would change
 // moves FALLBACK_WEIGHT of the way to FXAA's colour.
@@ -153,13 +167,7 @@ inline void fallback_tile(__global const PIXEL_T *src, __global const float *lut
 #if FALLBACK_COLOURS > 0
             if (!window_has_colours(src, x, y, w, h)) continue;   // flat-colour art: most pixels stop here
 #endif
-            if (fxaa_keeps(src, x, y, w, h)) continue;
-            float3 f;
-            if (!fxaa_pixel(src, luts, x, y, w, h, &f)) continue;
-            float4 c = load_px(src, i);
-            float3 m = blend_rgb(src, luts, x, y, w, h);
-            c.xyz = fxaa_encode(luts, m + FALLBACK_WEIGHT * (f - m));
-            store_px(dst, i, c);
+            if (!fxaa_keeps(src, x, y, w, h)) fallback_pixel(src, luts, dst, x, y, w, h);
         }
     }
 }
