@@ -202,6 +202,7 @@ RARELY_CALLED float4 feature_share(__global const PIXEL_T *src, __global const u
 
 inline __attribute__((always_inline)) void blend_pixel(__global const PIXEL_T *src, __global const uchar *edges,
                         __global const ushort *weights, __global const float *luts,
+                        __global const uchar *moved_features, __global const float4 *shares,
                         __global PIXEL_T *dst, int x, int y, int width, int height)
 {
     const int i = IDX(x, y, width);
@@ -212,16 +213,9 @@ inline __attribute__((always_inline)) void blend_pixel(__global const PIXEL_T *s
 #if SUBPIXEL_ON
     const int n = count_sides(sides);
     // neighbours across this pixel's edges that may be features (3+ sides)
-    // (a neighbour with 3+ sides has, besides the one it shares with this pixel, at least one of the two
-    // sides across the line between them: one edge byte settles most pixels)
-    const int near = ((sides & 1) && (edges[i - width] & EDGE_RIGHT || (x > 0 && (edges[i - width - 1] & EDGE_RIGHT)))
-                      && count_sides(edge_sides(edges, x, y - 1, width)) >= 3)
-                   | (((sides & 2) && (edges[i + width] & EDGE_RIGHT || (x > 0 && (edges[i + width - 1] & EDGE_RIGHT)))
-                       && count_sides(edge_sides(edges, x, y + 1, width)) >= 3) << 1)
-                   | (((sides & 4) && (edges[i - 1] & EDGE_BOTTOM || (y > 0 && (edges[i - width - 1] & EDGE_BOTTOM)))
-                       && count_sides(edge_sides(edges, x - 1, y, width)) >= 3) << 2)
-                   | (((sides & 8) && (edges[i + 1] & EDGE_BOTTOM || (y > 0 && (edges[i - width + 1] & EDGE_BOTTOM)))
-                       && count_sides(edge_sides(edges, x + 1, y, width)) >= 3) << 3);
+    // neighbours across this pixel's edges that are moved features (feature_shares, the pass before)
+    const int near = ((sides & 1) && moved_features[i - width]) | (((sides & 2) && moved_features[i + width]) << 1)
+                   | (((sides & 4) && moved_features[i - 1]) << 2) | (((sides & 8) && moved_features[i + 1]) << 3);
     if (!weighted && n < 3 && !near) return;
 #else
     if (!weighted) return;
@@ -234,10 +228,10 @@ inline __attribute__((always_inline)) void blend_pixel(__global const PIXEL_T *s
 #if SUBPIXEL_ON
     // neighbours across this pixel's edges that are moved features give it a share of their move
     float4 share = (float4)(0.0f);
-    if (near & 1) share += feature_share(src, weights, luts, edges, x, y - 1, width, height);
-    if (near & 2) share += feature_share(src, weights, luts, edges, x, y + 1, width, height);
-    if (near & 4) share += feature_share(src, weights, luts, edges, x - 1, y, width, height);
-    if (near & 8) share += feature_share(src, weights, luts, edges, x + 1, y, width, height);
+    if (near & 1) share += shares[i - width];
+    if (near & 2) share += shares[i + width];
+    if (near & 4) share += shares[i - 1];
+    if (near & 8) share += shares[i + 1];
     const int shared = share.x != 0.0f || share.y != 0.0f || share.z != 0.0f;
     if (!moved && n < 3 && !shared) return;
 #endif
@@ -263,8 +257,46 @@ inline __attribute__((always_inline)) void blend_pixel(__global const PIXEL_T *s
     store_px(dst, i, out);
 }
 
+// Before blend_neighbours: moved_features[i] = 1 where pixel i is a feature that moves (feature_share != 0),
+// shares[i] = what each neighbour across its edges takes (written only there); 0 elsewhere. Computed once per
+// feature instead of once per neighbour. One work item per SEGMENT pixels of a row.
+__kernel void feature_shares(__global const PIXEL_T *src, __global const uchar *edges,
+                             __global const ushort *weights, __global const float *luts,
+                             __global uchar *moved_features, __global float4 *shares,
+                             const int width, const int height)
+{
+    const int x0 = get_global_id(0) * SEGMENT, y = get_global_id(1);
+    if (x0 >= width || y >= height) return;
+    const int x1 = min(x0 + SEGMENT, width);
+    const ulong bottom_bits = 0x0101010101010101UL;
+    for (int x = x0; x < x1;) {
+        const int i = IDX(x, y, width);
+        if (x + GROUP <= x1) {   // 8 pixels bordering no edge: no feature among them
+            ulong own = edge_group(edges + i);
+            ulong above = y > 0 ? edge_group(edges + i - width) & bottom_bits : 0;
+            int from_left = x > 0 && (edges[i - 1] & EDGE_RIGHT);
+            if ((own | above) == 0 && !from_left) {
+                STORE_UCHAR8((uchar8)(0), moved_features + i);
+                x += GROUP;
+                continue;
+            }
+        }
+        int moved = 0;
+#if SUBPIXEL_ON
+        if (count_sides(edge_sides(edges, x, y, width)) >= 3) {
+            const float4 sh = feature_share(src, weights, luts, edges, x, y, width, height);
+            moved = sh.x != 0.0f || sh.y != 0.0f || sh.z != 0.0f;
+            if (moved) shares[i] = sh;
+        }
+#endif
+        moved_features[i] = (uchar)moved;
+        ++x;
+    }
+}
+
 __kernel void blend_neighbours(__global const PIXEL_T *src, __global const uchar *edges,
                                __global const ushort *weights, __global const float *luts,
+                               __global const uchar *moved_features, __global const float4 *shares,
                                __global PIXEL_T *dst, const int width, const int height)
 {
     const int x0 = get_global_id(0) * SEGMENT, y = get_global_id(1);
@@ -279,7 +311,7 @@ __kernel void blend_neighbours(__global const PIXEL_T *src, __global const uchar
             int from_left = x > 0 && (edges[i - 1] & EDGE_RIGHT);
             if ((own | above) == 0 && !from_left) { x += GROUP; continue; }
         }
-        blend_pixel(src, edges, weights, luts, dst, x, y, width, height);
+        blend_pixel(src, edges, weights, luts, moved_features, shares, dst, x, y, width, height);
         ++x;
     }
 }

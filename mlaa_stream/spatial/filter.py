@@ -191,11 +191,14 @@ class _FrameBuffers:
         self.hdist = context.buffer(4 * n)
         self.vdist = context.buffer(4 * n)
         self.weights = context.buffer(8 * n)
+        self.moved_features = context.buffer(n)   # blend.cl feature_shares: 1 where a feature moves
+        self.shares = context.buffer(16 * n)      # ... and what its neighbours take (float4, only there)
         self.staging = [np.empty(fmt.nbytes // fmt.dtype.itemsize, fmt.dtype) for _ in range(self.SLOTS)]
         self.last_use = [None] * self.SLOTS  # event after which slot k's src/dst/staging are free
 
     def device_bytes(self) -> int:
-        return sum(b.size for b in [*self.src, *self.dst, self.edges, self.hdist, self.vdist, self.weights])
+        return sum(b.size for b in [*self.src, *self.dst, self.edges, self.hdist, self.vdist, self.weights,
+                                    self.moved_features, self.shares])
 
 
 class Filter:
@@ -279,6 +282,7 @@ class Filter:
         self._k_vdist = k("distances", "vline_distances", defs)
         self._k_weights = k("weights", "blend_weights", defs)
         self._k_blend = k("blend", "blend_neighbours", defs)
+        self._k_shares = k("blend", "feature_shares", defs)
         if self.reconstruct:
             from mlaa_stream.spatial.reconstruct import Reconstructor
             self._reconstructor = Reconstructor(self.context, fmt)
@@ -344,8 +348,10 @@ class Filter:
         ev["weights"] = self._k_weights(q, g2, None, src, bufs.edges, bufs.hdist, bufs.vdist, self._table,
                                         bufs.weights, W, H, wait_for=[ev["hlines"], ev["vlines"]])
         ev["copy"] = cl.enqueue_copy(q, dst, src, byte_count=bufs.fmt.nbytes, wait_for=after)
-        ev["blend"] = self._k_blend(q, g2, None, src, bufs.edges, bufs.weights, self._luts, dst, W, H,
-                                    wait_for=[ev["weights"], ev["copy"]])
+        ev["shares"] = self._k_shares(q, g2, None, src, bufs.edges, bufs.weights, self._luts, bufs.moved_features,
+                                      bufs.shares, W, H, wait_for=[ev["weights"]])
+        ev["blend"] = self._k_blend(q, g2, None, src, bufs.edges, bufs.weights, self._luts, bufs.moved_features,
+                                    bufs.shares, dst, W, H, wait_for=[ev["shares"], ev["copy"]])
         last = ev["blend"]
         if self._bridger is not None:  # dash chains found in src, drawn over the blended frame
             last = self._bridger.enqueue(q, src, dst, self._luts, wait_for=[last], events=ev)
