@@ -19,6 +19,17 @@ def device() -> Context:
         pytest.fail(f"no OpenCL device (expected PoCL from `pip install .`): {exc}")
 
 
+@pytest.fixture(scope="module")
+def client():
+    """A Dask LocalCluster of 2 worker processes (one thread each) and its client, per test module."""
+    distributed = pytest.importorskip("distributed", reason="Dask is in the [cluster] and [test] extras")
+    cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0")
+    c = distributed.Client(cluster)
+    yield c
+    c.close()
+    cluster.close()
+
+
 @pytest.fixture
 def send_signal():
     """`send_signal(sig)` delivers a real signal to this process, as a terminal's Ctrl-C or `kill` would.

@@ -13,7 +13,7 @@ from click.testing import CliRunner
 from mlaa_stream.cli.main import main
 from mlaa_stream.io.images import check_complete, write_image
 
-distributed = pytest.importorskip("distributed", reason="Dask is in the [cluster] and [test] extras")
+pytest.importorskip("distributed", reason="Dask is in the [cluster] and [test] extras")
 
 
 def sequence(folder, n: int = 60, size=(40, 64)):
@@ -26,15 +26,6 @@ def sequence(folder, n: int = 60, size=(40, 64)):
 
 def files(folder) -> dict[str, bytes]:
     return {n: (folder / n).read_bytes() for n in sorted(os.listdir(folder))}
-
-
-@pytest.fixture(scope="module")
-def client():
-    cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0")
-    c = distributed.Client(cluster)
-    yield c
-    c.close()
-    cluster.close()
 
 
 @pytest.fixture(scope="module")

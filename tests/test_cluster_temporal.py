@@ -15,7 +15,7 @@ from mlaa_stream.cli.main import main
 from mlaa_stream.cluster.temporal import BLEND_WARMUP, TemporalSpec
 from mlaa_stream.io.images import read_image, write_image
 
-distributed = pytest.importorskip("distributed", reason="Dask is in the [cluster] and [test] extras")
+pytest.importorskip("distributed", reason="Dask is in the [cluster] and [test] extras")
 
 N, CHUNK, K = 24, 8, 4  # 3 chunks; a ring of 4 frames, so chunks 1 and 2 warm up on frames of the one before
 BLEND_TOLERANCE = 1     # levels after BLEND_WARMUP frames (docs/cluster.md: measured max on the bench scenes)
@@ -25,15 +25,6 @@ BLEND_TOLERANCE = 1     # levels after BLEND_WARMUP frames (docs/cluster.md: mea
 def pan() -> np.ndarray:
     return scene_pan(N, 240, 136).inputs  # (0.35, 0.15) px per frame: every frame "global" at this size (smaller
     # ones are classed dense now and then, which restarts the ring), so the ring is full at every chunk start
-
-
-@pytest.fixture(scope="module")
-def client():
-    cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0")
-    c = distributed.Client(cluster)
-    yield c
-    c.close()
-    cluster.close()
 
 
 @pytest.fixture(scope="module")

@@ -547,6 +547,20 @@ def flat_3x3(raw: np.ndarray, levels: float = 0.0) -> np.ndarray:
     return flat
 
 
+def sample_field(fld: np.ndarray, scale: int, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
+    """Bilinear read of a (fh, fw, 2) field stored at 1/scale of the frame, at full-size positions."""
+    f32 = np.float32
+    fh, fw = fld.shape[:2]
+    fx = np.clip((xs + f32(0.5)) / f32(scale) - f32(0.5), 0, fw - 1).astype(f32)
+    fy = np.clip((ys + f32(0.5)) / f32(scale) - f32(0.5), 0, fh - 1).astype(f32)
+    x0, y0 = fx.astype(np.int64), fy.astype(np.int64)
+    x1, y1 = np.minimum(x0 + 1, fw - 1), np.minimum(y0 + 1, fh - 1)
+    ax, ay = (fx - x0)[..., None], (fy - y0)[..., None]
+    top = fld[y0, x0] + (fld[y0, x1] - fld[y0, x0]) * ax
+    bot = fld[y1, x0] + (fld[y1, x1] - fld[y1, x0]) * ax
+    return (top + (bot - top) * ay).astype(f32)
+
+
 def temporal_reference(cur: np.ndarray, hist: np.ndarray, params: np.ndarray, cur_mode: int,
                        prev_mode: int, flow_b: np.ndarray | None = None, flow_f: np.ndarray | None = None,
                        flow_prev: np.ndarray | None = None, bgr: bool = False,
@@ -572,16 +586,8 @@ def temporal_reference(cur: np.ndarray, hist: np.ndarray, params: np.ndarray, cu
     p = params.astype(f32)
     ys, xs = np.mgrid[0:h, 0:w].astype(f32)
 
-    def sample_flow(f, s, px, py):
-        fh_, fw_ = f.shape[:2]
-        fx = np.clip((px + f32(0.5)) / f32(s) - f32(0.5), 0, fw_ - 1).astype(f32)
-        fy = np.clip((py + f32(0.5)) / f32(s) - f32(0.5), 0, fh_ - 1).astype(f32)
-        x0, y0 = fx.astype(np.int64), fy.astype(np.int64)
-        x1, y1 = np.minimum(x0 + 1, fw_ - 1), np.minimum(y0 + 1, fh_ - 1)
-        ax, ay = (fx - x0)[..., None], (fy - y0)[..., None]
-        top = f[y0, x0] + (f[y0, x1] - f[y0, x0]) * ax
-        bot = f[y1, x0] + (f[y1, x1] - f[y1, x0]) * ax
-        return ((top + (bot - top) * ay) * f32(s)).astype(f32)
+    def sample_flow(f, s, px, py):   # the field is stored in pixels of its own scale
+        return (sample_field(f, s, px, py) * f32(s)).astype(f32)
 
     def affine(m, px, py):
         return np.stack([m[0] * px + m[1] * py + m[2] - px, m[3] * px + m[4] * py + m[5] - py], -1)

@@ -50,7 +50,7 @@ import numpy as np
 
 from mlaa_stream.device.colour import device_luts, lut_read
 from mlaa_stream.device.formats import LUT_SIZE, frame_format
-from mlaa_stream.temporal.stage import (LK_ROBUST, Decision, Pyramid, _PMAX, choose_model,
+from mlaa_stream.temporal.stage import (LK_ROBUST, Decision, Pyramid, _PMAX, choose_model, sample_field,
                                         decode_table, grey8)
 
 DEFAULT_FRAMES = 16   # K: ring frames (the current one included)
@@ -413,20 +413,6 @@ def ring_of(frame: np.ndarray, bgr: bool) -> np.ndarray:
     lin = linear_of(frame, bgr)
     t = lin * np.float32(ONE) + np.float32(0.5)
     return np.where(lin > 0, np.where(lin < 1, t, np.float32(ONE)), np.float32(0)).astype(np.int32)
-
-
-def sample_field(fld: np.ndarray, scale: int, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
-    """Bilinear read of a (fh, fw, 2) field stored at 1/scale of the frame, at full-size positions."""
-    f32 = np.float32
-    fh, fw = fld.shape[:2]
-    fx = np.clip((xs + f32(0.5)) / f32(scale) - f32(0.5), 0, fw - 1).astype(f32)
-    fy = np.clip((ys + f32(0.5)) / f32(scale) - f32(0.5), 0, fh - 1).astype(f32)
-    x0, y0 = fx.astype(np.int64), fy.astype(np.int64)
-    x1, y1 = np.minimum(x0 + 1, fw - 1), np.minimum(y0 + 1, fh - 1)
-    ax, ay = (fx - x0)[..., None], (fy - y0)[..., None]
-    top = fld[y0, x0] + (fld[y0, x1] - fld[y0, x0]) * ax
-    bot = fld[y1, x0] + (fld[y1, x1] - fld[y1, x0]) * ax
-    return (top + (bot - top) * ay).astype(f32)
 
 
 def tss_reference(spatial_q: np.ndarray, cur_q: np.ndarray, ring: list[tuple],
