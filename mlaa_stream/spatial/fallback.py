@@ -11,7 +11,7 @@ import pyopencl as cl
 from mlaa_stream.device.colour import device_luts, lut_read
 from mlaa_stream.device.context import Context
 from mlaa_stream.device.formats import LUT_SIZE, FrameFormat, frame_format
-from mlaa_stream.spatial.fxaa import fxaa_defines, fxaa_mix_reference
+from mlaa_stream.spatial.fxaa import _MAX, fxaa_defines, fxaa_mix_reference
 
 SEGMENT = 64  # pixels of a tile band per work item of count_changed (a multiple of FALLBACK_TILE)
 
@@ -19,9 +19,6 @@ SEGMENT = 64  # pixels of a tile band per work item of count_changed (a multiple
 # FALLBACK_MIN_CHANGED pixels that MLAA changed, and its 3x3 window at least FALLBACK_COLOURS colours
 # (equal within FALLBACK_SAME / 255 of full scale per channel). It takes FALLBACK_WEIGHT of FXAA's colour.
 FALLBACK_TILE, FALLBACK_MIN_CHANGED, FALLBACK_COLOURS, FALLBACK_SAME, FALLBACK_WEIGHT = 8, 24, 4, 2.5, 0.8
-
-_MAX = {np.dtype(np.uint8): 255.0, np.dtype(np.uint16): 65535.0, np.dtype(np.float32): 1.0}
-
 
 def fallback_defines(fmt: FrameFormat, linear: bool, linear_input: bool, everywhere: bool = False) -> dict:
     """Defines for kernels/fallback.cl (FXAA's own at the shader's defaults, plus FALLBACK_*); `everywhere`
