@@ -126,20 +126,36 @@ RARELY_CALLED int window_has_colours(__global const PIXEL_T *src, int x, int y, 
 // The 3x3 window of (x, y), clamped at the frame's edge, holds at most two bit-identical colours: the edges of
 // flat-colour art, most windows the colour count sees, settled with eight comparisons (then it cannot hold
 // FALLBACK_COLOURS >= 3 colours).
-inline int window_two_colours(__global const PIXEL_T *src, int x, int y, int w, int h)
+RARELY_CALLED int window_two_colours(__global const PIXEL_T *src, int x, int y, int w, int h)
 {
-    const int c = IDX(x, y, w);
+    const int x0 = x > 0 ? x - 1 : 0, x2 = x < w - 1 ? x + 1 : w - 1;
+    const int r0 = (y > 0 ? y - 1 : 0) * w, r1 = y * w, r2 = (y < h - 1 ? y + 1 : h - 1) * w;
+    const int idx[9] = {r0 + x0, r0 + x, r0 + x2, r1 + x0, r1 + x, r1 + x2, r2 + x0, r2 + x, r2 + x2};
+#ifdef PIXEL_IS_FLOAT
     int second = -1;
-    for (int dy = -1; dy <= 1; ++dy) {
-        const int row = clamp_to(y + dy, h - 1) * w;
-        for (int dx = -1; dx <= 1; ++dx) {
-            const int i = row + clamp_to(x + dx, w - 1);
-            if (same_px(src, i, c)) continue;
-            if (second < 0) second = i;
-            else if (!same_px(src, i, second)) return 0;
-        }
+    for (int k = 0; k < 9; ++k) {
+        if (same_px(src, idx[k], idx[4])) continue;
+        if (second < 0) second = idx[k];
+        else if (!same_px(src, idx[k], second)) return 0;
     }
     return 1;
+#else
+    ulong key[9];
+    for (int k = 0; k < 9; ++k) {
+        __global const PIXEL_T *p = src + (size_t)idx[k] * CHANNELS;
+#if CHANNELS == 1
+        key[k] = p[0];
+#else
+        key[k] = (ulong)p[0] | (ulong)p[1] << 16 | (ulong)p[2] << 32;
+#endif
+    }
+    const ulong a = key[4];
+    ulong b = a;
+    for (int k = 0; k < 9; ++k) b = b == a ? key[k] : b;
+    int two = 1;
+    for (int k = 0; k < 9; ++k) two &= (key[k] == a) | (key[k] == b);
+    return two;
+#endif
 }
 
 // The 3x3 window is busy: at least FALLBACK_COLOURS colours (window_has_colours), the quick test first.
