@@ -19,6 +19,9 @@
 //     channel within FALLBACK_SAME of full scale): flat-colour art -- text, UI boxes, vector drawings -- has fewer.
 // An eligible pixel that the MLAA passes left takes FALLBACK_WEIGHT of FXAA's colour (linear light); one they
 // changed moves FALLBACK_MIX of the way from their colour to FXAA's.
+// Except: a pixel on a straight edge run of FALLBACK_KEEP_RUN pixels or more (hdist / vdist of distances.cl) keeps
+// the MLAA passes' colour -- their verdict on a straight edge: FXAA's sub-pixel blend would smear pixel-aligned
+// rules and stems wherever noise or compression makes their windows busy.
 // FALLBACK_MIN_CHANGED 0 drops the region and colour tests (Filter(fallback="everywhere"): frames known to be
 // 1-spp renders). Numpy reference: mlaa_stream.spatial.fallback.fallback_reference.
 
@@ -45,6 +48,9 @@
 #endif
 #ifndef FALLBACK_RICH_DIV
 #define FALLBACK_RICH_DIV 20
+#endif
+#ifndef FALLBACK_KEEP_RUN
+#define FALLBACK_KEEP_RUN 16
 #endif
 
 // Any stored channel (alpha included) of pixel i differs between a and b.
@@ -165,6 +171,22 @@ RARELY_CALLED int window_two_colours(__global const PIXEL_T *src, int x, int y, 
 #define WINDOW_BUSY(src, x, y, w, h) window_has_colours(src, x, y, w, h)
 #endif
 
+#if FALLBACK_KEEP_RUN > 0
+// The longest straight edge run (distances.cl: left + right + 1, up + down + 1) among the edges that pixel (x, y)
+// borders is at least FALLBACK_KEEP_RUN pixels.
+inline int on_long_run(__global const uchar *edges, __global const ushort2 *hdist, __global const ushort2 *vdist,
+                       int x, int y, int w)
+{
+    const int i = IDX(x, y, w);
+    int run = 0;
+    if (edges[i] & EDGE_BOTTOM) run = max(run, hdist[i].x + hdist[i].y + 1);
+    if (y > 0 && (edges[i - w] & EDGE_BOTTOM)) run = max(run, hdist[i - w].x + hdist[i - w].y + 1);
+    if (edges[i] & EDGE_RIGHT) run = max(run, vdist[i].x + vdist[i].y + 1);
+    if (x > 0 && (edges[i - 1] & EDGE_RIGHT)) run = max(run, vdist[i - 1].x + vdist[i - 1].y + 1);
+    return run >= FALLBACK_KEEP_RUN;
+}
+#endif
+
 // Three counts per tile (tx, ty), at counts[3 * (ty * tiles_x + tx) + k]: k = 0 its pixels that border an edge
 // and that the MLAA passes changed (dst != src), k = 1 its pixels that border an edge, k = 2 the changed ones
 // whose 3x3 window is busy (window_has_colours). One work item per SEGMENT pixels (a multiple of
@@ -226,7 +248,7 @@ RARELY_CALLED void mix_pixel(__global const PIXEL_T *src, __global const float *
 // pixel's own window busy); then each eligible pixel that FXAA would change takes its colour (fallback_pixel,
 // mix_pixel).
 inline void fallback_tile(__global const PIXEL_T *src, __global const float *luts, __global const uchar *edges,
-                          __global const uchar *counts, __global PIXEL_T *dst, int w, int h, int tiles_x,
+                          __global const ushort2 *hdist, __global const ushort2 *vdist, __global const uchar *counts, __global PIXEL_T *dst, int w, int h, int tiles_x,
                           int tiles_y, int tx, int ty)
 {
 #if FALLBACK_MIN_CHANGED > 0
@@ -253,6 +275,9 @@ inline void fallback_tile(__global const PIXEL_T *src, __global const float *lut
             if (!busy && (changed_px || !WINDOW_BUSY(src, x, y, w, h))) continue;
 #endif
             if (fxaa_keeps(src, x, y, w, h)) continue;
+#if FALLBACK_KEEP_RUN > 0
+            if (on_long_run(edges, hdist, vdist, x, y, w)) continue;
+#endif
             if (changed_px)
                 mix_pixel(src, luts, dst, x, y, w, h);
             else
@@ -264,12 +289,13 @@ inline void fallback_tile(__global const PIXEL_T *src, __global const float *lut
 // One work item per SEGMENT / FALLBACK_TILE tiles of a tile row (few work items: PoCL's cost per work group
 // is felt at one item per tile).
 __kernel void fxaa_fallback(__global const PIXEL_T *src, __global const float *luts,
-                            __global const uchar *edges, __global const uchar *counts, __global PIXEL_T *dst,
+                            __global const uchar *edges, __global const ushort2 *hdist,
+                            __global const ushort2 *vdist, __global const uchar *counts, __global PIXEL_T *dst,
                             const int w, const int h, const int tiles_x, const int tiles_y)
 {
     const int t0 = get_global_id(0) * (SEGMENT / FALLBACK_TILE), ty = get_global_id(1);
     if (t0 >= tiles_x || ty >= tiles_y) return;
     const int t1 = min(t0 + SEGMENT / FALLBACK_TILE, tiles_x);
     for (int tx = t0; tx < t1; ++tx)
-        fallback_tile(src, luts, edges, counts, dst, w, h, tiles_x, tiles_y, tx, ty);
+        fallback_tile(src, luts, edges, hdist, vdist, counts, dst, w, h, tiles_x, tiles_y, tx, ty);
 }

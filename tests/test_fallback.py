@@ -53,7 +53,8 @@ def test_kernel_matches_reference(mode, dtype, channels, bgr):
     with Filter(bgr=bgr, fallback=mode) as f, Filter(bgr=bgr, fallback="off") as g:
         got, passes = f.process(frame), g.intermediates(frame)
     mlaa = passes["out"]
-    want = fallback_reference(frame, mlaa, passes["edges"], bgr=bgr, everywhere=mode == "everywhere")
+    want = fallback_reference(frame, mlaa, passes["edges"], passes["hdist"], passes["vdist"], bgr=bgr,
+                              everywhere=mode == "everywhere")
     changed = np.any(np.atleast_3d(got) != np.atleast_3d(mlaa), -1)
     if channels > 1 or mode == "everywhere":  # (grey: channel 0 alone gives MLAA too few jaggies to open the gates)
         assert changed.sum() > 20, "the case must exercise the pass"
@@ -84,6 +85,22 @@ def test_only_edge_pixels_change_and_mlaa_blends_move_half_way():
         want = 255 * linear_to_srgb(m + share * (fx - m))
         sel = by_fallback & where
         assert np.abs(got[sel] - want[sel]).max() <= 1.0
+
+
+def test_pixel_aligned_rule_in_a_busy_region_stays_sharp():
+    """Known answer: a 1-px rule on noisy ground between busy rendered-like texture is a straight MLAA edge run
+    (FALLBACK_KEEP_RUN or longer): the gated fallback leaves its pixels as MLAA left them (within 2 levels),
+    where "everywhere" (no such test) smears it (by more than 20 levels somewhere)."""
+    rng = np.random.default_rng(3)
+    frame = textured_aliased(7, 144, 192).astype(np.int16)
+    frame[68:76] = 225                      # a flat band (a UI strip) across the busy frame ...
+    frame[72, 8:184] = 40                   # ... carrying a dark pixel-aligned rule, 176 px long
+    frame = np.clip(frame + rng.normal(0, 1.0, frame.shape).round(), 0, 255).astype(np.uint8)  # light noise
+    with Filter() as f, Filter(fallback="off") as g, Filter(fallback="everywhere") as e:
+        got, mlaa, every = f.process(frame), g.process(frame), e.process(frame)
+    rule = (slice(72, 73), slice(24, 168))  # away from the rule's ends
+    assert np.abs(every[rule].astype(int) - mlaa[rule]).max() > 20
+    assert np.abs(got[rule].astype(int) - mlaa[rule]).max() <= 2
 
 
 def test_flat_colour_art_is_left_to_mlaa():

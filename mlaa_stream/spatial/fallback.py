@@ -23,6 +23,9 @@ SEGMENT = 64  # pixels of a tile band per work item of count_changed (a multiple
 # takes FALLBACK_WEIGHT of FXAA's colour, one it changed moves FALLBACK_MIX of the way from MLAA's to FXAA's.
 FALLBACK_TILE, FALLBACK_MIN_CHANGED, FALLBACK_COLOURS, FALLBACK_SAME, FALLBACK_WEIGHT = 8, 24, 4, 2.5, 0.8
 FALLBACK_RICH_MIN, FALLBACK_RICH_DIV, FALLBACK_MIX = 12, 20, 0.5
+# ... except a pixel on a straight edge run of FALLBACK_KEEP_RUN pixels or more: MLAA's verdict on a straight edge
+# stands, so pixel-aligned rules and stems keep their sharpness where noise or compression makes windows busy.
+FALLBACK_KEEP_RUN = 16
 
 def fallback_defines(fmt: FrameFormat, linear: bool, linear_input: bool, everywhere: bool = False) -> dict:
     """Defines for kernels/fallback.cl (FXAA's own at the shader's defaults, plus FALLBACK_*); `everywhere`
@@ -32,7 +35,8 @@ def fallback_defines(fmt: FrameFormat, linear: bool, linear_input: bool, everywh
             "FALLBACK_COLOURS": 0 if everywhere else FALLBACK_COLOURS, "FALLBACK_SAME": float(FALLBACK_SAME / 255.0),
             "FALLBACK_SAME_LEVELS": int(np.floor(FALLBACK_SAME / 255.0 * _MAX[np.dtype(fmt.dtype)])),
             "FALLBACK_WEIGHT": float(FALLBACK_WEIGHT), "FALLBACK_MIX": float(FALLBACK_MIX),
-            "FALLBACK_RICH_MIN": FALLBACK_RICH_MIN, "FALLBACK_RICH_DIV": FALLBACK_RICH_DIV}
+            "FALLBACK_RICH_MIN": FALLBACK_RICH_MIN, "FALLBACK_RICH_DIV": FALLBACK_RICH_DIV,
+            "FALLBACK_KEEP_RUN": 0 if everywhere else FALLBACK_KEEP_RUN}
 
 
 class FallbackPass:
@@ -51,9 +55,9 @@ class FallbackPass:
     def device_bytes(self) -> int:
         return self._counts.size
 
-    def enqueue(self, queue, src, dst, edges, luts, wait_for: list, events: dict) -> cl.Event:
-        """dst holds the MLAA passes' output of src, `edges` their edge buffer; returns the event after which
-        dst holds the result."""
+    def enqueue(self, queue, src, dst, edges, hdist, vdist, luts, wait_for: list, events: dict) -> cl.Event:
+        """dst holds the MLAA passes' output of src, `edges`, `hdist` and `vdist` their edge and line-distance
+        buffers; returns the event after which dst holds the result."""
         W, H = np.int32(self.fmt.width), np.int32(self.fmt.height)
         tx, ty = np.int32(self.tiles[0]), np.int32(self.tiles[1])
         if not self.everywhere:  # "everywhere" reads no counts
@@ -61,7 +65,8 @@ class FallbackPass:
                                                    src, dst, edges, self._counts, W, H, tx, wait_for=wait_for)
             wait_for = [events["fallback_count"]]
         events["fallback"] = self._fxaa(queue, (-(-self.fmt.width // SEGMENT), self.tiles[1]), None,
-                                        src, luts, edges, self._counts, dst, W, H, tx, ty, wait_for=wait_for)
+                                        src, luts, edges, hdist, vdist, self._counts, dst, W, H, tx, ty,
+                                        wait_for=wait_for)
         return events["fallback"]
 
 
@@ -80,10 +85,23 @@ def _window_colours(rgb: np.ndarray) -> np.ndarray:
     return distinct
 
 
-def fallback_reference(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray, *, linear: bool = True,
-                       linear_input: bool = False, bgr: bool = False, everywhere: bool = False) -> np.ndarray:
+def long_runs(edges: np.ndarray, hdist: np.ndarray, vdist: np.ndarray) -> np.ndarray:
+    """kernels/fallback.cl on_long_run for every pixel: the longest straight run among the edges it borders is
+    FALLBACK_KEEP_RUN pixels or more (hdist, vdist: (h, w, 2) as distances.cl writes them)."""
+    e = np.asarray(edges)
+    hl = np.where(e & 1, hdist.astype(np.int64).sum(-1) + 1, 0)
+    vl = np.where(e & 2, vdist.astype(np.int64).sum(-1) + 1, 0)
+    run = np.maximum(hl, vl)
+    run[1:] = np.maximum(run[1:], hl[:-1])
+    run[:, 1:] = np.maximum(run[:, 1:], vl[:, :-1])
+    return run >= FALLBACK_KEEP_RUN
+
+
+def fallback_reference(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray, hdist: np.ndarray,
+                       vdist: np.ndarray, *, linear: bool = True, linear_input: bool = False, bgr: bool = False,
+                       everywhere: bool = False) -> np.ndarray:
     """What kernels/fallback.cl makes of `mlaa_out`, the MLAA passes' output of `src` with edge buffer
-    `edges` ((h, w) uint8, EDGE_BOTTOM 1 | EDGE_RIGHT 2), in numpy."""
+    `edges` ((h, w) uint8, EDGE_BOTTOM 1 | EDGE_RIGHT 2) and line distances `hdist`, `vdist`, in numpy."""
     fmt = frame_format(src, bgr)
     f32 = np.float32
     pmax = f32(_MAX[fmt.dtype])
@@ -117,6 +135,7 @@ def fallback_reference(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray,
         busy = (busy_changed >= FALLBACK_RICH_MIN) & (busy_changed * FALLBACK_RICH_DIV >= region_sums(borders))
         evidence = region_sums(changed & borders) >= FALLBACK_MIN_CHANGED
         eligible = borders & (busy | (evidence & busy_window & ~changed))
+        eligible &= ~long_runs(e, hdist, vdist)
     early, fx = fxaa_mix_reference(src, linear=linear, linear_input=linear_input, bgr=bgr)
     eligible &= ~early
     decode = linear and not linear_input

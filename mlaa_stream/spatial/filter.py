@@ -356,7 +356,8 @@ class Filter:
         if self._bridger is not None:  # dash chains found in src, drawn over the blended frame
             last = self._bridger.enqueue(q, src, dst, self._luts, wait_for=[last], events=ev)
         if self._fallback is not None:  # FXAA where MLAA left pixels of an aliased neighbourhood
-            last = self._fallback.enqueue(q, src, dst, bufs.edges, self._luts, wait_for=[last], events=ev)
+            last = self._fallback.enqueue(q, src, dst, bufs.edges, bufs.hdist, bufs.vdist, self._luts,
+                                          wait_for=[last], events=ev)
         return last
 
     def profile(self, frame: np.ndarray, runs: int = 20, warmup: int = 3) -> dict[str, float]:
