@@ -67,6 +67,7 @@ TSS_LOCAL = 8         # CPU work-group of tss_resolve_shift along the row (docs/
 FB_ABS, FB_REL = 0.5, 0.1   # forward-backward tolerance (px at full size): FB_ABS + FB_REL |v|
 ALIGN_LEVEL, ALIGN_PX, ALIGN_SIGMA, ALIGN_GROW = 10.0, 0.35, 2.0, 3   # MotionRing._alignment
 TILE, TILE_TOL, TILE_TEXTURE = 48, 0.4, 1.0   # _Refiner's tile check: flow px, px, mean squared gradient
+BAND, BAND_TOL, BAND_TEXTURE = 32, 0.25, 0.05   # _Refiner._bands: flow px, px, mean squared gradient
 REFINE_POINTS = 16384 # _Refiner: points in all (the largest gradients of each tile, at most a whole tile)
 
 
@@ -82,6 +83,11 @@ class RingEntry:
     field: np.ndarray | None = None   # (fh, fw, 2) float32 offsets in full-size px (dense map), NaN = invalid
     slot: int = -1                    # device ring slot
     valid: np.ndarray | None = None   # (fh, fw) uint8 at flow size: 1 where the map explains the frame
+
+    @property
+    def translated(self) -> bool:
+        """True when the map is one translation for every pixel (`shift`, the fast resolve path)."""
+        return self.field is None
 
 
 @dataclass
@@ -237,7 +243,7 @@ class MotionRing:
         step = fb * np.float32(fs)                                          # full-size px
         step[bad] = np.nan
         for e in self.entries:
-            if e.shift is not None:
+            if e.translated:
                 old = np.empty((fh, fw, 2), np.float32)
                 old[...] = e.shift
             else:
@@ -287,6 +293,7 @@ class _Refiner:
         keep = energy[ys, xs] > 0
         ys, xs = ys[keep], xs[keep]
         self.ys, self.xs = ys.astype(np.float64), xs.astype(np.float64)
+        self.iy, self.ix = ys, xs
         self.c = cur_b[ys, xs].astype(np.float64)
         self.gx, self.gy = gx[ys, xs].astype(np.float64), gy[ys, xs].astype(np.float64)
         self.gxx, self.gxy, self.gyy = self.gx * self.gx, self.gx * self.gy, self.gy * self.gy
@@ -320,6 +327,22 @@ class _Refiner:
         top = p00 + ax * (p01 - p00)
         return top + ay * (p10 + ax * (p11 - p10) - top)
 
+    def _bands(self, r: np.ndarray, step: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
+        """Row and column bands (BAND flow px) whose own 1-D step across their edges (vertical for a
+        row band, horizontal for a column band) departs from the frame's by over BAND_TOL px: a second
+        motion along long, near-horizontal or near-vertical edges, which a tile cannot measure (an
+        aliased edge of slope 1/L moves in 1-px jumps every L px; a band spans several)."""
+        nr, nc = -(-self.h // BAND), -(-self.w // BAND)
+        ry, cx = self.iy // BAND, self.ix // BAND
+        gyy = np.bincount(ry, self.gyy, nr)
+        gxx = np.bincount(cx, self.gxx, nc)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            dy = np.bincount(ry, r * self.gy, nr) / gyy
+            dx = np.bincount(cx, r * self.gx, nc) / gxx
+        rows = (gyy > BAND_TEXTURE * BAND * self.w) & (np.abs(dy - step[1]) > BAND_TOL)
+        cols = (gxx > BAND_TEXTURE * BAND * self.h) & (np.abs(dx - step[0]) > BAND_TOL)
+        return rows, cols
+
     def step(self, ring_b: np.ndarray, d: tuple[float, float], check: bool = True):
         """One step from d (flow px, cur(x) ~ ring(x + d)): returns (new d, valid mask or None)."""
         h, w = self.h, self.w
@@ -344,9 +367,13 @@ class _Refiner:
             sx = (self.tc * tbx - self.tb * tby) / self.tdet
             sy = (self.ta * tby - self.tb * tbx) / self.tdet
         bad = self.textured & (np.hypot(sx - step[0], sy - step[1]) > TILE_TOL)
-        if not bad.any():
+        rows, cols = self._bands(r, step)
+        if not bad.any() and not rows.any() and not cols.any():
             return new, None
         valid = np.ones((h, w), np.uint8)
+        b = BAND
+        valid[np.repeat(rows, b)[:h], :] = 0
+        valid[:, np.repeat(cols, b)[:w]] = 0
         valid[:self.ty * TILE, :self.tx * TILE][np.kron(bad, np.ones((TILE, TILE), bool))] = 0
         # the last partial row/column of tiles follows its neighbour
         if self.ty * TILE < h:
@@ -667,7 +694,7 @@ class TSSStage:
         self._prev_index, self._shape = index, frame_in.shape
         # Every sample in one cell (static shot, whole-pixel motion, a single frame): nothing to
         # resolve, the spatial output stands without a kernel.
-        trivial = all(e.shift is not None and e.valid is None for e in fm.entries) and len(
+        trivial = all(e.translated and e.valid is None for e in fm.entries) and len(
             {self._cell_of(e.shift) for e in fm.entries}) < self.min_cells
         cells = None
         if trivial:
@@ -678,7 +705,7 @@ class TSSStage:
                 self._upload_only(frame_in, pyr, fm)
         elif self.backend == "numpy":
             self._frames[fm.entries[-1].slot] = frame_in
-            ring = [(self._frames[e.slot], e.shift if e.shift is not None else e.field, e.valid)
+            ring = [(self._frames[e.slot], e.shift if e.translated else e.field, e.valid)
                     for e in fm.entries]
             out, cells = tss_frame_reference(frame_filtered, frame_in, ring, self.bgr, pyr.flow_scale,
                                              self.grid, self.eps, self.min_cells, self.full_cells)
@@ -750,10 +777,10 @@ class TSSStage:
         fh, fw = bufs.flow_shape
         n = len(fm.entries)
         for e in fm.entries:
-            if e.shift is None:
+            if not e.translated:
                 cl.enqueue_copy(q, bufs.fields, np.ascontiguousarray(e.field, np.float32),
                                 dst_offset=e.slot * fh * fw * 8, is_blocking=False)
-        shift_path = all(e.shift is not None for e in fm.entries)
+        shift_path = all(e.translated for e in fm.entries)
         for e in fm.entries:
             if e.valid is not None and shift_path:
                 if not (e.slot in self._vrows_sent and np.array_equal(self._vrows_sent[e.slot], e.valid)):
@@ -777,8 +804,8 @@ class TSSStage:
             info = np.zeros((n, 4), np.int32)
             shift = np.zeros((n, 2), np.float32)
             for j, e in enumerate(fm.entries):
-                info[j] = (e.slot, 0 if e.shift is not None else 1, e.slot, int(e.valid is not None))
-                if e.shift is not None:
+                info[j] = (e.slot, 0 if e.translated else 1, e.slot, int(e.valid is not None))
+                if e.translated:
                     shift[j] = e.shift
             cl.enqueue_copy(q, bufs.info, info, is_blocking=False)
             cl.enqueue_copy(q, bufs.shift, shift, is_blocking=False)
