@@ -164,3 +164,35 @@ def test_numpy_backend_is_the_reference(filt):
     a, b = TSSStage(bgr=False), TSSStage(bgr=False, backend="numpy")
     for i, (f, s) in enumerate(zip(sc.inputs, spatial)):
         assert np.array_equal(a(f, s, i), b(f, s, i))
+
+
+def _two_edges(y_top: float, y_bottom: float, w: int = 240, h: int = 144) -> np.ndarray:
+    """Grey float32 frame (blurred as the refiner reads it): two long horizontal edges of equal contrast
+    at y_top and y_bottom (sub-pixel positions, by area coverage of the row they cross), plus static
+    vertical edges every 32 px (added, so the gradients stay separable) that fix the horizontal motion."""
+    import cv2
+    ys = np.arange(h, dtype=np.float64)[:, None] + 0.5
+    xs = np.arange(w, dtype=np.float64)[None, :]
+    img = 40.0 + 100.0 * np.clip(ys - y_top, 0, 1) - 100.0 * np.clip(ys - y_bottom, 0, 1)
+    img = img + 60.0 * ((xs // 32) % 2)
+    return cv2.GaussianBlur(np.broadcast_to(img, (h, w)).astype(np.float32), (0, 0), 1.0)
+
+
+def test_band_check_masks_a_second_motion_along_long_edges():
+    """Known answer (_Refiner._bands): the upper edge moved 0.6 px between the ring frame and the
+    current one, the lower edge did not (a static border over a pan). The frame's translation splits the
+    difference, so each edge's row band is ~0.3 px off it: both bands (rows 32-63 and 64-95 with
+    BAND = 32) lose that frame's samples, every other row keeps them, and no column band is masked
+    (the vertical edges did not move). With both edges moved alike nothing is masked. The 48-px tile
+    check cannot see this: the tiles on the horizontal edges hold one edge direction only. (240 x 144:
+    whole 48-px tiles, so no partial tile row copies a band's mask.)"""
+    from mlaa_stream.temporal import tss as T
+    assert T.BAND == 32
+    ring = _two_edges(40.0, 80.0)
+    d, valid = T._Refiner(_two_edges(40.6, 80.0)).step(ring, (0.0, 0.0))
+    assert -0.45 < d[1] < -0.15 and abs(d[0]) < 0.02, d     # cur(x) ~ ring(x + d): the moved edge says -0.6
+    assert valid is not None
+    assert set(np.flatnonzero(valid.min(1) == 0)) == set(range(32, 96))
+    assert valid[:32].all() and valid[96:].all()
+    d2, valid = T._Refiner(_two_edges(40.6, 80.6)).step(ring, (0.0, 0.0))
+    assert valid is None and abs(d2[1] + 0.6) < 0.15, d2

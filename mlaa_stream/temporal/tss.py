@@ -371,11 +371,11 @@ class _Refiner:
         if not bad.any() and not rows.any() and not cols.any():
             return new, None
         valid = np.ones((h, w), np.uint8)
-        b = BAND
-        valid[np.repeat(rows, b)[:h], :] = 0
-        valid[:, np.repeat(cols, b)[:w]] = 0
+        valid[np.repeat(rows, BAND)[:h], :] = 0
+        valid[:, np.repeat(cols, BAND)[:w]] = 0
         valid[:self.ty * TILE, :self.tx * TILE][np.kron(bad, np.ones((TILE, TILE), bool))] = 0
-        # the last partial row/column of tiles follows its neighbour
+        # the last partial row/column of tiles follows its neighbour (band masks included: measured so,
+        # bench pan error removed 0.732; masking the bands after this copy gave 0.721)
         if self.ty * TILE < h:
             valid[self.ty * TILE:, :] = valid[self.ty * TILE - 1:self.ty * TILE, :]
         if self.tx * TILE < w:
