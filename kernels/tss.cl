@@ -18,7 +18,10 @@
 //            footprint; per cell: integer sum and count
 //   n    = filled cells, m = sum over filled cells, ascending, of (float)sum * (1 / count)
 //   out  = S + (m / n - S) min(1, n / FULL_CELLS) with S the spatial output's L, rounded to L and encoded
-//          (etab), where n >= MIN_CELLS; elsewhere the spatial pixel is copied bit for bit. cells[x] = n.
+//          (etab), where n >= MIN_CELLS; elsewhere the spatial pixel is copied bit for bit, and so it is
+//          where every channel of out is within DEAD (one 8-bit level: DEAD_CODES codes of an integer
+//          frame, 1/255 of a float one) of the spatial pixel's (docs/temporal.md: a dead zone against
+//          damage). cells[x] = n.
 // A gather: one tap per ring frame and pixel, no atomics.
 //
 // Buffers: ring = RING_SLOTS slots of height * TSS_PLANES * width ushorts; info = 4 ints per ring entry (slot, kind,
@@ -99,8 +102,8 @@ __kernel void tss_ingest(__global const PIXEL_T *src, __global ushort *ring, __g
 
 // The end of every resolve: pixel i's filled-cell count n and the sum m of its cells' means (L units)
 // give out = S + (m / n - S) min(1, n / FULL_CELLS) over the spatial output's L, S, rounded to L and
-// encoded; with fewer than MIN_CELLS cells the spatial pixel is copied bit for bit. Alpha stays the
-// spatial pixel's.
+// encoded; with fewer than MIN_CELLS cells, or an output within DEAD of the spatial pixel in every
+// channel, the spatial pixel is copied bit for bit. Alpha stays the spatial pixel's.
 inline void tss_store(__global const float *luts, __global const ushort *ltab, __global const PIXEL_T *etab,
                       __global const PIXEL_T *spatial, __global PIXEL_T *dst, __global uchar *cells,
                       int i, int n, float mr, float mg, float mb)
@@ -121,6 +124,8 @@ inline void tss_store(__global const float *luts, __global const ushort *ltab, _
     const float fn = (float)n;
     const float a = fn < (float)FULL_CELLS ? fn / (float)FULL_CELLS : 1.0f;
     const float mm[3] = {mr, mg, mb};
+    PIXEL_T ev[3];
+    int dead = 1;
     for (int c = 0; c < TSS_PLANES; ++c) {
         const float s = (float)tss_level(luts, ltab, spatial, i, c);
         float t = s + (mm[c] / fn - s) * a + 0.5f;
@@ -132,6 +137,22 @@ inline void tss_store(__global const float *luts, __global const ushort *ltab, _
 #else
         const PIXEL_T e = to_pixel(lut_read(luts + 2 * (LUT_SIZE + 1), (float)q * (1.0f / TSS_ONE)));
 #endif
+#if CHANNELS == 1
+        const PIXEL_T sv = sp[0];
+#elif ORDER_BGR
+        const PIXEL_T sv = sp[2 - c];
+#else
+        const PIXEL_T sv = sp[c];
+#endif
+#ifdef PIXEL_IS_FLOAT
+        dead &= fabs(e - sv) <= (1.0f / 255.0f);
+#else
+        dead &= abs((int)e - (int)sv) <= DEAD_CODES;
+#endif
+        ev[c] = e;
+    }
+    for (int c = 0; c < TSS_PLANES; ++c) {
+        const PIXEL_T e = dead ? (CHANNELS == 1 ? sp[0] : sp[ORDER_BGR ? 2 - c : c]) : ev[c];
 #if CHANNELS == 1
         d[0] = e;
 #elif ORDER_BGR

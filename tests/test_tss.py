@@ -196,3 +196,46 @@ def test_band_check_masks_a_second_motion_along_long_edges():
     assert valid[:32].all() and valid[96:].all()
     d2, valid = T._Refiner(_two_edges(40.6, 80.6)).step(ring, (0.0, 0.0))
     assert valid is None and abs(d2[1] + 0.6) < 0.15, d2
+
+
+def test_still_bands_leave_the_estimate_and_lose_their_samples():
+    """Known answer (_Refiner._band_weights): the upper edge moved 0.6 px, the lower one is still (a
+    static border over a pan). The first step averages the two (about -0.3); the still band (own motion
+    0 while the frame's is over 2 STATIC_TOL) then counts for nothing, so the translation converges to
+    the moving edge's -0.6 px, and the last step's band check masks the still band's rows (64-95: 0.6 px
+    off the frame) and keeps the moving one's (the tile check masks its 48-px tiles, rows 48-95, too)."""
+    from mlaa_stream.temporal import tss as T
+    assert T.BAND == 32 and T.STATIC_TOL > 0
+    ring = _two_edges(40.0, 80.0)
+    ref = T._Refiner(_two_edges(40.6, 80.0))
+    d, weights, valid = (0.0, 0.0), None, None
+    for k in range(3):
+        d, valid = ref.step(ring, d, check=k == 2, weights=weights)
+        weights = ref.band_weights
+    assert abs(d[1] + 0.6) < 0.1 and abs(d[0]) < 0.02, d
+    assert valid is not None
+    assert not valid[64:96].any()           # the still band (and the 48-px tiles holding it: rows 48-95)
+    assert valid[:48].all() and valid[96:].all()   # the moving edge's rows keep their samples
+
+
+@pytest.mark.parametrize("dtype,level", [(np.uint8, 1), (np.uint16, 257)])
+def test_dead_zone_keeps_the_spatial_pixel(stage_parts, dtype, level):
+    """Known answer: a flat input (code 100 levels) seen at 12 distinct sub-pixel phases resolves every
+    pixel to 100 levels. A spatial output one 8-bit level away is kept bit for bit (the dead zone); one
+    four levels away is replaced by the resolve's 100 (kernel and reference alike)."""
+    h, w = 24, 40
+    flat = np.full((h, w, 3), 100 * level, dtype)
+    ring = [(flat, (0.25 * (j % 4) + 0.1, 0.25 * (j // 4) + 0.1), None) for j in range(11)]
+    ring.append((flat, (0.0, 0.0), None))
+    for off, expect in ((1, 101), (4, 100)):
+        spatial = np.full((h, w, 3), (100 + off) * level, dtype)
+        ref, cells = tss_frame_reference(spatial, flat, ring, False)
+        inner = (slice(2, -2), slice(2, -2))     # the last row and column lose the far phases' samples
+        assert cells[inner].min() >= 9
+        tol = 0 if level == 1 else 2             # uint16: the 16-bit linear ring's rounding
+        assert (np.abs(ref[inner].astype(int) - expect * level) <= tol).all(), (off, np.unique(ref[inner]))
+        if off == 1:
+            assert np.array_equal(ref[inner], spatial[inner])
+        stage = TSSStage(frames=len(ring) + 1, bgr=False, context=stage_parts)
+        out, _ = _run_kernel(stage, flat, spatial, ring, False, 1)
+        assert np.array_equal(out, ref)
