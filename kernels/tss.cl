@@ -8,7 +8,9 @@
 // load of etab (integer frames: 65536 entries; float frames read the tables).
 //
 // Per output pixel x = (gx, gy) (pixel centres at integer coordinates):
-//   box  = the current frame's 3x3 per-plane min/max of L (edges replicated), widened by EPSQ
+//   box  = the current frame's 3x3 per-plane min/max of L (edges replicated), widened by EPSQ; where
+//          min == max in every plane (a flat neighbourhood: no aliasing to resolve, and on the bench no
+//          flat pixel ever changed) n = 0 and the spatial pixel stands: the kernels skip the ring
 //   for each ring frame j (the current frame included, identity map):
 //     p    = x + (dx_j, dy_j)                      translation map (tss_resolve_shift; info kind 0)
 //          = x + field_j(x), bilinear at 1/FS       dense map (tss_resolve, kind 1; NaN = no trusted motion)
@@ -187,6 +189,7 @@ __kernel void tss_resolve(__global const ushort *ring, __global const PIXEL_T *s
     const int x0 = gx > 0 ? gx - 1 : 0, x2 = gx < width - 1 ? gx + 1 : width - 1;
     const int y0 = gy > 0 ? gy - 1 : 0, y2 = gy < height - 1 ? gy + 1 : height - 1;
     int lo[3], hi[3];
+    int flat = 1;
     for (int c = 0; c < TSS_PLANES; ++c) {
         __global const ushort *pl = cur + c * width;
         int mn = 65536, mx = -1;
@@ -198,6 +201,11 @@ __kernel void tss_resolve(__global const ushort *ring, __global const PIXEL_T *s
             }
         lo[c] = mn - EPSQ;
         hi[c] = mx + EPSQ;
+        flat &= mn == mx;
+    }
+    if (flat) {
+        tss_store(luts, ltab, etab, spatial, dst, cells, i, 0, 0.0f, 0.0f, 0.0f);
+        return;
     }
 
     int sum[CELLS * 3];
@@ -329,6 +337,7 @@ __kernel void tss_resolve_shift(__global const ushort *ring, __global const PIXE
     const int y0 = gy > 0 ? gy - 1 : 0, y2 = gy < height - 1 ? gy + 1 : height - 1;
     int16 lo[TSS_PLANES], hi[TSS_PLANES], s[TSS_PLANES];
     float16 m[TSS_PLANES];
+    int16 flat = (int16)(-1);
     for (int c = 0; c < TSS_PLANES; ++c) {
         __global const ushort *pl = cur + c * width;
         int16 mn = (int16)(65536), mx = (int16)(-1);
@@ -344,6 +353,20 @@ __kernel void tss_resolve_shift(__global const ushort *ring, __global const PIXE
         hi[c] = mx + (int16)(EPSQ);
         s[c] = (int16)(0);
         m[c] = (float16)(0.0f);
+        flat &= mn == mx;
+    }
+    const int len = width - x0 < 16 ? width - x0 : 16;
+    {
+        // a group of 16 flat pixels (most of a frame with flat areas): no ring reads at all
+        __private const int *fl = (__private const int *)&flat;
+        int all_flat = 1;
+        for (int p = 0; p < len; ++p)
+            all_flat &= fl[p] != 0;
+        if (all_flat) {
+            for (int p = 0; p < len; ++p)
+                tss_store(luts, ltab, etab, spatial, dst, cells, gy * width + x0 + p, 0, 0.0f, 0.0f, 0.0f);
+            return;
+        }
     }
     int16 n = (int16)(0), cnt = (int16)(0);
     const int vy = gy / fs < fh - 1 ? gy / fs : fh - 1;
@@ -385,7 +408,7 @@ __kernel void tss_resolve_shift(__global const ushort *ring, __global const PIXE
             cnt = (int16)(0);
         }
     }
-    const int len = width - x0 < 16 ? width - x0 : 16;
+    n = n & ~flat;                          // flat pixels: n = 0, the spatial pixel stands
     __private const int *ne = (__private const int *)&n;
     __private const float *m0 = (__private const float *)&m[0];
 #if TSS_PLANES == 3

@@ -492,6 +492,7 @@ def tss_reference(spatial_q: np.ndarray, cur_q: np.ndarray, ring: list[tuple],
     epsq = eps_q(eps)
     lo = np.minimum.reduce(taps) - epsq
     hi = np.maximum.reduce(taps) + epsq
+    still = (lo == hi - 2 * epsq).all(-1)     # a flat 3x3 neighbourhood: n = 0, the spatial pixel stands
     g2 = grid * grid
     full_cells = FULL_CELLS if full_cells is None else full_cells
     sums = np.zeros((h, w, g2, 3), np.int64)
@@ -520,7 +521,7 @@ def tss_reference(spatial_q: np.ndarray, cur_q: np.ndarray, ring: list[tuple],
         sel = valid.ravel()
         sums.reshape(-1, g2, 3)[flat[sel], cell[sel]] += v.reshape(-1, 3)[sel]
         counts.reshape(-1, g2)[flat[sel], cell[sel]] += 1
-    n = (counts > 0).sum(-1)
+    n = np.where(still, 0, (counts > 0).sum(-1))
     m = np.zeros((h, w, 3), f32)
     for k in range(g2):     # cells in ascending order, each (float)sum * (1 / count), as the kernels add them
         c = counts[..., k]
@@ -771,7 +772,10 @@ class TSSStage:
         self._last = (grey, out)
         self.stats.append({"index": index, "model": fm.decision.model, "ring": len(fm.entries),
                            "flow_ms": (t1 - t0) * 1e3, "resolve_ms": (t2 - t1) * 1e3,
-                           "cells_mean": 1.0 if cells is None else float(cv2.mean(cells)[0]),
+                           # filled cells per pixel outside flat neighbourhoods (those have 0), and the
+                           # share of all pixels that took samples (n >= min_cells)
+                           "cells_mean": 1.0 if cells is None else float(cv2.mean(cells, (cells > 0).astype(np.uint8))[0]),
+                           "samples_share": 0.0 if cells is None else float(np.count_nonzero(cells >= self.min_cells)) / cells.size,
                            "translation": fm.decision.translation, **fm.decision.measures})
         if self.show == "history":
             c = np.ones(grey.shape, np.uint8) if cells is None else cells
