@@ -1,21 +1,26 @@
-// fallback.cl -- FXAA 3.11 (fxaa.cl, built into the same program) for the pixels the MLAA passes left,
-// where the frame shows 1-spp aliasing: the pass after blending (and bridging) in the default chain. It reads
-// the edge buffer of the MLAA passes (edges.cl): a pixel that borders no edge is neither counted nor changed.
+// fallback.cl -- FXAA 3.11 (fxaa.cl, built into the same program) for the edge pixels of 1-spp content: the
+// pass after blending (and bridging) in the default chain. It reads the edge buffer of the MLAA passes
+// (edges.cl): a pixel that borders no edge is neither counted nor changed.
 //
 // Why (beyond the seeds; SMAA and CMAA2 pair a line search with a local fallback in the same way): on
 // rendered frames a third of the input's error sits on edge pixels that no line of the MLAA search
 // covers -- short texture edges, foliage, outlines of lit surfaces -- and FXAA's local gradient blend
-// removes about 40 % of it there, while MLAA removes more than FXAA where it blends (docs/spatial_tuning.md,
-// FALLBACK_*). FXAA alone would blur text and photographs, so a pixel takes FALLBACK_WEIGHT of FXAA's
-// colour (linear light) only where
-//   - it borders an edge of the MLAA passes and they left it unchanged,
-//   - its tile of FALLBACK_TILE^2 pixels and the eight around it hold at least FALLBACK_MIN_CHANGED pixels
-//     that border an edge and that the MLAA passes changed (evidence of 1-spp aliasing nearby: antialiased content, photographs
-//     and flat regions have few), and
-//   - its 3x3 window holds at least FALLBACK_COLOURS distinct colours (equal: every channel within
-//     FALLBACK_SAME of full scale): flat-colour art -- text, UI boxes, vector drawings -- has fewer.
-// FALLBACK_MIN_CHANGED 0 and FALLBACK_COLOURS 0 drop the gates (Filter(fallback="everywhere"): frames known
-// to be 1-spp renders). Numpy reference: mlaa_stream.spatial.fallback.fallback_reference.
+// removes about 40 % of it there; where the MLAA passes blend, half of FXAA's colour on top of theirs removes
+// more than either alone (dense patterns: fences, foliage; docs/spatial_tuning.md, FALLBACK_*). FXAA alone
+// would blur text and photographs, so only eligible pixels change. A pixel is eligible where it borders an
+// edge of the MLAA passes, FXAA's contrast test passes, and its region (its tile of FALLBACK_TILE^2 pixels
+// and the eight around it) shows 1-spp aliasing:
+//   - either 1-spp content with shading or texture ("busy"): at least FALLBACK_RICH_MIN pixels that the
+//     MLAA passes changed and whose 3x3 window holds FALLBACK_COLOURS colours or more, and at least
+//     1 / FALLBACK_RICH_DIV of the region's edge-bordering pixels are such (photographs, antialiased text
+//     and wires have a few such pixels among many edges);
+//   - or, for pixels the MLAA passes left, at least FALLBACK_MIN_CHANGED changed edge-bordering pixels (any
+//     colours) and the pixel's own 3x3 window holds at least FALLBACK_COLOURS distinct colours (equal: every
+//     channel within FALLBACK_SAME of full scale): flat-colour art -- text, UI boxes, vector drawings -- has fewer.
+// An eligible pixel that the MLAA passes left takes FALLBACK_WEIGHT of FXAA's colour (linear light); one they
+// changed moves FALLBACK_MIX of the way from their colour to FXAA's.
+// FALLBACK_MIN_CHANGED 0 drops the region and colour tests (Filter(fallback="everywhere"): frames known to be
+// 1-spp renders). Numpy reference: mlaa_stream.spatial.fallback.fallback_reference.
 
 #ifndef FALLBACK_TILE
 #define FALLBACK_TILE 8
@@ -31,6 +36,15 @@
 #endif
 #ifndef FALLBACK_WEIGHT
 #define FALLBACK_WEIGHT 0.8f
+#endif
+#ifndef FALLBACK_MIX
+#define FALLBACK_MIX 0.5f
+#endif
+#ifndef FALLBACK_RICH_MIN
+#define FALLBACK_RICH_MIN 12
+#endif
+#ifndef FALLBACK_RICH_DIV
+#define FALLBACK_RICH_DIV 20
 #endif
 
 // Any stored channel (alpha included) of pixel i differs between a and b.
@@ -59,26 +73,6 @@ inline int group_is_quiet(__global const uchar *edges, int x, int y, int w)
     const int i = IDX(x, y, w);
     const ulong above = y > 0 ? edge_group(edges + i - w) & 0x0101010101010101UL : 0;
     return (edge_group(edges + i) | above) == 0 && !(x > 0 && (edges[i - 1] & EDGE_RIGHT));
-}
-
-// counts[ty * tiles_x + tx] = pixels of tile (tx, ty) that border an edge and that the MLAA passes changed
-// (dst != src). One work item per SEGMENT pixels (a multiple of FALLBACK_TILE) of a band of FALLBACK_TILE rows.
-__kernel void count_changed(__global const PIXEL_T *src, __global const PIXEL_T *dst,
-                            __global const uchar *edges, __global uchar *counts,
-                            const int w, const int h, const int tiles_x)
-{
-    const int x0 = get_global_id(0) * SEGMENT, ty = get_global_id(1), y0 = ty * FALLBACK_TILE;
-    if (x0 >= w || y0 >= h) return;
-    const int x1 = min(x0 + SEGMENT, w), y1 = min(y0 + FALLBACK_TILE, h);
-    for (int t0 = x0; t0 < x1; t0 += FALLBACK_TILE) {
-        const int t1 = min(t0 + FALLBACK_TILE, x1);
-        int n = 0;
-        for (int y = y0; y < y1; ++y)
-            if (!(t1 - t0 == 8 && group_is_quiet(edges, t0, y, w)))
-                for (int x = t0; x < t1; ++x)
-                    n += borders_edge(edges, x, y, w) && px_differs(src, dst, IDX(x, y, w));
-        counts[ty * tiles_x + t0 / FALLBACK_TILE] = (uchar)n;
-    }
 }
 
 // Two stored pixels are one colour: every colour channel within FALLBACK_SAME of full scale (integer
@@ -129,6 +123,78 @@ RARELY_CALLED int window_has_colours(__global const PIXEL_T *src, int x, int y, 
     return 0;
 }
 
+// The 3x3 window of (x, y), clamped at the frame's edge, holds at most two bit-identical colours: the edges of
+// flat-colour art, most windows the colour count sees, settled with eight comparisons (then it cannot hold
+// FALLBACK_COLOURS >= 3 colours).
+RARELY_CALLED int window_two_colours(__global const PIXEL_T *src, int x, int y, int w, int h)
+{
+    const int x0 = x > 0 ? x - 1 : 0, x2 = x < w - 1 ? x + 1 : w - 1;
+    const int r0 = (y > 0 ? y - 1 : 0) * w, r1 = y * w, r2 = (y < h - 1 ? y + 1 : h - 1) * w;
+    const int idx[9] = {r0 + x0, r0 + x, r0 + x2, r1 + x0, r1 + x, r1 + x2, r2 + x0, r2 + x, r2 + x2};
+#ifdef PIXEL_IS_FLOAT
+    int second = -1;
+    for (int k = 0; k < 9; ++k) {
+        if (same_px(src, idx[k], idx[4])) continue;
+        if (second < 0) second = idx[k];
+        else if (!same_px(src, idx[k], second)) return 0;
+    }
+    return 1;
+#else
+    ulong key[9];
+    for (int k = 0; k < 9; ++k) {
+        __global const PIXEL_T *p = src + (size_t)idx[k] * CHANNELS;
+#if CHANNELS == 1
+        key[k] = p[0];
+#else
+        key[k] = (ulong)p[0] | (ulong)p[1] << 16 | (ulong)p[2] << 32;
+#endif
+    }
+    const ulong a = key[4];
+    ulong b = a;
+    for (int k = 0; k < 9; ++k) b = b == a ? key[k] : b;
+    int two = 1;
+    for (int k = 0; k < 9; ++k) two &= (key[k] == a) | (key[k] == b);
+    return two;
+#endif
+}
+
+// The 3x3 window is busy: at least FALLBACK_COLOURS colours (window_has_colours), the quick test first.
+#if FALLBACK_COLOURS >= 3
+#define WINDOW_BUSY(src, x, y, w, h) (!window_two_colours(src, x, y, w, h) && window_has_colours(src, x, y, w, h))
+#else
+#define WINDOW_BUSY(src, x, y, w, h) window_has_colours(src, x, y, w, h)
+#endif
+
+// Three counts per tile (tx, ty), at counts[3 * (ty * tiles_x + tx) + k]: k = 0 its pixels that border an edge
+// and that the MLAA passes changed (dst != src), k = 1 its pixels that border an edge, k = 2 the changed ones
+// whose 3x3 window is busy (window_has_colours). One work item per SEGMENT pixels (a multiple of
+// FALLBACK_TILE) of a band of FALLBACK_TILE rows.
+__kernel void count_changed(__global const PIXEL_T *src, __global const PIXEL_T *dst,
+                            __global const uchar *edges, __global uchar *counts,
+                            const int w, const int h, const int tiles_x)
+{
+    const int x0 = get_global_id(0) * SEGMENT, ty = get_global_id(1), y0 = ty * FALLBACK_TILE;
+    if (x0 >= w || y0 >= h) return;
+    const int x1 = min(x0 + SEGMENT, w), y1 = min(y0 + FALLBACK_TILE, h);
+    for (int t0 = x0; t0 < x1; t0 += FALLBACK_TILE) {
+        const int t1 = min(t0 + FALLBACK_TILE, x1);
+        int changed = 0, bordering = 0, busy = 0;
+        for (int y = y0; y < y1; ++y)
+            if (!(t1 - t0 == 8 && group_is_quiet(edges, t0, y, w)))
+                for (int x = t0; x < t1; ++x) {
+                    if (!borders_edge(edges, x, y, w)) continue;
+                    ++bordering;
+                    if (!px_differs(src, dst, IDX(x, y, w))) continue;
+                    ++changed;
+                    busy += WINDOW_BUSY(src, x, y, w, h);
+                }
+        __global uchar *c = counts + 3 * (ty * tiles_x + t0 / FALLBACK_TILE);
+        c[0] = (uchar)changed;
+        c[1] = (uchar)bordering;
+        c[2] = (uchar)busy;
+    }
+}
+
 // FXAA's colour for pixel i mixed FALLBACK_WEIGHT of the way from the source's, stored in dst where FXAA
 // changes the pixel (out of line: FXAA's search is long and few pixels get here).
 RARELY_CALLED void fallback_pixel(__global const PIXEL_T *src, __global const float *luts, __global PIXEL_T *dst,
@@ -143,31 +209,54 @@ RARELY_CALLED void fallback_pixel(__global const PIXEL_T *src, __global const fl
     store_px(dst, i, c);
 }
 
-// Tile (tx, ty): nothing to do unless the 3x3 tiles around it hold FALLBACK_MIN_CHANGED changed pixels; then
-// each pixel that borders an edge, was left by the MLAA passes, has a busy window and that FXAA would change
-// moves FALLBACK_WEIGHT of the way to FXAA's colour.
+// ... and where the MLAA passes changed pixel i, FALLBACK_MIX of the way from their colour to FXAA's.
+RARELY_CALLED void mix_pixel(__global const PIXEL_T *src, __global const float *luts, __global PIXEL_T *dst,
+                             int x, int y, int w, int h)
+{
+    float3 f;
+    if (!fxaa_pixel(src, luts, x, y, w, h, &f)) return;
+    const int i = IDX(x, y, w);
+    float4 c = load_px(dst, i);
+    float3 m = blend_rgb(dst, luts, x, y, w, h);
+    c.xyz = fxaa_encode(luts, m + FALLBACK_MIX * (f - m));
+    store_px(dst, i, c);
+}
+
+// Tile (tx, ty): nothing to do unless the 3x3 tiles around it show 1-spp aliasing (busy, or evidence and the
+// pixel's own window busy); then each eligible pixel that FXAA would change takes its colour (fallback_pixel,
+// mix_pixel).
 inline void fallback_tile(__global const PIXEL_T *src, __global const float *luts, __global const uchar *edges,
                           __global const uchar *counts, __global PIXEL_T *dst, int w, int h, int tiles_x,
                           int tiles_y, int tx, int ty)
 {
 #if FALLBACK_MIN_CHANGED > 0
-    int changed = 0;
+    int changed = 0, bordering = 0, busy_changed = 0;
     for (int j = max(ty - 1, 0); j <= min(ty + 1, tiles_y - 1); ++j)
-        for (int k = max(tx - 1, 0); k <= min(tx + 1, tiles_x - 1); ++k)
-            changed += counts[j * tiles_x + k];
-    if (changed < FALLBACK_MIN_CHANGED) return;
+        for (int k = max(tx - 1, 0); k <= min(tx + 1, tiles_x - 1); ++k) {
+            __global const uchar *c = counts + 3 * (j * tiles_x + k);
+            changed += c[0];
+            bordering += c[1];
+            busy_changed += c[2];
+        }
+    const int busy = busy_changed >= FALLBACK_RICH_MIN && busy_changed * FALLBACK_RICH_DIV >= bordering;
+    if (!busy && changed < FALLBACK_MIN_CHANGED) return;
 #endif
     const int x0 = tx * FALLBACK_TILE, y0 = ty * FALLBACK_TILE;
     const int x1 = min(x0 + FALLBACK_TILE, w), y1 = min(y0 + FALLBACK_TILE, h);
     for (int y = y0; y < y1; ++y) {
         if (x1 - x0 == 8 && group_is_quiet(edges, x0, y, w)) continue;
         for (int x = x0; x < x1; ++x) {
-            const int i = IDX(x, y, w);
-            if (!borders_edge(edges, x, y, w) || px_differs(src, dst, i)) continue;
-#if FALLBACK_COLOURS > 0
-            if (!window_has_colours(src, x, y, w, h)) continue;   // flat-colour art: most pixels stop here
+            if (!borders_edge(edges, x, y, w)) continue;
+            const int changed_px = px_differs(src, dst, IDX(x, y, w));
+#if FALLBACK_MIN_CHANGED > 0
+            // outside busy regions only pixels MLAA left, and only in busy windows (flat-colour art stops here)
+            if (!busy && (changed_px || !WINDOW_BUSY(src, x, y, w, h))) continue;
 #endif
-            if (!fxaa_keeps(src, x, y, w, h)) fallback_pixel(src, luts, dst, x, y, w, h);
+            if (fxaa_keeps(src, x, y, w, h)) continue;
+            if (changed_px)
+                mix_pixel(src, luts, dst, x, y, w, h);
+            else
+                fallback_pixel(src, luts, dst, x, y, w, h);
         }
     }
 }

@@ -5,7 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mlaa_stream.spatial.fallback import FALLBACK_TILE, fallback_reference
+from mlaa_stream.device.colour import linear_to_srgb, srgb_to_linear
+from mlaa_stream.spatial.fallback import FALLBACK_MIX, FALLBACK_TILE, FALLBACK_WEIGHT, fallback_reference
+from mlaa_stream.spatial.fxaa import fxaa_mix_reference
 from mlaa_stream.spatial.filter import Filter
 
 
@@ -61,16 +63,27 @@ def test_kernel_matches_reference(mode, dtype, channels, bgr):
         np.testing.assert_array_equal(got, want)
 
 
-def test_only_pixels_mlaa_left_are_touched():
-    """The fallback never overwrites a pixel that the MLAA passes changed, and never touches a pixel whose
-    tile neighbourhood holds fewer than FALLBACK_MIN_CHANGED changed pixels."""
+def test_only_edge_pixels_change_and_mlaa_blends_move_half_way():
+    """Known answer: the pass changes only pixels that border an MLAA edge; a pixel the MLAA passes left takes
+    FALLBACK_WEIGHT of FXAA's colour from the source's, one they changed FALLBACK_MIX of the way from theirs,
+    in linear light (both within one level of rounding of the formula applied to FXAA 3.11's colour)."""
     frame = textured_aliased(12)
     with Filter() as f, Filter(fallback="off") as g:
-        got, mlaa = f.process(frame), g.process(frame)
+        got, passes = f.process(frame), g.intermediates(frame)
+    mlaa, e = passes["out"], passes["edges"]
+    borders = e != 0
+    borders[1:] |= (e[:-1] & 1) > 0
+    borders[:, 1:] |= (e[:, :-1] & 2) > 0
     by_mlaa = np.any(mlaa != frame, -1)
     by_fallback = np.any(got != mlaa, -1)
-    assert by_fallback.sum() > 20
-    assert not np.any(by_fallback & by_mlaa)
+    assert (by_fallback & by_mlaa).sum() > 20 and (by_fallback & ~by_mlaa).sum() > 20
+    assert not np.any(by_fallback & ~borders)
+    _, fx = fxaa_mix_reference(frame)  # linear RGB
+    for share, start, where in ((FALLBACK_WEIGHT, frame, ~by_mlaa), (FALLBACK_MIX, mlaa, by_mlaa)):
+        m = srgb_to_linear(start.astype(np.float64) / 255)
+        want = 255 * linear_to_srgb(m + share * (fx - m))
+        sel = by_fallback & where
+        assert np.abs(got[sel] - want[sel]).max() <= 1.0
 
 
 def test_flat_colour_art_is_left_to_mlaa():

@@ -15,19 +15,24 @@ from mlaa_stream.spatial.fxaa import _MAX, fxaa_defines, fxaa_mix_reference
 
 SEGMENT = 64  # pixels of a tile band per work item of count_changed (a multiple of FALLBACK_TILE)
 
-# Tiles of FALLBACK_TILE^2 pixels; a pixel is eligible where its tile and the eight around it hold at least
-# FALLBACK_MIN_CHANGED pixels that MLAA changed, and its 3x3 window at least FALLBACK_COLOURS colours
-# (equal within FALLBACK_SAME / 255 of full scale per channel). It takes FALLBACK_WEIGHT of FXAA's colour.
+# Tiles of FALLBACK_TILE^2 pixels; a pixel's region is its tile and the eight around it. A pixel is eligible where
+# it borders an edge and its region is busy 1-spp content -- at least FALLBACK_RICH_MIN pixels that MLAA changed
+# and whose 3x3 window holds FALLBACK_COLOURS colours or more (equal within FALLBACK_SAME / 255 of full scale per
+# channel), and at least 1 / FALLBACK_RICH_DIV of the region's edge-bordering pixels -- or, if MLAA left it, where
+# its region holds FALLBACK_MIN_CHANGED pixels that MLAA changed and its own window FALLBACK_COLOURS colours. A pixel MLAA left
+# takes FALLBACK_WEIGHT of FXAA's colour, one it changed moves FALLBACK_MIX of the way from MLAA's to FXAA's.
 FALLBACK_TILE, FALLBACK_MIN_CHANGED, FALLBACK_COLOURS, FALLBACK_SAME, FALLBACK_WEIGHT = 8, 24, 4, 2.5, 0.8
+FALLBACK_RICH_MIN, FALLBACK_RICH_DIV, FALLBACK_MIX = 12, 20, 0.5
 
 def fallback_defines(fmt: FrameFormat, linear: bool, linear_input: bool, everywhere: bool = False) -> dict:
     """Defines for kernels/fallback.cl (FXAA's own at the shader's defaults, plus FALLBACK_*); `everywhere`
-    drops both gates (the aliasing evidence and the colour count)."""
+    drops the region and colour tests: every edge-bordering pixel is eligible."""
     return {**fxaa_defines(fmt, linear=linear, linear_input=linear_input), "SEGMENT": SEGMENT,
             "FALLBACK_TILE": FALLBACK_TILE, "FALLBACK_MIN_CHANGED": 0 if everywhere else FALLBACK_MIN_CHANGED,
             "FALLBACK_COLOURS": 0 if everywhere else FALLBACK_COLOURS, "FALLBACK_SAME": float(FALLBACK_SAME / 255.0),
             "FALLBACK_SAME_LEVELS": int(np.floor(FALLBACK_SAME / 255.0 * _MAX[np.dtype(fmt.dtype)])),
-            "FALLBACK_WEIGHT": float(FALLBACK_WEIGHT)}
+            "FALLBACK_WEIGHT": float(FALLBACK_WEIGHT), "FALLBACK_MIX": float(FALLBACK_MIX),
+            "FALLBACK_RICH_MIN": FALLBACK_RICH_MIN, "FALLBACK_RICH_DIV": FALLBACK_RICH_DIV}
 
 
 class FallbackPass:
@@ -37,10 +42,11 @@ class FallbackPass:
                  everywhere: bool = False):
         defs = fallback_defines(fmt, linear, linear_input, everywhere)
         self.fmt = fmt
+        self.everywhere = everywhere
         self.tiles = (-(-fmt.width // FALLBACK_TILE), -(-fmt.height // FALLBACK_TILE))
         self._count = context.kernel("fallback", "count_changed", defs)
         self._fxaa = context.kernel("fallback", "fxaa_fallback", defs)
-        self._counts = context.buffer(self.tiles[0] * self.tiles[1])  # changed pixels per tile
+        self._counts = context.buffer(3 * self.tiles[0] * self.tiles[1])  # count_changed's three per tile
 
     def device_bytes(self) -> int:
         return self._counts.size
@@ -50,11 +56,12 @@ class FallbackPass:
         dst holds the result."""
         W, H = np.int32(self.fmt.width), np.int32(self.fmt.height)
         tx, ty = np.int32(self.tiles[0]), np.int32(self.tiles[1])
-        events["fallback_count"] = self._count(queue, (-(-self.fmt.width // SEGMENT), self.tiles[1]), None,
-                                               src, dst, edges, self._counts, W, H, tx, wait_for=wait_for)
+        if not self.everywhere:  # "everywhere" reads no counts
+            events["fallback_count"] = self._count(queue, (-(-self.fmt.width // SEGMENT), self.tiles[1]), None,
+                                                   src, dst, edges, self._counts, W, H, tx, wait_for=wait_for)
+            wait_for = [events["fallback_count"]]
         events["fallback"] = self._fxaa(queue, (-(-self.fmt.width // SEGMENT), self.tiles[1]), None,
-                                        src, luts, edges, self._counts, dst, W, H, tx, ty,
-                                        wait_for=[events["fallback_count"]])
+                                        src, luts, edges, self._counts, dst, W, H, tx, ty, wait_for=wait_for)
         return events["fallback"]
 
 
@@ -77,44 +84,67 @@ def fallback_reference(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray,
                        linear_input: bool = False, bgr: bool = False, everywhere: bool = False) -> np.ndarray:
     """What kernels/fallback.cl makes of `mlaa_out`, the MLAA passes' output of `src` with edge buffer
     `edges` ((h, w) uint8, EDGE_BOTTOM 1 | EDGE_RIGHT 2), in numpy."""
-    min_changed, colours = (0, 0) if everywhere else (FALLBACK_MIN_CHANGED, FALLBACK_COLOURS)
     fmt = frame_format(src, bgr)
     f32 = np.float32
     pmax = f32(_MAX[fmt.dtype])
     h, w, ch = fmt.height, fmt.width, fmt.channels
     a = np.asarray(src).reshape(h, w, ch)
-    out = np.asarray(mlaa_out).reshape(h, w, ch).copy()
+    mlaa = np.asarray(mlaa_out).reshape(h, w, ch)
+    out = mlaa.copy()
     e = np.asarray(edges)
     borders = e != 0
     borders[1:] |= (e[:-1] & 1) > 0
     borders[:, 1:] |= (e[:, :-1] & 2) > 0
-    changed = np.any(a != out, -1)
-    t = FALLBACK_TILE
-    th, tw = -(-h // t), -(-w // t)
-    tiles = np.zeros((th * t, tw * t), np.int32)
-    tiles[:h, :w] = changed & borders
-    tiles = tiles.reshape(th, t, tw, t).sum((1, 3))
-    pad = np.pad(tiles, 1)
-    busy = sum(pad[dy:dy + th, dx:dx + tw] for dy in range(3) for dx in range(3)) >= min_changed
-    busy = np.repeat(np.repeat(busy, t, 0), t, 1)[:h, :w]
+    changed = np.any(a != mlaa, -1)
     norm = a.astype(f32) * (f32(1.0) / pmax)
     rgb = np.repeat(norm[..., :1], 3, -1) if ch == 1 else norm[..., :3]
     rgb = rgb[..., ::-1] if fmt.bgr else rgb
+    if everywhere:
+        eligible = borders
+    else:
+        t = FALLBACK_TILE
+        th, tw = -(-h // t), -(-w // t)
+
+        def region_sums(mask: np.ndarray) -> np.ndarray:  # per pixel: the mask's count over its 3x3 tiles
+            tiles = np.zeros((th * t, tw * t), np.int32)
+            tiles[:h, :w] = mask
+            pad = np.pad(tiles.reshape(th, t, tw, t).sum((1, 3)), 1)
+            s3 = sum(pad[dy:dy + th, dx:dx + tw] for dy in range(3) for dx in range(3))
+            return np.repeat(np.repeat(s3, t, 0), t, 1)[:h, :w]
+
+        busy_window = _window_colours(rgb) >= FALLBACK_COLOURS
+        busy_changed = region_sums(changed & borders & busy_window)
+        busy = (busy_changed >= FALLBACK_RICH_MIN) & (busy_changed * FALLBACK_RICH_DIV >= region_sums(borders))
+        evidence = region_sums(changed & borders) >= FALLBACK_MIN_CHANGED
+        eligible = borders & (busy | (evidence & busy_window & ~changed))
     early, fx = fxaa_mix_reference(src, linear=linear, linear_input=linear_input, bgr=bgr)
-    take = busy & borders & ~changed & ~early & (_window_colours(rgb) >= colours)
+    eligible &= ~early
     decode = linear and not linear_input
     luts = device_luts()
-    m = lut_read(luts, rgb).astype(f32) if decode else rgb
-    c = m + f32(FALLBACK_WEIGHT) * (fx - m)
-    if decode:
-        c = lut_read(luts[2 * (LUT_SIZE + 1):], c).astype(f32)
-    c = c[..., ::-1] if fmt.bgr else c
-    new = norm.copy()
-    if ch == 1:
-        new[..., 0] = c[..., 0]
-    else:
-        new[..., :3] = c
-    if fmt.dtype != np.float32:
-        new = np.clip(np.rint(new * pmax), 0, pmax)
-    out[take] = new.astype(out.dtype)[take]
+
+    def mix_space(stored: np.ndarray) -> np.ndarray:  # (h, w, ch) stored -> RGB in mix space
+        n = stored.astype(f32) * (f32(1.0) / pmax)
+        c = np.repeat(n[..., :1], 3, -1) if ch == 1 else n[..., :3]
+        c = c[..., ::-1] if fmt.bgr else c
+        return lut_read(luts, c).astype(f32) if decode else c
+
+    def stored(c: np.ndarray, like: np.ndarray) -> np.ndarray:  # mix-space RGB -> stored pixels over `like`
+        if decode:
+            c = lut_read(luts[2 * (LUT_SIZE + 1):], c).astype(f32)
+        c = c[..., ::-1] if fmt.bgr else c
+        new = like.astype(f32) * (f32(1.0) / pmax)
+        if ch == 1:
+            new[..., 0] = c[..., 0]
+        else:
+            new[..., :3] = c
+        if fmt.dtype != np.float32:
+            new = np.clip(np.rint(new * pmax), 0, pmax)
+        return new.astype(out.dtype)
+
+    m = mix_space(a)
+    left = stored(m + f32(FALLBACK_WEIGHT) * (fx - m), a)
+    m = mix_space(mlaa)
+    mixed = stored(m + f32(FALLBACK_MIX) * (fx - m), mlaa)
+    out[eligible & ~changed] = left[eligible & ~changed]
+    out[eligible & changed] = mixed[eligible & changed]
     return out.reshape(np.asarray(mlaa_out).shape)
