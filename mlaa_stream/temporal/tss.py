@@ -28,14 +28,19 @@ Resolve (per output pixel x; `tss_reference` is the plain statement, kernels/tss
         out = S (the spatial pixel, bit for bit)                         otherwise
     with S the spatial output's L, rounded to L and encoded by table (`encode_table`); so static
     content and integer-pixel motion (every sample in one cell) return the spatial output exactly, and
-    a pan that fills the cells converges toward the box-filtered truth.
+    a pan that fills the cells converges toward the box-filtered truth;
+  - the spatial pixel also stands where the current frame's 3x3 is flat in every plane (n = 0: no
+    aliasing to resolve; the kernels read no ring there) and where the result is within one 8-bit level
+    of it in every channel (`within_dead_zone`: rounding-size moves only added damage).
 
 Motion (host, per frame; `MotionRing`): the per-frame decision of stage.choose_model (reset at a cut or
 an index jump or a size change, static, global translation, dense DIS flow). Global: each ring frame's
 translation is the previous one composed with this frame's, then refined *directly* against the
 current frame by sparse Gauss-Newton (`_Refiner`: the current frame's largest gradients on the flow-size
 grey, the ring frame's blurred grey kept): chaining alone drifts (issue 16: 0.09 px after 16 frames
-against 0.016 direct). Dense: DIS flow
+against 0.016 direct). Row and column bands test the translation along long edges (`_Refiner._bands`:
+a band whose own 1-D step departs from the frame's takes no samples from that ring frame) and still
+bands leave the estimate (`_Refiner._band_weights`): docs/temporal.md, "Never worse". Dense: DIS flow
 current -> previous composed with each ring frame's field (remap), forward-backward checked; the
 inconsistent pixels are NaN and stay so in every older field (nothing of theirs is trusted).
 """
