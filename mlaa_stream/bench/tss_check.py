@@ -6,7 +6,8 @@ Runs the bench's animated scenes (mlaa_stream.yardstick.scenes, the same frames 
 through the spatial filter alone and through the filter + TSSStage, and prints per scene: error removed,
 damage away from edges (levels), temporal error, flicker energy, FLIP as the mean over **all** frames (the
 bench's FLIP column scores frame 0 only, which a temporal stage returns unchanged), the share of pixels
-whose output differs from the spatial output, and the motion model of each frame (r reset, s static,
+whose output differs from the spatial output, the share that took samples (stats "samples_share": at
+least MIN_CELLS filled cells; mean over frames), and the motion model of each frame (r reset, s static,
 g global, d dense). A scene is "worse" when TSS loses in error removed, damage or all-frame FLIP.
 --tss-set sets a module constant of mlaa_stream.temporal.tss for the run (e.g. BAND_TOL=1e9).
 """
@@ -44,7 +45,7 @@ def main(argv: list[str] | None = None) -> int:
     with Filter(args.device, bgr=False) as filt:
         print(f"device: {filt.device_name}; FLIP {'over all frames' if with_flip else 'not installed'}")
         print(f"{'scene':16s} {'method':8s} {'err.rem':>8s} {'damage':>8s} {'temp.err':>9s} {'flicker':>8s} "
-              f"{'FLIP all':>9s} {'changed':>8s}  models")
+              f"{'FLIP all':>9s} {'changed':>8s} {'sampled':>8s}  models")
         for s in scenes:
             spatial = np.stack([filt.process(f) for f in s.inputs])
             stage = T.TSSStage(context=filt.context, bgr=False)
@@ -53,7 +54,8 @@ def main(argv: list[str] | None = None) -> int:
             a, b = scene_scores(spatial, s, with_flip), scene_scores(outs, s, with_flip)
             changed = float(np.mean(np.any((outs != spatial).reshape(outs.shape[:3] + (-1,)), -1)))
             models = "".join(r["model"][0] for r in stage.stats)
-            for name, r, extra in (("mlaa", a, ""), ("tss", b, f"{changed:8.3f}  {models}")):
+            sampled = float(np.mean([r.get("samples_share", float("nan")) for r in stage.stats]))
+            for name, r, extra in (("mlaa", a, ""), ("tss", b, f"{changed:8.3f} {sampled:8.3f}  {models}")):
                 print(f"{s.name:16s} {name:8s} {r['error_removed']:8.3f} {r['damage']:8.4f} "
                       f"{r['temporal_error']:9.3f} {r['flicker']:8.3f} {r['flip_all']:9.5f} {extra}")
             if (b["error_removed"] < a["error_removed"] or b["damage"] > a["damage"]
