@@ -8,7 +8,9 @@
 // load of etab (integer frames: 65536 entries; float frames read the tables).
 //
 // Per output pixel x = (gx, gy) (pixel centres at integer coordinates):
-//   box  = the current frame's 3x3 per-plane min/max of L (edges replicated), widened by EPSQ
+//   box  = the current frame's 3x3 per-plane min/max of L (edges replicated), widened by EPSQ; where
+//          min == max in every plane (a flat neighbourhood: no aliasing to resolve, and on the bench no
+//          flat pixel ever changed) n = 0 and the spatial pixel stands: the kernels skip the ring
 //   for each ring frame j (the current frame included, identity map):
 //     p    = x + (dx_j, dy_j)                      translation map (tss_resolve_shift; info kind 0)
 //          = x + field_j(x), bilinear at 1/FS       dense map (tss_resolve, kind 1; NaN = no trusted motion)
@@ -18,7 +20,10 @@
 //            footprint; per cell: integer sum and count
 //   n    = filled cells, m = sum over filled cells, ascending, of (float)sum * (1 / count)
 //   out  = S + (m / n - S) min(1, n / FULL_CELLS) with S the spatial output's L, rounded to L and encoded
-//          (etab), where n >= MIN_CELLS; elsewhere the spatial pixel is copied bit for bit. cells[x] = n.
+//          (etab), where n >= MIN_CELLS; elsewhere the spatial pixel is copied bit for bit, and so it is
+//          where every channel of out is within DEAD (one 8-bit level: DEAD_CODES codes of an integer
+//          frame, 1/255 of a float one) of the spatial pixel's (docs/temporal.md: a dead zone against
+//          damage). cells[x] = n.
 // A gather: one tap per ring frame and pixel, no atomics.
 //
 // Buffers: ring = RING_SLOTS slots of height * TSS_PLANES * width ushorts; info = 4 ints per ring entry (slot, kind,
@@ -99,8 +104,8 @@ __kernel void tss_ingest(__global const PIXEL_T *src, __global ushort *ring, __g
 
 // The end of every resolve: pixel i's filled-cell count n and the sum m of its cells' means (L units)
 // give out = S + (m / n - S) min(1, n / FULL_CELLS) over the spatial output's L, S, rounded to L and
-// encoded; with fewer than MIN_CELLS cells the spatial pixel is copied bit for bit. Alpha stays the
-// spatial pixel's.
+// encoded; with fewer than MIN_CELLS cells, or an output within DEAD of the spatial pixel in every
+// channel, the spatial pixel is copied bit for bit. Alpha stays the spatial pixel's.
 inline void tss_store(__global const float *luts, __global const ushort *ltab, __global const PIXEL_T *etab,
                       __global const PIXEL_T *spatial, __global PIXEL_T *dst, __global uchar *cells,
                       int i, int n, float mr, float mg, float mb)
@@ -121,6 +126,8 @@ inline void tss_store(__global const float *luts, __global const ushort *ltab, _
     const float fn = (float)n;
     const float a = fn < (float)FULL_CELLS ? fn / (float)FULL_CELLS : 1.0f;
     const float mm[3] = {mr, mg, mb};
+    PIXEL_T ev[3];
+    int dead = 1;
     for (int c = 0; c < TSS_PLANES; ++c) {
         const float s = (float)tss_level(luts, ltab, spatial, i, c);
         float t = s + (mm[c] / fn - s) * a + 0.5f;
@@ -132,6 +139,22 @@ inline void tss_store(__global const float *luts, __global const ushort *ltab, _
 #else
         const PIXEL_T e = to_pixel(lut_read(luts + 2 * (LUT_SIZE + 1), (float)q * (1.0f / TSS_ONE)));
 #endif
+#if CHANNELS == 1
+        const PIXEL_T sv = sp[0];
+#elif ORDER_BGR
+        const PIXEL_T sv = sp[2 - c];
+#else
+        const PIXEL_T sv = sp[c];
+#endif
+#ifdef PIXEL_IS_FLOAT
+        dead &= fabs(e - sv) <= (1.0f / 255.0f);
+#else
+        dead &= abs((int)e - (int)sv) <= DEAD_CODES;
+#endif
+        ev[c] = e;
+    }
+    for (int c = 0; c < TSS_PLANES; ++c) {
+        const PIXEL_T e = dead ? (CHANNELS == 1 ? sp[0] : sp[ORDER_BGR ? 2 - c : c]) : ev[c];
 #if CHANNELS == 1
         d[0] = e;
 #elif ORDER_BGR
@@ -166,6 +189,7 @@ __kernel void tss_resolve(__global const ushort *ring, __global const PIXEL_T *s
     const int x0 = gx > 0 ? gx - 1 : 0, x2 = gx < width - 1 ? gx + 1 : width - 1;
     const int y0 = gy > 0 ? gy - 1 : 0, y2 = gy < height - 1 ? gy + 1 : height - 1;
     int lo[3], hi[3];
+    int flat = 1;
     for (int c = 0; c < TSS_PLANES; ++c) {
         __global const ushort *pl = cur + c * width;
         int mn = 65536, mx = -1;
@@ -177,6 +201,11 @@ __kernel void tss_resolve(__global const ushort *ring, __global const PIXEL_T *s
             }
         lo[c] = mn - EPSQ;
         hi[c] = mx + EPSQ;
+        flat &= mn == mx;
+    }
+    if (flat) {
+        tss_store(luts, ltab, etab, spatial, dst, cells, i, 0, 0.0f, 0.0f, 0.0f);
+        return;
     }
 
     int sum[CELLS * 3];
@@ -308,6 +337,7 @@ __kernel void tss_resolve_shift(__global const ushort *ring, __global const PIXE
     const int y0 = gy > 0 ? gy - 1 : 0, y2 = gy < height - 1 ? gy + 1 : height - 1;
     int16 lo[TSS_PLANES], hi[TSS_PLANES], s[TSS_PLANES];
     float16 m[TSS_PLANES];
+    int16 flat = (int16)(-1);
     for (int c = 0; c < TSS_PLANES; ++c) {
         __global const ushort *pl = cur + c * width;
         int16 mn = (int16)(65536), mx = (int16)(-1);
@@ -323,6 +353,20 @@ __kernel void tss_resolve_shift(__global const ushort *ring, __global const PIXE
         hi[c] = mx + (int16)(EPSQ);
         s[c] = (int16)(0);
         m[c] = (float16)(0.0f);
+        flat &= mn == mx;
+    }
+    const int len = width - x0 < 16 ? width - x0 : 16;
+    {
+        // a group of 16 flat pixels (most of a frame with flat areas): no ring reads at all
+        __private const int *fl = (__private const int *)&flat;
+        int all_flat = 1;
+        for (int p = 0; p < len; ++p)
+            all_flat &= fl[p] != 0;
+        if (all_flat) {
+            for (int p = 0; p < len; ++p)
+                tss_store(luts, ltab, etab, spatial, dst, cells, gy * width + x0 + p, 0, 0.0f, 0.0f, 0.0f);
+            return;
+        }
     }
     int16 n = (int16)(0), cnt = (int16)(0);
     const int vy = gy / fs < fh - 1 ? gy / fs : fh - 1;
@@ -364,7 +408,7 @@ __kernel void tss_resolve_shift(__global const ushort *ring, __global const PIXE
             cnt = (int16)(0);
         }
     }
-    const int len = width - x0 < 16 ? width - x0 : 16;
+    n = n & ~flat;                          // flat pixels: n = 0, the spatial pixel stands
     __private const int *ne = (__private const int *)&n;
     __private const float *m0 = (__private const float *)&m[0];
 #if TSS_PLANES == 3

@@ -164,3 +164,105 @@ def test_numpy_backend_is_the_reference(filt):
     a, b = TSSStage(bgr=False), TSSStage(bgr=False, backend="numpy")
     for i, (f, s) in enumerate(zip(sc.inputs, spatial)):
         assert np.array_equal(a(f, s, i), b(f, s, i))
+
+
+def _two_edges(y_top: float, y_bottom: float, w: int = 240, h: int = 144) -> np.ndarray:
+    """Grey float32 frame (blurred as the refiner reads it): two long horizontal edges of equal contrast
+    at y_top and y_bottom (sub-pixel positions, by area coverage of the row they cross), plus static
+    vertical edges every 32 px (added, so the gradients stay separable) that fix the horizontal motion."""
+    import cv2
+    ys = np.arange(h, dtype=np.float64)[:, None] + 0.5
+    xs = np.arange(w, dtype=np.float64)[None, :]
+    img = 40.0 + 100.0 * np.clip(ys - y_top, 0, 1) - 100.0 * np.clip(ys - y_bottom, 0, 1)
+    img = img + 60.0 * ((xs // 32) % 2)
+    return cv2.GaussianBlur(np.broadcast_to(img, (h, w)).astype(np.float32), (0, 0), 1.0)
+
+
+def test_band_check_masks_a_second_motion_along_long_edges():
+    """Known answer (_Refiner._bands): the upper edge moved 0.6 px between the ring frame and the
+    current one, the lower edge did not (a static border over a pan). The frame's translation splits the
+    difference, so each edge's row band is ~0.3 px off it: both bands (rows 32-63 and 64-95 with
+    BAND = 32) lose that frame's samples, every other row keeps them, and no column band is masked
+    (the vertical edges did not move). With both edges moved alike nothing is masked. The 48-px tile
+    check cannot see this: the tiles on the horizontal edges hold one edge direction only. (240 x 144:
+    whole 48-px tiles, so no partial tile row copies a band's mask.)"""
+    from mlaa_stream.temporal import tss as T
+    assert T.BAND == 32
+    ring = _two_edges(40.0, 80.0)
+    d, valid = T._Refiner(_two_edges(40.6, 80.0)).step(ring, (0.0, 0.0))
+    assert -0.45 < d[1] < -0.15 and abs(d[0]) < 0.02, d     # cur(x) ~ ring(x + d): the moved edge says -0.6
+    assert valid is not None
+    assert set(np.flatnonzero(valid.min(1) == 0)) == set(range(32, 96))
+    assert valid[:32].all() and valid[96:].all()
+    d2, valid = T._Refiner(_two_edges(40.6, 80.6)).step(ring, (0.0, 0.0))
+    assert valid is None and abs(d2[1] + 0.6) < 0.15, d2
+
+
+def test_still_bands_leave_the_estimate_and_lose_their_samples():
+    """Known answer (_Refiner._band_weights): the upper edge moved 0.6 px, the lower one is still (a
+    static border over a pan). The first step averages the two (about -0.3); the still band (own motion
+    0 while the frame's is over 2 STATIC_TOL) then counts for nothing, so the translation converges to
+    the moving edge's -0.6 px, and the last step's band check masks the still band's rows (64-95: 0.6 px
+    off the frame) and keeps the moving one's (the tile check masks its 48-px tiles, rows 48-95, too)."""
+    from mlaa_stream.temporal import tss as T
+    assert T.BAND == 32 and T.STATIC_TOL > 0
+    ring = _two_edges(40.0, 80.0)
+    ref = T._Refiner(_two_edges(40.6, 80.0))
+    d, weights, valid = (0.0, 0.0), None, None
+    for k in range(3):
+        d, valid = ref.step(ring, d, check=k == 2, weights=weights)
+        weights = ref.band_weights
+    assert abs(d[1] + 0.6) < 0.1 and abs(d[0]) < 0.02, d
+    assert valid is not None
+    assert not valid[64:96].any()           # the still band (and the 48-px tiles holding it: rows 48-95)
+    assert valid[:48].all() and valid[96:].all()   # the moving edge's rows keep their samples
+
+
+@pytest.mark.parametrize("dtype,level", [(np.uint8, 1), (np.uint16, 257)])
+def test_dead_zone_keeps_the_spatial_pixel(stage_parts, dtype, level):
+    """Known answer: an input of columns alternating 100 and 101 levels (not flat, so the ring is read),
+    seen at 12 distinct sub-pixel phases, resolves every inner pixel to 100 or 101 levels. A spatial output
+    of 101 is then within one 8-bit level everywhere and is kept bit for bit (the dead zone); one of 105 is
+    replaced by the resolve (kernel and reference alike)."""
+    h, w = 24, 40
+    cols = (100 + np.arange(w) % 2) * level
+    cur = np.repeat(np.repeat(cols[None, :, None], h, 0), 3, 2).astype(dtype)
+    ring = [(cur, (0.25 * (j % 4) + 0.1, 0.25 * (j // 4) + 0.1), None) for j in range(11)]
+    ring.append((cur, (0.0, 0.0), None))
+    inner = (slice(2, -2), slice(2, -2))     # the last row and column lose the far phases' samples
+    for value in (101, 105):
+        spatial = np.full((h, w, 3), value * level, dtype)
+        ref, cells = tss_frame_reference(spatial, cur, ring, False)
+        assert cells[inner].min() >= 9
+        if value == 101:
+            assert np.array_equal(ref[inner], spatial[inner])
+        else:
+            tol = 0 if level == 1 else 2             # uint16: the 16-bit linear ring's rounding
+            r = ref[inner].astype(int)
+            assert ((r >= 100 * level - tol) & (r <= 101 * level + tol)).all(), np.unique(r)
+        stage = TSSStage(frames=len(ring) + 1, bgr=False, context=stage_parts)
+        out, _ = _run_kernel(stage, cur, spatial, ring, False, 1)
+        assert np.array_equal(out, ref)
+
+
+def test_flat_neighbourhood_keeps_the_spatial_pixel(stage_parts):
+    """Known answer: where the current frame's 3x3 is flat (here: everywhere) no sample is read and the
+    spatial pixel stands, even if the ring disagrees by less than the colour box's widening."""
+    h, w = 20, 37
+    cur = np.full((h, w, 3), 100, np.uint8)
+    other = np.full((h, w, 3), 103, np.uint8)
+    ring = [(other, (0.25 * (j % 4) + 0.1, 0.25 * (j // 4) + 0.1), None) for j in range(11)]
+    ring.append((cur, (0.0, 0.0), None))
+    spatial = np.full((h, w, 3), 99, np.uint8)
+    ref, cells = tss_frame_reference(spatial, cur, ring, False)
+    assert np.array_equal(ref, spatial) and not cells.any()
+    stage = TSSStage(frames=len(ring) + 1, bgr=False, context=stage_parts)
+    out, kcells = _run_kernel(stage, cur, spatial, ring, False, 1)
+    assert np.array_equal(out, spatial) and not kcells.any()
+    # one pixel of 101 in the middle: its 3x3 and its neighbours' are no longer flat and they resolve
+    cur2 = cur.copy()
+    cur2[10, 18] = 101
+    ref2, cells2 = tss_frame_reference(spatial, cur2, ring[:-1] + [(cur2, (0.0, 0.0), None)], False)
+    assert (cells2[9:12, 17:20] >= 9).all() and cells2.sum() == cells2[9:12, 17:20].sum()
+    out2, _ = _run_kernel(stage, cur2, spatial, ring[:-1] + [(cur2, (0.0, 0.0), None)], False, 1)
+    assert np.array_equal(out2, ref2) and not np.array_equal(out2[9:12, 17:20], spatial[9:12, 17:20])

@@ -41,13 +41,19 @@ class NoAA:
 
 
 class SpatialTemporal:
-    """The spatial filter, then the temporal stage (issue 6) with its history kept across frames;
-    `reset()` starts a new shot (the bench calls it between scenes)."""
+    """The spatial filter, then a temporal stage with its history kept across frames; `reset()` starts
+    a new shot (the bench calls it between scenes). method "tss": temporal supersampling, what
+    `--temporal` runs (mlaa_stream.temporal.tss.TSSStage); "blend": the reprojection blending of issue 6
+    (mlaa_stream.temporal.stage.TemporalStage)."""
 
-    def __init__(self, device: str | None, **temporal_options):
-        from mlaa_stream.temporal.stage import TemporalStage
+    def __init__(self, device: str | None, method: str = "tss", **temporal_options):
         self.filter = Filter(device=device)
-        self.stage = TemporalStage(context=self.filter.context, bgr=False, **temporal_options)
+        if method == "tss":
+            from mlaa_stream.temporal.tss import TSSStage
+            self.stage = TSSStage(context=self.filter.context, bgr=False, **temporal_options)
+        else:
+            from mlaa_stream.temporal.stage import TemporalStage
+            self.stage = TemporalStage(context=self.filter.context, bgr=False, **temporal_options)
         self.index = 0
 
     def process(self, frame: np.ndarray) -> np.ndarray:
@@ -70,8 +76,9 @@ METHODS: dict[str, Callable[[str | None], Processor]] = {
     "none": lambda device: NoAA(),
     "fxaa": lambda device: FXAA(device=device),
     "mlaa": lambda device: Filter(device=device),
-    "mlaa+temporal": lambda device: SpatialTemporal(device, mode="adaptive"),
-    "mlaa+temporal:dense": lambda device: SpatialTemporal(device, mode="dense"),
+    "mlaa+temporal": lambda device: SpatialTemporal(device, "tss"),
+    "mlaa+temporal:blend": lambda device: SpatialTemporal(device, "blend", mode="adaptive"),
+    "mlaa+temporal:blend-dense": lambda device: SpatialTemporal(device, "blend", mode="dense"),
 }
 # Every quality preset of the MLAA filter, as "mlaa:<preset>" (one with no options is "mlaa" itself).
 # The fast preset as Antialiaser(preset="fast") runs it: FastFilter, without host copies on CPU devices.
