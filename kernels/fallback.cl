@@ -11,7 +11,7 @@
 // edge of the MLAA passes, FXAA's contrast test passes, and its region (its tile of FALLBACK_TILE^2 pixels
 // and the eight around it) shows 1-spp aliasing:
 //   - either 1-spp content with shading or texture ("busy"): at least FALLBACK_RICH_MIN pixels that the
-//     MLAA passes changed and whose 3x3 window holds FALLBACK_COLOURS colours or more, and at least
+//     MLAA passes changed and whose 3x3 window holds FALLBACK_COLOURS bit-identical colours or more, and at least
 //     1 / FALLBACK_RICH_DIV of the region's edge-bordering pixels are such (photographs, antialiased text
 //     and wires have a few such pixels among many edges);
 //   - or, for pixels the MLAA passes left, at least FALLBACK_MIN_CHANGED changed edge-bordering pixels (any
@@ -92,6 +92,23 @@ typedef int sample_t;
 #endif
 #define COLOUR_CH (CHANNELS < 3 ? 1 : 3)
 
+// At least FALLBACK_COLOURS bit-identical colours in the 3x3 window of (x, y), clamped at the frame's edge: the
+// region statistic's test (smooth shading and texture differ by a level or two between neighbours; noise-free
+// flat-colour art has two or three colours per window).
+RARELY_CALLED int window_has_exact_colours(__global const PIXEL_T *src, int x, int y, int w, int h)
+{
+    int idx[9];
+    for (int k = 0; k < 9; ++k)
+        idx[k] = IDX(clamp_to(x + k % 3 - 1, w - 1), clamp_to(y + k / 3 - 1, h - 1), w);
+    int exact = 0;
+    for (int a = 0; a < 9 && exact < FALLBACK_COLOURS; ++a) {
+        int twin = 0;
+        for (int o = 0; o < a && !twin; ++o) twin = same_px(src, idx[a], idx[o]);
+        exact += !twin;
+    }
+    return exact >= FALLBACK_COLOURS;
+}
+
 // At least FALLBACK_COLOURS distinct colours in the 3x3 window of (x, y), clamped at the frame's edge,
 // counted in row order (a pixel counts when no earlier pixel of the window equals it); stops once settled.
 RARELY_CALLED int window_has_colours(__global const PIXEL_T *src, int x, int y, int w, int h)
@@ -164,11 +181,15 @@ RARELY_CALLED int window_two_colours(__global const PIXEL_T *src, int x, int y, 
 #endif
 }
 
-// The 3x3 window is busy: at least FALLBACK_COLOURS colours (window_has_colours), the quick test first.
+// The 3x3 window is busy: at least FALLBACK_COLOURS colours (window_has_colours; _EXACT: bit-identical ones,
+// window_has_exact_colours), the quick test first.
 #if FALLBACK_COLOURS >= 3
 #define WINDOW_BUSY(src, x, y, w, h) (!window_two_colours(src, x, y, w, h) && window_has_colours(src, x, y, w, h))
+#define WINDOW_BUSY_EXACT(src, x, y, w, h) \
+    (!window_two_colours(src, x, y, w, h) && window_has_exact_colours(src, x, y, w, h))
 #else
 #define WINDOW_BUSY(src, x, y, w, h) window_has_colours(src, x, y, w, h)
+#define WINDOW_BUSY_EXACT(src, x, y, w, h) window_has_exact_colours(src, x, y, w, h)
 #endif
 
 #if FALLBACK_KEEP_RUN > 0
@@ -208,7 +229,7 @@ __kernel void count_changed(__global const PIXEL_T *src, __global const PIXEL_T 
                     ++bordering;
                     if (!px_differs(src, dst, IDX(x, y, w))) continue;
                     ++changed;
-                    busy += WINDOW_BUSY(src, x, y, w, h);
+                    busy += WINDOW_BUSY_EXACT(src, x, y, w, h);
                 }
         __global uchar *c = counts + 3 * (ty * tiles_x + t0 / FALLBACK_TILE);
         c[0] = (uchar)changed;

@@ -17,9 +17,10 @@ SEGMENT = 64  # pixels of a tile band per work item of count_changed (a multiple
 
 # Tiles of FALLBACK_TILE^2 pixels; a pixel's region is its tile and the eight around it. A pixel is eligible where
 # it borders an edge and its region is busy 1-spp content -- at least FALLBACK_RICH_MIN pixels that MLAA changed
-# and whose 3x3 window holds FALLBACK_COLOURS colours or more (equal within FALLBACK_SAME / 255 of full scale per
-# channel), and at least 1 / FALLBACK_RICH_DIV of the region's edge-bordering pixels -- or, if MLAA left it, where
-# its region holds FALLBACK_MIN_CHANGED pixels that MLAA changed and its own window FALLBACK_COLOURS colours. A pixel MLAA left
+# and whose 3x3 window holds FALLBACK_COLOURS bit-identical colours or more, and at least 1 / FALLBACK_RICH_DIV of
+# the region's edge-bordering pixels -- or, if MLAA left it, where its region holds FALLBACK_MIN_CHANGED pixels
+# that MLAA changed and its own window FALLBACK_COLOURS colours (equal within FALLBACK_SAME / 255 of full scale
+# per channel). A pixel MLAA left
 # takes FALLBACK_WEIGHT of FXAA's colour, one it changed moves FALLBACK_MIX of the way from MLAA's to FXAA's.
 FALLBACK_TILE, FALLBACK_MIN_CHANGED, FALLBACK_COLOURS, FALLBACK_SAME, FALLBACK_WEIGHT = 8, 24, 4, 2.5, 0.8
 FALLBACK_RICH_MIN, FALLBACK_RICH_DIV, FALLBACK_MIX = 12, 20, 0.5
@@ -70,12 +71,13 @@ class FallbackPass:
         return events["fallback"]
 
 
-def _window_colours(rgb: np.ndarray) -> np.ndarray:
-    """kernels/fallback.cl window_colours for every pixel (rgb normalised, (h, w, 3))."""
+def _window_colours(rgb: np.ndarray, same: float = FALLBACK_SAME) -> np.ndarray:
+    """kernels/fallback.cl's colour count of every pixel's 3x3 window (rgb normalised, (h, w, 3)): colours equal
+    within `same` / 255 of full scale per channel count once (0: bit-identical, window_has_exact_colours)."""
     h, w = rgb.shape[:2]
     pad = np.pad(rgb, ((1, 1), (1, 1), (0, 0)), mode="edge")
     win = [pad[dy:dy + h, dx:dx + w] for dy in range(3) for dx in range(3)]
-    same = np.float32(FALLBACK_SAME / 255.0)
+    same = np.float32(same / 255.0)
     distinct = np.zeros((h, w), np.int32)
     for a in range(9):
         twin = np.zeros((h, w), bool)
@@ -131,7 +133,7 @@ def fallback_reference(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray,
             return np.repeat(np.repeat(s3, t, 0), t, 1)[:h, :w]
 
         busy_window = _window_colours(rgb) >= FALLBACK_COLOURS
-        busy_changed = region_sums(changed & borders & busy_window)
+        busy_changed = region_sums(changed & borders & (_window_colours(rgb, 0.0) >= FALLBACK_COLOURS))
         busy = (busy_changed >= FALLBACK_RICH_MIN) & (busy_changed * FALLBACK_RICH_DIV >= region_sums(borders))
         evidence = region_sums(changed & borders) >= FALLBACK_MIN_CHANGED
         eligible = borders & (busy | (evidence & busy_window & ~changed))
