@@ -1,9 +1,10 @@
 """Per-pass timings of the spatial filter on 1920x1080 frames: `python -m mlaa_stream.bench.mlaa_profile`.
 
-Five frames: the yardstick's mixed timing frame (edges, UI text, checkerboard, photo, wires); a
-photograph three ways -- upscaled to fill the frame (smooth), tiled at 1:1 (every pixel differs from
+Five frames (six with a rendered one): the yardstick's mixed timing frame (edges, UI text, checkerboard, photo,
+wires); a photograph three ways -- upscaled to fill the frame (smooth), tiled at 1:1 (every pixel differs from
 its neighbours: a detailed shot) and upscaled with camera noise (Gaussian, sigma 2 levels: what video
-from a camera looks like to edge detection) --; and a flat frame (the floor). For each: the median of >= 20 frames after warm-up of
+from a camera looks like to edge detection) --; a flat frame (the floor); and, where the
+rendered scenes can be drawn or are cached, a 1-spp render (the atrium still tiled 3x3). For each: the median of >= 20 frames after warm-up of
 `Filter.process` (host to host), and each pass's device time on a profiling queue. Writes
 docs/performance.md. A benchmark, never a unit test; machines here are noisy.
 """
@@ -32,11 +33,18 @@ def frames() -> dict[str, np.ndarray]:
     photo = cv2.resize(original, (1920, 1080), interpolation=cv2.INTER_CUBIC)
     rng = np.random.default_rng(0)
     noisy = np.clip(photo.astype(np.int16) + rng.normal(0, 2, photo.shape).round().astype(np.int16), 0, 255)
-    return {"mixed (yardstick timing frame)": timing_frame(),
+    out = {"mixed (yardstick timing frame)": timing_frame(),
             "photograph": np.ascontiguousarray(photo, dtype=np.uint8),
             "photograph, detailed (tiled 1:1)": np.ascontiguousarray(np.tile(original, (3, 4, 1))[:1080, :1920]),
             "photograph + camera noise": noisy.astype(np.uint8),
             "flat": np.full((1080, 1920, 3), 90, np.uint8)}
+    try:  # a 1-spp render (the yardstick's rendered atrium still, 640x360, tiled 3x3): needs EGL or the cache
+        from mlaa_stream.yardstick.scenes import SceneUnavailable, generate_scenes
+        atrium = next(s for s in generate_scenes(names=["rendered"]) if s.name == "rendered_atrium")
+        out["rendered (atrium still, tiled 3x3)"] = np.ascontiguousarray(np.tile(atrium.inputs[0], (3, 3, 1)))
+    except (SceneUnavailable, ImportError, StopIteration):
+        pass
+    return out
 
 
 def measure(f: Filter, frame: np.ndarray, runs: int) -> tuple[float, dict[str, float]]:
