@@ -297,7 +297,7 @@ def write_readme(res: BenchResult, path: Path, chart_name: str, scenes: list[Sce
         "and no edge pixel is next to them; 0 is ideal.",
         "- **broken wires**: share of thin-feature pixels whose contrast against the background is under "
         "a third of the truth's.",
-        "- **FLIP**: NVIDIA FLIP (LDR) on the first frame, centre crop ≤ 256×256; lower is better; "
+        "- **FLIP**: NVIDIA FLIP (LDR), mean over the frames, each a centre crop ≤ 256×256; lower is better; "
         "– when flip-evaluator is not installed or not asked for.",
         "- **temporal error**: mean |Δout − Δtruth| / mean |Δin − Δtruth| over consecutive frames; "
         "< 1 is steadier than the input. **flicker energy**: Σ Δout² / Σ Δtruth²; 1 ideal, above "

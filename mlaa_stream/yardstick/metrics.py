@@ -160,7 +160,8 @@ def score(outs: np.ndarray, inps: np.ndarray, truths: np.ndarray, edges: np.ndar
           wires: np.ndarray | None = None, backgrounds: np.ndarray | None = None,
           with_flip: bool = False) -> dict[str, float]:
     """Every metric for one sequence (T, H, W, C) or frame (H, W, C); NaN where one does not apply.
-    FLIP scores the first frame only (it costs seconds per megapixel)."""
+    FLIP is the mean over the frames (each a centre crop: it costs seconds per megapixel): a temporal stage
+    returns the first frame of a shot as the spatial filter does, so the first frame alone cannot tell them apart."""
     _check(outs, truths)
     _check(inps, truths)
     if edges is None:
@@ -174,7 +175,8 @@ def score(outs: np.ndarray, inps: np.ndarray, truths: np.ndarray, edges: np.ndar
         "rmse": math.sqrt(mse(outs, truths)),
         "broken_wires": (broken_wires(outs, truths, backgrounds, wires)
                          if wires is not None and backgrounds is not None else math.nan),
-        "flip": flip(first(outs), first(truths)) if with_flip else math.nan,
+        "flip": (float(np.mean([flip(o, t) for o, t in zip(outs, truths)])) if seq else
+                 flip(first(outs), first(truths))) if with_flip else math.nan,
         "temporal_error": temporal_error(outs, inps, truths) if seq else math.nan,
         "flicker": flicker_ratio(outs, truths) if seq else math.nan,
     }
