@@ -113,18 +113,12 @@ RARELY_CALLED int window_has_exact_colours(__global const PIXEL_T *src, int x, i
 // counted in row order (a pixel counts when no earlier pixel of the window equals it); stops once settled.
 RARELY_CALLED int window_has_colours(__global const PIXEL_T *src, int x, int y, int w, int h)
 {
+    // bit-identical colours first: merging within FALLBACK_SAME can only lower the count, so a window of
+    // fewer exact colours (flat-colour art, most of the pixels that get here) is settled at once
+    if (!window_has_exact_colours(src, x, y, w, h)) return 0;
     int idx[9];
     for (int k = 0; k < 9; ++k)
         idx[k] = IDX(clamp_to(x + k % 3 - 1, w - 1), clamp_to(y + k / 3 - 1, h - 1), w);
-    // bit-identical colours first: merging within FALLBACK_SAME can only lower the count, so a window of
-    // fewer exact colours (flat-colour art, most of the pixels that get here) is settled at once
-    int exact = 0;
-    for (int a = 0; a < 9 && exact < FALLBACK_COLOURS; ++a) {
-        int twin = 0;
-        for (int o = 0; o < a && !twin; ++o) twin = same_px(src, idx[a], idx[o]);
-        exact += !twin;
-    }
-    if (exact < FALLBACK_COLOURS) return 0;
     sample_t px[9][COLOUR_CH];
     for (int k = 0; k < 9; ++k)
         for (int c = 0; c < COLOUR_CH; ++c) px[k][c] = src[(size_t)idx[k] * CHANNELS + c];
@@ -147,7 +141,7 @@ RARELY_CALLED int window_has_colours(__global const PIXEL_T *src, int x, int y, 
 }
 
 // The 3x3 window of (x, y), clamped at the frame's edge, holds at most two bit-identical colours: the edges of
-// flat-colour art, most windows the colour count sees, settled with eight comparisons (then it cannot hold
+// flat-colour art, most windows the colour counts see, settled by comparing packed keys (then it cannot hold
 // FALLBACK_COLOURS >= 3 colours).
 RARELY_CALLED int window_two_colours(__global const PIXEL_T *src, int x, int y, int w, int h)
 {
@@ -238,36 +232,24 @@ __kernel void count_changed(__global const PIXEL_T *src, __global const PIXEL_T 
     }
 }
 
-// FXAA's colour for pixel i mixed FALLBACK_WEIGHT of the way from the source's, stored in dst where FXAA
-// changes the pixel (out of line: FXAA's search is long and few pixels get here).
-RARELY_CALLED void fallback_pixel(__global const PIXEL_T *src, __global const float *luts, __global PIXEL_T *dst,
-                                  int x, int y, int w, int h)
+// Pixel (x, y) of dst becomes `start`'s colour moved `share` of the way to FXAA's (linear light), where FXAA
+// changes the pixel: start = src with FALLBACK_WEIGHT for pixels the MLAA passes left, start = dst with
+// FALLBACK_MIX for pixels they blended (out of line: FXAA's search is long and few pixels get here).
+RARELY_CALLED void towards_fxaa(__global const PIXEL_T *src, __global const float *luts, __global PIXEL_T *dst,
+                                __global const PIXEL_T *start, float share, int x, int y, int w, int h)
 {
     float3 f;
     if (!fxaa_pixel(src, luts, x, y, w, h, &f)) return;
     const int i = IDX(x, y, w);
-    float4 c = load_px(src, i);
-    float3 m = blend_rgb(src, luts, x, y, w, h);
-    c.xyz = fxaa_encode(luts, m + FALLBACK_WEIGHT * (f - m));
-    store_px(dst, i, c);
-}
-
-// ... and where the MLAA passes changed pixel i, FALLBACK_MIX of the way from their colour to FXAA's.
-RARELY_CALLED void mix_pixel(__global const PIXEL_T *src, __global const float *luts, __global PIXEL_T *dst,
-                             int x, int y, int w, int h)
-{
-    float3 f;
-    if (!fxaa_pixel(src, luts, x, y, w, h, &f)) return;
-    const int i = IDX(x, y, w);
-    float4 c = load_px(dst, i);
-    float3 m = blend_rgb(dst, luts, x, y, w, h);
-    c.xyz = fxaa_encode(luts, m + FALLBACK_MIX * (f - m));
+    float4 c = load_px(start, i);
+    float3 m = blend_rgb(start, luts, x, y, w, h);
+    c.xyz = fxaa_encode(luts, m + share * (f - m));
     store_px(dst, i, c);
 }
 
 // Tile (tx, ty): nothing to do unless the 3x3 tiles around it show 1-spp aliasing (busy, or evidence and the
-// pixel's own window busy); then each eligible pixel that FXAA would change takes its colour (fallback_pixel,
-// mix_pixel).
+// pixel's own window busy); then each eligible pixel that FXAA would change moves towards its colour
+// (towards_fxaa).
 inline void fallback_tile(__global const PIXEL_T *src, __global const float *luts, __global const uchar *edges,
                           __global const ushort2 *hdist, __global const ushort2 *vdist, __global const uchar *counts, __global PIXEL_T *dst, int w, int h, int tiles_x,
                           int tiles_y, int tx, int ty)
@@ -300,9 +282,9 @@ inline void fallback_tile(__global const PIXEL_T *src, __global const float *lut
             if (on_long_run(edges, hdist, vdist, x, y, w)) continue;
 #endif
             if (changed_px)
-                mix_pixel(src, luts, dst, x, y, w, h);
+                towards_fxaa(src, luts, dst, dst, FALLBACK_MIX, x, y, w, h);
             else
-                fallback_pixel(src, luts, dst, x, y, w, h);
+                towards_fxaa(src, luts, dst, src, FALLBACK_WEIGHT, x, y, w, h);
         }
     }
 }

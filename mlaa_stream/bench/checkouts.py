@@ -18,7 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-# Run inside each checkout: prints {"frame name": median ms} as JSON on its last line.
+# Run inside each checkout: prints {"frame name": median ms} as JSON on its last line. Self-contained (it builds
+# the frames as bench/mlaa_profile.py does): an older checkout has only Filter and timing_frame to offer.
 _TIMER = r"""
 import json, sys, time
 import numpy as np
