@@ -63,6 +63,12 @@ inline int idiff(int3 a, int3 b)
 #endif
 }
 
+// The scalar path's pixel and edge test: stored levels and idiff for integer frames, float4 and weighted_diff for
+// float frames (below, after the #else).
+typedef int3 fast_px;
+inline fast_px fast_px_at(__global const PIXEL_T *src, int i) { return raw3(src, i); }
+inline int fast_edge(fast_px a, fast_px b) { return idiff(a, b) > FAST_LIMIT; }
+
 #if CHANNELS == 3 && SAMPLE_BYTES == 1
 #define FAST_VECTOR 1
 #define FAST_QUIET (FAST_LIMIT / 256)
@@ -101,6 +107,10 @@ inline short8 edge8(uchar16 a0, uchar8 a1, __global const uchar *b)
     return s > (ushort8)(FAST_LIMIT);   // -1 where an edge
 }
 #endif
+#else
+typedef float4 fast_px;
+inline fast_px fast_px_at(__global const PIXEL_T *src, int i) { return load_px(src, i); }
+inline int fast_edge(fast_px a, fast_px b) { return weighted_diff(a, b) > FAST_THRESHOLD; }
 #endif
 
 // Pass 1, and the copy of the frame into dst (pass 3 then writes only the pixels it changes): the source
@@ -128,7 +138,7 @@ __kernel void fast_edges(__global const PIXEL_T *src, __global uchar *edges, __g
             __global const uchar *s8 = (__global const uchar *)src;
             __global uchar *d8 = (__global uchar *)dst;
             const size_t stride = 3 * (size_t)width;
-            uchar prev = x > 0 && idiff(raw3(src, row + x - 1), raw3(src, row + x)) > FAST_LIMIT;   // left of x
+            uchar prev = x > 0 && fast_edge(fast_px_at(src, row + x - 1), fast_px_at(src, row + x));   // left of x
             int copied = 0;
             // The block's 64 pixels of this row at once, 16 bytes at a time: where no byte differs from the
             // right or lower neighbour's (in the block's first row the upper's too) by more than FAST_QUIET,
@@ -176,41 +186,22 @@ __kernel void fast_edges(__global const PIXEL_T *src, __global uchar *edges, __g
             }
         }
 #endif
-#ifndef PIXEL_IS_FLOAT
-        int3 left = x > 0 ? raw3(src, row + x - 1) : (int3)(0);
-        int3 c = x < x1 ? raw3(src, row + x) : (int3)(0);
+        fast_px left = x > 0 ? fast_px_at(src, row + x - 1) : (fast_px)(0);
+        fast_px c = x < x1 ? fast_px_at(src, row + x) : (fast_px)(0);
         for (; x < x1; ++x) {
             const int i = row + x;
             for (int k = 0; k < CHANNELS; ++k) dst[(size_t)i * CHANNELS + k] = src[(size_t)i * CHANNELS + k];
-            const int3 right = x + 1 < width ? raw3(src, i + 1) : c;
+            const fast_px right = x + 1 < width ? fast_px_at(src, i + 1) : c;
             uchar e = 0;
-            if (y > 0 && idiff(c, raw3(src, i - width)) > FAST_LIMIT) e |= E_TOP;
-            if (x + 1 < width && idiff(c, right) > FAST_LIMIT) e |= E_RIGHT;
-            if (y + 1 < height && idiff(c, raw3(src, i + width)) > FAST_LIMIT) e |= E_BOTTOM;
-            if (x > 0 && idiff(c, left) > FAST_LIMIT) e |= E_LEFT;
+            if (y > 0 && fast_edge(c, fast_px_at(src, i - width))) e |= E_TOP;
+            if (x + 1 < width && fast_edge(c, right)) e |= E_RIGHT;
+            if (y + 1 < height && fast_edge(c, fast_px_at(src, i + width))) e |= E_BOTTOM;
+            if (x > 0 && fast_edge(c, left)) e |= E_LEFT;
             edges[i] = e;
             seen |= e;
             left = c;
             c = right;
         }
-#else
-        float4 left = x0 > 0 ? load_px(src, row + x0 - 1) : (float4)(0.0f);
-        float4 c = load_px(src, row + x0);
-        for (; x < x1; ++x) {
-            const int i = row + x;
-            for (int k = 0; k < CHANNELS; ++k) dst[(size_t)i * CHANNELS + k] = src[(size_t)i * CHANNELS + k];
-            const float4 right = x + 1 < width ? load_px(src, i + 1) : c;
-            uchar e = 0;
-            if (y > 0 && weighted_diff(c, load_px(src, i - width)) > FAST_THRESHOLD) e |= E_TOP;
-            if (x + 1 < width && weighted_diff(c, right) > FAST_THRESHOLD) e |= E_RIGHT;
-            if (y + 1 < height && weighted_diff(c, load_px(src, i + width)) > FAST_THRESHOLD) e |= E_BOTTOM;
-            if (x > 0 && weighted_diff(c, left) > FAST_THRESHOLD) e |= E_LEFT;
-            edges[i] = e;
-            seen |= e;
-            left = c;
-            c = right;
-        }
-#endif
     }
     blocks[get_global_id(1) * BLOCKS_X(width) + get_global_id(0)] = seen != 0;
 }
