@@ -22,8 +22,19 @@
 // Except: a pixel on a straight edge run of FALLBACK_KEEP_RUN pixels or more (hdist / vdist of distances.cl) keeps
 // the MLAA passes' colour -- their verdict on a straight edge: FXAA's sub-pixel blend would smear pixel-aligned
 // rules and stems wherever noise or compression makes their windows busy.
-// FALLBACK_MIN_CHANGED 0 drops the region and colour tests (Filter(fallback="everywhere"): frames known to be
-// 1-spp renders). Numpy reference: mlaa_stream.spatial.fallback.fallback_reference.
+// Render regions: a tile whose wide neighbourhood (RENDER_RADIUS tiles each way) looks like a 1-spp 3D render is
+// treated as busy, and every pixel of it that the chain leaves (neither blended by MLAA nor moved by FXAA) takes
+// the footprint filter. The neighbourhood test: at least RENDER_MIN busy pixels (count_changed's k = 2), at least
+// 1 / RENDER_DIV of its edge-bordering pixels, and its busy tiles not two-toned -- on average at most
+// RENDER_NEAR_PCT % of a busy tile's pixels lie within a tenth of the tile's luma range from its darkest or
+// lightest (text and UI, even through JPEG ringing, are two-toned: 92-96 %; renders 67-78 %).
+// The footprint filter (why: a 1-spp frame holds point samples, its truth the average over each pixel's square
+// footprint, so texture and shading come out sharper than the truth wherever no edge was found; docs/
+// spatial_tuning.md, FOOTPRINT_WEIGHT): the pixel moves FOOTPRINT_WEIGHT of the way to the 3x3 tent average of the
+// input, in linear light. Windows of one colour are left as they are.
+// FALLBACK_MIN_CHANGED 0 drops the region and colour tests and makes every tile a render region
+// (Filter(fallback="everywhere"): frames known to be 1-spp renders). Numpy reference:
+// mlaa_stream.spatial.fallback.fallback_reference.
 
 #ifndef FALLBACK_TILE
 #define FALLBACK_TILE 8
@@ -52,6 +63,26 @@
 #ifndef FALLBACK_KEEP_RUN
 #define FALLBACK_KEEP_RUN 16
 #endif
+#ifndef RENDER_RADIUS
+#define RENDER_RADIUS 7
+#endif
+#ifndef RENDER_MIN
+#define RENDER_MIN 12
+#endif
+#ifndef RENDER_DIV
+#define RENDER_DIV 10
+#endif
+#ifndef RENDER_NEAR_PCT
+#define RENDER_NEAR_PCT 88
+#endif
+#ifndef RENDER_RANGE
+#define RENDER_RANGE (24.0f / 255.0f)
+#endif
+#ifndef FOOTPRINT_WEIGHT
+#define FOOTPRINT_WEIGHT 0.25f
+#endif
+#define COUNTS 4          // bytes per tile in `counts`
+#define NOT_MEASURED 255  // counts[3] of a tile with no busy pixel or a luma range under RENDER_RANGE
 
 // Any stored channel (alpha included) of pixel i differs between a and b.
 inline int px_differs(__global const PIXEL_T *a, __global const PIXEL_T *b, int i)
@@ -202,10 +233,33 @@ inline int on_long_run(__global const uchar *edges, __global const ushort2 *hdis
 }
 #endif
 
-// Three counts per tile (tx, ty), at counts[3 * (ty * tiles_x + tx) + k]: k = 0 its pixels that border an edge
+// How many of the tile's pixels (x0..x1, y0..y1) lie within a tenth of its luma range (px_luma) from its darkest or
+// lightest: the two-tone test of render regions; NOT_MEASURED where the range is under RENDER_RANGE.
+RARELY_CALLED int tile_near_extremes(__global const PIXEL_T *src, int x0, int x1, int y0, int y1, int w, int h)
+{
+    float lo = px_luma(src, x0, y0, w, h), hi = lo;
+    for (int y = y0; y < y1; ++y)
+        for (int x = x0; x < x1; ++x) {
+            const float l = px_luma(src, x, y, w, h);
+            lo = fmin(lo, l);
+            hi = fmax(hi, l);
+        }
+    const float range = hi - lo;
+    if (!(range >= RENDER_RANGE)) return NOT_MEASURED;
+    int near = 0;
+    for (int y = y0; y < y1; ++y)
+        for (int x = x0; x < x1; ++x) {
+            const float l = px_luma(src, x, y, w, h);
+            near += (l - lo) * 10.0f <= range || (hi - l) * 10.0f <= range;
+        }
+    return near;
+}
+
+// Four counts per tile (tx, ty), at counts[COUNTS * (ty * tiles_x + tx) + k]: k = 0 its pixels that border an edge
 // and that the MLAA passes changed (dst != src), k = 1 its pixels that border an edge, k = 2 the changed ones
-// whose 3x3 window is busy (window_has_colours). One work item per SEGMENT pixels (a multiple of
-// FALLBACK_TILE) of a band of FALLBACK_TILE rows.
+// whose 3x3 window holds FALLBACK_COLOURS bit-identical colours ("busy"), k = 3 tile_near_extremes where k = 2 is
+// not 0 (else NOT_MEASURED). One work item per SEGMENT pixels (a multiple of FALLBACK_TILE) of a band of
+// FALLBACK_TILE rows.
 __kernel void count_changed(__global const PIXEL_T *src, __global const PIXEL_T *dst,
                             __global const uchar *edges, __global uchar *counts,
                             const int w, const int h, const int tiles_x)
@@ -225,11 +279,41 @@ __kernel void count_changed(__global const PIXEL_T *src, __global const PIXEL_T 
                     ++changed;
                     busy += WINDOW_BUSY_EXACT(src, x, y, w, h);
                 }
-        __global uchar *c = counts + 3 * (ty * tiles_x + t0 / FALLBACK_TILE);
+        __global uchar *c = counts + COUNTS * (ty * tiles_x + t0 / FALLBACK_TILE);
         c[0] = (uchar)changed;
         c[1] = (uchar)bordering;
         c[2] = (uchar)busy;
+        c[3] = (uchar)(busy ? tile_near_extremes(src, t0, t1, y0, y1, w, h) : NOT_MEASURED);
     }
+}
+
+// Sums over the tiles tx - RENDER_RADIUS .. tx + RENDER_RADIUS of the tile's row, clamped to the frame: busy
+// pixels, edge-bordering pixels, busy pixels of measured tiles, and those weighted by the tiles' near counts
+// (the first of the two separable passes of render regions). One work item per tile.
+__kernel void render_rows(__global const uchar *counts, __global int4 *rows, const int tiles_x, const int tiles_y)
+{
+    const int tx = get_global_id(0), ty = get_global_id(1);
+    if (tx >= tiles_x || ty >= tiles_y) return;
+    int4 sum = (int4)(0, 0, 0, 0);
+    for (int k = max(tx - RENDER_RADIUS, 0); k <= min(tx + RENDER_RADIUS, tiles_x - 1); ++k) {
+        __global const uchar *c = counts + COUNTS * (ty * tiles_x + k);
+        const int busy = c[2], measured = c[3] != NOT_MEASURED;
+        sum += (int4)(busy, c[1], measured ? busy : 0, measured ? busy * c[3] : 0);
+    }
+    rows[ty * tiles_x + tx] = sum;
+}
+
+// render[tile] = 1 where the tiles within RENDER_RADIUS (rows' sums over the columns) look like a 1-spp render:
+// enough busy pixels, a share of the edge pixels, and not two-toned (the second separable pass).
+__kernel void render_tiles(__global const int4 *rows, __global uchar *render, const int tiles_x, const int tiles_y)
+{
+    const int tx = get_global_id(0), ty = get_global_id(1);
+    if (tx >= tiles_x || ty >= tiles_y) return;
+    int4 sum = (int4)(0, 0, 0, 0);
+    for (int j = max(ty - RENDER_RADIUS, 0); j <= min(ty + RENDER_RADIUS, tiles_y - 1); ++j)
+        sum += rows[j * tiles_x + tx];
+    render[ty * tiles_x + tx] = (uchar)(sum.x >= RENDER_MIN && sum.x * RENDER_DIV >= sum.y &&
+                                        sum.w * 100 <= RENDER_NEAR_PCT * (FALLBACK_TILE * FALLBACK_TILE) * sum.z);
 }
 
 // Pixel (x, y) of dst becomes `start`'s colour moved `share` of the way to FXAA's (linear light), where FXAA
@@ -247,44 +331,70 @@ RARELY_CALLED void towards_fxaa(__global const PIXEL_T *src, __global const floa
     store_px(dst, i, c);
 }
 
+// The footprint filter at (x, y): dst = src moved FOOTPRINT_WEIGHT of the way to the 3x3 tent average of src
+// (weights 1 2 1 / 2 4 2 / 1 2 1, clamped at the frame's edge) in mix space; windows of one colour are left.
+RARELY_CALLED void footprint(__global const PIXEL_T *src, __global const float *luts, __global PIXEL_T *dst,
+                             int x, int y, int w, int h)
+{
+    const int i = IDX(x, y, w);
+    int flat = 1;
+    for (int k = 0; k < 9 && flat; ++k)
+        flat = same_px(src, i, IDX(clamp_to(x + k % 3 - 1, w - 1), clamp_to(y + k / 3 - 1, h - 1), w));
+    if (flat) return;
+    const float3 m = blend_rgb(src, luts, x, y, w, h);
+    float3 tent = (float3)(0.0f, 0.0f, 0.0f);
+    for (int k = 0; k < 9; ++k) {
+        const int dx = k % 3 - 1, dy = k / 3 - 1;
+        tent += (float)((2 - dx * dx) * (2 - dy * dy)) * blend_rgb(src, luts, x + dx, y + dy, w, h);
+    }
+    float4 c = load_px(src, i);
+    c.xyz = fxaa_encode(luts, m + FOOTPRINT_WEIGHT * (tent * (1.0f / 16.0f) - m));
+    store_px(dst, i, c);
+}
+
 // Tile (tx, ty): nothing to do unless the 3x3 tiles around it show 1-spp aliasing (busy, or evidence and the
-// pixel's own window busy); then each eligible pixel that FXAA would change moves towards its colour
-// (towards_fxaa).
+// pixel's own window busy) or it lies in a render region; then each eligible pixel that FXAA would change moves
+// towards its colour (towards_fxaa), and in a render region every other pixel the chain left takes the
+// footprint filter.
 inline void fallback_tile(__global const PIXEL_T *src, __global const float *luts, __global const uchar *edges,
-                          __global const ushort2 *hdist, __global const ushort2 *vdist, __global const uchar *counts, __global PIXEL_T *dst, int w, int h, int tiles_x,
+                          __global const ushort2 *hdist, __global const ushort2 *vdist, __global const uchar *counts,
+                          __global const uchar *render, __global PIXEL_T *dst, int w, int h, int tiles_x,
                           int tiles_y, int tx, int ty)
 {
 #if FALLBACK_MIN_CHANGED > 0
+    const int rendered = render[ty * tiles_x + tx];
     int changed = 0, bordering = 0, busy_changed = 0;
     for (int j = max(ty - 1, 0); j <= min(ty + 1, tiles_y - 1); ++j)
         for (int k = max(tx - 1, 0); k <= min(tx + 1, tiles_x - 1); ++k) {
-            __global const uchar *c = counts + 3 * (j * tiles_x + k);
+            __global const uchar *c = counts + COUNTS * (j * tiles_x + k);
             changed += c[0];
             bordering += c[1];
             busy_changed += c[2];
         }
-    const int busy = busy_changed >= FALLBACK_RICH_MIN && busy_changed * FALLBACK_RICH_DIV >= bordering;
+    const int busy = rendered || (busy_changed >= FALLBACK_RICH_MIN && busy_changed * FALLBACK_RICH_DIV >= bordering);
     if (!busy && changed < FALLBACK_MIN_CHANGED) return;
+#else
+    const int rendered = 1, busy = 1;
 #endif
     const int x0 = tx * FALLBACK_TILE, y0 = ty * FALLBACK_TILE;
     const int x1 = min(x0 + FALLBACK_TILE, w), y1 = min(y0 + FALLBACK_TILE, h);
     for (int y = y0; y < y1; ++y) {
-        if (x1 - x0 == 8 && group_is_quiet(edges, x0, y, w)) continue;
+        const int quiet = x1 - x0 == 8 && group_is_quiet(edges, x0, y, w);
+        if (quiet && !(rendered && FOOTPRINT_WEIGHT > 0.0f)) continue;
         for (int x = x0; x < x1; ++x) {
-            if (!borders_edge(edges, x, y, w)) continue;
             const int changed_px = px_differs(src, dst, IDX(x, y, w));
-#if FALLBACK_MIN_CHANGED > 0
+            int eligible = !quiet && borders_edge(edges, x, y, w);
             // outside busy regions only pixels MLAA left, and only in busy windows (flat-colour art stops here)
-            if (!busy && (changed_px || !WINDOW_BUSY(src, x, y, w, h))) continue;
-#endif
-            if (fxaa_keeps(src, x, y, w, h)) continue;
+            eligible = eligible && (busy || (!changed_px && WINDOW_BUSY(src, x, y, w, h)));
+            eligible = eligible && !fxaa_keeps(src, x, y, w, h);
 #if FALLBACK_KEEP_RUN > 0
-            if (on_long_run(edges, hdist, vdist, x, y, w)) continue;
+            eligible = eligible && !on_long_run(edges, hdist, vdist, x, y, w);
 #endif
-            if (changed_px)
-                towards_fxaa(src, luts, dst, dst, FALLBACK_MIX, x, y, w, h);
-            else
-                towards_fxaa(src, luts, dst, src, FALLBACK_WEIGHT, x, y, w, h);
+            if (eligible)
+                towards_fxaa(src, luts, dst, changed_px ? dst : src, changed_px ? FALLBACK_MIX : FALLBACK_WEIGHT,
+                             x, y, w, h);
+            else if (rendered && !changed_px && FOOTPRINT_WEIGHT > 0.0f)
+                footprint(src, luts, dst, x, y, w, h);
         }
     }
 }
@@ -293,12 +403,13 @@ inline void fallback_tile(__global const PIXEL_T *src, __global const float *lut
 // is felt at one item per tile).
 __kernel void fxaa_fallback(__global const PIXEL_T *src, __global const float *luts,
                             __global const uchar *edges, __global const ushort2 *hdist,
-                            __global const ushort2 *vdist, __global const uchar *counts, __global PIXEL_T *dst,
+                            __global const ushort2 *vdist, __global const uchar *counts,
+                            __global const uchar *render, __global PIXEL_T *dst,
                             const int w, const int h, const int tiles_x, const int tiles_y)
 {
     const int t0 = get_global_id(0) * (SEGMENT / FALLBACK_TILE), ty = get_global_id(1);
     if (t0 >= tiles_x || ty >= tiles_y) return;
     const int t1 = min(t0 + SEGMENT / FALLBACK_TILE, tiles_x);
     for (int tx = t0; tx < t1; ++tx)
-        fallback_tile(src, luts, edges, hdist, vdist, counts, dst, w, h, tiles_x, tiles_y, tx, ty);
+        fallback_tile(src, luts, edges, hdist, vdist, counts, render, dst, w, h, tiles_x, tiles_y, tx, ty);
 }

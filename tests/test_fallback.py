@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 from mlaa_stream.device.colour import linear_to_srgb, srgb_to_linear
-from mlaa_stream.spatial.fallback import FALLBACK_MIX, FALLBACK_TILE, FALLBACK_WEIGHT, fallback_reference
-from mlaa_stream.spatial.fxaa import fxaa_mix_reference
+from mlaa_stream.spatial.fallback import (FALLBACK_MIX, FALLBACK_TILE, FALLBACK_WEIGHT, FOOTPRINT_WEIGHT,
+                                          RENDER_RADIUS, fallback_reference, render_regions)
+from mlaa_stream.spatial.fxaa import fxaa_mix_reference, luma_reference
 from mlaa_stream.spatial.filter import Filter
 
 
@@ -30,6 +31,62 @@ def textured_aliased(seed: int, h: int = 72, w: int = 96) -> np.ndarray:
     return np.clip(np.rint(img * 255), 0, 255).astype(np.uint8)
 
 
+def shaded_polygons(seed: int, h: int = 72, w: int = 96, cell: int = 4) -> np.ndarray:
+    """Render-like: smoothly shaded texture (bilinear over random texels of `cell` px) under hard-edged shaded
+    polygons sampled at pixel centres -- a 1-spp render's lit, textured surfaces and silhouettes."""
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
+
+    def smooth(lo: float, hi: float) -> np.ndarray:
+        g = rng.uniform(lo, hi, (h // cell + 2, w // cell + 2))
+        y, x = yy / cell, xx / cell
+        y0, x0 = np.floor(y).astype(int), np.floor(x).astype(int)
+        ty, tx = y - y0, x - x0
+        return (g[y0, x0] * (1 - ty) * (1 - tx) + g[y0 + 1, x0] * ty * (1 - tx)
+                + g[y0, x0 + 1] * (1 - ty) * tx + g[y0 + 1, x0 + 1] * ty * tx)
+
+    img = np.stack([smooth(0.2, 0.8) for _ in range(3)], -1)
+    for _ in range(10):
+        a, b = rng.uniform(-1, 1, 2)
+        cx, cy = rng.uniform(0, w), rng.uniform(0, h)
+        inside = a * (xx + 0.5 - cx) + b * (yy + 0.5 - cy) > 0
+        inside &= (xx - cx) ** 2 + (yy - cy) ** 2 < rng.uniform(20, 60) ** 2
+        shade = smooth(0.5, 1.0)[..., None] * rng.uniform(0.1, 1, 3)
+        img[inside] = shade[inside]
+    return np.clip(np.rint(img * 255), 0, 255).astype(np.uint8)
+
+
+def flat_art(seed: int, h: int, w: int) -> np.ndarray:
+    """Two-colour aliased discs on a flat ground (text, UI, vector art)."""
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[0:h, 0:w] + 0.5
+    img = np.full((h, w, 3), (235, 235, 230), np.uint8)
+    for _ in range(max(1, h * w // 1200)):
+        cx, cy, r = rng.uniform(8, w - 8), rng.uniform(8, h - 8), rng.uniform(5, 14)
+        img[(xx - cx) ** 2 + (yy - cy) ** 2 < r * r] = (30, 40, 120)
+    return img
+
+
+def render_beside_art(seed: int) -> np.ndarray:
+    """A render-like half (shaded_polygons) beside flat-colour art farther than RENDER_RADIUS tiles: the frame
+    has render regions and tiles that are not."""
+    gap = (RENDER_RADIUS + 2) * FALLBACK_TILE
+    return np.concatenate([shaded_polygons(seed), flat_art(seed, 72, gap + 32)], 1)
+
+
+def regions_of(frame: np.ndarray) -> np.ndarray:
+    """The render regions that fallback_reference finds in `frame` (8-bit RGB)."""
+    with Filter(fallback="off") as g:
+        passes = g.intermediates(frame)
+    e, changed = passes["edges"], np.any(passes["out"] != frame, -1)
+    borders = e != 0
+    borders[1:] |= (e[:-1] & 1) > 0
+    borders[:, 1:] |= (e[:, :-1] & 2) > 0
+    from mlaa_stream.spatial.fallback import _window_colours
+    busy = changed & borders & (_window_colours(frame.astype(np.float32) / 255, 0.0) >= 4)
+    return render_regions(busy, borders, luma_reference(frame.astype(np.float32) / 255))
+
+
 def _as(img8: np.ndarray, dtype, channels: int) -> np.ndarray:
     x = img8 if channels == 3 else (img8[..., :1] if channels == 1 else
                                     np.concatenate([img8, np.full(img8.shape[:2] + (1,), 200, np.uint8)], -1))
@@ -49,7 +106,11 @@ def test_kernel_matches_reference(mode, dtype, channels, bgr):
     """Exact: the pass is FXAA's kernel code (bit-identical to fxaa_reference, test_fxaa) behind integer
     gates, so the output must equal fallback_reference of the MLAA passes' output to the last bit
     (float32: within 1e-6 of full scale)."""
-    frame = _as(textured_aliased(12), dtype, channels)
+    frame8 = render_beside_art(12)
+    if mode == "auto" and channels == 3:  # the case must have render regions and tiles outside them
+        regions = regions_of(frame8)
+        assert regions[:, :64].all() and not regions[:, -32:].any()
+    frame = _as(frame8, dtype, channels)
     with Filter(bgr=bgr, fallback=mode) as f, Filter(bgr=bgr, fallback="off") as g:
         got, passes = f.process(frame), g.intermediates(frame)
     mlaa = passes["out"]
@@ -64,27 +125,64 @@ def test_kernel_matches_reference(mode, dtype, channels, bgr):
         np.testing.assert_array_equal(got, want)
 
 
-def test_only_edge_pixels_change_and_mlaa_blends_move_half_way():
-    """Known answer: the pass changes only pixels that border an MLAA edge; a pixel the MLAA passes left takes
-    FALLBACK_WEIGHT of FXAA's colour from the source's, one they changed FALLBACK_MIX of the way from theirs,
-    in linear light (both within one level of rounding of the formula applied to FXAA 3.11's colour)."""
-    frame = textured_aliased(12)
+def test_only_edge_pixels_change_outside_render_regions_and_the_formulas_hold():
+    """Known answer: outside render regions the pass changes only pixels that border an MLAA edge; a pixel the
+    MLAA passes left takes FALLBACK_WEIGHT of FXAA's colour from the source's, one they changed FALLBACK_MIX of
+    the way from theirs; in render regions every other changed pixel moves FOOTPRINT_WEIGHT of the way to its
+    3x3 tent average. All in linear light, each within one level of rounding of its formula."""
+    frame = render_beside_art(12)
     with Filter() as f, Filter(fallback="off") as g:
         got, passes = f.process(frame), g.intermediates(frame)
     mlaa, e = passes["out"], passes["edges"]
     borders = e != 0
     borders[1:] |= (e[:-1] & 1) > 0
     borders[:, 1:] |= (e[:, :-1] & 2) > 0
+    regions = regions_of(frame)
     by_mlaa = np.any(mlaa != frame, -1)
     by_fallback = np.any(got != mlaa, -1)
     assert (by_fallback & by_mlaa).sum() > 20 and (by_fallback & ~by_mlaa).sum() > 20
-    assert not np.any(by_fallback & ~borders)
+    assert not np.any(by_fallback & ~borders & ~regions)
+    assert (by_fallback & ~borders & regions).sum() > 500
     _, fx = fxaa_mix_reference(frame)  # linear RGB
-    for share, start, where in ((FALLBACK_WEIGHT, frame, ~by_mlaa), (FALLBACK_MIX, mlaa, by_mlaa)):
-        m = srgb_to_linear(start.astype(np.float64) / 255)
-        want = 255 * linear_to_srgb(m + share * (fx - m))
-        sel = by_fallback & where
-        assert np.abs(got[sel] - want[sel]).max() <= 1.0
+    lin = srgb_to_linear(frame.astype(np.float64) / 255)
+    pad = np.pad(lin, ((1, 1), (1, 1), (0, 0)), mode="edge")
+    h, w = frame.shape[:2]
+    tent = sum((2 - dx * dx) * (2 - dy * dy) * pad[1 + dy:1 + dy + h, 1 + dx:1 + dx + w]
+               for dy in (-1, 0, 1) for dx in (-1, 0, 1)) / 16
+    footprint = 255 * linear_to_srgb(lin + FOOTPRINT_WEIGHT * (tent - lin))
+    m = srgb_to_linear(mlaa.astype(np.float64) / 255)
+    mixed = 255 * linear_to_srgb(m + FALLBACK_MIX * (fx - m))
+    left = 255 * linear_to_srgb(lin + FALLBACK_WEIGHT * (fx - lin))
+
+    def within_a_level(want: np.ndarray) -> np.ndarray:
+        return np.abs(got - want).max(-1) <= 1.0
+
+    assert within_a_level(mixed)[by_fallback & by_mlaa].all()
+    assert within_a_level(footprint)[by_fallback & ~borders].all()
+    sel = by_fallback & ~by_mlaa & borders
+    assert (within_a_level(left) | (within_a_level(footprint) & regions))[sel].all()
+
+
+def test_two_toned_content_is_no_render_region():
+    """Known answer: the yardstick's aliased text and checkerboard through JPEG (ringing gives their edge windows
+    four or more colours, so their busy counts are high) stay out of render regions -- their busy tiles are
+    two-toned -- while render-like frames are regions nearly everywhere."""
+    from mlaa_stream.yardstick.scenes import SCENES
+    for scene in SCENES["compressed"](np.random.default_rng(0), True):
+        assert not regions_of(scene.inputs[0]).any(), scene.name
+    for seed in range(3):
+        assert regions_of(shaded_polygons(seed, 144, 192)).mean() > 0.9
+
+
+def test_footprint_leaves_one_colour_windows():
+    """Known answer: in a render region, a pixel whose 3x3 window is one colour keeps it (the tent average of
+    one colour is that colour; the pass does not round-trip it through linear light)."""
+    frame = shaded_polygons(9, 144, 192)
+    frame[40:60, 40:80] = (90, 140, 60)  # a flat patch inside the render region
+    with Filter() as f:
+        got = f.process(frame)
+    assert regions_of(frame)[45:55, 45:75].all()
+    np.testing.assert_array_equal(got[41:59, 41:79], frame[41:59, 41:79])
 
 
 def test_pixel_aligned_rule_in_a_busy_region_stays_sharp():

@@ -11,7 +11,7 @@ import pyopencl as cl
 from mlaa_stream.device.colour import device_luts, lut_read
 from mlaa_stream.device.context import Context
 from mlaa_stream.device.formats import LUT_SIZE, FrameFormat, frame_format
-from mlaa_stream.spatial.fxaa import _MAX, fxaa_defines, fxaa_mix_reference
+from mlaa_stream.spatial.fxaa import _MAX, fxaa_defines, fxaa_mix_reference, luma_reference
 
 SEGMENT = 64  # pixels of a tile band per work item of count_changed (a multiple of FALLBACK_TILE)
 
@@ -27,6 +27,14 @@ FALLBACK_RICH_MIN, FALLBACK_RICH_DIV, FALLBACK_MIX = 12, 20, 0.5
 # ... except a pixel on a straight edge run of FALLBACK_KEEP_RUN pixels or more: MLAA's verdict on a straight edge
 # stands, so pixel-aligned rules and stems keep their sharpness where noise or compression makes windows busy.
 FALLBACK_KEEP_RUN = 16
+# Render regions (kernels/fallback.cl): a tile whose neighbourhood of RENDER_RADIUS tiles each way holds at least
+# RENDER_MIN busy pixels, at least 1 / RENDER_DIV of its edge-bordering pixels, and busy tiles with on average at most
+# RENDER_NEAR_PCT % of their pixels within a tenth of the tile's luma range (RENDER_RANGE or more) from its
+# extremes, counts as busy, and the pixels the chain leaves there move FOOTPRINT_WEIGHT of the way to their 3x3
+# tent average: the point samples of a 1-spp render towards the average over their footprint.
+RENDER_RADIUS, RENDER_MIN, RENDER_DIV, RENDER_NEAR_PCT, RENDER_RANGE = 7, 12, 10, 88, 24 / 255
+FOOTPRINT_WEIGHT = 0.25
+COUNTS, NOT_MEASURED = 4, 255  # bytes per tile of count_changed's output; k = 3 of a tile not measured
 
 def fallback_defines(fmt: FrameFormat, linear: bool, linear_input: bool, everywhere: bool = False) -> dict:
     """Defines for kernels/fallback.cl (FXAA's own at the shader's defaults, plus FALLBACK_*); `everywhere`
@@ -37,11 +45,13 @@ def fallback_defines(fmt: FrameFormat, linear: bool, linear_input: bool, everywh
             "FALLBACK_SAME_LEVELS": int(np.floor(FALLBACK_SAME / 255.0 * _MAX[np.dtype(fmt.dtype)])),
             "FALLBACK_WEIGHT": float(FALLBACK_WEIGHT), "FALLBACK_MIX": float(FALLBACK_MIX),
             "FALLBACK_RICH_MIN": FALLBACK_RICH_MIN, "FALLBACK_RICH_DIV": FALLBACK_RICH_DIV,
-            "FALLBACK_KEEP_RUN": 0 if everywhere else FALLBACK_KEEP_RUN}
+            "FALLBACK_KEEP_RUN": 0 if everywhere else FALLBACK_KEEP_RUN, "RENDER_RADIUS": RENDER_RADIUS,
+            "RENDER_MIN": RENDER_MIN, "RENDER_DIV": RENDER_DIV, "RENDER_NEAR_PCT": RENDER_NEAR_PCT,
+            "RENDER_RANGE": float(RENDER_RANGE), "FOOTPRINT_WEIGHT": float(FOOTPRINT_WEIGHT)}
 
 
 class FallbackPass:
-    """The two kernels of kernels/fallback.cl and their tile-count buffer, for one frame format."""
+    """The kernels of kernels/fallback.cl and their per-tile buffers, for one frame format."""
 
     def __init__(self, context: Context, fmt: FrameFormat, linear: bool, linear_input: bool,
                  everywhere: bool = False):
@@ -51,23 +61,32 @@ class FallbackPass:
         self.tiles = (-(-fmt.width // FALLBACK_TILE), -(-fmt.height // FALLBACK_TILE))
         self._count = context.kernel("fallback", "count_changed", defs)
         self._fxaa = context.kernel("fallback", "fxaa_fallback", defs)
-        self._counts = context.buffer(3 * self.tiles[0] * self.tiles[1])  # count_changed's three per tile
+        self._rows = context.kernel("fallback", "render_rows", defs)
+        self._render_tiles = context.kernel("fallback", "render_tiles", defs)
+        n = self.tiles[0] * self.tiles[1]
+        self._counts = context.buffer(COUNTS * n)  # count_changed's four per tile
+        self._row_sums = context.buffer(16 * n)  # render_rows' int4 per tile
+        self._render = context.buffer(n)  # render_tiles' flag per tile
 
     def device_bytes(self) -> int:
-        return self._counts.size
+        return self._counts.size + self._row_sums.size + self._render.size
 
     def enqueue(self, queue, src, dst, edges, hdist, vdist, luts, wait_for: list, events: dict) -> cl.Event:
         """dst holds the MLAA passes' output of src, `edges`, `hdist` and `vdist` their edge and line-distance
         buffers; returns the event after which dst holds the result."""
         W, H = np.int32(self.fmt.width), np.int32(self.fmt.height)
         tx, ty = np.int32(self.tiles[0]), np.int32(self.tiles[1])
-        if not self.everywhere:  # "everywhere" reads no counts
+        if not self.everywhere:  # "everywhere" reads no counts: every tile is a render region
             events["fallback_count"] = self._count(queue, (-(-self.fmt.width // SEGMENT), self.tiles[1]), None,
                                                    src, dst, edges, self._counts, W, H, tx, wait_for=wait_for)
-            wait_for = [events["fallback_count"]]
+            events["render_rows"] = self._rows(queue, self.tiles, None, self._counts, self._row_sums, tx, ty,
+                                               wait_for=[events["fallback_count"]])
+            events["render_tiles"] = self._render_tiles(queue, self.tiles, None, self._row_sums, self._render,
+                                                        tx, ty, wait_for=[events["render_rows"]])
+            wait_for = [events["render_tiles"]]
         events["fallback"] = self._fxaa(queue, (-(-self.fmt.width // SEGMENT), self.tiles[1]), None,
-                                        src, luts, edges, hdist, vdist, self._counts, dst, W, H, tx, ty,
-                                        wait_for=wait_for)
+                                        src, luts, edges, hdist, vdist, self._counts, self._render, dst,
+                                        W, H, tx, ty, wait_for=wait_for)
         return events["fallback"]
 
 
@@ -121,6 +140,7 @@ def fallback_reference(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray,
     rgb = rgb[..., ::-1] if fmt.bgr else rgb
     if everywhere:
         eligible = borders
+        rendered = np.ones((h, w), bool)
     else:
         t = FALLBACK_TILE
         th, tw = -(-h // t), -(-w // t)
@@ -133,8 +153,11 @@ def fallback_reference(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray,
             return np.repeat(np.repeat(s3, t, 0), t, 1)[:h, :w]
 
         busy_window = _window_colours(rgb) >= FALLBACK_COLOURS
-        busy_changed = region_sums(changed & borders & (_window_colours(rgb, 0.0) >= FALLBACK_COLOURS))
-        busy = (busy_changed >= FALLBACK_RICH_MIN) & (busy_changed * FALLBACK_RICH_DIV >= region_sums(borders))
+        busy_px = changed & borders & (_window_colours(rgb, 0.0) >= FALLBACK_COLOURS)
+        busy_changed = region_sums(busy_px)
+        rendered = render_regions(busy_px, borders, luma_reference(rgb, linear_input))
+        busy = rendered | ((busy_changed >= FALLBACK_RICH_MIN)
+                           & (busy_changed * FALLBACK_RICH_DIV >= region_sums(borders)))
         evidence = region_sums(changed & borders) >= FALLBACK_MIN_CHANGED
         eligible = borders & (busy | (evidence & busy_window & ~changed))
         eligible &= ~long_runs(e, hdist, vdist)
@@ -159,7 +182,7 @@ def fallback_reference(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray,
         else:
             new[..., :3] = c
         if fmt.dtype != np.float32:
-            new = np.clip(np.rint(new * pmax), 0, pmax)
+            new = np.clip(np.floor(new * pmax + f32(0.5)), 0, pmax)  # to_pixel: round half up
         return new.astype(out.dtype)
 
     m = mix_space(a)
@@ -168,4 +191,61 @@ def fallback_reference(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray,
     mixed = stored(m + f32(FALLBACK_MIX) * (fx - m), mlaa)
     out[eligible & ~changed] = left[eligible & ~changed]
     out[eligible & changed] = mixed[eligible & changed]
+    if FOOTPRINT_WEIGHT > 0:
+        taken = rendered & ~changed & ~eligible & ~_one_colour(a)
+        m = mix_space(a)
+        pad = np.pad(m, ((1, 1), (1, 1), (0, 0)), mode="edge")
+        tent = np.zeros_like(m)
+        for k in range(9):  # the kernel's order of summation
+            dx, dy = k % 3 - 1, k // 3 - 1
+            tent += f32((2 - dx * dx) * (2 - dy * dy)) * pad[1 + dy:1 + dy + h, 1 + dx:1 + dx + w]
+        filtered = stored(m + f32(FOOTPRINT_WEIGHT) * (tent * f32(1.0 / 16.0) - m), a)
+        out[taken] = filtered[taken]
     return out.reshape(np.asarray(mlaa_out).shape)
+
+
+def _one_colour(a: np.ndarray) -> np.ndarray:
+    """The 3x3 window (clamped) of every pixel holds one colour (colour channels bit-identical; (h, w, ch))."""
+    h, w, ch = a.shape
+    col = a[..., :min(ch, 3)]
+    pad = np.pad(col, ((1, 1), (1, 1), (0, 0)), mode="edge")
+    one = np.ones((h, w), bool)
+    for dy in range(3):
+        for dx in range(3):
+            one &= np.all(pad[dy:dy + h, dx:dx + w] == col, -1)
+    return one
+
+
+def render_regions(busy: np.ndarray, borders: np.ndarray, luma: np.ndarray) -> np.ndarray:
+    """kernels/fallback.cl's render regions per pixel: `busy` and `borders` the pixel masks of count_changed's
+    k = 2 and k = 1, `luma` px_luma of the input (h, w)."""
+    t, r = FALLBACK_TILE, RENDER_RADIUS
+    h, w = busy.shape
+    th, tw = -(-h // t), -(-w // t)
+
+    def per_tile(mask: np.ndarray) -> np.ndarray:
+        tiles = np.zeros((th * t, tw * t), np.int64)
+        tiles[:h, :w] = mask
+        return tiles.reshape(th, t, tw, t).sum((1, 3))
+
+    busy_t, border_t = per_tile(busy), per_tile(borders)
+    f32 = np.float32
+    lum = np.full((th * t, tw * t), np.nan, f32)
+    lum[:h, :w] = luma
+    blocks = lum.reshape(th, t, tw, t).transpose(0, 2, 1, 3).reshape(th, tw, t * t)
+    lo, hi = np.nanmin(blocks, -1, keepdims=True), np.nanmax(blocks, -1, keepdims=True)
+    rng = hi - lo
+    near = (((blocks - lo) * f32(10) <= rng) | ((hi - blocks) * f32(10) <= rng)).sum(-1)
+    measured = (busy_t > 0) & (rng[..., 0] >= f32(RENDER_RANGE))
+    weighted = np.where(measured, busy_t * near, 0)
+    busy_m = np.where(measured, busy_t, 0)
+
+    def window(a: np.ndarray) -> np.ndarray:  # sums over tiles within r each way, clamped to the frame
+        c = np.pad(np.cumsum(np.cumsum(a, 0), 1), ((1, 0), (1, 0)))
+        y0, y1 = np.clip(np.arange(th) - r, 0, th), np.clip(np.arange(th) + r + 1, 0, th)
+        x0, x1 = np.clip(np.arange(tw) - r, 0, tw), np.clip(np.arange(tw) + r + 1, 0, tw)
+        return c[y1][:, x1] - c[y0][:, x1] - c[y1][:, x0] + c[y0][:, x0]
+
+    b, a, bm, nw = window(busy_t), window(border_t), window(busy_m), window(weighted)
+    flag = (b >= RENDER_MIN) & (b * RENDER_DIV >= a) & (nw * 100 <= RENDER_NEAR_PCT * t * t * bm)
+    return np.repeat(np.repeat(flag, t, 0), t, 1)[:h, :w]

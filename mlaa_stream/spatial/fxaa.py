@@ -173,6 +173,13 @@ def fxaa_reference(frame: np.ndarray, *, edge_threshold: float = EDGE_THRESHOLD,
     return out.astype(frame.dtype).reshape(frame.shape)
 
 
+def luma_reference(rgb: np.ndarray, linear_input: bool = False) -> np.ndarray:
+    """kernels/fxaa.cl px_luma of normalised RGB (float32, (..., 3) in RGB order)."""
+    f32 = np.float32
+    luma = f32(0.299) * rgb[..., 0] + f32(0.587) * rgb[..., 1] + f32(0.114) * rgb[..., 2]
+    return np.sqrt(np.maximum(luma, f32(0))) if linear_input else luma
+
+
 def fxaa_mix_reference(frame: np.ndarray, *, edge_threshold: float = EDGE_THRESHOLD,
                        edge_threshold_min: float = EDGE_THRESHOLD_MIN, subpix: float = SUBPIX,
                        quality: int = QUALITY, linear: bool = True,
@@ -188,9 +195,7 @@ def fxaa_mix_reference(frame: np.ndarray, *, edge_threshold: float = EDGE_THRESH
     rgb = np.repeat(a[..., :1], 3, axis=-1) if fmt.channels == 1 else a[..., :3]
     if fmt.bgr:
         rgb = rgb[..., ::-1]
-    luma = f32(0.299) * rgb[..., 0] + f32(0.587) * rgb[..., 1] + f32(0.114) * rgb[..., 2]
-    if linear_input:
-        luma = np.sqrt(np.maximum(luma, f32(0)))
+    luma = luma_reference(rgb, linear_input)
     decode = linear and not linear_input
     luts = device_luts()
     blend_rgb = lut_read(luts, rgb).astype(f32) if decode else rgb
