@@ -32,6 +32,7 @@
 // footprint, so texture and shading come out sharper than the truth wherever no edge was found; docs/
 // spatial_tuning.md, FOOTPRINT_WEIGHT): the pixel moves FOOTPRINT_WEIGHT of the way to the 3x3 tent average of the
 // input, in linear light. Windows of one colour are left as they are.
+// RENDER_REGIONS 0 makes no tile a render region (Filter(fallback="edges"): screen captures).
 // FALLBACK_MIN_CHANGED 0 drops the region and colour tests and makes every tile a render region
 // (Filter(fallback="everywhere"): frames known to be 1-spp renders). Numpy reference:
 // mlaa_stream.spatial.fallback.fallback_reference.
@@ -77,6 +78,9 @@
 #endif
 #ifndef RENDER_RANGE
 #define RENDER_RANGE (24.0f / 255.0f)
+#endif
+#ifndef RENDER_REGIONS
+#define RENDER_REGIONS 1
 #endif
 #ifndef FOOTPRINT_WEIGHT
 #define FOOTPRINT_WEIGHT 0.25f
@@ -287,33 +291,46 @@ __kernel void count_changed(__global const PIXEL_T *src, __global const PIXEL_T 
     }
 }
 
-// Sums over the tiles tx - RENDER_RADIUS .. tx + RENDER_RADIUS of the tile's row, clamped to the frame: busy
-// pixels, edge-bordering pixels, busy pixels of measured tiles, and those weighted by the tiles' near counts
-// (the first of the two separable passes of render regions). One work item per tile.
-__kernel void render_rows(__global const uchar *counts, __global int4 *rows, const int tiles_x, const int tiles_y)
+// A tile's four terms of the render-region sums: busy pixels, edge-bordering pixels, busy pixels of a measured
+// tile, and those weighted by its near count.
+inline int4 region_terms(__global const uchar *counts, int tile)
 {
-    const int tx = get_global_id(0), ty = get_global_id(1);
-    if (tx >= tiles_x || ty >= tiles_y) return;
-    int4 sum = (int4)(0, 0, 0, 0);
-    for (int k = max(tx - RENDER_RADIUS, 0); k <= min(tx + RENDER_RADIUS, tiles_x - 1); ++k) {
-        __global const uchar *c = counts + COUNTS * (ty * tiles_x + k);
-        const int busy = c[2], measured = c[3] != NOT_MEASURED;
-        sum += (int4)(busy, c[1], measured ? busy : 0, measured ? busy * c[3] : 0);
-    }
-    rows[ty * tiles_x + tx] = sum;
+    __global const uchar *c = counts + COUNTS * tile;
+    const int busy = c[2], measured = c[3] != NOT_MEASURED;
+    return (int4)(busy, c[1], measured ? busy : 0, measured ? busy * c[3] : 0);
 }
 
-// render[tile] = 1 where the tiles within RENDER_RADIUS (rows' sums over the columns) look like a 1-spp render:
-// enough busy pixels, a share of the edge pixels, and not two-toned (the second separable pass).
+// rows[tile] = region_terms summed over the tiles tx - RENDER_RADIUS .. tx + RENDER_RADIUS of its row, clamped to
+// the frame (the first of the two separable passes of render regions). One work item per tile row, a running sum.
+__kernel void render_rows(__global const uchar *counts, __global int4 *rows, const int tiles_x, const int tiles_y)
+{
+    const int ty = get_global_id(0);
+    if (ty >= tiles_y) return;
+    const int row = ty * tiles_x;
+    int4 sum = (int4)(0, 0, 0, 0);
+    for (int k = 0; k < RENDER_RADIUS && k < tiles_x; ++k) sum += region_terms(counts, row + k);
+    for (int tx = 0; tx < tiles_x; ++tx) {
+        if (tx + RENDER_RADIUS < tiles_x) sum += region_terms(counts, row + tx + RENDER_RADIUS);
+        rows[row + tx] = sum;
+        if (tx >= RENDER_RADIUS) sum -= region_terms(counts, row + tx - RENDER_RADIUS);
+    }
+}
+
+// render[tile] = 1 where the tiles within RENDER_RADIUS (rows' sums over the column) look like a 1-spp render:
+// enough busy pixels, a share of the edge pixels, and not two-toned (the second separable pass). One work item
+// per tile column, a running sum.
 __kernel void render_tiles(__global const int4 *rows, __global uchar *render, const int tiles_x, const int tiles_y)
 {
-    const int tx = get_global_id(0), ty = get_global_id(1);
-    if (tx >= tiles_x || ty >= tiles_y) return;
+    const int tx = get_global_id(0);
+    if (tx >= tiles_x) return;
     int4 sum = (int4)(0, 0, 0, 0);
-    for (int j = max(ty - RENDER_RADIUS, 0); j <= min(ty + RENDER_RADIUS, tiles_y - 1); ++j)
-        sum += rows[j * tiles_x + tx];
-    render[ty * tiles_x + tx] = (uchar)(sum.x >= RENDER_MIN && sum.x * RENDER_DIV >= sum.y &&
-                                        sum.w * 100 <= RENDER_NEAR_PCT * (FALLBACK_TILE * FALLBACK_TILE) * sum.z);
+    for (int k = 0; k < RENDER_RADIUS && k < tiles_y; ++k) sum += rows[k * tiles_x + tx];
+    for (int ty = 0; ty < tiles_y; ++ty) {
+        if (ty + RENDER_RADIUS < tiles_y) sum += rows[(ty + RENDER_RADIUS) * tiles_x + tx];
+        render[ty * tiles_x + tx] = (uchar)(sum.x >= RENDER_MIN && sum.x * RENDER_DIV >= sum.y &&
+                                            sum.w * 100 <= RENDER_NEAR_PCT * (FALLBACK_TILE * FALLBACK_TILE) * sum.z);
+        if (ty >= RENDER_RADIUS) sum -= rows[(ty - RENDER_RADIUS) * tiles_x + tx];
+    }
 }
 
 // Pixel (x, y) of dst becomes `start`'s colour moved `share` of the way to FXAA's (linear light), where FXAA
@@ -331,38 +348,74 @@ RARELY_CALLED void towards_fxaa(__global const PIXEL_T *src, __global const floa
     store_px(dst, i, c);
 }
 
-// The footprint filter at (x, y): dst = src moved FOOTPRINT_WEIGHT of the way to the 3x3 tent average of src
-// (weights 1 2 1 / 2 4 2 / 1 2 1, clamped at the frame's edge) in mix space; windows of one colour are left.
-RARELY_CALLED void footprint(__global const PIXEL_T *src, __global const float *luts, __global PIXEL_T *dst,
-                             int x, int y, int w, int h)
+// Pixel i in mix space: blend_rgb's numbers; integer frames decoded with one load per channel from `lin`
+// (common.cl linear_levels: the same table reads).
+inline float3 mix_colour(__global const PIXEL_T *src, __global const float *luts, __global const float *lin, int i)
 {
-    const int i = IDX(x, y, w);
-    int flat = 1;
-    for (int k = 0; k < 9 && flat; ++k)
-        flat = same_px(src, i, IDX(clamp_to(x + k % 3 - 1, w - 1), clamp_to(y + k / 3 - 1, h - 1), w));
-    if (flat) return;
-    const float3 m = blend_rgb(src, luts, x, y, w, h);
-    float3 tent = (float3)(0.0f, 0.0f, 0.0f);
-    for (int k = 0; k < 9; ++k) {
-        const int dx = k % 3 - 1, dy = k / 3 - 1;
-        tent += (float)((2 - dx * dx) * (2 - dy * dy)) * blend_rgb(src, luts, x + dx, y + dy, w, h);
+#if DECODE && !defined(PIXEL_IS_FLOAT)
+#if CHANNELS < 3
+    const float v = lin[src[i]];
+    return (float3)(v, v, v);
+#else
+    __global const PIXEL_T *p = src + (size_t)i * CHANNELS;
+#if ORDER_BGR
+    return (float3)(lin[p[2]], lin[p[1]], lin[p[0]]);
+#else
+    return (float3)(lin[p[0]], lin[p[1]], lin[p[2]]);
+#endif
+#endif
+#else
+    const float4 c = load_px(src, i);
+#if DECODE
+    return (float3)(srgb_to_linear(luts, c.x), srgb_to_linear(luts, c.y), srgb_to_linear(luts, c.z));
+#else
+    return c.xyz;
+#endif
+#endif
+}
+
+// The footprint filter for the pixels x0 .. x1 - 1 of row y whose bit (x - x0) is set in `take`: each moves
+// FOOTPRINT_WEIGHT of the way to the 3x3 tent average of src (1 2 1 down each column, then 1 2 1 across the
+// column sums; clamped at the frame's edge) in mix space; a pixel whose window is one colour is left.
+RARELY_CALLED void footprint_row(__global const PIXEL_T *src, __global const float *luts,
+                                 __global const float *lin, __global PIXEL_T *dst, int x0, int x1, int y, int w,
+                                 int h, uint take)
+{
+    const int above = clamp_to(y - 1, h - 1) * w, here = y * w, below = clamp_to(y + 1, h - 1) * w;
+    float3 column[FALLBACK_TILE + 2];  // columns x0 - 1 .. x1, clamped
+    int column_one[FALLBACK_TILE + 2];  // the column's three pixels are one colour
+    for (int k = 0; k < x1 - x0 + 2; ++k) {
+        const int x = clamp_to(x0 - 1 + k, w - 1);
+        column_one[k] = same_px(src, above + x, here + x) && same_px(src, below + x, here + x);
+        column[k] = mix_colour(src, luts, lin, above + x) + mix_colour(src, luts, lin, here + x) * 2.0f +
+                    mix_colour(src, luts, lin, below + x);
     }
-    float4 c = load_px(src, i);
-    c.xyz = fxaa_encode(luts, m + FOOTPRINT_WEIGHT * (tent * (1.0f / 16.0f) - m));
-    store_px(dst, i, c);
+    for (int x = x0; x < x1; ++x) {
+        if (!((take >> (x - x0)) & 1u)) continue;
+        const int k = x - x0 + 1, i = here + x;
+        if (column_one[k - 1] && column_one[k] && column_one[k + 1] &&
+            same_px(src, here + clamp_to(x - 1, w - 1), i) && same_px(src, here + clamp_to(x + 1, w - 1), i))
+            continue;
+        const float3 tent = column[k - 1] + column[k] * 2.0f + column[k + 1];
+        const float3 m = mix_colour(src, luts, lin, i);
+        float4 c = load_px(src, i);
+        c.xyz = fxaa_encode(luts, m + FOOTPRINT_WEIGHT * (tent * (1.0f / 16.0f) - m));
+        store_px(dst, i, c);
+    }
 }
 
 // Tile (tx, ty): nothing to do unless the 3x3 tiles around it show 1-spp aliasing (busy, or evidence and the
 // pixel's own window busy) or it lies in a render region; then each eligible pixel that FXAA would change moves
 // towards its colour (towards_fxaa), and in a render region every other pixel the chain left takes the
 // footprint filter.
-inline void fallback_tile(__global const PIXEL_T *src, __global const float *luts, __global const uchar *edges,
+inline void fallback_tile(__global const PIXEL_T *src, __global const float *luts, __global const float *lin,
+                          __global const uchar *edges,
                           __global const ushort2 *hdist, __global const ushort2 *vdist, __global const uchar *counts,
                           __global const uchar *render, __global PIXEL_T *dst, int w, int h, int tiles_x,
                           int tiles_y, int tx, int ty)
 {
 #if FALLBACK_MIN_CHANGED > 0
-    const int rendered = render[ty * tiles_x + tx];
+    const int rendered = RENDER_REGIONS && render[ty * tiles_x + tx];
     int changed = 0, bordering = 0, busy_changed = 0;
     for (int j = max(ty - 1, 0); j <= min(ty + 1, tiles_y - 1); ++j)
         for (int k = max(tx - 1, 0); k <= min(tx + 1, tiles_x - 1); ++k) {
@@ -381,6 +434,7 @@ inline void fallback_tile(__global const PIXEL_T *src, __global const float *lut
     for (int y = y0; y < y1; ++y) {
         const int quiet = x1 - x0 == 8 && group_is_quiet(edges, x0, y, w);
         if (quiet && !(rendered && FOOTPRINT_WEIGHT > 0.0f)) continue;
+        uint take = 0;  // the footprint filter's pixels of the row
         for (int x = x0; x < x1; ++x) {
             const int changed_px = px_differs(src, dst, IDX(x, y, w));
             int eligible = !quiet && borders_edge(edges, x, y, w);
@@ -394,14 +448,15 @@ inline void fallback_tile(__global const PIXEL_T *src, __global const float *lut
                 towards_fxaa(src, luts, dst, changed_px ? dst : src, changed_px ? FALLBACK_MIX : FALLBACK_WEIGHT,
                              x, y, w, h);
             else if (rendered && !changed_px && FOOTPRINT_WEIGHT > 0.0f)
-                footprint(src, luts, dst, x, y, w, h);
+                take |= 1u << (x - x0);
         }
+        if (take) footprint_row(src, luts, lin, dst, x0, x1, y, w, h, take);
     }
 }
 
 // One work item per SEGMENT / FALLBACK_TILE tiles of a tile row (few work items: PoCL's cost per work group
 // is felt at one item per tile).
-__kernel void fxaa_fallback(__global const PIXEL_T *src, __global const float *luts,
+__kernel void fxaa_fallback(__global const PIXEL_T *src, __global const float *luts, __global const float *lin,
                             __global const uchar *edges, __global const ushort2 *hdist,
                             __global const ushort2 *vdist, __global const uchar *counts,
                             __global const uchar *render, __global PIXEL_T *dst,
@@ -411,5 +466,5 @@ __kernel void fxaa_fallback(__global const PIXEL_T *src, __global const float *l
     if (t0 >= tiles_x || ty >= tiles_y) return;
     const int t1 = min(t0 + SEGMENT / FALLBACK_TILE, tiles_x);
     for (int tx = t0; tx < t1; ++tx)
-        fallback_tile(src, luts, edges, hdist, vdist, counts, render, dst, w, h, tiles_x, tiles_y, tx, ty);
+        fallback_tile(src, luts, lin, edges, hdist, vdist, counts, render, dst, w, h, tiles_x, tiles_y, tx, ty);
 }

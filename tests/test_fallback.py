@@ -99,7 +99,7 @@ def _as(img8: np.ndarray, dtype, channels: int) -> np.ndarray:
     return x.copy()
 
 
-@pytest.mark.parametrize("mode", ["auto", "everywhere"])
+@pytest.mark.parametrize("mode", ["auto", "edges", "everywhere"])
 @pytest.mark.parametrize("dtype,channels,bgr", [(np.uint8, 3, False), (np.uint8, 3, True), (np.uint8, 4, False),
                                                 (np.uint8, 1, False), (np.uint16, 3, False), (np.float32, 3, False)])
 def test_kernel_matches_reference(mode, dtype, channels, bgr):
@@ -115,7 +115,7 @@ def test_kernel_matches_reference(mode, dtype, channels, bgr):
         got, passes = f.process(frame), g.intermediates(frame)
     mlaa = passes["out"]
     want = fallback_reference(frame, mlaa, passes["edges"], passes["hdist"], passes["vdist"], bgr=bgr,
-                              everywhere=mode == "everywhere")
+                              everywhere=mode == "everywhere", regions=mode != "edges")
     changed = np.any(np.atleast_3d(got) != np.atleast_3d(mlaa), -1)
     if channels > 1 or mode == "everywhere":  # (grey: channel 0 alone gives MLAA too few jaggies to open the gates)
         assert changed.sum() > 20, "the case must exercise the pass"
@@ -161,6 +161,21 @@ def test_only_edge_pixels_change_outside_render_regions_and_the_formulas_hold():
     assert within_a_level(footprint)[by_fallback & ~borders].all()
     sel = by_fallback & ~by_mlaa & borders
     assert (within_a_level(left) | (within_a_level(footprint) & regions))[sel].all()
+
+
+def test_edges_mode_has_no_render_regions():
+    """fallback="edges" (preset `screen`) is "auto" without render regions: on a render-like frame it changes
+    only edge-bordering pixels, and every pixel it changes "auto" changes the same way outside the footprint."""
+    frame = shaded_polygons(3, 144, 192)
+    with Filter(fallback="off") as g, Filter() as a, Filter(preset="screen") as s:
+        passes, auto, edges = g.intermediates(frame), a.process(frame), s.process(frame)
+    mlaa, e = passes["out"], passes["edges"]
+    borders = e != 0
+    borders[1:] |= (e[:-1] & 1) > 0
+    borders[:, 1:] |= (e[:, :-1] & 2) > 0
+    by_edges = np.any(edges != mlaa, -1)
+    assert by_edges.sum() > 20 and not np.any(by_edges & ~borders)
+    assert np.any(auto != mlaa, -1)[~borders].sum() > 500
 
 
 def test_two_toned_content_is_no_render_region():
@@ -248,5 +263,5 @@ def test_option_checked():
     with pytest.raises(ValueError, match="fallback"):
         Filter(fallback="sometimes")
     assert Filter(fallback=False).fallback == "off" and Filter(fallback=True).fallback == "auto"
-    assert Filter(preset="fast").fallback == "off"
+    assert Filter(preset="fast").fallback == "off" and Filter(preset="screen").fallback == "edges"
     assert FALLBACK_TILE == 8

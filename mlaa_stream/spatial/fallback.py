@@ -36,9 +36,11 @@ RENDER_RADIUS, RENDER_MIN, RENDER_DIV, RENDER_NEAR_PCT, RENDER_RANGE = 7, 12, 10
 FOOTPRINT_WEIGHT = 0.25
 COUNTS, NOT_MEASURED = 4, 255  # bytes per tile of count_changed's output; k = 3 of a tile not measured
 
-def fallback_defines(fmt: FrameFormat, linear: bool, linear_input: bool, everywhere: bool = False) -> dict:
+def fallback_defines(fmt: FrameFormat, linear: bool, linear_input: bool, everywhere: bool = False,
+                     regions: bool = True) -> dict:
     """Defines for kernels/fallback.cl (FXAA's own at the shader's defaults, plus FALLBACK_*); `everywhere`
-    drops the region and colour tests: every edge-bordering pixel is eligible."""
+    drops the region and colour tests: every edge-bordering pixel is eligible; `regions` False: no render
+    regions (no tile is one unless `everywhere`)."""
     return {**fxaa_defines(fmt, linear=linear, linear_input=linear_input), "SEGMENT": SEGMENT,
             "FALLBACK_TILE": FALLBACK_TILE, "FALLBACK_MIN_CHANGED": 0 if everywhere else FALLBACK_MIN_CHANGED,
             "FALLBACK_COLOURS": 0 if everywhere else FALLBACK_COLOURS, "FALLBACK_SAME": float(FALLBACK_SAME / 255.0),
@@ -47,17 +49,19 @@ def fallback_defines(fmt: FrameFormat, linear: bool, linear_input: bool, everywh
             "FALLBACK_RICH_MIN": FALLBACK_RICH_MIN, "FALLBACK_RICH_DIV": FALLBACK_RICH_DIV,
             "FALLBACK_KEEP_RUN": 0 if everywhere else FALLBACK_KEEP_RUN, "RENDER_RADIUS": RENDER_RADIUS,
             "RENDER_MIN": RENDER_MIN, "RENDER_DIV": RENDER_DIV, "RENDER_NEAR_PCT": RENDER_NEAR_PCT,
-            "RENDER_RANGE": float(RENDER_RANGE), "FOOTPRINT_WEIGHT": float(FOOTPRINT_WEIGHT)}
+            "RENDER_RANGE": float(RENDER_RANGE), "FOOTPRINT_WEIGHT": float(FOOTPRINT_WEIGHT),
+            "RENDER_REGIONS": int(regions)}
 
 
 class FallbackPass:
     """The kernels of kernels/fallback.cl and their per-tile buffers, for one frame format."""
 
     def __init__(self, context: Context, fmt: FrameFormat, linear: bool, linear_input: bool,
-                 everywhere: bool = False):
-        defs = fallback_defines(fmt, linear, linear_input, everywhere)
+                 everywhere: bool = False, regions: bool = True):
+        defs = fallback_defines(fmt, linear, linear_input, everywhere, regions)
         self.fmt = fmt
         self.everywhere = everywhere
+        self.regions = regions and not everywhere
         self.tiles = (-(-fmt.width // FALLBACK_TILE), -(-fmt.height // FALLBACK_TILE))
         self._count = context.kernel("fallback", "count_changed", defs)
         self._fxaa = context.kernel("fallback", "fxaa_fallback", defs)
@@ -71,21 +75,24 @@ class FallbackPass:
     def device_bytes(self) -> int:
         return self._counts.size + self._row_sums.size + self._render.size
 
-    def enqueue(self, queue, src, dst, edges, hdist, vdist, luts, wait_for: list, events: dict) -> cl.Event:
+    def enqueue(self, queue, src, dst, edges, hdist, vdist, luts, lin, wait_for: list, events: dict) -> cl.Event:
         """dst holds the MLAA passes' output of src, `edges`, `hdist` and `vdist` their edge and line-distance
-        buffers; returns the event after which dst holds the result."""
+        buffers, `lin` the frame format's linear_levels table; returns the event after which dst holds the
+        result."""
         W, H = np.int32(self.fmt.width), np.int32(self.fmt.height)
         tx, ty = np.int32(self.tiles[0]), np.int32(self.tiles[1])
         if not self.everywhere:  # "everywhere" reads no counts: every tile is a render region
             events["fallback_count"] = self._count(queue, (-(-self.fmt.width // SEGMENT), self.tiles[1]), None,
                                                    src, dst, edges, self._counts, W, H, tx, wait_for=wait_for)
-            events["render_rows"] = self._rows(queue, self.tiles, None, self._counts, self._row_sums, tx, ty,
-                                               wait_for=[events["fallback_count"]])
-            events["render_tiles"] = self._render_tiles(queue, self.tiles, None, self._row_sums, self._render,
-                                                        tx, ty, wait_for=[events["render_rows"]])
-            wait_for = [events["render_tiles"]]
+            wait_for = [events["fallback_count"]]
+            if self.regions:
+                events["render_rows"] = self._rows(queue, (self.tiles[1],), None, self._counts, self._row_sums,
+                                                   tx, ty, wait_for=wait_for)
+                events["render_tiles"] = self._render_tiles(queue, (self.tiles[0],), None, self._row_sums,
+                                                            self._render, tx, ty, wait_for=[events["render_rows"]])
+                wait_for = [events["render_tiles"]]
         events["fallback"] = self._fxaa(queue, (-(-self.fmt.width // SEGMENT), self.tiles[1]), None,
-                                        src, luts, edges, hdist, vdist, self._counts, self._render, dst,
+                                        src, luts, lin, edges, hdist, vdist, self._counts, self._render, dst,
                                         W, H, tx, ty, wait_for=wait_for)
         return events["fallback"]
 
@@ -120,7 +127,7 @@ def long_runs(edges: np.ndarray, hdist: np.ndarray, vdist: np.ndarray) -> np.nda
 
 def fallback_reference(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray, hdist: np.ndarray,
                        vdist: np.ndarray, *, linear: bool = True, linear_input: bool = False, bgr: bool = False,
-                       everywhere: bool = False) -> np.ndarray:
+                       everywhere: bool = False, regions: bool = True) -> np.ndarray:
     """What kernels/fallback.cl makes of `mlaa_out`, the MLAA passes' output of `src` with edge buffer
     `edges` ((h, w) uint8, EDGE_BOTTOM 1 | EDGE_RIGHT 2) and line distances `hdist`, `vdist`, in numpy."""
     fmt = frame_format(src, bgr)
@@ -155,7 +162,8 @@ def fallback_reference(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray,
         busy_window = _window_colours(rgb) >= FALLBACK_COLOURS
         busy_px = changed & borders & (_window_colours(rgb, 0.0) >= FALLBACK_COLOURS)
         busy_changed = region_sums(busy_px)
-        rendered = render_regions(busy_px, borders, luma_reference(rgb, linear_input))
+        rendered = (render_regions(busy_px, borders, luma_reference(rgb, linear_input)) if regions
+                    else np.zeros((h, w), bool))
         busy = rendered | ((busy_changed >= FALLBACK_RICH_MIN)
                            & (busy_changed * FALLBACK_RICH_DIV >= region_sums(borders)))
         evidence = region_sums(changed & borders) >= FALLBACK_MIN_CHANGED
@@ -195,10 +203,8 @@ def fallback_reference(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray,
         taken = rendered & ~changed & ~eligible & ~_one_colour(a)
         m = mix_space(a)
         pad = np.pad(m, ((1, 1), (1, 1), (0, 0)), mode="edge")
-        tent = np.zeros_like(m)
-        for k in range(9):  # the kernel's order of summation
-            dx, dy = k % 3 - 1, k // 3 - 1
-            tent += f32((2 - dx * dx) * (2 - dy * dy)) * pad[1 + dy:1 + dy + h, 1 + dx:1 + dx + w]
+        column = pad[:h] + pad[1:h + 1] * f32(2) + pad[2:]  # the kernel's order of summation
+        tent = column[:, :w] + column[:, 1:w + 1] * f32(2) + column[:, 2:]
         filtered = stored(m + f32(FOOTPRINT_WEIGHT) * (tent * f32(1.0 / 16.0) - m), a)
         out[taken] = filtered[taken]
     return out.reshape(np.asarray(mlaa_out).shape)

@@ -59,7 +59,7 @@ SUBPIXEL_BG = 2.0
 SUBPIXEL_END = 0.25
 # ... and the neighbours across its edges take SUBPIXEL_SHARE of its move, negated, split among them (ink kept).
 SUBPIXEL_SHARE = 1.0
-FALLBACK_MODES = ("auto", "everywhere", "off")  # Filter(fallback=...): spatial/fallback.py
+FALLBACK_MODES = ("auto", "edges", "everywhere", "off")  # Filter(fallback=...): spatial/fallback.py
 # A U shape (a bump) of STEM_MIN_L or more pixels on a 1-px line is a 1-px stroke -- small text's stems, rules --
 # with square ends, not a curve's bump: its areas are scaled by STEM_K (kernels/weights.cl, docs/spatial_tuning.md).
 STEM_MIN_L, STEM_K = 8, 0.25
@@ -77,6 +77,9 @@ PRESETS: dict[str, dict] = {
     "no_bridge": {"bridge": False},        # without bridging the dash chains of sub-pixel wires (on by default)
     "fast": {"fast": True},               # seed 004's three passes, lines up to 31 px: live loops, previews
     "rendered": {"fallback": "everywhere"},  # 1-spp 3D renders only: the FXAA fallback on every pixel MLAA leaves
+    # screen captures and UI through a lossy codec: the fallback's local gates without render regions (their
+    # two-tone test can take three-tone flat-colour art through JPEG for a render: docs/spatial_tuning.md)
+    "screen": {"fallback": "edges"},
 }
 
 
@@ -213,7 +216,8 @@ class Filter:
                  preset: str | None = None, context: Context | None = None):
         """`preset`: one of PRESETS; its options replace the keywords of the same names. `fallback`: FXAA
         for the pixels MLAA leaves (spatial/fallback.py): "auto" where the neighbourhood shows 1-spp
-        aliasing and is no flat-colour art, "everywhere" (frames known to be 1-spp renders), "off"."""
+        aliasing and is no flat-colour art, with the footprint filter in render regions; "edges" the same
+        without render regions (screen captures); "everywhere" (frames known to be 1-spp renders); "off"."""
         if preset is not None:
             if preset not in PRESETS:
                 raise ValueError(f"preset: expected one of {', '.join(sorted(PRESETS))}, got {preset!r}")
@@ -294,7 +298,8 @@ class Filter:
         if self.fallback != "off":
             from mlaa_stream.spatial.fallback import FallbackPass
             self._fallback = FallbackPass(self.context, fmt, self.options.linear, self.options.linear_input,
-                                          everywhere=self.fallback == "everywhere")
+                                          everywhere=self.fallback == "everywhere",
+                                          regions=self.fallback != "edges")
         return bufs
 
     # -- per frame ---------------------------------------------------------------------------
@@ -356,7 +361,7 @@ class Filter:
         if self._bridger is not None:  # dash chains found in src, drawn over the blended frame
             last = self._bridger.enqueue(q, src, dst, self._luts, wait_for=[last], events=ev)
         if self._fallback is not None:  # FXAA where MLAA left pixels of an aliased neighbourhood
-            last = self._fallback.enqueue(q, src, dst, bufs.edges, bufs.hdist, bufs.vdist, self._luts,
+            last = self._fallback.enqueue(q, src, dst, bufs.edges, bufs.hdist, bufs.vdist, self._luts, self._lin,
                                           wait_for=[last], events=ev)
         return last
 
