@@ -24,8 +24,9 @@
 // rules and stems wherever noise or compression makes their windows busy.
 // Render regions: a tile whose wide neighbourhood (RENDER_RADIUS tiles each way) looks like a 1-spp 3D render is
 // treated as busy, and every pixel of it that the chain leaves (neither blended by MLAA nor moved by FXAA) takes
-// the footprint filter. The neighbourhood test: at least RENDER_MIN busy pixels (count_changed's k = 2), at least
-// 1 / RENDER_DIV of its edge-bordering pixels, and its busy tiles not two-toned -- on average at most
+// the footprint filter. The neighbourhood test: at least RENDER_MIN busy pixels (count_changed's k = 2) in tiles
+// with a luma range of RENDER_RANGE or more, busy pixels at least 1 / RENDER_DIV of its edge-bordering pixels, and
+// its busy tiles not two-toned -- on average at most
 // RENDER_NEAR_PCT % of a busy tile's pixels lie within a tenth of the tile's luma range from its darkest or
 // lightest (text and UI, even through JPEG ringing, are two-toned: 92-96 %; renders 67-78 %).
 // The footprint filter (why: a 1-spp frame holds point samples, its truth the average over each pixel's square
@@ -68,7 +69,7 @@
 #define RENDER_RADIUS 7
 #endif
 #ifndef RENDER_MIN
-#define RENDER_MIN 12
+#define RENDER_MIN 48
 #endif
 #ifndef RENDER_DIV
 #define RENDER_DIV 10
@@ -317,7 +318,8 @@ __kernel void render_rows(__global const uchar *counts, __global int4 *rows, con
 }
 
 // render[tile] = 1 where the tiles within RENDER_RADIUS (rows' sums over the column) look like a 1-spp render:
-// enough busy pixels, a share of the edge pixels, and not two-toned (the second separable pass). One work item
+// RENDER_MIN busy pixels in measured tiles (low-contrast tiles cannot show whether they are two-toned), busy
+// pixels a share of the edge pixels, and not two-toned (the second separable pass). One work item
 // per tile column, a running sum.
 __kernel void render_tiles(__global const int4 *rows, __global uchar *render, const int tiles_x, const int tiles_y)
 {
@@ -327,7 +329,7 @@ __kernel void render_tiles(__global const int4 *rows, __global uchar *render, co
     for (int k = 0; k < RENDER_RADIUS && k < tiles_y; ++k) sum += rows[k * tiles_x + tx];
     for (int ty = 0; ty < tiles_y; ++ty) {
         if (ty + RENDER_RADIUS < tiles_y) sum += rows[(ty + RENDER_RADIUS) * tiles_x + tx];
-        render[ty * tiles_x + tx] = (uchar)(sum.x >= RENDER_MIN && sum.x * RENDER_DIV >= sum.y &&
+        render[ty * tiles_x + tx] = (uchar)(sum.z >= RENDER_MIN && sum.x * RENDER_DIV >= sum.y &&
                                             sum.w * 100 <= RENDER_NEAR_PCT * (FALLBACK_TILE * FALLBACK_TILE) * sum.z);
         if (ty >= RENDER_RADIUS) sum -= rows[(ty - RENDER_RADIUS) * tiles_x + tx];
     }

@@ -189,6 +189,16 @@ def test_two_toned_content_is_no_render_region():
         assert regions_of(shaded_polygons(seed, 144, 192)).mean() > 0.9
 
 
+@pytest.mark.parametrize("seed,small", [(0, True), (1, True), (2, True), (2, False)])
+def test_antialiased_content_is_no_render_region(seed, small):
+    """Known answer: the yardstick's already antialiased text, wires and diagonals (8x8 samples per pixel) are no
+    render regions at any seed (low-contrast tiles do not count as evidence; a region needs RENDER_MIN busy
+    pixels: seed 2's full-size wires have a few dozen)."""
+    from mlaa_stream.yardstick.scenes import generate_scenes
+    for scene in generate_scenes(small=small, seed=seed, names=["antialiased"]):
+        assert not regions_of(scene.inputs[0]).any(), scene.name
+
+
 def test_footprint_leaves_one_colour_windows():
     """Known answer: in a render region, a pixel whose 3x3 window is one colour keeps it (the tent average of
     one colour is that colour; the pass does not round-trip it through linear light)."""

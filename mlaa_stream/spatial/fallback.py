@@ -28,11 +28,12 @@ FALLBACK_RICH_MIN, FALLBACK_RICH_DIV, FALLBACK_MIX = 12, 20, 0.5
 # stands, so pixel-aligned rules and stems keep their sharpness where noise or compression makes windows busy.
 FALLBACK_KEEP_RUN = 16
 # Render regions (kernels/fallback.cl): a tile whose neighbourhood of RENDER_RADIUS tiles each way holds at least
-# RENDER_MIN busy pixels, at least 1 / RENDER_DIV of its edge-bordering pixels, and busy tiles with on average at most
+# RENDER_MIN busy pixels in tiles of a luma range of RENDER_RANGE or more, busy pixels at least 1 / RENDER_DIV of its
+# edge-bordering pixels, and busy tiles with on average at most
 # RENDER_NEAR_PCT % of their pixels within a tenth of the tile's luma range (RENDER_RANGE or more) from its
 # extremes, counts as busy, and the pixels the chain leaves there move FOOTPRINT_WEIGHT of the way to their 3x3
 # tent average: the point samples of a 1-spp render towards the average over their footprint.
-RENDER_RADIUS, RENDER_MIN, RENDER_DIV, RENDER_NEAR_PCT, RENDER_RANGE = 7, 12, 10, 88, 24 / 255
+RENDER_RADIUS, RENDER_MIN, RENDER_DIV, RENDER_NEAR_PCT, RENDER_RANGE = 7, 48, 10, 88, 24 / 255
 FOOTPRINT_WEIGHT = 0.25
 COUNTS, NOT_MEASURED = 4, 255  # bytes per tile of count_changed's output; k = 3 of a tile not measured
 
@@ -253,5 +254,5 @@ def render_regions(busy: np.ndarray, borders: np.ndarray, luma: np.ndarray) -> n
         return c[y1][:, x1] - c[y0][:, x1] - c[y1][:, x0] + c[y0][:, x0]
 
     b, a, bm, nw = window(busy_t), window(border_t), window(busy_m), window(weighted)
-    flag = (b >= RENDER_MIN) & (b * RENDER_DIV >= a) & (nw * 100 <= RENDER_NEAR_PCT * t * t * bm)
+    flag = (bm >= RENDER_MIN) & (b * RENDER_DIV >= a) & (nw * 100 <= RENDER_NEAR_PCT * t * t * bm)
     return np.repeat(np.repeat(flag, t, 0), t, 1)[:h, :w]
