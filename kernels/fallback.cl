@@ -350,59 +350,75 @@ RARELY_CALLED void towards_fxaa(__global const PIXEL_T *src, __global const floa
     store_px(dst, i, c);
 }
 
-// Pixel i in mix space: blend_rgb's numbers; integer frames decoded with one load per channel from `lin`
-// (common.cl linear_levels: the same table reads).
-inline float3 mix_colour(__global const PIXEL_T *src, __global const float *luts, __global const float *lin, int i)
+// One column of the footprint filter's window at pixel index `here` (rows above and below): its 1 2 1 sum in mix
+// space (blend_rgb's numbers; integer frames decoded with one load per channel from `lin`, common.cl
+// linear_levels, the same table reads), its middle pixel in mix space, and whether its three pixels are one
+// colour. Channels in storage order: decode, tent and encode are the same for every channel.
+typedef struct { float3 sum, middle; int one; } column_t;
+
+inline float3 mix_channels(__global const PIXEL_T *src, __global const float *luts, __global const float *lin,
+                           int i)
 {
-#if DECODE && !defined(PIXEL_IS_FLOAT)
-#if CHANNELS < 3
-    const float v = lin[src[i]];
-    return (float3)(v, v, v);
+#if CHANNELS == 1
+    const PIXEL_T a = src[i], b = a, c = a;
 #else
     __global const PIXEL_T *p = src + (size_t)i * CHANNELS;
-#if ORDER_BGR
-    return (float3)(lin[p[2]], lin[p[1]], lin[p[0]]);
-#else
-    return (float3)(lin[p[0]], lin[p[1]], lin[p[2]]);
+    const PIXEL_T a = p[0], b = p[1], c = p[2];
 #endif
-#endif
+#if DECODE && !defined(PIXEL_IS_FLOAT)
+    return (float3)(lin[a], lin[b], lin[c]);
 #else
-    const float4 c = load_px(src, i);
+    const float3 v = (float3)((float)a, (float)b, (float)c) * (1.0f / PIXEL_MAX);
 #if DECODE
-    return (float3)(srgb_to_linear(luts, c.x), srgb_to_linear(luts, c.y), srgb_to_linear(luts, c.z));
+    return (float3)(srgb_to_linear(luts, v.x), srgb_to_linear(luts, v.y), srgb_to_linear(luts, v.z));
 #else
-    return c.xyz;
+    return v;
 #endif
 #endif
 }
 
+inline column_t footprint_column(__global const PIXEL_T *src, __global const float *luts,
+                                 __global const float *lin, int above, int here, int below)
+{
+    column_t col;
+    col.one = same_px(src, above, here) && same_px(src, below, here);
+    col.middle = mix_channels(src, luts, lin, here);
+    col.sum = mix_channels(src, luts, lin, above) + col.middle * 2.0f + mix_channels(src, luts, lin, below);
+    return col;
+}
+
 // The footprint filter for the pixels x0 .. x1 - 1 of row y whose bit (x - x0) is set in `take`: each moves
 // FOOTPRINT_WEIGHT of the way to the 3x3 tent average of src (1 2 1 down each column, then 1 2 1 across the
-// column sums; clamped at the frame's edge) in mix space; a pixel whose window is one colour is left.
+// column sums; clamped at the frame's edge) in mix space; a pixel whose window is one colour is left. A window of
+// three columns slides along the row. Alpha is not written (a pixel the chain left has its source's in dst).
 RARELY_CALLED void footprint_row(__global const PIXEL_T *src, __global const float *luts,
                                  __global const float *lin, __global PIXEL_T *dst, int x0, int x1, int y, int w,
                                  int h, uint take)
 {
     const int above = clamp_to(y - 1, h - 1) * w, here = y * w, below = clamp_to(y + 1, h - 1) * w;
-    float3 column[FALLBACK_TILE + 2];  // columns x0 - 1 .. x1, clamped
-    int column_one[FALLBACK_TILE + 2];  // the column's three pixels are one colour
-    for (int k = 0; k < x1 - x0 + 2; ++k) {
-        const int x = clamp_to(x0 - 1 + k, w - 1);
-        column_one[k] = same_px(src, above + x, here + x) && same_px(src, below + x, here + x);
-        column[k] = mix_colour(src, luts, lin, above + x) + mix_colour(src, luts, lin, here + x) * 2.0f +
-                    mix_colour(src, luts, lin, below + x);
-    }
+    int xl = clamp_to(x0 - 1, w - 1);
+    column_t left = footprint_column(src, luts, lin, above + xl, here + xl, below + xl);
+    column_t mid = footprint_column(src, luts, lin, above + x0, here + x0, below + x0);
     for (int x = x0; x < x1; ++x) {
-        if (!((take >> (x - x0)) & 1u)) continue;
-        const int k = x - x0 + 1, i = here + x;
-        if (column_one[k - 1] && column_one[k] && column_one[k + 1] &&
-            same_px(src, here + clamp_to(x - 1, w - 1), i) && same_px(src, here + clamp_to(x + 1, w - 1), i))
-            continue;
-        const float3 tent = column[k - 1] + column[k] * 2.0f + column[k + 1];
-        const float3 m = mix_colour(src, luts, lin, i);
-        float4 c = load_px(src, i);
-        c.xyz = fxaa_encode(luts, m + FOOTPRINT_WEIGHT * (tent * (1.0f / 16.0f) - m));
-        store_px(dst, i, c);
+        const int xr = clamp_to(x + 1, w - 1);
+        const column_t right = footprint_column(src, luts, lin, above + xr, here + xr, below + xr);
+        if (((take >> (x - x0)) & 1u) &&
+            !(left.one && mid.one && right.one && same_px(src, here + xl, here + x) &&
+              same_px(src, here + xr, here + x))) {
+            const float3 tent = left.sum + mid.sum * 2.0f + right.sum, m = mid.middle;
+            const float3 c = fxaa_encode(luts, m + FOOTPRINT_WEIGHT * (tent * (1.0f / 16.0f) - m));
+#if CHANNELS == 1
+            dst[here + x] = to_pixel(c.x);
+#else
+            __global PIXEL_T *p = dst + (size_t)(here + x) * CHANNELS;
+            p[0] = to_pixel(c.x);
+            p[1] = to_pixel(c.y);
+            p[2] = to_pixel(c.z);
+#endif
+        }
+        left = mid;
+        mid = right;
+        xl = x;
     }
 }
 
