@@ -146,3 +146,12 @@ def test_motion_is_subpixel_and_slow(scenes):
         step = np.abs(np.diff(t, axis=0)).max(axis=-1)
         assert (step > 0).any(), name
         assert np.median(step) <= 2, name
+
+
+@needs_egl
+def test_rendered_views_bench_runs(capsys):
+    """python -m mlaa_stream.bench.rendered_views at a tiny size: every view rendered, scored and printed."""
+    from mlaa_stream.bench import rendered_views
+    assert rendered_views.main(["--methods", "none,mlaa", "--sizes", "96x54"]) == 0
+    out = capsys.readouterr().out
+    assert all(f"{name}_96" in out for name in rendered_views.VIEWS) and "mean" in out

@@ -1,0 +1,84 @@
+"""Held-out rendered views: the rendered world (yardstick/rendered.py) seen from cameras that no bench scene uses.
+
+    python -m mlaa_stream.bench.rendered_views [--methods none,fxaa,mlaa,mlaa:screen,mlaa:rendered] [--sizes 640x360,960x540]
+
+The bench's rendered scenes are what the spatial filter's rendered-content rules were measured on; these views
+are not, so a rule that only fits those five scenes shows here. Each view is rendered like the bench's (1 spp at
+pixel centres; truth: 8x8 jittered samples averaged in linear light), at each size, and every method of the
+bench (mlaa_stream.bench.accuracy.METHODS) prints error removed % / damage away from edges (levels) / FLIP per
+view, with the mean error removed. Needs what the rendered scenes need (EGL; `pip install 'mlaa-stream[bench]'`
+for FLIP). A benchmark, never a unit test.
+"""
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+from mlaa_stream.bench.accuracy import METHODS
+from mlaa_stream.yardstick import metrics as M
+from mlaa_stream.yardstick.rendered import Camera, Renderer, _context, egl_available
+from mlaa_stream.yardstick.scenes import edge_mask
+
+# name -> (eye, target, vertical field of view in degrees): views the bench's shots (rendered.shot) do not use
+VIEWS: dict[str, tuple[tuple, tuple, float]] = {
+    "low_arches": ((-4.0, 0.5, -2.0), (2.0, 4.0, -10.0), 60.0),  # up at the colonnade from the stairs' side
+    "high_down": ((-2.0, 6.0, 10.0), (0.0, 0.0, -10.0), 55.0),  # over the whole arcade, looking down
+    "side_road": ((8.0, 2.5, -5.0), (0.0, 1.5, -15.0), 45.0),  # across the spheres to the fence and cables
+    "far_tele": ((3.0, 1.2, -30.0), (-5.0, 3.0, -60.0), 25.0),  # long lens towards the pylons
+}
+
+
+def render_views(sizes: list[tuple[int, int]]) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """{view_WIDTH: (input, truth)} for every view at every size."""
+    frames = {}
+    for width, height in sizes:
+        renderer = Renderer(_context(), width, height)
+        try:
+            for name, (eye, target, fov) in VIEWS.items():
+                cam = Camera(eye, target, fov)
+                frames[f"{name}_{width}"] = (renderer.input_frame(cam), renderer.truth_frame(cam))
+        finally:
+            renderer.release()
+    return frames
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--methods", default="none,fxaa,mlaa,mlaa:screen,mlaa:rendered")
+    ap.add_argument("--sizes", default="640x360,960x540")
+    ap.add_argument("--device", default=None)
+    args = ap.parse_args(argv)
+    ok, why = egl_available()
+    if not ok:
+        raise SystemExit(f"rendered views need a headless OpenGL context: {why}")
+    methods = args.methods.split(",")
+    unknown = [m for m in methods if m not in METHODS]
+    if unknown:
+        raise SystemExit(f"expected methods from {', '.join(METHODS)}, got {', '.join(unknown)}")
+    sizes = [tuple(int(v) for v in s.split("x")) for s in args.sizes.split(",")]
+    frames = render_views(sizes)
+    try:
+        M.flip(frames[next(iter(frames))][1], frames[next(iter(frames))][1])
+        with_flip = True
+    except Exception:  # FLIP is an optional part ([bench])
+        with_flip = False
+    print("view".ljust(16) + "".join(m.rjust(24) for m in methods))
+    removed = {m: [] for m in methods}
+    cells = {view: [] for view in frames}
+    for m in methods:
+        proc = METHODS[m](args.device)
+        for view, (inp, truth) in frames.items():
+            out = proc.process(inp)
+            sc = M.score(out, inp, truth, edge_mask(inp, truth), with_flip=with_flip)
+            removed[m].append(sc["error_removed"])
+            cells[view].append(f"{sc['error_removed'] * 100:5.1f} / {sc['damage']:.2f}"
+                               + (f" / {sc['flip']:.4f}" if with_flip else ""))
+    for view, row in cells.items():
+        print(view.ljust(16) + "".join(c.rjust(24) for c in row))
+    print("mean".ljust(16) + "".join(f"{np.mean(removed[m]) * 100:5.1f}".rjust(24) for m in methods))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
