@@ -7,8 +7,8 @@ import pytest
 
 from mlaa_stream.device.colour import linear_to_srgb, srgb_to_linear
 from mlaa_stream.spatial.fallback import (FALLBACK_MIX, FALLBACK_TILE, FALLBACK_WEIGHT, FOOTPRINT_WEIGHT,
-                                          RENDER_RADIUS, fallback_reference, render_regions)
-from mlaa_stream.spatial.fxaa import fxaa_mix_reference, luma_reference
+                                          RENDER_RADIUS, fallback_reference, render_regions_of)
+from mlaa_stream.spatial.fxaa import fxaa_mix_reference
 from mlaa_stream.spatial.filter import Filter
 
 
@@ -75,16 +75,10 @@ def render_beside_art(seed: int) -> np.ndarray:
 
 
 def regions_of(frame: np.ndarray) -> np.ndarray:
-    """The render regions that fallback_reference finds in `frame` (8-bit RGB)."""
+    """The render regions that fallback_reference finds in `frame`."""
     with Filter(fallback="off") as g:
         passes = g.intermediates(frame)
-    e, changed = passes["edges"], np.any(passes["out"] != frame, -1)
-    borders = e != 0
-    borders[1:] |= (e[:-1] & 1) > 0
-    borders[:, 1:] |= (e[:, :-1] & 2) > 0
-    from mlaa_stream.spatial.fallback import _window_colours
-    busy = changed & borders & (_window_colours(frame.astype(np.float32) / 255, 0.0) >= 4)
-    return render_regions(busy, borders, luma_reference(frame.astype(np.float32) / 255))
+    return render_regions_of(frame, passes["out"], passes["edges"])
 
 
 def _as(img8: np.ndarray, dtype, channels: int) -> np.ndarray:
@@ -275,3 +269,15 @@ def test_option_checked():
     assert Filter(fallback=False).fallback == "off" and Filter(fallback=True).fallback == "auto"
     assert Filter(preset="fast").fallback == "off" and Filter(preset="screen").fallback == "edges"
     assert FALLBACK_TILE == 8
+
+
+def test_codec_check_runs(capsys):
+    """python -m mlaa_stream.bench.codec_check on one scene: encoded and decoded through H.264 (close to, not
+    equal to, the input) and scored."""
+    from mlaa_stream.bench import codec_check
+    frames = np.repeat(shaded_polygons(1, 64, 96)[None], 2, 0)
+    coded = codec_check.through_h264(frames, 18)
+    assert coded.shape == frames.shape and np.any(coded != frames)
+    assert np.abs(coded.astype(int) - frames).mean() < 4
+    assert codec_check.main(["--scenes", "text_ui", "--crf", "28"]) == 0
+    assert "text_ui" in capsys.readouterr().out

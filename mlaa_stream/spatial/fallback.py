@@ -126,26 +126,42 @@ def long_runs(edges: np.ndarray, hdist: np.ndarray, vdist: np.ndarray) -> np.nda
     return run >= FALLBACK_KEEP_RUN
 
 
+def _frame_masks(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray, bgr: bool) -> tuple:
+    """(format, src (h, w, ch), MLAA output (h, w, ch), edge-bordering pixels, pixels the MLAA passes changed,
+    normalised RGB of src in RGB order (h, w, 3) float32)."""
+    fmt = frame_format(src, bgr)
+    h, w, ch = fmt.height, fmt.width, fmt.channels
+    a = np.asarray(src).reshape(h, w, ch)
+    mlaa = np.asarray(mlaa_out).reshape(h, w, ch)
+    e = np.asarray(edges)
+    borders = e != 0
+    borders[1:] |= (e[:-1] & 1) > 0
+    borders[:, 1:] |= (e[:, :-1] & 2) > 0
+    norm = a.astype(np.float32) * (np.float32(1.0) / np.float32(_MAX[fmt.dtype]))
+    rgb = np.repeat(norm[..., :1], 3, -1) if ch == 1 else norm[..., :3]
+    return fmt, a, mlaa, borders, np.any(a != mlaa, -1), (rgb[..., ::-1] if fmt.bgr else rgb)
+
+
+def render_regions_of(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray, *, linear_input: bool = False,
+                      bgr: bool = False) -> np.ndarray:
+    """The render regions kernels/fallback.cl finds in `src` (per pixel, (h, w) bool), given the MLAA passes'
+    output and edge buffer (Filter.intermediates: "out", "edges")."""
+    _, _, _, borders, changed, rgb = _frame_masks(src, mlaa_out, edges, bgr)
+    busy = changed & borders & (_window_colours(rgb, 0.0) >= FALLBACK_COLOURS)
+    return render_regions(busy, borders, luma_reference(rgb, linear_input))
+
+
 def fallback_reference(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray, hdist: np.ndarray,
                        vdist: np.ndarray, *, linear: bool = True, linear_input: bool = False, bgr: bool = False,
                        everywhere: bool = False, regions: bool = True) -> np.ndarray:
     """What kernels/fallback.cl makes of `mlaa_out`, the MLAA passes' output of `src` with edge buffer
     `edges` ((h, w) uint8, EDGE_BOTTOM 1 | EDGE_RIGHT 2) and line distances `hdist`, `vdist`, in numpy."""
-    fmt = frame_format(src, bgr)
+    fmt, a, mlaa, borders, changed, rgb = _frame_masks(src, mlaa_out, edges, bgr)
     f32 = np.float32
     pmax = f32(_MAX[fmt.dtype])
     h, w, ch = fmt.height, fmt.width, fmt.channels
-    a = np.asarray(src).reshape(h, w, ch)
-    mlaa = np.asarray(mlaa_out).reshape(h, w, ch)
     out = mlaa.copy()
     e = np.asarray(edges)
-    borders = e != 0
-    borders[1:] |= (e[:-1] & 1) > 0
-    borders[:, 1:] |= (e[:, :-1] & 2) > 0
-    changed = np.any(a != mlaa, -1)
-    norm = a.astype(f32) * (f32(1.0) / pmax)
-    rgb = np.repeat(norm[..., :1], 3, -1) if ch == 1 else norm[..., :3]
-    rgb = rgb[..., ::-1] if fmt.bgr else rgb
     if everywhere:
         eligible = borders
         rendered = np.ones((h, w), bool)
