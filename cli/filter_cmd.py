@@ -12,7 +12,7 @@ from typing import Iterator
 
 import click
 
-from mlaa_stream.spatial.filter import PRESETS
+from mlaa_stream.spatial.filter import PRESET_USES, PRESETS
 from mlaa_stream.spatial.fast_filter import FastFilter
 from mlaa_stream.cli.options import configure_logging, device_option, verbosity_options
 
@@ -207,8 +207,9 @@ def _job_for(kind: str, output: str) -> type:
 @click.option("--frames", metavar="A-B", help="Frame numbers of a %04d pattern, e.g. 1001-1100 "
               "(default: every number found; gaps are reported).")
 @click.option("--preset", type=click.Choice(sorted(PRESETS)), default=None,
-              help="The antialiasing filter's named settings (the options below override them); "
-                   "the video encoder's speed is --encoder-preset.")
+              help="The antialiasing filter's named settings (the options below override them): "
+                   + "; ".join(f"{name}: {use}" for name, use in PRESET_USES.items())
+                   + ". The video encoder's speed is --encoder-preset.")
 @click.option("--threshold", type=click.FloatRange(min=0, min_open=True), default=None,
               help="Edge threshold: CIELAB ΔE for --metric lab (default 8), a fraction of full "
                    "scale for luma/rgb (default 0.06).")

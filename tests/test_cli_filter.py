@@ -531,3 +531,9 @@ def test_help_explains_with_examples():
     for text in ("Examples:", "--overwrite", "--resume", "--frames", "--codec", "veryfast",
                  "Exit codes", "130 interrupted", "valid shorter", "--overlay", "%04d"):
         assert text in r.output, text
+
+
+def test_every_preset_says_what_it_is_for():
+    """--help names each preset's use (PRESET_USES), and no preset is without one."""
+    from mlaa_stream.spatial.filter import PRESET_USES, PRESETS
+    assert set(PRESET_USES) == set(PRESETS)

@@ -81,6 +81,17 @@ PRESETS: dict[str, dict] = {
     # two-tone test can take three-tone flat-colour art through JPEG for a render: docs/spatial_tuning.md)
     "screen": {"fallback": "edges"},
 }
+# One line per preset for --help: what it is for.
+PRESET_USES: dict[str, str] = {
+    "default": "anything: renders, video games, vector art, text; photographs left alone",
+    "screen": "screen captures and UI recordings through a lossy codec (no render regions)",
+    "rendered": "frames known to be 1-spp 3D renders only (blurs text and photographs)",
+    "soft": "rounder corners on text and wires",
+    "luma": "luma edges, as SMAA and FXAA find them (for comparison)",
+    "no_bridge": "without reconnecting dashed sub-pixel wires",
+    "reconstruct": "+ topological reconstruction of thin features (slow)",
+    "fast": "seed 004's three passes: live loops and previews, no guards",
+}
 
 
 def area_table(max_len: int = AREA_TABLE_L) -> np.ndarray:
