@@ -278,8 +278,10 @@ def _job_for(kind: str, output: str) -> type:
                    "history sooner; 0 keeps it regardless of speed).")
 @click.option("--stats", "stats_path", type=click.Path(dir_okay=False), default=None,
               help="Write per-frame temporal statistics (motion model used, ms) to this CSV.")
-@click.option("--show", type=click.Choice(["history"]), default=None,
-              help="Debug view instead of the image: history confidence of the temporal stage.")
+@click.option("--show", type=click.Choice(["history", "regions"]), default=None,
+              help="Debug view instead of the image: history = the temporal stage's samples per pixel "
+                   "(implies --temporal); regions = the output with everything outside render regions "
+                   "dimmed (where the filter treats the frame as a 1-spp 3D render).")
 @device_option
 @verbosity_options
 @click.pass_context
@@ -332,10 +334,18 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
             chunk_frames: int = 16) -> int:
     """Check everything that can be checked without a device, then build the filter and run."""
     temporal = temporal or TemporalOptions()
+    show_regions = temporal.show == "regions"
+    if show_regions:  # the spatial filter's view: it does not imply the temporal stage
+        temporal.show = None
     if overwrite and resume:
         con.error("--overwrite and --resume contradict each other: choose one")
         return EXIT_USAGE
     kwargs = _filter_kwargs(ctx, preset, threshold, metric, display_space, reconstruct, bridge)
+    if show_regions:
+        if kwargs.get("fast"):
+            con.error("--show regions needs the default chain (the fast preset has no render regions)")
+            return EXIT_USAGE
+        kwargs["show"] = "regions"
     try:
         kind = _kind_of(input_path)
         if frames is not None and kind != "pattern":
@@ -359,7 +369,7 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
         if temporal.wanted and kind == "image":
             con.info("a single image: spatial antialiasing only (temporal needs a sequence)")
             temporal.enabled, temporal.show, temporal.stats_path = False, None, None
-        if cluster is not None and (temporal.show or temporal.stats_path):
+        if cluster is not None and (temporal.show or temporal.stats_path or show_regions):
             raise Usage("--stats and --show are not available with --cluster (each worker has its own stage)")
         job = _job_for(kind, output)
         runner = job(input_path, output, kind, con, overwrite=overwrite, resume=resume,

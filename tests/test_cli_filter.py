@@ -537,3 +537,17 @@ def test_every_preset_says_what_it_is_for():
     """--help names each preset's use (PRESET_USES), and no preset is without one."""
     from mlaa_stream.spatial.filter import PRESET_USES, PRESETS
     assert set(PRESET_USES) == set(PRESETS)
+
+
+def test_show_regions_dims_what_is_not_a_render(tmp_path):
+    """--show regions: the output where the frame is a render region, dimmed elsewhere; a flat-colour staircase
+    has no region, so all of it is dimmed (to SHOW_DIM of the normal output's colour, within a level)."""
+    from mlaa_stream.spatial.fallback import SHOW_DIM
+    src, plain, shown = tmp_path / "in.png", tmp_path / "plain.png", tmp_path / "shown.png"
+    write_png(src, staircase(48, 64))
+    assert run(src, "-o", plain).exit_code == 0
+    assert run(src, "-o", shown, "--show", "regions").exit_code == 0
+    a, b = read_image(str(plain)).pixels.astype(float), read_image(str(shown)).pixels.astype(float)
+    assert np.abs(b - a * SHOW_DIM).max() <= 1.0
+    result = run(src, "-o", tmp_path / "fast.png", "--show", "regions", "--preset", "fast")
+    assert result.exit_code == 2 and "--show regions" in stderr(result)

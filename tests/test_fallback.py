@@ -281,3 +281,21 @@ def test_codec_check_runs(capsys):
     assert np.abs(coded.astype(int) - frames).mean() < 16  # yuv420p halves the chroma of a busy texture
     assert codec_check.main(["--scenes", "text_ui", "--crf", "28"]) == 0
     assert "text_ui" in capsys.readouterr().out
+
+
+def test_show_regions_view():
+    """Known answer: Filter(show="regions") returns the normal output inside render regions and SHOW_DIM of
+    it (rounded) outside; "everywhere" is all region, "off" none; the option is checked."""
+    from mlaa_stream.spatial.fallback import SHOW_DIM
+    frame = render_beside_art(3)
+    regions = regions_of(frame)
+    assert 0 < regions.mean() < 1
+    for mode, inside in (("auto", regions), ("everywhere", np.ones_like(regions)),
+                         ("off", np.zeros_like(regions))):
+        with Filter(fallback=mode) as f, Filter(fallback=mode, show="regions") as g:
+            plain, shown = f.process(frame), g.process(frame)
+        np.testing.assert_array_equal(shown[inside], plain[inside])
+        dimmed = np.rint(plain[~inside].astype(np.float32) * np.float32(SHOW_DIM))
+        np.testing.assert_array_equal(shown[~inside], dimmed.astype(np.uint8))
+    with pytest.raises(ValueError, match="show"):
+        Filter(show="history")

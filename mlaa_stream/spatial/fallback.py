@@ -36,6 +36,7 @@ FALLBACK_KEEP_RUN = 16
 RENDER_RADIUS, RENDER_MIN, RENDER_DIV, RENDER_NEAR_PCT, RENDER_RANGE = 7, 48, 10, 88, 24 / 255
 FOOTPRINT_WEIGHT = 0.25
 COUNTS, NOT_MEASURED = 4, 255  # bytes per tile of count_changed's output; k = 3 of a tile not measured
+SHOW_DIM = 0.35  # Filter(show="regions"): pixels outside render regions keep this share of their colour
 
 def fallback_defines(fmt: FrameFormat, linear: bool, linear_input: bool, everywhere: bool = False,
                      regions: bool = True) -> dict:
@@ -76,6 +77,15 @@ class FallbackPass:
     def device_bytes(self) -> int:
         return self._counts.size + self._row_sums.size + self._render.size
 
+    def read_regions(self, queue, wait_for: list) -> tuple[np.ndarray, cl.Event | None]:
+        """The last frame's render-region flag per tile, (tiles_y, tiles_x) uint8, and the event of its copy to
+        the host (None: known without a copy -- every tile in "everywhere", none without regions)."""
+        shape = (self.tiles[1], self.tiles[0])
+        if not self.regions:
+            return np.full(shape, 1 if self.everywhere else 0, np.uint8), None
+        flags = np.empty(shape, np.uint8)
+        return flags, cl.enqueue_copy(queue, flags, self._render, wait_for=wait_for, is_blocking=False)
+
     def enqueue(self, queue, src, dst, edges, hdist, vdist, luts, lin, wait_for: list, events: dict) -> cl.Event:
         """dst holds the MLAA passes' output of src, `edges`, `hdist` and `vdist` their edge and line-distance
         buffers, `lin` the frame format's linear_levels table; returns the event after which dst holds the
@@ -96,6 +106,18 @@ class FallbackPass:
                                         src, luts, lin, edges, hdist, vdist, self._counts, self._render, dst,
                                         W, H, tx, ty, wait_for=wait_for)
         return events["fallback"]
+
+
+def dim_outside_regions(frame: np.ndarray, tiles: np.ndarray) -> np.ndarray:
+    """Filter(show="regions")'s view: `frame` ((h, w) or (h, w, ch)) with every pixel outside render regions
+    (`tiles`: one flag per FALLBACK_TILE^2 tile) at SHOW_DIM of its colour; alpha is kept."""
+    h, w = frame.shape[:2]
+    inside = np.repeat(np.repeat(np.asarray(tiles) > 0, FALLBACK_TILE, 0), FALLBACK_TILE, 1)[:h, :w]
+    out = frame.copy()
+    colour = out if out.ndim == 2 else out[..., :3]
+    dimmed = colour[~inside].astype(np.float32) * np.float32(SHOW_DIM)
+    colour[~inside] = dimmed if np.issubdtype(frame.dtype, np.floating) else np.rint(dimmed).astype(frame.dtype)
+    return out
 
 
 def _window_colours(rgb: np.ndarray, same: float = FALLBACK_SAME) -> np.ndarray:

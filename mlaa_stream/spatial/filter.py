@@ -60,6 +60,7 @@ SUBPIXEL_END = 0.25
 # ... and the neighbours across its edges take SUBPIXEL_SHARE of its move, negated, split among them (ink kept).
 SUBPIXEL_SHARE = 1.0
 FALLBACK_MODES = ("auto", "edges", "everywhere", "off")  # Filter(fallback=...): spatial/fallback.py
+SHOWS = (None, "regions")  # Filter(show=...): debug views
 # A U shape (a bump) of STEM_MIN_L or more pixels on a 1-px line is a 1-px stroke -- small text's stems, rules --
 # with square ends, not a curve's bump: its areas are scaled by STEM_K (kernels/weights.cl, docs/spatial_tuning.md).
 STEM_MIN_L, STEM_K = 8, 0.25
@@ -177,10 +178,11 @@ class PendingFrame:
     """A frame in flight; `result()` waits for its download and returns it in the input's dtype."""
 
     def __init__(self, host_out: np.ndarray, event, out_dtype: np.dtype, shape: tuple, keep=(),
-                 non_finite: NonFinite | None = None):
+                 non_finite: NonFinite | None = None, regions: tuple | None = None):
         self._out, self._event, self._dtype, self._shape = host_out, event, out_dtype, shape
         self._keep = keep  # host arrays that must outlive the non-blocking copies
         self._non_finite = non_finite
+        self._regions = regions  # show="regions": (per-tile flags, the event of their copy or None)
 
     def result(self) -> np.ndarray:
         self._event.wait()
@@ -188,6 +190,12 @@ class PendingFrame:
         out = self._out.reshape(self._shape)
         if self._non_finite is not None:
             out = self._non_finite.restore(out)
+        if self._regions is not None:
+            from mlaa_stream.spatial.fallback import dim_outside_regions
+            flags, copied = self._regions
+            if copied is not None:
+                copied.wait()
+            out = dim_outside_regions(out, flags)
         return out if out.dtype == self._dtype else out.astype(self._dtype)
 
 
@@ -224,11 +232,15 @@ class Filter:
                  blend_u: bool = True, ramp: float = 0.35, short_corner: float = SHORT_CORNER,
                  aa_guard: bool = True, bridge: bool = True, grain_guard: bool = True,
                  subpixel: float = SUBPIXEL, fallback: str | bool = "auto", fast: bool = False,
-                 preset: str | None = None, context: Context | None = None):
+                 preset: str | None = None, context: Context | None = None, show: str | None = None):
         """`preset`: one of PRESETS; its options replace the keywords of the same names. `fallback`: FXAA
         for the pixels MLAA leaves (spatial/fallback.py): "auto" where the neighbourhood shows 1-spp
         aliasing and is no flat-colour art, with the footprint filter in render regions; "edges" the same
-        without render regions (screen captures); "everywhere" (frames known to be 1-spp renders); "off"."""
+        without render regions (screen captures); "everywhere" (frames known to be 1-spp renders); "off".
+        `show="regions"`: a debug view, the output with every pixel outside render regions dimmed."""
+        if show not in SHOWS:
+            raise ValueError(f"show: expected None or 'regions', got {show!r}")
+        self.show = show
         if preset is not None:
             if preset not in PRESETS:
                 raise ValueError(f"preset: expected one of {', '.join(sorted(PRESETS))}, got {preset!r}")
@@ -334,9 +346,15 @@ class Filter:
                                    is_blocking=False)
             bufs.last_use[slot] = down
             self._last_event = done
+            regions = None
+            if self.show == "regions":
+                from mlaa_stream.spatial.fallback import FALLBACK_TILE
+                none = np.zeros((-(-fmt.height // FALLBACK_TILE), -(-fmt.width // FALLBACK_TILE)), np.uint8)
+                regions = (self._fallback.read_regions(self.queue, [done]) if self._fallback is not None else
+                           (none, None))
             self.queue.flush()
         return PendingFrame(host_out, down, np.dtype(frame.dtype), frame.shape, keep=(staging,),
-                            non_finite=non_finite)
+                            non_finite=non_finite, regions=regions)
 
     def _enqueue_passes(self, bufs: _FrameBuffers, src, dst, after: list, queue=None,
                         events: dict | None = None):
