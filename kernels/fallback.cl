@@ -1,6 +1,6 @@
 // fallback.cl -- FXAA 3.11 (fxaa.cl, built into the same program) for the edge pixels of 1-spp content: the
 // pass after blending (and bridging) in the default chain. It reads the edge buffer of the MLAA passes
-// (edges.cl): a pixel that borders no edge is neither counted nor changed.
+// (edges.cl): outside render regions (below), a pixel that borders no edge is neither counted nor changed.
 //
 // Why (beyond the seeds; SMAA and CMAA2 pair a line search with a local fallback in the same way): on
 // rendered frames a third of the input's error sits on edge pixels that no line of the MLAA search
@@ -26,9 +26,9 @@
 // treated as busy, and every pixel of it that the chain leaves (neither blended by MLAA nor moved by FXAA) takes
 // the footprint filter. The neighbourhood test: at least RENDER_MIN busy pixels (count_changed's k = 2) in tiles
 // with a luma range of RENDER_RANGE or more, busy pixels at least 1 / RENDER_DIV of its edge-bordering pixels, and
-// its busy tiles not two-toned -- on average at most
-// RENDER_NEAR_PCT % of a busy tile's pixels lie within a tenth of the tile's luma range from its darkest or
-// lightest (text and UI, even through JPEG ringing, are two-toned: 92-96 %; renders 67-78 %).
+// its busy tiles not two-toned -- on average at most RENDER_NEAR_PCT % of a busy tile's pixels lie within a tenth
+// of the tile's luma range from its darkest or lightest (text and UI, even through JPEG ringing, are two-toned:
+// 92-96 %; renders 67-78 %).
 // The footprint filter (why: a 1-spp frame holds point samples, its truth the average over each pixel's square
 // footprint, so texture and shading come out sharper than the truth wherever no edge was found; docs/
 // spatial_tuning.md, FOOTPRINT_WEIGHT): the pixel moves FOOTPRINT_WEIGHT of the way to the 3x3 tent average of the
