@@ -263,8 +263,8 @@ RARELY_CALLED int tile_near_extremes(__global const PIXEL_T *src, int x0, int x1
 // Four counts per tile (tx, ty), at counts[COUNTS * (ty * tiles_x + tx) + k]: k = 0 its pixels that border an edge
 // and that the MLAA passes changed (dst != src), k = 1 its pixels that border an edge, k = 2 the changed ones
 // whose 3x3 window holds FALLBACK_COLOURS bit-identical colours ("busy"), k = 3 tile_near_extremes where k = 2 is
-// not 0 (else NOT_MEASURED). One work item per SEGMENT pixels (a multiple of FALLBACK_TILE) of a band of
-// FALLBACK_TILE rows.
+// not 0 and there are render regions (else NOT_MEASURED). One work item per SEGMENT pixels (a multiple of
+// FALLBACK_TILE) of a band of FALLBACK_TILE rows.
 __kernel void count_changed(__global const PIXEL_T *src, __global const PIXEL_T *dst,
                             __global const uchar *edges, __global uchar *counts,
                             const int w, const int h, const int tiles_x)
@@ -288,7 +288,7 @@ __kernel void count_changed(__global const PIXEL_T *src, __global const PIXEL_T 
         c[0] = (uchar)changed;
         c[1] = (uchar)bordering;
         c[2] = (uchar)busy;
-        c[3] = (uchar)(busy ? tile_near_extremes(src, t0, t1, y0, y1, w, h) : NOT_MEASURED);
+        c[3] = (uchar)(RENDER_REGIONS && busy ? tile_near_extremes(src, t0, t1, y0, y1, w, h) : NOT_MEASURED);
     }
 }
 

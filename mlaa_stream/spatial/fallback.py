@@ -29,10 +29,10 @@ FALLBACK_RICH_MIN, FALLBACK_RICH_DIV, FALLBACK_MIX = 12, 20, 0.5
 FALLBACK_KEEP_RUN = 16
 # Render regions (kernels/fallback.cl): a tile whose neighbourhood of RENDER_RADIUS tiles each way holds at least
 # RENDER_MIN busy pixels in tiles of a luma range of RENDER_RANGE or more, busy pixels at least 1 / RENDER_DIV of its
-# edge-bordering pixels, and busy tiles with on average at most
-# RENDER_NEAR_PCT % of their pixels within a tenth of the tile's luma range (RENDER_RANGE or more) from its
-# extremes, counts as busy, and the pixels the chain leaves there move FOOTPRINT_WEIGHT of the way to their 3x3
-# tent average: the point samples of a 1-spp render towards the average over their footprint.
+# edge-bordering pixels, and busy tiles with on average at most RENDER_NEAR_PCT % of their pixels within a tenth of
+# the tile's luma range from its extremes, counts as busy, and the pixels the chain leaves there move
+# FOOTPRINT_WEIGHT of the way to their 3x3 tent average: the point samples of a 1-spp render towards the average
+# over their footprint.
 RENDER_RADIUS, RENDER_MIN, RENDER_DIV, RENDER_NEAR_PCT, RENDER_RANGE = 7, 48, 10, 88, 24 / 255
 FOOTPRINT_WEIGHT = 0.25
 COUNTS, NOT_MEASURED = 4, 255  # bytes per tile of count_changed's output; k = 3 of a tile not measured
@@ -108,11 +108,12 @@ class FallbackPass:
         return events["fallback"]
 
 
-def dim_outside_regions(frame: np.ndarray, tiles: np.ndarray) -> np.ndarray:
+def dim_outside_regions(frame: np.ndarray, tiles: np.ndarray | None) -> np.ndarray:
     """Filter(show="regions")'s view: `frame` ((h, w) or (h, w, ch)) with every pixel outside render regions
-    (`tiles`: one flag per FALLBACK_TILE^2 tile) at SHOW_DIM of its colour; alpha is kept."""
+    (`tiles`: one flag per FALLBACK_TILE^2 tile; None: no regions) at SHOW_DIM of its colour; alpha is kept."""
     h, w = frame.shape[:2]
-    inside = np.repeat(np.repeat(np.asarray(tiles) > 0, FALLBACK_TILE, 0), FALLBACK_TILE, 1)[:h, :w]
+    inside = (np.zeros((h, w), bool) if tiles is None else
+              np.repeat(np.repeat(np.asarray(tiles) > 0, FALLBACK_TILE, 0), FALLBACK_TILE, 1)[:h, :w])
     out = frame.copy()
     colour = out if out.ndim == 2 else out[..., :3]
     dimmed = colour[~inside].astype(np.float32) * np.float32(SHOW_DIM)
@@ -169,8 +170,13 @@ def render_regions_of(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray, 
     """The render regions kernels/fallback.cl finds in `src` (per pixel, (h, w) bool), given the MLAA passes'
     output and edge buffer (Filter.intermediates: "out", "edges")."""
     _, _, _, borders, changed, rgb = _frame_masks(src, mlaa_out, edges, bgr)
-    busy = changed & borders & (_window_colours(rgb, 0.0) >= FALLBACK_COLOURS)
-    return render_regions(busy, borders, luma_reference(rgb, linear_input))
+    return render_regions(_busy_pixels(changed, borders, rgb), borders, luma_reference(rgb, linear_input))
+
+
+def _busy_pixels(changed: np.ndarray, borders: np.ndarray, rgb: np.ndarray) -> np.ndarray:
+    """count_changed's k = 2 per pixel: edge-bordering pixels the MLAA passes changed whose 3x3 window holds
+    FALLBACK_COLOURS bit-identical colours or more."""
+    return changed & borders & (_window_colours(rgb, 0.0) >= FALLBACK_COLOURS)
 
 
 def fallback_reference(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray, hdist: np.ndarray,
@@ -199,7 +205,7 @@ def fallback_reference(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray,
             return np.repeat(np.repeat(s3, t, 0), t, 1)[:h, :w]
 
         busy_window = _window_colours(rgb) >= FALLBACK_COLOURS
-        busy_px = changed & borders & (_window_colours(rgb, 0.0) >= FALLBACK_COLOURS)
+        busy_px = _busy_pixels(changed, borders, rgb)
         busy_changed = region_sums(busy_px)
         rendered = (render_regions(busy_px, borders, luma_reference(rgb, linear_input)) if regions
                     else np.zeros((h, w), bool))
@@ -232,19 +238,17 @@ def fallback_reference(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray,
             new = np.clip(np.floor(new * pmax + f32(0.5)), 0, pmax)  # to_pixel: round half up
         return new.astype(out.dtype)
 
-    m = mix_space(a)
-    left = stored(m + f32(FALLBACK_WEIGHT) * (fx - m), a)
-    m = mix_space(mlaa)
-    mixed = stored(m + f32(FALLBACK_MIX) * (fx - m), mlaa)
+    m_src, m_mlaa = mix_space(a), mix_space(mlaa)
+    left = stored(m_src + f32(FALLBACK_WEIGHT) * (fx - m_src), a)
+    mixed = stored(m_mlaa + f32(FALLBACK_MIX) * (fx - m_mlaa), mlaa)
     out[eligible & ~changed] = left[eligible & ~changed]
     out[eligible & changed] = mixed[eligible & changed]
     if FOOTPRINT_WEIGHT > 0:
         taken = rendered & ~changed & ~eligible & ~_one_colour(a)
-        m = mix_space(a)
-        pad = np.pad(m, ((1, 1), (1, 1), (0, 0)), mode="edge")
+        pad = np.pad(m_src, ((1, 1), (1, 1), (0, 0)), mode="edge")
         column = pad[:h] + pad[1:h + 1] * f32(2) + pad[2:]  # the kernel's order of summation
         tent = column[:, :w] + column[:, 1:w + 1] * f32(2) + column[:, 2:]
-        filtered = stored(m + f32(FOOTPRINT_WEIGHT) * (tent * f32(1.0 / 16.0) - m), a)
+        filtered = stored(m_src + f32(FOOTPRINT_WEIGHT) * (tent * f32(1.0 / 16.0) - m_src), a)
         out[taken] = filtered[taken]
     return out.reshape(np.asarray(mlaa_out).shape)
 

@@ -182,7 +182,7 @@ class PendingFrame:
         self._out, self._event, self._dtype, self._shape = host_out, event, out_dtype, shape
         self._keep = keep  # host arrays that must outlive the non-blocking copies
         self._non_finite = non_finite
-        self._regions = regions  # show="regions": (per-tile flags, the event of their copy or None)
+        self._regions = regions  # show="regions": (per-tile flags or None, the event of their copy or None)
 
     def result(self) -> np.ndarray:
         self._event.wait()
@@ -347,11 +347,9 @@ class Filter:
             bufs.last_use[slot] = down
             self._last_event = done
             regions = None
-            if self.show == "regions":
-                from mlaa_stream.spatial.fallback import FALLBACK_TILE
-                none = np.zeros((-(-fmt.height // FALLBACK_TILE), -(-fmt.width // FALLBACK_TILE)), np.uint8)
+            if self.show == "regions":  # without the fallback pass: no regions
                 regions = (self._fallback.read_regions(self.queue, [done]) if self._fallback is not None else
-                           (none, None))
+                           (None, None))
             self.queue.flush()
         return PendingFrame(host_out, down, np.dtype(frame.dtype), frame.shape, keep=(staging,),
                             non_finite=non_finite, regions=regions)
