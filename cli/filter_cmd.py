@@ -335,13 +335,12 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
     """Check everything that can be checked without a device, then build the filter and run."""
     temporal = temporal or TemporalOptions()
     show_regions = temporal.show == "regions"
-    if show_regions:  # the spatial filter's view: it does not imply the temporal stage
-        temporal.show = None
     if overwrite and resume:
         con.error("--overwrite and --resume contradict each other: choose one")
         return EXIT_USAGE
     kwargs = _filter_kwargs(ctx, preset, threshold, metric, display_space, reconstruct, bridge)
-    if show_regions:
+    if show_regions:  # the spatial filter's view: it does not imply the temporal stage
+        temporal.show = None
         if kwargs.get("fast"):
             con.error("--show regions needs the default chain (the fast preset has no render regions)")
             return EXIT_USAGE

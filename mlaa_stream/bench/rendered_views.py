@@ -58,11 +58,7 @@ def main(argv: list[str] | None = None) -> int:
         raise SystemExit(f"expected methods from {', '.join(METHODS)}, got {', '.join(unknown)}")
     sizes = [tuple(int(v) for v in s.split("x")) for s in args.sizes.split(",")]
     frames = render_views(sizes)
-    try:
-        M.flip(frames[next(iter(frames))][1], frames[next(iter(frames))][1])
-        with_flip = True
-    except Exception:  # FLIP is an optional part ([bench])
-        with_flip = False
+    with_flip = M.flip_available()  # an optional part ([bench])
     print("view".ljust(16) + "".join(m.rjust(24) for m in methods))
     removed = {m: [] for m in methods}
     cells = {view: [] for view in frames}
