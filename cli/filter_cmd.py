@@ -265,10 +265,12 @@ def _job_for(kind: str, output: str) -> type:
                    "default: not yet never-worse than spatial only (docs/temporal.md).")
 @click.option("--temporal-frames", "temporal_frames", type=click.IntRange(2, 64), default=None,
               help="K: input frames kept in the ring (default 16; more: steadier pans, more memory).")
-@click.option("--temporal-method", type=click.Choice(["tss", "blend", "tss+blend"]), default="tss",
+@click.option("--temporal-method", type=click.Choice(["auto", "tss", "blend", "tss+blend"]), default="auto",
               show_default=True,
-              help="tss: temporal supersampling; blend: the previous output reprojected and blended "
-                   "(seed 002; better on dense motion, docs/temporal.md); tss+blend: both in turn.")
+              help="auto: temporal supersampling, then the previous output reprojected and blended on "
+                   "moving edges of render regions (1-spp 3D renders); tss: temporal supersampling "
+                   "only; blend: the reprojection blend everywhere (seed 002); tss+blend: both "
+                   "everywhere (docs/temporal.md).")
 @click.option("--temporal-mode", type=click.Choice(["adaptive", "dense", "global", "static"]),
               default="adaptive", show_default=True,
               help="Motion model: adaptive picks per frame the cheapest that explains it "
@@ -368,6 +370,9 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
         if temporal.wanted and kind == "image":
             con.info("a single image: spatial antialiasing only (temporal needs a sequence)")
             temporal.enabled, temporal.show, temporal.stats_path = False, None, None
+        if temporal.spec() is not None and not kwargs.get("fast"):
+            from mlaa_stream.temporal.methods import needs_regions
+            kwargs["keep_regions"] = needs_regions(temporal.method)  # the stage reads the filter's regions
         if cluster is not None and (temporal.show or temporal.stats_path or show_regions):
             raise Usage("--stats and --show are not available with --cluster (each worker has its own stage)")
         job = _job_for(kind, output)
@@ -440,7 +445,7 @@ class TemporalOptions:
     stats_path: str | None = None
     show: str | None = None
     frames: int | None = None
-    method: str = "tss"
+    method: str = "auto"
 
     @property
     def wanted(self) -> bool:
@@ -449,7 +454,7 @@ class TemporalOptions:
     def stage(self, filt):
         """The temporal stage sharing the filter's OpenCL context, or None when off."""
         spec = self.spec()
-        return None if spec is None else spec.stage(filt.context, show=self.show)
+        return None if spec is None else spec.stage(filt, show=self.show)
 
     def spec(self):
         """The settings as a TemporalSpec (what the cluster's workers get), or None when off."""

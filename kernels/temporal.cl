@@ -281,7 +281,8 @@ __kernel void temporal_blend(__global const PIXEL_T *cur, __global const half *h
                              __global const float *luts, __global const float *dec,
                              const int width, const int height,
                              const int fw, const int fh, const int pfw, const int pfh,
-                             const int cur_mode, const int prev_mode)
+                             const int cur_mode, const int prev_mode,
+                             __global const uchar *gate, const int gated)
 {
     const int x0 = get_global_id(0) * SEGMENT, y = get_global_id(1);
     if (x0 >= width || y >= height) return;
@@ -354,7 +355,8 @@ __kernel void temporal_blend(__global const PIXEL_T *cur, __global const half *h
             float4 c = Cm;   // current pixel, linear (alpha as stored)
             float wgt = 0.0f;
             float4 out = c;
-            if (cur_mode != 0 && !pixel_flat(ra, rm, rb, x > 0 ? x - 1 : 0, x, xr)) {   // the flat rule
+            // the gate (gated: history only where gate[i] != 0), then the flat rule
+            if (cur_mode != 0 && (!gated || gate[i]) && !pixel_flat(ra, rm, rb, x > 0 ? x - 1 : 0, x, xr)) {
                 float2 p = (float2)((float)x, (float)y);
                 float2 vc = cur_mode == 2 ? sample_flow(flow_b, fw, fh, params[12], p)
                                           : affine_motion(params, p);

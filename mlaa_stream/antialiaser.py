@@ -17,6 +17,7 @@ import numpy as np
 from mlaa_stream.spatial.filter import PRESETS, Filter
 from mlaa_stream.spatial.fast_filter import FastFilter
 from mlaa_stream.pipeline import PostHook, Temporal, stream_items
+from mlaa_stream.temporal.methods import METHODS, make_stage, needs_regions
 
 
 def _capture_frames(cap: Any) -> Iterator[np.ndarray]:
@@ -31,12 +32,11 @@ def _capture_frames(cap: Any) -> Iterator[np.ndarray]:
 class Antialiaser:
     """Antialias BGR(A) frames (uint8 as OpenCV delivers them; uint16/float also work).
 
-    Options are the Filter's (`preset` first, explicit keywords override it). `temporal=True`
-    (or "tss") adds temporal supersampling (mlaa_stream.temporal.tss.TSSStage: the input's samples of
-    the last `temporal_frames` frames accumulated along the motion; its ring is kept between calls),
-    "blend" the older reprojection blending (mlaa_stream.temporal.stage.TemporalStage), "tss+blend"
-    both in turn (mlaa_stream.temporal.tss.TSSThenBlend), or pass any
-    `(frame_in, frame_filtered, index) -> frame` stage.
+    Options are the Filter's (`preset` first, explicit keywords override it). `temporal=True` (or
+    "auto") adds temporal supersampling (mlaa_stream.temporal.tss.TSSStage: the input's samples of the
+    last `temporal_frames` frames accumulated along the motion; its ring is kept between calls) and the
+    reprojection blend on moving edges of render regions; "tss", "blend" and "tss+blend" are the other
+    methods of mlaa_stream.temporal.methods; or pass any `(frame_in, frame_filtered, index) -> frame` stage.
     `post_hooks` is a list of `(frame, index) -> frame` callables (overlays), applied after it.
     """
 
@@ -51,20 +51,17 @@ class Antialiaser:
                            ("reconstruct", reconstruct)):
             if value is not None:
                 kwargs[key] = value
+        method = "auto" if temporal is True else temporal
+        if isinstance(method, str) and method not in METHODS:
+            raise ValueError(f"temporal: expected True, {', '.join(map(repr, METHODS))} or a callable, got {temporal!r}")
+        if isinstance(method, str) and needs_regions(method) and not kwargs.get("fast"):
+            kwargs["keep_regions"] = True  # the stage reads the filter's render regions
         # the fast preset without host copies on CPU devices (spatial/fast_filter.py)
         self._filter = (FastFilter if kwargs.get("fast") else Filter)(device, bgr=True, **kwargs)
         self.device_name: str = self._filter.device_name
-        if temporal is True or temporal == "tss":
-            from mlaa_stream.temporal.tss import DEFAULT_FRAMES, TSSStage
-            temporal = TSSStage(context=self._filter.context, bgr=True, frames=temporal_frames or DEFAULT_FRAMES)
-        elif temporal == "tss+blend":
-            from mlaa_stream.temporal.tss import DEFAULT_FRAMES, TSSThenBlend
-            temporal = TSSThenBlend(context=self._filter.context, bgr=True, frames=temporal_frames or DEFAULT_FRAMES)
-        elif temporal == "blend":
-            from mlaa_stream.temporal.stage import TemporalStage
-            temporal = TemporalStage(context=self._filter.context, bgr=True)
-        elif isinstance(temporal, str):
-            raise ValueError(f"temporal: expected True, 'tss', 'blend', 'tss+blend' or a callable, got {temporal!r}")
+        if isinstance(method, str):
+            temporal = make_stage(method, self._filter.context, bgr=True, frames=temporal_frames,
+                                  regions_from=self._filter)
         self.temporal = temporal or None
         self.post_hooks = list(post_hooks)
         self.in_flight = in_flight

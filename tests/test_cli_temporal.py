@@ -25,7 +25,7 @@ def test_video_gets_the_temporal_stage_and_stats(tmp_path):
     assert {"ring", "model", "flow_ms", "resolve_ms"} <= set(rows[0])
 
 
-@pytest.mark.parametrize("method", ["blend", "tss+blend"])
+@pytest.mark.parametrize("method", ["auto", "blend", "tss+blend"])
 def test_blend_methods(tmp_path, method):
     out, stats = tmp_path / "out.mp4", tmp_path / "stats.csv"
     res = CliRunner().invoke(main, [str(DEMO / "clip.mp4"), "-o", str(out), "--temporal",
@@ -33,7 +33,8 @@ def test_blend_methods(tmp_path, method):
     assert res.exit_code == 0, res.output
     rows = list(csv.DictReader(stats.open()))
     assert len(rows) == 10 and "history_weight_mean" in rows[0]
-    assert ("ring" in rows[0]) == (method == "tss+blend")
+    assert ("ring" in rows[0]) == (method != "blend")
+    assert ("gate_share" in rows[1]) == (method == "auto")  # auto: the blend only on moving render pixels
 
 
 def test_temporal_is_off_by_default_and_stats_imply_it(tmp_path):

@@ -299,3 +299,26 @@ def test_show_regions_view():
         np.testing.assert_array_equal(shown[~inside], dimmed.astype(np.uint8))
     with pytest.raises(ValueError, match="show"):
         Filter(show="history")
+
+
+def test_keep_regions_hands_each_frame_its_flags():
+    """Filter(keep_regions=True): every collected frame sets PendingFrame.regions and the filter's last_regions
+    to its own tile flags (the temporal stage's where="render" reads them), also with two frames in flight;
+    the output is the plain filter's."""
+    from mlaa_stream.spatial.fallback import FALLBACK_TILE
+    render, art = render_beside_art(3), render_beside_art(3)
+    art[...] = art[:1, :1]          # one flat colour: no region
+    with Filter() as f, Filter(keep_regions=True) as g:
+        assert g.last_regions is None
+        first, second = g.submit(render), g.submit(art)
+        out = first.result()
+        np.testing.assert_array_equal(out, f.process(render))
+        tiles = np.repeat(np.repeat(first.regions > 0, FALLBACK_TILE, 0), FALLBACK_TILE, 1)[:render.shape[0],
+                                                                                           :render.shape[1]]
+        np.testing.assert_array_equal(tiles, regions_of(render))
+        assert g.last_regions is first.regions
+        second.result()
+        assert g.last_regions is second.regions and not second.regions.any()
+    with Filter(fallback="off", keep_regions=True) as h:
+        h.process(render)
+        assert h.last_regions is None

@@ -20,13 +20,13 @@ from mlaa_stream.device.context import default_context
 from mlaa_stream.device.formats import frame_format
 from mlaa_stream.spatial.filter import Filter
 from mlaa_stream.temporal.stage import (CUR_AFFINE, CUR_DENSE, CUR_RESET, PREV_AFFINE, PREV_DENSE, PREV_NONE,
-                                  SEGMENT, TemporalStage, decode_table, flat_3x3, flat_levels, kernel_defines, make_params,
-                                  temporal_reference)
+                                  CHANGED_LEVELS, MOVED_LEVELS, SEGMENT, TemporalStage, decode_table, flat_3x3,
+                                  flat_levels, kernel_defines, make_params, moving_in_regions, temporal_reference)
 from mlaa_stream.bench.temporal import _pan_layers
 
 
 # --- kernel vs reference ------------------------------------------------------------------------------
-def run_kernel(cur, hist, params, cur_mode, prev_mode, flow_b, flow_f, flow_prev, bgr=False):
+def run_kernel(cur, hist, params, cur_mode, prev_mode, flow_b, flow_f, flow_prev, bgr=False, gate=None):
     ctx = default_context()
     fmt = frame_format(cur, bgr)
     k = ctx.kernel("temporal", "temporal_blend", kernel_defines(fmt))
@@ -42,7 +42,8 @@ def run_kernel(cur, hist, params, cur_mode, prev_mode, flow_b, flow_f, flow_prev
     dst, hist_out, conf = ctx.buffer(host.nbytes), ctx.buffer(hist.nbytes), ctx.buffer(h * w)
     k(q, (-(-w // SEGMENT), h), None, buf(host), buf(hist), hist_out, dst, conf, buf(flow_b), buf(flow_f),
       buf(flow_prev), buf(params), buf(device_luts()), buf(decode_table(fmt)), np.int32(w), np.int32(h), np.int32(fw), np.int32(fh),
-      np.int32(fw), np.int32(fh), np.int32(cur_mode), np.int32(prev_mode))
+      np.int32(fw), np.int32(fh), np.int32(cur_mode), np.int32(prev_mode),
+      buf(np.zeros((h, w), np.uint8) if gate is None else gate.astype(np.uint8)), np.int32(gate is not None))
     out, ho, co = np.empty_like(host), np.empty_like(hist), np.empty((h, w), np.uint8)
     cl.enqueue_copy(q, out, dst)
     cl.enqueue_copy(q, ho, hist_out)
@@ -113,6 +114,49 @@ def test_kernel_matches_reference_on_texels(shift):
     ref = temporal_reference(cur, hist, params, CUR_AFFINE, PREV_AFFINE, fb, ff, fp, bgr=True)
     assert 0.05 < (ref[2] > 0).mean() < 1.0
     assert_close(got[0], ref[0], got[1], ref[1], got[2], ref[2])
+
+
+@pytest.mark.parametrize("cur_mode,channels,dtype", [(CUR_AFFINE, 3, np.uint8), (CUR_DENSE, 4, np.uint16),
+                                                     (CUR_DENSE, 1, np.float32)])
+def test_kernel_matches_reference_with_a_gate(cur_mode, channels, dtype):
+    """where="render": no history where the gate is 0 (the spatial pixel bit for bit, weight 0), the same
+    blend as without a gate elsewhere."""
+    cur, hist, params, fb, ff, fp = random_case(11, 33, 75, channels, dtype)
+    gate = (np.random.default_rng(12).random((33, 75)) < 0.5).astype(np.uint8)
+    got = run_kernel(cur, hist, params, cur_mode, PREV_AFFINE, fb, ff, fp, gate=gate)
+    ref = temporal_reference(cur, hist, params, cur_mode, PREV_AFFINE, fb, ff, fp, gate=gate)
+    free = temporal_reference(cur, hist, params, cur_mode, PREV_AFFINE, fb, ff, fp)
+    assert_close(got[0], ref[0], got[1], ref[1], got[2], ref[2])
+    assert np.all(got[2][gate == 0] == 0) and (got[2][gate == 1] > 0).mean() > 0.05
+    assert np.array_equal(got[0].reshape(33, 75, -1)[gate == 0], np.asarray(cur).reshape(33, 75, -1)[gate == 0])
+    np.testing.assert_array_equal(ref[2][gate == 1], free[2][gate == 1])
+
+
+def test_moving_in_regions_known_answer():
+    """The gate: pixels of render-region tiles where the input moved by MOVED_LEVELS (dilated by one pixel)
+    and the blended frame differs from the input by CHANGED_LEVELS."""
+    h, w = 24, 32
+    prev = np.full((h, w, 3), 100, np.uint8)
+    cur = prev.copy()
+    cur[5, 5, 1] = 100 + MOVED_LEVELS          # moved, in a region tile (row 0, column 0)
+    cur[5, 20, 0] = 100 + MOVED_LEVELS - 1     # one level short
+    cur[18, 4, 2] = 100 - MOVED_LEVELS         # moved, outside every region
+    regions = np.zeros((3, 4), np.uint8)
+    regions[0, 0] = regions[0, 2] = 1
+    filtered = cur.copy()
+    gate = moving_in_regions(cur, prev, regions)
+    expect = np.zeros((h, w), np.uint8)
+    expect[4:7, 4:7] = 1
+    np.testing.assert_array_equal(gate, expect)
+    filtered[4:7, 4:7] = cur[4:7, 4:7] + np.uint8(CHANGED_LEVELS)
+    filtered[5, 6] = cur[5, 6] + np.uint8(CHANGED_LEVELS - 1)   # the filter barely touched it
+    expect[5, 6] = 0
+    np.testing.assert_array_equal(moving_in_regions(cur, prev, regions, filtered), expect)
+    # 16-bit and float frames: the same levels in their units
+    np.testing.assert_array_equal(moving_in_regions(cur.astype(np.uint16) * 257, prev.astype(np.uint16) * 257,
+                                                    regions), gate)
+    np.testing.assert_array_equal(moving_in_regions(cur / np.float32(255), prev / np.float32(255), regions), gate)
+    assert moving_in_regions(cur, None, regions) is None and moving_in_regions(cur, prev, None) is None
 
 
 @pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
@@ -358,3 +402,27 @@ def test_errors_name_the_frame():
             st(np.zeros((10, 12, 3), np.uint8), np.zeros((10, 13, 3), np.uint8), 4)
     with pytest.raises(ValueError, match="mode: expected"):
         TemporalStage(mode="fancy")
+
+
+def test_render_gate_blends_only_moving_pixels_of_regions(spatial):
+    """where="render": history only where moving_in_regions says so; without regions the spatial frames come
+    back bit for bit (the rotation and the flat-colour scenes get no render regions)."""
+    w, h = 160, 96
+    frames = [S.encode8(S.render(_pan_layers(w, h, 0.35 * t, 0.15 * t), w, h, 1)) for t in range(4)]
+    sp = [spatial.process(f) for f in frames]
+    regions = np.zeros((h // 8, w // 8), np.uint8)
+    regions[:, : w // 16] = 1                        # the left half is a "render region"
+    with TemporalStage(bgr=False, where="render") as st:
+        outs = [st(f, s, i, regions=regions) for i, (f, s) in enumerate(zip(frames, sp))]
+    changed_any = False
+    for t in range(1, 4):
+        gate = moving_in_regions(frames[t], frames[t - 1], regions, sp[t])
+        changed = np.any(outs[t] != sp[t], axis=-1)
+        assert not np.any(changed & (gate == 0)), t
+        changed_any |= bool(changed.any())
+    assert changed_any and not np.any(np.any(outs[3] != sp[3], axis=-1)[:, w // 2:])
+    with TemporalStage(bgr=False, where="render") as st:
+        bare = [st(f, s, i) for i, (f, s) in enumerate(zip(frames, sp))]
+    assert all(np.array_equal(a, b) for a, b in zip(bare, sp))
+    with pytest.raises(ValueError, match="where"):
+        TemporalStage(bgr=False, where="edges")

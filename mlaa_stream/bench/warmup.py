@@ -22,12 +22,13 @@ from mlaa_stream.bench.temporal import SCENES
 from mlaa_stream.cluster.temporal import TemporalSpec
 
 
-def outputs(spec: TemporalSpec, filt, inputs: np.ndarray, spatial: list[np.ndarray], first: int,
+def outputs(spec: TemporalSpec, filt, inputs: np.ndarray, spatial: list[tuple], first: int,
             last: int) -> list[np.ndarray]:
-    """The stage's outputs for frames first .. last-1 (a new stage, as a worker's)."""
-    stage = spec.stage(filt.context)
+    """The stage's outputs for frames first .. last-1 (a new stage, as a worker's); `spatial`: per frame
+    the filter's output and its render regions."""
+    stage = spec.stage(filt)
     try:
-        return [np.array(stage(inputs[t], spatial[t], t)) for t in range(first, last)]
+        return [np.array(stage(inputs[t], spatial[t][0], t, regions=spatial[t][1])) for t in range(first, last)]
     finally:
         stage.close()
 
@@ -35,7 +36,7 @@ def outputs(spec: TemporalSpec, filt, inputs: np.ndarray, spatial: list[np.ndarr
 def measure(spec: TemporalSpec, filt, inputs: np.ndarray, chunk: int, warmups: list[int]) -> dict[int, tuple]:
     """{W: (max |difference| in levels, share of samples that differ)} over every chunk after the first."""
     n = len(inputs)
-    spatial = [filt.process(f) for f in inputs]
+    spatial = [(filt.process(f), filt.last_regions) for f in inputs]
     single = outputs(spec, filt, inputs, spatial, 0, n)
     res = {}
     for w in warmups:
@@ -65,7 +66,7 @@ def main(argv: list[str] | None = None) -> None:
     a = ap.parse_args(argv)
     w, h = (int(v) for v in a.size.split("x"))
     warmups = [int(v) for v in a.warmup.split(",")]
-    filt = Filter(bgr=False)
+    filt = Filter(bgr=False, keep_regions=True)
     print(f"device: {filt.device_name}; {a.frames} frames of {w}x{h}, chunks of {a.chunk}, ring K = "
           f"{TemporalSpec('tss', a.ring).ring}" + (f", frame {a.hold.split(':')[0]} held {a.hold.split(':')[1]} more times"
                                                     if a.hold else ""))

@@ -109,7 +109,7 @@ def filter_chunk(chunk: Chunk, filter_kwargs: dict, overwrite: bool, strict: boo
         read = todo
         if temporal is not None:
             from mlaa_stream.cluster.temporal import WarmedStage
-            stage = WarmedStage(temporal.stage(encoded.context), temporal.warmup, can_extend=w < len(chunk.warmup),
+            stage = WarmedStage(temporal.stage(encoded), temporal.warmup, can_extend=w < len(chunk.warmup),
                                 from_start=len(warmup) == len(chunk.warmup) and chunk.starts_stream)
             read = list(warmup) + list(chunk.files)
             hook, source, sink = _with_temporal(stage, read, set(warmup), report, strict, like, set(todo), sink)

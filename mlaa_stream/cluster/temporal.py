@@ -29,14 +29,14 @@ BLEND_WARMUP = 8
 class TemporalSpec:
     """The temporal stage's settings, sent to the workers (each builds its own stage per chunk)."""
 
-    method: str = "tss"      # tss, blend or tss+blend (the CLI's --temporal-method)
+    method: str = "auto"     # one of temporal.methods.METHODS (the CLI's --temporal-method)
     frames: int | None = None  # K, the TSS ring (None: tss.DEFAULT_FRAMES)
     mode: str = "adaptive"
     k: float | None = None   # the blend's velocity-difference strength (None: its default)
 
     def __post_init__(self):
-        if self.method not in ("tss", "blend", "tss+blend"):
-            raise ValueError(f"temporal method: expected tss, blend or tss+blend, got {self.method!r}")
+        from mlaa_stream.temporal.methods import check
+        check(self.method)
 
     @property
     def ring(self) -> int:
@@ -46,17 +46,14 @@ class TemporalSpec:
     @property
     def warmup(self) -> int:
         """Frames each chunk reads before its start (see the module's docstring)."""
-        return {"tss": self.ring, "blend": BLEND_WARMUP, "tss+blend": max(self.ring, BLEND_WARMUP)}[self.method]
+        return {"tss": self.ring, "blend": BLEND_WARMUP}.get(self.method, max(self.ring, BLEND_WARMUP))
 
-    def stage(self, context, show: str | None = None):
-        """A new stage (fresh state) on `context` (the filter's OpenCL context), frames in RGB order."""
-        if self.method == "blend":
-            from mlaa_stream.temporal.stage import TemporalStage
-            kw = {} if self.k is None else {"k": self.k}
-            return TemporalStage(context=context, mode=self.mode, bgr=False, show=show, **kw)
-        from mlaa_stream.temporal.tss import TSSStage, TSSThenBlend
-        cls = TSSThenBlend if self.method == "tss+blend" else TSSStage
-        return cls(context=context, frames=self.ring, mode=self.mode, bgr=False, show=show)
+    def stage(self, filt, show: str | None = None):
+        """A new stage (fresh state) on the OpenCL context of `filt` (the spatial Filter whose frames it gets;
+        made with keep_regions=needs_regions(method)), frames in RGB order."""
+        from mlaa_stream.temporal.methods import make_stage
+        return make_stage(self.method, filt.context, bgr=False, frames=self.frames, mode=self.mode, k=self.k,
+                          show=show, regions_from=filt)
 
 
 # A chunk's warm-up may reach back at most this many times `warmup` frames to find `warmup` changes.

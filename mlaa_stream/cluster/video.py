@@ -73,7 +73,7 @@ def encode_segment(source: str, segment: Segment, filter_kwargs: dict, codec: st
         start = max(0.0, segment.start - w * frame)
         stage = None
         if temporal is not None:
-            stage = WarmedStage(temporal.stage(filt.context), temporal.warmup, from_start=start < frame / 2,
+            stage = WarmedStage(temporal.stage(filt), temporal.warmup, from_start=start < frame / 2,
                                 can_extend=start >= frame / 2 and w < MAX_WARMUP_FACTOR * temporal.warmup)
         writer = VideoWriter(segment.path, info, codec=codec, crf=crf, preset=encoder_preset, pix_fmt=pix_fmt,
                              audio="none", overwrite=True, offset=segment.start, container_format="matroska",

@@ -78,6 +78,8 @@ class FilterSet:
             return self.encoded
         if self.linear is None:
             self.linear = self._make_linear()
+            if hasattr(self.linear, "regions_owner"):  # a temporal stage reads the encoded filter's last_regions
+                self.linear.regions_owner = self.encoded
         return self.linear
 
     def close(self) -> None:

@@ -178,24 +178,35 @@ class PendingFrame:
     """A frame in flight; `result()` waits for its download and returns it in the input's dtype."""
 
     def __init__(self, host_out: np.ndarray, event, out_dtype: np.dtype, shape: tuple, keep=(),
-                 non_finite: NonFinite | None = None, regions: tuple | None = None):
+                 non_finite: NonFinite | None = None, regions: tuple | None = None, dim: bool = False,
+                 owner: "Filter | None" = None):
         self._out, self._event, self._dtype, self._shape = host_out, event, out_dtype, shape
         self._keep = keep  # host arrays that must outlive the non-blocking copies
         self._non_finite = non_finite
-        self._regions = regions  # show="regions": (per-tile flags or None, the event of their copy or None)
+        self._regions = regions  # (per-tile flags or None, the event of their copy or None), or None
+        self._dim = dim          # show="regions": dim everything outside the regions
+        self._owner = owner      # its last_regions is set on result()
+        self.regions: np.ndarray | None = None
 
     def result(self) -> np.ndarray:
+        """The filtered frame; afterwards `regions` holds its render-region flag per tile when the filter
+        was made with keep_regions=True or show="regions" (None where it has no render regions), and so
+        does the filter's `last_regions`: a temporal stage called right after result() reads its frame's."""
         self._event.wait()
         self._keep = ()
         out = self._out.reshape(self._shape)
         if self._non_finite is not None:
             out = self._non_finite.restore(out)
         if self._regions is not None:
-            from mlaa_stream.spatial.fallback import dim_outside_regions
             flags, copied = self._regions
             if copied is not None:
                 copied.wait()
-            out = dim_outside_regions(out, flags)
+            self.regions = flags
+            if self._owner is not None:
+                self._owner.last_regions = flags
+            if self._dim:
+                from mlaa_stream.spatial.fallback import dim_outside_regions
+                out = dim_outside_regions(out, flags)
         return out if out.dtype == self._dtype else out.astype(self._dtype)
 
 
@@ -232,15 +243,21 @@ class Filter:
                  blend_u: bool = True, ramp: float = 0.35, short_corner: float = SHORT_CORNER,
                  aa_guard: bool = True, bridge: bool = True, grain_guard: bool = True,
                  subpixel: float = SUBPIXEL, fallback: str | bool = "auto", fast: bool = False,
-                 preset: str | None = None, context: Context | None = None, show: str | None = None):
+                 preset: str | None = None, context: Context | None = None, show: str | None = None,
+                 keep_regions: bool = False):
         """`preset`: one of PRESETS; its options replace the keywords of the same names. `fallback`: FXAA
         for the pixels MLAA leaves (spatial/fallback.py): "auto" where the neighbourhood shows 1-spp
         aliasing and is no flat-colour art, with the footprint filter in render regions; "edges" the same
         without render regions (screen captures); "everywhere" (frames known to be 1-spp renders); "off".
-        `show="regions"`: a debug view, the output with every pixel outside render regions dimmed."""
+        `show="regions"`: a debug view, the output with every pixel outside render regions dimmed.
+        `keep_regions`: read every frame's render-region flags back (PendingFrame.regions, `last_regions`)
+        for a temporal stage with where="render"."""
         if show not in SHOWS:
             raise ValueError(f"show: expected None or 'regions', got {show!r}")
         self.show = show
+        self.keep_regions = bool(keep_regions) or show == "regions"
+        self.last_regions: np.ndarray | None = None  # the flags of the frame collected last (keep_regions)
+        self.regions_owner: "Filter" = self  # whose last_regions this filter's frames set (io.sequence.FilterSet)
         if preset is not None:
             if preset not in PRESETS:
                 raise ValueError(f"preset: expected one of {', '.join(sorted(PRESETS))}, got {preset!r}")
@@ -347,12 +364,15 @@ class Filter:
             bufs.last_use[slot] = down
             self._last_event = done
             regions = None
-            if self.show == "regions":  # without the fallback pass: no regions
+            if self.keep_regions:  # without the fallback pass: no regions
                 regions = (self._fallback.read_regions(self.queue, [done]) if self._fallback is not None else
                            (None, None))
+                if regions[1] is not None:  # the next frame's passes rewrite the flags after the copy
+                    self._last_event = regions[1]
             self.queue.flush()
         return PendingFrame(host_out, down, np.dtype(frame.dtype), frame.shape, keep=(staging,),
-                            non_finite=non_finite, regions=regions)
+                            non_finite=non_finite, regions=regions, dim=self.show == "regions",
+                            owner=self.regions_owner)
 
     def _enqueue_passes(self, bufs: _FrameBuffers, src, dst, after: list, queue=None,
                         events: dict | None = None):

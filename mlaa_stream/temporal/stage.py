@@ -25,9 +25,20 @@ import pyopencl as cl
 from mlaa_stream.device.colour import device_luts, lut_read
 from mlaa_stream.device.context import Context, default_context
 from mlaa_stream.device.formats import LUT_SIZE, FrameFormat, defines_for, frame_format
+from mlaa_stream.spatial.fallback import FALLBACK_TILE
 
 MODES = ("adaptive", "dense", "global", "static", "off")
 SHOWS = (None, "history")
+# where="everywhere": history wherever the motion and the clip box allow it; "render": only on pixels of the
+# spatial filter's render regions (1-spp rendered content, spatial/fallback.py) where the input moved
+# (`moving_in_regions`). docs/temporal.md measures why: on flat-colour art the blend is worse than spatial
+# only, on a 1-spp render it removes more error, and away from moving edges it adds damage.
+WHERE = ("everywhere", "render")
+# where="render": a pixel is moving when some colour channel of the raw input changed by at least
+# MOVED_LEVELS 8-bit levels since the previous input, at the pixel or one of its 8 neighbours, and the
+# frame the stage blends differs from the raw input there by CHANGED_LEVELS or more (an edge the spatial
+# filter or TSS worked on; a pixel they left is more often one the input already has right).
+MOVED_LEVELS, CHANGED_LEVELS = 32, 2
 
 # History weight at zero velocity difference: seed 002's 0.5. Longer histories (0.8, 0.9) were
 # measured steadier on nothing and blurrier on everything (docs/temporal.md).
@@ -247,6 +258,7 @@ class _Buffers:
         self.dst = context.buffer(fmt.nbytes)
         self.hist = [context.buffer(8 * n), context.buffer(8 * n)]      # RGBA half, linear light
         self.conf = context.buffer(n)
+        self.gate = context.buffer(n)                                    # where="render": 1 = history allowed
         self.flow = [context.buffer(8 * fh * fw), context.buffer(8 * fh * fw)]  # backward, ping-pong
         self.flow_f = context.buffer(8 * fh * fw)                          # forward (fb check)
         self.params = context.buffer(4 * N_PARAMS)
@@ -268,7 +280,11 @@ class TemporalStage:
     def __init__(self, device: str | int | None = None, *, strength_k: float = DEFAULT_STRENGTH,
                  mode: str = "adaptive", bgr: bool = True, show: str | None = None,
                  context: Context | None = None, k: float = DEFAULT_K, gamma: float = GAMMA,
-                 fb_check: bool = True, linear_input: bool = False, preset: str = "fast"):
+                 fb_check: bool = True, linear_input: bool = False, preset: str = "fast",
+                 where: str = "everywhere", regions_from=None):
+        """where="render": history only on moving pixels of render regions (WHERE); the regions are the
+        `regions` argument of each call, or else `regions_from.last_regions` (a Filter(keep_regions=True)
+        whose frame was collected just before the call)."""
         if mode not in MODES:
             raise ValueError(f"mode: expected one of {', '.join(MODES)}, got {mode!r}")
         if show not in SHOWS:
@@ -279,6 +295,9 @@ class TemporalStage:
             raise ValueError(f"k, gamma: expected k >= 0 and gamma > 0, got {k!r}, {gamma!r}")
         if preset not in ("ultrafast", "fast"):
             raise ValueError(f"preset: expected 'ultrafast' or 'fast', got {preset!r}")
+        if where not in WHERE:
+            raise ValueError(f"where: expected one of {', '.join(WHERE)}, got {where!r}")
+        self.where, self.regions_from = where, regions_from
         self.strength, self.k, self.gamma = float(strength_k), float(k), float(gamma)
         self.mode, self.bgr, self.show = mode, bool(bgr), show
         self.fb_check, self.linear_input = bool(fb_check), bool(linear_input)
@@ -304,6 +323,7 @@ class TemporalStage:
         """Forget the history: the next frame is passed through and starts a new one."""
         self._prev: Pyramid | None = None
         self._prev_index: int | None = None
+        self._prev_raw: np.ndarray | None = None   # where="render": the previous raw input
         self._prev_model = PREV_NONE
         self._prev_affine = IDENTITY
         self._prev_flow_scale = 1
@@ -332,7 +352,10 @@ class TemporalStage:
         return self._dis.calc(a, b, init)
 
     # -- per frame -------------------------------------------------------------------------------------
-    def __call__(self, frame_in: np.ndarray, frame_filtered: np.ndarray, index: int) -> np.ndarray:
+    def __call__(self, frame_in: np.ndarray, frame_filtered: np.ndarray, index: int,
+                 regions: np.ndarray | None = None) -> np.ndarray:
+        """`regions`: the spatial filter's render-region flag per tile of frame_in (Filter(regions=True),
+        PendingFrame.regions); read with where="render" only, where None means no render region."""
         if self._off:
             self.stats.append({"index": int(index), "model": "off", "flow_ms": 0.0, "blend_ms": 0.0,
                                "history_weight_mean": 0.0})
@@ -343,10 +366,12 @@ class TemporalStage:
         if (fin.height, fin.width) != (fmt.height, fmt.width):
             raise ValueError(f"{what}: expected the input and filtered frames to be the same size, "
                              f"got {fin.width}x{fin.height} and {fmt.width}x{fmt.height}")
+        if regions is None and self.regions_from is not None:
+            regions = self.regions_from.last_regions
         with self._lock:
-            return self._step(frame_in, frame_filtered, int(index), fmt)
+            return self._step(frame_in, frame_filtered, int(index), fmt, regions)
 
-    def _step(self, frame_in, frame_filtered, index: int, fmt: FrameFormat) -> np.ndarray:
+    def _step(self, frame_in, frame_filtered, index: int, fmt: FrameFormat, regions) -> np.ndarray:
         t0 = time.perf_counter()
         grey = grey8(frame_in, self.bgr)
         fresh = self._prev is None or self._prev_index is None or index != self._prev_index + 1
@@ -360,6 +385,14 @@ class TemporalStage:
             dec = Decision("reset", measures={"cut": False})
         else:
             dec = choose_model(self._prev, pyr, self.mode)
+        gate, chosen = None, dec.model
+        if self.where == "render":
+            gate = (moving_in_regions(frame_in, self._prev_raw, regions, frame_filtered)
+                    if dec.model != "reset" and regions is not None else None)
+            dec.measures["gate_share"] = 0.0 if gate is None else float(np.count_nonzero(gate)) / gate.size
+            if gate is None or not gate.any():   # no history anywhere: the current frame starts it anew
+                dec = Decision("reset", dec.translation, dec.measures)
+            self._prev_raw = np.array(frame_in, copy=True)
         flow_b = flow_f = None
         if dec.model == "dense":
             d = (dec.translation[0] / pyr.flow_scale, dec.translation[1] / pyr.flow_scale)
@@ -390,12 +423,15 @@ class TemporalStage:
             cl.enqueue_copy(q, bufs.flow[new_slot], flow_b, is_blocking=False)
             if flow_f is not None:
                 cl.enqueue_copy(q, bufs.flow_f, flow_f, is_blocking=False)
+        if gate is not None:
+            cl.enqueue_copy(q, bufs.gate, gate, is_blocking=False)
         fh, fw = bufs.flow_shape
         self._kernel(q, (-(-fmt.width // SEGMENT), fmt.height), None, bufs.cur, bufs.hist[prev_slot],
                      bufs.hist[new_slot], bufs.dst, bufs.conf, bufs.flow[new_slot], bufs.flow_f,
                      bufs.flow[prev_slot], bufs.params, self._luts, bufs.decode, np.int32(fmt.width),
                      np.int32(fmt.height), np.int32(fw), np.int32(fh), np.int32(fw), np.int32(fh),
-                     np.int32(cur_mode), np.int32(self._prev_model if cur_mode != CUR_RESET else PREV_NONE))
+                     np.int32(cur_mode), np.int32(self._prev_model if cur_mode != CUR_RESET else PREV_NONE),
+                     bufs.gate, np.int32(gate is not None))
         if cur_mode == CUR_RESET:
             out = frame_filtered
             cl.enqueue_copy(q, bufs.host_conf, bufs.conf, is_blocking=True) if self.show else q.finish()
@@ -412,7 +448,7 @@ class TemporalStage:
         self._prev, self._prev_index, self._slot = pyr, index, new_slot
         self._prev_model = {"reset": PREV_NONE, "dense": PREV_DENSE}.get(dec.model, PREV_AFFINE)
         self._prev_affine, self._prev_flow_scale = affine, pyr.flow_scale
-        self.stats.append({"index": index, "model": dec.model, "flow_ms": (t1 - t0) * 1e3,
+        self.stats.append({"index": index, "model": chosen, "flow_ms": (t1 - t0) * 1e3,
                            "blend_ms": (t2 - t1) * 1e3, "history_weight_mean": weight,
                            "translation": dec.translation, "flow_scale": pyr.flow_scale,
                            **dec.measures})
@@ -460,6 +496,30 @@ class TemporalStage:
 
 
 SEGMENT = 64  # pixels of a row per work item (kernels/common.cl)
+
+
+def moving_in_regions(cur: np.ndarray, prev: np.ndarray | None, regions: np.ndarray | None,
+                      filtered: np.ndarray | None = None) -> np.ndarray | None:
+    """where="render"'s gate, (h, w) uint8: 1 on pixels of render-region tiles (`regions`: one flag per
+    FALLBACK_TILE^2 tile, spatial/fallback.py) where some colour channel of the raw input `cur` differs from
+    `prev` by MOVED_LEVELS 8-bit levels or more, at the pixel or one of its 8 neighbours, and (`filtered`
+    given) `filtered` differs from `cur` by CHANGED_LEVELS or more in some colour channel. None without a
+    previous frame of the same shape and type or without regions."""
+    if prev is None or regions is None or prev.shape != cur.shape or prev.dtype != cur.dtype:
+        return None
+    h, w = cur.shape[:2]
+    unit = {"f": 1.0 / 255.0}.get(cur.dtype.kind, 257.0 if cur.dtype == np.uint16 else 1.0)  # one 8-bit level
+
+    def largest_difference(a: np.ndarray, b: np.ndarray) -> np.ndarray:   # over the colour channels
+        d = cv2.absdiff(a if a.ndim == 2 else a[..., :3], b if b.ndim == 2 else b[..., :3])
+        return d if d.ndim == 2 else d.max(axis=2)
+
+    moved = cv2.dilate((largest_difference(cur, prev) >= MOVED_LEVELS * unit).astype(np.uint8),
+                       np.ones((3, 3), np.uint8)) > 0
+    if filtered is not None:
+        moved &= largest_difference(np.asarray(filtered, cur.dtype), cur) >= CHANGED_LEVELS * unit
+    inside = np.repeat(np.repeat(np.asarray(regions) > 0, FALLBACK_TILE, 0), FALLBACK_TILE, 1)[:h, :w]
+    return (moved & inside).astype(np.uint8)
 
 
 def make_params(affine, prev_affine, flow_scale: float, prev_flow_scale: float, strength: float,
@@ -564,9 +624,11 @@ def sample_field(fld: np.ndarray, scale: int, xs: np.ndarray, ys: np.ndarray) ->
 def temporal_reference(cur: np.ndarray, hist: np.ndarray, params: np.ndarray, cur_mode: int,
                        prev_mode: int, flow_b: np.ndarray | None = None, flow_f: np.ndarray | None = None,
                        flow_prev: np.ndarray | None = None, bgr: bool = False,
-                       linear_input: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                       linear_input: bool = False,
+                       gate: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """What kernels/temporal.cl computes, in float32 numpy (slow, plain): returns (out frame,
-    new history (H, W, 4) float16, weight (H, W) uint8). `hist` is (H, W, 4) float16 linear RGBA."""
+    new history (H, W, 4) float16, weight (H, W) uint8). `hist` is (H, W, 4) float16 linear RGBA;
+    `gate` (H, W), when given: no history where it is 0 (where="render")."""
     f32 = np.float32
     fmt = frame_format(cur, bgr)
     h, w = fmt.height, fmt.width
@@ -648,6 +710,8 @@ def temporal_reference(cur: np.ndarray, hist: np.ndarray, params: np.ndarray, cu
         # type bounds the clip box to c +- EXT_FLOOR, so the blend is skipped there: w = 0 gives
         # out = c untouched and history = c in linear light, as on a reset
         wgt = np.where(flat_3x3(raw.astype(fmt.dtype), flat_levels(fmt.dtype)), f32(0), wgt).astype(f32)
+        if gate is not None:
+            wgt = np.where(np.asarray(gate) == 0, f32(0), wgt).astype(f32)
         blended = lin + (clipped - lin) * wgt[..., None]
         blended[..., 3] = lin[..., 3]
         out_lin = np.where((wgt > 0)[..., None], blended, lin).astype(f32)

@@ -728,7 +728,8 @@ class TSSStage:
         self._shape = None
         self._last: tuple[np.ndarray, np.ndarray] | None = None   # (grey, output) of the previous frame
 
-    def __call__(self, frame_in: np.ndarray, frame_filtered: np.ndarray, index: int) -> np.ndarray:
+    def __call__(self, frame_in: np.ndarray, frame_filtered: np.ndarray, index: int,
+                 regions: np.ndarray | None = None) -> np.ndarray:
         fin, fout = np.asarray(frame_in), np.asarray(frame_filtered)
         if fin.shape != fout.shape or fin.dtype != fout.dtype:
             raise ValueError(f"frame {index}: expected the input and filtered frames to have the same shape "
@@ -944,8 +945,9 @@ class TSSThenBlend:
         return [{**b, **t, "history_weight_mean": b.get("history_weight_mean", 0.0),
                  "blend_model": b.get("model")} for t, b in zip(self.tss.stats, self.blend.stats)]
 
-    def __call__(self, frame_in: np.ndarray, frame_filtered: np.ndarray, index: int) -> np.ndarray:
-        return self.blend(frame_in, self.tss(frame_in, frame_filtered, index), index)
+    def __call__(self, frame_in: np.ndarray, frame_filtered: np.ndarray, index: int,
+                 regions: np.ndarray | None = None) -> np.ndarray:
+        return self.blend(frame_in, self.tss(frame_in, frame_filtered, index), index, regions=regions)
 
     def reset(self) -> None:
         self.tss.reset()

@@ -1,0 +1,44 @@
+"""The temporal methods by name (the CLI's --temporal-method, Antialiaser(temporal=...), the cluster's spec).
+
+    stage = make_stage("auto", filt.context, regions_from=filt)   # filt = Filter(keep_regions=True)
+    out = stage(frame_in, frame_filtered, index)
+
+- "auto" (the default): temporal supersampling (tss.TSSStage), then the reprojection blend
+  (stage.TemporalStage) only on moving pixels of the spatial filter's render regions (where="render").
+  The blend removes error on 1-spp renders and is worse than spatial only on flat-colour art
+  (docs/temporal.md, "Blend in render regions").
+- "tss": temporal supersampling alone; "blend": the blend everywhere; "tss+blend": both, the blend everywhere.
+"""
+from __future__ import annotations
+
+METHODS = ("auto", "tss", "blend", "tss+blend")
+DEFAULT_METHOD = "auto"
+
+
+def needs_regions(method: str) -> bool:
+    """Whether the method reads the spatial filter's render regions (make the Filter with keep_regions=True)."""
+    return method == "auto"
+
+
+def check(method: str) -> str:
+    if method not in METHODS:
+        raise ValueError(f"temporal method: expected one of {', '.join(METHODS)}, got {method!r}")
+    return method
+
+
+def make_stage(method: str, context, *, bgr: bool, frames: int | None = None, mode: str = "adaptive",
+               k: float | None = None, show: str | None = None, regions_from=None):
+    """A new temporal stage (fresh state) on `context` (the filter's OpenCL context). `regions_from`: the
+    Filter(keep_regions=True) whose frames the stage gets ("auto" reads its last_regions)."""
+    check(method)
+    kw = {} if k is None else {"k": k}
+    if method == "blend":
+        from mlaa_stream.temporal.stage import TemporalStage
+        return TemporalStage(context=context, mode=mode, bgr=bgr, show=show, **kw)
+    from mlaa_stream.temporal.tss import DEFAULT_FRAMES, TSSStage, TSSThenBlend
+    ring = int(frames or DEFAULT_FRAMES)
+    if method == "tss":
+        return TSSStage(context=context, frames=ring, mode=mode, bgr=bgr, show=show)
+    if method == "auto":
+        kw.update(where="render", regions_from=regions_from)
+    return TSSThenBlend(context=context, frames=ring, mode=mode, bgr=bgr, show=show, **kw)
