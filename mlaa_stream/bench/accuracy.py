@@ -42,18 +42,17 @@ class NoAA:
 
 class SpatialTemporal:
     """The spatial filter, then a temporal stage with its history kept across frames; `reset()` starts
-    a new shot (the bench calls it between scenes). method "tss": temporal supersampling, what
-    `--temporal` runs (mlaa_stream.temporal.tss.TSSStage); "blend": the reprojection blending of issue 6
-    (mlaa_stream.temporal.stage.TemporalStage)."""
+    a new shot (the bench calls it between scenes). `method`: one of mlaa_stream.temporal.methods.METHODS
+    ("auto" is what `--temporal` runs); with `temporal_options` the blend (TemporalStage) with them."""
 
-    def __init__(self, device: str | None, method: str = "tss", **temporal_options):
-        self.filter = Filter(device=device)
-        if method == "tss":
-            from mlaa_stream.temporal.tss import TSSStage
-            self.stage = TSSStage(context=self.filter.context, bgr=False, **temporal_options)
-        else:
+    def __init__(self, device: str | None, method: str = "auto", **temporal_options):
+        from mlaa_stream.temporal.methods import make_stage, needs_regions
+        self.filter = Filter(device=device, keep_regions=needs_regions(method))
+        if temporal_options:   # the blend's own options (mode): TemporalStage itself
             from mlaa_stream.temporal.stage import TemporalStage
             self.stage = TemporalStage(context=self.filter.context, bgr=False, **temporal_options)
+        else:
+            self.stage = make_stage(method, self.filter.context, bgr=False, regions_from=self.filter)
         self.index = 0
 
     def process(self, frame: np.ndarray) -> np.ndarray:
@@ -76,7 +75,8 @@ METHODS: dict[str, Callable[[str | None], Processor]] = {
     "none": lambda device: NoAA(),
     "fxaa": lambda device: FXAA(device=device),
     "mlaa": lambda device: Filter(device=device),
-    "mlaa+temporal": lambda device: SpatialTemporal(device, "tss"),
+    "mlaa+temporal": lambda device: SpatialTemporal(device, "auto"),
+    "mlaa+temporal:tss": lambda device: SpatialTemporal(device, "tss"),
     "mlaa+temporal:blend": lambda device: SpatialTemporal(device, "blend", mode="adaptive"),
     "mlaa+temporal:blend-dense": lambda device: SpatialTemporal(device, "blend", mode="dense"),
 }

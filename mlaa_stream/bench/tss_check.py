@@ -1,14 +1,17 @@
 """Is temporal supersampling never worse than spatial only? (issue 16's on-by-default condition)
 
-    python -m mlaa_stream.bench.tss_check [--scenes rotation,pan,mover,cut,rendered] [--tss-set NAME=VALUE ...]
+    python -m mlaa_stream.bench.tss_check [--scenes rotation,pan,mover,cut,rendered] [--method auto]
+        [--tss-set NAME=VALUE ...]
 
 Runs the bench's animated scenes (mlaa_stream.yardstick.scenes, the same frames `mlaa-stream bench` scores)
-through the spatial filter alone and through the filter + TSSStage, and prints per scene: error removed,
+through the spatial filter alone and through the filter + a temporal stage (--method, one of
+mlaa_stream.temporal.methods.METHODS; default "auto", what --temporal runs), and prints per scene: error removed,
 damage away from edges (levels), temporal error, flicker energy, FLIP as the mean over **all** frames (the
 bench's FLIP column scores frame 0 only, which a temporal stage returns unchanged), the share of pixels
 whose output differs from the spatial output, the share that took samples (stats "samples_share": at
 least MIN_CELLS filled cells; mean over frames), and the motion model of each frame (r reset, s static,
-g global, d dense). A scene is "worse" when TSS loses in error removed, damage or all-frame FLIP.
+g global, d dense; TSS's models where the method has TSS). A scene is "worse" when the stage loses in error
+removed, damage or all-frame FLIP.
 --tss-set sets a module constant of mlaa_stream.temporal.tss for the run (e.g. BAND_TOL=1e9).
 """
 from __future__ import annotations
@@ -19,6 +22,7 @@ import numpy as np
 
 from mlaa_stream.spatial.filter import Filter
 from mlaa_stream.temporal import tss as T
+from mlaa_stream.temporal.methods import METHODS, make_stage, needs_regions
 from mlaa_stream.yardstick import metrics as M
 from mlaa_stream.yardstick.scenes import generate_scenes
 
@@ -34,6 +38,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--scenes", default="rotation,pan,mover,cut,rendered")
     ap.add_argument("--device", default=None)
+    ap.add_argument("--method", default="auto", choices=METHODS)
     ap.add_argument("--tss-set", action="append", default=[], metavar="NAME=VALUE")
     args = ap.parse_args(argv)
     for item in args.tss_set:
@@ -42,20 +47,24 @@ def main(argv: list[str] | None = None) -> int:
     with_flip = M.flip_available()
     scenes = [s for s in generate_scenes(names=args.scenes.split(",")) if s.animated]
     worse = []
-    with Filter(args.device, bgr=False) as filt:
+    with Filter(args.device, bgr=False, keep_regions=needs_regions(args.method)) as filt:
         print(f"device: {filt.device_name}; FLIP {'over all frames' if with_flip else 'not installed'}")
         print(f"{'scene':16s} {'method':8s} {'err.rem':>8s} {'damage':>8s} {'temp.err':>9s} {'flicker':>8s} "
               f"{'FLIP all':>9s} {'changed':>8s} {'sampled':>8s}  models")
         for s in scenes:
-            spatial = np.stack([filt.process(f) for f in s.inputs])
-            stage = T.TSSStage(context=filt.context, bgr=False)
-            outs = np.stack([stage(f, sp, i) for i, (f, sp) in enumerate(zip(s.inputs, spatial))])
+            spatial, regions = [], []
+            for f in s.inputs:
+                spatial.append(filt.process(f))
+                regions.append(filt.last_regions)
+            spatial = np.stack(spatial)
+            stage = make_stage(args.method, filt.context, bgr=False)
+            outs = np.stack([stage(f, sp, i, regions=r) for i, (f, sp, r) in enumerate(zip(s.inputs, spatial, regions))])
             stage.close()
             a, b = scene_scores(spatial, s, with_flip), scene_scores(outs, s, with_flip)
             changed = float(np.mean(np.any((outs != spatial).reshape(outs.shape[:3] + (-1,)), -1)))
             models = "".join(r["model"][0] for r in stage.stats)
             sampled = float(np.mean([r.get("samples_share", float("nan")) for r in stage.stats]))
-            for name, r, extra in (("mlaa", a, ""), ("tss", b, f"{changed:8.3f} {sampled:8.3f}  {models}")):
+            for name, r, extra in (("mlaa", a, ""), (args.method, b, f"{changed:8.3f} {sampled:8.3f}  {models}")):
                 print(f"{s.name:16s} {name:8s} {r['error_removed']:8.3f} {r['damage']:8.4f} "
                       f"{r['temporal_error']:9.3f} {r['flicker']:8.3f} {r['flip_all']:9.5f} {extra}")
             if (b["error_removed"] < a["error_removed"] or b["damage"] > a["damage"]
