@@ -925,7 +925,8 @@ class TSSStage:
 
 
 class TSSThenBlend:
-    """Temporal supersampling, then the older reprojection blending on its output (method "tss+blend").
+    """Temporal supersampling, then the older reprojection blending on its output (methods "tss+blend" and,
+    with the blend's where="render", "auto": mlaa_stream.temporal.methods).
 
     Measured (docs/temporal_bench.md): TSS alone gains only where one global motion holds and needs a
     few frames to fill its cells; the blend (mlaa_stream.temporal.stage.TemporalStage, seed 002)
