@@ -511,15 +511,23 @@ def moving_in_regions(cur: np.ndarray, prev: np.ndarray | None, regions: np.ndar
     unit = {"f": 1.0 / 255.0}.get(cur.dtype.kind, 257.0 if cur.dtype == np.uint16 else 1.0)  # one 8-bit level
 
     def largest_difference(a: np.ndarray, b: np.ndarray) -> np.ndarray:   # over the colour channels
-        d = cv2.absdiff(a if a.ndim == 2 else a[..., :3], b if b.ndim == 2 else b[..., :3])
-        return d if d.ndim == 2 else d.max(axis=2)
+        d = cv2.absdiff(a, b)
+        if d.ndim == 2:
+            return d
+        planes = cv2.split(d)[:3]
+        out = planes[0]
+        for p in planes[1:]:
+            out = cv2.max(out, p)
+        return out
 
-    moved = cv2.dilate((largest_difference(cur, prev) >= MOVED_LEVELS * unit).astype(np.uint8),
-                       np.ones((3, 3), np.uint8)) > 0
+    moved = cv2.dilate((largest_difference(cur, prev) >= MOVED_LEVELS * unit).view(np.uint8),
+                       np.ones((3, 3), np.uint8))
     if filtered is not None:
-        moved &= largest_difference(np.asarray(filtered, cur.dtype), cur) >= CHANGED_LEVELS * unit
-    inside = np.repeat(np.repeat(np.asarray(regions) > 0, FALLBACK_TILE, 0), FALLBACK_TILE, 1)[:h, :w]
-    return (moved & inside).astype(np.uint8)
+        moved &= (largest_difference(np.asarray(filtered, cur.dtype), cur) >= CHANGED_LEVELS * unit).view(np.uint8)
+    th, tw = np.shape(regions)
+    inside = cv2.resize((np.asarray(regions) > 0).view(np.uint8), (tw * FALLBACK_TILE, th * FALLBACK_TILE),
+                        interpolation=cv2.INTER_NEAREST)[:h, :w]
+    return moved & inside
 
 
 def make_params(affine, prev_affine, flow_scale: float, prev_flow_scale: float, strength: float,
