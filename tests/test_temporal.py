@@ -426,3 +426,27 @@ def test_render_gate_blends_only_moving_pixels_of_regions(spatial):
     assert all(np.array_equal(a, b) for a, b in zip(bare, sp))
     with pytest.raises(ValueError, match="where"):
         TemporalStage(bgr=False, where="edges")
+
+
+def test_auto_method_reads_the_filters_regions(spatial):
+    """make_stage("auto"): TSS, then the blend on moving pixels of the regions its `regions_from` holds at each
+    call (Filter.last_regions); without regions it returns exactly what TSS alone returns."""
+    from types import SimpleNamespace
+    from mlaa_stream.temporal.methods import make_stage
+    w, h = 160, 96
+    frames = [S.encode8(S.render(_pan_layers(w, h, 0.35 * t, 0.15 * t), w, h, 1)) for t in range(4)]
+    sp = [spatial.process(f) for f in frames]
+    holder = SimpleNamespace(last_regions=None)
+    tss = make_stage("tss", spatial.context, bgr=False)
+    bare = make_stage("auto", spatial.context, bgr=False, regions_from=holder)
+    alone = [tss(f, s, i) for i, (f, s) in enumerate(zip(frames, sp))]
+    assert all(np.array_equal(a, b) for a, b in zip(alone, [bare(f, s, i) for i, (f, s) in enumerate(zip(frames, sp))]))
+    holder.last_regions = np.ones((h // 8, w // 8), np.uint8)
+    auto = make_stage("auto", spatial.context, bgr=False, regions_from=holder)
+    outs = [auto(f, s, i) for i, (f, s) in enumerate(zip(frames, sp))]
+    assert any(np.any(a != b) for a, b in zip(outs[1:], alone[1:]))
+    assert [r["gate_share"] > 0 for r in auto.blend.stats] == [False, True, True, True]
+    for st in (tss, bare, auto):
+        st.close()
+    with pytest.raises(ValueError, match="temporal method"):
+        make_stage("smooth", spatial.context, bgr=False)
