@@ -21,7 +21,8 @@ from mlaa_stream.device.formats import frame_format
 from mlaa_stream.spatial.filter import Filter
 from mlaa_stream.temporal.stage import (CUR_AFFINE, CUR_DENSE, CUR_RESET, PREV_AFFINE, PREV_DENSE, PREV_NONE,
                                   CHANGED_LEVELS, MOVED_LEVELS, SEGMENT, TemporalStage, decode_table, flat_3x3,
-                                  flat_levels, kernel_defines, make_params, moving_in_regions, temporal_reference)
+                                  BLOB_MARGIN, flat_levels, kernel_defines, make_params, moving_in_regions,
+                                  temporal_reference, unexplained_blobs)
 from mlaa_stream.bench.temporal import _pan_layers
 
 
@@ -157,6 +158,30 @@ def test_moving_in_regions_known_answer():
                                                     regions), gate)
     np.testing.assert_array_equal(moving_in_regions(cur / np.float32(255), prev / np.float32(255), regions), gate)
     assert moving_in_regions(cur, None, regions) is None and moving_in_regions(cur, prev, None) is None
+
+
+def test_unexplained_blobs_known_answer():
+    """A square that moved 20 px where the motion says 0 is a blob (grown by BLOB_MARGIN); a straight edge
+    whose staircase moved by one pixel (a 1-px line of change) is not; with the square's motion only the
+    background it uncovered is left."""
+    h, w = 96, 128
+    prev = np.full((h, w, 3), 60, np.uint8)
+    cur = prev.copy()
+    prev[30:50, 20:40] = 200
+    cur[30:50, 40:60] = 200
+    cur[80:, :], prev[81:, :] = 180, 180            # an edge one row lower in the previous frame
+    blobs = unexplained_blobs(cur, prev, None, 1, (0.0, 0.0))
+    grown = np.zeros((h, w), bool)
+    grown[30 + 1 - BLOB_MARGIN:50 - 1 + BLOB_MARGIN, 20 + 1 - BLOB_MARGIN:60 - 1 + BLOB_MARGIN] = True
+    np.testing.assert_array_equal(blobs > 0, grown)
+    assert not blobs[80:].any() and not blobs[:, 60 + BLOB_MARGIN:].any()
+    # the square's own motion as a dense flow (current -> previous: -20 px in x) explains it
+    flow = np.zeros((h, w, 2), np.float32)
+    flow[30:50, 40:60, 0] = -20.0
+    flow[30:50, 20:40, 0] = 0.0
+    explained = unexplained_blobs(cur, prev, flow, 1, (0.0, 0.0))
+    assert blobs[30:50, 55:60].all() and not explained[30:50, 55:60].any()
+    assert explained[30:50, 20:40].all()             # the background the square uncovered stays out
 
 
 @pytest.mark.parametrize("dtype", [np.uint8, np.uint16])

@@ -4,7 +4,8 @@
         [--tss-set NAME=VALUE ...]
 
 Runs the bench's animated scenes (mlaa_stream.yardstick.scenes, the same frames `mlaa-stream bench` scores)
-through the spatial filter alone and through the filter + a temporal stage (--method, one of
+(with the rendered group, also `rendered_mover`: a fast mover over a rendered still, built here) through the
+spatial filter alone and through the filter + a temporal stage (--method, one of
 mlaa_stream.temporal.methods.METHODS; default "auto", what --temporal runs), and prints per scene: error removed,
 damage away from edges (levels), temporal error, flicker energy, FLIP as the mean over **all** frames (the
 bench's FLIP column scores frame 0 only, which a temporal stage returns unchanged), the share of pixels
@@ -24,7 +25,30 @@ from mlaa_stream.spatial.filter import Filter
 from mlaa_stream.temporal import tss as T
 from mlaa_stream.temporal.methods import METHODS, make_stage, needs_regions
 from mlaa_stream.yardstick import metrics as M
-from mlaa_stream.yardstick.scenes import generate_scenes
+from mlaa_stream.yardstick.scenes import Scene, edge_mask, generate_scenes
+
+
+MOVER_STEP = (23, 3)  # px per frame: faster than DIS's FAST preset follows on a small textured patch
+
+
+def rendered_mover(scenes: list[Scene]) -> Scene | None:
+    """A fast mover over a render: an 80x100 patch of rendered_stress (input and truth) moving MOVER_STEP px per
+    frame over the still rendered_atrium, 8 frames; None without both stills. The moving-layer case where the
+    blend ghosts (the background a mover uncovers takes the mover's colour from the history)."""
+    stills = {s.name: s for s in scenes}
+    if "rendered_atrium" not in stills or "rendered_stress" not in stills:
+        return None
+    back, patch = stills["rendered_atrium"], stills["rendered_stress"]
+    src_in, src_truth = patch.inputs[0][150:230, 300:400], patch.truths[0][150:230, 300:400]
+    inputs, truths = [], []
+    for t in range(8):
+        x0, y0 = 40 + MOVER_STEP[0] * t, 120 + MOVER_STEP[1] * t
+        a, b = back.inputs[0].copy(), back.truths[0].copy()
+        a[y0:y0 + 80, x0:x0 + 100], b[y0:y0 + 80, x0:x0 + 100] = src_in, src_truth
+        inputs.append(a)
+        truths.append(b)
+    inputs, truths = np.stack(inputs), np.stack(truths)
+    return Scene("rendered_mover", "rendered", inputs, truths, np.stack([edge_mask(a, b) for a, b in zip(inputs, truths)]))
 
 
 def scene_scores(outs: np.ndarray, scene, with_flip: bool) -> dict[str, float]:
@@ -45,7 +69,8 @@ def main(argv: list[str] | None = None) -> int:
         name, value = item.split("=", 1)
         setattr(T, name, type(getattr(T, name))(float(value)))
     with_flip = M.flip_available()
-    scenes = [s for s in generate_scenes(names=args.scenes.split(",")) if s.animated]
+    every = generate_scenes(names=args.scenes.split(","))
+    scenes = [s for s in every if s.animated] + [m for m in [rendered_mover(every)] if m is not None]
     worse = []
     with Filter(args.device, bgr=False, keep_regions=needs_regions(args.method)) as filt:
         print(f"device: {filt.device_name}; FLIP {'over all frames' if with_flip else 'not installed'}")

@@ -39,6 +39,6 @@ def make_stage(method: str, context, *, bgr: bool, frames: int | None = None, mo
     ring = int(frames or DEFAULT_FRAMES)
     if method == "tss":
         return TSSStage(context=context, frames=ring, mode=mode, bgr=bgr, show=show)
-    if method == "auto":   # without the forward flow: the same scores on the rendered shots for half the DIS time
-        kw.update(where="render", regions_from=regions_from, fb_check=False)
+    if method == "auto":
+        kw.update(where="render", regions_from=regions_from)
     return TSSThenBlend(context=context, frames=ring, mode=mode, bgr=bgr, show=show, **kw)
