@@ -13,6 +13,7 @@ and blends in one pass; `temporal_reference` is its numpy twin. See docs/tempora
 """
 from __future__ import annotations
 
+import functools
 import math
 import threading
 import time
@@ -505,6 +506,14 @@ class TemporalStage:
 SEGMENT = 64  # pixels of a row per work item (kernels/common.cl)
 
 
+@functools.lru_cache(maxsize=4)
+def _pixel_grid(h: int, w: int) -> tuple[np.ndarray, np.ndarray]:
+    """x and y of every pixel centre, (h, w) float32 each (kept: building them costs more than the warp)."""
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float32)
+    xs.flags.writeable = ys.flags.writeable = False
+    return xs, ys
+
+
 def _one_level(dtype: np.dtype) -> float:
     """One 8-bit level in a frame type's units."""
     return {"f": 1.0 / 255.0}.get(dtype.kind, 257.0 if dtype == np.uint16 else 1.0)
@@ -550,13 +559,16 @@ def unexplained_blobs(cur: np.ndarray, prev: np.ndarray, flow_b: np.ndarray | No
     the translation), what survives a 3x3 erosion (aliasing leaves thin lines along moving edges, which do not;
     a mover the flow missed, or the background it uncovers, does), grown by BLOB_MARGIN pixels."""
     h, w = cur.shape[:2]
-    ys, xs = np.mgrid[0:h, 0:w].astype(np.float32)
     if flow_b is not None:
+        xs, ys = _pixel_grid(h, w)
         f = cv2.resize(flow_b, (w, h), interpolation=cv2.INTER_LINEAR) * np.float32(flow_scale)
-        mx, my = xs + f[..., 0], ys + f[..., 1]
+        f[..., 0] += xs
+        f[..., 1] += ys
+        warped = cv2.remap(prev, f, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
     else:
-        mx, my = xs + np.float32(translation[0]), ys + np.float32(translation[1])
-    warped = cv2.remap(prev, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        m = np.float32([[1, 0, translation[0]], [0, 1, translation[1]]])
+        warped = cv2.warpAffine(prev, m, (w, h), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                                borderMode=cv2.BORDER_REPLICATE)
     off = cv2.erode((_largest_difference(cur, warped) >= MOVED_LEVELS * _one_level(cur.dtype)).view(np.uint8),
                     np.ones((3, 3), np.uint8))
     side = 2 * BLOB_MARGIN + 1
