@@ -39,6 +39,6 @@ def make_stage(method: str, context, *, bgr: bool, frames: int | None = None, mo
     ring = int(frames or DEFAULT_FRAMES)
     if method == "tss":
         return TSSStage(context=context, frames=ring, mode=mode, bgr=bgr, show=show)
-    if method == "auto":
-        kw.update(where="render", regions_from=regions_from)
+    if method == "auto":   # the blob test makes the forward-backward check redundant there (docs/temporal.md)
+        kw.update(where="render", regions_from=regions_from, fb_check=False)
     return TSSThenBlend(context=context, frames=ring, mode=mode, bgr=bgr, show=show, **kw)
