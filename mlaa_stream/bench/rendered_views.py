@@ -12,13 +12,14 @@ for FLIP). A benchmark, never a unit test.
 from __future__ import annotations
 
 import argparse
+import math
 
 import numpy as np
 
 from mlaa_stream.bench.accuracy import METHODS
 from mlaa_stream.yardstick import metrics as M
-from mlaa_stream.yardstick.rendered import Camera, Renderer, _context, egl_available
-from mlaa_stream.yardstick.scenes import edge_mask
+from mlaa_stream.yardstick.rendered import Camera, Renderer, _context, _yawed, egl_available
+from mlaa_stream.yardstick.scenes import Scene, edge_mask
 
 # name -> (eye, target, vertical field of view in degrees): views the bench's shots (rendered.shot) do not use
 VIEWS: dict[str, tuple[tuple, tuple, float]] = {
@@ -41,6 +42,33 @@ def render_views(sizes: list[tuple[int, int]]) -> dict[str, tuple[np.ndarray, np
         finally:
             renderer.release()
     return frames
+
+
+VIEW_PAN_PX = 0.45     # the held-out pans' image motion per frame at the centre (the bench's pan: 0.3)
+VIEW_DOLLY_M = 0.04    # the held-out dollies' step along the view direction per frame, metres (the bench's: 0.05)
+
+
+def view_shots(width: int, height: int, frames: int = 8) -> list[Scene]:
+    """Animated held-out shots for the temporal stage (mlaa_stream.bench.tss_check --views): from every view of
+    VIEWS a yaw pan of VIEW_PAN_PX px per frame and a dolly of VIEW_DOLLY_M per frame, input and truth as the
+    bench's shots."""
+    shots = []
+    renderer = Renderer(_context(), width, height)
+    try:
+        for name, (eye, target, fov) in VIEWS.items():
+            e, t = np.asarray(eye, float), np.asarray(target, float)
+            step = VIEW_PAN_PX * 2 * math.tan(math.radians(fov) / 2) / height
+            forward = (t - e) / np.linalg.norm(t - e) * VIEW_DOLLY_M
+            for kind, cams in (("pan", [Camera(eye, _yawed(eye, target, k * step), fov) for k in range(frames)]),
+                               ("dolly", [Camera(tuple(e + k * forward), tuple(t + k * forward), fov)
+                                          for k in range(frames)])):
+                inputs = np.stack([renderer.input_frame(c) for c in cams])
+                truths = np.stack([renderer.truth_frame(c) for c in cams])
+                edges = np.stack([edge_mask(a, b) for a, b in zip(inputs, truths)])
+                shots.append(Scene(f"{name}_{kind}", "rendered", inputs, truths, edges))
+    finally:
+        renderer.release()
+    return shots
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -1,7 +1,7 @@
 """Is temporal supersampling never worse than spatial only? (issue 16's on-by-default condition)
 
     python -m mlaa_stream.bench.tss_check [--scenes rotation,pan,mover,cut,rendered] [--method auto]
-        [--tss-set NAME=VALUE ...]
+        [--views] [--tss-set NAME=VALUE ...]
 
 Runs the bench's animated scenes (mlaa_stream.yardstick.scenes, the same frames `mlaa-stream bench` scores)
 (with the rendered group, also `rendered_mover`: a fast mover over a rendered still, built here) through the
@@ -13,6 +13,8 @@ whose output differs from the spatial output, the share that took samples (stats
 least MIN_CELLS filled cells; mean over frames), and the motion model of each frame (r reset, s static,
 g global, d dense; TSS's models where the method has TSS). A scene is "worse" when the stage loses in error
 removed, damage or all-frame FLIP.
+--views adds held-out rendered shots (mlaa_stream.bench.rendered_views.view_shots: a pan and a dolly from each
+held-out view at 640x360, rendered here: a few minutes), shots no constant was measured on.
 --tss-set sets a module constant of mlaa_stream.temporal.tss for the run (e.g. BAND_TOL=1e9).
 """
 from __future__ import annotations
@@ -63,6 +65,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--scenes", default="rotation,pan,mover,cut,rendered")
     ap.add_argument("--device", default=None)
     ap.add_argument("--method", default="auto", choices=METHODS)
+    ap.add_argument("--views", action="store_true", help="also held-out rendered shots (needs EGL)")
     ap.add_argument("--tss-set", action="append", default=[], metavar="NAME=VALUE")
     args = ap.parse_args(argv)
     for item in args.tss_set:
@@ -71,6 +74,9 @@ def main(argv: list[str] | None = None) -> int:
     with_flip = M.flip_available()
     every = generate_scenes(names=args.scenes.split(","))
     scenes = [s for s in every if s.animated] + [m for m in [rendered_mover(every)] if m is not None]
+    if args.views:
+        from mlaa_stream.bench.rendered_views import view_shots
+        scenes += view_shots(640, 360)
     worse = []
     with Filter(args.device, bgr=False, keep_regions=needs_regions(args.method)) as filt:
         print(f"device: {filt.device_name}; FLIP {'over all frames' if with_flip else 'not installed'}")

@@ -4,7 +4,8 @@
     out = stage(frame_in, frame_filtered, index)
 
 - "auto" (the default): temporal supersampling (tss.TSSStage), then the reprojection blend
-  (stage.TemporalStage) only on moving pixels of the spatial filter's render regions (where="render").
+  (stage.TemporalStage) with dense flow, only on moving pixels of the spatial filter's render regions
+  (where="render").
   The blend removes error on 1-spp renders and is worse than spatial only on flat-colour art
   (docs/temporal.md, "Blend in render regions").
 - "tss": temporal supersampling alone; "blend": the blend everywhere; "tss+blend": both, the blend everywhere.
@@ -39,6 +40,8 @@ def make_stage(method: str, context, *, bgr: bool, frames: int | None = None, mo
     ring = int(frames or DEFAULT_FRAMES)
     if method == "tss":
         return TSSStage(context=context, frames=ring, mode=mode, bgr=bgr, show=show)
-    if method == "auto":   # the blob test makes the forward-backward check redundant there (docs/temporal.md)
-        kw.update(where="render", regions_from=regions_from, fb_check=False)
+    if method == "auto":   # docs/temporal.md: dense flow follows a dolly's zoom, which one translation does not;
+        # the blob test makes the forward-backward check redundant
+        kw.update(where="render", regions_from=regions_from, fb_check=False,
+                  blend_mode="dense" if mode == "adaptive" else mode)
     return TSSThenBlend(context=context, frames=ring, mode=mode, bgr=bgr, show=show, **kw)

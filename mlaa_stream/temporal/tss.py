@@ -934,10 +934,12 @@ class TSSThenBlend:
     input's temporal error (TSS 0.64, blend 0.54), the bench pan to 0.39 (0.42, 0.53)."""
 
     def __init__(self, device: str | int | None = None, *, frames: int = DEFAULT_FRAMES, bgr: bool = True,
-                 mode: str = "adaptive", show: str | None = None, context=None, **blend_kwargs):
+                 mode: str = "adaptive", show: str | None = None, context=None, blend_mode: str | None = None,
+                 **blend_kwargs):
+        """`blend_mode`: the blend's motion model when not `mode` ("auto": "dense")."""
         from mlaa_stream.temporal.stage import TemporalStage
         self.tss = TSSStage(device, frames=frames, bgr=bgr, mode=mode, context=context)
-        self.blend = TemporalStage(device, bgr=bgr, mode=mode, show=show, context=self.tss.context,
+        self.blend = TemporalStage(device, bgr=bgr, mode=blend_mode or mode, show=show, context=self.tss.context,
                                    **blend_kwargs)
 
     @property
