@@ -359,7 +359,7 @@ class TemporalStage:
     # -- per frame -------------------------------------------------------------------------------------
     def __call__(self, frame_in: np.ndarray, frame_filtered: np.ndarray, index: int,
                  regions: np.ndarray | None = None) -> np.ndarray:
-        """`regions`: the spatial filter's render-region flag per tile of frame_in (Filter(regions=True),
+        """`regions`: the spatial filter's render-region flag per tile of frame_in (Filter(keep_regions=True),
         PendingFrame.regions); read with where="render" only, where None means no render region."""
         if self._off:
             self.stats.append({"index": int(index), "model": "off", "flow_ms": 0.0, "blend_ms": 0.0,
