@@ -730,6 +730,8 @@ class TSSStage:
 
     def __call__(self, frame_in: np.ndarray, frame_filtered: np.ndarray, index: int,
                  regions: np.ndarray | None = None) -> np.ndarray:
+        """`regions` is accepted for the stages' common call (temporal.methods) and not read: TSS takes samples
+        wherever the motion checks pass."""
         fin, fout = np.asarray(frame_in), np.asarray(frame_filtered)
         if fin.shape != fout.shape or fin.dtype != fout.dtype:
             raise ValueError(f"frame {index}: expected the input and filtered frames to have the same shape "
