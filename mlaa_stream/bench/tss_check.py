@@ -16,6 +16,10 @@ removed, damage or all-frame FLIP.
 --views adds held-out rendered shots (mlaa_stream.bench.rendered_views.view_shots: a pan and a dolly from each
 held-out view at 640x360, rendered here: a few minutes), shots no constant was measured on.
 --tss-set sets a module constant of mlaa_stream.temporal.tss for the run (e.g. BAND_TOL=1e9).
+--exact-motion adds two oracle rows to each of the bench's rendered shots, with the renderer's exact motion
+(mlaa_stream.yardstick.rendered.reprojection, from each frame's depth; needs EGL): "tss:exact", the TSS resolve
+(tss_frame_reference, the kernel's twin) with every ring frame's exact per-pixel map, and "<method>:exact", the
+method with the blend's dense flow replaced by the exact one (TSS as usual). How much better motion could buy.
 """
 from __future__ import annotations
 
@@ -30,6 +34,7 @@ from mlaa_stream.yardstick import metrics as M
 from mlaa_stream.yardstick.scenes import Scene, edge_mask, generate_scenes
 
 
+EXACT_SHOTS = ("rendered_pan", "rendered_dolly", "rendered_orbit")   # --exact-motion: shots with cameras to reproject
 MOVER_STEP = (23, 3)  # px per frame: faster than DIS's FAST preset follows on a small textured patch
 
 
@@ -60,6 +65,24 @@ def scene_scores(outs: np.ndarray, scene, with_flip: bool) -> dict[str, float]:
     return r
 
 
+def exact_maps(name: str, width: int, height: int) -> dict[tuple[int, int], np.ndarray]:
+    """The rendered shot's exact motion: maps[t, u] = frame t's (H, W, 2) offsets into frame u, for u < t."""
+    from mlaa_stream.yardstick import rendered as R
+    small = (width, height) == R.SIZES[True]
+    cams = R.shot(name, width, height)
+    depths = R.shot_depths(name, small)
+    return {(t, u): R.reprojection(cams[t], cams[u], depths[t]) for t in range(len(cams)) for u in range(t)}
+
+
+def exact_tss(scene: Scene, spatial: np.ndarray, maps: dict) -> np.ndarray:
+    """TSS's resolve with exact maps: each frame from its last DEFAULT_FRAMES - 1 inputs and itself."""
+    outs = []
+    for t, (f, sp) in enumerate(zip(scene.inputs, spatial)):
+        ring = [(scene.inputs[u], maps[t, u], None) for u in range(max(0, t - T.DEFAULT_FRAMES + 1), t)]
+        outs.append(T.tss_frame_reference(sp, f, ring + [(f, (0.0, 0.0), None)], bgr=False)[0])
+    return np.stack(outs)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--scenes", default="rotation,pan,mover,cut,rendered")
@@ -67,6 +90,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--method", default="auto", choices=METHODS)
     ap.add_argument("--views", action="store_true", help="also held-out rendered shots (needs EGL)")
     ap.add_argument("--tss-set", action="append", default=[], metavar="NAME=VALUE")
+    ap.add_argument("--exact-motion", action="store_true",
+                    help="oracle rows with the renderer's exact motion on the rendered shots (needs EGL)")
     args = ap.parse_args(argv)
     for item in args.tss_set:
         name, value = item.split("=", 1)
@@ -95,7 +120,18 @@ def main(argv: list[str] | None = None) -> int:
             changed = float(np.mean(np.any((outs != spatial).reshape(outs.shape[:3] + (-1,)), -1)))
             models = "".join(r["model"][0] for r in stage.stats)
             sampled = float(np.mean([r.get("samples_share", float("nan")) for r in stage.stats]))
-            for name, r, extra in (("mlaa", a, ""), (args.method, b, f"{changed:8.3f} {sampled:8.3f}  {models}")):
+            rows = [("mlaa", a, ""), (args.method, b, f"{changed:8.3f} {sampled:8.3f}  {models}")]
+            if args.exact_motion and s.name in EXACT_SHOTS:
+                maps = exact_maps(s.name, s.inputs.shape[2], s.inputs.shape[1])
+                rows.append(("tss:exact", scene_scores(exact_tss(s, spatial, maps), s, with_flip), ""))
+                if args.method != "tss":
+                    known = make_stage(args.method, filt.context, bgr=False,
+                                       motion=lambda t, m=maps: m[t, t - 1] if t > 0 else None)
+                    outs = np.stack([known(f, sp, i, regions=r)
+                                     for i, (f, sp, r) in enumerate(zip(s.inputs, spatial, regions))])
+                    known.close()
+                    rows.append((f"{args.method}:exact", scene_scores(outs, s, with_flip), ""))
+            for name, r, extra in rows:
                 print(f"{s.name:16s} {name:8s} {r['error_removed']:8.3f} {r['damage']:8.4f} "
                       f"{r['temporal_error']:9.3f} {r['flicker']:8.3f} {r['flip_all']:9.5f} {extra}")
             if (b["error_removed"] < a["error_removed"] or b["damage"] > a["damage"]

@@ -28,11 +28,16 @@ def check(method: str) -> str:
 
 
 def make_stage(method: str, context, *, bgr: bool, frames: int | None = None, mode: str = "adaptive",
-               k: float | None = None, show: str | None = None, regions_from=None):
+               k: float | None = None, show: str | None = None, regions_from=None, motion=None):
     """A new temporal stage (fresh state) on `context` (the filter's OpenCL context). `regions_from`: the
-    Filter(keep_regions=True) whose frames the stage gets ("auto" reads its last_regions)."""
+    Filter(keep_regions=True) whose frames the stage gets ("auto" reads its last_regions). `motion`: known
+    motion for the blend's dense frames instead of DIS (stage.TemporalStage's `motion`; methods with a blend)."""
     check(method)
     kw = {} if k is None else {"k": k}
+    if motion is not None:
+        if method == "tss":
+            raise ValueError("motion: the tss method estimates its own; give it to a method with a blend")
+        kw["motion"] = motion
     if method == "blend":
         from mlaa_stream.temporal.stage import TemporalStage
         return TemporalStage(context=context, mode=mode, bgr=bgr, show=show, **kw)

@@ -18,6 +18,7 @@ import math
 import threading
 import time
 from dataclasses import dataclass, field
+from typing import Callable
 
 import cv2
 import numpy as np
@@ -286,10 +287,15 @@ class TemporalStage:
                  mode: str = "adaptive", bgr: bool = True, show: str | None = None,
                  context: Context | None = None, k: float = DEFAULT_K, gamma: float = GAMMA,
                  fb_check: bool = True, linear_input: bool = False, preset: str = "fast",
-                 where: str = "everywhere", regions_from=None):
+                 where: str = "everywhere", regions_from=None,
+                 motion: Callable[[int], np.ndarray | None] | None = None):
         """where="render": history only on moving pixels of render regions (WHERE); the regions are the
         `regions` argument of each call, or else `regions_from.last_regions` (a Filter(keep_regions=True)
-        whose frame was collected just before the call)."""
+        whose frame was collected just before the call).
+        `motion`: known motion instead of DIS on dense frames: motion(index) gives frame `index`'s (H, W, 2)
+        offsets to the previous frame in full-size pixels (previous position = pixel + offset: a renderer's
+        motion vectors; tss_check's exact-motion oracle), or None for DIS; a known field gets no
+        forward-backward check."""
         if mode not in MODES:
             raise ValueError(f"mode: expected one of {', '.join(MODES)}, got {mode!r}")
         if show not in SHOWS:
@@ -302,7 +308,7 @@ class TemporalStage:
             raise ValueError(f"preset: expected 'ultrafast' or 'fast', got {preset!r}")
         if where not in WHERE:
             raise ValueError(f"where: expected one of {', '.join(WHERE)}, got {where!r}")
-        self.where, self.regions_from = where, regions_from
+        self.where, self.regions_from, self.motion = where, regions_from, motion
         self.strength, self.k, self.gamma = float(strength_k), float(k), float(gamma)
         self.mode, self.bgr, self.show = mode, bool(bgr), show
         self.fb_check, self.linear_input = bool(fb_check), bool(linear_input)
@@ -399,7 +405,12 @@ class TemporalStage:
                 dec = Decision("reset", dec.translation, dec.measures)
             prev_raw, self._prev_raw = self._prev_raw, np.array(frame_in, copy=True)
         flow_b = flow_f = None
-        if dec.model == "dense":
+        known = self.motion(index) if self.motion is not None and dec.model == "dense" else None
+        if known is not None:
+            fh, fw = pyr.flow.shape[:2]
+            flow_b = (cv2.resize(known, (fw, fh), interpolation=cv2.INTER_AREA) / np.float32(pyr.flow_scale)
+                      if pyr.flow_scale != 1 else np.array(known, np.float32))
+        elif dec.model == "dense":
             d = (dec.translation[0] / pyr.flow_scale, dec.translation[1] / pyr.flow_scale)
             flow_b = self._flow(pyr.flow, self._prev.flow, d)                # current -> previous
             if self.fb_check:

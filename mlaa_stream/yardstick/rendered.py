@@ -875,6 +875,13 @@ class Renderer:
         img = np.frombuffer(self.fbo8.read(components=3), np.uint8).reshape(self.height, self.width, 3)
         return np.flipud(img).copy()
 
+    def depth_frame(self, cam: Camera) -> np.ndarray:
+        """The window depth in [0, 1] of the 1-spp pass (what each pixel centre's sample hit; the sky is 1):
+        (H, W) float32, row 0 the image's top. For exact motion (reprojection)."""
+        self.input_frame(cam)
+        depth = np.frombuffer(self.fbo8.read(components=1, attachment=-1, dtype="f4"), np.float32)
+        return np.flipud(depth.reshape(self.height, self.width)).copy()
+
     def truth_linear(self, cam: Camera, spp: int = TRUTH_SPP) -> np.ndarray:
         """The mean of spp x spp jittered passes in linear light: (H, W, 3) float64."""
         self.fbo32.use()
@@ -901,6 +908,35 @@ class Renderer:
             t.release()
         for obj in (self.sky_vao, self.prog, self.sky, self.fbo8, self.fbo32):
             obj.release()
+
+
+def reprojection(cam_from: Camera, cam_to: Camera, depth: np.ndarray) -> np.ndarray:
+    """Exact motion of a still world: where the point each pixel centre of cam_from's frame hit (window depth
+    `depth`, Renderer.depth_frame) lies in cam_to's frame. Returns (H, W, 2) float32 offsets (x, y) in pixels,
+    position in cam_to's frame = pixel index + offset (the maps of mlaa_stream.temporal.tss). The sky (depth 1)
+    is taken at the far plane. Occlusion is not tested: a point hidden in cam_to's frame still gets its
+    position (the temporal stages' colour box is what rejects such samples)."""
+    h, w = depth.shape
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
+    ndc = np.stack([2 * (xs + 0.5) / w - 1, 1 - 2 * (ys + 0.5) / h, 2 * depth.astype(np.float64) - 1,
+                    np.ones_like(xs)], -1)
+    world = ndc @ np.linalg.inv(cam_from.view_projection(w, h)).T
+    clip = world @ cam_to.view_projection(w, h).T   # the homogeneous w cancels in the divide below
+    px = (clip[..., 0] / clip[..., 3] + 1) / 2 * w - 0.5
+    py = (1 - clip[..., 1] / clip[..., 3]) / 2 * h - 0.5
+    return np.stack([px - xs, py - ys], -1).astype(np.float32)
+
+
+def shot_depths(name: str, small: bool = False, renderer: Renderer | None = None) -> np.ndarray:
+    """Every frame's window depth of a scene's shot: (T, H, W) float32 (not cached: ~0.3 s a frame)."""
+    width, height = SIZES[bool(small)]
+    own = renderer is None
+    r = Renderer(_context(), width, height) if own else renderer
+    try:
+        return np.stack([r.depth_frame(c) for c in shot(name, width, height)])
+    finally:
+        if own:
+            r.release()
 
 
 def render_scene(name: str, small: bool = False, renderer: Renderer | None = None) -> Scene:
