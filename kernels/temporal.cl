@@ -252,6 +252,28 @@ inline void pass_flat(__global const PIXEL_T *cur, __global half *hist_out, __gl
     }
 }
 
+// Pixels [xa, xb) without history: each untouched, its own value in linear light as the new history,
+// weight 0 (what the per-pixel path below gives them, without its 3x3 statistics).
+inline void pass_own(__global const float *luts, __global const float *dec, __global const PIXEL_T *cur,
+                     __global half *hist_out, __global PIXEL_T *dst, __global uchar *conf, int row, int xa, int xb)
+{
+    for (int x = xa; x < xb; ++x) {
+        vstore_half4_rte(load_linear(luts, dec, cur, row + x), row + x, hist_out);
+        conf[row + x] = 0;
+    }
+    __global const uchar *s8 = (__global const uchar *)cur + (size_t)(row + xa) * PXB;
+    __global uchar *d8 = (__global uchar *)dst + (size_t)(row + xa) * PXB;
+    for (int k = 0; k < (xb - xa) * PXB; ++k) d8[k] = s8[k];
+}
+
+// Whether the gate is 0 on all of gate[i .. i + n).
+inline int gate_closed(__global const uchar *gate, int i, int n)
+{
+    uchar g = 0;
+    for (int k = 0; k < n; ++k) g |= gate[i + k];
+    return g == 0;
+}
+
 // Vertical Catmull-Rom of texel column cx over rows r0..r3 (clamped): one column of the 4x4 taps.
 #define VCOL(cx) (htex(hb, r0 * width + CLAMPI(cx, width - 1)) * wy.x + \
                   htex(hb, r1 * width + CLAMPI(cx, width - 1)) * wy.y + \
@@ -324,19 +346,16 @@ __kernel void temporal_blend(__global const PIXEL_T *cur, __global const half *h
             continue;
         }
         run = 0;
+        // a reset, or a group the gate closes (where="render": most of a frame): no history in the group
+        if (cur_mode == 0 || (gated && gate_closed(gate, row + gx, gend - gx))) {
+            pass_own(luts, dec, cur, hist_out, dst, conf, row, gx, gend);
+            continue;
+        }
 #if FLAT_NEAR
         if (gx >= 1 && gx + GROUP < width &&
             group_near_flat((__global const PIXEL_T *)ra, (__global const PIXEL_T *)rm,
                             (__global const PIXEL_T *)rb, gx)) {
-            // near-flat: each pixel untouched, its own value as the history, weight 0
-            for (int x = gx; x < gend; ++x) {
-                const int i = row + x;
-                vstore_half4_rte(load_linear(luts, dec, cur, i), i, hist_out);
-                conf[i] = 0;
-            }
-            __global const uchar *s8 = (__global const uchar *)cur + (size_t)(row + gx) * PXB;
-            __global uchar *d8 = (__global uchar *)dst + (size_t)(row + gx) * PXB;
-            for (int k = 0; k < GROUP * PXB; ++k) d8[k] = s8[k];
+            pass_own(luts, dec, cur, hist_out, dst, conf, row, gx, gend);   // near-flat: no history either
             continue;
         }
 #endif
