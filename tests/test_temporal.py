@@ -513,3 +513,31 @@ def test_known_motion_replaces_the_flow(spatial):
     assert all(np.array_equal(a, b) for a, b in zip(fallback, plain))
     with pytest.raises(ValueError, match="motion"):
         make_stage("tss", spatial.context, bgr=False, motion=field((0.0, 0.0)))
+
+
+def test_blend_reuses_what_tss_measured(spatial, monkeypatch):
+    """TSSThenBlend hands TSS's pyramid and motion decision to the blend (no second choose_model on the same frame
+    pair); the output is bit for bit what the blend gives when it measures the frames itself."""
+    from types import SimpleNamespace
+    from mlaa_stream.temporal import stage as stage_module
+    from mlaa_stream.temporal.methods import make_stage
+    w, h = 160, 96
+    frames = [S.encode8(S.render(_pan_layers(w, h, 0.35 * t, 0.15 * t), w, h, 1)) for t in range(5)]
+    sp = [spatial.process(f) for f in frames]
+    holder = SimpleNamespace(last_regions=np.ones((h // 8, w // 8), np.uint8))
+    outs = {}
+    real = stage_module.choose_model
+    for kind in ("shared", "own"):
+        calls = []
+        monkeypatch.setattr(stage_module, "choose_model", lambda *a, **k: calls.append(1) or real(*a, **k))
+        st = make_stage("auto", spatial.context, bgr=False, regions_from=holder)
+        if kind == "own":
+            st._measured = lambda: None
+        outs[kind] = [st(f, s, i) for i, (f, s) in enumerate(zip(frames, sp))]
+        models = [r["blend_model"] for r in st.stats]
+        st.close()
+        blend_calls = len(calls)
+        assert models == ["reset"] + ["dense"] * 4, models
+        assert blend_calls == (0 if kind == "shared" else 4), (kind, blend_calls)
+    assert all(np.array_equal(a, b) for a, b in zip(outs["shared"], outs["own"]))
+    assert any(np.any(o != s) for o, s in zip(outs["shared"][1:], sp[1:]))

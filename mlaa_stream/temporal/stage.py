@@ -364,9 +364,12 @@ class TemporalStage:
 
     # -- per frame -------------------------------------------------------------------------------------
     def __call__(self, frame_in: np.ndarray, frame_filtered: np.ndarray, index: int,
-                 regions: np.ndarray | None = None) -> np.ndarray:
+                 regions: np.ndarray | None = None,
+                 measured: tuple[Pyramid, Decision | None] | None = None) -> np.ndarray:
         """`regions`: the spatial filter's render-region flag per tile of frame_in (Filter(keep_regions=True),
-        PendingFrame.regions); read with where="render" only, where None means no render region."""
+        PendingFrame.regions); read with where="render" only, where None means no render region.
+        `measured`: frame_in's grey pyramid, and the model choice for this frame after the previous one (or
+        None), as another stage measured them (TSSThenBlend): used instead of measuring again."""
         if self._off:
             self.stats.append({"index": int(index), "model": "off", "flow_ms": 0.0, "blend_ms": 0.0,
                                "history_weight_mean": 0.0})
@@ -380,20 +383,22 @@ class TemporalStage:
         if regions is None and self.regions_from is not None:
             regions = self.regions_from.last_regions
         with self._lock:
-            return self._step(frame_in, frame_filtered, int(index), fmt, regions)
+            return self._step(frame_in, frame_filtered, int(index), fmt, regions, measured)
 
-    def _step(self, frame_in, frame_filtered, index: int, fmt: FrameFormat, regions) -> np.ndarray:
+    def _step(self, frame_in, frame_filtered, index: int, fmt: FrameFormat, regions, measured) -> np.ndarray:
         t0 = time.perf_counter()
-        grey = grey8(frame_in, self.bgr)
+        grey = grey8(frame_in, self.bgr) if measured is None else measured[0].grey
         fresh = self._prev is None or self._prev_index is None or index != self._prev_index + 1
         if (not fresh and self._buffers is not None and self._buffers.fmt == fmt
                 and np.array_equal(grey, self._prev.grey)):
             return self._repeat(frame_filtered, index, t0)
-        pyr = Pyramid.of(frame_in, self.bgr, grey)
+        pyr = Pyramid.of(frame_in, self.bgr, grey) if measured is None else measured[0]
         bufs = self._prepare(fmt, pyr)
         fresh = fresh or self._prev is None   # _prepare resets on a new format
         if fresh:
             dec = Decision("reset", measures={"cut": False})
+        elif measured is not None and measured[1] is not None:
+            dec = measured[1]
         else:
             dec = choose_model(self._prev, pyr, self.mode)
         gate, chosen = None, dec.model

@@ -727,6 +727,9 @@ class TSSStage:
         self._prev_index: int | None = None
         self._shape = None
         self._last: tuple[np.ndarray, np.ndarray] | None = None   # (grey, output) of the previous frame
+        # the latest frame's grey pyramid and motion decision (None after a repeated frame): TSSThenBlend
+        # hands them to the blend, which would measure the same frame pair again
+        self.last_motion: tuple[Pyramid, Decision] | None = None
 
     def __call__(self, frame_in: np.ndarray, frame_filtered: np.ndarray, index: int,
                  regions: np.ndarray | None = None) -> np.ndarray:
@@ -741,6 +744,7 @@ class TSSStage:
 
     def _step(self, frame_in: np.ndarray, frame_filtered: np.ndarray, index: int) -> np.ndarray:
         t0 = time.perf_counter()
+        self.last_motion = None
         grey = grey8(frame_in, self.bgr)
         fresh = self._prev_index is None or index != self._prev_index + 1 or frame_in.shape != self._shape
         if not fresh and self._last is not None and np.array_equal(grey, self._last[0]):
@@ -753,6 +757,7 @@ class TSSStage:
             return self._last[1].copy()
         pyr = Pyramid.of(frame_in, self.bgr, grey)
         fm = self.motion.push(pyr, index, fresh)
+        self.last_motion = (pyr, fm.decision)
         used = {e.slot for e in fm.entries if e.slot >= 0}
         fm.entries[-1].slot = min(set(range(self.frames)) - used)
         t1 = time.perf_counter()
@@ -952,7 +957,21 @@ class TSSThenBlend:
 
     def __call__(self, frame_in: np.ndarray, frame_filtered: np.ndarray, index: int,
                  regions: np.ndarray | None = None) -> np.ndarray:
-        return self.blend(frame_in, self.tss(frame_in, frame_filtered, index), index, regions=regions)
+        out = self.tss(frame_in, frame_filtered, index)
+        return self.blend(frame_in, out, index, regions=regions, measured=self._measured())
+
+    def _measured(self) -> tuple[Pyramid, Decision | None] | None:
+        """TSS's pyramid of this frame and, where the blend's model choice would reach the same, its decision:
+        the same choice in the same mode, or a translation measured in adaptive mode handed to a dense blend
+        (choose_model measures it the same way in both modes before it decides)."""
+        if self.tss.last_motion is None:
+            return None
+        pyr, dec = self.tss.last_motion
+        if self.blend.mode == self.tss.motion.mode:
+            return pyr, Decision(dec.model, dec.translation, dict(dec.measures))
+        if self.blend.mode == "dense" and dec.model in ("global", "dense"):
+            return pyr, Decision("dense", dec.translation, dict(dec.measures))
+        return pyr, None
 
     def reset(self) -> None:
         self.tss.reset()
