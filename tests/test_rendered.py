@@ -190,7 +190,7 @@ def test_depth_reprojects_one_frame_onto_the_next(scenes):
     s = by_name["rendered_dolly"]
     h, w = s.truths.shape[1:3]
     cams = R.shot("rendered_dolly", w, h)
-    m = R.reprojection(cams[7], cams[0], R.shot_depths("rendered_dolly", small=True)[7])
+    m = R.reprojection(cams[7], cams[0], R.depth_frames(cams, w, h)[7])
     ys, xs = np.mgrid[0:h, 0:w].astype(np.float32)
 
     def err(dx, dy):

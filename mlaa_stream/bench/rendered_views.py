@@ -48,24 +48,30 @@ VIEW_PAN_PX = 0.45     # the held-out pans' image motion per frame at the centre
 VIEW_DOLLY_M = 0.04    # the held-out dollies' step along the view direction per frame, metres (the bench's: 0.05)
 
 
+def view_cameras(width: int, height: int, frames: int = 8) -> dict[str, list[Camera]]:
+    """The held-out shots' cameras, one per frame: from every view of VIEWS a yaw pan of VIEW_PAN_PX px per frame
+    ("<view>_pan") and a dolly of VIEW_DOLLY_M per frame ("<view>_dolly")."""
+    shots = {}
+    for name, (eye, target, fov) in VIEWS.items():
+        e, t = np.asarray(eye, float), np.asarray(target, float)
+        step = VIEW_PAN_PX * 2 * math.tan(math.radians(fov) / 2) / height
+        forward = (t - e) / np.linalg.norm(t - e) * VIEW_DOLLY_M
+        shots[f"{name}_pan"] = [Camera(eye, _yawed(eye, target, k * step), fov) for k in range(frames)]
+        shots[f"{name}_dolly"] = [Camera(tuple(e + k * forward), tuple(t + k * forward), fov) for k in range(frames)]
+    return shots
+
+
 def view_shots(width: int, height: int, frames: int = 8) -> list[Scene]:
-    """Animated held-out shots for the temporal stage (mlaa_stream.bench.tss_check --views): from every view of
-    VIEWS a yaw pan of VIEW_PAN_PX px per frame and a dolly of VIEW_DOLLY_M per frame, input and truth as the
-    bench's shots."""
+    """Animated held-out shots for the temporal stage (mlaa_stream.bench.tss_check --views): view_cameras' shots,
+    input and truth as the bench's shots."""
     shots = []
     renderer = Renderer(_context(), width, height)
     try:
-        for name, (eye, target, fov) in VIEWS.items():
-            e, t = np.asarray(eye, float), np.asarray(target, float)
-            step = VIEW_PAN_PX * 2 * math.tan(math.radians(fov) / 2) / height
-            forward = (t - e) / np.linalg.norm(t - e) * VIEW_DOLLY_M
-            for kind, cams in (("pan", [Camera(eye, _yawed(eye, target, k * step), fov) for k in range(frames)]),
-                               ("dolly", [Camera(tuple(e + k * forward), tuple(t + k * forward), fov)
-                                          for k in range(frames)])):
-                inputs = np.stack([renderer.input_frame(c) for c in cams])
-                truths = np.stack([renderer.truth_frame(c) for c in cams])
-                edges = np.stack([edge_mask(a, b) for a, b in zip(inputs, truths)])
-                shots.append(Scene(f"{name}_{kind}", "rendered", inputs, truths, edges))
+        for name, cams in view_cameras(width, height, frames).items():
+            inputs = np.stack([renderer.input_frame(c) for c in cams])
+            truths = np.stack([renderer.truth_frame(c) for c in cams])
+            edges = np.stack([edge_mask(a, b) for a, b in zip(inputs, truths)])
+            shots.append(Scene(name, "rendered", inputs, truths, edges))
     finally:
         renderer.release()
     return shots

@@ -1,7 +1,7 @@
 """Is temporal supersampling never worse than spatial only? (issue 16's on-by-default condition)
 
     python -m mlaa_stream.bench.tss_check [--scenes rotation,pan,mover,cut,rendered] [--method auto]
-        [--views] [--tss-set NAME=VALUE ...]
+        [--views] [--exact-motion] [--tss-set NAME=VALUE ...]
 
 Runs the bench's animated scenes (mlaa_stream.yardstick.scenes, the same frames `mlaa-stream bench` scores)
 (with the rendered group, also `rendered_mover`: a fast mover over a rendered still, built here) through the
@@ -16,10 +16,12 @@ removed, damage or all-frame FLIP.
 --views adds held-out rendered shots (mlaa_stream.bench.rendered_views.view_shots: a pan and a dolly from each
 held-out view at 640x360, rendered here: a few minutes), shots no constant was measured on.
 --tss-set sets a module constant of mlaa_stream.temporal.tss for the run (e.g. BAND_TOL=1e9).
---exact-motion adds two oracle rows to each of the bench's rendered shots, with the renderer's exact motion
-(mlaa_stream.yardstick.rendered.reprojection, from each frame's depth; needs EGL): "tss:exact", the TSS resolve
-(tss_frame_reference, the kernel's twin) with every ring frame's exact per-pixel map, and "<method>:exact", the
-method with the blend's dense flow replaced by the exact one (TSS as usual). How much better motion could buy.
+--exact-motion adds two oracle rows to each of the bench's rendered shots (and the held-out shots with --views), with
+the renderer's exact motion (mlaa_stream.yardstick.rendered.reprojection, from each frame's depth; needs EGL):
+"tss:exact", the TSS resolve (tss_frame_reference, the kernel's twin) with every ring frame's exact per-pixel map,
+"tss:homography", the same resolve with one projective map per frame pair estimated from the frames (ECC,
+homography_maps: slow, a measurement of the model, not of a fast estimator), and "<method>:exact", the method
+with the blend's dense flow replaced by the exact one (TSS as usual). How much better motion could buy.
 """
 from __future__ import annotations
 
@@ -34,7 +36,7 @@ from mlaa_stream.yardstick import metrics as M
 from mlaa_stream.yardstick.scenes import Scene, edge_mask, generate_scenes
 
 
-EXACT_SHOTS = ("rendered_pan", "rendered_dolly", "rendered_orbit")   # --exact-motion: shots with cameras to reproject
+EXACT_SHOTS = ("rendered_pan", "rendered_dolly", "rendered_orbit")   # --exact-motion: the bench's shots (and --views')
 MOVER_STEP = (23, 3)  # px per frame: faster than DIS's FAST preset follows on a small textured patch
 
 
@@ -65,13 +67,44 @@ def scene_scores(outs: np.ndarray, scene, with_flip: bool) -> dict[str, float]:
     return r
 
 
-def exact_maps(name: str, width: int, height: int) -> dict[tuple[int, int], np.ndarray]:
-    """The rendered shot's exact motion: maps[t, u] = frame t's (H, W, 2) offsets into frame u, for u < t."""
+def shot_cameras(name: str, width: int, height: int, frames: int) -> list | None:
+    """The cameras of a rendered shot of this check (the bench's EXACT_SHOTS, the held-out view shots), else None."""
+    from mlaa_stream.bench.rendered_views import view_cameras
     from mlaa_stream.yardstick import rendered as R
-    small = (width, height) == R.SIZES[True]
-    cams = R.shot(name, width, height)
-    depths = R.shot_depths(name, small)
+    if name in EXACT_SHOTS:
+        return R.shot(name, width, height)
+    return view_cameras(width, height, frames).get(name)
+
+
+def exact_maps(cams: list, width: int, height: int) -> dict[tuple[int, int], np.ndarray]:
+    """A shot's exact motion: maps[t, u] = frame t's (H, W, 2) offsets into frame u, for u < t."""
+    from mlaa_stream.yardstick import rendered as R
+    depths = R.depth_frames(cams, width, height)
     return {(t, u): R.reprojection(cams[t], cams[u], depths[t]) for t in range(len(cams)) for u in range(t)}
+
+
+def homography_maps(inputs: np.ndarray) -> dict[tuple[int, int], np.ndarray]:
+    """One projective map per frame pair, estimated from the 1-spp frames alone: cv2.findTransformECC
+    (MOTION_HOMOGRAPHY) of frame t's grey against frame u's, both blurred by 1 px, directly for every pair
+    (started from the estimate of the pair (t - 1, u)); maps[t, u] as exact_maps gives them. A camera that
+    turns about its eye (the pans) moves the image by exactly such a map."""
+    import cv2
+    grey = [cv2.GaussianBlur(cv2.cvtColor(f, cv2.COLOR_RGB2GRAY).astype(np.float32), (0, 0), 1.0) for f in inputs]
+    h, w = grey[0].shape
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float32)
+    found, maps = {}, {}
+    for t in range(len(grey)):
+        for u in range(t):
+            start = found.get((t - 1, u), np.eye(3, dtype=np.float32))
+            try:
+                _, found[t, u] = cv2.findTransformECC(grey[t], grey[u], start.copy(), cv2.MOTION_HOMOGRAPHY,
+                                                      (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 60, 1e-5),
+                                                      None, 1)
+            except cv2.error:   # no convergence: keep the start
+                found[t, u] = start
+            p = np.stack([xs, ys, np.ones_like(xs)], -1) @ found[t, u].T
+            maps[t, u] = np.stack([p[..., 0] / p[..., 2] - xs, p[..., 1] / p[..., 2] - ys], -1).astype(np.float32)
+    return maps
 
 
 def exact_tss(scene: Scene, spatial: np.ndarray, maps: dict) -> np.ndarray:
@@ -121,9 +154,13 @@ def main(argv: list[str] | None = None) -> int:
             models = "".join(r["model"][0] for r in stage.stats)
             sampled = float(np.mean([r.get("samples_share", float("nan")) for r in stage.stats]))
             rows = [("mlaa", a, ""), (args.method, b, f"{changed:8.3f} {sampled:8.3f}  {models}")]
-            if args.exact_motion and s.name in EXACT_SHOTS:
-                maps = exact_maps(s.name, s.inputs.shape[2], s.inputs.shape[1])
+            cams = (shot_cameras(s.name, s.inputs.shape[2], s.inputs.shape[1], len(s.inputs))
+                    if args.exact_motion else None)
+            if cams is not None:
+                maps = exact_maps(cams, s.inputs.shape[2], s.inputs.shape[1])
                 rows.append(("tss:exact", scene_scores(exact_tss(s, spatial, maps), s, with_flip), ""))
+                homographies = homography_maps(s.inputs)
+                rows.append(("tss:homography", scene_scores(exact_tss(s, spatial, homographies), s, with_flip), ""))
                 if args.method != "tss":
                     known = make_stage(args.method, filt.context, bgr=False,
                                        motion=lambda t, m=maps: m[t, t - 1] if t > 0 else None)

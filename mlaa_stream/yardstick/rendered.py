@@ -927,13 +927,12 @@ def reprojection(cam_from: Camera, cam_to: Camera, depth: np.ndarray) -> np.ndar
     return np.stack([px - xs, py - ys], -1).astype(np.float32)
 
 
-def shot_depths(name: str, small: bool = False, renderer: Renderer | None = None) -> np.ndarray:
-    """Every frame's window depth of a scene's shot: (T, H, W) float32 (not cached: ~0.3 s a frame)."""
-    width, height = SIZES[bool(small)]
+def depth_frames(cams: list[Camera], width: int, height: int, renderer: Renderer | None = None) -> np.ndarray:
+    """Each camera's window depth (Renderer.depth_frame): (T, H, W) float32 (not cached: ~0.3 s a frame)."""
     own = renderer is None
     r = Renderer(_context(), width, height) if own else renderer
     try:
-        return np.stack([r.depth_frame(c) for c in shot(name, width, height)])
+        return np.stack([r.depth_frame(c) for c in cams])
     finally:
         if own:
             r.release()
