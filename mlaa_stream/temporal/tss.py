@@ -46,6 +46,7 @@ inconsistent pixels are NaN and stay so in every older field (nothing of theirs 
 """
 from __future__ import annotations
 
+import math
 import threading
 import time
 from dataclasses import dataclass, field
@@ -71,6 +72,10 @@ LANES = 16            # pixels of a row per work item of tss_resolve_shift (int1
 TSS_LOCAL = 8         # CPU work-group of tss_resolve_shift along the row (docs/temporal.md: speed)
 FB_ABS, FB_REL = 0.5, 0.1   # forward-backward tolerance (px at full size): FB_ABS + FB_REL |v|
 ALIGN_LEVEL, ALIGN_PX, ALIGN_SIGMA, ALIGN_GROW = 10.0, 0.35, 2.0, 3   # MotionRing._alignment
+PROJECTIVE_MIN = 0.25 # px (full size): a global frame uses projective maps where some ring frame's homography departs
+                      # from its translation by this much at a corner of the frame (MotionRing._projective)
+HOMOGRAPHY_STEPS = 3  # inverse-compositional Gauss-Newton steps for the newest ring frame's homography
+PROJECTIVE_RATIO = 1.0  # ... and no ring frame departs by more than this times its translation (plus PROJECTIVE_MIN)
 TILE, TILE_TOL, TILE_TEXTURE = 48, 0.4, 1.0   # _Refiner's tile check: flow px, px, mean squared gradient
 BAND, BAND_TOL, BAND_TEXTURE = 32, 0.25, 0.05   # _Refiner._bands: flow px, px, mean squared gradient
 STATIC_TOL = 0.05     # px (flow): a band whose own motion is under this while the frame's is over twice it is
@@ -90,6 +95,7 @@ class RingEntry:
     field: np.ndarray | None = None   # (fh, fw, 2) float32 offsets in full-size px (dense map), NaN = invalid
     slot: int = -1                    # device ring slot
     valid: np.ndarray | None = None   # (fh, fw) uint8 at flow size: 1 where the map explains the frame
+    homography: np.ndarray | None = None   # 3x3, current frame's flow px -> this frame's (global frames)
 
     @property
     def translated(self) -> bool:
@@ -114,6 +120,7 @@ class MotionRing:
         self.dense_samples = bool(dense_samples)
         self.entries: list[RingEntry] = []
         self._dis = None
+        self.projective_gap = 0.0   # the latest global frame's largest homography-translation gap (px)
 
     def reset(self) -> None:
         self.entries = []
@@ -140,10 +147,12 @@ class MotionRing:
             for e in self.entries:
                 if e.shift is not None:
                     e.shift = (e.shift[0] + d[0], e.shift[1] + d[1])
+                    e.field = None   # a projective map is made anew below
                 else:
                     e.field = self._compose_const(e.field, d, pyr)
             if self.refine:
                 self._refine(pyr, index, d)
+                self._projective(pyr, index)
         elif dec.model == "dense" and self.dense_samples:
             self._dense(prev, pyr, dec)
         elif dec.model == "dense":
@@ -154,8 +163,8 @@ class MotionRing:
             self.entries = []
         # static: every map stays as it is (nothing moved)
         for e in self.entries:
-            # translations are checked per tile (global branch above); dense maps per region
-            if e.shift is None:
+            # translations are checked per tile (global branch above); dense and projective maps per region
+            if not e.translated:
                 e.valid = self._alignment(e, pyr)
         self.entries.append(RingEntry(index, None, pyr))
         if len(self.entries) > self.frames:
@@ -171,7 +180,7 @@ class MotionRing:
         converges; refining all of them every frame made the output less steady).
         The last step of each refined frame also runs the per-tile check (its valid mask)."""
         fs = pyr.flow_scale
-        ref = _Refiner(pyr.blurred("flow"))
+        ref = self._last_refiner = _Refiner(pyr.blurred("flow"))
         todo = [e for e in self.entries if e.shift is not None]
         if not todo:
             return
@@ -197,6 +206,54 @@ class MotionRing:
             if (index - e.index - 1) % REFINE_EVERY == 0:
                 refine(e, REFINE_STEPS)
 
+    def _projective(self, pyr: Pyramid, index: int) -> None:
+        """A camera that turns about its eye moves the image by a homography, which one translation fits only
+        near the frame's centre (docs/temporal.md, "Pans are not translations"). Each translated ring frame
+        keeps a homography from the current frame: the newest gets HOMOGRAPHY_STEPS direct steps from its
+        translation, older ones are chained through it (last frame's map after the newest's) and refined
+        directly on the translation's schedule. Where one departs from its translation by PROJECTIVE_MIN px at a
+        corner, every ring frame takes its projective map as a dense field this frame (checked per region by
+        _alignment: the band and tile checks measure translations)."""
+        todo = [e for e in self.entries if e.shift is not None]
+        if not todo or PROJECTIVE_MIN <= 0:
+            return
+        fs = pyr.flow_scale
+        ref = self._last_refiner
+        newest = todo[-1]
+        step = ref.homography(newest.pyr.blurred("flow"), _translation(newest.shift, fs), HOMOGRAPHY_STEPS)
+        newest.homography = step
+        for e in todo[:-1]:
+            e.homography = (e.homography @ step if e.homography is not None
+                            else _translation(e.shift, fs))
+            if (index - e.index - 1) % REFINE_EVERY == 0:
+                e.homography = ref.homography(e.pyr.blurred("flow"), e.homography, REFINE_STEPS)
+        fh, fw = pyr.flow.shape
+        corners = np.array([[0, 0, 1], [fw - 1, 0, 1], [0, fh - 1, 1], [fw - 1, fh - 1, 1]], np.float64)
+        gap, wild = 0.0, False
+        for e in todo:
+            q = corners @ e.homography.T
+            q = q[:, :2] / q[:, 2:3] - corners[:, :2]
+            g = float(np.abs(q - np.array(e.shift) / fs).max()) * fs
+            gap = max(gap, g)
+            # a turning camera's image moves at most ~2x as fast at the corners as at the centre (a 90-degree
+            # lens): a homography departing more from the translation fits something else
+            wild |= g > PROJECTIVE_MIN + PROJECTIVE_RATIO * math.hypot(*e.shift)
+        self.projective_gap = gap
+        # does the newest frame's homography explain it better than its translation?
+        self.projective_gain = ref.residual(newest.pyr.blurred("flow"), _translation(newest.shift, fs)) / max(
+            ref.residual(newest.pyr.blurred("flow"), newest.homography), 1e-12)
+        import os
+        if os.environ.get("PDEBUG"):
+            print(f"   frame {index}: gap {gap:.3f} gain {self.projective_gain:.3f}")
+        if gap < PROJECTIVE_MIN or wild:
+            return
+        gx, gy = np.meshgrid(np.arange(fw, dtype=np.float64), np.arange(fh, dtype=np.float64))
+        for e in todo:
+            m = e.homography
+            den = m[2, 0] * gx + m[2, 1] * gy + m[2, 2]
+            e.field = (np.stack([(m[0, 0] * gx + m[0, 1] * gy + m[0, 2]) / den - gx,
+                                 (m[1, 0] * gx + m[1, 1] * gy + m[1, 2]) / den - gy], -1) * fs).astype(np.float32)
+
     def _alignment(self, e: RingEntry, pyr: Pyramid) -> np.ndarray:
         """1 where ring frame e, moved by its map, matches the current frame (flow size): a map that is
         wrong over a region (a second motion that the global model averages away, a flow error) puts
@@ -207,7 +264,7 @@ class MotionRing:
         fh, fw = pyr.flow.shape
         fs = pyr.flow_scale
         gx, gy = np.meshgrid(np.arange(fw, dtype=np.float32), np.arange(fh, dtype=np.float32))
-        if e.shift is not None:
+        if e.field is None:
             mx, my = gx + np.float32(e.shift[0] / fs), gy + np.float32(e.shift[1] / fs)
         else:
             mx, my = gx + e.field[..., 0] / np.float32(fs), gy + e.field[..., 1] / np.float32(fs)
@@ -336,6 +393,53 @@ class _Refiner:
         top = p00 + ax * (p01 - p00)
         return top + ay * (p10 + ax * (p11 - p10) - top)
 
+    def _sample_at(self, img: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """img at per-point positions (x, y), bilinear, clamped to the frame."""
+        h, w = self.h, self.w
+        x, y = np.clip(x, 0, w - 1), np.clip(y, 0, h - 1)
+        x0 = np.minimum(x.astype(np.intp), max(w - 2, 0))
+        y0 = np.minimum(y.astype(np.intp), max(h - 2, 0))
+        ax, ay = x - x0, y - y0
+        flat = img.ravel()
+        i = y0 * w + x0
+        dx, dy = (1 if w > 1 else 0), (w if h > 1 else 0)
+        p00, p01 = flat.take(i), flat.take(i + dx)
+        p10, p11 = flat.take(i + dy), flat.take(i + dy + dx)
+        top = p00 + ax * (p01 - p00)
+        return top + ay * (p10 + ax * (p11 - p10) - top)
+
+    def residual(self, ring_b: np.ndarray, m: np.ndarray) -> float:
+        """The robust cost sum rho(r) (Cauchy, LK_ROBUST) of cur(x) - ring(m x) at the points."""
+        q = np.stack([self.xs, self.ys, np.ones_like(self.xs)], -1) @ np.asarray(m, np.float64).T
+        r = self._sample_at(ring_b, q[:, 0] / q[:, 2], q[:, 1] / q[:, 2]) - self.c
+        return float(np.add.reduce(np.log1p((r * r) * (1.0 / (LK_ROBUST * LK_ROBUST)))))
+
+    def homography(self, ring_b: np.ndarray, m: np.ndarray, steps: int) -> np.ndarray:
+        """`steps` inverse-compositional Gauss-Newton steps (Baker and Matthews) of the homography m with
+        cur(x) ~ ring(m x) (flow px), at the points, robust weights as step(); coordinates centred and scaled
+        to [-1, 1] for the 8 parameters' conditioning."""
+        cx, cy, sc = (self.w - 1) / 2.0, (self.h - 1) / 2.0, max(self.w, self.h) / 2.0
+        u, v = (self.xs - cx) / sc, (self.ys - cy) / sc
+        gu, gv = self.gx * sc, self.gy * sc
+        sd = np.stack([gu * u, gu * v, gu, gv * u, gv * v, gv, -(gu * u + gv * v) * u, -(gu * u + gv * v) * v], -1)
+        norm = np.array([[1 / sc, 0, -cx / sc], [0, 1 / sc, -cy / sc], [0, 0, 1.0]])
+        denorm = np.linalg.inv(norm)
+        m = np.array(m, np.float64)
+        for _ in range(steps):
+            q = np.stack([self.xs, self.ys, np.ones_like(self.xs)], -1) @ m.T
+            r = self._sample_at(ring_b, q[:, 0] / q[:, 2], q[:, 1] / q[:, 2]) - self.c
+            wr = 1.0 / (1.0 + (r * r) * (1.0 / (LK_ROBUST * LK_ROBUST)))
+            hess = np.einsum("ni,nj->ij", sd * wr[:, None], sd)
+            b = np.add.reduce(sd * (wr * r)[:, None], axis=0)
+            try:
+                dp = np.linalg.solve(hess, b)
+            except np.linalg.LinAlgError:
+                break
+            d = np.array([[1 + dp[0], dp[1], dp[2]], [dp[3], 1 + dp[4], dp[5]], [dp[6], dp[7], 1.0]])
+            m = m @ (denorm @ np.linalg.inv(d) @ norm)
+            m /= m[2, 2]
+        return m
+
     def _band_steps(self, r: np.ndarray):
         """Each row band's 1-D vertical step and each column band's horizontal step from residuals r
         at the points, with whether the band has the texture to measure it."""
@@ -418,6 +522,11 @@ class _Refiner:
         if self.tx * TILE < w:
             valid[:, self.tx * TILE:] = valid[:, self.tx * TILE - 1:self.tx * TILE]
         return new, valid
+
+
+def _translation(shift: tuple[float, float], fs: int) -> np.ndarray:
+    """The homography of a translation by `shift` full-size px, in flow px."""
+    return np.array([[1.0, 0.0, shift[0] / fs], [0.0, 1.0, shift[1] / fs], [0.0, 0.0, 1.0]])
 
 
 def _blur_align(pyr: Pyramid) -> np.ndarray:
@@ -811,7 +920,8 @@ class TSSStage:
         if self._buffers is not None and self._buffers.fmt == fmt and self._buffers.flow_shape == shape:
             return self._buffers
         self.queue.finish()
-        self._buffers = _Buffers(self.context, fmt, shape, self.frames, self.motion.dense_samples)
+        self._buffers = _Buffers(self.context, fmt, shape, self.frames,
+                                 self.motion.dense_samples or PROJECTIVE_MIN > 0)
         self._vrows_sent = {}
         defines = kernel_defines(fmt, self.grid, self.eps, self.min_cells, self.full_cells)
         self._kernel = self.context.kernel("tss", "tss_resolve", defines)
