@@ -242,9 +242,6 @@ class MotionRing:
         # does the newest frame's homography explain it better than its translation?
         self.projective_gain = ref.residual(newest.pyr.blurred("flow"), _translation(newest.shift, fs)) / max(
             ref.residual(newest.pyr.blurred("flow"), newest.homography), 1e-12)
-        import os
-        if os.environ.get("PDEBUG"):
-            print(f"   frame {index}: gap {gap:.3f} gain {self.projective_gain:.3f}")
         if gap < PROJECTIVE_MIN or wild:
             return
         gx, gy = np.meshgrid(np.arange(fw, dtype=np.float64), np.arange(fh, dtype=np.float64))
