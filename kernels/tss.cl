@@ -316,6 +316,9 @@ inline int16 tss_mask16(__global const uchar *row, int x, int width)
 // taps: 4 ints per ring frame (slot, dx, dy, close: 0 inside a cell, the cell's frame count on its last
 // frame); vslots[j] >= 0: ring frame j has a valid mask (the per-tile check's output) in that slot of
 // valids, (fh, width) per slot: the flow-size mask with each column repeated FS times (vrows_of).
+// Projective maps (a turning camera: a homography per ring frame) are a translation to within ~0.01 px over a
+// tile of tile_rows x 16 pixels: the host then gives one such table per tile (tiles_x tiles per row of tiles),
+// each from the homography at the tile's centre; one table for the frame otherwise.
 // Global size (ceil(width / 16), height); on CPUs work-groups along the row (TSS_LOCAL in tss.py: the
 // neighbouring work items read the neighbouring 32 bytes of every stream; (1, 8) ran 1.5-3x slower).
 __kernel void tss_resolve_shift(__global const ushort *ring, __global const PIXEL_T *spatial,
@@ -325,11 +328,17 @@ __kernel void tss_resolve_shift(__global const ushort *ring, __global const PIXE
                                 __global const float *luts, __global const ushort *ltab,
                                 __global const PIXEL_T *etab,
                                 const int width, const int height, const int fw, const int fh, const int fs,
-                                const int n_ring, const int cur_slot)
+                                const int n_ring, const int cur_slot, const int tile_rows, const int tiles_x)
 {
     const int x0 = get_global_id(0) * 16, gy = get_global_id(1);
     if (x0 >= width || gy >= height)
         return;
+    {   // projective maps: each tile of tile_rows x 16 pixels has its own table (one table: tiles_x 1, a tile
+        // as tall as the frame)
+        const int tile = (gy / tile_rows) * tiles_x + (tiles_x > 1 ? x0 / 16 : 0);
+        taps += 4 * n_ring * tile;
+        vslots += n_ring * tile;
+    }
     const size_t frame = (size_t)width * height;
     const int16 lane = (int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
     const int rowlen = TSS_PLANES * width;

@@ -309,26 +309,32 @@ def test_homography_steps_recover_a_projective_map():
 
 
 def test_projective_maps_only_where_a_translation_does_not_fit(filt):
-    """MotionRing._projective: a turning camera's frames (the image's sides move faster than its centre) get
-    dense projective fields from the third frame on (the translation departs by PROJECTIVE_MIN px at a corner),
-    which follow the true motion within 0.1 px; a pure translation keeps translated maps (the fast resolve)."""
+    """MotionRing._projective: a turning camera's frames (the image's sides move faster than its centre) take
+    projective maps from the third frame on (the translation departs by PROJECTIVE_MIN px at a corner), whose
+    per-tile translations follow the true motion within 0.1 px; the kernel (per-tile tables of
+    tss_resolve_shift) returns what the numpy reference does, bit for bit; a pure translation keeps one table."""
     from mlaa_stream.temporal import tss as T
     for perspective, projective in ((5e-6, True), (0.0, False)):
         frames, a = _projective_frames(6, perspective=perspective)
         frames = [np.repeat(f[..., None], 3, -1).astype(np.uint8) for f in frames]
-        st = TSSStage(context=filt.context, bgr=False, frames=8)
-        for i, f in enumerate(frames):
-            st(f, filt.process(f), i)
-        entries = st.motion.entries[:-1]
-        assert [r["model"] for r in st.stats] == ["reset"] + ["global"] * 5
-        assert all(not e.translated for e in entries) == projective
-        assert all(e.translated for e in entries) == (not projective)
+        h, w = frames[0].shape[:2]
+        outs = {}
+        for backend in ("device", "numpy"):
+            st = TSSStage(context=filt.context, bgr=False, frames=8, backend=backend)
+            outs[backend] = [st(f, filt.process(f), i) for i, f in enumerate(frames)]
+            entries = st.motion.entries[:-1]
+            assert [r["model"] for r in st.stats] == ["reset"] + ["global"] * 5
+            assert all(e.projective for e in entries) == projective
+            assert not any(e.projective for e in entries) == (not projective)
+            st.close()
+        assert all(np.array_equal(x, y) for x, y in zip(outs["device"], outs["numpy"]))
+        assert any(np.any(o != filt.process(f)) for o, f in zip(outs["device"][2:], frames[2:]))
         if projective:
-            e = entries[0]                                   # frame 0, seen from frame 5
-            true = np.linalg.inv(a(0)) @ a(5)
-            h, w = f.shape[:2]
-            ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
-            p = np.stack([xs, ys, np.ones_like(xs)], -1) @ true.T
-            want = np.stack([p[..., 0] / p[..., 2] - xs, p[..., 1] / p[..., 2] - ys], -1)
-            assert np.abs(e.field - want)[8:-8, 8:-8].max() < 0.1
-        st.close()
+            got = T.tile_shifts(entries[0].homography, w, h, 1).shifts      # frame 0, seen from frame 5
+            ty, tx = got.shape[:2]
+            cy = np.minimum(np.arange(ty) * T.TILE_ROWS + (T.TILE_ROWS - 1) / 2.0, h - 1)
+            cx = np.minimum(np.arange(tx) * T.LANES + (T.LANES - 1) / 2.0, w - 1)
+            gx, gy = np.meshgrid(cx, cy)
+            p = np.stack([gx, gy, np.ones_like(gx)], -1) @ (np.linalg.inv(a(0)) @ a(5)).T
+            want = np.stack([p[..., 0] / p[..., 2] - gx, p[..., 1] / p[..., 2] - gy], -1)
+            assert np.abs(got - want).max() < 0.1, np.abs(got - want).max()

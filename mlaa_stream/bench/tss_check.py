@@ -11,8 +11,8 @@ damage away from edges (levels), temporal error, flicker energy, FLIP as the mea
 bench's FLIP column scores frame 0 only, which a temporal stage returns unchanged), the share of pixels
 whose output differs from the spatial output, the share that took samples (stats "samples_share": at
 least MIN_CELLS filled cells; mean over frames), and the motion model of each frame (r reset, s static,
-g global, d dense; TSS's models where the method has TSS). A scene is "worse" when the stage loses in error
-removed, damage or all-frame FLIP.
+g global, p global with projective maps, d dense; TSS's models where the method has TSS). A scene is "worse"
+when the stage loses in error removed, damage or all-frame FLIP.
 --views adds held-out rendered shots (mlaa_stream.bench.rendered_views.view_shots: a pan and a dolly from each
 held-out view at 640x360, rendered here: a few minutes), shots no constant was measured on.
 --tss-set sets a module constant of mlaa_stream.temporal.tss for the run (e.g. BAND_TOL=1e9).
@@ -151,7 +151,7 @@ def main(argv: list[str] | None = None) -> int:
             stage.close()
             a, b = scene_scores(spatial, s, with_flip), scene_scores(outs, s, with_flip)
             changed = float(np.mean(np.any((outs != spatial).reshape(outs.shape[:3] + (-1,)), -1)))
-            models = "".join(r["model"][0] for r in stage.stats)
+            models = "".join("p" if r.get("projective") else r["model"][0] for r in stage.stats)
             sampled = float(np.mean([r.get("samples_share", float("nan")) for r in stage.stats]))
             rows = [("mlaa", a, ""), (args.method, b, f"{changed:8.3f} {sampled:8.3f}  {models}")]
             cams = (shot_cameras(s.name, s.inputs.shape[2], s.inputs.shape[1], len(s.inputs))

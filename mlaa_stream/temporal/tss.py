@@ -40,7 +40,12 @@ current frame by sparse Gauss-Newton (`_Refiner`: the current frame's largest gr
 grey, the ring frame's blurred grey kept): chaining alone drifts (issue 16: 0.09 px after 16 frames
 against 0.016 direct). Row and column bands test the translation along long edges (`_Refiner._bands`:
 a band whose own 1-D step departs from the frame's takes no samples from that ring frame) and still
-bands leave the estimate (`_Refiner._band_weights`): docs/temporal.md, "Never worse". Dense: DIS flow
+bands leave the estimate (`_Refiner._band_weights`): docs/temporal.md, "Never worse". A turning camera moves
+the image by a homography, far from one translation with a wide lens: each translated ring frame also keeps a
+homography (`MotionRing._projective`, 8-parameter steps of `_Refiner.homography`), and where it departs from the
+translation at the frame's corners the frame's maps are projective, resolved as one translation per tile of
+TILE_ROWS x LANES pixels (`tile_shifts`, per-tile tables of tss_resolve_shift) and checked per region
+(`MotionRing._alignment`): docs/temporal.md, "Pans are not translations". Dense: DIS flow
 current -> previous composed with each ring frame's field (remap), forward-backward checked; the
 inconsistent pixels are NaN and stay so in every older field (nothing of theirs is trusted).
 """
@@ -69,6 +74,7 @@ REFINE_STEPS = 2      # ... and for each older ring frame refined in that frame
 REFINE_EVERY = 3      # older ring frames refined directly at ages 1 + a multiple of this (docs/temporal.md)
 ONE = 65535           # ring samples: linear light in 16-bit fixed point (kernels/tss.cl, ring_of)
 LANES = 16            # pixels of a row per work item of tss_resolve_shift (int16 / float16 vectors)
+TILE_ROWS = 16        # rows of a tile of projective maps (tss_resolve_shift: one translation per tile and ring frame)
 TSS_LOCAL = 8         # CPU work-group of tss_resolve_shift along the row (docs/temporal.md: speed)
 FB_ABS, FB_REL = 0.5, 0.1   # forward-backward tolerance (px at full size): FB_ABS + FB_REL |v|
 ALIGN_LEVEL, ALIGN_PX, ALIGN_SIGMA, ALIGN_GROW = 10.0, 0.35, 2.0, 3   # MotionRing._alignment
@@ -96,6 +102,7 @@ class RingEntry:
     slot: int = -1                    # device ring slot
     valid: np.ndarray | None = None   # (fh, fw) uint8 at flow size: 1 where the map explains the frame
     homography: np.ndarray | None = None   # 3x3, current frame's flow px -> this frame's (global frames)
+    projective: bool = False          # this frame's map is the homography (per-tile translations), not shift
 
     @property
     def translated(self) -> bool:
@@ -147,7 +154,7 @@ class MotionRing:
             for e in self.entries:
                 if e.shift is not None:
                     e.shift = (e.shift[0] + d[0], e.shift[1] + d[1])
-                    e.field = None   # a projective map is made anew below
+                    e.projective = False   # decided anew below
                 else:
                     e.field = self._compose_const(e.field, d, pyr)
             if self.refine:
@@ -164,7 +171,7 @@ class MotionRing:
         # static: every map stays as it is (nothing moved)
         for e in self.entries:
             # translations are checked per tile (global branch above); dense and projective maps per region
-            if not e.translated:
+            if not e.translated or e.projective:
                 e.valid = self._alignment(e, pyr)
         self.entries.append(RingEntry(index, None, pyr))
         if len(self.entries) > self.frames:
@@ -239,17 +246,10 @@ class MotionRing:
             # lens): a homography departing more from the translation fits something else
             wild |= g > PROJECTIVE_MIN + PROJECTIVE_RATIO * math.hypot(*e.shift)
         self.projective_gap = gap
-        # does the newest frame's homography explain it better than its translation?
-        self.projective_gain = ref.residual(newest.pyr.blurred("flow"), _translation(newest.shift, fs)) / max(
-            ref.residual(newest.pyr.blurred("flow"), newest.homography), 1e-12)
         if gap < PROJECTIVE_MIN or wild:
             return
-        gx, gy = np.meshgrid(np.arange(fw, dtype=np.float64), np.arange(fh, dtype=np.float64))
         for e in todo:
-            m = e.homography
-            den = m[2, 0] * gx + m[2, 1] * gy + m[2, 2]
-            e.field = (np.stack([(m[0, 0] * gx + m[0, 1] * gy + m[0, 2]) / den - gx,
-                                 (m[1, 0] * gx + m[1, 1] * gy + m[1, 2]) / den - gy], -1) * fs).astype(np.float32)
+            e.projective = True
 
     def _alignment(self, e: RingEntry, pyr: Pyramid) -> np.ndarray:
         """1 where ring frame e, moved by its map, matches the current frame (flow size): a map that is
@@ -260,22 +260,30 @@ class MotionRing:
         grown by ALIGN_GROW texels."""
         fh, fw = pyr.flow.shape
         fs = pyr.flow_scale
-        gx, gy = np.meshgrid(np.arange(fw, dtype=np.float32), np.arange(fh, dtype=np.float32))
-        if e.field is None:
-            mx, my = gx + np.float32(e.shift[0] / fs), gy + np.float32(e.shift[1] / fs)
+        nan = None
+        if e.projective:   # every texel has a position
+            warped = cv2.warpPerspective(_blur_align(e.pyr), e.homography, (fw, fh),
+                                         flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE)
         else:
-            mx, my = gx + e.field[..., 0] / np.float32(fs), gy + e.field[..., 1] / np.float32(fs)
-        warped = cv2.remap(_blur_align(e.pyr), mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+            gx, gy = np.meshgrid(np.arange(fw, dtype=np.float32), np.arange(fh, dtype=np.float32))
+            if e.field is None:
+                mx, my = gx + np.float32(e.shift[0] / fs), gy + np.float32(e.shift[1] / fs)
+            else:
+                mx, my = gx + e.field[..., 0] / np.float32(fs), gy + e.field[..., 1] / np.float32(fs)
+            warped = cv2.remap(_blur_align(e.pyr), mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+            nan = ~np.isfinite(mx) | ~np.isfinite(my)
         cur = _blur_align(pyr)
-        grad = cv2.magnitude(cv2.Sobel(cur, cv2.CV_32F, 1, 0, ksize=3, scale=0.125),
-                             cv2.Sobel(cur, cv2.CV_32F, 0, 1, ksize=3, scale=0.125))
+        if "align_grad" not in pyr._blur:   # the current frame's, once for every ring frame
+            pyr._blur["align_grad"] = cv2.magnitude(cv2.Sobel(cur, cv2.CV_32F, 1, 0, ksize=3, scale=0.125),
+                                                    cv2.Sobel(cur, cv2.CV_32F, 0, 1, ksize=3, scale=0.125))
+        grad = pyr._blur["align_grad"]
         # a residual a misplacement of under ALIGN_PX explains is motion error the cells tolerate
         bad = ~(np.abs(warped - cur) <= ALIGN_LEVEL + ALIGN_PX * grad)     # NaN maps are bad too
         k = np.ones((3, 3), np.uint8)
         bad = cv2.erode(bad.astype(np.uint8), k)
         bad = cv2.dilate(bad, np.ones((2 * ALIGN_GROW + 1,) * 2, np.uint8))
-        nan = ~np.isfinite(mx) | ~np.isfinite(my)
-        return ((1 - bad) & ~nan).astype(np.uint8)
+        good = (1 - bad).astype(bool)
+        return (good if nan is None else good & ~nan).astype(np.uint8)
 
     def _compose_const(self, fld: np.ndarray, d: tuple[float, float], pyr: Pyramid) -> np.ndarray:
         """field_new(x) = d + field(x + d), at the field's resolution."""
@@ -405,12 +413,6 @@ class _Refiner:
         top = p00 + ax * (p01 - p00)
         return top + ay * (p10 + ax * (p11 - p10) - top)
 
-    def residual(self, ring_b: np.ndarray, m: np.ndarray) -> float:
-        """The robust cost sum rho(r) (Cauchy, LK_ROBUST) of cur(x) - ring(m x) at the points."""
-        q = np.stack([self.xs, self.ys, np.ones_like(self.xs)], -1) @ np.asarray(m, np.float64).T
-        r = self._sample_at(ring_b, q[:, 0] / q[:, 2], q[:, 1] / q[:, 2]) - self.c
-        return float(np.add.reduce(np.log1p((r * r) * (1.0 / (LK_ROBUST * LK_ROBUST)))))
-
     def homography(self, ring_b: np.ndarray, m: np.ndarray, steps: int) -> np.ndarray:
         """`steps` inverse-compositional Gauss-Newton steps (Baker and Matthews) of the homography m with
         cur(x) ~ ring(m x) (flow px), at the points, robust weights as step(); coordinates centred and scaled
@@ -521,6 +523,29 @@ class _Refiner:
         return new, valid
 
 
+@dataclass
+class TileShifts:
+    """A ring frame's map as one translation per tile of TILE_ROWS x LANES pixels (projective maps: the homography
+    at each tile's centre): shifts (tiles down, tiles across, 2) float32, full-size px."""
+
+    shifts: np.ndarray
+
+
+def tile_shifts(m: np.ndarray | None, width: int, height: int, fs: int) -> TileShifts:
+    """The per-tile translations of the homography m (flow px, current -> ring frame; None: identity)."""
+    ty, tx = -(-height // TILE_ROWS), -(-width // LANES)
+    cy = np.minimum(np.arange(ty) * TILE_ROWS + (TILE_ROWS - 1) / 2.0, height - 1)
+    cx = np.minimum(np.arange(tx) * LANES + (LANES - 1) / 2.0, width - 1)
+    gx, gy = np.meshgrid(cx, cy)
+    if m is None:
+        return TileShifts(np.zeros((ty, tx, 2), np.float32))
+    fx, fy = (gx + 0.5) / fs - 0.5, (gy + 0.5) / fs - 0.5
+    den = m[2, 0] * fx + m[2, 1] * fy + m[2, 2]
+    px = ((m[0, 0] * fx + m[0, 1] * fy + m[0, 2]) / den + 0.5) * fs - 0.5
+    py = ((m[1, 0] * fx + m[1, 1] * fy + m[1, 2]) / den + 0.5) * fs - 0.5
+    return TileShifts(np.stack([px - gx, py - gy], -1).astype(np.float32))
+
+
 def _translation(shift: tuple[float, float], fs: int) -> np.ndarray:
     """The homography of a translation by `shift` full-size px, in flow px."""
     return np.array([[1.0, 0.0, shift[0] / fs], [0.0, 1.0, shift[1] / fs], [0.0, 0.0, 1.0]])
@@ -610,7 +635,15 @@ def tss_reference(spatial_q: np.ndarray, cur_q: np.ndarray, ring: list[tuple],
     counts = np.zeros((h, w, g2), np.int32)
     flat = np.arange(h * w)
     for q, m, ok in ring:
-        if isinstance(m, np.ndarray):
+        if isinstance(m, TileShifts):
+            # per tile one translation: the whole-pixel offset and the cell come from it alone, as the host's
+            # tables for tss_resolve_shift give them (the pixel's own position adds whole pixels)
+            d = m.shifts[np.minimum(ys.astype(np.int64) // TILE_ROWS, m.shifts.shape[0] - 1),
+                         np.minimum(xs.astype(np.int64) // LANES, m.shifts.shape[1] - 1)]
+            whole = np.floor(d + f32(0.5))
+            px, py = xs + whole[..., 0], ys + whole[..., 1]
+            ox, oy = (whole[..., 0] - d[..., 0]).astype(f32), (whole[..., 1] - d[..., 1]).astype(f32)
+        elif isinstance(m, np.ndarray):
             off = sample_field(m, flow_scale, xs, ys)
             px, py = xs + off[..., 0], ys + off[..., 1]
         else:
@@ -621,9 +654,12 @@ def tss_reference(spatial_q: np.ndarray, cur_q: np.ndarray, ring: list[tuple],
             valid &= ok[np.minimum(ys.astype(np.int64) // flow_scale, fh - 1),
                         np.minimum(xs.astype(np.int64) // flow_scale, fw - 1)] > 0
         px, py = np.where(valid, px, 0).astype(f32), np.where(valid, py, 0).astype(f32)
-        sx, sy = np.floor(px + f32(0.5)), np.floor(py + f32(0.5))
+        if isinstance(m, TileShifts):
+            sx, sy = px, py
+        else:
+            sx, sy = np.floor(px + f32(0.5)), np.floor(py + f32(0.5))
+            ox, oy = sx - px, sy - py                              # in [-0.5, 0.5)
         valid &= (sx >= 0) & (sx <= w - 1) & (sy >= 0) & (sy <= h - 1)
-        ox, oy = sx - px, sy - py                                  # in [-0.5, 0.5)
         cx = np.clip(np.floor((ox + f32(0.5)) * f32(grid)), 0, grid - 1).astype(np.int64)
         cy = np.clip(np.floor((oy + f32(0.5)) * f32(grid)), 0, grid - 1).astype(np.int64)
         v = q[np.clip(sy, 0, h - 1).astype(np.int64), np.clip(sx, 0, w - 1).astype(np.int64)]
@@ -769,7 +805,8 @@ class _Buffers:
         self.cells = context.buffer(fmt.pixels)
         self.info = context.buffer(4 * 4 * frames)
         self.shift = context.buffer(4 * 2 * frames)
-        self.vslots = context.buffer(4 * frames)
+        # tss_resolve_shift's tables (one, or one per tile of projective maps: grown when needed)
+        self.tables, self.table_vslots = context.buffer(4 * 4 * frames), context.buffer(4 * frames)
         # dense maps only with dense_samples (66 MB at 1080p, K = 16): the default path reads none
         self.fields = context.buffer(8 * fh * fw * frames if dense else 8)
         self.valids = context.buffer(fh * fw * frames)
@@ -870,7 +907,7 @@ class TSSStage:
         self._prev_index, self._shape = index, frame_in.shape
         # Every sample in one cell (static shot, whole-pixel motion, a single frame): nothing to
         # resolve, the spatial output stands without a kernel.
-        trivial = all(e.translated and e.valid is None for e in fm.entries) and len(
+        trivial = all(e.translated and not e.projective and e.valid is None for e in fm.entries) and len(
             {self._cell_of(e.shift) for e in fm.entries}) < self.min_cells
         cells = None
         if trivial:
@@ -881,8 +918,9 @@ class TSSStage:
                 self._upload_only(frame_in, pyr, fm)
         elif self.backend == "numpy":
             self._frames[fm.entries[-1].slot] = frame_in
-            ring = [(self._frames[e.slot], e.shift if e.translated else e.field, e.valid)
-                    for e in fm.entries]
+            h, w = frame_in.shape[:2]
+            ring = [(self._frames[e.slot], tile_shifts(e.homography, w, h, pyr.flow_scale) if e.projective
+                     else e.shift if e.translated else e.field, e.valid) for e in fm.entries]
             out, cells = tss_frame_reference(frame_filtered, frame_in, ring, self.bgr, pyr.flow_scale,
                                              self.grid, self.eps, self.min_cells, self.full_cells)
         else:
@@ -895,7 +933,8 @@ class TSSStage:
                            # share of all pixels that took samples (n >= min_cells)
                            "cells_mean": 1.0 if cells is None else float(cv2.mean(cells, (cells > 0).astype(np.uint8))[0]),
                            "samples_share": 0.0 if cells is None else float(np.count_nonzero(cells >= self.min_cells)) / cells.size,
-                           "translation": fm.decision.translation, **fm.decision.measures})
+                           "translation": fm.decision.translation,
+                           "projective": any(e.projective for e in fm.entries), **fm.decision.measures})
         if self.show == "history":
             c = np.ones(grey.shape, np.uint8) if cells is None else cells
             return cells_view(c, out, self.grid, self.bgr)
@@ -917,8 +956,7 @@ class TSSStage:
         if self._buffers is not None and self._buffers.fmt == fmt and self._buffers.flow_shape == shape:
             return self._buffers
         self.queue.finish()
-        self._buffers = _Buffers(self.context, fmt, shape, self.frames,
-                                 self.motion.dense_samples or PROJECTIVE_MIN > 0)
+        self._buffers = _Buffers(self.context, fmt, shape, self.frames, self.motion.dense_samples)
         self._vrows_sent = {}
         defines = kernel_defines(fmt, self.grid, self.eps, self.min_cells, self.full_cells)
         self._kernel = self.context.kernel("tss", "tss_resolve", defines)
@@ -973,13 +1011,21 @@ class TSSStage:
                                 dst_offset=e.slot * fh * fw, is_blocking=False)
         cl.enqueue_copy(q, bufs.spatial, np.ascontiguousarray(frame_filtered), is_blocking=False)
         if shift_path:
-            taps, vslots = self._taps(fm.entries)
-            cl.enqueue_copy(q, bufs.info, taps, is_blocking=False)
-            cl.enqueue_copy(q, bufs.vslots, vslots, is_blocking=False)
+            if any(e.projective for e in fm.entries):
+                taps, vslots = self._tile_taps(fm.entries, fmt.width, fmt.height, pyr.flow_scale)
+                tile_rows, tiles_x = TILE_ROWS, -(-fmt.width // LANES)
+            else:
+                taps, vslots = self._taps(fm.entries)
+                tile_rows, tiles_x = fmt.height, 1
+            if bufs.tables.size < taps.nbytes:
+                bufs.tables, bufs.table_vslots = self.context.buffer(taps.nbytes), self.context.buffer(vslots.nbytes)
+            cl.enqueue_copy(q, bufs.tables, taps, is_blocking=False)
+            cl.enqueue_copy(q, bufs.table_vslots, vslots, is_blocking=False)
             self._kernel_shift(q, *shift_launch(fmt.width, fmt.height, self.context), bufs.ring, bufs.spatial, bufs.dst,
-                               bufs.cells, bufs.info, bufs.vslots, bufs.vrows, self._luts, bufs.ltab, bufs.etab,
-                               np.int32(fmt.width), np.int32(fmt.height), np.int32(fw), np.int32(fh),
-                               np.int32(pyr.flow_scale), np.int32(n), np.int32(fm.entries[-1].slot))
+                               bufs.cells, bufs.tables, bufs.table_vslots, bufs.vrows, self._luts, bufs.ltab,
+                               bufs.etab, np.int32(fmt.width), np.int32(fmt.height), np.int32(fw), np.int32(fh),
+                               np.int32(pyr.flow_scale), np.int32(n), np.int32(fm.entries[-1].slot),
+                               np.int32(tile_rows), np.int32(tiles_x))
         else:
             info = np.zeros((n, 4), np.int32)
             shift = np.zeros((n, 2), np.float32)
@@ -997,6 +1043,31 @@ class TSSStage:
         cl.enqueue_copy(q, out, bufs.dst, is_blocking=False)
         cl.enqueue_copy(q, bufs.host_cells, bufs.cells, is_blocking=True)
         return out, bufs.host_cells
+
+    def _tile_taps(self, entries: list[RingEntry], width: int, height: int,
+                   fs: int) -> tuple[np.ndarray, np.ndarray]:
+        """_taps for projective maps: one table per tile of TILE_ROWS x LANES pixels (tiles in row order), each
+        from the per-tile translations (tile_shifts) as tss_reference takes them."""
+        f32 = np.float32
+        ty, tx = -(-height // TILE_ROWS), -(-width // LANES)
+        d = np.stack([tile_shifts(e.homography, width, height, fs).shifts if e.projective
+                      else np.broadcast_to(np.asarray(e.shift, f32), (ty, tx, 2)) for e in entries], 2)
+        whole = np.floor(d + f32(0.5))
+        o = whole - d
+        c = np.clip(np.floor((o + f32(0.5)) * f32(self.grid)), 0, self.grid - 1).astype(np.int32)
+        cell = c[..., 1] * self.grid + c[..., 0]                                   # (ty, tx, K)
+        order = np.argsort(cell, axis=-1, kind="stable")
+        cell = np.take_along_axis(cell, order, -1)
+        taps = np.zeros((ty, tx, len(entries), 4), np.int32)
+        slots = np.array([e.slot for e in entries], np.int32)
+        taps[..., 0] = slots[order]
+        taps[..., 1] = np.take_along_axis(whole[..., 0].astype(np.int32), order, -1)
+        taps[..., 2] = np.take_along_axis(whole[..., 1].astype(np.int32), order, -1)
+        last = np.ones(cell.shape, bool)
+        last[..., :-1] = cell[..., 1:] != cell[..., :-1]
+        taps[..., 3] = np.where(last, (cell[..., :, None] == cell[..., None, :]).sum(-1), 0)
+        has = np.array([e.slot if e.valid is not None else -1 for e in entries], np.int32)
+        return np.ascontiguousarray(taps), np.ascontiguousarray(has[order])
 
     def _taps(self, entries: list[RingEntry]) -> tuple[np.ndarray, np.ndarray]:
         """tss_resolve_shift's table: per ring frame (slot, dx, dy, close) with (dx, dy) its whole-pixel
