@@ -127,7 +127,7 @@ class MotionRing:
         self.dense_samples = bool(dense_samples)
         self.entries: list[RingEntry] = []
         self._dis = None
-        self.projective_gap = 0.0   # the latest global frame's largest homography-translation gap (px)
+        self._last_refiner: _Refiner | None = None   # this frame's, made by _refine, used by _projective
 
     def reset(self) -> None:
         self.entries = []
@@ -219,8 +219,9 @@ class MotionRing:
         keeps a homography from the current frame: the newest gets HOMOGRAPHY_STEPS direct steps from its
         translation, older ones are chained through it (last frame's map after the newest's) and refined
         directly on the translation's schedule. Where one departs from its translation by PROJECTIVE_MIN px at a
-        corner, every ring frame takes its projective map as a dense field this frame (checked per region by
-        _alignment: the band and tile checks measure translations)."""
+        corner (and none by more than a turning camera can: PROJECTIVE_RATIO), every ring frame's map is its
+        homography this frame (`projective`: resolved as per-tile translations, checked per region by _alignment,
+        since the band and tile checks measure translations)."""
         todo = [e for e in self.entries if e.shift is not None]
         if not todo or PROJECTIVE_MIN <= 0:
             return
@@ -245,7 +246,6 @@ class MotionRing:
             # a turning camera's image moves at most ~2x as fast at the corners as at the centre (a 90-degree
             # lens): a homography departing more from the translation fits something else
             wild |= g > PROJECTIVE_MIN + PROJECTIVE_RATIO * math.hypot(*e.shift)
-        self.projective_gap = gap
         if gap < PROJECTIVE_MIN or wild:
             return
         for e in todo:
@@ -384,19 +384,7 @@ class _Refiner:
 
     def _sample(self, img: np.ndarray, d: tuple[float, float]) -> np.ndarray:
         """img at the points moved by d, bilinear, positions clamped to the frame (replicated border)."""
-        h, w = self.h, self.w
-        x = np.clip(self.xs + d[0], 0, w - 1)
-        y = np.clip(self.ys + d[1], 0, h - 1)
-        x0 = np.minimum(x.astype(np.intp), max(w - 2, 0))
-        y0 = np.minimum(y.astype(np.intp), max(h - 2, 0))
-        ax, ay = x - x0, y - y0
-        flat = img.ravel()
-        i = y0 * w + x0
-        dx, dy = (1 if w > 1 else 0), (w if h > 1 else 0)
-        p00, p01 = flat.take(i), flat.take(i + dx)
-        p10, p11 = flat.take(i + dy), flat.take(i + dy + dx)
-        top = p00 + ax * (p01 - p00)
-        return top + ay * (p10 + ax * (p11 - p10) - top)
+        return self._sample_at(img, self.xs + d[0], self.ys + d[1])
 
     def _sample_at(self, img: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """img at per-point positions (x, y), bilinear, clamped to the frame."""
