@@ -999,12 +999,7 @@ class TSSStage:
                                 dst_offset=e.slot * fh * fw, is_blocking=False)
         cl.enqueue_copy(q, bufs.spatial, np.ascontiguousarray(frame_filtered), is_blocking=False)
         if shift_path:
-            if any(e.projective for e in fm.entries):
-                taps, vslots = self._tile_taps(fm.entries, fmt.width, fmt.height, pyr.flow_scale)
-                tile_rows, tiles_x = TILE_ROWS, -(-fmt.width // LANES)
-            else:
-                taps, vslots = self._taps(fm.entries)
-                tile_rows, tiles_x = fmt.height, 1
+            taps, vslots, (tile_rows, tiles_x) = self._taps(fm.entries, fmt.width, fmt.height, pyr.flow_scale)
             if bufs.tables.size < taps.nbytes:
                 bufs.tables, bufs.table_vslots = self.context.buffer(taps.nbytes), self.context.buffer(vslots.nbytes)
             cl.enqueue_copy(q, bufs.tables, taps, is_blocking=False)
@@ -1032,50 +1027,34 @@ class TSSStage:
         cl.enqueue_copy(q, bufs.host_cells, bufs.cells, is_blocking=True)
         return out, bufs.host_cells
 
-    def _tile_taps(self, entries: list[RingEntry], width: int, height: int,
-                   fs: int) -> tuple[np.ndarray, np.ndarray]:
-        """_taps for projective maps: one table per tile of TILE_ROWS x LANES pixels (tiles in row order), each
-        from the per-tile translations (tile_shifts) as tss_reference takes them."""
+    def _taps(self, entries: list[RingEntry], width: int, height: int,
+              fs: int) -> tuple[np.ndarray, np.ndarray, tuple[int, int]]:
+        """tss_resolve_shift's tables: per ring frame (slot, dx, dy, close) with (dx, dy) its whole-pixel offset,
+        frames ordered by footprint cell (stable: ring order inside a cell), close = the cell's frame count on
+        its last frame, else 0; and each frame's valid-mask slot (-1: none). One table for the frame when every
+        map is a translation; with projective maps one per tile of TILE_ROWS x LANES pixels (tiles in row order),
+        from the per-tile translations (tile_shifts) as tss_reference takes them. Returns the tables, the mask
+        slots and the kernel's (tile_rows, tiles_x)."""
         f32 = np.float32
-        ty, tx = -(-height // TILE_ROWS), -(-width // LANES)
+        projective = any(e.projective for e in entries)
+        ty, tx = (-(-height // TILE_ROWS), -(-width // LANES)) if projective else (1, 1)
         d = np.stack([tile_shifts(e.homography, width, height, fs).shifts if e.projective
                       else np.broadcast_to(np.asarray(e.shift, f32), (ty, tx, 2)) for e in entries], 2)
         whole = np.floor(d + f32(0.5))
-        o = whole - d
-        c = np.clip(np.floor((o + f32(0.5)) * f32(self.grid)), 0, self.grid - 1).astype(np.int32)
+        c = np.clip(np.floor((whole - d + f32(0.5)) * f32(self.grid)), 0, self.grid - 1).astype(np.int32)
         cell = c[..., 1] * self.grid + c[..., 0]                                   # (ty, tx, K)
         order = np.argsort(cell, axis=-1, kind="stable")
         cell = np.take_along_axis(cell, order, -1)
         taps = np.zeros((ty, tx, len(entries), 4), np.int32)
-        slots = np.array([e.slot for e in entries], np.int32)
-        taps[..., 0] = slots[order]
+        taps[..., 0] = np.array([e.slot for e in entries], np.int32)[order]
         taps[..., 1] = np.take_along_axis(whole[..., 0].astype(np.int32), order, -1)
         taps[..., 2] = np.take_along_axis(whole[..., 1].astype(np.int32), order, -1)
         last = np.ones(cell.shape, bool)
         last[..., :-1] = cell[..., 1:] != cell[..., :-1]
         taps[..., 3] = np.where(last, (cell[..., :, None] == cell[..., None, :]).sum(-1), 0)
-        has = np.array([e.slot if e.valid is not None else -1 for e in entries], np.int32)
-        return np.ascontiguousarray(taps), np.ascontiguousarray(has[order])
-
-    def _taps(self, entries: list[RingEntry]) -> tuple[np.ndarray, np.ndarray]:
-        """tss_resolve_shift's table: per ring frame (slot, dx, dy, close) with (dx, dy) its whole-pixel
-        offset, frames ordered by footprint cell (stable: ring order inside a cell), close = the cell's
-        frame count on its last frame, else 0; and each frame's valid-mask slot (-1: none)."""
-        taps = np.zeros((len(entries), 4), np.int32)
-        cell = np.zeros(len(entries), np.int32)
-        vslots = np.full(len(entries), -1, np.int32)
-        for j, e in enumerate(entries):
-            sx, sy = (int(np.floor(np.float32(d) + np.float32(0.5))) for d in e.shift)
-            cx, cy = self._cell_of(e.shift)
-            taps[j, :3] = (e.slot, sx, sy)
-            cell[j] = cy * self.grid + cx
-            vslots[j] = e.slot if e.valid is not None else -1
-        order = np.argsort(cell, kind="stable")
-        taps, vslots, cell = taps[order], vslots[order], cell[order]
-        for j in range(len(entries)):
-            if j == len(entries) - 1 or cell[j + 1] != cell[j]:
-                taps[j, 3] = int((cell == cell[j]).sum())
-        return np.ascontiguousarray(taps), np.ascontiguousarray(vslots)
+        vslots = np.array([e.slot if e.valid is not None else -1 for e in entries], np.int32)[order]
+        return (np.ascontiguousarray(taps), np.ascontiguousarray(vslots),
+                (TILE_ROWS, tx) if projective else (height, 1))
 
     def finish(self) -> None:
         if self.context is not None:
