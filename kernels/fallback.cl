@@ -23,16 +23,14 @@
 // the MLAA passes' colour -- their verdict on a straight edge: FXAA's sub-pixel blend would smear pixel-aligned
 // rules and stems wherever noise or compression makes their windows busy.
 // Render regions: a tile whose wide neighbourhood (RENDER_RADIUS tiles each way) looks like a 1-spp 3D render is
-// treated as busy, and every pixel of it that the chain leaves (neither blended by MLAA nor moved by FXAA) takes
-// the footprint filter. The neighbourhood test: at least RENDER_MIN busy pixels (count_changed's k = 2) in tiles
-// with a luma range of RENDER_RANGE or more, busy pixels at least 1 / RENDER_DIV of its edge-bordering pixels, and
-// its busy tiles not two-toned -- on average at most RENDER_NEAR_PCT % of a busy tile's pixels lie within a tenth
-// of the tile's luma range from its darkest or lightest (text and UI, even through JPEG ringing, are two-toned:
-// 92-96 %; renders 67-78 %).
-// The footprint filter (why: a 1-spp frame holds point samples, its truth the average over each pixel's square
-// footprint, so texture and shading come out sharper than the truth wherever no edge was found; docs/
-// spatial_tuning.md, FOOTPRINT_WEIGHT): the pixel moves FOOTPRINT_WEIGHT of the way to the 3x3 tent average of the
-// input, in linear light. Windows of one colour are left as they are.
+// treated as busy, and every pixel of it then takes the footprint table (below). The neighbourhood test: at least
+// RENDER_MIN busy pixels (count_changed's k = 2) in tiles with a luma range of RENDER_RANGE or more, busy pixels at
+// least 1 / RENDER_DIV of its edge-bordering pixels, and its busy tiles not two-toned -- on average at most
+// RENDER_NEAR_PCT % of a busy tile's pixels lie within a tenth of the tile's luma range from its darkest or
+// lightest (text and UI, even through JPEG ringing, are two-toned: 92-96 %; renders 67-78 %).
+// The footprint table (mlaa_stream/spatial/footprint.py says what and why): a 1-spp frame holds point samples, its
+// truth the average over each pixel's square footprint; each pixel of a render region becomes a linear filter of
+// its 5x5 window and the chain's colour, one filter per local structure class, clamped to its 3x3 window's range.
 // RENDER_REGIONS 0 makes no tile a render region (Filter(fallback="edges"): screen captures).
 // FALLBACK_MIN_CHANGED 0 drops the region and colour tests and makes every tile a render region
 // (Filter(fallback="everywhere"): frames known to be 1-spp renders). Numpy reference:
@@ -83,8 +81,14 @@
 #ifndef RENDER_REGIONS
 #define RENDER_REGIONS 1
 #endif
-#ifndef FOOTPRINT_WEIGHT
-#define FOOTPRINT_WEIGHT 0.25f
+#ifndef FOOTPRINT_TABLE
+#define FOOTPRINT_TABLE 1
+#endif
+#ifndef FOOTPRINT_BUCKETS
+#define FOOTPRINT_BUCKETS 144
+#endif
+#ifndef FOOTPRINT_WEIGHTS
+#define FOOTPRINT_WEIGHTS 26
 #endif
 #define COUNTS 4          // bytes per tile in `counts`
 #define NOT_MEASURED 255  // counts[3] of a tile with no busy pixel or a luma range under RENDER_RANGE
@@ -236,6 +240,9 @@ inline int on_long_run(__global const uchar *edges, __global const ushort2 *hdis
     if (x > 0 && (edges[i - 1] & EDGE_RIGHT)) run = max(run, vdist[i - 1].x + vdist[i - 1].y + 1);
     return run >= FALLBACK_KEEP_RUN;
 }
+#define ON_LONG_RUN(edges, hdist, vdist, x, y, w) on_long_run(edges, hdist, vdist, x, y, w)
+#else
+#define ON_LONG_RUN(edges, hdist, vdist, x, y, w) 0
 #endif
 
 // How many of the tile's pixels (x0..x1, y0..y1) lie within a tenth of its luma range (px_luma) from its darkest or
@@ -350,12 +357,8 @@ RARELY_CALLED void towards_fxaa(__global const PIXEL_T *src, __global const floa
     store_px(dst, i, c);
 }
 
-// One column of the footprint filter's window at pixel index `here` (rows above and below): its 1 2 1 sum in mix
-// space (blend_rgb's numbers; integer frames decoded with one load per channel from `lin`, common.cl
-// linear_levels, the same table reads), its middle pixel in mix space, and whether its three pixels are one
-// colour. Channels in storage order: decode, tent and encode are the same for every channel.
-typedef struct { float3 sum, middle; int one; } column_t;
-
+// A pixel's colour channels in mix space (linear light when DECODE; integer frames decoded with one load per
+// channel from `lin`, common.cl linear_levels), in storage order.
 inline float3 mix_channels(__global const PIXEL_T *src, __global const float *luts, __global const float *lin,
                            int i)
 {
@@ -377,60 +380,121 @@ inline float3 mix_channels(__global const PIXEL_T *src, __global const float *lu
 #endif
 }
 
-inline column_t footprint_column(__global const PIXEL_T *src, __global const float *luts,
-                                 __global const float *lin, int above, int here, int below)
+#if FOOTPRINT_TABLE
+#define FP_R 2                    // footprint.py TABLE_RADIUS: the 5x5 window
+#define FP_N (2 * FP_R + 1)
+#define FP_L (FP_N + 2)           // luma is read over 7x7: central differences at every tap of the 5x5
+#if ORDER_BGR
+#define FP_LUMA(c) ((c).z * 0.2126f + (c).y * 0.7152f + (c).x * 0.0722f)
+#else
+#define FP_LUMA(c) ((c).x * 0.2126f + (c).y * 0.7152f + (c).z * 0.0722f)
+#endif
+#define FP_STRENGTHS 3
+#define FP_COHERENCES 3
+
+// How many of the two levels t a band statistic reaches (footprint.py _bands: no square roots).
+inline int fp_strength(float tr, float det2)
 {
-    column_t col;
-    col.one = same_px(src, above, here) && same_px(src, below, here);
-    col.middle = mix_channels(src, luts, lin, here);
-    col.sum = mix_channels(src, luts, lin, above) + col.middle * 2.0f + mix_channels(src, luts, lin, below);
-    return col;
+    int n = 0;
+    const float t[2] = {0.02f, 0.08f};  // STRENGTH_LEVELS: l1 = (tr + sqrt(det2)) / 2 >= t^2
+    for (int k = 0; k < 2; ++k) {
+        const float need = 2.0f * t[k] * t[k] - tr;
+        n += need <= 0.0f || det2 >= need * need;
+    }
+    return n;
 }
 
-// The footprint filter for the pixels x0 .. x1 - 1 of row y whose bit (x - x0) is set in `take`: each moves
-// FOOTPRINT_WEIGHT of the way to the 3x3 tent average of src (1 2 1 down each column, then 1 2 1 across the
-// column sums; clamped at the frame's edge) in mix space; a pixel whose window is one colour is left. A window of
-// three columns slides along the row. Alpha is not written (a pixel the chain left has its source's in dst).
-RARELY_CALLED void footprint_row(__global const PIXEL_T *src, __global const float *luts,
-                                 __global const float *lin, __global PIXEL_T *dst, int x0, int x1, int y, int w,
-                                 int h, uint take)
+inline int fp_coherence(float tr, float det2)
 {
-    const int above = clamp_to(y - 1, h - 1) * w, here = y * w, below = clamp_to(y + 1, h - 1) * w;
-    int xl = clamp_to(x0 - 1, w - 1);
-    column_t left = footprint_column(src, luts, lin, above + xl, here + xl, below + xl);
-    column_t mid = footprint_column(src, luts, lin, above + x0, here + x0, below + x0);
-    for (int x = x0; x < x1; ++x) {
-        const int xr = clamp_to(x + 1, w - 1);
-        const column_t right = footprint_column(src, luts, lin, above + xr, here + xr, below + xr);
-        if (((take >> (x - x0)) & 1u) &&
-            !(left.one && mid.one && right.one && same_px(src, here + xl, here + x) &&
-              same_px(src, here + xr, here + x))) {
-            const float3 tent = left.sum + mid.sum * 2.0f + right.sum, m = mid.middle;
-            const float3 c = fxaa_encode(luts, m + FOOTPRINT_WEIGHT * (tent * (1.0f / 16.0f) - m));
-#if CHANNELS == 1
-            dst[here + x] = to_pixel(c.x);
-#else
-            __global PIXEL_T *p = dst + (size_t)(here + x) * CHANNELS;
-            p[0] = to_pixel(c.x);
-            p[1] = to_pixel(c.y);
-            p[2] = to_pixel(c.z);
-#endif
-        }
-        left = mid;
-        mid = right;
-        xl = x;
+    int n = 0;
+    const float t[2] = {0.3f, 0.6f};  // COHERENCE_LEVELS: sqrt(det2) >= tr 2t / (1 + t^2)
+    for (int k = 0; k < 2; ++k) {
+        const float q = tr * (2.0f * t[k] / (1.0f + t[k] * t[k]));
+        n += det2 >= q * q;
     }
+    return n;
 }
+
+// The footprint table at pixel (x, y) of a render region (footprint.py footprint_reference): dst holds the chain's
+// colour and receives the new one; a pixel whose 5x5 window is one colour and which the chain left is not
+// written. Alpha is kept.
+void footprint_pixel(__global const PIXEL_T *src, __global const float *luts, __global const float *lin,
+                     __global const float *table, __global PIXEL_T *dst, int x, int y, int w, int h)
+{
+    const int i = IDX(x, y, w);
+    const int changed = px_differs(src, dst, i);
+    float3 win[FP_N][FP_N];
+    float luma[FP_L][FP_L];
+    int flat = 1;
+    for (int j = 0; j < FP_L; ++j) {
+        const int row = clamp_to(y + j - FP_R - 1, h - 1) * w;
+        for (int k = 0; k < FP_L; ++k) {
+            const int corner = (j == 0 || j == FP_L - 1) && (k == 0 || k == FP_L - 1);
+            if (corner) continue;  // no central difference reads them
+            const float3 c = mix_channels(src, luts, lin, row + clamp_to(x + k - FP_R - 1, w - 1));
+            luma[j][k] = FP_LUMA(c);
+            if (j >= 1 && j <= FP_N && k >= 1 && k <= FP_N) win[j - 1][k - 1] = c;
+        }
+    }
+    const float3 mid = win[FP_R][FP_R];
+    for (int j = 0; j < FP_N; ++j)
+        for (int k = 0; k < FP_N; ++k)
+            flat &= all(win[j][k] == mid);
+    if (flat && !changed) return;
+    // structure tensor of linear luma: central differences, averaged over the 5x5 window
+    float sxx = 0.0f, syy = 0.0f, sxy = 0.0f;
+    for (int j = 1; j <= FP_N; ++j)
+        for (int k = 1; k <= FP_N; ++k) {
+            const float gx = (luma[j][k + 1] - luma[j][k - 1]) * 0.5f;
+            const float gy = (luma[j + 1][k] - luma[j - 1][k]) * 0.5f;
+            sxx += gx * gx;
+            syy += gy * gy;
+            sxy += gx * gy;
+        }
+    sxx *= 1.0f / (FP_N * FP_N);
+    syy *= 1.0f / (FP_N * FP_N);
+    sxy *= 1.0f / (FP_N * FP_N);
+    const float u = sxx - syy, v = 2.0f * sxy, tr = sxx + syy, det2 = u * u + v * v;
+    const float au = fabs(u), av = fabs(v);
+    // octant of the doubled angle: the gradient's orientation in eight bins of pi / 8
+    const int octant = v >= 0.0f ? (u > 0.0f ? (av < au ? 0 : 1) : (av > au ? 2 : 3))
+                                 : (u < 0.0f ? (av < au ? 4 : 5) : (av > au ? 6 : 7));
+    const int bucket = ((octant * FP_STRENGTHS + fp_strength(tr, det2)) * FP_COHERENCES + fp_coherence(tr, det2))
+                       * 2 + changed;
+    __global const float *wt = table + bucket * FOOTPRINT_WEIGHTS;
+    const float3 chain = mix_channels(dst, luts, lin, i);
+    float3 pred = mid;
+    for (int j = 0; j < FP_N; ++j)
+        for (int k = 0; k < FP_N; ++k)
+            pred += (win[j][k] - mid) * wt[j * FP_N + k];
+    pred += (chain - mid) * wt[FP_N * FP_N];
+    float3 lo = chain, hi = chain;  // no overshoot: the 3x3 window's range and the chain's colour
+    for (int j = FP_R - 1; j <= FP_R + 1; ++j)
+        for (int k = FP_R - 1; k <= FP_R + 1; ++k) {
+            lo = fmin(lo, win[j][k]);
+            hi = fmax(hi, win[j][k]);
+        }
+    const float3 c = fxaa_encode(luts, fmin(fmax(pred, lo), hi));
+#if CHANNELS == 1
+    dst[i] = to_pixel(c.x);
+#else
+    __global PIXEL_T *p = dst + (size_t)i * CHANNELS;
+    p[0] = to_pixel(c.x);
+    p[1] = to_pixel(c.y);
+    p[2] = to_pixel(c.z);
+#endif
+}
+#endif
 
 // Tile (tx, ty): nothing to do unless the 3x3 tiles around it show 1-spp aliasing (busy, or evidence and the
 // pixel's own window busy) or it lies in a render region; then each eligible pixel that FXAA would change moves
-// towards its colour (towards_fxaa), and in a render region every other pixel the chain left takes the
-// footprint filter.
+// towards its colour (towards_fxaa), and in a render region every pixel then takes the footprint table, but for
+// those the chain changed on a straight edge run.
 inline void fallback_tile(__global const PIXEL_T *src, __global const float *luts, __global const float *lin,
                           __global const uchar *edges,
                           __global const ushort2 *hdist, __global const ushort2 *vdist, __global const uchar *counts,
-                          __global const uchar *render, __global PIXEL_T *dst, int w, int h, int tiles_x,
-                          int tiles_y, int tx, int ty)
+                          __global const uchar *render, __global const float *table, __global PIXEL_T *dst, int w,
+                          int h, int tiles_x, int tiles_y, int tx, int ty)
 {
 #if FALLBACK_MIN_CHANGED > 0
     const int rendered = RENDER_REGIONS && render[ty * tiles_x + tx];
@@ -451,24 +515,25 @@ inline void fallback_tile(__global const PIXEL_T *src, __global const float *lut
     const int x1 = min(x0 + FALLBACK_TILE, w), y1 = min(y0 + FALLBACK_TILE, h);
     for (int y = y0; y < y1; ++y) {
         const int quiet = x1 - x0 == 8 && group_is_quiet(edges, x0, y, w);
-        if (quiet && !(rendered && FOOTPRINT_WEIGHT > 0.0f)) continue;
-        uint take = 0;  // the footprint filter's pixels of the row
+        if (quiet && !(rendered && FOOTPRINT_TABLE)) continue;
         for (int x = x0; x < x1; ++x) {
-            const int changed_px = px_differs(src, dst, IDX(x, y, w));
-            int eligible = !quiet && borders_edge(edges, x, y, w);
-            // outside busy regions only pixels MLAA left, and only in busy windows (flat-colour art stops here)
-            eligible = eligible && (busy || (!changed_px && WINDOW_BUSY(src, x, y, w, h)));
-            eligible = eligible && !fxaa_keeps(src, x, y, w, h);
-#if FALLBACK_KEEP_RUN > 0
-            eligible = eligible && !on_long_run(edges, hdist, vdist, x, y, w);
+            if (!quiet) {
+                const int changed_px = px_differs(src, dst, IDX(x, y, w));
+                int eligible = borders_edge(edges, x, y, w);
+                // outside busy regions only pixels MLAA left, and only in busy windows (flat-colour art stops here)
+                eligible = eligible && (busy || (!changed_px && WINDOW_BUSY(src, x, y, w, h)));
+                eligible = eligible && !fxaa_keeps(src, x, y, w, h);
+                eligible = eligible && !ON_LONG_RUN(edges, hdist, vdist, x, y, w);
+                if (eligible)
+                    towards_fxaa(src, luts, dst, changed_px ? dst : src,
+                                 changed_px ? FALLBACK_MIX : FALLBACK_WEIGHT, x, y, w, h);
+            }
+#if FOOTPRINT_TABLE
+            // the table too leaves a colour the chain gave a pixel on a straight edge run (FALLBACK_KEEP_RUN)
+            if (rendered && !(ON_LONG_RUN(edges, hdist, vdist, x, y, w) && px_differs(src, dst, IDX(x, y, w))))
+                footprint_pixel(src, luts, lin, table, dst, x, y, w, h);
 #endif
-            if (eligible)
-                towards_fxaa(src, luts, dst, changed_px ? dst : src, changed_px ? FALLBACK_MIX : FALLBACK_WEIGHT,
-                             x, y, w, h);
-            else if (rendered && !changed_px && FOOTPRINT_WEIGHT > 0.0f)
-                take |= 1u << (x - x0);
         }
-        if (take) footprint_row(src, luts, lin, dst, x0, x1, y, w, h, take);
     }
 }
 
@@ -477,12 +542,13 @@ inline void fallback_tile(__global const PIXEL_T *src, __global const float *lut
 __kernel void fxaa_fallback(__global const PIXEL_T *src, __global const float *luts, __global const float *lin,
                             __global const uchar *edges, __global const ushort2 *hdist,
                             __global const ushort2 *vdist, __global const uchar *counts,
-                            __global const uchar *render, __global PIXEL_T *dst,
+                            __global const uchar *render, __global const float *table, __global PIXEL_T *dst,
                             const int w, const int h, const int tiles_x, const int tiles_y)
 {
     const int t0 = get_global_id(0) * (SEGMENT / FALLBACK_TILE), ty = get_global_id(1);
     if (t0 >= tiles_x || ty >= tiles_y) return;
     const int t1 = min(t0 + SEGMENT / FALLBACK_TILE, tiles_x);
     for (int tx = t0; tx < t1; ++tx)
-        fallback_tile(src, luts, lin, edges, hdist, vdist, counts, render, dst, w, h, tiles_x, tiles_y, tx, ty);
+        fallback_tile(src, luts, lin, edges, hdist, vdist, counts, render, table, dst, w, h, tiles_x, tiles_y,
+                      tx, ty);
 }

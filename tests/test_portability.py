@@ -120,6 +120,7 @@ KERNEL_TESTS = ["tests/test_mlaa.py", "tests/test_bridge.py::test_kernel_matches
 
 
 @needs_rusticl
+@pytest.mark.timeout(1600)  # a cold compile cache (a new machine): every kernel built for llvmpipe, ~10 min here
 def test_kernels_match_their_references_on_rusticl():
     """The kernel-vs-reference tests of every spatial pass, GRLAA and FXAA, run again on rusticl."""
     root = os.path.join(os.path.dirname(__file__), "..")

@@ -11,6 +11,7 @@ import pyopencl as cl
 from mlaa_stream.device.colour import device_luts, lut_read
 from mlaa_stream.device.context import Context
 from mlaa_stream.device.formats import LUT_SIZE, FrameFormat, frame_format
+from mlaa_stream.spatial.footprint import BUCKETS, WEIGHTS, footprint_reference, load_table
 from mlaa_stream.spatial.fxaa import _MAX, fxaa_defines, fxaa_mix_reference, luma_reference
 
 SEGMENT = 64  # pixels of a tile band per work item of count_changed (a multiple of FALLBACK_TILE)
@@ -30,19 +31,17 @@ FALLBACK_KEEP_RUN = 16
 # Render regions (kernels/fallback.cl): a tile whose neighbourhood of RENDER_RADIUS tiles each way holds at least
 # RENDER_MIN busy pixels in tiles of a luma range of RENDER_RANGE or more, busy pixels at least 1 / RENDER_DIV of its
 # edge-bordering pixels, and busy tiles with on average at most RENDER_NEAR_PCT % of their pixels within a tenth of
-# the tile's luma range from its extremes, counts as busy, and the pixels the chain leaves there move
-# FOOTPRINT_WEIGHT of the way to their 3x3 tent average: the point samples of a 1-spp render towards the average
-# over their footprint.
+# the tile's luma range from its extremes, counts as busy, and every pixel there takes the footprint table
+# (spatial/footprint.py): the point samples of a 1-spp render towards the average over their footprint.
 RENDER_RADIUS, RENDER_MIN, RENDER_DIV, RENDER_NEAR_PCT, RENDER_RANGE = 7, 48, 10, 88, 24 / 255
-FOOTPRINT_WEIGHT = 0.25
 COUNTS, NOT_MEASURED = 4, 255  # bytes per tile of count_changed's output; k = 3 of a tile not measured
 SHOW_DIM = 0.35  # Filter(show="regions"): pixels outside render regions keep this share of their colour
 
 def fallback_defines(fmt: FrameFormat, linear: bool, linear_input: bool, everywhere: bool = False,
-                     regions: bool = True) -> dict:
+                     regions: bool = True, table: bool = True) -> dict:
     """Defines for kernels/fallback.cl (FXAA's own at the shader's defaults, plus FALLBACK_*); `everywhere`
     drops the region and colour tests: every edge-bordering pixel is eligible; `regions` False: no render
-    regions (no tile is one unless `everywhere`)."""
+    regions (no tile is one unless `everywhere`); `table` False: render regions without the footprint table."""
     return {**fxaa_defines(fmt, linear=linear, linear_input=linear_input), "SEGMENT": SEGMENT,
             "FALLBACK_TILE": FALLBACK_TILE, "FALLBACK_MIN_CHANGED": 0 if everywhere else FALLBACK_MIN_CHANGED,
             "FALLBACK_COLOURS": 0 if everywhere else FALLBACK_COLOURS, "FALLBACK_SAME": float(FALLBACK_SAME / 255.0),
@@ -51,16 +50,17 @@ def fallback_defines(fmt: FrameFormat, linear: bool, linear_input: bool, everywh
             "FALLBACK_RICH_MIN": FALLBACK_RICH_MIN, "FALLBACK_RICH_DIV": FALLBACK_RICH_DIV,
             "FALLBACK_KEEP_RUN": 0 if everywhere else FALLBACK_KEEP_RUN, "RENDER_RADIUS": RENDER_RADIUS,
             "RENDER_MIN": RENDER_MIN, "RENDER_DIV": RENDER_DIV, "RENDER_NEAR_PCT": RENDER_NEAR_PCT,
-            "RENDER_RANGE": float(RENDER_RANGE), "FOOTPRINT_WEIGHT": float(FOOTPRINT_WEIGHT),
-            "RENDER_REGIONS": int(regions)}
+            "RENDER_RANGE": float(RENDER_RANGE), "RENDER_REGIONS": int(regions),
+            "FOOTPRINT_TABLE": int(table), "FOOTPRINT_BUCKETS": BUCKETS, "FOOTPRINT_WEIGHTS": WEIGHTS}
 
 
 class FallbackPass:
     """The kernels of kernels/fallback.cl and their per-tile buffers, for one frame format."""
 
     def __init__(self, context: Context, fmt: FrameFormat, linear: bool, linear_input: bool,
-                 everywhere: bool = False, regions: bool = True):
-        defs = fallback_defines(fmt, linear, linear_input, everywhere, regions)
+                 everywhere: bool = False, regions: bool = True, table: np.ndarray | None = None):
+        """`table`: the footprint table for render regions (spatial/footprint.py; None: none)."""
+        defs = fallback_defines(fmt, linear, linear_input, everywhere, regions, table is not None)
         self.fmt = fmt
         self.everywhere = everywhere
         self.regions = regions and not everywhere
@@ -73,8 +73,12 @@ class FallbackPass:
         self._counts = context.buffer(COUNTS * n)  # count_changed's four per tile
         self._row_sums = context.buffer(16 * n)  # render_rows' int4 per tile
         self._render = context.buffer(n)  # render_tiles' flag per tile
+        self._table = context.buffer(4 * BUCKETS * WEIGHTS)  # the footprint table (unused without one)
+        if table is not None:
+            cl.enqueue_copy(context.queue, self._table, np.ascontiguousarray(table, np.float32), is_blocking=True)
 
     def device_bytes(self) -> int:
+        """Bytes of the per-frame buffers (the footprint table's 15 KB do not grow with the frame)."""
         return self._counts.size + self._row_sums.size + self._render.size
 
     def read_regions(self, queue, wait_for: list) -> tuple[np.ndarray, cl.Event | None]:
@@ -103,8 +107,8 @@ class FallbackPass:
                                                             self._render, tx, ty, wait_for=[events["render_rows"]])
                 wait_for = [events["render_tiles"]]
         events["fallback"] = self._fxaa(queue, (-(-self.fmt.width // SEGMENT), self.tiles[1]), None,
-                                        src, luts, lin, edges, hdist, vdist, self._counts, self._render, dst,
-                                        W, H, tx, ty, wait_for=wait_for)
+                                        src, luts, lin, edges, hdist, vdist, self._counts, self._render,
+                                        self._table, dst, W, H, tx, ty, wait_for=wait_for)
         return events["fallback"]
 
 
@@ -179,20 +183,50 @@ def _busy_pixels(changed: np.ndarray, borders: np.ndarray, rgb: np.ndarray) -> n
     return changed & borders & (_window_colours(rgb, 0.0) >= FALLBACK_COLOURS)
 
 
-def fallback_reference(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray, hdist: np.ndarray,
-                       vdist: np.ndarray, *, linear: bool = True, linear_input: bool = False, bgr: bool = False,
-                       everywhere: bool = False, regions: bool = True) -> np.ndarray:
-    """What kernels/fallback.cl makes of `mlaa_out`, the MLAA passes' output of `src` with edge buffer
-    `edges` ((h, w) uint8, EDGE_BOTTOM 1 | EDGE_RIGHT 2) and line distances `hdist`, `vdist`, in numpy."""
-    fmt, a, mlaa, borders, changed, rgb = _frame_masks(src, mlaa_out, edges, bgr)
+def to_mix_space(px: np.ndarray, fmt: FrameFormat, decode: bool) -> np.ndarray:
+    """(h, w, ch) stored pixels -> (h, w, 3) float32 RGB in the kernels' mix space (linear light through the
+    device LUT when `decode`)."""
+    f32 = np.float32
+    n = px.astype(f32) * (f32(1.0) / f32(_MAX[fmt.dtype]))
+    c = np.repeat(n[..., :1], 3, -1) if fmt.channels == 1 else n[..., :3]
+    c = c[..., ::-1] if fmt.bgr else c
+    return lut_read(device_luts(), c).astype(f32) if decode else c
+
+
+def from_mix_space(c: np.ndarray, like: np.ndarray, fmt: FrameFormat, decode: bool) -> np.ndarray:
+    """Mix-space RGB (h, w, 3) -> stored pixels over `like` ((h, w, ch): alpha is kept), as the kernels store."""
     f32 = np.float32
     pmax = f32(_MAX[fmt.dtype])
-    h, w, ch = fmt.height, fmt.width, fmt.channels
+    if decode:
+        c = lut_read(device_luts()[2 * (LUT_SIZE + 1):], c).astype(f32)
+    c = c[..., ::-1] if fmt.bgr else c
+    new = like.astype(f32) * (f32(1.0) / pmax)
+    if fmt.channels == 1:
+        new[..., 0] = c[..., 0]
+    else:
+        new[..., :3] = c
+    if fmt.dtype != np.float32:
+        new = np.clip(np.floor(new * pmax + f32(0.5)), 0, pmax)  # to_pixel: round half up
+    return new.astype(like.dtype)
+
+
+def fallback_reference(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray, hdist: np.ndarray,
+                       vdist: np.ndarray, *, linear: bool = True, linear_input: bool = False, bgr: bool = False,
+                       everywhere: bool = False, regions: bool = True,
+                       table: np.ndarray | None | str = "default") -> np.ndarray:
+    """What kernels/fallback.cl makes of `mlaa_out`, the MLAA passes' output of `src` with edge buffer
+    `edges` ((h, w) uint8, EDGE_BOTTOM 1 | EDGE_RIGHT 2) and line distances `hdist`, `vdist`, in numpy.
+    `table`: the footprint table ("default": the shipped one; None: none)."""
+    table = load_table() if isinstance(table, str) else table
+    fmt, a, mlaa, borders, changed, rgb = _frame_masks(src, mlaa_out, edges, bgr)
+    f32 = np.float32
+    h, w = fmt.height, fmt.width
     out = mlaa.copy()
     e = np.asarray(edges)
     if everywhere:
         eligible = borders
         rendered = np.ones((h, w), bool)
+        runs = np.zeros((h, w), bool)
     else:
         t = FALLBACK_TILE
         th, tw = -(-h // t), -(-w // t)
@@ -213,56 +247,30 @@ def fallback_reference(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray,
                            & (busy_changed * FALLBACK_RICH_DIV >= region_sums(borders)))
         evidence = region_sums(changed & borders) >= FALLBACK_MIN_CHANGED
         eligible = borders & (busy | (evidence & busy_window & ~changed))
-        eligible &= ~long_runs(e, hdist, vdist)
+        runs = long_runs(e, hdist, vdist)
+        eligible &= ~runs
     early, fx = fxaa_mix_reference(src, linear=linear, linear_input=linear_input, bgr=bgr)
     eligible &= ~early
     decode = linear and not linear_input
-    luts = device_luts()
 
-    def mix_space(stored: np.ndarray) -> np.ndarray:  # (h, w, ch) stored -> RGB in mix space
-        n = stored.astype(f32) * (f32(1.0) / pmax)
-        c = np.repeat(n[..., :1], 3, -1) if ch == 1 else n[..., :3]
-        c = c[..., ::-1] if fmt.bgr else c
-        return lut_read(luts, c).astype(f32) if decode else c
+    def mix_space(px: np.ndarray) -> np.ndarray:
+        return to_mix_space(px, fmt, decode)
 
-    def stored(c: np.ndarray, like: np.ndarray) -> np.ndarray:  # mix-space RGB -> stored pixels over `like`
-        if decode:
-            c = lut_read(luts[2 * (LUT_SIZE + 1):], c).astype(f32)
-        c = c[..., ::-1] if fmt.bgr else c
-        new = like.astype(f32) * (f32(1.0) / pmax)
-        if ch == 1:
-            new[..., 0] = c[..., 0]
-        else:
-            new[..., :3] = c
-        if fmt.dtype != np.float32:
-            new = np.clip(np.floor(new * pmax + f32(0.5)), 0, pmax)  # to_pixel: round half up
-        return new.astype(out.dtype)
+    def stored(c: np.ndarray, like: np.ndarray) -> np.ndarray:
+        return from_mix_space(c, like, fmt, decode)
 
     m_src, m_mlaa = mix_space(a), mix_space(mlaa)
     left = stored(m_src + f32(FALLBACK_WEIGHT) * (fx - m_src), a)
     mixed = stored(m_mlaa + f32(FALLBACK_MIX) * (fx - m_mlaa), mlaa)
     out[eligible & ~changed] = left[eligible & ~changed]
     out[eligible & changed] = mixed[eligible & changed]
-    if FOOTPRINT_WEIGHT > 0:
-        taken = rendered & ~changed & ~eligible & ~_one_colour(a)
-        pad = np.pad(m_src, ((1, 1), (1, 1), (0, 0)), mode="edge")
-        column = pad[:h] + pad[1:h + 1] * f32(2) + pad[2:]  # the kernel's order of summation
-        tent = column[:, :w] + column[:, 1:w + 1] * f32(2) + column[:, 2:]
-        filtered = stored(m_src + f32(FOOTPRINT_WEIGHT) * (tent * f32(1.0 / 16.0) - m_src), a)
-        out[taken] = filtered[taken]
+    if table is not None and rendered.any():
+        chain = out.reshape(a.shape)
+        now_changed = np.any(chain != a, -1)
+        new, kept = footprint_reference(m_src, mix_space(chain), now_changed, table)
+        take = rendered & ~kept & ~(runs & now_changed)
+        out[take] = stored(new, chain)[take]
     return out.reshape(np.asarray(mlaa_out).shape)
-
-
-def _one_colour(a: np.ndarray) -> np.ndarray:
-    """The 3x3 window (clamped) of every pixel holds one colour (colour channels bit-identical; (h, w, ch))."""
-    h, w, ch = a.shape
-    col = a[..., :min(ch, 3)]
-    pad = np.pad(col, ((1, 1), (1, 1), (0, 0)), mode="edge")
-    one = np.ones((h, w), bool)
-    for dy in range(3):
-        for dx in range(3):
-            one &= np.all(pad[dy:dy + h, dx:dx + w] == col, -1)
-    return one
 
 
 def render_regions(busy: np.ndarray, borders: np.ndarray, luma: np.ndarray) -> np.ndarray:

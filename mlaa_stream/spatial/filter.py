@@ -244,14 +244,16 @@ class Filter:
                  aa_guard: bool = True, bridge: bool = True, grain_guard: bool = True,
                  subpixel: float = SUBPIXEL, fallback: str | bool = "auto", fast: bool = False,
                  preset: str | None = None, context: Context | None = None, show: str | None = None,
-                 keep_regions: bool = False):
+                 keep_regions: bool = False, footprint_table: np.ndarray | None | str = "default"):
         """`preset`: one of PRESETS; its options replace the keywords of the same names. `fallback`: FXAA
         for the pixels MLAA leaves (spatial/fallback.py): "auto" where the neighbourhood shows 1-spp
         aliasing and is no flat-colour art, with the footprint filter in render regions; "edges" the same
         without render regions (screen captures); "everywhere" (frames known to be 1-spp renders); "off".
         `show="regions"`: a debug view, the output with every pixel outside render regions dimmed.
         `keep_regions`: read every frame's render-region flags back (PendingFrame.regions, `last_regions`)
-        for a temporal stage with where="render"."""
+        for a temporal stage with where="render". `footprint_table`: the fallback's filter table for render
+        regions (spatial/footprint.py): "default" the shipped one, None none (render regions then get FXAA
+        only), or a (BUCKETS, WEIGHTS) float32 array."""
         if show not in SHOWS:
             raise ValueError(f"show: expected None or 'regions', got {show!r}")
         self.show = show
@@ -285,6 +287,15 @@ class Filter:
         if fallback not in FALLBACK_MODES:
             raise ValueError(f"fallback: expected one of {', '.join(FALLBACK_MODES)}, got {fallback!r}")
         self.fallback = "off" if self.fast else fallback
+        if isinstance(footprint_table, str):
+            if footprint_table != "default":
+                raise ValueError(f"footprint_table: expected 'default', None or an array, got {footprint_table!r}")
+            from mlaa_stream.spatial.footprint import load_table
+            footprint_table = load_table()
+        elif footprint_table is not None:
+            from mlaa_stream.spatial.footprint import as_table
+            footprint_table = as_table(footprint_table)
+        self.footprint_table = footprint_table
         self.context = context or default_context(device)
         dev = self.context.device
         props = cl.command_queue_properties.OUT_OF_ORDER_EXEC_MODE_ENABLE
@@ -339,7 +350,7 @@ class Filter:
             from mlaa_stream.spatial.fallback import FallbackPass
             self._fallback = FallbackPass(self.context, fmt, self.options.linear, self.options.linear_input,
                                           everywhere=self.fallback == "everywhere",
-                                          regions=self.fallback != "edges")
+                                          regions=self.fallback != "edges", table=self.footprint_table)
         return bufs
 
     # -- per frame ---------------------------------------------------------------------------

@@ -1,0 +1,107 @@
+"""Fit the footprint table (mlaa_stream/spatial/footprint.py) on rendered training views and write it.
+
+    python -m mlaa_stream.bench.footprint_fit [--out mlaa_stream/data/footprint_table.npy] [--sizes 640x360,960x540]
+
+The training views are cameras in the rendered world (yardstick/rendered.py) that neither a bench scene nor a
+held-out view (bench/rendered_views.py) uses, so both stay out of sample. Each view is rendered like the bench's
+(1 spp at pixel centres; truth: 8x8 jittered samples averaged in linear light) at each size, run through the
+default Filter without the table, and every pixel the table takes (render regions but for what the chain changed on straight edge runs), in all eight flips and transposes of the
+frame, is a sample of the least-squares fit. Needs EGL (`pip install 'mlaa-stream[bench]'`); ~1 minute here.
+"""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+from mlaa_stream.device.formats import frame_format
+from mlaa_stream.spatial.fallback import FALLBACK_TILE, long_runs, to_mix_space
+from mlaa_stream.spatial.filter import Filter
+from mlaa_stream.spatial.footprint import TABLE_FILE, fit_table
+from mlaa_stream.yardstick import metrics as M
+from mlaa_stream.yardstick.rendered import Camera, Renderer, _context, egl_available
+
+# name -> (eye, target, vertical field of view in degrees)
+TRAIN_VIEWS: dict[str, tuple[tuple, tuple, float]] = {
+    "west": ((-6.0, 1.8, 4.0), (0.0, 2.0, -12.0), 50.0),          # along the arcade, stairs and spheres
+    "east_high": ((6.0, 3.0, 2.0), (-2.0, 1.0, -14.0), 40.0),     # over the torus to the arches
+    "low_road": ((0.0, 1.0, -6.0), (6.0, 2.0, -30.0), 60.0),      # down the road past the sign
+    "mid": ((-3.0, 4.0, -12.0), (4.0, 0.5, -25.0), 45.0),         # the flag, fence and cables from above
+    "far": ((10.0, 1.7, -25.0), (-2.0, 2.0, -40.0), 35.0),        # through the chain-link fence
+    "top": ((0.0, 8.0, -5.0), (0.0, 0.0, -20.0), 65.0),           # down on the colonnade's roofline
+}
+DEFAULT_SIZES = "640x360,960x540"
+
+
+def dihedral(a: np.ndarray, k: int) -> np.ndarray:
+    """One of the eight flips and transposes of a frame (k in 0..7), on its first two axes."""
+    if k & 4:
+        a = np.swapaxes(a, 0, 1)
+    if k & 1:
+        a = a[::-1]
+    if k & 2:
+        a = a[:, ::-1]
+    return np.ascontiguousarray(a)
+
+
+def region_pixels(tiles: np.ndarray, height: int, width: int) -> np.ndarray:
+    """Per-tile render-region flags -> (height, width) bool."""
+    return np.repeat(np.repeat(tiles.astype(bool), FALLBACK_TILE, 0), FALLBACK_TILE, 1)[:height, :width]
+
+
+def training_frames(sizes: list[tuple[int, int]]) -> list[tuple[np.ndarray, ...]]:
+    """(input, truth, chain without the table, mask) per training view and size; the mask holds the pixels the
+    table takes: render regions but for pixels the chain changed on straight edge runs (kernels/fallback.cl)."""
+    frames = []
+    with Filter(footprint_table=None, keep_regions=True) as chain, Filter(fallback="off") as mlaa:
+        for width, height in sizes:
+            renderer = Renderer(_context(), width, height)
+            try:
+                for eye, target, fov in TRAIN_VIEWS.values():
+                    cam = Camera(eye, target, fov)
+                    inp, truth = renderer.input_frame(cam), renderer.truth_frame(cam)
+                    out = chain.process(inp)
+                    passes = mlaa.intermediates(inp)
+                    runs = long_runs(passes["edges"], passes["hdist"], passes["vdist"])
+                    kept = runs & np.any(out != inp, -1)
+                    frames.append((inp, truth, out, region_pixels(chain.last_regions, height, width) & ~kept))
+            finally:
+                renderer.release()
+    return frames
+
+
+def samples(frames):
+    """fit_table's samples: every training frame in its eight orientations, in mix space (linear light)."""
+    for inp, truth, out, mask in frames:
+        fmt = frame_format(inp)
+        for k in range(8):
+            i, t, o, m = (dihedral(a, k) for a in (inp, truth, out, mask))
+            yield (to_mix_space(i, fmt, True), to_mix_space(o, fmt, True), np.any(o != i, -1),
+                   to_mix_space(t, fmt, True), m)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m mlaa_stream.bench.footprint_fit", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--out", default=str(Path(__file__).resolve().parents[1] / "data" / TABLE_FILE),
+                    help="where to write the table (default: the package's)")
+    ap.add_argument("--sizes", default=DEFAULT_SIZES, help="WxH,... (default %(default)s)")
+    args = ap.parse_args(argv)
+    ok, why = egl_available()
+    if not ok:
+        ap.error(f"the training views need a headless OpenGL context: {why}")
+    sizes = [tuple(int(v) for v in s.split("x")) for s in args.sizes.split(",")]
+    frames = training_frames(sizes)
+    table = fit_table(samples(frames))
+    np.save(args.out, table)
+    print(f"wrote {args.out}: {table.shape[0]} buckets x {table.shape[1]} weights")
+    with Filter(footprint_table=table) as f:  # in-sample check: the held-out views are rendered_views' job
+        for (inp, truth, out, _), name in zip(frames, [f"{n}_{w}" for w, _ in sizes for n in TRAIN_VIEWS]):
+            print(f"{name:16s} error removed without the table {M.error_removed(out, inp, truth):.3f}, "
+                  f"with it {M.error_removed(f.process(inp), inp, truth):.3f}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
