@@ -415,74 +415,92 @@ inline int fp_coherence(float tr, float det2)
     return n;
 }
 
-// The footprint table at pixel (x, y) of a render region (footprint.py footprint_reference): dst holds the chain's
-// colour and receives the new one; a pixel whose 5x5 window is one colour and which the chain left is not
-// written. Alpha is kept.
-void footprint_pixel(__global const PIXEL_T *src, __global const float *luts, __global const float *lin,
-                     __global const float *table, __global PIXEL_T *dst, int x, int y, int w, int h)
+// The footprint table for the pixels x0 .. x1 - 1 (at most FALLBACK_TILE) of row y whose bit (x - x0) is set in
+// `take` (footprint.py footprint_reference): dst holds the chain's colours and receives the new ones; a pixel whose
+// 5x5 window is one colour and which the chain left is not written. Alpha is kept. The row's windows share their
+// reads: luma over 7 rows x (FALLBACK_TILE + 6) columns, colours over the middle 5 rows x (FALLBACK_TILE + 4), and
+// the structure tensor's sums per column of 5 rows (the reference sums in the same order).
+#define FP_LC (FALLBACK_TILE + 2 * FP_R + 2)  // luma columns x0 - 3 .. x0 + FALLBACK_TILE + 2
+#define FP_CC (FALLBACK_TILE + 2 * FP_R)      // colour and gradient columns x0 - 2 .. x0 + FALLBACK_TILE + 1
+RARELY_CALLED void footprint_row(__global const PIXEL_T *src, __global const float *luts, __global const float *lin,
+                                 __global const float *table, __global PIXEL_T *dst, int x0, int x1, int y, int w,
+                                 int h, uint take)
 {
-    const int i = IDX(x, y, w);
-    const int changed = px_differs(src, dst, i);
-    float3 win[FP_N][FP_N];
-    float luma[FP_L][FP_L];
-    int flat = 1;
+    float luma[FP_L][FP_LC];
+    float3 win[FP_N][FP_CC];
     for (int j = 0; j < FP_L; ++j) {
         const int row = clamp_to(y + j - FP_R - 1, h - 1) * w;
-        for (int k = 0; k < FP_L; ++k) {
-            const int corner = (j == 0 || j == FP_L - 1) && (k == 0 || k == FP_L - 1);
-            if (corner) continue;  // no central difference reads them
-            const float3 c = mix_channels(src, luts, lin, row + clamp_to(x + k - FP_R - 1, w - 1));
+        for (int k = 0; k < FP_LC; ++k) {
+            const float3 c = mix_channels(src, luts, lin, row + clamp_to(x0 + k - FP_R - 1, w - 1));
             luma[j][k] = FP_LUMA(c);
-            if (j >= 1 && j <= FP_N && k >= 1 && k <= FP_N) win[j - 1][k - 1] = c;
+            if (j >= 1 && j <= FP_N && k >= 1 && k <= FP_CC) win[j - 1][k - 1] = c;
         }
     }
-    const float3 mid = win[FP_R][FP_R];
-    for (int j = 0; j < FP_N; ++j)
-        for (int k = 0; k < FP_N; ++k)
-            flat &= all(win[j][k] == mid);
-    if (flat && !changed) return;
-    // structure tensor of linear luma: central differences, averaged over the 5x5 window
-    float sxx = 0.0f, syy = 0.0f, sxy = 0.0f;
-    for (int j = 1; j <= FP_N; ++j)
-        for (int k = 1; k <= FP_N; ++k) {
+    // per column: the 5 rows' sums of gx^2, gy^2, gx gy (central differences)
+    float cxx[FP_CC], cyy[FP_CC], cxy[FP_CC];
+    for (int k = 1; k <= FP_CC; ++k) {
+        float sxx = 0.0f, syy = 0.0f, sxy = 0.0f;
+        for (int j = 1; j <= FP_N; ++j) {
             const float gx = (luma[j][k + 1] - luma[j][k - 1]) * 0.5f;
             const float gy = (luma[j + 1][k] - luma[j - 1][k]) * 0.5f;
             sxx += gx * gx;
             syy += gy * gy;
             sxy += gx * gy;
         }
-    sxx *= 1.0f / (FP_N * FP_N);
-    syy *= 1.0f / (FP_N * FP_N);
-    sxy *= 1.0f / (FP_N * FP_N);
-    const float u = sxx - syy, v = 2.0f * sxy, tr = sxx + syy, det2 = u * u + v * v;
-    const float au = fabs(u), av = fabs(v);
-    // octant of the doubled angle: the gradient's orientation in eight bins of pi / 8
-    const int octant = v >= 0.0f ? (u > 0.0f ? (av < au ? 0 : 1) : (av > au ? 2 : 3))
-                                 : (u < 0.0f ? (av < au ? 4 : 5) : (av > au ? 6 : 7));
-    const int bucket = ((octant * FP_STRENGTHS + fp_strength(tr, det2)) * FP_COHERENCES + fp_coherence(tr, det2))
-                       * 2 + changed;
-    __global const float *wt = table + bucket * FOOTPRINT_WEIGHTS;
-    const float3 chain = mix_channels(dst, luts, lin, i);
-    float3 pred = mid;
-    for (int j = 0; j < FP_N; ++j)
-        for (int k = 0; k < FP_N; ++k)
-            pred += (win[j][k] - mid) * wt[j * FP_N + k];
-    pred += (chain - mid) * wt[FP_N * FP_N];
-    float3 lo = chain, hi = chain;  // no overshoot: the 3x3 window's range and the chain's colour
-    for (int j = FP_R - 1; j <= FP_R + 1; ++j)
-        for (int k = FP_R - 1; k <= FP_R + 1; ++k) {
-            lo = fmin(lo, win[j][k]);
-            hi = fmax(hi, win[j][k]);
+        cxx[k - 1] = sxx;
+        cyy[k - 1] = syy;
+        cxy[k - 1] = sxy;
+    }
+    for (int x = x0; x < x1; ++x) {
+        const int o = x - x0;  // the pixel's window: columns o .. o + 4 of win and of the column sums
+        if (!((take >> o) & 1u)) continue;
+        const int i = IDX(x, y, w);
+        const int changed = px_differs(src, dst, i);
+        const float3 mid = win[FP_R][o + FP_R];
+        int flat = 1;
+        for (int j = 0; j < FP_N; ++j)
+            for (int k = o; k < o + FP_N; ++k)
+                flat &= all(win[j][k] == mid);
+        if (flat && !changed) continue;
+        float sxx = 0.0f, syy = 0.0f, sxy = 0.0f;
+        for (int k = o; k < o + FP_N; ++k) {
+            sxx += cxx[k];
+            syy += cyy[k];
+            sxy += cxy[k];
         }
-    const float3 c = fxaa_encode(luts, fmin(fmax(pred, lo), hi));
+        sxx *= 1.0f / (FP_N * FP_N);
+        syy *= 1.0f / (FP_N * FP_N);
+        sxy *= 1.0f / (FP_N * FP_N);
+        const float u = sxx - syy, v = 2.0f * sxy, tr = sxx + syy, det2 = u * u + v * v;
+        const float au = fabs(u), av = fabs(v);
+        // octant of the doubled angle: the gradient's orientation in eight bins of pi / 8
+        const int octant = v >= 0.0f ? (u > 0.0f ? (av < au ? 0 : 1) : (av > au ? 2 : 3))
+                                     : (u < 0.0f ? (av < au ? 4 : 5) : (av > au ? 6 : 7));
+        const int bucket = ((octant * FP_STRENGTHS + fp_strength(tr, det2)) * FP_COHERENCES
+                            + fp_coherence(tr, det2)) * 2 + changed;
+        __global const float *wt = table + bucket * FOOTPRINT_WEIGHTS;
+        const float3 chain = mix_channels(dst, luts, lin, i);
+        float3 pred = mid;
+        for (int j = 0; j < FP_N; ++j)
+            for (int k = 0; k < FP_N; ++k)
+                pred += (win[j][o + k] - mid) * wt[j * FP_N + k];
+        pred += (chain - mid) * wt[FP_N * FP_N];
+        float3 lo = chain, hi = chain;  // no overshoot: the 3x3 window's range and the chain's colour
+        for (int j = FP_R - 1; j <= FP_R + 1; ++j)
+            for (int k = o + FP_R - 1; k <= o + FP_R + 1; ++k) {
+                lo = fmin(lo, win[j][k]);
+                hi = fmax(hi, win[j][k]);
+            }
+        const float3 c = fxaa_encode(luts, fmin(fmax(pred, lo), hi));
 #if CHANNELS == 1
-    dst[i] = to_pixel(c.x);
+        dst[i] = to_pixel(c.x);
 #else
-    __global PIXEL_T *p = dst + (size_t)i * CHANNELS;
-    p[0] = to_pixel(c.x);
-    p[1] = to_pixel(c.y);
-    p[2] = to_pixel(c.z);
+        __global PIXEL_T *p = dst + (size_t)i * CHANNELS;
+        p[0] = to_pixel(c.x);
+        p[1] = to_pixel(c.y);
+        p[2] = to_pixel(c.z);
 #endif
+    }
 }
 #endif
 
@@ -516,6 +534,7 @@ inline void fallback_tile(__global const PIXEL_T *src, __global const float *lut
     for (int y = y0; y < y1; ++y) {
         const int quiet = x1 - x0 == 8 && group_is_quiet(edges, x0, y, w);
         if (quiet && !(rendered && FOOTPRINT_TABLE)) continue;
+        uint take = 0;  // the footprint table's pixels of the row
         for (int x = x0; x < x1; ++x) {
             if (!quiet) {
                 const int changed_px = px_differs(src, dst, IDX(x, y, w));
@@ -528,12 +547,13 @@ inline void fallback_tile(__global const PIXEL_T *src, __global const float *lut
                     towards_fxaa(src, luts, dst, changed_px ? dst : src,
                                  changed_px ? FALLBACK_MIX : FALLBACK_WEIGHT, x, y, w, h);
             }
-#if FOOTPRINT_TABLE
             // the table too leaves a colour the chain gave a pixel on a straight edge run (FALLBACK_KEEP_RUN)
             if (rendered && !(ON_LONG_RUN(edges, hdist, vdist, x, y, w) && px_differs(src, dst, IDX(x, y, w))))
-                footprint_pixel(src, luts, lin, table, dst, x, y, w, h);
-#endif
+                take |= 1u << (x - x0);
         }
+#if FOOTPRINT_TABLE
+        if (take) footprint_row(src, luts, lin, table, dst, x0, x1, y, w, h, take);
+#endif
     }
 }
 

@@ -26,7 +26,7 @@ Per pixel, in mix space (linear light by default), for each colour channel c:
 
 The table (BUCKETS x WEIGHTS float32) ships as mlaa_stream/data/footprint_table.npy; `python -m
 mlaa_stream.bench.footprint_fit` renders its training views (none of them a bench scene or a held-out view) and
-fits it again. Kernel: kernels/fallback.cl footprint_pixel.
+fits it again. Kernel: kernels/fallback.cl footprint_row.
 """
 from __future__ import annotations
 
@@ -91,13 +91,17 @@ def footprint_buckets(lin: np.ndarray, changed: np.ndarray) -> np.ndarray:
     sxx = np.zeros_like(y)
     syy, sxy = sxx.copy(), sxx.copy()
     r = TABLE_RADIUS
-    for dy in range(-r, r + 1):
-        for dx in range(-r, r + 1):  # central differences at each tap, every read clamped at the frame's edge
+    for dx in range(-r, r + 1):  # per column of the window, then across (the kernel's order of summation)
+        cxx, cyy, cxy = np.zeros_like(y), np.zeros_like(y), np.zeros_like(y)
+        for dy in range(-r, r + 1):  # central differences at each tap, every read clamped at the frame's edge
             a = (_shifted(y, dy, dx + 1) - _shifted(y, dy, dx - 1)) * f32(0.5)
             b = (_shifted(y, dy + 1, dx) - _shifted(y, dy - 1, dx)) * f32(0.5)
-            sxx += a * a
-            syy += b * b
-            sxy += a * b
+            cxx += a * a
+            cyy += b * b
+            cxy += a * b
+        sxx += cxx
+        syy += cyy
+        sxy += cxy
     n = f32(1.0 / TAPS)
     sxx, syy, sxy = sxx * n, syy * n, sxy * n
     u, v = sxx - syy, f32(2) * sxy         # the doubled angle's vector: (l1 - l2) (cos 2t, sin 2t)
@@ -130,7 +134,7 @@ def footprint_features(lin: np.ndarray, chain: np.ndarray) -> np.ndarray:
 
 def footprint_reference(lin: np.ndarray, chain: np.ndarray, changed: np.ndarray, table: np.ndarray
                         ) -> tuple[np.ndarray, np.ndarray]:
-    """What footprint_pixel makes of every pixel: (new colour (h, w, 3) float32 in mix space, kept (h, w) bool:
+    """What footprint_row makes of every pixel: (new colour (h, w, 3) float32 in mix space, kept (h, w) bool:
     one-colour windows the chain left, which keep their stored value)."""
     f32 = np.float32
     feats = footprint_features(lin, chain)
