@@ -436,9 +436,13 @@ RARELY_CALLED void footprint_row(__global const PIXEL_T *src, __global const flo
             if (j >= 1 && j <= FP_N && k >= 1 && k <= FP_CC) win[j - 1][k - 1] = c;
         }
     }
-    // per column: the 5 rows' sums of gx^2, gy^2, gx gy (central differences)
+    // per column: the 5 rows' sums of gx^2, gy^2, gx gy (central differences), and whether its 5 colours are one
     float cxx[FP_CC], cyy[FP_CC], cxy[FP_CC];
+    int one[FP_CC];
     for (int k = 1; k <= FP_CC; ++k) {
+        int same = 1;
+        for (int j = 1; j < FP_N; ++j) same &= all(win[j][k - 1] == win[0][k - 1]);
+        one[k - 1] = same;
         float sxx = 0.0f, syy = 0.0f, sxy = 0.0f;
         for (int j = 1; j <= FP_N; ++j) {
             const float gx = (luma[j][k + 1] - luma[j][k - 1]) * 0.5f;
@@ -457,10 +461,8 @@ RARELY_CALLED void footprint_row(__global const PIXEL_T *src, __global const flo
         const int i = IDX(x, y, w);
         const int changed = px_differs(src, dst, i);
         const float3 mid = win[FP_R][o + FP_R];
-        int flat = 1;
-        for (int j = 0; j < FP_N; ++j)
-            for (int k = o; k < o + FP_N; ++k)
-                flat &= all(win[j][k] == mid);
+        int flat = 1;  // the 5x5 window is one colour
+        for (int k = o; k < o + FP_N; ++k) flat &= one[k] && all(win[0][k] == mid);
         if (flat && !changed) continue;
         float sxx = 0.0f, syy = 0.0f, sxy = 0.0f;
         for (int k = o; k < o + FP_N; ++k) {

@@ -247,7 +247,7 @@ class Filter:
                  keep_regions: bool = False, footprint_table: np.ndarray | None | str = "default"):
         """`preset`: one of PRESETS; its options replace the keywords of the same names. `fallback`: FXAA
         for the pixels MLAA leaves (spatial/fallback.py): "auto" where the neighbourhood shows 1-spp
-        aliasing and is no flat-colour art, with the footprint filter in render regions; "edges" the same
+        aliasing and is no flat-colour art, with the footprint table in render regions; "edges" the same
         without render regions (screen captures); "everywhere" (frames known to be 1-spp renders); "off".
         `show="regions"`: a debug view, the output with every pixel outside render regions dimmed.
         `keep_regions`: read every frame's render-region flags back (PendingFrame.regions, `last_regions`)
