@@ -1,4 +1,5 @@
-"""The wheel carries every kernel and installs no top-level `cli` package (DESIGN.md, Layout)."""
+"""The wheel carries every kernel and the footprint table, and installs no top-level `cli` package (DESIGN.md,
+Layout)."""
 from __future__ import annotations
 
 import subprocess
@@ -19,6 +20,7 @@ def test_wheel_contains_every_kernel_and_no_top_level_cli(tmp_path):
     for k in kernels:
         assert f"mlaa_stream/kernels/{k}" in names, f"{k} missing from the wheel"
     assert "mlaa_stream/cli/main.py" in names
+    assert "mlaa_stream/data/footprint_table.npy" in names  # the footprint table (spatial/footprint.py)
     tops = {n.split("/")[0] for n in names}
     assert "cli" not in tops and "kernels" not in tops, f"top-level entries: {sorted(tops)}"
 
