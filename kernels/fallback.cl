@@ -415,93 +415,106 @@ inline int fp_coherence(float tr, float det2)
     return n;
 }
 
-// The footprint table for the pixels x0 .. x1 - 1 (at most FALLBACK_TILE) of row y whose bit (x - x0) is set in
-// `take` (footprint.py footprint_reference): dst holds the chain's colours and receives the new ones; a pixel whose
-// 5x5 window is one colour and which the chain left is not written. Alpha is kept. The row's windows share their
-// reads: luma over 7 rows x (FALLBACK_TILE + 6) columns, colours over the middle 5 rows x (FALLBACK_TILE + 4), and
-// the structure tensor's sums per column of 5 rows (the reference sums in the same order).
-#define FP_LC (FALLBACK_TILE + 2 * FP_R + 2)  // luma columns x0 - 3 .. x0 + FALLBACK_TILE + 2
-#define FP_CC (FALLBACK_TILE + 2 * FP_R)      // colour and gradient columns x0 - 2 .. x0 + FALLBACK_TILE + 1
-RARELY_CALLED void footprint_row(__global const PIXEL_T *src, __global const float *luts, __global const float *lin,
-                                 __global const float *table, __global PIXEL_T *dst, int x0, int x1, int y, int w,
-                                 int h, uint take)
+// The footprint table for the pixels (x, y) of the tile x0 .. x1 - 1, y0 .. y1 - 1 (at most FALLBACK_TILE each way)
+// whose bit (x - x0) is set in take[y - y0] (footprint.py footprint_reference): dst holds the chain's colours and
+// receives the new ones; a pixel whose 5x5 window is one colour and which the chain left is not written. Alpha is
+// kept. The tile's windows share their reads: luma over (FALLBACK_TILE + 6)^2 pixels, colours and gradient products
+// over the middle (FALLBACK_TILE + 4)^2; per row of the tile, the structure tensor's sums per column of 5 rows (the
+// reference sums in the same order).
+#define FP_LC (FALLBACK_TILE + 2 * FP_R + 2)  // luma rows / columns: y0 - 3 .. y0 + FALLBACK_TILE + 2 (x alike)
+#define FP_CC (FALLBACK_TILE + 2 * FP_R)      // colour and gradient rows / columns: y0 - 2 .. y0 + FALLBACK_TILE + 1
+RARELY_CALLED void footprint_tile(__global const PIXEL_T *src, __global const float *luts, __global const float *lin,
+                                  __global const float *table, __global PIXEL_T *dst, int x0, int x1, int y0,
+                                  int y1, int w, int h, const uint *take)
 {
-    float luma[FP_L][FP_LC];
-    float3 win[FP_N][FP_CC];
-    for (int j = 0; j < FP_L; ++j) {
-        const int row = clamp_to(y + j - FP_R - 1, h - 1) * w;
+    float luma[FP_LC][FP_LC];
+    float3 win[FP_CC][FP_CC];
+    for (int j = 0; j < FP_LC; ++j) {
+        const int row = clamp_to(y0 + j - FP_R - 1, h - 1) * w;
         for (int k = 0; k < FP_LC; ++k) {
             const float3 c = mix_channels(src, luts, lin, row + clamp_to(x0 + k - FP_R - 1, w - 1));
             luma[j][k] = FP_LUMA(c);
-            if (j >= 1 && j <= FP_N && k >= 1 && k <= FP_CC) win[j - 1][k - 1] = c;
+            if (j >= 1 && j <= FP_CC && k >= 1 && k <= FP_CC) win[j - 1][k - 1] = c;
         }
     }
-    // per column: the 5 rows' sums of gx^2, gy^2, gx gy (central differences), and whether its 5 colours are one
-    float cxx[FP_CC], cyy[FP_CC], cxy[FP_CC];
-    int one[FP_CC];
-    for (int k = 1; k <= FP_CC; ++k) {
-        int same = 1;
-        for (int j = 1; j < FP_N; ++j) same &= all(win[j][k - 1] == win[0][k - 1]);
-        one[k - 1] = same;
-        float sxx = 0.0f, syy = 0.0f, sxy = 0.0f;
-        for (int j = 1; j <= FP_N; ++j) {
+    // gx^2, gy^2, gx gy (central differences) at every colour position
+    float pxx[FP_CC][FP_CC], pyy[FP_CC][FP_CC], pxy[FP_CC][FP_CC];
+    for (int j = 1; j <= FP_CC; ++j)
+        for (int k = 1; k <= FP_CC; ++k) {
             const float gx = (luma[j][k + 1] - luma[j][k - 1]) * 0.5f;
             const float gy = (luma[j + 1][k] - luma[j - 1][k]) * 0.5f;
-            sxx += gx * gx;
-            syy += gy * gy;
-            sxy += gx * gy;
+            pxx[j - 1][k - 1] = gx * gx;
+            pyy[j - 1][k - 1] = gy * gy;
+            pxy[j - 1][k - 1] = gx * gy;
         }
-        cxx[k - 1] = sxx;
-        cyy[k - 1] = syy;
-        cxy[k - 1] = sxy;
-    }
-    for (int x = x0; x < x1; ++x) {
-        const int o = x - x0;  // the pixel's window: columns o .. o + 4 of win and of the column sums
-        if (!((take >> o) & 1u)) continue;
-        const int i = IDX(x, y, w);
-        const int changed = px_differs(src, dst, i);
-        const float3 mid = win[FP_R][o + FP_R];
-        int flat = 1;  // the 5x5 window is one colour
-        for (int k = o; k < o + FP_N; ++k) flat &= one[k] && all(win[0][k] == mid);
-        if (flat && !changed) continue;
-        float sxx = 0.0f, syy = 0.0f, sxy = 0.0f;
-        for (int k = o; k < o + FP_N; ++k) {
-            sxx += cxx[k];
-            syy += cyy[k];
-            sxy += cxy[k];
-        }
-        sxx *= 1.0f / (FP_N * FP_N);
-        syy *= 1.0f / (FP_N * FP_N);
-        sxy *= 1.0f / (FP_N * FP_N);
-        const float u = sxx - syy, v = 2.0f * sxy, tr = sxx + syy, det2 = u * u + v * v;
-        const float au = fabs(u), av = fabs(v);
-        // octant of the doubled angle: the gradient's orientation in eight bins of pi / 8
-        const int octant = v >= 0.0f ? (u > 0.0f ? (av < au ? 0 : 1) : (av > au ? 2 : 3))
-                                     : (u < 0.0f ? (av < au ? 4 : 5) : (av > au ? 6 : 7));
-        const int bucket = ((octant * FP_STRENGTHS + fp_strength(tr, det2)) * FP_COHERENCES
-                            + fp_coherence(tr, det2)) * 2 + changed;
-        __global const float *wt = table + bucket * FOOTPRINT_WEIGHTS;
-        const float3 chain = mix_channels(dst, luts, lin, i);
-        float3 pred = mid;
-        for (int j = 0; j < FP_N; ++j)
-            for (int k = 0; k < FP_N; ++k)
-                pred += (win[j][o + k] - mid) * wt[j * FP_N + k];
-        pred += (chain - mid) * wt[FP_N * FP_N];
-        float3 lo = chain, hi = chain;  // no overshoot: the 3x3 window's range and the chain's colour
-        for (int j = FP_R - 1; j <= FP_R + 1; ++j)
-            for (int k = o + FP_R - 1; k <= o + FP_R + 1; ++k) {
-                lo = fmin(lo, win[j][k]);
-                hi = fmax(hi, win[j][k]);
+    for (int y = y0; y < y1; ++y) {
+        const int r = y - y0;  // the row's windows: rows r .. r + 4 of win and of the products
+        if (!take[r]) continue;
+        // per column: the 5 rows' sums of the products, and whether its 5 colours are one
+        float cxx[FP_CC], cyy[FP_CC], cxy[FP_CC];
+        int one[FP_CC];
+        for (int k = 0; k < FP_CC; ++k) {
+            float sxx = 0.0f, syy = 0.0f, sxy = 0.0f;
+            int same = 1;
+            for (int j = r; j < r + FP_N; ++j) {
+                sxx += pxx[j][k];
+                syy += pyy[j][k];
+                sxy += pxy[j][k];
+                same &= all(win[j][k] == win[r][k]);
             }
-        const float3 c = fxaa_encode(luts, fmin(fmax(pred, lo), hi));
+            cxx[k] = sxx;
+            cyy[k] = syy;
+            cxy[k] = sxy;
+            one[k] = same;
+        }
+        for (int x = x0; x < x1; ++x) {
+            const int o = x - x0;  // the pixel's window: columns o .. o + 4 of win and of the column sums
+            if (!((take[r] >> o) & 1u)) continue;
+            const int i = IDX(x, y, w);
+            const int changed = px_differs(src, dst, i);
+            const float3 mid = win[r + FP_R][o + FP_R];
+            int flat = 1;  // the 5x5 window is one colour
+            for (int k = o; k < o + FP_N; ++k) flat &= one[k] && all(win[r][k] == mid);
+            if (flat && !changed) continue;
+            float sxx = 0.0f, syy = 0.0f, sxy = 0.0f;
+            for (int k = o; k < o + FP_N; ++k) {
+                sxx += cxx[k];
+                syy += cyy[k];
+                sxy += cxy[k];
+            }
+            sxx *= 1.0f / (FP_N * FP_N);
+            syy *= 1.0f / (FP_N * FP_N);
+            sxy *= 1.0f / (FP_N * FP_N);
+            const float u = sxx - syy, v = 2.0f * sxy, tr = sxx + syy, det2 = u * u + v * v;
+            const float au = fabs(u), av = fabs(v);
+            // octant of the doubled angle: the gradient's orientation in eight bins of pi / 8
+            const int octant = v >= 0.0f ? (u > 0.0f ? (av < au ? 0 : 1) : (av > au ? 2 : 3))
+                                         : (u < 0.0f ? (av < au ? 4 : 5) : (av > au ? 6 : 7));
+            const int bucket = ((octant * FP_STRENGTHS + fp_strength(tr, det2)) * FP_COHERENCES
+                                + fp_coherence(tr, det2)) * 2 + changed;
+            __global const float *wt = table + bucket * FOOTPRINT_WEIGHTS;
+            const float3 chain = mix_channels(dst, luts, lin, i);
+            float3 pred = mid;
+            for (int j = 0; j < FP_N; ++j)
+                for (int k = 0; k < FP_N; ++k)
+                    pred += (win[r + j][o + k] - mid) * wt[j * FP_N + k];
+            pred += (chain - mid) * wt[FP_N * FP_N];
+            float3 lo = chain, hi = chain;  // no overshoot: the 3x3 window's range and the chain's colour
+            for (int j = r + FP_R - 1; j <= r + FP_R + 1; ++j)
+                for (int k = o + FP_R - 1; k <= o + FP_R + 1; ++k) {
+                    lo = fmin(lo, win[j][k]);
+                    hi = fmax(hi, win[j][k]);
+                }
+            const float3 c = fxaa_encode(luts, fmin(fmax(pred, lo), hi));
 #if CHANNELS == 1
-        dst[i] = to_pixel(c.x);
+            dst[i] = to_pixel(c.x);
 #else
-        __global PIXEL_T *p = dst + (size_t)i * CHANNELS;
-        p[0] = to_pixel(c.x);
-        p[1] = to_pixel(c.y);
-        p[2] = to_pixel(c.z);
+            __global PIXEL_T *p = dst + (size_t)i * CHANNELS;
+            p[0] = to_pixel(c.x);
+            p[1] = to_pixel(c.y);
+            p[2] = to_pixel(c.z);
 #endif
+        }
     }
 }
 #endif
@@ -533,10 +546,11 @@ inline void fallback_tile(__global const PIXEL_T *src, __global const float *lut
 #endif
     const int x0 = tx * FALLBACK_TILE, y0 = ty * FALLBACK_TILE;
     const int x1 = min(x0 + FALLBACK_TILE, w), y1 = min(y0 + FALLBACK_TILE, h);
+    uint take[FALLBACK_TILE], any = 0;  // the footprint table's pixels, a bit per column, per row
     for (int y = y0; y < y1; ++y) {
         const int quiet = x1 - x0 == 8 && group_is_quiet(edges, x0, y, w);
+        take[y - y0] = 0;
         if (quiet && !(rendered && FOOTPRINT_TABLE)) continue;
-        uint take = 0;  // the footprint table's pixels of the row
         for (int x = x0; x < x1; ++x) {
             if (!quiet) {
                 const int changed_px = px_differs(src, dst, IDX(x, y, w));
@@ -551,12 +565,13 @@ inline void fallback_tile(__global const PIXEL_T *src, __global const float *lut
             }
             // the table too leaves a colour the chain gave a pixel on a straight edge run (FALLBACK_KEEP_RUN)
             if (rendered && !(ON_LONG_RUN(edges, hdist, vdist, x, y, w) && px_differs(src, dst, IDX(x, y, w))))
-                take |= 1u << (x - x0);
+                take[y - y0] |= 1u << (x - x0);
         }
-#if FOOTPRINT_TABLE
-        if (take) footprint_row(src, luts, lin, table, dst, x0, x1, y, w, h, take);
-#endif
+        any |= take[y - y0];
     }
+#if FOOTPRINT_TABLE
+    if (any) footprint_tile(src, luts, lin, table, dst, x0, x1, y0, y1, w, h, take);
+#endif
 }
 
 // One work item per SEGMENT / FALLBACK_TILE tiles of a tile row (few work items: PoCL's cost per work group

@@ -1,4 +1,4 @@
-"""The footprint table (mlaa_stream/spatial/footprint.py, kernels/fallback.cl footprint_row): buckets and fit
+"""The footprint table (mlaa_stream/spatial/footprint.py, kernels/fallback.cl footprint_tile): buckets and fit
 against cases with a known answer, and the kernel with known tables. The kernel against fallback_reference bit
 for bit, in every format, is tests/test_fallback.py test_kernel_matches_reference."""
 from __future__ import annotations

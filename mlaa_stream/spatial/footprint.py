@@ -26,7 +26,7 @@ Per pixel, in mix space (linear light by default), for each colour channel c:
 
 The table (BUCKETS x WEIGHTS float32) ships as mlaa_stream/data/footprint_table.npy; `python -m
 mlaa_stream.bench.footprint_fit` renders its training views (none of them a bench scene or a held-out view) and
-fits it again. Kernel: kernels/fallback.cl footprint_row.
+fits it again. Kernel: kernels/fallback.cl footprint_tile.
 """
 from __future__ import annotations
 
@@ -134,7 +134,7 @@ def footprint_features(lin: np.ndarray, chain: np.ndarray) -> np.ndarray:
 
 def footprint_reference(lin: np.ndarray, chain: np.ndarray, changed: np.ndarray, table: np.ndarray
                         ) -> tuple[np.ndarray, np.ndarray]:
-    """What footprint_row makes of every pixel: (new colour (h, w, 3) float32 in mix space, kept (h, w) bool:
+    """What footprint_tile makes of every pixel: (new colour (h, w, 3) float32 in mix space, kept (h, w) bool:
     one-colour windows the chain left, which keep their stored value)."""
     f32 = np.float32
     feats = footprint_features(lin, chain)
