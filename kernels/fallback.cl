@@ -392,7 +392,7 @@ inline float3 mix_channels(__global const PIXEL_T *src, __global const float *lu
 #define FP_STRENGTHS 3
 #define FP_COHERENCES 3
 
-// How many of the two levels t a band statistic reaches (footprint.py _bands: no square roots).
+// How many of the two levels t a band statistic reaches (footprint.py footprint_buckets: no square roots).
 inline int fp_strength(float tr, float det2)
 {
     int n = 0;
@@ -563,9 +563,11 @@ inline void fallback_tile(__global const PIXEL_T *src, __global const float *lut
                     towards_fxaa(src, luts, dst, changed_px ? dst : src,
                                  changed_px ? FALLBACK_MIX : FALLBACK_WEIGHT, x, y, w, h);
             }
+#if FOOTPRINT_TABLE
             // the table too leaves a colour the chain gave a pixel on a straight edge run (FALLBACK_KEEP_RUN)
             if (rendered && !(ON_LONG_RUN(edges, hdist, vdist, x, y, w) && px_differs(src, dst, IDX(x, y, w))))
                 take[y - y0] |= 1u << (x - x0);
+#endif
         }
         any |= take[y - y0];
     }

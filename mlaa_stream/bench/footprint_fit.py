@@ -5,8 +5,9 @@
 The training views are cameras in the rendered world (yardstick/rendered.py) that neither a bench scene nor a
 held-out view (bench/rendered_views.py) uses, so both stay out of sample. Each view is rendered like the bench's
 (1 spp at pixel centres; truth: 8x8 jittered samples averaged in linear light) at each size, run through the
-default Filter without the table, and every pixel the table takes (render regions but for what the chain changed on straight edge runs), in all eight flips and transposes of the
-frame, is a sample of the least-squares fit. Needs EGL (`pip install 'mlaa-stream[bench]'`); ~1 minute here.
+default Filter without the table, and every pixel the table takes (fallback.table_pixels), in all eight flips
+and transposes of the frame, is a sample of the least-squares fit. Needs EGL
+(`pip install 'mlaa-stream[bench]'`); 2-3 minutes here.
 """
 from __future__ import annotations
 
@@ -16,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from mlaa_stream.device.formats import frame_format
-from mlaa_stream.spatial.fallback import FALLBACK_TILE, long_runs, to_mix_space
+from mlaa_stream.spatial.fallback import long_runs, region_pixels, table_pixels, to_mix_space
 from mlaa_stream.spatial.filter import Filter
 from mlaa_stream.spatial.footprint import TABLE_FILE, fit_table
 from mlaa_stream.yardstick import metrics as M
@@ -45,14 +46,8 @@ def dihedral(a: np.ndarray, k: int) -> np.ndarray:
     return np.ascontiguousarray(a)
 
 
-def region_pixels(tiles: np.ndarray, height: int, width: int) -> np.ndarray:
-    """Per-tile render-region flags -> (height, width) bool."""
-    return np.repeat(np.repeat(tiles.astype(bool), FALLBACK_TILE, 0), FALLBACK_TILE, 1)[:height, :width]
-
-
 def training_frames(sizes: list[tuple[int, int]]) -> list[tuple[np.ndarray, ...]]:
-    """(input, truth, chain without the table, mask) per training view and size; the mask holds the pixels the
-    table takes: render regions but for pixels the chain changed on straight edge runs (kernels/fallback.cl)."""
+    """(input, truth, chain without the table, mask of the pixels the table takes) per training view and size."""
     frames = []
     with Filter(footprint_table=None, keep_regions=True) as chain, Filter(fallback="off") as mlaa:
         for width, height in sizes:
@@ -64,8 +59,9 @@ def training_frames(sizes: list[tuple[int, int]]) -> list[tuple[np.ndarray, ...]
                     out = chain.process(inp)
                     passes = mlaa.intermediates(inp)
                     runs = long_runs(passes["edges"], passes["hdist"], passes["vdist"])
-                    kept = runs & np.any(out != inp, -1)
-                    frames.append((inp, truth, out, region_pixels(chain.last_regions, height, width) & ~kept))
+                    mask = table_pixels(region_pixels(chain.last_regions, height, width), runs,
+                                        np.any(out != inp, -1))
+                    frames.append((inp, truth, out, mask))
             finally:
                 renderer.release()
     return frames

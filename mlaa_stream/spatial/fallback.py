@@ -112,12 +112,23 @@ class FallbackPass:
         return events["fallback"]
 
 
+def region_pixels(tiles: np.ndarray, height: int, width: int) -> np.ndarray:
+    """Render-region flags per FALLBACK_TILE^2 tile (FallbackPass.read_regions, Filter.last_regions) -> per pixel,
+    (height, width) bool."""
+    return np.repeat(np.repeat(np.asarray(tiles) > 0, FALLBACK_TILE, 0), FALLBACK_TILE, 1)[:height, :width]
+
+
+def table_pixels(regions: np.ndarray, runs: np.ndarray, changed: np.ndarray) -> np.ndarray:
+    """The pixels the footprint table takes (kernels/fallback.cl fallback_tile): render regions, but for pixels the
+    chain changed on a straight edge run (long_runs)."""
+    return regions & ~(runs & changed)
+
+
 def dim_outside_regions(frame: np.ndarray, tiles: np.ndarray | None) -> np.ndarray:
     """Filter(show="regions")'s view: `frame` ((h, w) or (h, w, ch)) with every pixel outside render regions
     (`tiles`: one flag per FALLBACK_TILE^2 tile; None: no regions) at SHOW_DIM of its colour; alpha is kept."""
     h, w = frame.shape[:2]
-    inside = (np.zeros((h, w), bool) if tiles is None else
-              np.repeat(np.repeat(np.asarray(tiles) > 0, FALLBACK_TILE, 0), FALLBACK_TILE, 1)[:h, :w])
+    inside = np.zeros((h, w), bool) if tiles is None else region_pixels(tiles, h, w)
     out = frame.copy()
     colour = out if out.ndim == 2 else out[..., :3]
     dimmed = colour[~inside].astype(np.float32) * np.float32(SHOW_DIM)
@@ -268,7 +279,7 @@ def fallback_reference(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray,
         chain = out.reshape(a.shape)
         now_changed = np.any(chain != a, -1)
         new, kept = footprint_reference(m_src, mix_space(chain), now_changed, table)
-        take = rendered & ~kept & ~(runs & now_changed)
+        take = table_pixels(rendered, runs, now_changed) & ~kept
         out[take] = stored(new, chain)[take]
     return out.reshape(np.asarray(mlaa_out).shape)
 

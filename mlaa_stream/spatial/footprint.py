@@ -75,14 +75,6 @@ def _shifted(a: np.ndarray, dy: int, dx: int) -> np.ndarray:
     return a[np.clip(np.arange(h) + dy, 0, h - 1)][:, np.clip(np.arange(w) + dx, 0, w - 1)]
 
 
-def _bands(tr: np.ndarray, det2: np.ndarray, levels, scale) -> np.ndarray:
-    """How many of `levels` a band statistic reaches, tested without square roots (the kernel's arithmetic)."""
-    n = np.zeros(tr.shape, np.int32)
-    for t in levels:
-        n += scale(tr, det2, np.float32(t))
-    return n
-
-
 def footprint_buckets(lin: np.ndarray, changed: np.ndarray) -> np.ndarray:
     """Bucket per pixel, (h, w) int32, of `lin` ((h, w, 3) float32 RGB in mix space) and `changed` ((h, w) bool:
     the chain changed the pixel)."""
@@ -111,16 +103,17 @@ def footprint_buckets(lin: np.ndarray, changed: np.ndarray) -> np.ndarray:
     octant = np.where(v >= 0, np.where(u > 0, np.where(av < au, 0, 1), np.where(av > au, 2, 3)),
                       np.where(u < 0, np.where(av < au, 4, 5), np.where(av > au, 6, 7)))
 
-    def strength(tr, det2, t):  # l1 = (tr + sqrt(det2)) / 2 >= t^2
+    # the bands, tested without square roots (the kernel's arithmetic): how many of the levels t each reaches
+    def strength(t: np.float32) -> np.ndarray:  # l1 = (tr + sqrt(det2)) / 2 >= t^2
         need = f32(2) * t * t - tr
         return (need <= 0) | (det2 >= need * need)
 
-    def coherence(tr, det2, t):  # (sqrt l1 - sqrt l2) >= t (sqrt l1 + sqrt l2)  <=>  sqrt(det2) >= tr 2t / (1 + t^2)
-        k = tr * (f32(2) * t / (f32(1) + t * t))
+    def coherence(t: np.float32) -> np.ndarray:  # (sqrt l1 - sqrt l2) >= t (sqrt l1 + sqrt l2)
+        k = tr * (f32(2) * t / (f32(1) + t * t))  # <=> sqrt(det2) >= tr 2t / (1 + t^2)
         return det2 >= k * k
 
-    s = _bands(tr, det2, STRENGTH_LEVELS, strength)
-    c = _bands(tr, det2, COHERENCE_LEVELS, coherence)
+    s = sum(strength(f32(t)).astype(np.int32) for t in STRENGTH_LEVELS)
+    c = sum(coherence(f32(t)).astype(np.int32) for t in COHERENCE_LEVELS)
     return (((octant * STRENGTHS + s) * COHERENCES + c) * 2 + changed).astype(np.int32)
 
 
