@@ -55,6 +55,9 @@ typedef short8 short8_a2 __attribute__((aligned(2)));
 #define LOAD_UCHAR16(p) (*(__global const uchar16_a1 *)(p))
 #define LOAD_FLOAT8(p) (*(__global const float8_a4 *)(p))
 #define STORE_FLOAT8(v, p) (*(__global float8_a4 *)(p) = (v))
+#define LOAD_FLOAT8_PRIVATE(p) (*(__private const float8_a4 *)(p))
+#define STORE_FLOAT8_PRIVATE(v, p) (*(__private float8_a4 *)(p) = (v))
+#define LOAD_INT8_PRIVATE(p) (*(__private const int8_a4 *)(p))
 #define STORE_INT8_PRIVATE(v, p) (*(__private int8_a4 *)(p) = (v))
 #define STORE_SHORT8_PRIVATE(v, p) (*(__private short8_a2 *)(p) = (v))
 #define LOAD_UCHAR8(p) (*(__global const uchar8_a1 *)(p))
@@ -67,6 +70,9 @@ typedef short8 short8_a2 __attribute__((aligned(2)));
 #define LOAD_UCHAR16(p) vload16(0, p)
 #define LOAD_FLOAT8(p) vload8(0, p)
 #define STORE_FLOAT8(v, p) vstore8(v, 0, p)
+#define LOAD_FLOAT8_PRIVATE(p) vload8(0, p)
+#define STORE_FLOAT8_PRIVATE(v, p) vstore8(v, 0, p)
+#define LOAD_INT8_PRIVATE(p) vload8(0, p)
 #define STORE_INT8_PRIVATE(v, p) vstore8(v, 0, p)
 #define STORE_SHORT8_PRIVATE(v, p) vstore8(v, 0, p)
 #define LOAD_UCHAR8(p) vload8(0, p)
@@ -207,13 +213,15 @@ inline float3 lab_of_levels(__global const PIXEL_T *src, __global const float *l
 }
 #endif
 
+// Eight floats t[v.s0] .. t[v.s7]: a table read per lane.
+#define GATHER8(t, v) ((float8)((t)[(v).s0], (t)[(v).s1], (t)[(v).s2], (t)[(v).s3], \
+                                (t)[(v).s4], (t)[(v).s5], (t)[(v).s6], (t)[(v).s7]))
+
 #ifndef PIXEL_IS_FLOAT
 // CIELAB of 8 pixels from their stored levels (R, G, B int8 lanes): lab_of_levels' arithmetic lane by
 // lane (per-level linear values from `lin`, the matrix and f(t) table read as lut_read does), the same
 // numbers; used by edges.cl and reconstruct.cl, which have `luts` and `lin` in scope. Macros: PoCL
 // passes wide vectors to calls through memory.
-#define GATHER8(t, v) ((float8)((t)[(v).s0], (t)[(v).s1], (t)[(v).s2], (t)[(v).s3], \
-                                (t)[(v).s4], (t)[(v).s5], (t)[(v).s6], (t)[(v).s7]))
 #define LUT8(lut, x, out) {                                                                              \
         float8 t_ = (x) * (float)LUT_SIZE;                                                             \
         t_ = t_ < 0.0f ? 0.0f : (t_ > (float)LUT_SIZE ? (float)LUT_SIZE : t_);                         \

@@ -392,25 +392,25 @@ inline float3 mix_channels(__global const PIXEL_T *src, __global const float *lu
 #define FP_STRENGTHS 3
 #define FP_COHERENCES 3
 
-// How many of the two levels t a band statistic reaches (footprint.py footprint_buckets: no square roots).
-inline int fp_strength(float tr, float det2)
+// How many of the two levels t a band statistic reaches, per lane (footprint.py footprint_buckets: no square roots).
+inline int8 fp_strength(float8 tr, float8 det2)
 {
-    int n = 0;
+    int8 n = 0;
     const float t[2] = {0.02f, 0.08f};  // STRENGTH_LEVELS: l1 = (tr + sqrt(det2)) / 2 >= t^2
     for (int k = 0; k < 2; ++k) {
-        const float need = 2.0f * t[k] * t[k] - tr;
-        n += need <= 0.0f || det2 >= need * need;
+        const float8 need = 2.0f * t[k] * t[k] - tr;
+        n -= (need <= 0.0f) | (det2 >= need * need);  // a vector comparison is -1 where true
     }
     return n;
 }
 
-inline int fp_coherence(float tr, float det2)
+inline int8 fp_coherence(float8 tr, float8 det2)
 {
-    int n = 0;
+    int8 n = 0;
     const float t[2] = {0.3f, 0.6f};  // COHERENCE_LEVELS: sqrt(det2) >= tr 2t / (1 + t^2)
     for (int k = 0; k < 2; ++k) {
-        const float q = tr * (2.0f * t[k] / (1.0f + t[k] * t[k]));
-        n += det2 >= q * q;
+        const float8 q = tr * (2.0f * t[k] / (1.0f + t[k] * t[k]));
+        n -= det2 >= q * q;
     }
     return n;
 }
@@ -418,23 +418,31 @@ inline int fp_coherence(float tr, float det2)
 // The footprint table for the pixels (x, y) of the tile x0 .. x1 - 1, y0 .. y1 - 1 (at most FALLBACK_TILE each way)
 // whose bit (x - x0) is set in take[y - y0] (footprint.py footprint_reference): dst holds the chain's colours and
 // receives the new ones; a pixel whose 5x5 window is one colour and which the chain left is not written. Alpha is
-// kept. The tile's windows share their reads: luma over (FALLBACK_TILE + 6)^2 pixels, colours and gradient products
-// over the middle (FALLBACK_TILE + 4)^2; per row of the tile, the structure tensor's sums per column of 5 rows (the
-// reference sums in the same order).
+// kept. The tile's windows share their reads: luma over (FALLBACK_TILE + 6)^2 pixels, colours (planar) and gradient
+// products over the middle (FALLBACK_TILE + 4)^2; the structure tensor's sums per column of 5 rows (the reference
+// sums in the same order). A row's 8 pixels are the 8 lanes of float8 arithmetic (lane o: column x0 + o; lanes past
+// x1 compute from clamped reads and store nothing): PoCL does not run a tile's pixels in vector lanes by itself.
 #define FP_LC (FALLBACK_TILE + 2 * FP_R + 2)  // luma rows / columns: y0 - 3 .. y0 + FALLBACK_TILE + 2 (x alike)
 #define FP_CC (FALLBACK_TILE + 2 * FP_R)      // colour and gradient rows / columns: y0 - 2 .. y0 + FALLBACK_TILE + 1
+#if FALLBACK_TILE != 8
+#error "footprint_tile runs a tile row as 8 lanes: FALLBACK_TILE 8"
+#endif
 RARELY_CALLED void footprint_tile(__global const PIXEL_T *src, __global const float *luts, __global const float *lin,
                                   __global const float *table, __global PIXEL_T *dst, int x0, int x1, int y0,
                                   int y1, int w, int h, const uint *take)
 {
     float luma[FP_LC][FP_LC];
-    float3 win[FP_CC][FP_CC];
+    float wr[FP_CC][FP_CC], wg[FP_CC][FP_CC], wb[FP_CC][FP_CC];  // the colours, one plane per channel
     for (int j = 0; j < FP_LC; ++j) {
         const int row = clamp_to(y0 + j - FP_R - 1, h - 1) * w;
         for (int k = 0; k < FP_LC; ++k) {
             const float3 c = mix_channels(src, luts, lin, row + clamp_to(x0 + k - FP_R - 1, w - 1));
             luma[j][k] = FP_LUMA(c);
-            if (j >= 1 && j <= FP_CC && k >= 1 && k <= FP_CC) win[j - 1][k - 1] = c;
+            if (j >= 1 && j <= FP_CC && k >= 1 && k <= FP_CC) {
+                wr[j - 1][k - 1] = c.x;
+                wg[j - 1][k - 1] = c.y;
+                wb[j - 1][k - 1] = c.z;
+            }
         }
     }
     // gx^2, gy^2, gx gy (central differences) at every colour position
@@ -448,9 +456,9 @@ RARELY_CALLED void footprint_tile(__global const PIXEL_T *src, __global const fl
             pxy[j - 1][k - 1] = gx * gy;
         }
     for (int y = y0; y < y1; ++y) {
-        const int r = y - y0;  // the row's windows: rows r .. r + 4 of win and of the products
+        const int r = y - y0;  // the row's windows: rows r .. r + 4 of the colours and of the products
         if (!take[r]) continue;
-        // per column: the 5 rows' sums of the products, and whether its 5 colours are one
+        // per column: the 5 rows' sums of the products, and whether its 5 colours are one (-1: a lane's true)
         float cxx[FP_CC], cyy[FP_CC], cxy[FP_CC];
         int one[FP_CC];
         for (int k = 0; k < FP_CC; ++k) {
@@ -460,52 +468,83 @@ RARELY_CALLED void footprint_tile(__global const PIXEL_T *src, __global const fl
                 sxx += pxx[j][k];
                 syy += pyy[j][k];
                 sxy += pxy[j][k];
-                same &= all(win[j][k] == win[r][k]);
+                same &= wr[j][k] == wr[r][k] && wg[j][k] == wg[r][k] && wb[j][k] == wb[r][k];
             }
             cxx[k] = sxx;
             cyy[k] = syy;
             cxy[k] = sxy;
-            one[k] = same;
+            one[k] = -same;
         }
-        for (int x = x0; x < x1; ++x) {
-            const int o = x - x0;  // the pixel's window: columns o .. o + 4 of win and of the column sums
-            if (!((take[r] >> o) & 1u)) continue;
-            const int i = IDX(x, y, w);
-            const int changed = px_differs(src, dst, i);
-            const float3 mid = win[r + FP_R][o + FP_R];
-            int flat = 1;  // the 5x5 window is one colour
-            for (int k = o; k < o + FP_N; ++k) flat &= one[k] && all(win[r][k] == mid);
-            if (flat && !changed) continue;
-            float sxx = 0.0f, syy = 0.0f, sxy = 0.0f;
-            for (int k = o; k < o + FP_N; ++k) {
-                sxx += cxx[k];
-                syy += cyy[k];
-                sxy += cxy[k];
+        int chg[FALLBACK_TILE];
+        float chr[FALLBACK_TILE], chgr[FALLBACK_TILE], chb[FALLBACK_TILE];  // the chain's colours
+        for (int o = 0; o < FALLBACK_TILE; ++o) {
+            const int i = IDX(min(x0 + o, w - 1), y, w);
+            const float3 c = mix_channels(dst, luts, lin, i);
+            chg[o] = -px_differs(src, dst, i);
+            chr[o] = c.x;
+            chgr[o] = c.y;
+            chb[o] = c.z;
+        }
+        const int8 changed = LOAD_INT8_PRIVATE(chg);
+        const float8 mr = LOAD_FLOAT8_PRIVATE(&wr[r + FP_R][FP_R]), mg = LOAD_FLOAT8_PRIVATE(&wg[r + FP_R][FP_R]),
+                     mb = LOAD_FLOAT8_PRIVATE(&wb[r + FP_R][FP_R]);
+        int8 flat = -1;  // the 5x5 window is one colour
+        float8 sxx = 0.0f, syy = 0.0f, sxy = 0.0f;
+        for (int k = 0; k < FP_N; ++k) {
+            flat &= LOAD_INT8_PRIVATE(&one[k]) & (LOAD_FLOAT8_PRIVATE(&wr[r][k]) == mr)
+                    & (LOAD_FLOAT8_PRIVATE(&wg[r][k]) == mg) & (LOAD_FLOAT8_PRIVATE(&wb[r][k]) == mb);
+            sxx += LOAD_FLOAT8_PRIVATE(&cxx[k]);
+            syy += LOAD_FLOAT8_PRIVATE(&cyy[k]);
+            sxy += LOAD_FLOAT8_PRIVATE(&cxy[k]);
+        }
+        sxx *= 1.0f / (FP_N * FP_N);
+        syy *= 1.0f / (FP_N * FP_N);
+        sxy *= 1.0f / (FP_N * FP_N);
+        const float8 u = sxx - syy, v = 2.0f * sxy, tr = sxx + syy, det2 = u * u + v * v;
+        const float8 au = fabs(u), av = fabs(v);
+        // octant of the doubled angle: the gradient's orientation in eight bins of pi / 8
+        const int8 octant = select(select(select((int8)5, (int8)4, av < au), select((int8)7, (int8)6, av > au), u >= 0.0f),
+                                   select(select((int8)3, (int8)2, av > au), select((int8)1, (int8)0, av < au), u > 0.0f),
+                                   v >= 0.0f);
+        const int8 bucket = ((octant * FP_STRENGTHS + fp_strength(tr, det2)) * FP_COHERENCES
+                             + fp_coherence(tr, det2)) * 2 - changed;
+        const int8 base = bucket * FOOTPRINT_WEIGHTS;
+        const float8 cr = LOAD_FLOAT8_PRIVATE(chr), cg = LOAD_FLOAT8_PRIVATE(chgr), cb = LOAD_FLOAT8_PRIVATE(chb);
+        float8 qr = mr, qg = mg, qb = mb;
+        for (int j = 0; j < FP_N; ++j)
+            for (int k = 0; k < FP_N; ++k) {
+                const float8 wt = GATHER8(table + j * FP_N + k, base);
+                qr += (LOAD_FLOAT8_PRIVATE(&wr[r + j][k]) - mr) * wt;
+                qg += (LOAD_FLOAT8_PRIVATE(&wg[r + j][k]) - mg) * wt;
+                qb += (LOAD_FLOAT8_PRIVATE(&wb[r + j][k]) - mb) * wt;
             }
-            sxx *= 1.0f / (FP_N * FP_N);
-            syy *= 1.0f / (FP_N * FP_N);
-            sxy *= 1.0f / (FP_N * FP_N);
-            const float u = sxx - syy, v = 2.0f * sxy, tr = sxx + syy, det2 = u * u + v * v;
-            const float au = fabs(u), av = fabs(v);
-            // octant of the doubled angle: the gradient's orientation in eight bins of pi / 8
-            const int octant = v >= 0.0f ? (u > 0.0f ? (av < au ? 0 : 1) : (av > au ? 2 : 3))
-                                         : (u < 0.0f ? (av < au ? 4 : 5) : (av > au ? 6 : 7));
-            const int bucket = ((octant * FP_STRENGTHS + fp_strength(tr, det2)) * FP_COHERENCES
-                                + fp_coherence(tr, det2)) * 2 + changed;
-            __global const float *wt = table + bucket * FOOTPRINT_WEIGHTS;
-            const float3 chain = mix_channels(dst, luts, lin, i);
-            float3 pred = mid;
-            for (int j = 0; j < FP_N; ++j)
-                for (int k = 0; k < FP_N; ++k)
-                    pred += (win[r + j][o + k] - mid) * wt[j * FP_N + k];
-            pred += (chain - mid) * wt[FP_N * FP_N];
-            float3 lo = chain, hi = chain;  // no overshoot: the 3x3 window's range and the chain's colour
-            for (int j = r + FP_R - 1; j <= r + FP_R + 1; ++j)
-                for (int k = o + FP_R - 1; k <= o + FP_R + 1; ++k) {
-                    lo = fmin(lo, win[j][k]);
-                    hi = fmax(hi, win[j][k]);
-                }
-            const float3 c = fxaa_encode(luts, fmin(fmax(pred, lo), hi));
+        const float8 wc = GATHER8(table + FP_N * FP_N, base);
+        qr += (cr - mr) * wc;
+        qg += (cg - mg) * wc;
+        qb += (cb - mb) * wc;
+        float8 lr = cr, lg = cg, lb = cb, hr = cr, hg = cg, hb = cb;  // no overshoot: the 3x3 range and the chain
+        for (int j = r + FP_R - 1; j <= r + FP_R + 1; ++j)
+            for (int k = FP_R - 1; k <= FP_R + 1; ++k) {
+                const float8 tr_ = LOAD_FLOAT8_PRIVATE(&wr[j][k]), tg = LOAD_FLOAT8_PRIVATE(&wg[j][k]),
+                             tb = LOAD_FLOAT8_PRIVATE(&wb[j][k]);
+                lr = fmin(lr, tr_);
+                lg = fmin(lg, tg);
+                lb = fmin(lb, tb);
+                hr = fmax(hr, tr_);
+                hg = fmax(hg, tg);
+                hb = fmax(hb, tb);
+            }
+        float outr[FALLBACK_TILE], outg[FALLBACK_TILE], outb[FALLBACK_TILE];
+        int keep[FALLBACK_TILE];
+        STORE_FLOAT8_PRIVATE(fmin(fmax(qr, lr), hr), outr);
+        STORE_FLOAT8_PRIVATE(fmin(fmax(qg, lg), hg), outg);
+        STORE_FLOAT8_PRIVATE(fmin(fmax(qb, lb), hb), outb);
+        STORE_INT8_PRIVATE(flat & ~changed, keep);
+        for (int x = x0; x < x1; ++x) {
+            const int o = x - x0;
+            if (!((take[r] >> o) & 1u) || keep[o]) continue;
+            const float3 c = fxaa_encode(luts, (float3)(outr[o], outg[o], outb[o]));
+            const int i = IDX(x, y, w);
 #if CHANNELS == 1
             dst[i] = to_pixel(c.x);
 #else
