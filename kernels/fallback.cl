@@ -455,25 +455,33 @@ RARELY_CALLED void footprint_tile(__global const PIXEL_T *src, __global const fl
             pyy[j - 1][k - 1] = gy * gy;
             pxy[j - 1][k - 1] = gx * gy;
         }
+#ifdef FP_PROBE
+    { float s_ = 0.0f; for (int j = 0; j < FP_CC; ++j) for (int k = 0; k < FP_CC; ++k) s_ += pxx[j][k] + pyy[j][k] + pxy[j][k] + wr[j][k] + wg[j][k] + wb[j][k];
+      if (s_ != 12345.0f) return; }
+#endif
     for (int y = y0; y < y1; ++y) {
         const int r = y - y0;  // the row's windows: rows r .. r + 4 of the colours and of the products
         if (!take[r]) continue;
-        // per column: the 5 rows' sums of the products, and whether its 5 colours are one (-1: a lane's true)
+        // per column: the 5 rows' sums of the products, and whether its 5 colours are one (-1 where true); as two
+        // overlapping float8 of columns 0 .. 7 and 4 .. 11
         float cxx[FP_CC], cyy[FP_CC], cxy[FP_CC];
         int one[FP_CC];
-        for (int k = 0; k < FP_CC; ++k) {
-            float sxx = 0.0f, syy = 0.0f, sxy = 0.0f;
-            int same = 1;
+        for (int k = 0; k <= FP_CC - 8; k += FP_CC - 8) {
+            float8 sxx = 0.0f, syy = 0.0f, sxy = 0.0f;
+            int8 same = -1;
+            const float8 tr_ = LOAD_FLOAT8_PRIVATE(&wr[r][k]), tg = LOAD_FLOAT8_PRIVATE(&wg[r][k]),
+                         tb = LOAD_FLOAT8_PRIVATE(&wb[r][k]);
             for (int j = r; j < r + FP_N; ++j) {
-                sxx += pxx[j][k];
-                syy += pyy[j][k];
-                sxy += pxy[j][k];
-                same &= wr[j][k] == wr[r][k] && wg[j][k] == wg[r][k] && wb[j][k] == wb[r][k];
+                sxx += LOAD_FLOAT8_PRIVATE(&pxx[j][k]);
+                syy += LOAD_FLOAT8_PRIVATE(&pyy[j][k]);
+                sxy += LOAD_FLOAT8_PRIVATE(&pxy[j][k]);
+                same &= (LOAD_FLOAT8_PRIVATE(&wr[j][k]) == tr_) & (LOAD_FLOAT8_PRIVATE(&wg[j][k]) == tg)
+                        & (LOAD_FLOAT8_PRIVATE(&wb[j][k]) == tb);
             }
-            cxx[k] = sxx;
-            cyy[k] = syy;
-            cxy[k] = sxy;
-            one[k] = -same;
+            STORE_FLOAT8_PRIVATE(sxx, &cxx[k]);
+            STORE_FLOAT8_PRIVATE(syy, &cyy[k]);
+            STORE_FLOAT8_PRIVATE(sxy, &cxy[k]);
+            STORE_INT8_PRIVATE(same, &one[k]);
         }
         int chg[FALLBACK_TILE];
         float chr[FALLBACK_TILE], chgr[FALLBACK_TILE], chb[FALLBACK_TILE];  // the chain's colours
