@@ -455,10 +455,6 @@ RARELY_CALLED void footprint_tile(__global const PIXEL_T *src, __global const fl
             pyy[j - 1][k - 1] = gy * gy;
             pxy[j - 1][k - 1] = gx * gy;
         }
-#ifdef FP_PROBE
-    { float s_ = 0.0f; for (int j = 0; j < FP_CC; ++j) for (int k = 0; k < FP_CC; ++k) s_ += pxx[j][k] + pyy[j][k] + pxy[j][k] + wr[j][k] + wg[j][k] + wb[j][k];
-      if (s_ != 12345.0f) return; }
-#endif
     for (int y = y0; y < y1; ++y) {
         const int r = y - y0;  // the row's windows: rows r .. r + 4 of the colours and of the products
         if (!take[r]) continue;
