@@ -493,7 +493,7 @@ class _SequenceTemporal:
 
     def __call__(self, frame_in, frame_out, index: int):
         ff = self.runner.read_order.get(index)
-        number = index if ff is None or ff.number is None else ff.number
+        number = index if ff is None or ff.sequence_number is None else ff.sequence_number
         shape = (frame_in.shape, frame_in.dtype)
         if self._prev is not None:
             label = ff.label if ff is not None else f"frame {index}"
@@ -508,7 +508,7 @@ class _SequenceTemporal:
 
     def warm(self, frame_in, frame_out, ff) -> None:
         """A frame before the first one to write (--resume): through the stage, output discarded."""
-        number = ff.number if ff.number is not None else (self._prev[0] + 1 if self._prev else 0)
+        number = ff.sequence_number if ff.sequence_number is not None else (self._prev[0] + 1 if self._prev else 0)
         self._prev = (number, (frame_in.shape, frame_in.dtype))
         self.stage(frame_in, frame_out, number)
 
@@ -608,14 +608,15 @@ class _ImageJob(_Job):
             skipped = set(id(ff) for ff in existing)
             first = next((i for i, ff in enumerate(self.plan) if id(ff) not in skipped), None)
             # the temporal stage's warm-up: the skipped frames just before the first one to write,
-            # consecutive in number (issue 16: --resume warms up from the K frames before it)
+            # consecutive in number or, in a folder, in name order (issue 16: --resume warms up from the K frames
+            # before it)
             warm: list = []
             if first is not None:
                 for ff in reversed(self.plan[:first]):
                     nxt = warm[0] if warm else self.plan[first]
-                    if id(ff) not in skipped or ff.number is None or nxt.number is None \
-                            or ff.number != nxt.number - 1:
-                        break   # folders (no numbers) start anew: their positions restart at 0
+                    if id(ff) not in skipped or ff.sequence_number is None or nxt.sequence_number is None \
+                            or ff.sequence_number != nxt.sequence_number - 1:
+                        break
                     warm.insert(0, ff)
             self.warm_up = warm
             self.plan = [ff for ff in self.plan if id(ff) not in skipped]

@@ -141,7 +141,7 @@ def filter_chunk(chunk: Chunk, filter_kwargs: dict, overwrite: bool, strict: boo
 def _with_temporal(stage, files: list[FrameFile], warm: set, report: Report, strict: bool, like, write: set,
                    sink):
     """(temporal hook, source, sink) for a chunk read with its warm-up (`warm`): the stage (a WarmedStage)
-    is called with the frame number (a folder: the position read), as on one machine
+    is called with the frame number (a folder: the file's position in name order), as on one machine
     (cli/filter_cmd._SequenceTemporal), and only the frames in `write` reach the sink."""
     read_order: dict[int, FrameFile] = {}
 
@@ -156,7 +156,7 @@ def _with_temporal(stage, files: list[FrameFile], warm: set, report: Report, str
 
     def hook(frame_in, frame_out, index: int):
         ff = read_order.pop(index, None)
-        number = index if ff is None or ff.number is None else ff.number
+        number = index if ff is None or ff.sequence_number is None else ff.sequence_number
         return stage(frame_in, frame_out, number, ff in warm)
 
     def only_written(item) -> None:

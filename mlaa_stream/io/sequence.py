@@ -25,11 +25,18 @@ _FATAL_ERRNOS = {errno.ENOSPC, errno.EDQUOT, errno.EROFS}
 
 @dataclass(frozen=True)
 class FrameFile:
-    """One input file and its output; `number` is the frame number for patterns, else None."""
+    """One input file and its output; `number` is the frame number for patterns, else None; `position` the file's
+    place in a folder's name order (the temporal stage's frame number there), else None."""
 
     src: str
     dst: str
     number: int | None = None
+    position: int | None = None
+
+    @property
+    def sequence_number(self) -> int | None:
+        """The frame's number in its sequence: `number`, else `position`."""
+        return self.number if self.number is not None else self.position
 
     @property
     def label(self) -> str:
@@ -256,7 +263,8 @@ def image_sink(report: Report, *, overwrite: bool, strict: bool) -> Callable[[It
 
 
 def plan_images(src_paths: list[str], output: str, numbers: list[int | None] | None = None) -> list[FrameFile]:
-    """Pair each input with its output path."""
-    numbers = numbers or [None] * len(src_paths)
+    """Pair each input with its output path; without numbers (a folder) each file gets its position in the list."""
+    if numbers is None:
+        return [FrameFile(src, output_path(src, output, None), None, k) for k, src in enumerate(src_paths)]
     return [FrameFile(src, output_path(src, output, n), n) for src, n in zip(src_paths, numbers)]
 
