@@ -97,55 +97,48 @@ def test_single_image_is_spatial_only(tmp_path):
     assert "spatial antialiasing only" in res.output and (tmp_path / "b.png").exists()
 
 
-def test_sequence_resume_warms_up_the_temporal_stage(tmp_path):
-    """--resume (issue 16): the frames before the first one to write go through the stage first, so the
-    written frames get the models and rings of an uninterrupted run (without the warm-up the first one
-    is a reset with a ring of 1) and --stats lists only the written frames."""
-    from mlaa_stream.io.images import write_image
-    frames = _pan_frames(7)
-    for n, f in enumerate(frames, start=1):
-        write_image(str(tmp_path / f"s.{n:04d}.png"), f)
-    out = tmp_path / "o"
-    args = [str(tmp_path / "s.%04d.png"), "-o", str(out / "s.%04d.png"), "--temporal", "--temporal-frames", "4"]
-    full = tmp_path / "full.csv"
+def _resume_after_losing(tmp_path, args: list[str], lost: list[Path], indices: list[str]) -> dict:
+    """Run `args` whole, remove the outputs `lost`, run again with --resume: the stage must warm up on the 4 frames
+    before them, and the written frames (stats `indices`) get the models and rings of the whole run (without the
+    warm-up the first one is a reset with a ring of 1), --stats listing only them. Returns the lost outputs'
+    pixels from the whole run."""
+    from mlaa_stream.io.images import read_image
+    full, stats = tmp_path / "full.csv", tmp_path / "stats.csv"
     res = CliRunner().invoke(main, args + ["--stats", str(full)])
     assert res.exit_code == 0, res.output
-    for n in (6, 7):
-        (out / f"s.{n:04d}.png").unlink()
-    stats = tmp_path / "stats.csv"
+    whole = {p: read_image(str(p)).pixels for p in lost}
+    for p in lost:
+        p.unlink()
     res = CliRunner().invoke(main, args + ["--resume", "--stats", str(stats), "-v"])
     assert res.exit_code == 0, res.output
     assert "temporal history warmed up from 4 frames before" in res.output
     rows = list(csv.DictReader(stats.open()))
-    assert [r["index"] for r in rows] == ["6", "7"]
-    expected = [r for r in csv.DictReader(full.open()) if r["index"] in ("6", "7")]
+    assert [r["index"] for r in rows] == indices
+    expected = [r for r in csv.DictReader(full.open()) if r["index"] in indices]
     assert [(r["model"], r["ring"]) for r in rows] == [(r["model"], r["ring"]) for r in expected]
     assert rows[0]["model"] != "reset"
+    return whole
+
+
+def test_sequence_resume_warms_up_the_temporal_stage(tmp_path):
+    """--resume (issue 16) on a numbered sequence: the frames numbered before the first one to write."""
+    from mlaa_stream.io.images import write_image
+    for n, f in enumerate(_pan_frames(7), start=1):
+        write_image(str(tmp_path / f"s.{n:04d}.png"), f)
+    out = tmp_path / "o"
+    args = [str(tmp_path / "s.%04d.png"), "-o", str(out / "s.%04d.png"), "--temporal", "--temporal-frames", "4"]
+    _resume_after_losing(tmp_path, args, [out / f"s.{n:04d}.png" for n in (6, 7)], ["6", "7"])
 
 
 def test_folder_resume_warms_up_the_temporal_stage(tmp_path):
-    """A folder's frames are in name order: --resume warms the stage up on the files before the first one to
-    write, and the written frames come out bit for bit as in an uninterrupted run."""
+    """A folder's files in name order (their positions are the frame numbers): the written frames come out bit
+    for bit as in the whole run."""
     from mlaa_stream.io.images import read_image, write_image
     src, out = tmp_path / "in", tmp_path / "out"
     src.mkdir()
     for i, f in enumerate(_pan_frames(7)):
         write_image(str(src / f"shot_{chr(ord('a') + i)}.png"), f)
     args = [str(src), "-o", str(out), "--temporal", "--temporal-frames", "4"]
-    full = tmp_path / "full.csv"
-    res = CliRunner().invoke(main, args + ["--stats", str(full)])
-    assert res.exit_code == 0, res.output
-    whole = {n: read_image(str(out / f"shot_{n}.png")).pixels for n in "fg"}
-    for n in "fg":
-        (out / f"shot_{n}.png").unlink()
-    stats = tmp_path / "stats.csv"
-    res = CliRunner().invoke(main, args + ["--resume", "--stats", str(stats), "-v"])
-    assert res.exit_code == 0, res.output
-    assert "temporal history warmed up from 4 frames before" in res.output
-    rows = list(csv.DictReader(stats.open()))
-    assert [r["index"] for r in rows] == ["5", "6"]   # positions in name order, as in the whole run
-    expected = [r for r in csv.DictReader(full.open()) if r["index"] in ("5", "6")]
-    assert [(r["model"], r["ring"]) for r in rows] == [(r["model"], r["ring"]) for r in expected]
-    assert rows[0]["model"] != "reset"
-    for n in "fg":
-        np.testing.assert_array_equal(read_image(str(out / f"shot_{n}.png")).pixels, whole[n])
+    whole = _resume_after_losing(tmp_path, args, [out / f"shot_{n}.png" for n in "fg"], ["5", "6"])
+    for p, pixels in whole.items():
+        np.testing.assert_array_equal(read_image(str(p)).pixels, pixels)
