@@ -507,9 +507,10 @@ RARELY_CALLED void footprint_tile(__global const PIXEL_T *src, __global const fl
         const float8 u = sxx - syy, v = 2.0f * sxy, tr = sxx + syy, det2 = u * u + v * v;
         const float8 au = fabs(u), av = fabs(v);
         // octant of the doubled angle: the gradient's orientation in eight bins of pi / 8
-        const int8 octant = select(select(select((int8)5, (int8)4, av < au), select((int8)7, (int8)6, av > au), u >= 0.0f),
-                                   select(select((int8)3, (int8)2, av > au), select((int8)1, (int8)0, av < au), u > 0.0f),
-                                   v >= 0.0f);
+        // (select(a, b, c): b where c, else a)
+        const int8 lower = select(select((int8)5, (int8)4, av < au), select((int8)7, (int8)6, av > au), u >= 0.0f);
+        const int8 upper = select(select((int8)3, (int8)2, av > au), select((int8)1, (int8)0, av < au), u > 0.0f);
+        const int8 octant = select(lower, upper, v >= 0.0f);
         const int8 bucket = ((octant * FP_STRENGTHS + fp_strength(tr, det2)) * FP_COHERENCES
                              + fp_coherence(tr, det2)) * 2 - changed;
         const int8 base = bucket * FOOTPRINT_WEIGHTS;
