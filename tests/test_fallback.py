@@ -119,6 +119,20 @@ def test_kernel_matches_reference(mode, dtype, channels, bgr):
         np.testing.assert_array_equal(got, want)
 
 
+@pytest.mark.parametrize("mode", ["auto", "everywhere"])
+def test_kernel_matches_reference_on_partial_tiles(mode):
+    """Exact on a frame whose width and height are not multiples of FALLBACK_TILE: the last tiles of each row and
+    column hold fewer pixels (footprint_tile computes their missing lanes from clamped reads and stores nothing
+    there)."""
+    frame = np.ascontiguousarray(render_beside_art(12)[:69, ::-1][:, 3:])  # 197 wide, the render on the right
+    with Filter(fallback=mode) as f, Filter(fallback="off") as g:
+        got, passes = f.process(frame), g.intermediates(frame)
+    want = fallback_reference(frame, passes["out"], passes["edges"], passes["hdist"], passes["vdist"],
+                              everywhere=mode == "everywhere")
+    assert np.any(got[:, -5:] != passes["out"][:, -5:]), "the last, partial tile column must take the pass"
+    np.testing.assert_array_equal(got, want)
+
+
 def test_only_edge_pixels_change_outside_render_regions_and_the_formulas_hold():
     """Known answer: without the footprint table the pass changes only pixels that border an MLAA edge; a pixel
     the MLAA passes left takes FALLBACK_WEIGHT of FXAA's colour from the source's, one they changed FALLBACK_MIX
