@@ -11,7 +11,7 @@ import pyopencl as cl
 from mlaa_stream.device.colour import device_luts, lut_read
 from mlaa_stream.device.context import Context
 from mlaa_stream.device.formats import LUT_SIZE, FrameFormat, frame_format
-from mlaa_stream.spatial.footprint import BUCKETS, WEIGHTS, footprint_reference, load_table
+from mlaa_stream.spatial.footprint import BUCKETS, WEIGHTS, footprint_reference, table_of
 from mlaa_stream.spatial.fxaa import _MAX, fxaa_defines, fxaa_mix_reference, luma_reference
 
 SEGMENT = 64  # pixels of a tile band per work item of count_changed (a multiple of FALLBACK_TILE)
@@ -228,7 +228,7 @@ def fallback_reference(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray,
     """What kernels/fallback.cl makes of `mlaa_out`, the MLAA passes' output of `src` with edge buffer
     `edges` ((h, w) uint8, EDGE_BOTTOM 1 | EDGE_RIGHT 2) and line distances `hdist`, `vdist`, in numpy.
     `table`: the footprint table ("default": the shipped one; None: none)."""
-    table = load_table() if isinstance(table, str) else table
+    table = table_of(table)
     fmt, a, mlaa, borders, changed, rgb = _frame_masks(src, mlaa_out, edges, bgr)
     f32 = np.float32
     h, w = fmt.height, fmt.width

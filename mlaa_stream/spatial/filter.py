@@ -287,15 +287,8 @@ class Filter:
         if fallback not in FALLBACK_MODES:
             raise ValueError(f"fallback: expected one of {', '.join(FALLBACK_MODES)}, got {fallback!r}")
         self.fallback = "off" if self.fast else fallback
-        if isinstance(footprint_table, str):
-            if footprint_table != "default":
-                raise ValueError(f"footprint_table: expected 'default', None or an array, got {footprint_table!r}")
-            from mlaa_stream.spatial.footprint import load_table
-            footprint_table = load_table()
-        elif footprint_table is not None:
-            from mlaa_stream.spatial.footprint import as_table
-            footprint_table = as_table(footprint_table)
-        self.footprint_table = footprint_table
+        from mlaa_stream.spatial.footprint import table_of
+        self.footprint_table = table_of(footprint_table)
         self.context = context or default_context(device)
         dev = self.context.device
         props = cl.command_queue_properties.OUT_OF_ORDER_EXEC_MODE_ENABLE

@@ -62,6 +62,16 @@ def load_table() -> np.ndarray:
         return as_table(np.load(f))
 
 
+def table_of(spec: np.ndarray | str | None) -> np.ndarray | None:
+    """A table argument (Filter's `footprint_table`, fallback_reference's `table`) resolved: "default" the shipped
+    table, None none, an array checked by as_table."""
+    if isinstance(spec, str):
+        if spec != "default":
+            raise ValueError(f"footprint_table: expected 'default', None or an array, got {spec!r}")
+        return load_table()
+    return None if spec is None else as_table(spec)
+
+
 def identity_table() -> np.ndarray:
     """A table that keeps the chain's colour everywhere (the pass without the footprint table)."""
     t = np.zeros((BUCKETS, WEIGHTS), np.float32)
