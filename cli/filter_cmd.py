@@ -271,6 +271,10 @@ def _job_for(kind: str, output: str) -> type:
                    "moving edges of render regions (1-spp 3D renders); tss: temporal supersampling "
                    "only; blend: the reprojection blend everywhere (seed 002); tss+blend: both "
                    "everywhere (docs/temporal.md).")
+@click.option("--lookahead", type=click.IntRange(0, 8), default=0, show_default=True, metavar="N",
+              help="Temporal supersampling also reads the N frames after each one (implies --temporal; "
+                   "each output waits for N more frames): steadier pans from the first frame on "
+                   "(docs/temporal.md, \"Look-ahead\"). Not with --cluster yet.")
 @click.option("--temporal-mode", type=click.Choice(["adaptive", "dense", "global", "static"]),
               default="adaptive", show_default=True,
               help="Motion model: adaptive picks per frame the cheapest that explains it "
@@ -295,7 +299,7 @@ def filter_command(ctx: click.Context, input_path: str, output: str, overwrite: 
                    rate: float, video_backend: str,
                    overlay: str | None, cluster: str | None, chunk_frames: int, progress_path: str | None,
                    in_flight: int, temporal: bool | None,
-                   temporal_frames: int | None, temporal_method: str, temporal_mode: str,
+                   temporal_frames: int | None, temporal_method: str, lookahead: int, temporal_mode: str,
                    temporal_k: float | None, stats_path: str | None, show: str | None,
                    device: str | None, verbose: int, quiet: bool) -> None:
     """Remove jaggies from an image, a folder of images, a frame sequence or a video.
@@ -316,7 +320,7 @@ def filter_command(ctx: click.Context, input_path: str, output: str, overwrite: 
                            overlay=overlay, in_flight=in_flight, device=device, progress_path=progress_path,
                            cluster=cluster, chunk_frames=chunk_frames,
                            temporal=TemporalOptions(temporal, temporal_mode, temporal_k, stats_path, show,
-                                                    temporal_frames, temporal_method))
+                                                    temporal_frames, temporal_method, lookahead))
     except Terminated as exc:
         con.error(f"terminated by {exc}; complete outputs are kept, the one in progress was removed")
         code = 128 + exc.signum
@@ -369,17 +373,25 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
         post_hooks = _load_post_hooks(overlay, device)
         if temporal.wanted and kind == "image":
             con.info("a single image: spatial antialiasing only (temporal needs a sequence)")
-            temporal.enabled, temporal.show, temporal.stats_path = False, None, None
+            temporal.enabled, temporal.show, temporal.stats_path, temporal.lookahead = False, None, None, 0
         if temporal.spec() is not None and not kwargs.get("fast"):
             from mlaa_stream.temporal.methods import needs_regions
             kwargs["keep_regions"] = needs_regions(temporal.method)  # the stage reads the filter's regions
         if cluster is not None and (temporal.show or temporal.stats_path or show_regions):
             raise Usage("--stats and --show are not available with --cluster (each worker has its own stage)")
+        if temporal.lookahead and temporal.spec() is not None:
+            if temporal.method == "blend":
+                raise Usage("--lookahead needs a --temporal-method with TSS (auto, tss, tss+blend): the blend "
+                            "reads the past only")
+            if cluster is not None:
+                raise Usage("--lookahead is not available with --cluster yet (a chunk would need the frames after "
+                            "its end)")
         job = _job_for(kind, output)
         runner = job(input_path, output, kind, con, overwrite=overwrite, resume=resume,
                      frames=frames, codec=codec, container=container, audio=audio,
                      progress_path=progress_path, crf=crf, start=start, end=end, cluster=cluster,
                      chunk_frames=chunk_frames, temporal_spec=temporal.spec() if cluster else None,
+                     lookahead=temporal.lookahead if temporal.spec() is not None else 0,
                      encoder_preset=encoder_preset, pix_fmt=pix_fmt, rate=rate,
                      video_backend=video_backend, filter_kwargs=kwargs)
         runner.prepare()
@@ -419,7 +431,7 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
                 code = runner.run(filt, post_hooks, in_flight, times, stage)
         finally:
             if stage is not None:
-                temporal.finish(getattr(stage, "stage", stage), con)
+                temporal.finish(getattr(stage, "stage", stage), con, skip=getattr(runner, "read_ahead_numbers", set()))
     finally:
         runner.abort()  # no-op after a commit; removes a video in progress on errors and Ctrl-C
         runner.close_progress()
@@ -446,10 +458,11 @@ class TemporalOptions:
     show: str | None = None
     frames: int | None = None
     method: str = "auto"
+    lookahead: int = 0
 
     @property
     def wanted(self) -> bool:
-        return bool(self.enabled or self.show or self.stats_path)
+        return bool(self.enabled or self.show or self.stats_path or self.lookahead)
 
     def stage(self, filt):
         """The temporal stage sharing the filter's OpenCL context, or None when off."""
@@ -458,14 +471,15 @@ class TemporalOptions:
 
     def spec(self):
         """The settings as a TemporalSpec (what the cluster's workers get), or None when off."""
-        if self.enabled is False or (self.enabled is None and not (self.show or self.stats_path)):
-            return None  # off unless asked for; --show history and --stats imply it
+        if self.enabled is False or (self.enabled is None and not (self.show or self.stats_path or self.lookahead)):
+            return None  # off unless asked for; --show history, --stats and --lookahead imply it
         from mlaa_stream.cluster.temporal import TemporalSpec
-        return TemporalSpec(self.method, self.frames, self.mode, self.k)
+        return TemporalSpec(self.method, self.frames, self.mode, self.k, self.lookahead)
 
-    def finish(self, stage, con: "Console") -> None:
-        """Write --stats and say which motion models were used."""
-        stats = list(stage.stats)
+    def finish(self, stage, con: "Console", skip: set = frozenset()) -> None:
+        """Write --stats and say which motion models were used; `skip`: frame numbers read only as look-ahead
+        frames (--resume), not written."""
+        stats = [row for row in stage.stats if row.get("index") not in skip]
         stage.close()
         if not stats:
             return
@@ -489,11 +503,21 @@ class _SequenceTemporal:
 
     def __init__(self, stage, runner: "_ImageJob", con: Console):
         self.stage, self.runner, self.con = stage, runner, con
+        self.lookahead = getattr(stage, "lookahead", 0)   # the pipeline hands in that many frames ahead
         self._prev: tuple | None = None   # (number, shape) of the previous frame
 
-    def __call__(self, frame_in, frame_out, index: int):
+    def _number(self, position: int) -> int:
+        ff = self.runner.read_order.get(position)
+        return position if ff is None or ff.sequence_number is None else ff.sequence_number
+
+    def __call__(self, frame_in, frame_out, index: int, future=()):
         ff = self.runner.read_order.get(index)
-        number = index if ff is None or ff.sequence_number is None else ff.sequence_number
+        number = self._number(index)
+        # the look-ahead window ends before a gap in the numbering (the stage resets there)
+        n = 0
+        while n < len(future) and self._number(index + 1 + n) == number + 1 + n:
+            n += 1
+        future = list(future)[:n]
         shape = (frame_in.shape, frame_in.dtype)
         if self._prev is not None:
             label = ff.label if ff is not None else f"frame {index}"
@@ -504,7 +528,8 @@ class _SequenceTemporal:
                 self.con.info(f"{label}: temporal history reset (the frame size or type changed)")
         self._prev = (number, shape)
         self.runner.read_order.pop(index, None)
-        return self.stage(frame_in, frame_out, number)
+        return self.stage(frame_in, frame_out, number, future=future) if self.lookahead else \
+            self.stage(frame_in, frame_out, number)
 
     def warm(self, frame_in, frame_out, ff) -> None:
         """A frame before the first one to write (--resume): through the stage, output discarded."""
@@ -619,7 +644,8 @@ class _ImageJob(_Job):
                         break
                     warm.insert(0, ff)
             self.warm_up = warm
-            self.plan = [ff for ff in self.plan if id(ff) not in skipped]
+            whole, self.plan = self.plan, [ff for ff in self.plan if id(ff) not in skipped]
+            self._read_ahead_of(whole, skipped)
         elif existing and not o["overwrite"]:
             more = f" (and {len(existing) - 1} more)" if len(existing) > 1 else ""
             raise Usage(f"{existing[0].dst}: exists{more}; use --overwrite to replace "
@@ -628,6 +654,25 @@ class _ImageJob(_Job):
             if not os.path.isdir(d):
                 raise Failed(f"{d}: the output folder does not exist")
             _check_writable(d)
+
+    def _read_ahead_of(self, whole: list, skipped: set) -> None:
+        """--resume with --lookahead N: after each file to write, the (skipped) files that follow it, up to N and
+        consecutive, are read too but not written (`read_ahead`), so that its output reads the frames ahead an
+        uninterrupted run read."""
+        n = self.opts.get("lookahead", 0)
+        extra: list = []
+        for i, ff in enumerate(whole):
+            if id(ff) in skipped:
+                continue
+            for nxt, prev in zip(whole[i + 1:i + 1 + n], whole[i:i + n]):
+                if id(nxt) not in skipped or prev.sequence_number is None or nxt.sequence_number is None \
+                        or nxt.sequence_number != prev.sequence_number + 1:
+                    break
+                extra.append(nxt)
+        ids = {id(ff) for ff in extra}
+        self.read_ahead = ids
+        self.read_ahead_numbers = {ff.sequence_number for ff in extra}
+        self.read_plan = [ff for ff in whole if id(ff) not in skipped or id(ff) in ids]
 
     def _warm_up(self, filt, temporal) -> None:
         _warm_up_images(self, filt, temporal)
@@ -673,15 +718,21 @@ class _ImageJob(_Job):
         if self.opts.get("cluster"):
             return self._run_on_cluster()
         filt = FilterSet(encoded, make_linear)
-        progress = self._progress(len(self.plan))
+        read_plan = getattr(self, "read_plan", self.plan) if temporal is not None else self.plan
+        read_ahead = getattr(self, "read_ahead", set())
+        progress = self._progress(len(read_plan))
         say = self.report.say
         self.report.say = lambda msg: (progress.clear(), say(msg))
-        sink = image_sink(self.report, overwrite=self.opts["overwrite"], strict=self.strict)
+        write = image_sink(self.report, overwrite=self.opts["overwrite"], strict=self.strict)
+
+        def sink(item) -> None:
+            if id(item.meta[0]) not in read_ahead:   # a look-ahead frame of --resume: read, not written
+                write(item)
         self.read_order: dict = {}
 
         def source():
             """image_source, remembering which file each position is (for the temporal stage)."""
-            inner = image_source(self.plan, self.report, strict=self.strict)
+            inner = image_source(read_plan, self.report, strict=self.strict)
             try:
                 for position, item in enumerate(inner):
                     self.read_order[position] = item.meta[0]

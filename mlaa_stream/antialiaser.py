@@ -37,13 +37,16 @@ class Antialiaser:
     last `temporal_frames` frames accumulated along the motion; its ring is kept between calls) and the
     reprojection blend on moving edges of render regions; "tss", "blend" and "tss+blend" are the other
     methods of mlaa_stream.temporal.methods; or pass any `(frame_in, frame_filtered, index) -> frame` stage.
+    `lookahead=N` (files, not live capture): in `stream`, temporal supersampling also reads the N frames after
+    each one (each output then waits for N more frames to be read); `aa(frame)` reads the past only.
     `post_hooks` is a list of `(frame, index) -> frame` callables (overlays), applied after it.
     """
 
     def __init__(self, device: str | int | None = None, *, preset: str | None = None,
                  threshold: float | None = None, metric: str | None = None, linear: bool | None = None,
                  reconstruct: bool | None = None, temporal: Temporal | bool | str | None = None,
-                 temporal_frames: int | None = None, post_hooks: Sequence[PostHook] = (), in_flight: int = 2):
+                 temporal_frames: int | None = None, post_hooks: Sequence[PostHook] = (), in_flight: int = 2,
+                 lookahead: int = 0):
         if preset is not None and preset not in PRESETS:
             raise ValueError(f"expected a preset among {', '.join(sorted(PRESETS))}, got {preset!r}")
         kwargs = dict(PRESETS.get(preset or "default", {}))
@@ -61,7 +64,9 @@ class Antialiaser:
         self.device_name: str = self._filter.device_name
         if isinstance(method, str):
             temporal = make_stage(method, self._filter.context, bgr=True, frames=temporal_frames,
-                                  regions_from=self._filter)
+                                  regions_from=self._filter, lookahead=lookahead)
+        elif lookahead:
+            raise ValueError("lookahead: needs temporal=True or one of the temporal methods with TSS")
         self.temporal = temporal or None
         self.post_hooks = list(post_hooks)
         self.in_flight = in_flight
@@ -91,7 +96,10 @@ class Antialiaser:
         temporal = None
         if self.temporal is not None:
             user_temporal = self.temporal
-            temporal = lambda a, b, i: user_temporal(a, b, base + i)  # noqa: E731
+
+            def temporal(a, b, i, **future):
+                return user_temporal(a, b, base + i, **future)
+            temporal.lookahead = getattr(user_temporal, "lookahead", 0)   # the pipeline reads it
         hooks = [(lambda h: (lambda f, i: h(f, base + i)))(h) for h in self.post_hooks]
         for item in stream_items(frames, self._filter, in_flight=self.in_flight,
                                  temporal=temporal, post_hooks=hooks):

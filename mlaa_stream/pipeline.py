@@ -164,6 +164,9 @@ def stream_items(source: Iterable, filt: FrameFilter, *, in_flight: int = 2, que
     """Filter the frames of `source` (ndarrays or Items) in a reader thread + this thread, in order.
 
     `in_flight` frames are submitted before the oldest one's result is taken (1 = serialized).
+    A temporal stage with a `lookahead` attribute N > 0 is called as `temporal(frame_in, frame_filtered,
+    index, future=[raw frames index + 1 .. index + N])` (fewer at the end of the stream): a frame waits,
+    filtered, until the N frames after it are read.
     Raises PipelineError after yielding every frame before the failing one.
     """
     if in_flight < 1:
@@ -172,8 +175,11 @@ def stream_items(source: Iterable, filt: FrameFilter, *, in_flight: int = 2, que
     stop = threading.Event()
     q: queue.Queue = queue.Queue(maxsize=max(1, queue_size))
     reader = _Reader(source, q, stop, times)
-    pending: deque = deque()
+    pending: deque = deque()   # (item, pending result): submitted to the filter
+    ready: deque = deque()     # (item, filtered frame): collected, waiting for the frames after it (look-ahead)
+    ahead = max(0, int(getattr(temporal, "lookahead", 0) or 0)) if temporal is not None else 0
     upstream: _Failure | None = None  # read or submit failure: frames before it still come out
+    lost: _Failure | None = None  # a submitted frame's result failed: frames before it still come out
     failure: _Failure | None = None  # failure while finishing a frame: nothing after it comes out
     reader.start()
     try:
@@ -192,44 +198,71 @@ def stream_items(source: Iterable, filt: FrameFilter, *, in_flight: int = 2, que
                 upstream = _Failure("filter", obj.index, exc, obj.meta)
                 break
             times.submit += time.perf_counter() - t0
-            while len(pending) >= in_flight and failure is None:
-                item, failure = _finish(pending.popleft(), temporal, post_hooks, times)
-                if failure is None:
-                    yield item
-            if failure is not None:
+            while len(pending) >= in_flight and failure is None and lost is None:
+                lost = _collect(pending.popleft(), ready, times)
+                while ready and failure is None and lost is None and len(ready) - 1 + len(pending) >= ahead:
+                    item, failure = _finish(ready, pending, ahead, temporal, post_hooks, times)
+                    if failure is None:
+                        yield item
+            if failure is not None or lost is not None:
                 break
         stop.set()  # no more input is needed: let the reader go while the last frames finish
-        while pending and failure is None:
-            item, failure = _finish(pending.popleft(), temporal, post_hooks, times)
+        while pending and failure is None and lost is None:
+            lost = _collect(pending.popleft(), ready, times)
+        if lost is not None:
+            _settle(pending)   # frames after one the filter failed on: neither written nor read ahead
+        while ready and failure is None:   # the frames before a read or filter failure still come out
+            item, failure = _finish(ready, pending, ahead, temporal, post_hooks, times)
             if failure is None:
                 yield item
-        failure = failure or upstream
+        failure = failure or lost or upstream
         if failure is not None:
             raise PipelineError(failure.stage, failure.index, failure.exc, failure.meta) from failure.exc
     finally:
         stop.set()
         _drain(q)
         reader.join()
-        while pending:  # frames submitted but never collected: let the device finish with them
-            _item, _pending = pending.popleft()
-            try:
-                _pending.result()
-            except Exception:  # noqa: BLE001 - already unwinding from the error that matters
-                pass
+        _settle(pending)
 
 
-def _finish(entry: tuple, temporal: Temporal | None, post_hooks: Sequence[PostHook],
-            times: StageTimes) -> tuple[Item, _Failure | None]:
-    """Collect a submitted frame, then run the temporal stage and the post hooks on it."""
+def _settle(pending: deque) -> None:
+    """Frames submitted but never collected: let the device finish with them, their errors dropped."""
+    while pending:
+        _item, result = pending.popleft()
+        try:
+            result.result()
+        except Exception:  # noqa: BLE001 - already unwinding from the error that matters
+            pass
+
+
+def _collect(entry: tuple, ready: deque, times: StageTimes) -> _Failure | None:
+    """Wait for a submitted frame's filtered result and queue it for the temporal stage and the hooks."""
     item, pending = entry
-    stage = "filter"
     try:
         t0 = time.perf_counter()
         out = pending.result()
+        times.wait += time.perf_counter() - t0
+    except Exception as exc:
+        return _Failure("filter", item.index, exc, item.meta)
+    ready.append((item, out))
+    return None
+
+
+def _finish(ready: deque, pending: deque, ahead: int, temporal: Temporal | None, post_hooks: Sequence[PostHook],
+            times: StageTimes) -> tuple[Item, _Failure | None]:
+    """Run the temporal stage (with the raw frames of the next `ahead` items read) and the post hooks on the
+    oldest collected frame."""
+    item, out = ready.popleft()
+    stage = "temporal"
+    try:
         t1 = time.perf_counter()
-        times.wait += t1 - t0
-        if temporal is not None:
-            stage = "temporal"
+        if temporal is not None and ahead:
+            later = [it.frame for it, _ in ready] + [it.frame for it, _ in pending]
+            out = temporal(item.frame, out, item.index, future=later[:ahead])
+            t2 = time.perf_counter()
+            times.temporal += t2 - t1
+            t1 = t2
+        elif temporal is not None:
             out = temporal(item.frame, out, item.index)
             t2 = time.perf_counter()
             times.temporal += t2 - t1

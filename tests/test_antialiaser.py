@@ -157,3 +157,21 @@ def test_temporal_supersampling_on_a_pan_and_blend_mode():
         assert "history_weight_mean" in aa.temporal.stats[0]
     with pytest.raises(ValueError, match="temporal: expected"):
         Antialiaser(temporal="nonesuch")
+
+
+def test_stream_with_lookahead_reads_the_frames_ahead():
+    """Antialiaser(temporal="tss", lookahead=2).stream gives what the filter and a TSSStage reading two frames
+    ahead give, bit for bit; aa(frame) reads the past only."""
+    from mlaa_stream.bench.temporal import scene_pan
+    from mlaa_stream.temporal.tss import TSSStage
+    frames = [np.ascontiguousarray(f[..., ::-1]) for f in scene_pan(5, 240, 136).inputs]   # BGR
+    with Antialiaser(temporal="tss", lookahead=2) as aa:
+        outs = list(aa.stream(frames))
+        assert [r["lookahead"] for r in aa.temporal.stats] == [2, 2, 2, 1, 0]
+        with TSSStage(bgr=True, lookahead=2, context=aa._filter.context) as stage:
+            expected = [stage(f, aa._filter.process(f), i, future=frames[i + 1:i + 3]) for i, f in enumerate(frames)]
+        aa(frames[0])
+        assert aa.temporal.stats[-1]["lookahead"] == 0
+    assert all(np.array_equal(a, b) for a, b in zip(outs, expected))
+    with pytest.raises(ValueError, match="lookahead"):
+        Antialiaser(lookahead=2)

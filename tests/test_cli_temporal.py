@@ -142,3 +142,62 @@ def test_folder_resume_warms_up_the_temporal_stage(tmp_path):
     whole = _resume_after_losing(tmp_path, args, [out / f"shot_{n}.png" for n in "fg"], ["5", "6"])
     for p, pixels in whole.items():
         np.testing.assert_array_equal(read_image(str(p)).pixels, pixels)
+
+
+def _wide_pan(n: int) -> list[np.ndarray]:
+    """A pan wide enough for one global translation per frame (160 x 90 is measured as dense motion)."""
+    from mlaa_stream.bench.temporal import scene_pan
+    return list(scene_pan(n, 240, 136).inputs)
+
+
+def test_lookahead_on_a_sequence_stops_at_gaps(tmp_path):
+    """--lookahead 2 (issue 16) on a numbered sequence with a gap after 3: frames 1-3 read 2, 1, 0 frames ahead
+    (the window ends at the gap, where the stage resets), 5-7 again 2, 1, 0; the outputs differ from the causal
+    run's on the frames that read ahead."""
+    from mlaa_stream.io.images import read_image, write_image
+    for n, f in zip((1, 2, 3, 5, 6, 7), _wide_pan(6)):
+        write_image(str(tmp_path / f"s.{n:04d}.png"), f)
+    runs = {}
+    for la in ("0", "2"):
+        stats = tmp_path / f"stats{la}.csv"
+        res = CliRunner().invoke(main, [str(tmp_path / "s.%04d.png"), "-o", str(tmp_path / la / "s.%04d.png"),
+                                        "--temporal-method", "tss", "--lookahead", la, "--stats", str(stats), "-q"])
+        assert res.exit_code == 0, res.output
+        runs[la] = list(csv.DictReader(stats.open()))
+    assert [r["index"] for r in runs["2"]] == ["1", "2", "3", "5", "6", "7"]
+    assert [r["lookahead"] for r in runs["2"]] == ["2", "1", "0", "2", "1", "0"]
+    assert {r["lookahead"] for r in runs["0"]} == {"0"}
+    changed = [not np.array_equal(read_image(str(tmp_path / "0" / f"s.{n:04d}.png")).pixels,
+                                  read_image(str(tmp_path / "2" / f"s.{n:04d}.png")).pixels) for n in (1, 2, 5, 6)]
+    assert all(changed)
+
+
+def test_lookahead_folder_resume_is_bit_for_bit(tmp_path):
+    """--resume with --lookahead: the written frames come out as in the whole run (the warm-up needs no frames
+    ahead: they change no state the written frames read)."""
+    from mlaa_stream.io.images import read_image, write_image
+    src, out = tmp_path / "in", tmp_path / "out"
+    src.mkdir()
+    for i, f in enumerate(_wide_pan(7)):
+        write_image(str(src / f"shot_{chr(ord('a') + i)}.png"), f)
+    args = [str(src), "-o", str(out), "--lookahead", "2", "--temporal-frames", "4"]
+    whole = _resume_after_losing(tmp_path, args, [out / f"shot_{n}.png" for n in "ef"], ["4", "5"])
+    for p, pixels in whole.items():
+        np.testing.assert_array_equal(read_image(str(p)).pixels, pixels)
+
+
+def test_lookahead_on_video_and_refusals(tmp_path):
+    """--lookahead implies --temporal; a video gets it (stats per frame); the blend alone and --cluster refuse
+    it with a message naming the option."""
+    stats = tmp_path / "stats.csv"
+    res = CliRunner().invoke(main, [str(DEMO / "clip.mp4"), "-o", str(tmp_path / "a.mp4"), "--lookahead", "3",
+                                    "--stats", str(stats), "-q"])
+    assert res.exit_code == 0, res.output
+    rows = list(csv.DictReader(stats.open()))
+    assert len(rows) == 10 and rows[-1]["lookahead"] == "0"
+    res = CliRunner().invoke(main, [str(DEMO / "clip.mp4"), "-o", str(tmp_path / "b.mp4"), "--lookahead", "2",
+                                    "--temporal-method", "blend"])
+    assert res.exit_code != 0 and "--lookahead needs a --temporal-method with TSS" in res.output
+    res = CliRunner().invoke(main, [str(DEMO / "clip.mp4"), "-o", str(tmp_path / "c.mp4"), "--lookahead", "2",
+                                    "--cluster", "local:1"])
+    assert res.exit_code != 0 and "--lookahead is not available with --cluster" in res.output

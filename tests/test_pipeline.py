@@ -182,6 +182,64 @@ def test_an_error_in_any_stage_stops_all_and_names_the_frame(where, stage):
     assert len(read) < 40  # the reader was stopped, bounded by the queues
 
 
+class LookaheadStage:
+    """A temporal stage reading `lookahead` frames ahead: logs (index, indices of the future frames it got),
+    found by their first pixel (each test frame carries its index there)."""
+
+    def __init__(self, lookahead: int, fail_at: int | None = None):
+        self.lookahead, self.fail_at, self.calls = lookahead, fail_at, []
+
+    def __call__(self, frame_in, frame_out, index, future=()):
+        if index == self.fail_at:
+            raise ArithmeticError("flow diverged")
+        self.calls.append((index, [int(f[0, 0, 0]) for f in future]))
+        return frame_out
+
+
+def numbered(n: int) -> list[np.ndarray]:
+    out = frames(n)
+    for i, f in enumerate(out):
+        f[0, 0, 0] = i
+    return out
+
+
+@pytest.mark.parametrize("in_flight,lookahead", [(1, 2), (2, 2), (3, 1), (2, 5)])
+def test_lookahead_stage_gets_the_raw_frames_after_each_one(in_flight, lookahead):
+    """Known answer: frame i's call gets the raw input frames i + 1 .. i + N (fewer at the end), whatever the
+    number in flight; every frame comes out once, in order, filtered."""
+    src = numbered(7)
+    stage = LookaheadStage(lookahead)
+    out = []
+    run_pipeline(src, HostFilter(), out.append, in_flight=in_flight, temporal=stage)
+    assert [it.index for it in out] == list(range(7))
+    assert all(np.array_equal(it.frame, 255 - f) for it, f in zip(out, src))
+    assert stage.calls == [(i, list(range(i + 1, min(i + 1 + lookahead, 7)))) for i in range(7)]
+
+
+@pytest.mark.parametrize("where", ["read", "result", "temporal"])
+def test_lookahead_errors_write_the_frames_before_and_name_the_frame(where):
+    """A read, filter or temporal failure at frame 4 with look-ahead 2: frames 0-3 are written (the stage still
+    runs on those the filter finished), the error names frame 4, and no frame after it is handed on as a
+    look-ahead frame (after a filter failure frame 4's own raw input may be: it was read)."""
+    src = numbered(9)
+    stage = LookaheadStage(2, fail_at=4 if where == "temporal" else None)
+
+    def source():
+        for i, f in enumerate(src):
+            if where == "read" and i == 4:
+                raise IOError("corrupt packet")
+            yield f
+
+    out = []
+    with pytest.raises(PipelineError) as ei:
+        run_pipeline(source(), HostFilter(fail_result_at=4 if where == "result" else None), out.append,
+                     temporal=stage)
+    assert ei.value.index == 4 and ei.value.stage == {"read": "read", "result": "filter"}.get(where, "temporal")
+    assert [it.index for it in out] == [0, 1, 2, 3]
+    limit = {"read": 4, "result": 5}.get(where, 9)
+    assert all(max(fut, default=-1) < limit for _, fut in stage.calls), stage.calls
+
+
 def test_keyboard_interrupt_stops_every_stage(send_signal):
     written = []
 

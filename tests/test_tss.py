@@ -54,9 +54,9 @@ def _run_kernel(stage, cur, spatial, ring, bgr, fs):
         e = RingEntry(j, None, pyr, shift=None if isinstance(m, np.ndarray) else m,
                       field=m if isinstance(m, np.ndarray) else None, slot=j, valid=ok)
         if j < len(ring) - 1:
-            stage._ingest(f, pyr, j)
+            stage._ingest(f, pyr, j, j)
         entries.append(e)
-    out, cells = stage._resolve(cur, spatial, pyr, FrameMotion(Decision("global"), entries))
+    out, cells = stage._resolve(cur, spatial, pyr, FrameMotion(Decision("global"), entries), [])
     return out, cells.copy()
 
 
@@ -164,6 +164,53 @@ def test_numpy_backend_is_the_reference(filt):
     a, b = TSSStage(bgr=False), TSSStage(bgr=False, backend="numpy")
     for i, (f, s) in enumerate(zip(sc.inputs, spatial)):
         assert np.array_equal(a(f, s, i), b(f, s, i))
+
+
+def _run_ahead(stage, scene, spatial, n):
+    """The scene through a stage reading n frames ahead (fewer at the end), as the pipeline hands them in."""
+    return np.stack([stage(f, s, i, future=scene.inputs[i + 1:i + 1 + n])
+                     for i, (f, s) in enumerate(zip(scene.inputs, spatial))])
+
+
+def test_lookahead_numpy_backend_is_the_reference(filt):
+    """Look-ahead frames through the device (slots of their own, ingested once) and the numpy reference: bit
+    for bit, the end of the shot (fewer frames ahead) included."""
+    sc = scene_pan(6, 240, 136)
+    spatial = [filt.process(f) for f in sc.inputs]
+    a, b = TSSStage(bgr=False, frames=4, lookahead=2), TSSStage(bgr=False, frames=4, lookahead=2, backend="numpy")
+    outs_a, outs_b = _run_ahead(a, sc, spatial, 2), _run_ahead(b, sc, spatial, 2)
+    assert np.array_equal(outs_a, outs_b)
+    assert [r["lookahead"] for r in a.stats] == [2, 2, 2, 2, 1, 0]
+
+
+def test_lookahead_fills_the_first_frame(filt):
+    """Without look-ahead the first frame of a pan has no other samples and is the spatial output bit for bit;
+    with two frames ahead its pixels take samples and it is closer to the truth. Over the shot the look-ahead
+    run removes more error."""
+    sc = scene_pan(8, 320, 180)
+    spatial = [filt.process(f) for f in sc.inputs]
+    causal = _run(TSSStage(bgr=False, frames=8), sc, spatial)
+    stage = TSSStage(bgr=False, frames=8, lookahead=2)
+    ahead = _run_ahead(stage, sc, spatial, 2)
+    assert np.array_equal(causal[0], spatial[0])
+    assert stage.stats[0]["model"] == "reset" and stage.stats[0]["samples_share"] > 0.05
+    first = M.error_removed(ahead[:1], sc.inputs[:1], sc.truths[:1])
+    assert first > M.error_removed(causal[:1], sc.inputs[:1], sc.truths[:1]) + 0.05
+    assert M.error_removed(ahead, sc.inputs, sc.truths) > M.error_removed(causal, sc.inputs, sc.truths)
+
+
+def test_lookahead_stops_at_a_cut(filt):
+    """No sample from after a cut before it: the frames just before the cut read no frame past it, and their
+    outputs are those of a stage that never saw the second shot."""
+    sc = scene_cut(10, 160, 90)
+    spatial = [filt.process(f) for f in sc.inputs]
+    stage = TSSStage(bgr=False, lookahead=3)
+    outs = _run_ahead(stage, sc, spatial, 3)
+    assert [r["lookahead"] for r in stage.stats[2:5]] == [2, 1, 0]
+    first_shot = TSSStage(bgr=False, lookahead=3)
+    alone = np.stack([first_shot(f, s, i, future=sc.inputs[i + 1:5]) for i, (f, s) in
+                      enumerate(zip(sc.inputs[:5], spatial[:5]))])
+    assert np.array_equal(outs[:5], alone)
 
 
 def _two_edges(y_top: float, y_bottom: float, w: int = 240, h: int = 144) -> np.ndarray:

@@ -1,7 +1,7 @@
 """Is temporal supersampling never worse than spatial only? (issue 16's on-by-default condition)
 
     python -m mlaa_stream.bench.tss_check [--scenes rotation,pan,mover,cut,rendered] [--method auto]
-        [--views] [--exact-motion] [--tss-set NAME=VALUE ...]
+        [--views] [--exact-motion] [--lookahead 0,2] [--tss-set NAME=VALUE ...]
 
 Runs the bench's animated scenes (mlaa_stream.yardstick.scenes, the same frames `mlaa-stream bench` scores)
 (with the rendered group, also `rendered_mover`: a fast mover over a rendered still, built here) through the
@@ -15,6 +15,8 @@ g global, p global with projective maps, d dense; TSS's models where the method 
 when the stage loses in error removed, damage or all-frame FLIP.
 --views adds held-out rendered shots (mlaa_stream.bench.rendered_views.view_shots: a pan and a dolly from each
 held-out view at 640x360, rendered here: a few minutes), shots no constant was measured on.
+--lookahead N[,N...]: the method with TSS reading N frames after the current one too (a row per N, named
+"<method>+N" for N > 0; what `--lookahead N` runs); each row is checked against spatial only.
 --tss-set sets a module constant of mlaa_stream.temporal.tss for the run (e.g. BAND_TOL=1e9).
 --exact-motion adds two oracle rows to each of the bench's rendered shots (and the held-out shots with --views), with
 the renderer's exact motion (mlaa_stream.yardstick.rendered.reprojection, from each frame's depth; needs EGL):
@@ -123,9 +125,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--method", default="auto", choices=METHODS)
     ap.add_argument("--views", action="store_true", help="also held-out rendered shots (needs EGL)")
     ap.add_argument("--tss-set", action="append", default=[], metavar="NAME=VALUE")
+    ap.add_argument("--lookahead", default="0", metavar="N[,N...]",
+                    help="frames after the current one TSS also reads; a row per value (default 0)")
     ap.add_argument("--exact-motion", action="store_true",
                     help="oracle rows with the renderer's exact motion on the rendered shots (needs EGL)")
     args = ap.parse_args(argv)
+    lookaheads = [int(v) for v in args.lookahead.split(",")]
     for item in args.tss_set:
         name, value = item.split("=", 1)
         setattr(T, name, type(getattr(T, name))(float(value)))
@@ -146,14 +151,22 @@ def main(argv: list[str] | None = None) -> int:
                 spatial.append(filt.process(f))
                 regions.append(filt.last_regions)
             spatial = np.stack(spatial)
-            stage = make_stage(args.method, filt.context, bgr=False)
-            outs = np.stack([stage(f, sp, i, regions=r) for i, (f, sp, r) in enumerate(zip(s.inputs, spatial, regions))])
-            stage.close()
-            a, b = scene_scores(spatial, s, with_flip), scene_scores(outs, s, with_flip)
-            changed = float(np.mean(np.any((outs != spatial).reshape(outs.shape[:3] + (-1,)), -1)))
-            models = "".join("p" if r.get("projective") else r["model"][0] for r in stage.stats)
-            sampled = float(np.mean([r.get("samples_share", float("nan")) for r in stage.stats]))
-            rows = [("mlaa", a, ""), (args.method, b, f"{changed:8.3f} {sampled:8.3f}  {models}")]
+            a = scene_scores(spatial, s, with_flip)
+            rows = [("mlaa", a, "")]
+            for n in lookaheads:
+                stage = make_stage(args.method, filt.context, bgr=False, lookahead=n)
+                outs = np.stack([stage(f, sp, i, regions=r, **({"future": s.inputs[i + 1:i + 1 + n]} if n else {}))
+                                 for i, (f, sp, r) in enumerate(zip(s.inputs, spatial, regions))])
+                stage.close()
+                b = scene_scores(outs, s, with_flip)
+                changed = float(np.mean(np.any((outs != spatial).reshape(outs.shape[:3] + (-1,)), -1)))
+                models = "".join("p" if r.get("projective") else r["model"][0] for r in stage.stats)
+                sampled = float(np.mean([r.get("samples_share", float("nan")) for r in stage.stats]))
+                name = args.method + (f"+{n}" if n else "")
+                rows.append((name, b, f"{changed:8.3f} {sampled:8.3f}  {models}"))
+                if (b["error_removed"] < a["error_removed"] or b["damage"] > a["damage"]
+                        or (with_flip and b["flip_all"] > a["flip_all"])):
+                    worse.append(f"{s.name} ({name})")
             cams = (shot_cameras(s.name, s.inputs.shape[2], s.inputs.shape[1], len(s.inputs))
                     if args.exact_motion else None)
             if cams is not None:
@@ -170,10 +183,7 @@ def main(argv: list[str] | None = None) -> int:
                     rows.append((f"{args.method}:exact", scene_scores(outs, s, with_flip), ""))
             for name, r, extra in rows:
                 print(f"{s.name:16s} {name:8s} {r['error_removed']:8.3f} {r['damage']:8.4f} "
-                      f"{r['temporal_error']:9.3f} {r['flicker']:8.3f} {r['flip_all']:9.5f} {extra}")
-            if (b["error_removed"] < a["error_removed"] or b["damage"] > a["damage"]
-                    or (with_flip and b["flip_all"] > a["flip_all"])):
-                worse.append(s.name)
+                      f"{r['temporal_error']:9.3f} {r['flicker']:8.3f} {r['flip_all']:9.5f} {extra}", flush=True)
     print("worse than spatial only:", ", ".join(worse) if worse else "none")
     return 0
 

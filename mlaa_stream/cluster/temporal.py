@@ -33,6 +33,7 @@ class TemporalSpec:
     frames: int | None = None  # K, the TSS ring (None: tss.DEFAULT_FRAMES)
     mode: str = "adaptive"
     k: float | None = None   # the blend's velocity-difference strength (None: its default)
+    lookahead: int = 0       # frames after the current one TSS also reads (one machine only, not the cluster yet)
 
     def __post_init__(self):
         from mlaa_stream.temporal.methods import check
@@ -53,7 +54,7 @@ class TemporalSpec:
         made with keep_regions=needs_regions(method)), frames in RGB order."""
         from mlaa_stream.temporal.methods import make_stage
         return make_stage(self.method, filt.context, bgr=False, frames=self.frames, mode=self.mode, k=self.k,
-                          show=show, regions_from=filt)
+                          show=show, regions_from=filt, lookahead=self.lookahead)
 
 
 # A chunk's warm-up may reach back at most this many times `warmup` frames to find `warmup` changes.

@@ -116,6 +116,17 @@ class FrameMotion:
 
     decision: Decision
     entries: list[RingEntry] = field(default_factory=list)   # oldest first, current last
+    future: list[RingEntry] = field(default_factory=list)    # look-ahead frames after the current one, in order
+
+
+@dataclass
+class Ahead:
+    """A frame after the current one (look-ahead): its index, grey pyramid and the decision of its motion from
+    the frame before it (choose_model, made once: the same decision is the ring's when the frame is current)."""
+
+    index: int
+    pyr: Pyramid
+    decision: Decision
 
 
 class MotionRing:
@@ -128,6 +139,7 @@ class MotionRing:
         self.entries: list[RingEntry] = []
         self._dis = None
         self._last_refiner: _Refiner | None = None   # this frame's, made by _refine, used by _projective
+        self._refiner_pyr: Pyramid | None = None     # the frame _last_refiner was made for
 
     def reset(self) -> None:
         self.entries = []
@@ -140,13 +152,16 @@ class MotionRing:
         init[...] = start
         return self._dis.calc(a, b, init)
 
-    def push(self, pyr: Pyramid, index: int, fresh: bool) -> FrameMotion:
-        """Add the current frame; returns its decision and the maps of all kept frames (current last)."""
+    def push(self, pyr: Pyramid, index: int, fresh: bool, decision: Decision | None = None,
+             future: list[Ahead] = ()) -> FrameMotion:
+        """Add the current frame; returns its decision and the maps of all kept frames (current last), and of the
+        look-ahead frames `future` (frames index + 1, index + 2, ...). `decision`: the current frame's motion
+        from the previous one when already measured (it came as a look-ahead frame), else measured here."""
         prev = self.entries[-1] if self.entries else None
         if fresh or prev is None:
             dec = Decision("reset", measures={"cut": False})
         else:
-            dec = choose_model(prev.pyr, pyr, self.mode)
+            dec = decision if decision is not None else choose_model(prev.pyr, pyr, self.mode)
         if dec.model == "reset":
             self.entries = []
         elif dec.model == "global":
@@ -169,14 +184,56 @@ class MotionRing:
             # sub-pixel-accurate local motion the spatial output stands and the ring starts anew.
             self.entries = []
         # static: every map stays as it is (nothing moved)
-        for e in self.entries:
+        ahead = self._ahead(pyr, index, list(future)) if future else []
+        for e in self.entries + ahead:
             # translations are checked per tile (global branch above); dense and projective maps per region
             if not e.translated or e.projective:
                 e.valid = self._alignment(e, pyr)
         self.entries.append(RingEntry(index, None, pyr))
         if len(self.entries) > self.frames:
             del self.entries[0]
-        return FrameMotion(dec, list(self.entries))
+        return FrameMotion(dec, list(self.entries), ahead)
+
+    def _refiner(self, pyr: Pyramid) -> _Refiner:
+        """The direct refiner of the current frame (made once per frame)."""
+        if self._refiner_pyr is not pyr or self._last_refiner is None:
+            self._last_refiner, self._refiner_pyr = _Refiner(pyr.blurred("flow")), pyr
+        return self._last_refiner
+
+    def _ahead(self, pyr: Pyramid, index: int, future: list[Ahead]) -> list[RingEntry]:
+        """Maps of the look-ahead frames (issue 16: a window that also reads later frames removes the warm-up
+        cost): each one's translation chained from the frame-to-frame decisions (frame f's translation d_f
+        maps f's pixels into f - 1, so the current frame's pixels land in f at x - d_(t+1) - ... - d_f), then
+        refined *directly* against the current frame as the newest ring frame is (NEWEST_STEPS steps, the last
+        with the tile and band checks: its valid mask). The window ends before the first frame that is not
+        the next one, is a cut, or moves by more than one translation (dense). Projective when the ring's maps
+        are this frame (each future frame's homography then refined from its translation)."""
+        out: list[RingEntry] = []
+        fs = pyr.flow_scale
+        d = (0.0, 0.0)
+        moved = False
+        for k, a in enumerate(future):
+            if a.index != index + 1 + k or a.decision.model not in ("global", "static") or a.pyr.flow.shape != pyr.flow.shape:
+                break
+            if a.decision.model == "global":
+                t = a.decision.translation
+                d = (d[0] - t[0], d[1] - t[1])
+                moved = True
+            e = RingEntry(a.index, None, a.pyr, shift=d)
+            if self.refine and moved:
+                ref = self._refiner(pyr)
+                s, weights = (d[0] / fs, d[1] / fs), None
+                for step in range(NEWEST_STEPS):
+                    s, e.valid = ref.step(a.pyr.blurred("flow"), s, check=step == NEWEST_STEPS - 1, weights=weights)
+                    weights = ref.band_weights
+                e.shift = (s[0] * fs, s[1] * fs)
+            out.append(e)
+        if self.refine and any(e.projective for e in self.entries):
+            ref = self._refiner(pyr)
+            for e in out:
+                e.homography = ref.homography(e.pyr.blurred("flow"), _translation(e.shift, fs), HOMOGRAPHY_STEPS)
+                e.projective = True
+        return out
 
     def _refine(self, pyr: Pyramid, index: int, d: tuple[float, float]) -> None:
         """Direct Gauss-Newton refinement of the translated ring frames against the current frame (chaining
@@ -187,7 +244,7 @@ class MotionRing:
         converges; refining all of them every frame made the output less steady).
         The last step of each refined frame also runs the per-tile check (its valid mask)."""
         fs = pyr.flow_scale
-        ref = self._last_refiner = _Refiner(pyr.blurred("flow"))
+        ref = self._refiner(pyr)
         todo = [e for e in self.entries if e.shift is not None]
         if not todo:
             return
@@ -818,9 +875,11 @@ class TSSStage:
     def __init__(self, device: str | int | None = None, *, frames: int = DEFAULT_FRAMES, bgr: bool = True,
                  mode: str = "adaptive", grid: int = GRID, eps: float = EPS, min_cells: int = MIN_CELLS,
                  full_cells: int | None = None, refine: bool = True, fb_check: bool = True, show: str | None = None,
-                 context=None, backend: str = "device", dense_samples: bool = False):
+                 context=None, backend: str = "device", dense_samples: bool = False, lookahead: int = 0):
         if int(frames) < 1:
             raise ValueError(f"frames: expected K >= 1, got {frames!r}")
+        if int(lookahead) < 0:
+            raise ValueError(f"lookahead: expected N >= 0 frames, got {lookahead!r}")
         if backend not in ("device", "numpy"):
             raise ValueError(f"backend: expected 'device' or 'numpy', got {backend!r}")
         if show not in (None, "history"):
@@ -828,6 +887,7 @@ class TSSStage:
         if mode not in ("adaptive", "dense", "global", "static"):
             raise ValueError(f"mode: expected adaptive, dense, global or static, got {mode!r}")
         self.frames, self.bgr, self.mode, self.show = int(frames), bool(bgr), mode, show
+        self.lookahead = int(lookahead)   # N: frames after the current one the caller hands in (`future`)
         self.grid, self.eps, self.min_cells = int(grid), float(eps), int(min_cells)
         self.full_cells = FULL_CELLS if full_cells is None else int(full_cells)
         self.backend = backend
@@ -853,7 +913,10 @@ class TSSStage:
     def reset(self) -> None:
         """Forget the ring: the next frame starts a new one (and returns the spatial output)."""
         self.motion.reset()
-        self._pending: dict[int, np.ndarray] = {}   # ring slot -> input frame not yet ingested (_upload_only)
+        self._pending: dict[int, tuple[int, np.ndarray]] = {}   # ring slot -> (index, input frame) not yet ingested
+        self._resident: dict[int, int] = {}         # ring slot -> index of the frame the device holds there
+        self._slot_of: dict[int, int] = {}          # frame index -> ring slot, for the frames kept (past, current, future)
+        self._seen: dict[int, Ahead] = {}           # look-ahead frames measured already, by index
         self._vrows_sent: dict[int, np.ndarray] = {}   # ring slot -> the valid mask on the device
         self._prev_index: int | None = None
         self._shape = None
@@ -863,21 +926,49 @@ class TSSStage:
         self.last_motion: tuple[Pyramid, Decision] | None = None
 
     def __call__(self, frame_in: np.ndarray, frame_filtered: np.ndarray, index: int,
-                 regions: np.ndarray | None = None) -> np.ndarray:
+                 regions: np.ndarray | None = None, future: list[np.ndarray] = ()) -> np.ndarray:
         """`regions` is accepted for the stages' common call (temporal.methods) and not read: TSS takes samples
-        wherever the motion checks pass."""
+        wherever the motion checks pass. `future`: the raw input frames index + 1, index + 2, ... (at most
+        `lookahead` are read; fewer at the end of a stream): their samples count as the ring's do."""
         fin, fout = np.asarray(frame_in), np.asarray(frame_filtered)
         if fin.shape != fout.shape or fin.dtype != fout.dtype:
             raise ValueError(f"frame {index}: expected the input and filtered frames to have the same shape "
                              f"and type, got {fin.shape} {fin.dtype} and {fout.shape} {fout.dtype}")
+        ahead = []
+        for f in list(future)[:self.lookahead]:
+            f = np.asarray(f)
+            if f.shape != fin.shape or f.dtype != fin.dtype:
+                break   # a new size or type starts a new ring there: the window ends before it
+            ahead.append(f)
         with self._lock:
-            return self._step(fin, fout, int(index))
+            return self._step(fin, fout, int(index), ahead)
 
-    def _step(self, frame_in: np.ndarray, frame_filtered: np.ndarray, index: int) -> np.ndarray:
+    def _look_ahead(self, pyr: Pyramid, index: int, future: list[np.ndarray]) -> list[Ahead]:
+        """The look-ahead frames' pyramids and frame-to-frame decisions, each measured once (kept by index
+        until the frame is current)."""
+        self._seen = {i: a for i, a in self._seen.items() if index < i <= index + len(future)}
+        out, prev = [], pyr
+        for k, f in enumerate(future):
+            i = index + 1 + k
+            a = self._seen.get(i)
+            if a is None:
+                fp = Pyramid.of(f, self.bgr)
+                a = self._seen[i] = Ahead(i, fp, choose_model(prev, fp, self.mode))
+            out.append(a)
+            prev = a.pyr
+        return out
+
+    def _step(self, frame_in: np.ndarray, frame_filtered: np.ndarray, index: int,
+              future: list[np.ndarray] = ()) -> np.ndarray:
         t0 = time.perf_counter()
         self.last_motion = None
         grey = grey8(frame_in, self.bgr)
         fresh = self._prev_index is None or index != self._prev_index + 1 or frame_in.shape != self._shape
+        if fresh:   # a new ring: nothing kept from before a jump back or forward is trusted
+            self._seen, self._pending, self._resident = {}, {}, {}
+        seen = self._seen.pop(index, None)   # this frame came as a look-ahead frame: measured already
+        if seen is not None and not np.array_equal(seen.pyr.grey, grey):
+            seen, self._seen = None, {}
         if not fresh and self._last is not None and np.array_equal(grey, self._last[0]):
             # a repeated frame (a still shot from a renderer, a duplicated frame): no new samples, no
             # new motion; the previous output stands and the ring is kept as it is
@@ -886,47 +977,64 @@ class TSSStage:
                                "flow_ms": (time.perf_counter() - t0) * 1e3, "resolve_ms": 0.0,
                                "cells_mean": self.stats[-1]["cells_mean"] if self.stats else 0.0})
             return self._last[1].copy()
-        pyr = Pyramid.of(frame_in, self.bgr, grey)
-        fm = self.motion.push(pyr, index, fresh)
+        pyr = seen.pyr if seen is not None else Pyramid.of(frame_in, self.bgr, grey)
+        fm = self.motion.push(pyr, index, fresh, seen.decision if seen is not None else None,
+                              self._look_ahead(pyr, index, future) if future else [])
         self.last_motion = (pyr, fm.decision)
-        used = {e.slot for e in fm.entries if e.slot >= 0}
-        fm.entries[-1].slot = min(set(range(self.frames)) - used)
+        self._assign_slots(fm)
+        future = future[:len(fm.future)]
         t1 = time.perf_counter()
         self._prev_index, self._shape = index, frame_in.shape
         # Every sample in one cell (static shot, whole-pixel motion, a single frame): nothing to
         # resolve, the spatial output stands without a kernel.
-        trivial = all(e.translated and not e.projective and e.valid is None for e in fm.entries) and len(
-            {self._cell_of(e.shift) for e in fm.entries}) < self.min_cells
+        taps = fm.entries + fm.future
+        trivial = all(e.translated and not e.projective and e.valid is None for e in taps) and len(
+            {self._cell_of(e.shift) for e in taps}) < self.min_cells
         cells = None
+        if self.backend == "numpy":
+            self._frames = {e.slot: self._frames[e.slot] for e in fm.entries[:-1]}
+            self._frames[fm.entries[-1].slot] = frame_in
+            self._frames.update({e.slot: np.array(f, copy=True) for e, f in zip(fm.future, future)})
         if trivial:
             out = frame_filtered
-            if self.backend == "numpy":
-                self._frames[fm.entries[-1].slot] = frame_in
-            else:
-                self._upload_only(frame_in, pyr, fm)
+            if self.backend != "numpy":
+                self._upload_only(frame_in, pyr, fm, future)
         elif self.backend == "numpy":
-            self._frames[fm.entries[-1].slot] = frame_in
             h, w = frame_in.shape[:2]
             ring = [(self._frames[e.slot], tile_shifts(e.homography, w, h, pyr.flow_scale) if e.projective
-                     else e.shift if e.translated else e.field, e.valid) for e in fm.entries]
+                     else e.shift if e.translated else e.field, e.valid) for e in taps]
             out, cells = tss_frame_reference(frame_filtered, frame_in, ring, self.bgr, pyr.flow_scale,
                                              self.grid, self.eps, self.min_cells, self.full_cells)
         else:
-            out, cells = self._resolve(frame_in, frame_filtered, pyr, fm)
+            out, cells = self._resolve(frame_in, frame_filtered, pyr, fm, future)
         t2 = time.perf_counter()
         self._last = (grey, out)
         self.stats.append({"index": index, "model": fm.decision.model, "ring": len(fm.entries),
+                           "lookahead": len(fm.future),
                            "flow_ms": (t1 - t0) * 1e3, "resolve_ms": (t2 - t1) * 1e3,
                            # filled cells per pixel outside flat neighbourhoods (those have 0), and the
                            # share of all pixels that took samples (n >= min_cells)
                            "cells_mean": 1.0 if cells is None else float(cv2.mean(cells, (cells > 0).astype(np.uint8))[0]),
                            "samples_share": 0.0 if cells is None else float(np.count_nonzero(cells >= self.min_cells)) / cells.size,
                            "translation": fm.decision.translation,
-                           "projective": any(e.projective for e in fm.entries), **fm.decision.measures})
+                           "projective": any(e.projective for e in taps), **fm.decision.measures})
         if self.show == "history":
             c = np.ones(grey.shape, np.uint8) if cells is None else cells
             return cells_view(c, out, self.grid, self.bgr)
         return out
+
+    def _assign_slots(self, fm: FrameMotion) -> None:
+        """Ring slots for the current and the look-ahead frames: a frame keeps its slot from when it first came
+        (a look-ahead frame is ingested once, not again when it is current); K + N slots in all."""
+        live = {e.index for e in fm.entries + fm.future}
+        self._slot_of = {i: sl for i, sl in self._slot_of.items() if i in live}
+        for e in fm.entries[:-1]:
+            self._slot_of[e.index] = e.slot
+        for e in [fm.entries[-1]] + fm.future:
+            sl = self._slot_of.get(e.index)
+            if sl is None:
+                sl = self._slot_of[e.index] = min(set(range(self.frames + self.lookahead)) - set(self._slot_of.values()))
+            e.slot = sl
 
     def _cell_of(self, shift: tuple[float, float]) -> tuple[int, int]:
         """The footprint cell every sample of a translated frame lands in (the same for all pixels)."""
@@ -944,18 +1052,19 @@ class TSSStage:
         if self._buffers is not None and self._buffers.fmt == fmt and self._buffers.flow_shape == shape:
             return self._buffers
         self.queue.finish()
-        self._buffers = _Buffers(self.context, fmt, shape, self.frames, self.motion.dense_samples)
-        self._vrows_sent = {}
+        self._buffers = _Buffers(self.context, fmt, shape, self.frames + self.lookahead, self.motion.dense_samples)
+        self._vrows_sent, self._resident = {}, {}
         defines = kernel_defines(fmt, self.grid, self.eps, self.min_cells, self.full_cells)
         self._kernel = self.context.kernel("tss", "tss_resolve", defines)
         self._kernel_shift = self.context.kernel("tss", "tss_resolve_shift", defines)
         self._kernel_ingest = self.context.kernel("tss", "tss_ingest", defines)
         return self._buffers
 
-    def _ingest(self, frame_in: np.ndarray, pyr: Pyramid, slot: int) -> _Buffers:
-        """The current input into ring slot `slot` (tss_ingest: 16-bit linear planes)."""
+    def _ingest(self, frame_in: np.ndarray, pyr: Pyramid, slot: int, index: int) -> _Buffers:
+        """Input frame `index` into ring slot `slot` (tss_ingest: 16-bit linear planes)."""
         import pyopencl as cl
         bufs = self._prepare(frame_in, pyr)
+        self._resident[slot] = index
         fmt = bufs.fmt
         cl.enqueue_copy(self.queue, bufs.src, np.ascontiguousarray(frame_in), is_blocking=False)
         self._kernel_ingest(self.queue, *shift_launch(fmt.width, fmt.height, self.context), bufs.src, bufs.ring,
@@ -964,30 +1073,42 @@ class TSSStage:
                             np.int32(fmt.width), np.int32(fmt.height), np.int32(slot))
         return bufs
 
-    def _upload_only(self, frame_in: np.ndarray, pyr: Pyramid, fm: FrameMotion) -> None:
+    def _keep_pending(self, fm: FrameMotion, frames: list[tuple[RingEntry, np.ndarray]]) -> None:
+        """Host copies of the frames the device does not hold yet (the look-ahead frames; the current one when
+        its resolve is trivial); copies of frames no longer kept are dropped."""
+        live = {e.slot: e.index for e in fm.entries + fm.future}
+        self._pending = {sl: v for sl, v in self._pending.items() if live.get(sl) == v[0]}
+        for e, f in frames:
+            if self._resident.get(e.slot) != e.index and self._pending.get(e.slot, (None,))[0] != e.index:
+                self._pending[e.slot] = (e.index, np.array(f, copy=True))
+
+    def _upload_only(self, frame_in: np.ndarray, pyr: Pyramid, fm: FrameMotion, future: list[np.ndarray]) -> None:
         """A frame whose resolve is trivial (static shot): kept on the host until a resolve reads it
         (a still shot with codec noise then costs a copy, not an ingest, per frame)."""
         self._prepare(frame_in, pyr)
-        live = {e.slot for e in fm.entries}
-        self._pending = {k: v for k, v in self._pending.items() if k in live}
-        self._pending[fm.entries[-1].slot] = np.array(frame_in, copy=True)
+        self._keep_pending(fm, [(fm.entries[-1], frame_in)] + list(zip(fm.future, future)))
 
-    def _resolve(self, frame_in, frame_filtered, pyr: Pyramid, fm: FrameMotion):
+    def _resolve(self, frame_in, frame_filtered, pyr: Pyramid, fm: FrameMotion, future: list[np.ndarray]):
         import pyopencl as cl
-        for e in fm.entries[:-1]:
-            if e.slot in self._pending:
-                self._ingest(self._pending.pop(e.slot), pyr, e.slot)
+        self._prepare(frame_in, pyr)
+        self._keep_pending(fm, list(zip(fm.future, future)))
+        for e in fm.entries[:-1] + fm.future:
+            if self._resident.get(e.slot) != e.index:
+                self._ingest(self._pending.pop(e.slot)[1], pyr, e.slot, e.index)
         self._pending = {}
-        bufs = self._ingest(frame_in, pyr, fm.entries[-1].slot)
+        # the current frame always (a look-ahead frame is in its slot already, but the caller's frame is the one
+        # this output answers for: the same index after a jump or reset is another frame)
+        bufs = self._ingest(frame_in, pyr, fm.entries[-1].slot, index=fm.entries[-1].index)
         q, fmt = self.queue, bufs.fmt
+        ring = fm.entries + fm.future
         fh, fw = bufs.flow_shape
-        n = len(fm.entries)
-        for e in fm.entries:
+        n = len(ring)
+        for e in ring:
             if not e.translated:
                 cl.enqueue_copy(q, bufs.fields, np.ascontiguousarray(e.field, np.float32),
                                 dst_offset=e.slot * fh * fw * 8, is_blocking=False)
-        shift_path = all(e.translated for e in fm.entries)
-        for e in fm.entries:
+        shift_path = all(e.translated for e in ring)
+        for e in ring:
             if e.valid is not None and shift_path:
                 if not (e.slot in self._vrows_sent and np.array_equal(self._vrows_sent[e.slot], e.valid)):
                     # masks change rarely (a tile's verdict): upload only a changed one
@@ -999,7 +1120,7 @@ class TSSStage:
                                 dst_offset=e.slot * fh * fw, is_blocking=False)
         cl.enqueue_copy(q, bufs.spatial, np.ascontiguousarray(frame_filtered), is_blocking=False)
         if shift_path:
-            taps, vslots, (tile_rows, tiles_x) = self._taps(fm.entries, fmt.width, fmt.height, pyr.flow_scale)
+            taps, vslots, (tile_rows, tiles_x) = self._taps(ring, fmt.width, fmt.height, pyr.flow_scale)
             if bufs.tables.size < taps.nbytes:
                 bufs.tables, bufs.table_vslots = self.context.buffer(taps.nbytes), self.context.buffer(vslots.nbytes)
             cl.enqueue_copy(q, bufs.tables, taps, is_blocking=False)
@@ -1012,7 +1133,7 @@ class TSSStage:
         else:
             info = np.zeros((n, 4), np.int32)
             shift = np.zeros((n, 2), np.float32)
-            for j, e in enumerate(fm.entries):
+            for j, e in enumerate(ring):
                 info[j] = (e.slot, 0 if e.translated else 1, e.slot, int(e.valid is not None))
                 if e.translated:
                     shift[j] = e.shift
@@ -1087,10 +1208,11 @@ class TSSThenBlend:
 
     def __init__(self, device: str | int | None = None, *, frames: int = DEFAULT_FRAMES, bgr: bool = True,
                  mode: str = "adaptive", show: str | None = None, context=None, blend_mode: str | None = None,
-                 **blend_kwargs):
-        """`blend_mode`: the blend's motion model when not `mode` ("auto": "dense")."""
+                 lookahead: int = 0, **blend_kwargs):
+        """`blend_mode`: the blend's motion model when not `mode` ("auto": "dense"); `lookahead`: TSS's (the blend
+        reads the past only)."""
         from mlaa_stream.temporal.stage import TemporalStage
-        self.tss = TSSStage(device, frames=frames, bgr=bgr, mode=mode, context=context)
+        self.tss = TSSStage(device, frames=frames, bgr=bgr, mode=mode, context=context, lookahead=lookahead)
         self.blend = TemporalStage(device, bgr=bgr, mode=blend_mode or mode, show=show, context=self.tss.context,
                                    **blend_kwargs)
 
@@ -1100,9 +1222,13 @@ class TSSThenBlend:
         return [{**b, **t, "history_weight_mean": b.get("history_weight_mean", 0.0),
                  "blend_model": b.get("model")} for t, b in zip(self.tss.stats, self.blend.stats)]
 
+    @property
+    def lookahead(self) -> int:
+        return self.tss.lookahead
+
     def __call__(self, frame_in: np.ndarray, frame_filtered: np.ndarray, index: int,
-                 regions: np.ndarray | None = None) -> np.ndarray:
-        out = self.tss(frame_in, frame_filtered, index)
+                 regions: np.ndarray | None = None, future: list[np.ndarray] = ()) -> np.ndarray:
+        out = self.tss(frame_in, frame_filtered, index, future=future)
         return self.blend(frame_in, out, index, regions=regions, measured=self._measured())
 
     def _measured(self) -> tuple[Pyramid, Decision | None] | None:
