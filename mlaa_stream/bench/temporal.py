@@ -147,8 +147,10 @@ def run_sequence(scene: Scene, spatial: list[np.ndarray], mode: str | None,
             outs = [stage(f, s, i) for i, (f, s) in enumerate(zip(scene.inputs, spatial))]
             return np.stack(outs), stage.stats
     if mode.startswith("tss"):
-        with TSSStage(device, frames=int(mode.split()[1]), bgr=False) as stage:
-            outs = [stage(f, s, i) for i, (f, s) in enumerate(zip(scene.inputs, spatial))]
+        k, ahead = _tss_mode(mode)
+        with TSSStage(device, frames=k, bgr=False, lookahead=ahead) as stage:
+            outs = [stage(f, s, i, future=scene.inputs[i + 1:i + 1 + ahead]) for i, (f, s) in
+                    enumerate(zip(scene.inputs, spatial))]
             return np.stack(outs), stage.stats
     with TemporalStage(device, mode=mode, bgr=False) as stage:
         outs = [stage(f, s, i) for i, (f, s) in enumerate(zip(scene.inputs, spatial))]
@@ -177,22 +179,35 @@ def time_stage(frames: list[np.ndarray], spatial: list[np.ndarray], mode: str, w
     if mode == "tss+blend":
         stage_cm = TSSThenBlend(device, bgr=False)
     elif mode.startswith("tss"):
-        stage_cm = TSSStage(device, frames=int(mode.split()[1]), bgr=False)
+        k, ahead = _tss_mode(mode)
+        stage_cm = TSSStage(device, frames=k, bgr=False, lookahead=ahead)
     else:
         stage_cm = TemporalStage(device, mode=mode, bgr=False)
     with stage_cm as stage:
         times = []
+        ahead = getattr(stage, "lookahead", 0)
         for i, (f, s) in enumerate(zip(frames, spatial)):
             t0 = time.perf_counter()
-            stage(f, s, i)
-            if i >= warmup:
+            stage(f, s, i, **({"future": frames[i + 1:i + 1 + ahead]} if ahead else {}))
+            if warmup <= i < len(frames) - ahead:   # look-ahead: frames with all N frames ahead
                 times.append((time.perf_counter() - t0) * 1e3)
-        st = stage.stats[warmup:]
+        st = stage.stats[warmup:len(frames) - ahead]
         models: dict[str, int] = {}
         for r in st:
             models[r["model"]] = models.get(r["model"], 0) + 1
         return (statistics.median(times), models, statistics.median(r["flow_ms"] for r in st),
                 statistics.median(r.get("blend_ms", r.get("resolve_ms", 0.0)) for r in st))
+
+
+def _tss_key(mode: str) -> str:
+    k, ahead = _tss_mode(mode)
+    return f"+TSS K={k}" + (f", look-ahead {ahead}" if ahead else "")
+
+
+def _tss_mode(mode: str) -> tuple[int, int]:
+    """"tss K" or "tss K+N" (N frames of look-ahead): (K, N)."""
+    k, _, ahead = mode.split()[1].partition("+")
+    return int(k), int(ahead or 0)
 
 
 def _set_tss_constants(pairs: list[str]) -> None:
@@ -219,6 +234,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--rendered", action="store_true", help="also the rendered pan, dolly and orbit shots")
     ap.add_argument("--tss-frames", default=",".join(map(str, TSS_FRAMES)), help="K values for TSS rows")
     ap.add_argument("--blend-modes", default="adaptive", help="modes of the older blend stage ('' for none)")
+    ap.add_argument("--lookahead", default="2,4", help="look-ahead frames N for rows of TSS with K = 16 ('' for none)")
     ap.add_argument("--device", default=None)
     ap.add_argument("--scenes", default=",".join(SCENES))
     ap.add_argument("--out", default=str(DOCS))
@@ -237,7 +253,8 @@ def main(argv: list[str] | None = None) -> int:
     device = spatial_filter.device_name
     results: dict[str, dict[str, dict]] = {}
     model_use: dict[str, dict[str, dict[str, int]]] = {}
-    methods = [None] + [f"tss {k}" for k in args.tss_frames.split(",") if k] + \
+    ahead_modes = [f"tss {DEFAULT_FRAMES}+{n}" for n in args.lookahead.split(",") if n]
+    methods = [None] + [f"tss {k}" for k in args.tss_frames.split(",") if k] + ahead_modes + \
         [m for m in args.blend_modes.split(",") if m] + ["tss+blend"]
     scenes = []
     for name in args.scenes.split(","):
@@ -255,7 +272,7 @@ def main(argv: list[str] | None = None) -> int:
         for mode in methods:
             outs, stats = run_sequence(scene, spatial, mode, args.device)
             key = ("spatial only" if mode is None else f"+TSS K={DEFAULT_FRAMES} then blend" if mode == "tss+blend"
-                   else f"+TSS K={mode.split()[1]}" if mode.startswith("tss") else f"+blend {mode}")
+                   else _tss_key(mode) if mode.startswith("tss") else f"+blend {mode}")
             results[name][key] = score(outs, scene)
             counts: dict[str, int] = {}
             for r in stats:
@@ -275,7 +292,8 @@ def main(argv: list[str] | None = None) -> int:
 
     speed = {}
     if args.timed > 0:
-        n = args.timed + max([int(k) for k in args.tss_frames.split(",") if k] + [3])
+        n = args.timed + max([int(k) for k in args.tss_frames.split(",") if k] + [3, DEFAULT_FRAMES]) + max(
+            [int(v) for v in args.lookahead.split(",") if v] + [0])
         base = timing_frame(1936, 1096)
         pan = _pan_frames(n, base)
         static = [base[8:1088, 8:1928].copy()] * n
@@ -291,8 +309,8 @@ def main(argv: list[str] | None = None) -> int:
         noisy_sp = [spatial_filter.process(f) for f in noisy]
         for shot, frames, sp in (("pan", pan, pan_sp), ("static", static, static_sp),
                                  ("static, codec noise", noisy, noisy_sp)):
-            for mode in [f"tss {k}" for k in args.tss_frames.split(",") if k] + ["adaptive", "tss+blend"]:
-                warm = int(mode.split()[1]) if mode.startswith("tss ") else DEFAULT_FRAMES if mode == "tss+blend" else 3
+            for mode in [f"tss {k}" for k in args.tss_frames.split(",") if k] + ahead_modes + ["adaptive", "tss+blend"]:
+                warm = _tss_mode(mode)[0] if mode.startswith("tss ") else DEFAULT_FRAMES if mode == "tss+blend" else 3
                 speed[(shot, mode)] = time_stage(frames, sp, mode, warm, args.device)
                 ms, models, fms, bms = speed[(shot, mode)]
                 log(f"speed {shot} {mode}: {ms:.1f} ms per 1080p frame (flow+decision {fms:.1f}, "

@@ -69,6 +69,9 @@ GRID = 4              # footprint cells per side (GRID^2 strata)
 EPS = 0.03            # linear-light widening of the current 3x3 colour box (issue 16: 0.02-0.05)
 MIN_CELLS = 2         # fewer filled cells: the spatial output stands
 FULL_CELLS = 9        # filled cells at which the samples alone resolve the pixel (below: n / 9 of it)
+FULL_CELLS_AHEAD = 1.25   # ... plus this many per look-ahead frame (rounded): more frames fill more cells with
+                          # samples of sub-pixel detail that the spatial output renders better (docs/temporal.md,
+                          # "Look-ahead")
 NEWEST_STEPS = 2      # Gauss-Newton steps per frame for the newest ring frame (MotionRing._refine)
 REFINE_STEPS = 2      # ... and for each older ring frame refined in that frame
 REFINE_EVERY = 3      # older ring frames refined directly at ages 1 + a multiple of this (docs/temporal.md)
@@ -889,7 +892,8 @@ class TSSStage:
         self.frames, self.bgr, self.mode, self.show = int(frames), bool(bgr), mode, show
         self.lookahead = int(lookahead)   # N: frames after the current one the caller hands in (`future`)
         self.grid, self.eps, self.min_cells = int(grid), float(eps), int(min_cells)
-        self.full_cells = FULL_CELLS if full_cells is None else int(full_cells)
+        self.full_cells = (FULL_CELLS + int(FULL_CELLS_AHEAD * self.lookahead + 0.5) if full_cells is None
+                           else int(full_cells))
         self.backend = backend
         self.motion = MotionRing(self.frames, mode, refine, fb_check, dense_samples)
         self.stats: list[dict] = []
