@@ -274,7 +274,7 @@ def _job_for(kind: str, output: str) -> type:
 @click.option("--lookahead", type=click.IntRange(0, 8), default=0, show_default=True, metavar="N",
               help="Temporal supersampling also reads the N frames after each one (implies --temporal; "
                    "each output waits for N more frames): steadier pans from the first frame on "
-                   "(docs/temporal.md, \"Look-ahead\"). Not with --cluster yet.")
+                   "(docs/temporal.md, \"Look-ahead\").")
 @click.option("--temporal-mode", type=click.Choice(["adaptive", "dense", "global", "static"]),
               default="adaptive", show_default=True,
               help="Motion model: adaptive picks per frame the cheapest that explains it "
@@ -379,13 +379,9 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
             kwargs["keep_regions"] = needs_regions(temporal.method)  # the stage reads the filter's regions
         if cluster is not None and (temporal.show or temporal.stats_path or show_regions):
             raise Usage("--stats and --show are not available with --cluster (each worker has its own stage)")
-        if temporal.lookahead and temporal.spec() is not None:
-            if temporal.method == "blend":
-                raise Usage("--lookahead needs a --temporal-method with TSS (auto, tss, tss+blend): the blend "
-                            "reads the past only")
-            if cluster is not None:
-                raise Usage("--lookahead is not available with --cluster yet (a chunk would need the frames after "
-                            "its end)")
+        if temporal.lookahead and temporal.spec() is not None and temporal.method == "blend":
+            raise Usage("--lookahead needs a --temporal-method with TSS (auto, tss, tss+blend): the blend "
+                        "reads the past only")
         job = _job_for(kind, output)
         runner = job(input_path, output, kind, con, overwrite=overwrite, resume=resume,
                      frames=frames, codec=codec, container=container, audio=audio,

@@ -187,8 +187,8 @@ def test_lookahead_folder_resume_is_bit_for_bit(tmp_path):
 
 
 def test_lookahead_on_video_and_refusals(tmp_path):
-    """--lookahead implies --temporal; a video gets it (stats per frame); the blend alone and --cluster refuse
-    it with a message naming the option."""
+    """--lookahead implies --temporal; a video gets it (stats per frame); the blend alone refuses it with a message
+    naming the option."""
     stats = tmp_path / "stats.csv"
     res = CliRunner().invoke(main, [str(DEMO / "clip.mp4"), "-o", str(tmp_path / "a.mp4"), "--lookahead", "3",
                                     "--stats", str(stats), "-q"])
@@ -198,6 +198,3 @@ def test_lookahead_on_video_and_refusals(tmp_path):
     res = CliRunner().invoke(main, [str(DEMO / "clip.mp4"), "-o", str(tmp_path / "b.mp4"), "--lookahead", "2",
                                     "--temporal-method", "blend"])
     assert res.exit_code != 0 and "--lookahead needs a --temporal-method with TSS" in res.output
-    res = CliRunner().invoke(main, [str(DEMO / "clip.mp4"), "-o", str(tmp_path / "c.mp4"), "--lookahead", "2",
-                                    "--cluster", "local:1"])
-    assert res.exit_code != 0 and "--lookahead is not available with --cluster" in res.output

@@ -94,6 +94,22 @@ def test_tss_chunks_equal_one_machine(client, seq, tmp_path):
         > N // 2  # the stage changed most frames: the equality is not the spatial filter's
 
 
+def test_tss_lookahead_chunks_equal_one_machine(client, seq, tmp_path):
+    """--lookahead 2 on the cluster: each chunk reads the 2 frames after its end (unwritten), so its last frames
+    read what one machine's do: bit for bit (they differ from the causal run's)."""
+    from mlaa_stream.cluster.frames import filter_on_cluster
+
+    ref = single_machine(seq, "ref_tss_ahead", "--temporal-method", "tss", "--temporal-frames", str(K),
+                         "--lookahead", "2")
+    report = filter_on_cluster(client, str(seq / "in" / "p.%04d.png"), str(tmp_path / "c.%04d.png"),
+                               chunk_frames=CHUNK, temporal=TemporalSpec("tss", K, lookahead=2))
+    assert len(report.written) == N and not report.failed
+    got = frames_of(tmp_path)
+    assert len(got) == N and all(np.array_equal(a, b) for a, b in zip(got, ref))
+    causal = single_machine(seq, "ref_tss", "--temporal-frames", str(K))
+    assert not np.array_equal(ref[CHUNK - 1], causal[CHUNK - 1])   # a chunk's last frame read ahead
+
+
 def test_blend_chunks_within_the_stated_tolerance(client, seq, tmp_path):
     from mlaa_stream.cluster.frames import filter_on_cluster
 
@@ -160,6 +176,20 @@ def test_tss_video_segments_equal_one_machine(client, pan_video, tmp_path):
     assert len(a) == len(b) == N and all(np.array_equal(x, y) for x, y in zip(a, b))
     assert not np.array_equal(b[-1], decoded(pan_video)[-1])  # filtered
     assert sorted(os.listdir(tmp_path)) == ["cl.mkv", "ref.mkv"]
+
+
+def test_tss_lookahead_video_segments_equal_one_machine(client, pan_video, tmp_path):
+    """Video segments with look-ahead: each decodes 2 frames past its end for the stage, writes none of them."""
+    from mlaa_stream.cluster.video import filter_video_on_cluster
+
+    r = CliRunner().invoke(main, [pan_video, "-o", str(tmp_path / "ref.mkv"), "--codec", "ffv1", "--temporal-method",
+                                  "tss", "--temporal-frames", str(K), "--lookahead", "2"])
+    assert r.exit_code == 0, r.output
+    n = filter_video_on_cluster(client, pan_video, str(tmp_path / "cl.mkv"), codec="ffv1", segment_seconds=CHUNK / 24,
+                                temporal=TemporalSpec("tss", K, lookahead=2))
+    assert n == N
+    a, b = decoded(tmp_path / "ref.mkv"), decoded(tmp_path / "cl.mkv")
+    assert len(a) == len(b) == N and all(np.array_equal(x, y) for x, y in zip(a, b))
 
 
 def test_a_warm_up_that_cannot_reach_back_far_enough_says_so():

@@ -12,7 +12,8 @@ has its chunks run again elsewhere (an output its first run completed is kept, n
 temporary file a killed worker left behind is removed at the end. Outputs equal the single-machine ones
 bit for bit (the spatial filter reads nothing across frames). With the temporal stage (`temporal=`, a
 TemporalSpec) each chunk first runs the frames before it through the filter and the stage, unwritten
-(warm-up: mlaa_stream/cluster/temporal.py says how many and what equality that gives).
+(warm-up: mlaa_stream/cluster/temporal.py says how many and what equality that gives), and with its
+`lookahead` N reads the N frames after its end too (unwritten), as one machine's stage reads them.
 """
 from __future__ import annotations
 
@@ -39,6 +40,7 @@ class Chunk:
     files: tuple[FrameFile, ...]
     warmup: tuple[FrameFile, ...] = ()  # frames before it, the last ones run through the temporal stage unwritten
     starts_stream: bool = True  # `warmup` begins at the job's first frame
+    ahead: tuple[FrameFile, ...] = ()   # frames after it, read for the temporal stage's look-ahead, unwritten
 
     @property
     def label(self) -> str:
@@ -57,11 +59,13 @@ class ChunkResult:
     warnings: list[str] = field(default_factory=list)
 
 
-def plan_chunks(files: list[FrameFile], chunk_frames: int = CHUNK_FRAMES, warmup: int = 0) -> list[Chunk]:
-    """Consecutive chunks of `chunk_frames`, each with up to `warmup` frames before it."""
+def plan_chunks(files: list[FrameFile], chunk_frames: int = CHUNK_FRAMES, warmup: int = 0,
+                ahead: int = 0) -> list[Chunk]:
+    """Consecutive chunks of `chunk_frames`, each with up to `warmup` frames before it and `ahead` after it."""
     if chunk_frames < 1:
         raise ValueError(f"chunk_frames: expected >= 1, got {chunk_frames}")
-    return [Chunk(k, tuple(files[i:i + chunk_frames]), tuple(files[max(0, i - warmup):i]), i <= warmup)
+    return [Chunk(k, tuple(files[i:i + chunk_frames]), tuple(files[max(0, i - warmup):i]), i <= warmup,
+                  tuple(files[i + chunk_frames:i + chunk_frames + ahead]))
             for k, i in enumerate(range(0, len(files), chunk_frames))]
 
 
@@ -111,7 +115,7 @@ def filter_chunk(chunk: Chunk, filter_kwargs: dict, overwrite: bool, strict: boo
             from mlaa_stream.cluster.temporal import WarmedStage
             stage = WarmedStage(temporal.stage(encoded), temporal.warmup, can_extend=w < len(chunk.warmup),
                                 from_start=len(warmup) == len(chunk.warmup) and chunk.starts_stream)
-            read = list(warmup) + list(chunk.files)
+            read = list(warmup) + list(chunk.files) + list(chunk.ahead)
             hook, source, sink = _with_temporal(stage, read, set(warmup), report, strict, like, set(todo), sink)
         else:
             source = image_source(todo, report, strict=strict, like=like)
@@ -154,10 +158,19 @@ def _with_temporal(stage, files: list[FrameFile], warm: set, report: Report, str
         finally:
             inner.close()
 
-    def hook(frame_in, frame_out, index: int):
-        ff = read_order.pop(index, None)
-        number = index if ff is None or ff.sequence_number is None else ff.sequence_number
-        return stage(frame_in, frame_out, number, ff in warm)
+    def number_at(position: int) -> int:
+        ff = read_order.get(position)
+        return position if ff is None or ff.sequence_number is None else ff.sequence_number
+
+    def hook(frame_in, frame_out, index: int, future=()):
+        ff = read_order.get(index)
+        number = number_at(index)
+        n = 0   # the look-ahead ends before a gap in the numbering, as on one machine
+        while n < len(future) and number_at(index + 1 + n) == number + 1 + n:
+            n += 1
+        read_order.pop(index, None)
+        return stage(frame_in, frame_out, number, ff in warm, future=list(future)[:n])
+    hook.lookahead = getattr(stage, "lookahead", 0)
 
     def only_written(item) -> None:
         if item.meta[0] in write:
@@ -177,7 +190,8 @@ def run_chunks(client, files: list[FrameFile], filter_kwargs: dict, *, overwrite
     say = say or (lambda msg: None)
     report = Report(say=say)
     from mlaa_stream.cluster.temporal import MAX_WARMUP_FACTOR
-    chunks = plan_chunks(files, chunk_frames, MAX_WARMUP_FACTOR * temporal.warmup if temporal is not None else 0)
+    chunks = plan_chunks(files, chunk_frames, MAX_WARMUP_FACTOR * temporal.warmup if temporal is not None else 0,
+                         temporal.lookahead if temporal is not None else 0)
     like = None
     if strict and files:
         from mlaa_stream.io.images import read_image

@@ -33,7 +33,7 @@ class TemporalSpec:
     frames: int | None = None  # K, the TSS ring (None: tss.DEFAULT_FRAMES)
     mode: str = "adaptive"
     k: float | None = None   # the blend's velocity-difference strength (None: its default)
-    lookahead: int = 0       # frames after the current one TSS also reads (one machine only, not the cluster yet)
+    lookahead: int = 0       # frames after the current one TSS also reads: each chunk reads that many past its end
 
     def __post_init__(self):
         from mlaa_stream.temporal.methods import check
@@ -79,10 +79,11 @@ class WarmedStage:
 
     def __init__(self, stage, need: int, *, can_extend: bool, from_start: bool):
         self.stage, self.need, self.can_extend, self.from_start = stage, need, can_extend, from_start
+        self.lookahead = getattr(stage, "lookahead", 0)   # the chunk's pipeline hands in that many frames ahead
         self.changes, self.checked, self._prev = 0, False, None
         self.short = 0  # changes missing where the warm-up could not be extended (outputs may differ)
 
-    def __call__(self, frame_in, frame_out, index: int, warm: bool):
+    def __call__(self, frame_in, frame_out, index: int, warm: bool, future=()):
         if not self.checked:
             import numpy as np
             from mlaa_stream.temporal.stage import grey8
@@ -96,6 +97,8 @@ class WarmedStage:
                     if self.can_extend:
                         raise ShortWarmup(self.need - self.changes)
                     self.short = self.need - self.changes
+        if self.lookahead:
+            return self.stage(frame_in, frame_out, index, future=future)
         return self.stage(frame_in, frame_out, index)
 
     def close(self) -> None:

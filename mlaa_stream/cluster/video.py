@@ -110,8 +110,18 @@ def _run_segment(info, segment: Segment, start: float | None, filt, writer, stag
         ft = item.meta
         return ft.pts is not None and bool(ft.time_base) and float(ft.pts * ft.time_base) < first
 
+    frame = 1.0 / float(info.fps or 25)
+    ahead = getattr(stage, "lookahead", 0) if stage is not None else 0
+    last = None if segment.end is None else segment.end - 0.5 * frame   # frames from here on: look-ahead only
+
+    def is_ahead(item) -> bool:
+        ft = item.meta
+        return last is not None and ft.pts is not None and bool(ft.time_base) and float(ft.pts * ft.time_base) >= last
+
     def source():
-        inner = read_video(info, start=start, end=segment.end)
+        # the stage's look-ahead reads the N frames after the segment too (not written)
+        inner = read_video(info, start=start, end=segment.end if segment.end is None or not ahead
+                           else segment.end + ahead * frame)
         try:
             for position, item in enumerate(inner):
                 warm[position] = is_warm(item)
@@ -119,11 +129,12 @@ def _run_segment(info, segment: Segment, start: float | None, filt, writer, stag
         finally:
             inner.close()
 
-    def hook(frame_in, frame_out, index: int):
-        return stage(frame_in, frame_out, index, warm.pop(index, False))
+    def hook(frame_in, frame_out, index: int, future=()):
+        return stage(frame_in, frame_out, index, warm.pop(index, False), future=future)
+    hook.lookahead = ahead
 
     def sink(item) -> None:
-        if not is_warm(item):
+        if not is_warm(item) and not is_ahead(item):
             writer.write(item.frame, item.meta)
             written[0] += 1
 
