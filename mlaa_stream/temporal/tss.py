@@ -48,6 +48,11 @@ TILE_ROWS x LANES pixels (`tile_shifts`, per-tile tables of tss_resolve_shift) a
 (`MotionRing._alignment`): docs/temporal.md, "Pans are not translations". Dense: DIS flow
 current -> previous composed with each ring frame's field (remap), forward-backward checked; the
 inconsistent pixels are NaN and stay so in every older field (nothing of theirs is trusted).
+
+Look-ahead (files: `TSSStage(lookahead=N)`, called with `future=` the next N raw frames, which
+mlaa_stream.pipeline hands in): the frames after the current one are ring entries too, each one's translation
+chained from the frame-to-frame decisions and refined directly against the current frame (`MotionRing._ahead`),
+in K + N device slots; FULL_CELLS grows by FULL_CELLS_AHEAD per frame ahead (docs/temporal.md, "Look-ahead").
 """
 from __future__ import annotations
 
@@ -871,8 +876,9 @@ class TSSStage:
     frame_in is the raw input frame (its samples are accumulated; motion and cuts are measured on
     it), frame_filtered the spatial output of the same frame (it stands where samples are few);
     returns frame `index`'s output (same shape and dtype as frame_filtered). Frames must come in
-    order; a jump in `index`, a new size, a cut or reset() start a new ring. `stats` gets one dict
-    per frame (index, model, ring, flow_ms, resolve_ms, cells_mean, ...). backend "device"
+    order; a jump in `index`, a new size, a cut or reset() start a new ring. With `lookahead` N, pass the raw
+    frames index + 1 .. index + N as `future` (fewer at the end). `stats` gets one dict
+    per frame (index, model, ring, lookahead, flow_ms, resolve_ms, cells_mean, ...). backend "device"
     (kernels/tss.cl) or "numpy" (tss_frame_reference, slow)."""
 
     def __init__(self, device: str | int | None = None, *, frames: int = DEFAULT_FRAMES, bgr: bool = True,
@@ -1029,7 +1035,8 @@ class TSSStage:
 
     def _assign_slots(self, fm: FrameMotion) -> None:
         """Ring slots for the current and the look-ahead frames: a frame keeps its slot from when it first came
-        (a look-ahead frame is ingested once, not again when it is current); K + N slots in all."""
+        (a look-ahead frame is ingested once for the frames before it; as the current frame it is ingested again,
+        _resolve); K + N slots in all."""
         live = {e.index for e in fm.entries + fm.future}
         self._slot_of = {i: sl for i, sl in self._slot_of.items() if i in live}
         for e in fm.entries[:-1]:
