@@ -133,7 +133,8 @@ def main(argv: list[str] | None = None) -> int:
     lookaheads = [int(v) for v in args.lookahead.split(",")]
     for item in args.tss_set:
         name, value = item.split("=", 1)
-        setattr(T, name, type(getattr(T, name))(float(value)))
+        kind = type(getattr(T, name))
+        setattr(T, name, value.lower() in ("1", "true") if kind is bool else kind(float(value)))
     with_flip = M.flip_available()
     every = generate_scenes(names=args.scenes.split(","))
     scenes = [s for s in every if s.animated] + [m for m in [rendered_mover(every)] if m is not None]
