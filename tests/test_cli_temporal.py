@@ -151,19 +151,21 @@ def _wide_pan(n: int) -> list[np.ndarray]:
 
 
 def test_lookahead_on_a_sequence_stops_at_gaps(tmp_path):
-    """--lookahead 2 (issue 16) on a numbered sequence with a gap after 3: frames 1-3 read 2, 1, 0 frames ahead
-    (the window ends at the gap, where the stage resets), 5-7 again 2, 1, 0; the outputs differ from the causal
-    run's on the frames that read ahead."""
+    """--lookahead 2 (issue 16; the command line's default) on a numbered sequence with a gap after 3: frames 1-3
+    read 2, 1, 0 frames ahead (the window ends at the gap, where the stage resets), 5-7 again 2, 1, 0; the outputs
+    differ from the causal run's (--lookahead 0) on the frames that read ahead."""
     from mlaa_stream.io.images import read_image, write_image
     for n, f in zip((1, 2, 3, 5, 6, 7), _wide_pan(6)):
         write_image(str(tmp_path / f"s.{n:04d}.png"), f)
     runs = {}
-    for la in ("0", "2"):
+    for la in ("0", "2", "default"):
         stats = tmp_path / f"stats{la}.csv"
         res = CliRunner().invoke(main, [str(tmp_path / "s.%04d.png"), "-o", str(tmp_path / la / "s.%04d.png"),
-                                        "--temporal-method", "tss", "--lookahead", la, "--stats", str(stats), "-q"])
+                                        "--temporal-method", "tss", "--stats", str(stats), "-q"]
+                                 + ([] if la == "default" else ["--lookahead", la]))
         assert res.exit_code == 0, res.output
         runs[la] = list(csv.DictReader(stats.open()))
+    assert [r["lookahead"] for r in runs["default"]] == [r["lookahead"] for r in runs["2"]]   # the default is 2
     assert [r["index"] for r in runs["2"]] == ["1", "2", "3", "5", "6", "7"]
     assert [r["lookahead"] for r in runs["2"]] == ["2", "1", "0", "2", "1", "0"]
     assert {r["lookahead"] for r in runs["0"]} == {"0"}
@@ -198,3 +200,6 @@ def test_lookahead_on_video_and_refusals(tmp_path):
     res = CliRunner().invoke(main, [str(DEMO / "clip.mp4"), "-o", str(tmp_path / "b.mp4"), "--lookahead", "2",
                                     "--temporal-method", "blend"])
     assert res.exit_code != 0 and "--lookahead needs a --temporal-method with TSS" in res.output
+    res = CliRunner().invoke(main, [str(DEMO / "clip.mp4"), "-o", str(tmp_path / "c.mp4"), "--temporal",
+                                    "--temporal-method", "blend", "-q"])   # its default: none, no complaint
+    assert res.exit_code == 0, res.output

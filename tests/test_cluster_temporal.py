@@ -73,7 +73,7 @@ def test_held_frames_before_a_chunk_lengthen_its_warm_up(client, pan, tmp_path):
     (tmp_path / "in").mkdir()
     for k, img in enumerate(paused(pan)):
         write_image(str(tmp_path / "in" / f"p.{101 + k:04d}.png"), img)
-    ref = single_machine(tmp_path, "ref", "--temporal-frames", str(K))
+    ref = single_machine(tmp_path, "ref", "--temporal-frames", str(K), "--lookahead", "0")
     report = filter_on_cluster(client, str(tmp_path / "in" / "p.%04d.png"), str(tmp_path / "c" / "c.%04d.png"),
                                chunk_frames=CHUNK, temporal=TemporalSpec("tss", K))
     assert len(report.written) == N and not report.warnings
@@ -84,7 +84,7 @@ def test_held_frames_before_a_chunk_lengthen_its_warm_up(client, pan, tmp_path):
 def test_tss_chunks_equal_one_machine(client, seq, tmp_path):
     from mlaa_stream.cluster.frames import filter_on_cluster
 
-    ref = single_machine(seq, "ref_tss", "--temporal-frames", str(K))
+    ref = single_machine(seq, "ref_tss", "--temporal-frames", str(K), "--lookahead", "0")
     report = filter_on_cluster(client, str(seq / "in" / "p.%04d.png"), str(tmp_path / "c.%04d.png"),
                                chunk_frames=CHUNK, temporal=TemporalSpec("tss", K))
     assert len(report.written) == N and not report.failed
@@ -106,7 +106,7 @@ def test_tss_lookahead_chunks_equal_one_machine(client, seq, tmp_path):
     assert len(report.written) == N and not report.failed
     got = frames_of(tmp_path)
     assert len(got) == N and all(np.array_equal(a, b) for a, b in zip(got, ref))
-    causal = single_machine(seq, "ref_tss", "--temporal-frames", str(K))
+    causal = single_machine(seq, "ref_tss", "--temporal-frames", str(K), "--lookahead", "0")
     assert not np.array_equal(ref[CHUNK - 1], causal[CHUNK - 1])   # a chunk's last frame read ahead
 
 
@@ -125,7 +125,8 @@ def test_blend_chunks_within_the_stated_tolerance(client, seq, tmp_path):
 
 
 def test_the_command_line_runs_temporal_on_the_cluster(seq, tmp_path):
-    ref = single_machine(seq, "ref_tss", "--temporal-frames", str(K))
+    """The command line's defaults (method auto, look-ahead 2) reach the workers: the same frames as one machine."""
+    ref = single_machine(seq, "ref_default", "--temporal-frames", str(K))
     r = CliRunner().invoke(main, [str(seq / "in" / "p.%04d.png"), "-o", str(tmp_path / "c.%04d.png"), "--temporal",
                                   "--temporal-frames", str(K), "--cluster", "local:2", "--chunk-frames", str(CHUNK)])
     assert r.exit_code == 0, r.output
@@ -167,7 +168,7 @@ def test_tss_video_segments_equal_one_machine(client, pan_video, tmp_path):
     from mlaa_stream.cluster.video import filter_video_on_cluster
 
     r = CliRunner().invoke(main, [pan_video, "-o", str(tmp_path / "ref.mkv"), "--codec", "ffv1", "--temporal",
-                                  "--temporal-frames", str(K)])
+                                  "--temporal-frames", str(K), "--lookahead", "0"])
     assert r.exit_code == 0, r.output
     n = filter_video_on_cluster(client, pan_video, str(tmp_path / "cl.mkv"), codec="ffv1", segment_seconds=CHUNK / 24,
                                 temporal=TemporalSpec("tss", K))
