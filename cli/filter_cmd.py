@@ -443,9 +443,6 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
     return code
 
 
-DEFAULT_LOOKAHEAD = 2   # --lookahead when not given (docs/temporal.md, "Look-ahead")
-
-
 @dataclass
 class TemporalOptions:
     """The temporal stage's command-line settings (issues 6, 16); off unless --temporal (or --stats /
@@ -479,6 +476,7 @@ class TemporalOptions:
     @property
     def frames_ahead(self) -> int:
         """N for the stage: --lookahead, else DEFAULT_LOOKAHEAD (files: the output may wait), 0 for the blend."""
+        from mlaa_stream.temporal.methods import DEFAULT_LOOKAHEAD
         if self.lookahead is not None:
             return self.lookahead
         return 0 if self.method == "blend" else DEFAULT_LOOKAHEAD

@@ -156,6 +156,25 @@ def test_bench_outputs(tmp_path):
     assert paths[2].stat().st_size > 10_000
 
 
+def test_bench_temporal_method_reads_frames_ahead():
+    """The bench's mlaa+temporal is what --temporal runs: TSS reading DEFAULT_LOOKAHEAD frames ahead (the same
+    frames as a stage driven by hand with them), and the shot's frames in order through a fresh stage."""
+    from mlaa_stream.bench.temporal import scene_pan
+    from mlaa_stream.temporal.methods import DEFAULT_LOOKAHEAD
+    from mlaa_stream.temporal.tss import TSSStage
+    sc = scene_pan(5, 240, 136)
+    proc = B.METHODS["mlaa+temporal:tss"](None)
+    try:
+        outs = B.run_scene(proc, sc)
+        assert [r["lookahead"] for r in proc.stage.stats] == [2, 2, 2, 1, 0] and DEFAULT_LOOKAHEAD == 2
+        with TSSStage(bgr=False, lookahead=2, context=proc.filter.context) as stage:
+            expected = [stage(f, proc.filter.process(f), i, future=sc.inputs[i + 1:i + 3])
+                        for i, f in enumerate(sc.inputs)]
+        assert all(np.array_equal(a, b) for a, b in zip(outs, expected))
+    finally:
+        proc.close()
+
+
 def test_bench_records_a_failing_method(monkeypatch):
     def broken(device):
         raise RuntimeError("kernel exploded")

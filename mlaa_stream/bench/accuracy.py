@@ -21,6 +21,7 @@ from mlaa_stream.yardstick import metrics as M
 from mlaa_stream.spatial.fast_filter import FastFilter
 from mlaa_stream.spatial.fxaa import FXAA
 from mlaa_stream.spatial.filter import PRESETS, Filter
+from mlaa_stream.temporal.methods import DEFAULT_LOOKAHEAD
 from mlaa_stream.yardstick.scenes import Scene, generate_scenes, timing_frame
 
 
@@ -43,22 +44,32 @@ class NoAA:
 class SpatialTemporal:
     """The spatial filter, then a temporal stage with its history kept across frames; `reset()` starts
     a new shot (the bench calls it between scenes). `method`: one of mlaa_stream.temporal.methods.METHODS
-    ("auto" is what `--temporal` runs); with `temporal_options` the blend (TemporalStage) with them."""
+    ("auto" is what `--temporal` runs, with `lookahead` DEFAULT_LOOKAHEAD); with `temporal_options` the blend
+    (TemporalStage) with them. `process_all` hands the stage each frame's `lookahead` next frames, as the pipeline
+    does; `process` (the timing run) reads the past only."""
 
-    def __init__(self, device: str | None, method: str = "auto", **temporal_options):
+    def __init__(self, device: str | None, method: str = "auto", lookahead: int = 0, **temporal_options):
         from mlaa_stream.temporal.methods import make_stage, needs_regions
         self.filter = Filter(device=device, keep_regions=needs_regions(method))
+        self.lookahead = lookahead
         if temporal_options:   # the blend's own options (mode): TemporalStage itself
             from mlaa_stream.temporal.stage import TemporalStage
             self.stage = TemporalStage(context=self.filter.context, bgr=False, **temporal_options)
         else:
-            self.stage = make_stage(method, self.filter.context, bgr=False, regions_from=self.filter)
+            self.stage = make_stage(method, self.filter.context, bgr=False, regions_from=self.filter,
+                                    lookahead=lookahead)
         self.index = 0
 
-    def process(self, frame: np.ndarray) -> np.ndarray:
-        out = self.stage(frame, self.filter.process(frame), self.index)
+    def process(self, frame: np.ndarray, future: list[np.ndarray] = ()) -> np.ndarray:
+        ahead = {"future": future} if self.lookahead else {}
+        out = self.stage(frame, self.filter.process(frame), self.index, **ahead)
         self.index += 1
         return out
+
+    def process_all(self, frames: np.ndarray) -> np.ndarray:
+        """A shot's frames in order, each with the next `lookahead` frames."""
+        n = self.lookahead
+        return np.stack([self.process(f, list(frames[i + 1:i + 1 + n])) for i, f in enumerate(frames)])
 
     def reset(self) -> None:
         self.stage.reset()
@@ -75,8 +86,8 @@ METHODS: dict[str, Callable[[str | None], Processor]] = {
     "none": lambda device: NoAA(),
     "fxaa": lambda device: FXAA(device=device),
     "mlaa": lambda device: Filter(device=device),
-    "mlaa+temporal": lambda device: SpatialTemporal(device, "auto"),
-    "mlaa+temporal:tss": lambda device: SpatialTemporal(device, "tss"),
+    "mlaa+temporal": lambda device: SpatialTemporal(device, "auto", lookahead=DEFAULT_LOOKAHEAD),
+    "mlaa+temporal:tss": lambda device: SpatialTemporal(device, "tss", lookahead=DEFAULT_LOOKAHEAD),
     "mlaa+temporal:blend": lambda device: SpatialTemporal(device, "blend", mode="adaptive"),
     "mlaa+temporal:blend-dense": lambda device: SpatialTemporal(device, "blend", mode="dense"),
 }
@@ -139,6 +150,8 @@ def run_scene(proc: Processor, scene: Scene) -> np.ndarray:
     reset = getattr(proc, "reset", None)
     if reset is not None:
         reset()
+    if hasattr(proc, "process_all"):   # a temporal method reading frames ahead
+        return proc.process_all(scene.inputs)
     return np.stack([proc.process(f) for f in scene.inputs])
 
 

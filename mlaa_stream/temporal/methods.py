@@ -14,6 +14,9 @@ from __future__ import annotations
 
 METHODS = ("auto", "tss", "blend", "tss+blend")
 DEFAULT_METHOD = "auto"
+# frames after the current one that TSS reads where the output may wait (the command line: files and pipes);
+# the API's default is 0 (frames may come live). docs/temporal.md, "Look-ahead"
+DEFAULT_LOOKAHEAD = 2
 
 
 def needs_regions(method: str) -> bool:
