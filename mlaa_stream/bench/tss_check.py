@@ -16,7 +16,8 @@ when the stage loses in error removed, damage or all-frame FLIP.
 --views adds held-out rendered shots (mlaa_stream.bench.rendered_views.view_shots: a pan and a dolly from each
 held-out view at 640x360, rendered here: a few minutes), shots no constant was measured on.
 --lookahead N[,N...]: the method with TSS reading N frames after the current one too (a row per N, named
-"<method>+N" for N > 0; what `--lookahead N` runs); each row is checked against spatial only.
+"<method>+N" for N > 0; what `--lookahead N` runs; default DEFAULT_LOOKAHEAD, what `--temporal` reads); each
+row is checked against spatial only.
 --tss-set sets a module constant of mlaa_stream.temporal.tss for the run (e.g. BAND_TOL=1e9).
 --exact-motion adds two oracle rows to each of the bench's rendered shots (and the held-out shots with --views), with
 the renderer's exact motion (mlaa_stream.yardstick.rendered.reprojection, from each frame's depth; needs EGL):
@@ -33,7 +34,7 @@ import numpy as np
 
 from mlaa_stream.spatial.filter import Filter
 from mlaa_stream.temporal import tss as T
-from mlaa_stream.temporal.methods import METHODS, make_stage, needs_regions
+from mlaa_stream.temporal.methods import DEFAULT_LOOKAHEAD, METHODS, make_stage, needs_regions
 from mlaa_stream.yardstick import metrics as M
 from mlaa_stream.yardstick.scenes import Scene, edge_mask, generate_scenes
 
@@ -125,12 +126,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--method", default="auto", choices=METHODS)
     ap.add_argument("--views", action="store_true", help="also held-out rendered shots (needs EGL)")
     ap.add_argument("--tss-set", action="append", default=[], metavar="NAME=VALUE")
-    ap.add_argument("--lookahead", default="0", metavar="N[,N...]",
-                    help="frames after the current one TSS also reads; a row per value (default 0)")
+    ap.add_argument("--lookahead", default=str(DEFAULT_LOOKAHEAD), metavar="N[,N...]",
+                    help="frames after the current one TSS also reads; a row per value (default: what --temporal "
+                         f"reads, {DEFAULT_LOOKAHEAD})")
     ap.add_argument("--exact-motion", action="store_true",
                     help="oracle rows with the renderer's exact motion on the rendered shots (needs EGL)")
     args = ap.parse_args(argv)
-    lookaheads = [int(v) for v in args.lookahead.split(",")]
+    lookaheads = [0] if args.method == "blend" else [int(v) for v in args.lookahead.split(",")]   # blend: the past
     for item in args.tss_set:
         name, value = item.split("=", 1)
         kind = type(getattr(T, name))
