@@ -274,7 +274,7 @@ def _job_for(kind: str, output: str) -> type:
 @click.option("--lookahead", type=click.IntRange(0, 8), default=None, metavar="N",
               help="Temporal supersampling also reads the N frames after each one (each output waits for N "
                    "more frames; implies --temporal). Default with the temporal stage: 2 (steadier and more "
-                   "error removed on every shot where it takes samples, 1.13x its time: docs/temporal.md, "
+                   "error removed on every shot where it takes samples, ~1.1x its time: docs/temporal.md, "
                    "\"Look-ahead\"); 0 reads the past only.")
 @click.option("--temporal-mode", type=click.Choice(["adaptive", "dense", "global", "static"]),
               default="adaptive", show_default=True,

@@ -410,3 +410,24 @@ def test_projective_kernel_matches_reference_in_every_format(filt, channels, dty
             st.close()
     for a, b in zip(outs["device"], outs["numpy"]):
         assert a.dtype == b.dtype and np.array_equal(a, b)
+
+
+def test_band_growth_keeps_aliasing_and_drops_a_second_motion():
+    """Known answers for the band check's age rule (BAND_GROWTH): three bands checked in ring frames of ages 1, 4, 7
+    and 10. Band 0 deviates by 0.4 px at every age (a bias of 1-spp aliasing along its edges: kept), band 1 by
+    0.12 px per frame of age (a second motion: off where its deviation is over BAND_TOL, from age 4), band 2 by
+    1.0 px (over BAND_FAR: off at any age); a band without texture is never off."""
+    from mlaa_stream.temporal.tss import BAND_FAR, BAND_GROWTH, BAND_TOL, _band_slopes, _bands_growing
+    assert BAND_GROWTH > 0 and BAND_FAR < 1.0
+    ages = (1, 4, 7, 10)
+    textured = np.array([True, True, True, False])
+    checks = []
+    for a in ages:
+        dev = np.array([0.4, 0.12 * a, 1.0, 5.0])
+        checks.append((None, a, (None, dev, textured, dev, textured)))
+    slopes = _band_slopes(checks)
+    np.testing.assert_allclose(slopes[0][:3], [0.0, 0.12, 0.0], atol=1e-12)
+    for a in ages:
+        rows, cols = _bands_growing(slopes, a, *checks[ages.index(a)][2][1:])
+        expect = [False, 0.12 * a > BAND_TOL, True, False]
+        assert list(rows) == expect and list(cols) == expect, (a, rows)

@@ -94,6 +94,10 @@ TILE, TILE_TOL, TILE_TEXTURE = 48, 0.4, 1.0   # _Refiner's tile check: flow px, 
 BAND, BAND_TOL, BAND_TEXTURE = 32, 0.25, 0.05   # _Refiner._bands: flow px, px, mean squared gradient
 STATIC_TOL = 0.05     # px (flow): a band whose own motion is under this while the frame's is over twice it is
                       # still content (_Refiner._band_weights): left out of the estimate; 0 = off
+BAND_GROWTH = 0.2     # with 3 ring ages or more checked in a frame, a band is off only where its deviation also grows
+                      # with age by this share of BAND_TOL per age (_bands_growing; docs/temporal.md, "The band
+                      # check on a pure pan"); 0 = every band over BAND_TOL is off
+BAND_FAR = 0.75       # px (flow): a band departing this much is off at any age
 REFINE_POINTS = 16384 # _Refiner: points in all (the largest gradients of each tile, at most a whole tile)
 
 
@@ -257,6 +261,8 @@ class MotionRing:
         if not todo:
             return
 
+        checks = []
+
         def refine(e: RingEntry, steps: int) -> None:
             s = (e.shift[0] / fs, e.shift[1] / fs)
             weights = None
@@ -264,6 +270,9 @@ class MotionRing:
                 s, e.valid = ref.step(e.pyr.blurred("flow"), s, check=k == steps - 1, weights=weights)
                 weights = ref.band_weights
             e.shift = (s[0] * fs, s[1] * fs)
+            if ref.last_check is not None:
+                checks.append((e, index - e.index, ref.last_check))
+                ref.last_check = None
 
         newest = todo[-1]
         before = newest.shift
@@ -277,6 +286,10 @@ class MotionRing:
             # however the run started (--resume's warm-up, a cluster chunk's: docs/cluster.md)
             if (index - e.index - 1) % REFINE_EVERY == 0:
                 refine(e, REFINE_STEPS)
+        if BAND_GROWTH > 0 and len({a for _, a, _ in checks}) >= 3:
+            slopes = _band_slopes(checks)
+            for e, age, (bad, dy, ty, dx, tx) in checks:
+                e.valid = ref.valid_of(bad, *_bands_growing(slopes, age, dy, ty, dx, tx))
 
     def _projective(self, pyr: Pyramid, index: int) -> None:
         """A camera that turns about its eye moves the image by a homography, which one translation fits only
@@ -405,6 +418,7 @@ class _Refiner:
     from that frame."""
 
     def __init__(self, cur_b: np.ndarray, points: int | None = None):
+        self.last_check = None   # (bad tiles, row deviations, textured rows, column deviations, textured columns)
         points = REFINE_POINTS if points is None else int(points)
         self.h, self.w = h, w = cur_b.shape
         points = -(-points // max(-(-h // TILE) * -(-w // TILE), 1))    # per tile
@@ -508,9 +522,13 @@ class _Refiner:
         """Row and column bands (BAND flow px) whose own 1-D step across their edges (vertical for a
         row band, horizontal for a column band) departs from the frame's by over BAND_TOL px: a second
         motion along long, near-horizontal or near-vertical edges, which a tile cannot measure (an
-        aliased edge of slope 1/L moves in 1-px jumps every L px; a band spans several)."""
+        aliased edge of slope 1/L moves in 1-px jumps every L px; a band spans several). Also keeps each
+        band's deviation (`last_check`): 1-spp aliasing alone makes some depart by 0.4-0.6 px at any age,
+        and MotionRing._refine then keeps only those whose deviation grows with age (_bands_growing)."""
         (dy, ty), (dx, tx) = self._band_steps(r)
-        return ty & (np.abs(dy - step[1]) > BAND_TOL), tx & (np.abs(dx - step[0]) > BAND_TOL)
+        dy, dx = dy - step[1], dx - step[0]
+        self.last_check = (None, dy, ty, dx, tx)
+        return ty & (np.abs(dy) > BAND_TOL), tx & (np.abs(dx) > BAND_TOL)
 
     def _band_weights(self, d: tuple[float, float], r: np.ndarray,
                       step: tuple[float, float]) -> np.ndarray | None:
@@ -561,8 +579,14 @@ class _Refiner:
             sy = (self.ta * tby - self.tb * tbx) / self.tdet
         bad = self.textured & (np.hypot(sx - step[0], sy - step[1]) > TILE_TOL)
         rows, cols = self._bands(r, step)
+        self.last_check = (bad,) + self.last_check[1:]   # the tiles and bands of this check (MotionRing._refine)
+        return new, self.valid_of(bad, rows, cols)
+
+    def valid_of(self, bad: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray | None:
+        """The valid mask (flow size) without the bad tiles, row bands and column bands; None: all valid."""
+        h, w = self.h, self.w
         if not bad.any() and not rows.any() and not cols.any():
-            return new, None
+            return None
         valid = np.ones((h, w), np.uint8)
         valid[np.repeat(rows, BAND)[:h], :] = 0
         valid[:, np.repeat(cols, BAND)[:w]] = 0
@@ -573,7 +597,34 @@ class _Refiner:
             valid[self.ty * TILE:, :] = valid[self.ty * TILE - 1:self.ty * TILE, :]
         if self.tx * TILE < w:
             valid[:, self.tx * TILE:] = valid[:, self.tx * TILE - 1:self.tx * TILE]
-        return new, valid
+        return valid
+
+
+def _band_slopes(checks: list) -> tuple[np.ndarray, np.ndarray]:
+    """Each band's deviation per frame of age: the least-squares slope, with an intercept, of its deviations from
+    the frame's motion against the ages of the ring frames checked this frame (row bands vertical, column bands
+    horizontal)."""
+    def fit(pairs):
+        ages = np.array([a for a, _, _ in pairs], np.float64)[:, None]
+        dev = np.stack([np.nan_to_num(d) for _, d, _ in pairs])
+        w = np.stack([t for _, _, t in pairs]).astype(np.float64)
+        sw, sa, saa = w.sum(0), (w * ages).sum(0), (w * ages * ages).sum(0)
+        sd, sad = (w * dev).sum(0), (w * ages * dev).sum(0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            v = (sad * sw - sa * sd) / (sw * saa - sa * sa)
+        return np.where(np.isfinite(v), v, 0.0)
+    return (fit([(a, dy, ty) for _, a, (_, dy, ty, _, _) in checks]),
+            fit([(a, dx, tx) for _, a, (_, _, _, dx, tx) in checks]))
+
+
+def _bands_growing(slopes, age: int, dy, ty, dx, tx) -> tuple[np.ndarray, np.ndarray]:
+    """Bands off for a ring frame of this age: its deviation over BAND_TOL *and* growing with age (slope x age over
+    BAND_GROWTH x BAND_TOL), or its deviation over BAND_FAR."""
+    vr, vc = slopes
+    def off(v, d, t):
+        d = np.abs(np.nan_to_num(d))
+        return t & (((d > BAND_TOL) & (np.abs(v * age) > BAND_GROWTH * BAND_TOL)) | (d > BAND_FAR))
+    return off(vr, dy, ty), off(vc, dx, tx)
 
 
 @dataclass
