@@ -152,6 +152,7 @@ class MotionRing:
         self._dis = None
         self._last_refiner: _Refiner | None = None   # this frame's, made by _refine, used by _projective
         self._refiner_pyr: Pyramid | None = None     # the frame _last_refiner was made for
+        self.band_slopes = None                      # each band's deviation per frame of age (_refine, _band_slopes)
 
     def reset(self) -> None:
         self.entries = []
@@ -170,6 +171,7 @@ class MotionRing:
         look-ahead frames `future` (frames index + 1, index + 2, ...). `decision`: the current frame's motion
         from the previous one when already measured (it came as a look-ahead frame), else measured here."""
         prev = self.entries[-1] if self.entries else None
+        self.band_slopes = None   # set by _refine where it fits them this frame
         if fresh or prev is None:
             dec = Decision("reset", measures={"cut": False})
         else:
@@ -239,6 +241,11 @@ class MotionRing:
                     s, e.valid = ref.step(a.pyr.blurred("flow"), s, check=step == NEWEST_STEPS - 1, weights=weights)
                     weights = ref.band_weights
                 e.shift = (s[0] * fs, s[1] * fs)
+                slopes = self.band_slopes
+                if slopes is not None and ref.last_check is not None:   # a frame ahead's age is negative
+                    bad, dy, ty, dx, tx = ref.last_check
+                    e.valid = ref.valid_of(bad, *_bands_growing(slopes, index - a.index, dy, ty, dx, tx))
+                ref.last_check = None
             out.append(e)
         if self.refine and any(e.projective for e in self.entries):
             ref = self._refiner(pyr)
@@ -286,10 +293,11 @@ class MotionRing:
             # however the run started (--resume's warm-up, a cluster chunk's: docs/cluster.md)
             if (index - e.index - 1) % REFINE_EVERY == 0:
                 refine(e, REFINE_STEPS)
+        self.band_slopes = None   # this frame's, for the frames ahead too (_ahead)
         if BAND_GROWTH > 0 and len({a for _, a, _ in checks}) >= 3:
-            slopes = _band_slopes(checks)
+            self.band_slopes = _band_slopes(checks)
             for e, age, (bad, dy, ty, dx, tx) in checks:
-                e.valid = ref.valid_of(bad, *_bands_growing(slopes, age, dy, ty, dx, tx))
+                e.valid = ref.valid_of(bad, *_bands_growing(self.band_slopes, age, dy, ty, dx, tx))
 
     def _projective(self, pyr: Pyramid, index: int) -> None:
         """A camera that turns about its eye moves the image by a homography, which one translation fits only
