@@ -511,18 +511,11 @@ class _SequenceTemporal:
         self.lookahead = getattr(stage, "lookahead", 0)   # the pipeline hands in that many frames ahead
         self._prev: tuple | None = None   # (number, shape) of the previous frame
 
-    def _number(self, position: int) -> int:
-        ff = self.runner.read_order.get(position)
-        return position if ff is None or ff.sequence_number is None else ff.sequence_number
-
     def __call__(self, frame_in, frame_out, index: int, future=()):
+        from mlaa_stream.io.sequence import consecutive_ahead, frame_number
         ff = self.runner.read_order.get(index)
-        number = self._number(index)
-        # the look-ahead window ends before a gap in the numbering (the stage resets there)
-        n = 0
-        while n < len(future) and self._number(index + 1 + n) == number + 1 + n:
-            n += 1
-        future = list(future)[:n]
+        number = frame_number(self.runner.read_order, index)
+        future = consecutive_ahead(self.runner.read_order, index, future)
         shape = (frame_in.shape, frame_in.dtype)
         if self._prev is not None:
             label = ff.label if ff is not None else f"frame {index}"

@@ -226,7 +226,7 @@ def _two_edges(y_top: float, y_bottom: float, w: int = 240, h: int = 144) -> np.
 
 
 def test_band_check_masks_a_second_motion_along_long_edges():
-    """Known answer (_Refiner._bands): the upper edge moved 0.6 px between the ring frame and the
+    """Known answer (_Refiner._band_deviations): the upper edge moved 0.6 px between the ring frame and the
     current one, the lower edge did not (a static border over a pan). The frame's translation splits the
     difference, so each edge's row band is ~0.3 px off it: both bands (rows 32-63 and 64-95 with
     BAND = 32) lose that frame's samples, every other row keeps them, and no column band is masked

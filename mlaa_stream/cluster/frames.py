@@ -23,7 +23,8 @@ from dataclasses import dataclass, field
 from typing import Callable
 
 from mlaa_stream.io.images import check_complete, image_shape, remove_quietly, stale_temp_files
-from mlaa_stream.io.sequence import FilterSet, FrameFile, Report, image_sink, image_source
+from mlaa_stream.io.sequence import (FilterSet, FrameFile, Report, consecutive_ahead, frame_number, image_sink,
+                                     image_source)
 
 CHUNK_FRAMES = 16  # frames per task: a few seconds of work for a 1080p frame, enough to hide scheduling
 
@@ -158,18 +159,12 @@ def _with_temporal(stage, files: list[FrameFile], warm: set, report: Report, str
         finally:
             inner.close()
 
-    def number_at(position: int) -> int:
-        ff = read_order.get(position)
-        return position if ff is None or ff.sequence_number is None else ff.sequence_number
-
     def hook(frame_in, frame_out, index: int, future=()):
         ff = read_order.get(index)
-        number = number_at(index)
-        n = 0   # the look-ahead ends before a gap in the numbering, as on one machine
-        while n < len(future) and number_at(index + 1 + n) == number + 1 + n:
-            n += 1
+        number = frame_number(read_order, index)
+        ahead = consecutive_ahead(read_order, index, future)   # as on one machine
         read_order.pop(index, None)
-        return stage(frame_in, frame_out, number, ff in warm, future=list(future)[:n])
+        return stage(frame_in, frame_out, number, ff in warm, future=ahead)
     hook.lookahead = getattr(stage, "lookahead", 0)
 
     def only_written(item) -> None:

@@ -262,6 +262,23 @@ def image_sink(report: Report, *, overwrite: bool, strict: bool) -> Callable[[It
     return sink
 
 
+def frame_number(read_order: dict, position: int) -> int:
+    """The frame number a temporal stage gets for the frame at `position` of a run (read_order: position ->
+    FrameFile as read): the file's sequence number (a folder: its position in name order), else the position."""
+    ff = read_order.get(position)
+    return position if ff is None or ff.sequence_number is None else ff.sequence_number
+
+
+def consecutive_ahead(read_order: dict, position: int, future) -> list:
+    """The look-ahead frames (those read after `position`) up to a gap in the numbering, where the temporal
+    stage resets: the window ends before it."""
+    number = frame_number(read_order, position)
+    n = 0
+    while n < len(future) and frame_number(read_order, position + 1 + n) == number + 1 + n:
+        n += 1
+    return list(future)[:n]
+
+
 def plan_images(src_paths: list[str], output: str, numbers: list[int | None] | None = None) -> list[FrameFile]:
     """Pair each input with its output path; without numbers (a folder) each file gets its position in the list."""
     if numbers is None:

@@ -38,7 +38,7 @@ an index jump or a size change, static, global translation, dense DIS flow). Glo
 translation is the previous one composed with this frame's, then refined *directly* against the
 current frame by sparse Gauss-Newton (`_Refiner`: the current frame's largest gradients on the flow-size
 grey, the ring frame's blurred grey kept): chaining alone drifts (issue 16: 0.09 px after 16 frames
-against 0.016 direct). Row and column bands test the translation along long edges (`_Refiner._bands`:
+against 0.016 direct). Row and column bands test the translation along long edges (`_Refiner._band_deviations`:
 a band whose own 1-D step departs from the frame's takes no samples from that ring frame) and still
 bands leave the estimate (`_Refiner._band_weights`): docs/temporal.md, "Never worse". A turning camera moves
 the image by a homography, far from one translation with a wide lens: each translated ring frame also keeps a
@@ -91,7 +91,7 @@ PROJECTIVE_MIN = 0.25 # px (full size): a global frame uses projective maps wher
 HOMOGRAPHY_STEPS = 3  # inverse-compositional Gauss-Newton steps for the newest ring frame's homography
 PROJECTIVE_RATIO = 1.0  # ... and no ring frame departs by more than this times its translation (plus PROJECTIVE_MIN)
 TILE, TILE_TOL, TILE_TEXTURE = 48, 0.4, 1.0   # _Refiner's tile check: flow px, px, mean squared gradient
-BAND, BAND_TOL, BAND_TEXTURE = 32, 0.25, 0.05   # _Refiner._bands: flow px, px, mean squared gradient
+BAND, BAND_TOL, BAND_TEXTURE = 32, 0.25, 0.05   # _Refiner._band_deviations: flow px, px, mean squared gradient
 STATIC_TOL = 0.05     # px (flow): a band whose own motion is under this while the frame's is over twice it is
                       # still content (_Refiner._band_weights): left out of the estimate; 0 = off
 BAND_GROWTH = 0.2     # with 3 ring ages or more checked in a frame, a band is off only where its deviation also grows
@@ -171,7 +171,7 @@ class MotionRing:
         look-ahead frames `future` (frames index + 1, index + 2, ...). `decision`: the current frame's motion
         from the previous one when already measured (it came as a look-ahead frame), else measured here."""
         prev = self.entries[-1] if self.entries else None
-        self.band_slopes = None   # set by _refine where it fits them this frame
+        self.band_slopes = None   # set by _refine where it fits them this frame (_ahead reads them)
         if fresh or prev is None:
             dec = Decision("reset", measures={"cut": False})
         else:
@@ -236,16 +236,11 @@ class MotionRing:
             e = RingEntry(a.index, None, a.pyr, shift=d)
             if self.refine and moved:
                 ref = self._refiner(pyr)
-                s, weights = (d[0] / fs, d[1] / fs), None
-                for step in range(NEWEST_STEPS):
-                    s, e.valid = ref.step(a.pyr.blurred("flow"), s, check=step == NEWEST_STEPS - 1, weights=weights)
-                    weights = ref.band_weights
+                s, e.valid, check = ref.refine(a.pyr.blurred("flow"), (d[0] / fs, d[1] / fs), NEWEST_STEPS)
                 e.shift = (s[0] * fs, s[1] * fs)
-                slopes = self.band_slopes
-                if slopes is not None and ref.last_check is not None:   # a frame ahead's age is negative
-                    bad, dy, ty, dx, tx = ref.last_check
-                    e.valid = ref.valid_of(bad, *_bands_growing(slopes, index - a.index, dy, ty, dx, tx))
-                ref.last_check = None
+                if self.band_slopes is not None and check is not None:   # a frame ahead's age is negative
+                    bad, dy, ty, dx, tx = check
+                    e.valid = ref.valid_of(bad, *_bands_growing(self.band_slopes, index - a.index, dy, ty, dx, tx))
             out.append(e)
         if self.refine and any(e.projective for e in self.entries):
             ref = self._refiner(pyr)
@@ -271,15 +266,10 @@ class MotionRing:
         checks = []
 
         def refine(e: RingEntry, steps: int) -> None:
-            s = (e.shift[0] / fs, e.shift[1] / fs)
-            weights = None
-            for k in range(steps):
-                s, e.valid = ref.step(e.pyr.blurred("flow"), s, check=k == steps - 1, weights=weights)
-                weights = ref.band_weights
+            s, e.valid, check = ref.refine(e.pyr.blurred("flow"), (e.shift[0] / fs, e.shift[1] / fs), steps)
             e.shift = (s[0] * fs, s[1] * fs)
-            if ref.last_check is not None:
-                checks.append((e, index - e.index, ref.last_check))
-                ref.last_check = None
+            if check is not None:
+                checks.append((e, index - e.index, check))
 
         newest = todo[-1]
         before = newest.shift
@@ -293,7 +283,6 @@ class MotionRing:
             # however the run started (--resume's warm-up, a cluster chunk's: docs/cluster.md)
             if (index - e.index - 1) % REFINE_EVERY == 0:
                 refine(e, REFINE_STEPS)
-        self.band_slopes = None   # this frame's, for the frames ahead too (_ahead)
         if BAND_GROWTH > 0 and len({a for _, a, _ in checks}) >= 3:
             self.band_slopes = _band_slopes(checks)
             for e, age, (bad, dy, ty, dx, tx) in checks:
@@ -526,17 +515,15 @@ class _Refiner:
             dx = np.bincount(cx, r * self.gx, nc) / gxx
         return (dy, gyy > BAND_TEXTURE * BAND * self.w), (dx, gxx > BAND_TEXTURE * BAND * self.h)
 
-    def _bands(self, r: np.ndarray, step: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
-        """Row and column bands (BAND flow px) whose own 1-D step across their edges (vertical for a
-        row band, horizontal for a column band) departs from the frame's by over BAND_TOL px: a second
-        motion along long, near-horizontal or near-vertical edges, which a tile cannot measure (an
-        aliased edge of slope 1/L moves in 1-px jumps every L px; a band spans several). Also keeps each
-        band's deviation (`last_check`): 1-spp aliasing alone makes some depart by 0.4-0.6 px at any age,
-        and MotionRing._refine then keeps only those whose deviation grows with age (_bands_growing)."""
+    def _band_deviations(self, r: np.ndarray, step: tuple[float, float]):
+        """How far each row band's own 1-D step across its edges (vertical; column bands: horizontal) departs
+        from the frame's, with whether the band has the texture to measure it: (dy, ty, dx, tx). A band
+        departing by over BAND_TOL px holds a second motion along long, near-horizontal or near-vertical edges,
+        which a tile cannot measure (an aliased edge of slope 1/L moves in 1-px jumps every L px; a band spans
+        several); but 1-spp aliasing alone makes some depart by 0.4-0.6 px at any age, so MotionRing._refine
+        keeps only those whose deviation grows with age (_bands_growing)."""
         (dy, ty), (dx, tx) = self._band_steps(r)
-        dy, dx = dy - step[1], dx - step[0]
-        self.last_check = (None, dy, ty, dx, tx)
-        return ty & (np.abs(dy) > BAND_TOL), tx & (np.abs(dx) > BAND_TOL)
+        return dy - step[1], ty, dx - step[0], tx
 
     def _band_weights(self, d: tuple[float, float], r: np.ndarray,
                       step: tuple[float, float]) -> np.ndarray | None:
@@ -586,9 +573,19 @@ class _Refiner:
             sx = (self.tc * tbx - self.tb * tby) / self.tdet
             sy = (self.ta * tby - self.tb * tbx) / self.tdet
         bad = self.textured & (np.hypot(sx - step[0], sy - step[1]) > TILE_TOL)
-        rows, cols = self._bands(r, step)
-        self.last_check = (bad,) + self.last_check[1:]   # the tiles and bands of this check (MotionRing._refine)
-        return new, self.valid_of(bad, rows, cols)
+        dy, ty, dx, tx = self._band_deviations(r, step)
+        self.last_check = (bad, dy, ty, dx, tx)   # the tiles and bands of this check (MotionRing._refine)
+        return new, self.valid_of(bad, ty & (np.abs(dy) > BAND_TOL), tx & (np.abs(dx) > BAND_TOL))
+
+    def refine(self, ring_b: np.ndarray, d: tuple[float, float], steps: int):
+        """`steps` steps from d (flow px), each with the previous one's band weights, the last with the checks:
+        returns (d, valid mask or None, the last check's (bad tiles, dy, ty, dx, tx) or None)."""
+        weights, valid, self.last_check = None, None, None
+        for k in range(steps):
+            d, valid = self.step(ring_b, d, check=k == steps - 1, weights=weights)
+            weights = self.band_weights
+        check, self.last_check = self.last_check, None
+        return d, valid, check
 
     def valid_of(self, bad: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray | None:
         """The valid mask (flow size) without the bad tiles, row bands and column bands; None: all valid."""
