@@ -279,7 +279,7 @@ def _job_for(kind: str, output: str) -> type:
 @click.option("--temporal-mode", type=click.Choice(["adaptive", "dense", "global", "static"]),
               default="adaptive", show_default=True,
               help="Motion model: adaptive picks per frame the cheapest that explains it "
-                   "(static shot, one global motion, dense flow).")
+                   "(static shot, one global motion, moving layers over a background, dense flow).")
 @click.option("--temporal-k", type=click.FloatRange(min=0), default=None,
               help="Velocity-difference strength K of seed 002 in pixel units (larger rejects "
                    "history sooner; 0 keeps it regardless of speed).")

@@ -21,7 +21,7 @@ def test_video_gets_the_temporal_stage_and_stats(tmp_path):
     assert res.exit_code == 0, res.output
     rows = list(csv.DictReader(stats.open()))
     assert len(rows) == 10 and rows[0]["model"] == "reset"
-    assert {r["model"] for r in rows[1:]} <= {"static", "global", "dense", "reset"}
+    assert {r["model"] for r in rows[1:]} <= {"static", "global", "layers", "dense", "reset"}
     assert {"ring", "model", "flow_ms", "resolve_ms"} <= set(rows[0])
 
 

@@ -66,7 +66,7 @@ def _run_kernel(stage, cur, spatial, ring, bgr, fs):
     (3, np.uint8, True, True, 1, 7), (4, np.uint16, False, True, 2, 7),
     (1, np.float32, False, True, 2, 7), (3, np.uint8, False, True, 2, 7)])
 def test_kernel_matches_reference(stage_parts, channels, dtype, bgr, dense, fs, k):
-    """tss_resolve (dense maps) and tss_resolve_shift (the default translation path; 53 px wide: three
+    """tss_resolve (dense maps, FULL_CELLS_FIELDS) and tss_resolve_shift (the default translation path; 53 px wide: three
     full 16-pixel groups and a partial one; K = 20 puts several frames in some cells) against the
     reference: bit-identical."""
     rng = np.random.default_rng(channels * 7 + fs + k)
@@ -78,7 +78,9 @@ def test_kernel_matches_reference(stage_parts, channels, dtype, bgr, dense, fs, 
                 for j, (f, m, _) in enumerate(ring)]
     stage = TSSStage(frames=k + 1, bgr=bgr, context=stage_parts, dense_samples=dense)
     out, cells = _run_kernel(stage, cur, spatial, ring, bgr, fs)
-    ref, rcells = tss_frame_reference(spatial, cur, ring, bgr, fs)
+    from mlaa_stream.temporal.tss import GRID, EPS, MIN_CELLS
+    ref, rcells = tss_frame_reference(spatial, cur, ring, bgr, fs, GRID, EPS, MIN_CELLS,
+                                      stage.field_full_cells if dense else stage.full_cells)
     assert np.array_equal(cells, rcells) and cells.max() >= 2
     assert np.array_equal(out, ref)
     assert np.array_equal(out[cells < 2], spatial[cells < 2])

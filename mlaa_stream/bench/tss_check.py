@@ -11,7 +11,7 @@ damage away from edges (levels), temporal error, flicker energy, FLIP as the mea
 bench's FLIP column scores frame 0 only, which a temporal stage returns unchanged), the share of pixels
 whose output differs from the spatial output, the share that took samples (stats "samples_share": at
 least MIN_CELLS filled cells; mean over frames), and the motion model of each frame (r reset, s static,
-g global, p global with projective maps, d dense; TSS's models where the method has TSS). A scene is "worse"
+g global, p global with projective maps, l moving layers, d dense; TSS's models where the method has TSS). A scene is "worse"
 when the stage loses in error removed, damage or all-frame FLIP.
 --views adds held-out rendered shots (mlaa_stream.bench.rendered_views.view_shots: a pan and a dolly from each
 held-out view at 640x360, rendered here: a few minutes), shots no constant was measured on.

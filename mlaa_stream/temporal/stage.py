@@ -205,7 +205,7 @@ def small_residual(prev: np.ndarray, cur: np.ndarray, d: tuple[float, float]) ->
 class Decision:
     """What `choose_model` measured and chose for one frame."""
 
-    model: str                                   # "reset" | "static" | "global" | "dense"
+    model: str                                   # "reset" | "static" | "global" | "dense" ("layers": TSS's record)
     translation: tuple[float, float] = (0.0, 0.0)   # full-frame px, current -> previous
     measures: dict = field(default_factory=dict)
 

@@ -45,9 +45,12 @@ the image by a homography, far from one translation with a wide lens: each trans
 homography (`MotionRing._projective`, 8-parameter steps of `_Refiner.homography`), and where it departs from the
 translation at the frame's corners the frame's maps are projective, resolved as one translation per tile of
 TILE_ROWS x LANES pixels (`tile_shifts`, per-tile tables of tss_resolve_shift) and checked per region
-(`MotionRing._alignment`): docs/temporal.md, "Pans are not translations". Dense: DIS flow
-current -> previous composed with each ring frame's field (remap), forward-backward checked; the
-inconsistent pixels are NaN and stay so in every older field (nothing of theirs is trusted).
+(`MotionRing._alignment`): docs/temporal.md, "Pans are not translations". Frames choose_model classes dense:
+moving layers (mlaa_stream.temporal.layers: a background translation and a few affine layers, each ring frame's
+map a field, refined directly, checked per region; resolved by tss_resolve with FULL_CELLS_FIELDS) where they
+explain the frame (docs/temporal.md, "Moving layers"), else the ring restarts. With dense_samples (kept for
+measurements): DIS flow current -> previous composed with each ring frame's field (remap), forward-backward
+checked; the inconsistent pixels are NaN and stay so in every older field (nothing of theirs is trusted).
 
 Look-ahead (files: `TSSStage(lookahead=N)`, called with `future=` the next N raw frames, which
 mlaa_stream.pipeline hands in): the frames after the current one are ring entries too, each one's translation
@@ -66,6 +69,8 @@ import numpy as np
 
 from mlaa_stream.device.colour import device_luts, lut_read
 from mlaa_stream.device.formats import LUT_SIZE, frame_format
+from mlaa_stream.temporal.layers import (ahead_fields, background_of, find_layers, inverse_compositional,
+                                         layer_fields, layers_decision, sample_bilinear)
 from mlaa_stream.temporal.stage import (LK_ROBUST, Decision, Pyramid, _PMAX, choose_model, sample_field,
                                         decode_table, grey8)
 
@@ -77,6 +82,9 @@ FULL_CELLS = 9        # filled cells at which the samples alone resolve the pixe
 FULL_CELLS_AHEAD = 1.25   # ... plus this many per look-ahead frame (rounded): more frames fill more cells with
                           # samples of sub-pixel detail that the spatial output renders better (docs/temporal.md,
                           # "Look-ahead")
+FULL_CELLS_FIELDS = 16  # ... where the maps are fields (moving layers): a layer's samples fill the cells along its local
+                        # motion (a turning object's edge moves along one direction), so their mean is trusted less
+                        # (docs/temporal.md, "Moving layers")
 NEWEST_STEPS = 2      # Gauss-Newton steps per frame for the newest ring frame (MotionRing._refine)
 REFINE_STEPS = 2      # ... and for each older ring frame refined in that frame
 REFINE_EVERY = 3      # older ring frames refined directly at ages 1 + a multiple of this (docs/temporal.md)
@@ -115,6 +123,7 @@ class RingEntry:
     valid: np.ndarray | None = None   # (fh, fw) uint8 at flow size: 1 where the map explains the frame
     homography: np.ndarray | None = None   # 3x3, current frame's flow px -> this frame's (global frames)
     projective: bool = False          # this frame's map is the homography (per-tile translations), not shift
+    bg: tuple[float, float] = (0.0, 0.0)   # the background's translation where the map is a field of layers
 
     @property
     def translated(self) -> bool:
@@ -145,14 +154,15 @@ class MotionRing:
     """The ring's motion bookkeeping: which frames are kept and how the current frame maps into them."""
 
     def __init__(self, frames: int = DEFAULT_FRAMES, mode: str = "adaptive", refine: bool = True,
-                 fb_check: bool = True, dense_samples: bool = False):
+                 fb_check: bool = True, dense_samples: bool = False, layers: bool = True):
         self.frames, self.mode, self.refine, self.fb_check = int(frames), mode, bool(refine), bool(fb_check)
-        self.dense_samples = bool(dense_samples)
+        self.dense_samples, self.layers = bool(dense_samples), bool(layers)
         self.entries: list[RingEntry] = []
         self._dis = None
         self._last_refiner: _Refiner | None = None   # this frame's, made by _refine, used by _projective
         self._refiner_pyr: Pyramid | None = None     # the frame _last_refiner was made for
         self.band_slopes = None                      # each band's deviation per frame of age (_refine, _band_slopes)
+        self._frame_layers = None                    # this frame's (layers, unexplained texels) where it has layers
 
     def reset(self) -> None:
         self.entries = []
@@ -186,19 +196,29 @@ class MotionRing:
                     e.projective = False   # decided anew below
                 else:
                     e.field = self._compose_const(e.field, d, pyr)
+                    e.bg = (e.bg[0] + d[0], e.bg[1] + d[1])
             if self.refine:
                 self._refine(pyr, index, d)
                 self._projective(pyr, index)
         elif dec.model == "dense" and self.dense_samples:
             self._dense(prev, pyr, dec)
+        elif dec.model == "dense" and self.layers and (found := self._layers(prev, pyr, dec)) is not None:
+            dec = found
         elif dec.model == "dense":
-            # Measured (docs/temporal.md, TSS section): DIS flow on 1-spp frames is ~0.1-0.2 px off and
-            # composing it over the ring puts samples on the wrong side of edges: rotation, orbit,
-            # dolly and the fast mover all came out worse than the spatial output. Without
-            # sub-pixel-accurate local motion the spatial output stands and the ring starts anew.
+            # No layers explain the frame (a camera move with parallax, a mover they cannot fit). Measured
+            # (docs/temporal.md, TSS section): DIS flow on 1-spp frames is ~0.1-0.2 px off and composing it
+            # over the ring puts samples on the wrong side of edges: rotation, orbit, dolly and the fast mover
+            # all came out worse than the spatial output. Without sub-pixel-accurate local motion the spatial
+            # output stands and the ring starts anew.
             self.entries = []
         # static: every map stays as it is (nothing moved)
-        ahead = self._ahead(pyr, index, list(future)) if future else []
+        if not future:
+            ahead = []
+        elif dec.model == "layers":
+            ahead = ahead_fields(pyr, index, list(future), *self._frame_layers,
+                                 lambda i, p, fld, bg: RingEntry(i, None, p, shift=None, field=fld, bg=bg))
+        else:
+            ahead = self._ahead(pyr, index, list(future))
         for e in self.entries + ahead:
             # translations are checked per tile (global branch above); dense and projective maps per region
             if not e.translated or e.projective:
@@ -207,6 +227,17 @@ class MotionRing:
         if len(self.entries) > self.frames:
             del self.entries[0]
         return FrameMotion(dec, list(self.entries), ahead)
+
+    def _layers(self, prev: RingEntry, pyr: Pyramid, dec: Decision) -> Decision | None:
+        """Moving layers (temporal.layers): the ring's maps become fields of a background translation and each
+        layer's affine map; None (the ring untouched) where layers do not explain the frame."""
+        bg = background_of(dec, prev.pyr, pyr)
+        found = find_layers(prev.pyr, pyr, bg, self._flow)
+        if found is None:
+            return None
+        layer_fields(self.entries, *found, bg, pyr.flow_scale)
+        self._frame_layers = found
+        return layers_decision(dec, found[0])
 
     def _refiner(self, pyr: Pyramid) -> _Refiner:
         """The direct refiner of the current frame (made once per frame)."""
@@ -464,44 +495,13 @@ class _Refiner:
 
     def _sample_at(self, img: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """img at per-point positions (x, y), bilinear, clamped to the frame."""
-        h, w = self.h, self.w
-        x, y = np.clip(x, 0, w - 1), np.clip(y, 0, h - 1)
-        x0 = np.minimum(x.astype(np.intp), max(w - 2, 0))
-        y0 = np.minimum(y.astype(np.intp), max(h - 2, 0))
-        ax, ay = x - x0, y - y0
-        flat = img.ravel()
-        i = y0 * w + x0
-        dx, dy = (1 if w > 1 else 0), (w if h > 1 else 0)
-        p00, p01 = flat.take(i), flat.take(i + dx)
-        p10, p11 = flat.take(i + dy), flat.take(i + dy + dx)
-        top = p00 + ax * (p01 - p00)
-        return top + ay * (p10 + ax * (p11 - p10) - top)
+        return sample_bilinear(img, x, y)
 
     def homography(self, ring_b: np.ndarray, m: np.ndarray, steps: int) -> np.ndarray:
-        """`steps` inverse-compositional Gauss-Newton steps (Baker and Matthews) of the homography m with
-        cur(x) ~ ring(m x) (flow px), at the points, robust weights as step(); coordinates centred and scaled
-        to [-1, 1] for the 8 parameters' conditioning."""
-        cx, cy, sc = (self.w - 1) / 2.0, (self.h - 1) / 2.0, max(self.w, self.h) / 2.0
-        u, v = (self.xs - cx) / sc, (self.ys - cy) / sc
-        gu, gv = self.gx * sc, self.gy * sc
-        sd = np.stack([gu * u, gu * v, gu, gv * u, gv * v, gv, -(gu * u + gv * v) * u, -(gu * u + gv * v) * v], -1)
-        norm = np.array([[1 / sc, 0, -cx / sc], [0, 1 / sc, -cy / sc], [0, 0, 1.0]])
-        denorm = np.linalg.inv(norm)
-        m = np.array(m, np.float64)
-        for _ in range(steps):
-            q = np.stack([self.xs, self.ys, np.ones_like(self.xs)], -1) @ m.T
-            r = self._sample_at(ring_b, q[:, 0] / q[:, 2], q[:, 1] / q[:, 2]) - self.c
-            wr = 1.0 / (1.0 + (r * r) * (1.0 / (LK_ROBUST * LK_ROBUST)))
-            hess = np.einsum("ni,nj->ij", sd * wr[:, None], sd)
-            b = np.add.reduce(sd * (wr * r)[:, None], axis=0)
-            try:
-                dp = np.linalg.solve(hess, b)
-            except np.linalg.LinAlgError:
-                break
-            d = np.array([[1 + dp[0], dp[1], dp[2]], [dp[3], 1 + dp[4], dp[5]], [dp[6], dp[7], 1.0]])
-            m = m @ (denorm @ np.linalg.inv(d) @ norm)
-            m /= m[2, 2]
-        return m
+        """`steps` inverse-compositional Gauss-Newton steps of the homography m with cur(x) ~ ring(m x) (flow px),
+        at the points, robust weights as step() (layers.inverse_compositional)."""
+        return inverse_compositional(ring_b, m, steps, self.xs, self.ys, self.c, self.gx, self.gy, (self.h, self.w),
+                                     8, LK_ROBUST)
 
     def _band_steps(self, r: np.ndarray):
         """Each row band's 1-D vertical step and each column band's horizontal step from residuals r
@@ -954,8 +954,9 @@ class TSSStage:
         self.frames, self.bgr, self.mode, self.show = int(frames), bool(bgr), mode, show
         self.lookahead = int(lookahead)   # N: frames after the current one the caller hands in (`future`)
         self.grid, self.eps, self.min_cells = int(grid), float(eps), int(min_cells)
-        self.full_cells = (FULL_CELLS + int(FULL_CELLS_AHEAD * self.lookahead + 0.5) if full_cells is None
-                           else int(full_cells))
+        ahead = int(FULL_CELLS_AHEAD * self.lookahead + 0.5)
+        self.full_cells = FULL_CELLS + ahead if full_cells is None else int(full_cells)
+        self.field_full_cells = FULL_CELLS_FIELDS + ahead if full_cells is None else int(full_cells)   # tss_resolve
         self.backend = backend
         self.motion = MotionRing(self.frames, mode, refine, fb_check, dense_samples)
         self.stats: list[dict] = []
@@ -1070,7 +1071,8 @@ class TSSStage:
             ring = [(self._frames[e.slot], tile_shifts(e.homography, w, h, pyr.flow_scale) if e.projective
                      else e.shift if e.translated else e.field, e.valid) for e in taps]
             out, cells = tss_frame_reference(frame_filtered, frame_in, ring, self.bgr, pyr.flow_scale,
-                                             self.grid, self.eps, self.min_cells, self.full_cells)
+                                             self.grid, self.eps, self.min_cells,
+                                             self.full_cells if all(e.translated for e in taps) else self.field_full_cells)
         else:
             out, cells = self._resolve(frame_in, frame_filtered, pyr, fm, future)
         t2 = time.perf_counter()
@@ -1122,7 +1124,8 @@ class TSSStage:
         self._buffers = _Buffers(self.context, fmt, shape, self.frames + self.lookahead, self.motion.dense_samples)
         self._vrows_sent, self._resident = {}, {}
         defines = kernel_defines(fmt, self.grid, self.eps, self.min_cells, self.full_cells)
-        self._kernel = self.context.kernel("tss", "tss_resolve", defines)
+        self._kernel = self.context.kernel("tss", "tss_resolve", kernel_defines(fmt, self.grid, self.eps, self.min_cells,
+                                                                                self.field_full_cells))
         self._kernel_shift = self.context.kernel("tss", "tss_resolve_shift", defines)
         self._kernel_ingest = self.context.kernel("tss", "tss_ingest", defines)
         return self._buffers
@@ -1170,6 +1173,8 @@ class TSSStage:
         ring = fm.entries + fm.future
         fh, fw = bufs.flow_shape
         n = len(ring)
+        if not all(e.translated for e in ring) and bufs.fields.size < 8 * fh * fw * (self.frames + self.lookahead):
+            bufs.fields = self.context.buffer(8 * fh * fw * (self.frames + self.lookahead))   # fields: layers, dense
         for e in ring:
             if not e.translated:
                 cl.enqueue_copy(q, bufs.fields, np.ascontiguousarray(e.field, np.float32),
@@ -1305,6 +1310,8 @@ class TSSThenBlend:
         if self.tss.last_motion is None:
             return None
         pyr, dec = self.tss.last_motion
+        if dec.model == "layers":   # TSS's own model for what choose_model classed dense
+            dec = Decision("dense", dec.translation, dec.measures)
         if self.blend.mode == self.tss.motion.mode:
             return pyr, Decision(dec.model, dec.translation, dict(dec.measures))
         if self.blend.mode == "dense" and dec.model in ("global", "dense"):

@@ -1,0 +1,359 @@
+"""Moving layers: the TSS motion model for frames where one translation does not explain the scene (issue 16:
+"static / one global translation or affine / per moving layer / dense DIS flow, chosen per frame").
+
+A frame that choose_model classes dense (a turning object over a still background, a mover) is explained as a
+background translation plus a few layers, each moving by one affine map (the issue's experiment: ECC-fitted
+layers found by frame differencing, background within 2 px of a silhouette moved with the layer):
+
+  1. background: choose_model's translation, or none where it is under GLOBAL_MIN_SHIFT (a still background);
+  2. layers: the flow-size pixels the background's motion does not explain (blurred grey residual over
+     LAYER_LEVEL, blobs that survive a 3x3 erosion, as choose_model's outliers), merged within LAYER_MERGE texels;
+     connected regions of LAYER_MIN_AREA texels or more; where their convex hull covers more than LAYER_MAX_SHARE of
+     the frame the camera moved (a dolly, an orbit: parallax), which layers do not model: no layers;
+  3. each layer's affine map from the current frame to the previous one: started from the median DIS flow of its
+     points, refined by inverse-compositional Gauss-Newton (Baker and Matthews) at the current frame's largest
+     gradients inside the region (`LayerPoints`); a layer whose median residual stays over LAYER_FIT_LEVEL is not
+     one affine motion: its region takes no samples;
+  4. labels: inside a layer's region a texel moves with the layer unless the background explains it better
+     (3x3 mean residuals); layer texels are grown by LAYER_GROW texels into the background (motion-vector
+     dilation: the background next to a silhouette moves with it);
+  5. ring: each ring frame's map becomes a field (full-size px at flow size, as the dense path's): its own
+     background translation everywhere, each layer's affine on that layer's texels. A ring frame's affine for a
+     layer starts from its previous map composed with this frame's layer step (fitted as an affine map at the
+     layer's points) and is refined *directly* against that ring frame (chaining alone drifts: issue 16).
+
+MotionRing then checks every field per region (_alignment) and the colour box rejects the rest.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from mlaa_stream.temporal.stage import GLOBAL_MIN_SHIFT, Decision, Pyramid
+
+LAYER_LEVEL = 10.0       # grey levels: a texel the background's motion leaves this far off has moved by itself
+LAYER_MERGE = 4          # texels: changed blobs this close are one layer
+LAYER_MIN_AREA = 24      # texels: smaller regions are not layers (they take no samples)
+LAYER_MAX = 4            # layers per frame (the largest)
+LAYER_MAX_SHARE = 0.5    # the changed regions' convex hull over this share of the frame: the camera moved (parallax)
+LAYER_POINTS = 4096      # a layer's Gauss-Newton points (its largest gradients)
+LAYER_ROBUST = 8.0      # grey levels: robust scale of a layer's steps (its region holds uncovered background too)
+LAYER_STEPS = 5          # steps for the newest ring frame's map
+LAYER_REFINE_STEPS = 2   # ... and for each older ring frame's, from the composed map
+LAYER_FIT_SHARE = 0.85   # a layer's map must leave under this share of the background's median |residual| at its points
+LAYER_FIT_LEVEL = 4.0    # a ring frame's map refined from the composed one: median |residual| over this, not found
+LAYER_CONDITION = 0.05   # LayerPoints.conditioning under this: the points do not fix an affine map (one edge)
+LAYER_MARGIN = 1.0       # grey levels: a texel of a layer's region stays with the background where its residual is
+                         # lower by this
+LAYER_STILL = 2.0        # grey levels: a region's texel the background's motion explains this well is no point of the
+                         # layer's fit (still texture next to a mover fits it to no motion, or to the texture's period)
+LAYER_GROW = 1           # texels (flow size): layer labels grown into the background
+
+
+def sample_bilinear(img: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """img at positions (x, y), exact bilinear interpolation, positions clamped to the frame."""
+    h, w = img.shape
+    x, y = np.clip(x, 0, w - 1), np.clip(y, 0, h - 1)
+    x0 = np.minimum(x.astype(np.intp), max(w - 2, 0))
+    y0 = np.minimum(y.astype(np.intp), max(h - 2, 0))
+    ax, ay = x - x0, y - y0
+    flat = img.ravel()
+    i = y0 * w + x0
+    dx, dy = (1 if w > 1 else 0), (w if h > 1 else 0)
+    p00, p01 = flat.take(i), flat.take(i + dx)
+    p10, p11 = flat.take(i + dy), flat.take(i + dy + dx)
+    top = p00 + ax * (p01 - p00)
+    return top + ay * (p10 + ax * (p11 - p10) - top)
+
+
+def inverse_compositional(ring_b: np.ndarray, m: np.ndarray, steps: int, xs: np.ndarray, ys: np.ndarray,
+                          c: np.ndarray, gx: np.ndarray, gy: np.ndarray, shape: tuple[int, int], dof: int,
+                          robust: float) -> np.ndarray:
+    """`steps` inverse-compositional Gauss-Newton steps (Baker and Matthews) of the map m (3x3, flow px) with
+    cur(x) ~ ring(m x) at points (xs, ys) of values c and gradients (gx, gy) of the current frame; dof 8
+    (homography) or 6 (affine); residuals weighted 1 / (1 + (r / robust)^2); coordinates centred and scaled to
+    [-1, 1] for the parameters' conditioning."""
+    h, w = shape
+    cx, cy, sc = (w - 1) / 2.0, (h - 1) / 2.0, max(w, h) / 2.0
+    u, v = (xs - cx) / sc, (ys - cy) / sc
+    gu, gv = gx * sc, gy * sc
+    cols = [gu * u, gu * v, gu, gv * u, gv * v, gv]
+    if dof == 8:
+        cols += [-(gu * u + gv * v) * u, -(gu * u + gv * v) * v]
+    sd = np.stack(cols, -1)
+    norm = np.array([[1 / sc, 0, -cx / sc], [0, 1 / sc, -cy / sc], [0, 0, 1.0]])
+    denorm = np.linalg.inv(norm)
+    m = np.array(m, np.float64)
+    pts = np.stack([xs, ys, np.ones_like(xs)], -1)
+    for _ in range(steps):
+        q = pts @ m.T
+        r = sample_bilinear(ring_b, q[:, 0] / q[:, 2], q[:, 1] / q[:, 2]) - c
+        wr = 1.0 / (1.0 + (r * r) * (1.0 / (robust * robust)))
+        hess = np.einsum("ni,nj->ij", sd * wr[:, None], sd)
+        b = np.add.reduce(sd * (wr * r)[:, None], axis=0)
+        try:
+            dp = np.linalg.solve(hess, b)
+        except np.linalg.LinAlgError:
+            break
+        p = np.zeros(8)
+        p[:dof] = dp
+        d = np.array([[1 + p[0], p[1], p[2]], [p[3], 1 + p[4], p[5]], [p[6], p[7], 1.0]])
+        m = m @ (denorm @ np.linalg.inv(d) @ norm)
+        m /= m[2, 2]
+    return m
+
+
+class LayerPoints:
+    """One layer's Gauss-Newton points: the current frame's largest gradients inside its region (flow size)."""
+
+    def __init__(self, cur_b: np.ndarray, region: np.ndarray, gx: np.ndarray, gy: np.ndarray):
+        self.shape = cur_b.shape
+        energy = np.where(region, gx * gx + gy * gy, 0.0)
+        ys, xs = np.nonzero(energy > 1e-3)
+        if ys.size > LAYER_POINTS:
+            top = np.argpartition(-energy[ys, xs], LAYER_POINTS - 1)[:LAYER_POINTS]
+            ys, xs = ys[top], xs[top]
+        self.iy, self.ix = ys, xs
+        self.xs, self.ys = xs.astype(np.float64), ys.astype(np.float64)
+        self.c = cur_b[ys, xs].astype(np.float64)
+        self.gx, self.gy = gx[ys, xs].astype(np.float64), gy[ys, xs].astype(np.float64)
+
+    def conditioning(self) -> float:
+        """The smallest over the largest eigenvalue of the affine steps' Gauss-Newton matrix (coordinates scaled to
+        [-1, 1] over the layer's points): near 0 where the points do not fix all six parameters (one straight edge
+        fixes only the motion across it)."""
+        if self.count < 6:
+            return 0.0
+        cx, cy = self.xs.mean(), self.ys.mean()
+        sc = max(np.ptp(self.xs), np.ptp(self.ys), 1.0) / 2.0
+        u, v = (self.xs - cx) / sc, (self.ys - cy) / sc
+        sd = np.stack([self.gx * u, self.gx * v, self.gx, self.gy * u, self.gy * v, self.gy], -1)
+        ev = np.linalg.eigvalsh(sd.T @ sd)
+        return float(ev[0] / ev[-1]) if ev[-1] > 0 else 0.0
+
+    @property
+    def count(self) -> int:
+        return int(self.xs.size)
+
+    def refine(self, ring_b: np.ndarray, m: np.ndarray, steps: int) -> tuple[np.ndarray, float]:
+        """The affine map m (flow px, current -> ring frame) after `steps` steps, and its median |residual|."""
+        m = inverse_compositional(ring_b, m, steps, self.xs, self.ys, self.c, self.gx, self.gy, self.shape, 6,
+                                  LAYER_ROBUST)
+        q = np.stack([self.xs, self.ys, np.ones_like(self.xs)], -1) @ m.T
+        r = sample_bilinear(ring_b, q[:, 0] / q[:, 2], q[:, 1] / q[:, 2]) - self.c
+        return m, float(np.median(np.abs(r))) if r.size else math.inf
+
+    def fit_to(self, fld: np.ndarray, fs: int, m: np.ndarray) -> np.ndarray | None:
+        """The affine map (flow px) that best fits, at the points, positions m(x) moved on by the field `fld`
+        (full-size px at flow size, read at m(x)): the composition of m with a ring frame's previous map.
+        None where too few of those positions have a finite field."""
+        q = np.stack([self.xs, self.ys, np.ones_like(self.xs)], -1) @ m.T
+        qx, qy = q[:, 0] / q[:, 2], q[:, 1] / q[:, 2]
+        off = np.stack([sample_bilinear(fld[..., k], qx, qy) for k in (0, 1)], -1) / fs
+        ok = np.isfinite(off).all(-1)
+        if np.count_nonzero(ok) < 6:
+            return None
+        a = np.stack([self.xs[ok], self.ys[ok], np.ones(np.count_nonzero(ok))], -1)
+        tgt = np.stack([qx[ok] + off[ok, 0], qy[ok] + off[ok, 1]], -1)
+        sol, *_ = np.linalg.lstsq(a, tgt, rcond=None)
+        return np.vstack([sol.T, [0.0, 0.0, 1.0]])
+
+
+@dataclass
+class Layer:
+    """One moving layer of the current frame: its texels (flow size), points and map to the previous frame."""
+
+    texels: np.ndarray        # bool (fh, fw): texels that move with it (labels, grown)
+    points: LayerPoints
+    affine: np.ndarray        # 3x3 flow px, current -> previous frame
+
+
+def _translation(d: tuple[float, float]) -> np.ndarray:
+    return np.array([[1.0, 0.0, d[0]], [0.0, 1.0, d[1]], [0.0, 0.0, 1.0]])
+
+
+def _box_residual(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return cv2.blur(np.abs(a - b), (3, 3))
+
+
+def _warp(img: np.ndarray, m: np.ndarray) -> np.ndarray:
+    h, w = img.shape
+    return cv2.warpAffine(img, m[:2].astype(np.float64), (w, h), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                          borderMode=cv2.BORDER_REPLICATE)
+
+
+def _changed(prev_b: np.ndarray, cur_b: np.ndarray, m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(prev warped by m, blobs of residual over LAYER_LEVEL that survive a 3x3 erosion) at flow size."""
+    warped = _warp(prev_b, m)
+    blobs = cv2.erode((np.abs(warped - cur_b) > LAYER_LEVEL).astype(np.uint8), np.ones((3, 3), np.uint8))
+    return warped, blobs
+
+
+def _hull(mask: np.ndarray) -> np.ndarray:
+    """The filled convex hull of a mask's texels (a turning object's changed texels are its rim: the hull
+    holds the rest of it)."""
+    pts = cv2.findNonZero(mask.astype(np.uint8))
+    out = np.zeros(mask.shape, np.uint8)
+    cv2.fillConvexPoly(out, cv2.convexHull(pts), 1)
+    return out.astype(bool) | mask.astype(bool)
+
+
+def background_of(dec: Decision, prev: Pyramid, cur: Pyramid) -> tuple[float, float]:
+    """The background's translation (full-size px): choose_model's, or none where that leaves fewer texels
+    changed (a mover pulls the frame's estimate off a still background)."""
+    d = dec.translation
+    if math.hypot(*d) < GLOBAL_MIN_SHIFT:
+        return (0.0, 0.0)
+    fs = cur.flow_scale
+    cur_b, prev_b = cur.blurred("flow"), prev.blurred("flow")
+    moved = np.count_nonzero(_changed(prev_b, cur_b, _translation((d[0] / fs, d[1] / fs)))[1])
+    still = np.count_nonzero(_changed(prev_b, cur_b, _translation((0.0, 0.0)))[1])
+    return (0.0, 0.0) if still <= moved else (float(d[0]), float(d[1]))
+
+
+def _fit(pts: LayerPoints, prev_b: np.ndarray, fl: np.ndarray, bg_f: tuple[float, float]) -> np.ndarray | None:
+    """A layer's affine map to the previous frame (flow px): from the median DIS flow of its points that
+    moved against the background (else from the background's translation), LAYER_STEPS Gauss-Newton steps.
+    None where the points do not fix an affine map (LAYER_CONDITION) or it does not explain them: the median
+    |residual| stays over LAYER_FIT_SHARE of the background's there (1-spp aliasing leaves a few levels at
+    the edges of a right map)."""
+    if pts.count < 16 or pts.conditioning() < LAYER_CONDITION:
+        return None
+    f = fl[pts.iy, pts.ix]
+    moved = np.hypot(f[:, 0] - bg_f[0], f[:, 1] - bg_f[1]) > 0.5
+    start = np.median(f[moved], axis=0) if np.count_nonzero(moved) >= 16 else np.array(bg_f)
+    m, level = pts.refine(prev_b, _translation((float(start[0]), float(start[1]))), LAYER_STEPS)
+    _, level_bg = pts.refine(prev_b, _translation(bg_f), 0)
+    return m if level <= LAYER_FIT_SHARE * level_bg else None
+
+
+def find_layers(prev: Pyramid, cur: Pyramid, bg: tuple[float, float], flow) -> tuple[list[Layer], np.ndarray] | None:
+    """The moving layers of `cur` relative to `prev` with the background moving by `bg` (full-size px):
+    (layers, texels of regions no layer explains), or None where layers do not explain the frame (nothing
+    moved by itself, or most of the frame did). All changed regions are tried as one layer first (a turning
+    object changes along its rim, in several pieces), then each on its own. `flow(a, b, start)`: DIS flow
+    cur -> prev (the start of each fit)."""
+    fs = cur.flow_scale
+    cur_b, prev_b = cur.blurred("flow"), prev.blurred("flow")
+    fh, fw = cur_b.shape
+    bg_f = (bg[0] / fs, bg[1] / fs)
+    warped_bg, blobs = _changed(prev_b, cur_b, _translation(bg_f))
+    if not blobs.any():
+        return None
+    merged = cv2.dilate(blobs, np.ones((2 * LAYER_MERGE + 1,) * 2, np.uint8))
+    n, lab, stats, _ = cv2.connectedComponentsWithStats(merged, connectivity=8)
+    comps = sorted((k for k in range(1, n) if stats[k, cv2.CC_STAT_AREA] >= LAYER_MIN_AREA),
+                   key=lambda k: -stats[k, cv2.CC_STAT_AREA])
+    if not comps:
+        return None
+    union = np.isin(lab, comps)
+    if np.count_nonzero(_hull(union)) > LAYER_MAX_SHARE * union.size:
+        return None   # changes all over the frame: the camera moved (a dolly, an orbit), with parallax
+    unexplained = merged > 0
+    gx = cv2.Sobel(cur_b, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
+    gy = cv2.Sobel(cur_b, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
+    fl = flow(cur.flow, prev.flow, bg_f)
+    moved = np.abs(warped_bg - cur_b) > LAYER_STILL
+    m = _fit(LayerPoints(cur_b, union & moved, gx, gy), prev_b, fl, bg_f)
+    fits = [(union, m)]
+    if m is None and len(comps) > 1:
+        fits = [(lab == k, _fit(LayerPoints(cur_b, (lab == k) & moved, gx, gy), prev_b, fl, bg_f))
+                for k in comps[:LAYER_MAX]]
+    best = _box_residual(warped_bg, cur_b)
+    labels = np.zeros((fh, fw), np.int32)
+    fitted: list[tuple[LayerPoints, np.ndarray]] = []
+    for changed, m in fits:
+        if m is None:
+            continue
+        r = _box_residual(_warp(prev_b, m), cur_b)
+        take = _hull(changed) & (r <= best + LAYER_MARGIN)
+        labels[take] = len(fitted) + 1
+        best = np.where(take, np.minimum(r, best), best)
+        fitted.append((LayerPoints(cur_b, changed & moved, gx, gy), m))
+    if not fitted:
+        return None
+    if LAYER_GROW > 0:
+        grown = cv2.dilate(labels.astype(np.uint8), np.ones((2 * LAYER_GROW + 1,) * 2, np.uint8))
+        labels = np.where(labels == 0, grown, labels)
+    layers = [Layer(labels == k + 1, pts, m) for k, (pts, m) in enumerate(fitted)]
+    # changed texels no layer takes and the background does not explain either: no samples there
+    return layers, unexplained & (labels == 0) & (_box_residual(warped_bg, cur_b) > LAYER_LEVEL)
+
+
+def _field(shape: tuple[int, int], bg: tuple[float, float], unexplained: np.ndarray, layers: list[Layer],
+           maps: list[np.ndarray | None], fs: int) -> np.ndarray:
+    """A ring frame's field (full-size px at flow size): `bg` everywhere, NaN on unexplained texels, each layer's
+    map on its texels (NaN where its map was not found: None)."""
+    fh, fw = shape
+    gy, gx = np.mgrid[0:fh, 0:fw].astype(np.float32)
+    out = np.empty((fh, fw, 2), np.float32)
+    out[...] = bg
+    out[unexplained] = np.nan
+    for layer, a in zip(layers, maps):
+        t = layer.texels
+        if a is None:
+            out[t] = np.nan
+            continue
+        out[t, 0] = (a[0, 0] * gx[t] + a[0, 1] * gy[t] + a[0, 2] - gx[t]) * fs
+        out[t, 1] = (a[1, 0] * gx[t] + a[1, 1] * gy[t] + a[1, 2] - gy[t]) * fs
+    return out
+
+
+def _refined(layer: Layer, ring_b: np.ndarray, start: np.ndarray | None) -> np.ndarray | None:
+    """A layer's map into another frame from `start`, LAYER_REFINE_STEPS direct steps; None where it leaves a
+    median |residual| over LAYER_FIT_LEVEL at the layer's points (or there was no start)."""
+    if start is None:
+        return None
+    a, level = layer.points.refine(ring_b, start, LAYER_REFINE_STEPS)
+    return a if level <= LAYER_FIT_LEVEL else None
+
+
+def layer_fields(entries: list, layers: list[Layer], unexplained: np.ndarray, bg: tuple[float, float],
+                 fs: int) -> None:
+    """Each ring entry's map becomes a field: its background translation (`entry.bg`, moved on by `bg`)
+    everywhere, NaN on unexplained texels, each layer's affine (composed, then refined directly) on the layer's
+    texels. entries: oldest first, the previous frame last (its map was the identity)."""
+    shape = unexplained.shape
+    for j, e in enumerate(entries):
+        old_bg = e.bg if e.field is not None or e.shift is None else e.shift
+        prev_map = e.field if e.field is not None else np.broadcast_to(np.float32(old_bg), shape + (2,))
+        e.bg = (old_bg[0] + bg[0], old_bg[1] + bg[1])
+        if j == len(entries) - 1:
+            maps = [layer.affine for layer in layers]
+        else:
+            ring_b = e.pyr.blurred("flow")
+            maps = [_refined(layer, ring_b, layer.points.fit_to(prev_map, fs, layer.affine)) for layer in layers]
+        e.field, e.shift, e.projective = _field(shape, e.bg, unexplained, layers, maps, fs), None, False
+
+
+def ahead_fields(pyr: Pyramid, index: int, future: list, layers: list[Layer], unexplained: np.ndarray,
+                 entry) -> list:
+    """Look-ahead ring entries of a layers frame (`future`: Ahead records of frames index + 1, ...): each one's
+    background translation chained from the frame-to-frame decisions (background_of), each layer's map started
+    from the previous frame's continued by the layer's own step (a steady motion: current -> next is the inverse
+    of current -> previous) and refined directly. The window ends before a frame that is not the next one, moved
+    as one translation (global) or was a cut. entry(index, pyr, field, bg): a ring entry."""
+    fs = pyr.flow_scale
+    out = []
+    bg = (0.0, 0.0)
+    step = [np.linalg.inv(layer.affine) for layer in layers]
+    maps: list[np.ndarray | None] = [np.eye(3) for _ in layers]
+    prev = pyr
+    for k, a in enumerate(future):
+        if a.index != index + 1 + k or a.decision.model not in ("dense", "static") or a.pyr.flow.shape != pyr.flow.shape:
+            break
+        d = background_of(a.decision, prev, a.pyr) if a.decision.model == "dense" else (0.0, 0.0)
+        bg = (bg[0] - d[0], bg[1] - d[1])
+        ring_b = a.pyr.blurred("flow")
+        maps = [_refined(layer, ring_b, None if m is None else m @ s) for layer, m, s in zip(layers, maps, step)]
+        out.append(entry(a.index, a.pyr, _field(unexplained.shape, bg, unexplained, layers, maps, fs), bg))
+        prev = a.pyr
+    return out
+
+
+def layers_decision(dec: Decision, layers: list[Layer]) -> Decision:
+    """The frame's record: model "layers", with how many."""
+    return Decision("layers", dec.translation, {**dec.measures, "layers": len(layers)})

@@ -1,0 +1,192 @@
+"""Moving layers (mlaa_stream.temporal.layers): known answers on seeded textures moved by known maps, and the
+TSS stage on a turning object over a still background (the bench's rotation scene, 8x8 supersampled truth)."""
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+import pytest
+
+from mlaa_stream.bench.temporal import exact_motion, scene_rotation
+from mlaa_stream.spatial.filter import Filter
+from mlaa_stream.temporal import layers as L
+from mlaa_stream.temporal.stage import Pyramid
+from mlaa_stream.temporal.tss import MotionRing, TSSStage
+from mlaa_stream.yardstick import metrics as M
+
+H, W = 144, 240
+CX, CY, RADIUS = 130.3, 70.6, 40.0
+
+
+def _texture(seed: int, h: int = H, w: int = W) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    return cv2.resize(rng.uniform(0, 255, (h // 8, w // 8)).astype(np.float32), (w, h), interpolation=cv2.INTER_CUBIC)
+
+
+def _turn(deg: float) -> np.ndarray:
+    """3x3: a pixel of the disc turned by `deg` about (CX, CY) -> where it was before."""
+    a = math.radians(-deg)
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, -s, CX - c * CX + s * CY], [s, c, CY - s * CX - c * CY], [0.0, 0.0, 1.0]])
+
+
+def _disc_frames(degrees: list[float]) -> tuple[list[np.ndarray], np.ndarray]:
+    """uint8 frames: a still textured background and a textured disc turned by each angle (degrees) about its centre;
+    and the disc's mask."""
+    bg, disc = _texture(1), _texture(2)
+    ys, xs = np.mgrid[0:H, 0:W]
+    mask = np.hypot(xs - CX, ys - CY) <= RADIUS
+    frames = []
+    for d in degrees:
+        m = _turn(d)
+        turned = cv2.warpAffine(disc, m[:2], (W, H), flags=cv2.INTER_CUBIC | cv2.WARP_INVERSE_MAP,
+                                borderMode=cv2.BORDER_REFLECT)
+        frames.append(np.clip(np.where(mask, turned, bg), 0, 255).astype(np.uint8))
+    return frames, mask
+
+
+def _offsets(m: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    ys, xs = np.nonzero(mask)
+    p = np.stack([xs, ys, np.ones_like(xs)], -1).astype(np.float64) @ m.T
+    return p[:, :2] / p[:, 2:3] - np.stack([xs, ys], -1)
+
+
+def _dis():
+    dis = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_FAST)
+
+    def flow(a, b, start):
+        init = np.empty(a.shape[:2] + (2,), np.float32)
+        init[...] = start
+        return dis.calc(a, b, init)
+    return flow
+
+
+def test_affine_steps_recover_a_turning_layer():
+    """Known answer (inverse-compositional affine steps at a layer's points): from no motion, the map of a disc turned
+    by 1.5 degrees (1 px at its rim) is found within 0.04 px over the disc (uint8 frames: their rounding bounds it)."""
+    frames, mask = _disc_frames([0.0, 1.5])
+    prev, cur = (cv2.GaussianBlur(f.astype(np.float32), (0, 0), 1.0) for f in frames)
+    gx = cv2.Sobel(cur, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
+    gy = cv2.Sobel(cur, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
+    inner = cv2.erode(mask.astype(np.uint8), np.ones((7, 7), np.uint8)) > 0
+    pts = L.LayerPoints(cur, inner, gx, gy)
+    m, level = pts.refine(prev, np.eye(3), 6)
+    err = np.abs(_offsets(m, inner) - _offsets(_turn(1.5), inner)).max()
+    assert err < 0.04, err
+    assert level < 1.0
+    assert np.abs(_offsets(np.eye(3), inner) - _offsets(_turn(1.5), inner)).max() > 0.9
+
+
+def test_find_layers_separates_a_turning_disc_from_a_still_background():
+    """One layer: its map within 0.08 px of the disc's over the disc (the blur mixes the still background into the
+    rim's points: 0.03 px from points inside the disc, above), its texels the disc's rim and not the still background
+    beyond the label growth."""
+    frames, mask = _disc_frames([0.0, 1.5])
+    prev, cur = (Pyramid.of(f, False) for f in frames)
+    found = L.find_layers(prev, cur, (0.0, 0.0), _dis())
+    assert found is not None
+    layers, unexplained = found
+    assert len(layers) == 1
+    layer = layers[0]
+    inner = cv2.erode(mask.astype(np.uint8), np.ones((7, 7), np.uint8)) > 0
+    assert np.abs(_offsets(layer.affine, inner) - _offsets(_turn(1.5), inner)).max() < 0.08
+    rim = mask & (np.hypot(*np.mgrid[0:H, 0:W][::-1] - np.array([CX, CY])[:, None, None]) > RADIUS - 12)
+    assert layer.texels[rim].mean() > 0.8
+    far = ~cv2.dilate(mask.astype(np.uint8), np.ones((9, 9), np.uint8)).astype(bool)
+    assert layer.texels[far].mean() < 0.01
+    assert not unexplained.any()
+
+
+def test_no_layers_where_nothing_or_the_whole_frame_moves():
+    frames, _ = _disc_frames([0.0, 0.0])
+    a, b = (Pyramid.of(f, False) for f in frames)
+    assert L.find_layers(a, b, (0.0, 0.0), _dis()) is None
+    # the whole frame zooming (a dolly): more than LAYER_MAX_SHARE changes
+    tex = _texture(3)
+    zoom = cv2.warpAffine(tex, cv2.getRotationMatrix2D((W / 2, H / 2), 0.0, 1.03), (W, H), flags=cv2.INTER_CUBIC)
+    a, b = (Pyramid.of(np.clip(f, 0, 255).astype(np.uint8), False) for f in (tex, zoom))
+    assert L.find_layers(a, b, (0.0, 0.0), _dis()) is None
+
+
+def test_ring_fields_keep_the_background_exact_and_follow_the_layer():
+    """Over four frames of the disc turning 1 degree per frame: every ring frame's field is the still background's
+    0 exactly away from the disc, and within 0.15 px of the disc's composed turn on its inner texels (0.05 on
+    average)."""
+    frames, mask = _disc_frames([0.0, 1.0, 2.0, 3.0])
+    ring = MotionRing(frames=8)
+    fm = None
+    for i, f in enumerate(frames):
+        fm = ring.push(Pyramid.of(f, False), i, fresh=i == 0)
+    assert fm.decision.model == "layers" and fm.decision.measures["layers"] == 1
+    far = ~cv2.dilate(mask.astype(np.uint8), np.ones((9, 9), np.uint8)).astype(bool)
+    inner = cv2.erode(mask.astype(np.uint8), np.ones((9, 9), np.uint8)) > 0
+    for e in fm.entries[:-1]:
+        age = 3 - e.index
+        assert np.array_equal(e.field[far], np.zeros_like(e.field[far]))
+        err = np.abs(e.field[inner] - _offsets(_turn(float(age)), inner))
+        assert err.max() < 0.15 and err.mean() < 0.05, (age, err.max(), err.mean())
+
+
+@pytest.fixture(scope="module")
+def rotation():
+    sc = scene_rotation(8, 480, 270)
+    with Filter(None, bgr=False) as f:
+        spatial = [f.process(x) for x in sc.inputs]
+    return sc, spatial
+
+
+def test_turning_object_takes_samples_and_removes_more_error(rotation):
+    """The bench's rotation scene (a square and a 0.8-px bar turning 0.5 degrees per frame over a still background):
+    layers from the second frame on, and more error removed and a steadier output than the spatial filter alone
+    (8 frames, mostly warm-up: 0.953 / 0.210 against 0.948 / 0.221; the 24-frame bench: docs/temporal_bench.md)."""
+    sc, spatial = rotation
+    with TSSStage(bgr=False) as stage:
+        outs = np.stack([stage(f, s, i) for i, (f, s) in enumerate(zip(sc.inputs, spatial))])
+    assert [r["model"] for r in stage.stats[1:]] == ["layers"] * 7
+    sp = np.stack(spatial)
+    assert M.error_removed(outs, sc.inputs, sc.truths) > M.error_removed(sp, sc.inputs, sc.truths) + 0.003
+    assert M.temporal_error(outs, sc.inputs, sc.truths) < M.temporal_error(sp, sc.inputs, sc.truths) - 0.005
+
+
+def test_layers_numpy_backend_is_the_reference(rotation):
+    sc, spatial = rotation
+    a, b = TSSStage(bgr=False), TSSStage(bgr=False, backend="numpy")
+    for i, (f, s) in enumerate(zip(sc.inputs[:5], spatial[:5])):
+        assert np.array_equal(a(f, s, i), b(f, s, i)), i
+    assert a.stats[-1]["model"] == "layers"
+
+
+def test_exact_motion_of_the_bench_rotation_is_what_the_layer_finds(rotation):
+    """The layer's map of the bench rotation (1-spp frames) matches the scene's exact motion within 0.15 px at its
+    points (0.06 on average)."""
+    sc, _ = rotation
+    ex = np.vstack([exact_motion("rotation", 480, 270).astype(np.float64), [0, 0, 1]])
+    for i in (1, 4, 7):
+        prev, cur = (Pyramid.of(f, False) for f in sc.inputs[i - 1:i + 1])
+        found = L.find_layers(prev, cur, (0.0, 0.0), _dis())
+        assert found is not None and len(found[0]) == 1
+        layer = found[0][0]
+        pts = np.stack([layer.points.xs, layer.points.ys, np.ones(layer.points.count)], -1)
+        err = np.hypot(*((pts @ layer.affine.T)[:, :2] - (pts @ ex.T)[:, :2]).T)
+        assert err.max() < 0.15 and err.mean() < 0.06, (i, err.max(), err.mean())
+
+
+def test_layers_lookahead_reads_the_frames_ahead_and_matches_the_reference(rotation):
+    """With look-ahead, layer frames take the next frames' samples too (their maps refined directly), device and
+    numpy reference bit for bit, and the output is steadier than without."""
+    sc, spatial = rotation
+    n = len(sc.inputs)
+    a, b = TSSStage(bgr=False, lookahead=2), TSSStage(bgr=False, lookahead=2, backend="numpy")
+    outs = []
+    for i, (f, s) in enumerate(zip(sc.inputs, spatial)):
+        fut = sc.inputs[i + 1:i + 3]
+        out = a(f, s, i, future=fut)
+        if i < 5:
+            assert np.array_equal(out, b(f, s, i, future=fut)), i
+        outs.append(out)
+    assert [r["lookahead"] for r in a.stats[1:n - 2]] == [2] * (n - 3)
+    assert {r["model"] for r in a.stats[1:]} == {"layers"}
+    with TSSStage(bgr=False) as causal:
+        plain = np.stack([causal(f, s, i) for i, (f, s) in enumerate(zip(sc.inputs, spatial))])
+    assert M.temporal_error(np.stack(outs), sc.inputs, sc.truths) < M.temporal_error(plain, sc.inputs, sc.truths)
