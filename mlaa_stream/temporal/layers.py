@@ -170,6 +170,12 @@ class Layer:
     points: LayerPoints
     affine: np.ndarray        # 3x3 flow px, current -> previous frame
 
+    def __post_init__(self) -> None:
+        ys, xs = np.nonzero(self.texels)
+        self.box = (slice(int(ys.min()), int(ys.max()) + 1), slice(int(xs.min()), int(xs.max()) + 1)) if ys.size \
+            else (slice(0, 0), slice(0, 0))
+        self.inside = self.texels[self.box]   # the texels inside the bounding box
+
 
 def _translation(d: tuple[float, float]) -> np.ndarray:
     return np.array([[1.0, 0.0, d[0]], [0.0, 1.0, d[1]], [0.0, 0.0, 1.0]])
@@ -286,19 +292,21 @@ def find_layers(prev: Pyramid, cur: Pyramid, bg: tuple[float, float], flow) -> t
 def _field(shape: tuple[int, int], bg: tuple[float, float], unexplained: np.ndarray, layers: list[Layer],
            maps: list[np.ndarray | None], fs: int) -> np.ndarray:
     """A ring frame's field (full-size px at flow size): `bg` everywhere, NaN on unexplained texels, each layer's
-    map on its texels (NaN where its map was not found: None)."""
-    fh, fw = shape
-    gy, gx = np.mgrid[0:fh, 0:fw].astype(np.float32)
-    out = np.empty((fh, fw, 2), np.float32)
+    map on its texels (NaN where its map was not found: None); computed over each layer's bounding box."""
+    out = np.empty(shape + (2,), np.float32)
     out[...] = bg
     out[unexplained] = np.nan
     for layer, a in zip(layers, maps):
-        t = layer.texels
+        ys, xs = layer.box
+        view = out[ys, xs]
         if a is None:
-            out[t] = np.nan
+            view[layer.inside] = np.nan
             continue
-        out[t, 0] = (a[0, 0] * gx[t] + a[0, 1] * gy[t] + a[0, 2] - gx[t]) * fs
-        out[t, 1] = (a[1, 0] * gx[t] + a[1, 1] * gy[t] + a[1, 2] - gy[t]) * fs
+        x = np.arange(xs.start, xs.stop, dtype=np.float32)[None, :]
+        y = np.arange(ys.start, ys.stop, dtype=np.float32)[:, None]
+        for k in (0, 1):
+            off = (np.float32(a[k, 0] - (k == 0)) * x + np.float32(a[k, 1] - (k == 1)) * y + np.float32(a[k, 2])) * fs
+            np.copyto(view[..., k], off.astype(np.float32), where=layer.inside)
     return out
 
 
