@@ -173,6 +173,19 @@ def _pan_frames(n: int, base: np.ndarray, step=(0.35, 0.15)) -> list[np.ndarray]
     return out
 
 
+def _turning_frames(n: int, base: np.ndarray, deg: float = 0.5) -> list[np.ndarray]:
+    """n frames of 1080p: a disc of `base` (radius 300 px) turning `deg` degrees per frame about its centre over the
+    still rest of it (TSS: moving layers), cropped to 1920x1080."""
+    still = base[8:1088, 8:1928]
+    ys, xs = np.mgrid[0:1080, 0:1920]
+    disc = (np.hypot(xs - 960.3, ys - 540.2) <= 300)[..., None]
+    out = []
+    for t in range(n):
+        m = cv2.getRotationMatrix2D((960.3, 540.2), deg * t, 1.0)
+        out.append(np.where(disc, cv2.warpAffine(still, m, (1920, 1080), flags=cv2.INTER_LINEAR), still))
+    return out
+
+
 def time_stage(frames: list[np.ndarray], spatial: list[np.ndarray], mode: str, warmup: int,
                device: str | None) -> tuple[float, dict[str, int], float, float]:
     """Median wall ms of the stage per frame after warm-up, the models used, median flow/blend ms."""
@@ -298,6 +311,7 @@ def main(argv: list[str] | None = None) -> int:
             [int(v) for v in args.lookahead.split(",") if v] + [0])
         base = timing_frame(1936, 1096)
         pan = _pan_frames(n, base)
+        turning = _turning_frames(n, base)
         static = [base[8:1088, 8:1928].copy()] * n
         # a still shot through a codec: the same frame with +-1 level of noise on 2 % of its samples
         rng = np.random.default_rng(0)
@@ -309,7 +323,8 @@ def main(argv: list[str] | None = None) -> int:
         pan_sp = [spatial_filter.process(f) for f in pan]
         static_sp = [spatial_filter.process(static[0])] * n
         noisy_sp = [spatial_filter.process(f) for f in noisy]
-        for shot, frames, sp in (("pan", pan, pan_sp), ("static", static, static_sp),
+        turning_sp = [spatial_filter.process(f) for f in turning]
+        for shot, frames, sp in (("pan", pan, pan_sp), ("turning layer", turning, turning_sp), ("static", static, static_sp),
                                  ("static, codec noise", noisy, noisy_sp)):
             for mode in [f"tss {k}" for k in args.tss_frames.split(",") if k] + ahead_modes + ["adaptive", "tss+blend"]:
                 warm = _tss_mode(mode)[0] if mode.startswith("tss ") else DEFAULT_FRAMES if mode == "tss+blend" else 3
@@ -344,7 +359,9 @@ def main(argv: list[str] | None = None) -> int:
     if speed:
         lines += ["## Speed (1920x1080, temporal stage only, wall clock)", "",
                   f"Median over {args.timed} frames after warm-up (K frames for TSS, 3 for the blend); the pan is "
-                  "the timing frame shifted (0.35, 0.15) px per frame; the static shot repeats one frame "
+                  "the timing frame shifted (0.35, 0.15) px per frame; the turning layer is a disc of it (radius 300 "
+                  "px) turning 0.5 degrees per frame over the still rest (TSS: moving layers); the static shot "
+                  "repeats one frame "
                   "(identical frames: the previous output is returned, no kernel); the codec-noise static shot "
                   "adds +-1 level to 2 % of the samples of each frame (TSS: every sample in one cell, no kernel; "
                   "blend: unwarped blend). Machine shared with other jobs: compare rows of one run.", "",

@@ -50,6 +50,10 @@ LAYER_MARGIN = 1.0       # grey levels: a texel of a layer's region stays with t
                          # lower by this
 LAYER_STILL = 2.0        # grey levels: a region's texel the background's motion explains this well is no point of the
                          # layer's fit (still texture next to a mover fits it to no motion, or to the texture's period)
+STILL_SHIFT = 1.0        # px: a global frame moving less than this is tested for a still background
+                         # (tss.MotionRing._still_background) ...
+STILL_AGE = 2            # ... over a ring of at least this many frames, where no motion leaves a sum of residuals
+STILL_MARGIN = 0.97      # ... under this share of the moving background's
 LAYER_GROW = 1           # texels (flow size): layer labels grown into the background
 
 
@@ -69,21 +73,41 @@ def sample_bilinear(img: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray
     return top + ay * (p10 + ax * (p11 - p10) - top)
 
 
+def _steepest(u: np.ndarray, v: np.ndarray, gu: np.ndarray, gv: np.ndarray, dof: int) -> np.ndarray:
+    """The steepest-descent images of a map's parameters at points (u, v) of gradients (gu, gv): dof 3 (Euclidean:
+    rotation, shift), 4 (similarity: scale, rotation, shift), 6 (affine) or 8 (homography)."""
+    if dof == 3:
+        return np.stack([gv * u - gu * v, gu, gv], -1)
+    if dof == 4:
+        return np.stack([gu * u + gv * v, gv * u - gu * v, gu, gv], -1)
+    cols = [gu * u, gu * v, gu, gv * u, gv * v, gv]
+    if dof == 8:
+        cols += [-(gu * u + gv * v) * u, -(gu * u + gv * v) * v]
+    return np.stack(cols, -1)
+
+
+def _step_map(p: np.ndarray, dof: int) -> np.ndarray:
+    """The 3x3 map of a parameter step (the parameters of _steepest)."""
+    if dof == 3:
+        c, s = math.cos(p[0]), math.sin(p[0])
+        return np.array([[c, -s, p[1]], [s, c, p[2]], [0.0, 0.0, 1.0]])
+    if dof == 4:
+        return np.array([[1 + p[0], -p[1], p[2]], [p[1], 1 + p[0], p[3]], [0.0, 0.0, 1.0]])
+    q = np.zeros(8)
+    q[:dof] = p
+    return np.array([[1 + q[0], q[1], q[2]], [q[3], 1 + q[4], q[5]], [q[6], q[7], 1.0]])
+
+
 def inverse_compositional(ring_b: np.ndarray, m: np.ndarray, steps: int, xs: np.ndarray, ys: np.ndarray,
                           c: np.ndarray, gx: np.ndarray, gy: np.ndarray, shape: tuple[int, int], dof: int,
                           robust: float) -> np.ndarray:
     """`steps` inverse-compositional Gauss-Newton steps (Baker and Matthews) of the map m (3x3, flow px) with
     cur(x) ~ ring(m x) at points (xs, ys) of values c and gradients (gx, gy) of the current frame; dof 8
-    (homography) or 6 (affine); residuals weighted 1 / (1 + (r / robust)^2); coordinates centred and scaled to
-    [-1, 1] for the parameters' conditioning."""
+    (homography), 6 (affine), 4 (similarity) or 3 (Euclidean); residuals weighted 1 / (1 + (r / robust)^2); coordinates centred and
+    scaled to [-1, 1] for the parameters' conditioning."""
     h, w = shape
     cx, cy, sc = (w - 1) / 2.0, (h - 1) / 2.0, max(w, h) / 2.0
-    u, v = (xs - cx) / sc, (ys - cy) / sc
-    gu, gv = gx * sc, gy * sc
-    cols = [gu * u, gu * v, gu, gv * u, gv * v, gv]
-    if dof == 8:
-        cols += [-(gu * u + gv * v) * u, -(gu * u + gv * v) * v]
-    sd = np.stack(cols, -1)
+    sd = _steepest((xs - cx) / sc, (ys - cy) / sc, gx * sc, gy * sc, dof)
     norm = np.array([[1 / sc, 0, -cx / sc], [0, 1 / sc, -cy / sc], [0, 0, 1.0]])
     denorm = np.linalg.inv(norm)
     m = np.array(m, np.float64)
@@ -98,10 +122,7 @@ def inverse_compositional(ring_b: np.ndarray, m: np.ndarray, steps: int, xs: np.
             dp = np.linalg.solve(hess, b)
         except np.linalg.LinAlgError:
             break
-        p = np.zeros(8)
-        p[:dof] = dp
-        d = np.array([[1 + p[0], p[1], p[2]], [p[3], 1 + p[4], p[5]], [p[6], p[7], 1.0]])
-        m = m @ (denorm @ np.linalg.inv(d) @ norm)
+        m = m @ (denorm @ np.linalg.inv(_step_map(dp, dof)) @ norm)
         m /= m[2, 2]
     return m
 
@@ -121,16 +142,15 @@ class LayerPoints:
         self.c = cur_b[ys, xs].astype(np.float64)
         self.gx, self.gy = gx[ys, xs].astype(np.float64), gy[ys, xs].astype(np.float64)
 
-    def conditioning(self) -> float:
-        """The smallest over the largest eigenvalue of the affine steps' Gauss-Newton matrix (coordinates scaled to
-        [-1, 1] over the layer's points): near 0 where the points do not fix all six parameters (one straight edge
-        fixes only the motion across it)."""
-        if self.count < 6:
+    def conditioning(self, dof: int = 6) -> float:
+        """The smallest over the largest eigenvalue of the Gauss-Newton matrix of a map with `dof` parameters
+        (6 affine, 4 similarity, 3 Euclidean; coordinates scaled to [-1, 1] over the layer's points): near 0 where the points do
+        not fix them all (one straight edge fixes only the motion across it)."""
+        if self.count < dof:
             return 0.0
         cx, cy = self.xs.mean(), self.ys.mean()
         sc = max(np.ptp(self.xs), np.ptp(self.ys), 1.0) / 2.0
-        u, v = (self.xs - cx) / sc, (self.ys - cy) / sc
-        sd = np.stack([self.gx * u, self.gx * v, self.gx, self.gy * u, self.gy * v, self.gy], -1)
+        sd = _steepest((self.xs - cx) / sc, (self.ys - cy) / sc, self.gx, self.gy, dof)
         ev = np.linalg.eigvalsh(sd.T @ sd)
         return float(ev[0] / ev[-1]) if ev[-1] > 0 else 0.0
 
@@ -138,27 +158,38 @@ class LayerPoints:
     def count(self) -> int:
         return int(self.xs.size)
 
-    def refine(self, ring_b: np.ndarray, m: np.ndarray, steps: int) -> tuple[np.ndarray, float]:
-        """The affine map m (flow px, current -> ring frame) after `steps` steps, and its median |residual|."""
-        m = inverse_compositional(ring_b, m, steps, self.xs, self.ys, self.c, self.gx, self.gy, self.shape, 6,
+    def refine(self, ring_b: np.ndarray, m: np.ndarray, steps: int, dof: int = 6) -> tuple[np.ndarray, float]:
+        """The map m (flow px, current -> ring frame; dof 6 affine, 4 similarity, 3 Euclidean) after `steps` steps, and its
+        median |residual|."""
+        m = inverse_compositional(ring_b, m, steps, self.xs, self.ys, self.c, self.gx, self.gy, self.shape, dof,
                                   LAYER_ROBUST)
         q = np.stack([self.xs, self.ys, np.ones_like(self.xs)], -1) @ m.T
         r = sample_bilinear(ring_b, q[:, 0] / q[:, 2], q[:, 1] / q[:, 2]) - self.c
         return m, float(np.median(np.abs(r))) if r.size else math.inf
 
-    def fit_to(self, fld: np.ndarray, fs: int, m: np.ndarray) -> np.ndarray | None:
-        """The affine map (flow px) that best fits, at the points, positions m(x) moved on by the field `fld`
-        (full-size px at flow size, read at m(x)): the composition of m with a ring frame's previous map.
-        None where too few of those positions have a finite field."""
+    def fit_to(self, fld: np.ndarray, fs: int, m: np.ndarray, dof: int = 6) -> np.ndarray | None:
+        """The map (flow px; dof 6 affine, 4 similarity, 3 Euclidean) that best fits, at the points, positions m(x) moved on by
+        the field `fld` (full-size px at flow size, read at m(x)): the composition of m with a ring frame's previous
+        map. None where too few of those positions have a finite field."""
         q = np.stack([self.xs, self.ys, np.ones_like(self.xs)], -1) @ m.T
         qx, qy = q[:, 0] / q[:, 2], q[:, 1] / q[:, 2]
         off = np.stack([sample_bilinear(fld[..., k], qx, qy) for k in (0, 1)], -1) / fs
         ok = np.isfinite(off).all(-1)
-        if np.count_nonzero(ok) < 6:
+        k = int(np.count_nonzero(ok))
+        if k < 6:
             return None
-        a = np.stack([self.xs[ok], self.ys[ok], np.ones(np.count_nonzero(ok))], -1)
-        tgt = np.stack([qx[ok] + off[ok, 0], qy[ok] + off[ok, 1]], -1)
-        sol, *_ = np.linalg.lstsq(a, tgt, rcond=None)
+        x, y, one, zero = self.xs[ok], self.ys[ok], np.ones(k), np.zeros(k)
+        tx, ty = qx[ok] + off[ok, 0], qy[ok] + off[ok, 1]
+        if dof in (3, 4):   # x' = a x - b y + c, y' = b x + a y + d (Euclidean: a, b scaled to a rotation)
+            a = np.concatenate([np.stack([x, -y, one, zero], -1), np.stack([y, x, zero, one], -1)])
+            (p, r, c, d), *_ = np.linalg.lstsq(a, np.concatenate([tx, ty]), rcond=None)
+            if dof == 3:
+                k = math.hypot(p, r) or 1.0
+                mx, my = x.mean(), y.mean()   # keep the points' mean where the fit puts it
+                p, r = p / k, r / k
+                c, d = tx.mean() - (p * mx - r * my), ty.mean() - (r * mx + p * my)
+            return np.array([[p, -r, c], [r, p, d], [0.0, 0.0, 1.0]])
+        sol, *_ = np.linalg.lstsq(np.stack([x, y, one], -1), np.stack([tx, ty], -1), rcond=None)
         return np.vstack([sol.T, [0.0, 0.0, 1.0]])
 
 
@@ -169,6 +200,7 @@ class Layer:
     texels: np.ndarray        # bool (fh, fw): texels that move with it (labels, grown)
     points: LayerPoints
     affine: np.ndarray        # 3x3 flow px, current -> previous frame
+    dof: int = 6              # the map's parameters: 6 affine, 4 similarity, 3 Euclidean (what the points fix)
 
     def __post_init__(self) -> None:
         ys, xs = np.nonzero(self.texels)
@@ -207,33 +239,43 @@ def _hull(mask: np.ndarray) -> np.ndarray:
     return out.astype(bool) | mask.astype(bool)
 
 
-def background_of(dec: Decision, prev: Pyramid, cur: Pyramid) -> tuple[float, float]:
-    """The background's translation (full-size px): choose_model's, or none where that leaves fewer texels
-    changed (a mover pulls the frame's estimate off a still background)."""
-    d = dec.translation
-    if math.hypot(*d) < GLOBAL_MIN_SHIFT:
-        return (0.0, 0.0)
+def residual_sum(prev: Pyramid, cur: Pyramid, d: tuple[float, float]) -> float:
+    """Sum of |cur - prev moved by d (full-size px)| over the blurred flow-size grey."""
     fs = cur.flow_scale
-    cur_b, prev_b = cur.blurred("flow"), prev.blurred("flow")
-    moved = np.count_nonzero(_changed(prev_b, cur_b, _translation((d[0] / fs, d[1] / fs)))[1])
-    still = np.count_nonzero(_changed(prev_b, cur_b, _translation((0.0, 0.0)))[1])
-    return (0.0, 0.0) if still <= moved else (float(d[0]), float(d[1]))
+    warped = _warp(prev.blurred("flow"), _translation((d[0] / fs, d[1] / fs)))
+    return float(cv2.norm(warped, cur.blurred("flow"), cv2.NORM_L1))
 
 
-def _fit(pts: LayerPoints, prev_b: np.ndarray, fl: np.ndarray, bg_f: tuple[float, float]) -> np.ndarray | None:
-    """A layer's affine map to the previous frame (flow px): from the median DIS flow of its points that
-    moved against the background (else from the background's translation), LAYER_STEPS Gauss-Newton steps.
-    None where the points do not fix an affine map (LAYER_CONDITION) or it does not explain them: the median
-    |residual| stays over LAYER_FIT_SHARE of the background's there (1-spp aliasing leaves a few levels at
-    the edges of a right map)."""
-    if pts.count < 16 or pts.conditioning() < LAYER_CONDITION:
+def background_of(dec: Decision, prev: Pyramid, cur: Pyramid) -> tuple[float, float]:
+    """The background's translation (full-size px): choose_model's, or none where no motion leaves no larger a sum
+    of residuals (a mover pulled the frame's robust estimate off a still background: the background's texels are
+    then explained exactly by no motion, while a moving background adds its displacement everywhere)."""
+    d = dec.translation
+    if dec.measures.get("still_background"):
+        return (0.0, 0.0)
+    if math.hypot(*d) < GLOBAL_MIN_SHIFT or residual_sum(prev, cur, (0.0, 0.0)) <= residual_sum(prev, cur, d):
+        return (0.0, 0.0)
+    return (float(d[0]), float(d[1]))
+
+
+def _fit(pts: LayerPoints, prev_b: np.ndarray, fl: np.ndarray, bg_f: tuple[float, float]) -> tuple[np.ndarray, int] | None:
+    """A layer's map to the previous frame (flow px) and its parameter count: the first of affine, similarity and
+    Euclidean that the points fix (LAYER_CONDITION: a turning square whose rim moves by more than LAYER_STILL only
+    near its corners fixes no affine map; a wheel's radial spokes fix no scale), else none. From the median DIS flow of its points that moved against the background (else from the
+    background's translation), LAYER_STEPS Gauss-Newton steps. None also where the map does not explain the
+    points: the median |residual| stays over LAYER_FIT_SHARE of the background's there (1-spp aliasing leaves a
+    few levels at the edges of a right map)."""
+    if pts.count < 16:
+        return None
+    dof = next((d for d in (6, 4, 3) if pts.conditioning(d) >= LAYER_CONDITION), None)
+    if dof is None:
         return None
     f = fl[pts.iy, pts.ix]
     moved = np.hypot(f[:, 0] - bg_f[0], f[:, 1] - bg_f[1]) > 0.5
     start = np.median(f[moved], axis=0) if np.count_nonzero(moved) >= 16 else np.array(bg_f)
-    m, level = pts.refine(prev_b, _translation((float(start[0]), float(start[1]))), LAYER_STEPS)
+    m, level = pts.refine(prev_b, _translation((float(start[0]), float(start[1]))), LAYER_STEPS, dof)
     _, level_bg = pts.refine(prev_b, _translation(bg_f), 0)
-    return m if level <= LAYER_FIT_SHARE * level_bg else None
+    return (m, dof) if level <= LAYER_FIT_SHARE * level_bg else None
 
 
 def find_layers(prev: Pyramid, cur: Pyramid, bg: tuple[float, float], flow) -> tuple[list[Layer], np.ndarray] | None:
@@ -255,36 +297,39 @@ def find_layers(prev: Pyramid, cur: Pyramid, bg: tuple[float, float], flow) -> t
                    key=lambda k: -stats[k, cv2.CC_STAT_AREA])
     if not comps:
         return None
-    union = np.isin(lab, comps)
-    if np.count_nonzero(_hull(union)) > LAYER_MAX_SHARE * union.size:
+    union = _hull(np.isin(lab, comps))
+    if np.count_nonzero(union) > LAYER_MAX_SHARE * union.size:
         return None   # changes all over the frame: the camera moved (a dolly, an orbit), with parallax
     unexplained = merged > 0
     gx = cv2.Sobel(cur_b, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
     gy = cv2.Sobel(cur_b, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
     fl = flow(cur.flow, prev.flow, bg_f)
+    # a layer's points: texels of its region's hull that the background's motion leaves off by over LAYER_STILL
+    # (a turning object's rim moves by little near its centre: under LAYER_LEVEL, still a point)
     moved = np.abs(warped_bg - cur_b) > LAYER_STILL
-    m = _fit(LayerPoints(cur_b, union & moved, gx, gy), prev_b, fl, bg_f)
-    fits = [(union, m)]
-    if m is None and len(comps) > 1:
-        fits = [(lab == k, _fit(LayerPoints(cur_b, (lab == k) & moved, gx, gy), prev_b, fl, bg_f))
-                for k in comps[:LAYER_MAX]]
+    joint = _fit(LayerPoints(cur_b, union & moved, gx, gy), prev_b, fl, bg_f)
+    fits = [(union, joint)]
+    if joint is None and len(comps) > 1:
+        hulls = [_hull(lab == k) for k in comps[:LAYER_MAX]]
+        fits = [(r, _fit(LayerPoints(cur_b, r & moved, gx, gy), prev_b, fl, bg_f)) for r in hulls]
     best = _box_residual(warped_bg, cur_b)
     labels = np.zeros((fh, fw), np.int32)
-    fitted: list[tuple[LayerPoints, np.ndarray]] = []
-    for changed, m in fits:
-        if m is None:
+    fitted: list[tuple[LayerPoints, np.ndarray, int]] = []
+    for region, fit in fits:
+        if fit is None:
             continue
+        m, dof = fit
         r = _box_residual(_warp(prev_b, m), cur_b)
-        take = _hull(changed) & (r <= best + LAYER_MARGIN)
+        take = region & (r <= best + LAYER_MARGIN)
         labels[take] = len(fitted) + 1
         best = np.where(take, np.minimum(r, best), best)
-        fitted.append((LayerPoints(cur_b, changed & moved, gx, gy), m))
+        fitted.append((LayerPoints(cur_b, region & moved, gx, gy), m, dof))
     if not fitted:
         return None
     if LAYER_GROW > 0:
         grown = cv2.dilate(labels.astype(np.uint8), np.ones((2 * LAYER_GROW + 1,) * 2, np.uint8))
         labels = np.where(labels == 0, grown, labels)
-    layers = [Layer(labels == k + 1, pts, m) for k, (pts, m) in enumerate(fitted)]
+    layers = [Layer(labels == k + 1, pts, m, dof) for k, (pts, m, dof) in enumerate(fitted)]
     # changed texels no layer takes and the background does not explain either: no samples there
     return layers, unexplained & (labels == 0) & (_box_residual(warped_bg, cur_b) > LAYER_LEVEL)
 
@@ -315,7 +360,7 @@ def _refined(layer: Layer, ring_b: np.ndarray, start: np.ndarray | None) -> np.n
     median |residual| over LAYER_FIT_LEVEL at the layer's points (or there was no start)."""
     if start is None:
         return None
-    a, level = layer.points.refine(ring_b, start, LAYER_REFINE_STEPS)
+    a, level = layer.points.refine(ring_b, start, LAYER_REFINE_STEPS, layer.dof)
     return a if level <= LAYER_FIT_LEVEL else None
 
 
@@ -333,7 +378,7 @@ def layer_fields(entries: list, layers: list[Layer], unexplained: np.ndarray, bg
             maps = [layer.affine for layer in layers]
         else:
             ring_b = e.pyr.blurred("flow")
-            maps = [_refined(layer, ring_b, layer.points.fit_to(prev_map, fs, layer.affine)) for layer in layers]
+            maps = [_refined(layer, ring_b, layer.points.fit_to(prev_map, fs, layer.affine, layer.dof)) for layer in layers]
         e.field, e.shift, e.projective = _field(shape, e.bg, unexplained, layers, maps, fs), None, False
 
 
@@ -351,9 +396,9 @@ def ahead_fields(pyr: Pyramid, index: int, future: list, layers: list[Layer], un
     maps: list[np.ndarray | None] = [np.eye(3) for _ in layers]
     prev = pyr
     for k, a in enumerate(future):
-        if a.index != index + 1 + k or a.decision.model not in ("dense", "static") or a.pyr.flow.shape != pyr.flow.shape:
+        if a.index != index + 1 + k or a.decision.model == "reset" or a.pyr.flow.shape != pyr.flow.shape:
             break
-        d = background_of(a.decision, prev, a.pyr) if a.decision.model == "dense" else (0.0, 0.0)
+        d = background_of(a.decision, prev, a.pyr) if a.decision.model != "static" else (0.0, 0.0)
         bg = (bg[0] - d[0], bg[1] - d[1])
         ring_b = a.pyr.blurred("flow")
         maps = [_refined(layer, ring_b, None if m is None else m @ s) for layer, m, s in zip(layers, maps, step)]
