@@ -211,7 +211,7 @@ def _wheel(n: int, w: int = 480, h: int = 270):
 
 def test_still_background_under_a_turning_wheel_is_not_a_pan():
     """choose_model explains the wheel over a still background by one translation of ~0.26 px per frame; from the
-    ring's second frame TSS takes it as a still background and a layer (Euclidean: the spokes fix no scale), level
+    ring's third frame (STILL_AGE) TSS takes it as a still background and a layer (Euclidean: the spokes fix no scale), level
     with the spatial filter (with the translation, 16 frames: error removed 0.488 against 0.508, damage 0.31
     against 0.24)."""
     from mlaa_stream.temporal.stage import choose_model
@@ -222,11 +222,11 @@ def test_still_background_under_a_turning_wheel_is_not_a_pan():
         spatial = np.stack([f.process(x) for x in sc.inputs])
     with TSSStage(bgr=False) as stage:
         outs = np.stack([stage(f, s, i) for i, (f, s) in enumerate(zip(sc.inputs, spatial))])
-    assert [r["model"] for r in stage.stats[2:]] == ["layers"] * 6
-    assert all(r["still_background"] for r in stage.stats[2:])
+    assert [r["model"] for r in stage.stats[3:]] == ["layers"] * 5
+    assert all(r["still_background"] for r in stage.stats[3:])
     found = L.find_layers(a, b, (0.0, 0.0), _dis())
     assert found is not None and found[0][0].dof == 3
-    # within 0.001 (the ring's first frame still takes the pulled translation: 0.5026 against 0.5027)
+    # within 0.001 (the ring's first two frames still take the pulled translation)
     assert M.error_removed(outs, sc.inputs, sc.truths) >= M.error_removed(spatial, sc.inputs, sc.truths) - 0.001
     assert M.damage(outs, sc.inputs, sc.truths, sc.edges) <= M.damage(spatial, sc.inputs, sc.truths, sc.edges) + 0.005
 

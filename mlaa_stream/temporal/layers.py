@@ -52,8 +52,8 @@ LAYER_STILL = 2.0        # grey levels: a region's texel the background's motion
                          # layer's fit (still texture next to a mover fits it to no motion, or to the texture's period)
 STILL_SHIFT = 1.0        # px: a global frame moving less than this is tested for a still background
                          # (tss.MotionRing._still_background) ...
-STILL_AGE = 2            # ... over a ring of at least this many frames, where no motion leaves a sum of residuals
-STILL_MARGIN = 0.97      # ... under this share of the moving background's
+STILL_AGE = 3            # ... over a ring of at least this many frames, where no motion leaves a sum of residuals
+STILL_MARGIN = 0.9       # ... under this share of the moving background's
 LAYER_GROW = 1           # texels (flow size): layer labels grown into the background
 
 
