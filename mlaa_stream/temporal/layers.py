@@ -53,7 +53,9 @@ LAYER_STILL = 2.0        # grey levels: a region's texel the background's motion
 STILL_SHIFT = 1.0        # px: a global frame moving less than this is tested for a still background
                          # (tss.MotionRing._still_background) ...
 STILL_AGE = 3            # ... over a ring of at least this many frames, where no motion leaves a sum of residuals
-STILL_MARGIN = 0.9       # ... under this share of the moving background's
+STILL_MARGIN = 1.0       # ... no larger than the moving background's (still_background) ...
+STILL_SHARE = 0.5        # ... and this share of the textured texels unchanged
+STILL_TEXTURE = 4.0      # grey levels per texel: textured (blurred gradient magnitude)
 LAYER_GROW = 1           # texels (flow size): layer labels grown into the background
 
 
@@ -241,9 +243,30 @@ def _hull(mask: np.ndarray) -> np.ndarray:
 
 def residual_sum(prev: Pyramid, cur: Pyramid, d: tuple[float, float]) -> float:
     """Sum of |cur - prev moved by d (full-size px)| over the blurred flow-size grey."""
+    return float(np.abs(_moved(prev, cur, d) - cur.blurred("flow")).sum())
+
+
+def _moved(prev: Pyramid, cur: Pyramid, d: tuple[float, float]) -> np.ndarray:
     fs = cur.flow_scale
-    warped = _warp(prev.blurred("flow"), _translation((d[0] / fs, d[1] / fs)))
-    return float(cv2.norm(warped, cur.blurred("flow"), cv2.NORM_L1))
+    return _warp(prev.blurred("flow"), _translation((d[0] / fs, d[1] / fs)))
+
+
+def still_background(far: Pyramid, cur: Pyramid, moved: tuple[float, float]) -> bool:
+    """Is the background still between ring frame `far` and `cur`, rather than moved by `moved` (full-size px)?
+    Both: no motion leaves no larger sum of residuals (STILL_MARGIN), and at least STILL_SHARE of the current
+    frame's textured texels (blurred gradient over STILL_TEXTURE levels per texel) match unmoved within one level
+    (a still background is the same texels; a moving object over it changes its own). Each alone is fooled: a slow
+    vector pan's 1-spp frames keep most near-horizontal edges unchanged for frames (share 0.54-0.67 at ages 3-5),
+    and a large textured object turning leaves a residual sum near the moving background's (ratio 0.94-0.96)."""
+    c = cur.blurred("flow")
+    still = np.abs(_moved(far, cur, (0.0, 0.0)) - c)
+    if float(still.sum()) > STILL_MARGIN * float(np.abs(_moved(far, cur, moved) - c).sum()):
+        return False
+    if "still_texture" not in cur._blur:
+        cur._blur["still_texture"] = cv2.magnitude(cv2.Sobel(c, cv2.CV_32F, 1, 0, ksize=3, scale=0.125),
+                                                   cv2.Sobel(c, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)) > STILL_TEXTURE
+    tex = cur._blur["still_texture"]
+    return bool(np.count_nonzero(tex)) and float(np.count_nonzero((still < 1.0) & tex)) >= STILL_SHARE * np.count_nonzero(tex)
 
 
 def background_of(dec: Decision, prev: Pyramid, cur: Pyramid) -> tuple[float, float]:

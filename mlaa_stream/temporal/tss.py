@@ -69,8 +69,9 @@ import numpy as np
 
 from mlaa_stream.device.colour import device_luts, lut_read
 from mlaa_stream.device.formats import LUT_SIZE, frame_format
-from mlaa_stream.temporal.layers import (STILL_AGE, STILL_MARGIN, STILL_SHIFT, ahead_fields, background_of, find_layers, inverse_compositional,
-                                         layer_fields, layers_decision, residual_sum, sample_bilinear)
+from mlaa_stream.temporal.layers import (STILL_AGE, STILL_SHIFT, ahead_fields, background_of, find_layers,
+                                         inverse_compositional, layer_fields, layers_decision, sample_bilinear,
+                                         still_background)
 from mlaa_stream.temporal.stage import (LK_ROBUST, Decision, Pyramid, _PMAX, choose_model, sample_field,
                                         decode_table, grey8)
 
@@ -247,9 +248,9 @@ class MotionRing:
     def _still_background(self, pyr: Pyramid, dec: Decision) -> bool:
         """One small translation (under STILL_SHIFT px) fitted to a still background and an object moving over it
         (a turning wheel pulls it to ~0.26 px per frame)? Judged over the ring's whole baseline, at least STILL_AGE
-        frames: the oldest ring frame matches the current one better unmoved (by STILL_MARGIN) than moved by the
-        background's translation (1-spp frames of a slow pan can match better unmoved frame to frame: near-horizontal
-        edges jump a row now and then; over several frames the pan shows). docs/temporal.md, "Moving layers"."""
+        frames: layers.still_background between the oldest ring frame and the current one (1-spp frames of a slow
+        pan can match better unmoved frame to frame: near-horizontal edges jump a row now and then; over several
+        frames the pan shows). docs/temporal.md, "Moving layers"."""
         d = dec.translation
         far = self.entries[0] if self.entries else None
         age = self.entries[-1].index - far.index + 1 if far is not None else 0
@@ -258,7 +259,7 @@ class MotionRing:
         # the moving background's hypothesis: the ring's translation (global frames), or this frame's for every frame
         # of the baseline (after a still background was found, the ring's background is still)
         moved = (far.shift[0] + d[0], far.shift[1] + d[1]) if far.shift is not None else (d[0] * age, d[1] * age)
-        return residual_sum(far.pyr, pyr, (0.0, 0.0)) <= STILL_MARGIN * residual_sum(far.pyr, pyr, moved)
+        return still_background(far.pyr, pyr, moved)
 
     def _refiner(self, pyr: Pyramid) -> _Refiner:
         """The direct refiner of the current frame (made once per frame)."""
