@@ -359,11 +359,12 @@ def find_layers(prev: Pyramid, cur: Pyramid, bg: tuple[float, float], flow) -> t
 
 def _field(shape: tuple[int, int], bg: tuple[float, float], unexplained: np.ndarray, layers: list[Layer],
            maps: list[np.ndarray | None], fs: int) -> np.ndarray:
-    """A ring frame's field (full-size px at flow size): `bg` everywhere, NaN on unexplained texels, each layer's
-    map on its texels (NaN where its map was not found: None); computed over each layer's bounding box."""
+    """A ring frame's field (full-size px at flow size): `bg` everywhere, NaN on unexplained texels (`unexplained`:
+    their flat indices), each layer's map on its texels (NaN where its map was not found: None); the layers are
+    written over their bounding boxes."""
     out = np.empty(shape + (2,), np.float32)
-    out[...] = bg
-    out[unexplained] = np.nan
+    out.view(np.complex64).fill(complex(bg[0], bg[1]))   # (x, y) pairs in one pass (broadcasting a pair: ~10x slower)
+    out.reshape(-1, 2)[unexplained] = np.nan
     for layer, a in zip(layers, maps):
         ys, xs = layer.box
         view = out[ys, xs]
@@ -392,7 +393,7 @@ def layer_fields(entries: list, layers: list[Layer], unexplained: np.ndarray, bg
     """Each ring entry's map becomes a field: its background translation (`entry.bg`, moved on by `bg`)
     everywhere, NaN on unexplained texels, each layer's affine (composed, then refined directly) on the layer's
     texels. entries: oldest first, the previous frame last (its map was the identity)."""
-    shape = unexplained.shape
+    shape, nan = unexplained.shape, np.flatnonzero(unexplained)
     for j, e in enumerate(entries):
         old_bg = e.bg if e.field is not None or e.shift is None else e.shift
         prev_map = e.field if e.field is not None else np.broadcast_to(np.float32(old_bg), shape + (2,))
@@ -402,7 +403,7 @@ def layer_fields(entries: list, layers: list[Layer], unexplained: np.ndarray, bg
         else:
             ring_b = e.pyr.blurred("flow")
             maps = [_refined(layer, ring_b, layer.points.fit_to(prev_map, fs, layer.affine, layer.dof)) for layer in layers]
-        e.field, e.shift, e.projective = _field(shape, e.bg, unexplained, layers, maps, fs), None, False
+        e.field, e.shift, e.projective = _field(shape, e.bg, nan, layers, maps, fs), None, False
 
 
 def ahead_fields(pyr: Pyramid, index: int, future: list, layers: list[Layer], unexplained: np.ndarray,
@@ -417,7 +418,7 @@ def ahead_fields(pyr: Pyramid, index: int, future: list, layers: list[Layer], un
     bg = (0.0, 0.0)
     step = [np.linalg.inv(layer.affine) for layer in layers]
     maps: list[np.ndarray | None] = [np.eye(3) for _ in layers]
-    prev = pyr
+    prev, nan = pyr, np.flatnonzero(unexplained)
     for k, a in enumerate(future):
         if a.index != index + 1 + k or a.decision.model == "reset" or a.pyr.flow.shape != pyr.flow.shape:
             break
@@ -425,7 +426,7 @@ def ahead_fields(pyr: Pyramid, index: int, future: list, layers: list[Layer], un
         bg = (bg[0] - d[0], bg[1] - d[1])
         ring_b = a.pyr.blurred("flow")
         maps = [_refined(layer, ring_b, None if m is None else m @ s) for layer, m, s in zip(layers, maps, step)]
-        out.append(entry(a.index, a.pyr, _field(unexplained.shape, bg, unexplained, layers, maps, fs), bg))
+        out.append(entry(a.index, a.pyr, _field(unexplained.shape, bg, nan, layers, maps, fs), bg))
         prev = a.pyr
     return out
 

@@ -59,6 +59,7 @@ in K + N device slots; FULL_CELLS grows by FULL_CELLS_AHEAD per frame ahead (doc
 """
 from __future__ import annotations
 
+import functools
 import math
 import threading
 import time
@@ -163,7 +164,7 @@ class MotionRing:
         self._last_refiner: _Refiner | None = None   # this frame's, made by _refine, used by _projective
         self._refiner_pyr: Pyramid | None = None     # the frame _last_refiner was made for
         self.band_slopes = None                      # each band's deviation per frame of age (_refine, _band_slopes)
-        self._frame_layers = None                    # this frame's (layers, unexplained texels) where it has layers
+        self.frame_layers = None                    # this frame's (layers, unexplained texels) where it has layers
 
     def reset(self) -> None:
         self.entries = []
@@ -183,6 +184,7 @@ class MotionRing:
         from the previous one when already measured (it came as a look-ahead frame), else measured here."""
         prev = self.entries[-1] if self.entries else None
         self.band_slopes = None   # set by _refine where it fits them this frame (_ahead reads them)
+        self.frame_layers = None
         if fresh or prev is None:
             dec = Decision("reset", measures={"cut": False})
         else:
@@ -218,7 +220,7 @@ class MotionRing:
         if not future:
             ahead = []
         elif dec.model == "layers":
-            ahead = ahead_fields(pyr, index, list(future), *self._frame_layers,
+            ahead = ahead_fields(pyr, index, list(future), *self.frame_layers,
                                  lambda i, p, fld, bg: RingEntry(i, None, p, shift=None, field=fld, bg=bg))
         else:
             ahead = self._ahead(pyr, index, list(future))
@@ -242,7 +244,7 @@ class MotionRing:
             for e in self.entries:
                 e.shift, e.bg = ((0.0, 0.0) if e.shift is not None else None), (0.0, 0.0)
         layer_fields(self.entries, *found, bg, pyr.flow_scale)
-        self._frame_layers = found
+        self.frame_layers = found
         return layers_decision(dec, found[0])
 
     def _still_background(self, pyr: Pyramid, dec: Decision) -> bool:
@@ -393,7 +395,7 @@ class MotionRing:
             warped = cv2.warpPerspective(_blur_align(e.pyr), e.homography, (fw, fh),
                                          flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE)
         else:
-            gx, gy = np.meshgrid(np.arange(fw, dtype=np.float32), np.arange(fh, dtype=np.float32))
+            gx, gy = _texel_grid(fh, fw)
             if e.field is None:
                 mx, my = gx + np.float32(e.shift[0] / fs), gy + np.float32(e.shift[1] / fs)
             else:
@@ -675,6 +677,14 @@ def tile_shifts(m: np.ndarray | None, width: int, height: int, fs: int) -> TileS
     px = ((m[0, 0] * fx + m[0, 1] * fy + m[0, 2]) / den + 0.5) * fs - 0.5
     py = ((m[1, 0] * fx + m[1, 1] * fy + m[1, 2]) / den + 0.5) * fs - 0.5
     return TileShifts(np.stack([px - gx, py - gy], -1).astype(np.float32))
+
+
+@functools.lru_cache(maxsize=4)
+def _texel_grid(fh: int, fw: int) -> tuple[np.ndarray, np.ndarray]:
+    """Each texel's x and y (float32, read-only), made once per flow size."""
+    gx, gy = np.meshgrid(np.arange(fw, dtype=np.float32), np.arange(fh, dtype=np.float32))
+    gx.flags.writeable = gy.flags.writeable = False
+    return gx, gy
 
 
 def _translation(shift: tuple[float, float], fs: int) -> np.ndarray:
@@ -1090,11 +1100,20 @@ class TSSStage:
                 self._upload_only(frame_in, pyr, fm, future)
         elif self.backend == "numpy":
             h, w = frame_in.shape[:2]
-            ring = [(self._frames[e.slot], tile_shifts(e.homography, w, h, pyr.flow_scale) if e.projective
-                     else e.shift if e.translated else e.field, e.valid) for e in taps]
-            out, cells = tss_frame_reference(frame_filtered, frame_in, ring, self.bgr, pyr.flow_scale,
-                                             self.grid, self.eps, self.min_cells,
-                                             self.full_cells if all(e.translated for e in taps) else self.field_full_cells)
+
+            def reference(entries, full_cells):
+                ring = [(self._frames[e.slot], tile_shifts(e.homography, w, h, pyr.flow_scale) if e.projective
+                         else e.shift if e.translated else e.field, e.valid) for e in entries]
+                return tss_frame_reference(frame_filtered, frame_in, ring, self.bgr, pyr.flow_scale, self.grid,
+                                           self.eps, self.min_cells, full_cells)
+            rect = self._layer_rect(fm, pyr, w, h)
+            if rect is not None:   # as the device: background translations, then the layers' rectangle
+                out, cells = reference(self._background_entries(taps), self.full_cells)
+                fout, fcells = reference(taps, self.field_full_cells)
+                x0, y0, x1, y1 = rect
+                out[y0:y1, x0:x1], cells[y0:y1, x0:x1] = fout[y0:y1, x0:x1], fcells[y0:y1, x0:x1]
+            else:
+                out, cells = reference(taps, self.full_cells if all(e.translated for e in taps) else self.field_full_cells)
         else:
             out, cells = self._resolve(frame_in, frame_filtered, pyr, fm, future)
         t2 = time.perf_counter()
@@ -1126,6 +1145,32 @@ class TSSStage:
             if sl is None:
                 sl = self._slot_of[e.index] = min(set(range(self.frames + self.lookahead)) - set(self._slot_of.values()))
             e.slot = sl
+
+    def _layer_rect(self, fm: FrameMotion, pyr: Pyramid, width: int, height: int) -> tuple[int, int, int, int] | None:
+        """A layers frame's maps are the background's translation outside its layers and unexplained texels: the
+        full-size rectangle (x0, y0, x1, y1) holding every pixel whose field read (bilinear) touches one of them,
+        where the general resolve runs with FULL_CELLS_FIELDS; the translations' resolve (FULL_CELLS) does the rest
+        of the frame. None: not a layers frame (fields everywhere: the general resolve)."""
+        if fm.decision.model != "layers" or self.motion.frame_layers is None:
+            return None
+        layers, unexplained = self.motion.frame_layers
+        mask = unexplained.copy()
+        for layer in layers:
+            mask |= layer.texels
+        ys, xs = np.nonzero(mask)
+        if not ys.size:
+            return (0, 0, 0, 0)
+        fs, (fh, fw) = pyr.flow_scale, mask.shape
+        # texel t is read by the pixels whose position falls in texels t - 1 .. t + 1
+        y0, y1 = max(int(ys.min()) - 1, 0), min(int(ys.max()) + 2, fh)
+        x0, x1 = max(int(xs.min()) - 1, 0), min(int(xs.max()) + 2, fw)
+        return (x0 * fs, y0 * fs, width if x1 == fw else x1 * fs, height if y1 == fh else y1 * fs)
+
+    @staticmethod
+    def _background_entries(entries: list[RingEntry]) -> list[RingEntry]:
+        """The ring with each field replaced by its background translation (valid masks kept)."""
+        return [e if e.translated else RingEntry(e.index, None, e.pyr, shift=e.bg, slot=e.slot, valid=e.valid)
+                for e in entries]
 
     def _cell_of(self, shift: tuple[float, float]) -> tuple[int, int]:
         """The footprint cell every sample of a translated frame lands in (the same for all pixels)."""
@@ -1201,20 +1246,22 @@ class TSSStage:
             if not e.translated:
                 cl.enqueue_copy(q, bufs.fields, np.ascontiguousarray(e.field, np.float32),
                                 dst_offset=e.slot * fh * fw * 8, is_blocking=False)
+        rect = self._layer_rect(fm, pyr, fmt.width, fmt.height)
         shift_path = all(e.translated for e in ring)
         for e in ring:
-            if e.valid is not None and shift_path:
+            if e.valid is not None and (shift_path or rect is not None):
                 if not (e.slot in self._vrows_sent and np.array_equal(self._vrows_sent[e.slot], e.valid)):
                     # masks change rarely (a tile's verdict): upload only a changed one
                     cl.enqueue_copy(q, bufs.vrows, vrows_of(e.valid, pyr.flow_scale, fmt.width),
                                     dst_offset=e.slot * fh * fmt.width, is_blocking=False)
                     self._vrows_sent[e.slot] = e.valid
-            elif e.valid is not None:
+            if e.valid is not None and not shift_path:
                 cl.enqueue_copy(q, bufs.valids, np.ascontiguousarray(e.valid, np.uint8),
                                 dst_offset=e.slot * fh * fw, is_blocking=False)
         cl.enqueue_copy(q, bufs.spatial, np.ascontiguousarray(frame_filtered), is_blocking=False)
-        if shift_path:
-            taps, vslots, (tile_rows, tiles_x) = self._taps(ring, fmt.width, fmt.height, pyr.flow_scale)
+        if shift_path or rect is not None:
+            shifted = ring if shift_path else self._background_entries(ring)
+            taps, vslots, (tile_rows, tiles_x) = self._taps(shifted, fmt.width, fmt.height, pyr.flow_scale)
             if bufs.tables.size < taps.nbytes:
                 bufs.tables, bufs.table_vslots = self.context.buffer(taps.nbytes), self.context.buffer(vslots.nbytes)
             cl.enqueue_copy(q, bufs.tables, taps, is_blocking=False)
@@ -1224,7 +1271,8 @@ class TSSStage:
                                bufs.etab, np.int32(fmt.width), np.int32(fmt.height), np.int32(fw), np.int32(fh),
                                np.int32(pyr.flow_scale), np.int32(n), np.int32(fm.entries[-1].slot),
                                np.int32(tile_rows), np.int32(tiles_x))
-        else:
+        if not shift_path:
+            x0, y0, x1, y1 = rect if rect is not None else (0, 0, fmt.width, fmt.height)
             info = np.zeros((n, 4), np.int32)
             shift = np.zeros((n, 2), np.float32)
             for j, e in enumerate(ring):
@@ -1233,10 +1281,12 @@ class TSSStage:
                     shift[j] = e.shift
             cl.enqueue_copy(q, bufs.info, info, is_blocking=False)
             cl.enqueue_copy(q, bufs.shift, shift, is_blocking=False)
-            self._kernel(q, (fmt.width, fmt.height), None, bufs.ring, bufs.spatial, bufs.dst, bufs.cells,
-                         bufs.info, bufs.shift, bufs.fields, bufs.valids, self._luts, bufs.ltab, bufs.etab,
-                         np.int32(fmt.width), np.int32(fmt.height), np.int32(fw), np.int32(fh),
-                         np.int32(pyr.flow_scale), np.int32(n), np.int32(fm.entries[-1].slot))
+            if x1 > x0 and y1 > y0:   # the layers' rectangle (get_global_id counts from the offset)
+                self._kernel(q, (x1 - x0, y1 - y0), None, bufs.ring, bufs.spatial, bufs.dst, bufs.cells,
+                             bufs.info, bufs.shift, bufs.fields, bufs.valids, self._luts, bufs.ltab, bufs.etab,
+                             np.int32(fmt.width), np.int32(fmt.height), np.int32(fw), np.int32(fh),
+                             np.int32(pyr.flow_scale), np.int32(n), np.int32(fm.entries[-1].slot),
+                             global_offset=(x0, y0))
         out = np.empty(frame_filtered.shape, frame_filtered.dtype)
         cl.enqueue_copy(q, out, bufs.dst, is_blocking=False)
         cl.enqueue_copy(q, bufs.host_cells, bufs.cells, is_blocking=True)
