@@ -37,6 +37,8 @@ from mlaa_stream.temporal.stage import GLOBAL_MIN_SHIFT, Decision, Pyramid
 LAYER_LEVEL = 10.0       # grey levels: a texel the background's motion leaves this far off has moved by itself
 LAYER_MERGE = 4          # texels: changed blobs this close are one layer
 LAYER_MIN_AREA = 24      # texels: smaller regions are not layers (they take no samples)
+LAYER_MIN_SHARE = 0.01   # layers taking less of the frame are not worth their cost (a field, steps and a check per
+                         # ring frame: ~6 ms at 1080p): the ring restarts as without layers
 LAYER_MAX = 4            # layers per frame (the largest)
 LAYER_MAX_SHARE = 0.5    # the changed regions' convex hull over this share of the frame: the camera moved (parallax)
 LAYER_POINTS = 4096      # a layer's Gauss-Newton points (its largest gradients)
@@ -347,8 +349,8 @@ def find_layers(prev: Pyramid, cur: Pyramid, bg: tuple[float, float], flow) -> t
         labels[take] = len(fitted) + 1
         best = np.where(take, np.minimum(r, best), best)
         fitted.append((LayerPoints(cur_b, region & moved, gx, gy), m, dof))
-    if not fitted:
-        return None
+    if not fitted or np.count_nonzero(labels) < LAYER_MIN_SHARE * labels.size:
+        return None   # no layers, or too small to pay for a field per ring frame: the ring restarts
     if LAYER_GROW > 0:
         grown = cv2.dilate(labels.astype(np.uint8), np.ones((2 * LAYER_GROW + 1,) * 2, np.uint8))
         labels = np.where(labels == 0, grown, labels)
