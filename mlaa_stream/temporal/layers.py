@@ -134,13 +134,18 @@ def inverse_compositional(ring_b: np.ndarray, m: np.ndarray, steps: int, xs: np.
 class LayerPoints:
     """One layer's Gauss-Newton points: the current frame's largest gradients inside its region (flow size)."""
 
-    def __init__(self, cur_b: np.ndarray, region: np.ndarray, gx: np.ndarray, gy: np.ndarray):
+    def __init__(self, cur_b: np.ndarray, region: np.ndarray, gx: np.ndarray, gy: np.ndarray,
+                 energy: np.ndarray | None = None):
+        """`energy`: gx^2 + gy^2 when the caller has it (one per frame for every layer)."""
         self.shape = cur_b.shape
-        energy = np.where(region, gx * gx + gy * gy, 0.0)
-        ys, xs = np.nonzero(energy > 1e-3)
+        x, y, w, h = cv2.boundingRect(region.astype(np.uint8))   # the region's texels only (one small region of
+        box = (slice(y, y + h), slice(x, x + w))                  # a large frame)
+        e = (gx[box] * gx[box] + gy[box] * gy[box]) if energy is None else energy[box]
+        ys, xs = np.nonzero(region[box] & (e > 1e-3))
         if ys.size > LAYER_POINTS:
-            top = np.argpartition(-energy[ys, xs], LAYER_POINTS - 1)[:LAYER_POINTS]
+            top = np.argpartition(-e[ys, xs], LAYER_POINTS - 1)[:LAYER_POINTS]
             ys, xs = ys[top], xs[top]
+        ys, xs = ys + y, xs + x
         self.iy, self.ix = ys, xs
         self.xs, self.ys = xs.astype(np.float64), ys.astype(np.float64)
         self.c = cur_b[ys, xs].astype(np.float64)
@@ -237,10 +242,12 @@ def _changed(prev_b: np.ndarray, cur_b: np.ndarray, m: np.ndarray) -> tuple[np.n
 def _hull(mask: np.ndarray) -> np.ndarray:
     """The filled convex hull of a mask's texels (a turning object's changed texels are its rim: the hull
     holds the rest of it)."""
-    pts = cv2.findNonZero(mask.astype(np.uint8))
+    m = mask.astype(np.uint8)
     out = np.zeros(mask.shape, np.uint8)
-    cv2.fillConvexPoly(out, cv2.convexHull(pts), 1)
-    return out.astype(bool) | mask.astype(bool)
+    pts = cv2.findNonZero(m)
+    if pts is not None:
+        cv2.fillConvexPoly(out, cv2.convexHull(pts), 1)
+    return (out | m).astype(bool)
 
 
 def residual_sum(prev: Pyramid, cur: Pyramid, d: tuple[float, float]) -> float:
@@ -328,15 +335,16 @@ def find_layers(prev: Pyramid, cur: Pyramid, bg: tuple[float, float], flow) -> t
     unexplained = merged > 0
     gx = cv2.Sobel(cur_b, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
     gy = cv2.Sobel(cur_b, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
+    energy = gx * gx + gy * gy
     fl = flow(cur.flow, prev.flow, bg_f)
     # a layer's points: texels of its region's hull that the background's motion leaves off by over LAYER_STILL
     # (a turning object's rim moves by little near its centre: under LAYER_LEVEL, still a point)
     moved = np.abs(warped_bg - cur_b) > LAYER_STILL
-    joint = _fit(LayerPoints(cur_b, union & moved, gx, gy), prev_b, fl, bg_f)
+    joint = _fit(LayerPoints(cur_b, union & moved, gx, gy, energy), prev_b, fl, bg_f)
     fits = [(union, joint)]
     if joint is None and len(comps) > 1:
         hulls = [_hull(lab == k) for k in comps[:LAYER_MAX]]
-        fits = [(r, _fit(LayerPoints(cur_b, r & moved, gx, gy), prev_b, fl, bg_f)) for r in hulls]
+        fits = [(r, _fit(LayerPoints(cur_b, r & moved, gx, gy, energy), prev_b, fl, bg_f)) for r in hulls]
     best = _box_residual(warped_bg, cur_b)
     labels = np.zeros((fh, fw), np.int32)
     fitted: list[tuple[LayerPoints, np.ndarray, int]] = []
@@ -348,7 +356,7 @@ def find_layers(prev: Pyramid, cur: Pyramid, bg: tuple[float, float], flow) -> t
         take = region & (r <= best + LAYER_MARGIN)
         labels[take] = len(fitted) + 1
         best = np.where(take, np.minimum(r, best), best)
-        fitted.append((LayerPoints(cur_b, region & moved, gx, gy), m, dof))
+        fitted.append((LayerPoints(cur_b, region & moved, gx, gy, energy), m, dof))
     if not fitted or np.count_nonzero(labels) < LAYER_MIN_SHARE * labels.size:
         return None   # no layers, or too small to pay for a field per ring frame: the ring restarts
     if LAYER_GROW > 0:
