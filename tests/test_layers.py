@@ -211,9 +211,9 @@ def _wheel(n: int, w: int = 480, h: int = 270):
 
 def test_still_background_under_a_turning_wheel_is_not_a_pan():
     """choose_model explains the wheel over a still background by one translation of ~0.26 px per frame; from the
-    ring's third frame (STILL_AGE) TSS takes it as a still background and a layer (Euclidean: the spokes fix no scale), level
-    with the spatial filter (with the translation, 16 frames: error removed 0.488 against 0.508, damage 0.31
-    against 0.24)."""
+    ring's third frame (STILL_AGE) TSS takes it as a still background and a layer (Euclidean: the spokes fix no
+    scale), level with the spatial filter (with the translation, 16 frames: error removed 0.488 against 0.508,
+    damage 0.31 against 0.24)."""
     from mlaa_stream.temporal.stage import choose_model
     sc = _wheel(8)
     a, b = (Pyramid.of(f, False) for f in sc.inputs[2:4])

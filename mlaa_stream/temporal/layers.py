@@ -2,27 +2,35 @@
 "static / one global translation or affine / per moving layer / dense DIS flow, chosen per frame").
 
 A frame that choose_model classes dense (a turning object over a still background, a mover) is explained as a
-background translation plus a few layers, each moving by one affine map (the issue's experiment: ECC-fitted
+background translation plus a few layers, each moving by one map (the issue's experiment: ECC-fitted Euclidean
 layers found by frame differencing, background within 2 px of a silhouette moved with the layer):
 
-  1. background: choose_model's translation, or none where it is under GLOBAL_MIN_SHIFT (a still background);
-  2. layers: the flow-size pixels the background's motion does not explain (blurred grey residual over
-     LAYER_LEVEL, blobs that survive a 3x3 erosion, as choose_model's outliers), merged within LAYER_MERGE texels;
-     connected regions of LAYER_MIN_AREA texels or more; where their convex hull covers more than LAYER_MAX_SHARE of
-     the frame the camera moved (a dolly, an orbit: parallax), which layers do not model: no layers;
-  3. each layer's affine map from the current frame to the previous one: started from the median DIS flow of its
-     points, refined by inverse-compositional Gauss-Newton (Baker and Matthews) at the current frame's largest
-     gradients inside the region (`LayerPoints`); a layer whose median residual stays over LAYER_FIT_LEVEL is not
-     one affine motion: its region takes no samples;
-  4. labels: inside a layer's region a texel moves with the layer unless the background explains it better
+  1. background: choose_model's translation, or none where no motion leaves no larger residual sum
+     (`background_of`); tss.MotionRing also takes a slow global frame for a still background where the ring's
+     baseline shows it (`still_background`: an object turning over it pulls one translation to ~0.2 px per frame);
+  2. regions: the flow-size texels the background's motion leaves over LAYER_LEVEL (blurred grey, blobs that
+     survive a 3x3 erosion, as choose_model's outliers), merged within LAYER_MERGE texels, connected regions of
+     LAYER_MIN_AREA texels or more; where their convex hull covers more than LAYER_MAX_SHARE of the frame the camera
+     moved (a dolly, an orbit: parallax), which layers do not model: no layers;
+  3. one layer for the hull of all regions first (a turning object changes along its rim in pieces, each a straight
+     edge that fixes only the motion across it), each region's hull on its own only where that fails; its map from
+     the current frame to the previous one: the first of affine, similarity and Euclidean that its points fix
+     (`LayerPoints.conditioning`), started from the median DIS flow of the points that moved, refined by
+     inverse-compositional Gauss-Newton (Baker and Matthews) at the current frame's largest gradients that the
+     background leaves off by over LAYER_STILL; kept where it leaves under LAYER_FIT_SHARE of the background's
+     median residual there;
+  4. labels: inside a layer's hull a texel moves with the layer unless the background explains it better
      (3x3 mean residuals); layer texels are grown by LAYER_GROW texels into the background (motion-vector
-     dilation: the background next to a silhouette moves with it);
-  5. ring: each ring frame's map becomes a field (full-size px at flow size, as the dense path's): its own
-     background translation everywhere, each layer's affine on that layer's texels. A ring frame's affine for a
-     layer starts from its previous map composed with this frame's layer step (fitted as an affine map at the
-     layer's points) and is refined *directly* against that ring frame (chaining alone drifts: issue 16).
+     dilation: the background next to a silhouette moves with it); changed texels nothing explains take no
+     samples; layers under LAYER_MIN_SHARE of the frame are not worth a field per ring frame: no layers;
+  5. ring (`layer_fields`; frames ahead: `ahead_fields`): each ring frame's map becomes a field (full-size px at
+     flow size, as the dense path's): its own background translation everywhere, each layer's map on that layer's
+     texels. A ring frame's map for a layer starts from its previous field composed with this frame's layer map
+     (fitted at the layer's points) and is refined *directly* against that ring frame (chaining alone drifts).
 
-MotionRing then checks every field per region (_alignment) and the colour box rejects the rest.
+MotionRing then checks every field per region (_alignment) and the colour box rejects the rest; TSSStage resolves
+the layers' rectangle with the general kernel (FULL_CELLS_FIELDS) and the rest with the background's translations.
+docs/temporal.md, "Moving layers".
 """
 from __future__ import annotations
 
@@ -42,7 +50,7 @@ LAYER_MIN_SHARE = 0.01   # layers taking less of the frame are not worth their c
 LAYER_MAX = 4            # layers per frame (the largest)
 LAYER_MAX_SHARE = 0.5    # the changed regions' convex hull over this share of the frame: the camera moved (parallax)
 LAYER_POINTS = 4096      # a layer's Gauss-Newton points (its largest gradients)
-LAYER_ROBUST = 8.0      # grey levels: robust scale of a layer's steps (its region holds uncovered background too)
+LAYER_ROBUST = 8.0       # grey levels: robust scale of a layer's steps (its region holds uncovered background too)
 LAYER_STEPS = 5          # steps for the newest ring frame's map
 LAYER_REFINE_STEPS = 2   # ... and for each older ring frame's, from the composed map
 LAYER_FIT_SHARE = 0.85   # a layer's map must leave under this share of the background's median |residual| at its points
@@ -107,8 +115,8 @@ def inverse_compositional(ring_b: np.ndarray, m: np.ndarray, steps: int, xs: np.
                           robust: float) -> np.ndarray:
     """`steps` inverse-compositional Gauss-Newton steps (Baker and Matthews) of the map m (3x3, flow px) with
     cur(x) ~ ring(m x) at points (xs, ys) of values c and gradients (gx, gy) of the current frame; dof 8
-    (homography), 6 (affine), 4 (similarity) or 3 (Euclidean); residuals weighted 1 / (1 + (r / robust)^2); coordinates centred and
-    scaled to [-1, 1] for the parameters' conditioning."""
+    (homography), 6 (affine), 4 (similarity) or 3 (Euclidean); residuals weighted 1 / (1 + (r / robust)^2);
+    coordinates centred and scaled to [-1, 1] for the parameters' conditioning."""
     h, w = shape
     cx, cy, sc = (w - 1) / 2.0, (h - 1) / 2.0, max(w, h) / 2.0
     sd = _steepest((xs - cx) / sc, (ys - cy) / sc, gx * sc, gy * sc, dof)
@@ -153,8 +161,8 @@ class LayerPoints:
 
     def conditioning(self, dof: int = 6) -> float:
         """The smallest over the largest eigenvalue of the Gauss-Newton matrix of a map with `dof` parameters
-        (6 affine, 4 similarity, 3 Euclidean; coordinates scaled to [-1, 1] over the layer's points): near 0 where the points do
-        not fix them all (one straight edge fixes only the motion across it)."""
+        (6 affine, 4 similarity, 3 Euclidean; coordinates scaled to [-1, 1] over the layer's points): near 0 where
+        the points do not fix them all (one straight edge fixes only the motion across it)."""
         if self.count < dof:
             return 0.0
         cx, cy = self.xs.mean(), self.ys.mean()
@@ -168,8 +176,8 @@ class LayerPoints:
         return int(self.xs.size)
 
     def refine(self, ring_b: np.ndarray, m: np.ndarray, steps: int, dof: int = 6) -> tuple[np.ndarray, float]:
-        """The map m (flow px, current -> ring frame; dof 6 affine, 4 similarity, 3 Euclidean) after `steps` steps, and its
-        median |residual|."""
+        """The map m (flow px, current -> ring frame; dof 6 affine, 4 similarity, 3 Euclidean) after `steps`
+        steps, and its median |residual|."""
         m = inverse_compositional(ring_b, m, steps, self.xs, self.ys, self.c, self.gx, self.gy, self.shape, dof,
                                   LAYER_ROBUST)
         q = np.stack([self.xs, self.ys, np.ones_like(self.xs)], -1) @ m.T
@@ -177,9 +185,9 @@ class LayerPoints:
         return m, float(np.median(np.abs(r))) if r.size else math.inf
 
     def fit_to(self, fld: np.ndarray, fs: int, m: np.ndarray, dof: int = 6) -> np.ndarray | None:
-        """The map (flow px; dof 6 affine, 4 similarity, 3 Euclidean) that best fits, at the points, positions m(x) moved on by
-        the field `fld` (full-size px at flow size, read at m(x)): the composition of m with a ring frame's previous
-        map. None where too few of those positions have a finite field."""
+        """The map (flow px; dof 6 affine, 4 similarity, 3 Euclidean) that best fits, at the points, positions m(x)
+        moved on by the field `fld` (full-size px at flow size, read at m(x)): the composition of m with a ring
+        frame's previous map. None where too few of those positions have a finite field."""
         q = np.stack([self.xs, self.ys, np.ones_like(self.xs)], -1) @ m.T
         qx, qy = q[:, 0] / q[:, 2], q[:, 1] / q[:, 2]
         off = np.stack([sample_bilinear(fld[..., k], qx, qy) for k in (0, 1)], -1) / fs
@@ -275,7 +283,8 @@ def still_background(far: Pyramid, cur: Pyramid, moved: tuple[float, float]) -> 
         cur._blur["still_texture"] = cv2.magnitude(cv2.Sobel(c, cv2.CV_32F, 1, 0, ksize=3, scale=0.125),
                                                    cv2.Sobel(c, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)) > STILL_TEXTURE
     tex = cur._blur["still_texture"]
-    return bool(np.count_nonzero(tex)) and float(np.count_nonzero((still < 1.0) & tex)) >= STILL_SHARE * np.count_nonzero(tex)
+    textured = np.count_nonzero(tex)
+    return bool(textured) and np.count_nonzero((still < 1.0) & tex) >= STILL_SHARE * textured
 
 
 def background_of(dec: Decision, prev: Pyramid, cur: Pyramid) -> tuple[float, float]:
@@ -290,13 +299,14 @@ def background_of(dec: Decision, prev: Pyramid, cur: Pyramid) -> tuple[float, fl
     return (float(d[0]), float(d[1]))
 
 
-def _fit(pts: LayerPoints, prev_b: np.ndarray, fl: np.ndarray, bg_f: tuple[float, float]) -> tuple[np.ndarray, int] | None:
+def _fit(pts: LayerPoints, prev_b: np.ndarray, fl: np.ndarray,
+         bg_f: tuple[float, float]) -> tuple[np.ndarray, int] | None:
     """A layer's map to the previous frame (flow px) and its parameter count: the first of affine, similarity and
     Euclidean that the points fix (LAYER_CONDITION: a turning square whose rim moves by more than LAYER_STILL only
-    near its corners fixes no affine map; a wheel's radial spokes fix no scale), else none. From the median DIS flow of its points that moved against the background (else from the
-    background's translation), LAYER_STEPS Gauss-Newton steps. None also where the map does not explain the
-    points: the median |residual| stays over LAYER_FIT_SHARE of the background's there (1-spp aliasing leaves a
-    few levels at the edges of a right map)."""
+    near its corners fixes no affine map; a wheel's radial spokes fix no scale), else none. From the median DIS flow
+    of its points that moved against the background (else from the background's translation), LAYER_STEPS
+    Gauss-Newton steps. None also where the map does not explain the points: the median |residual| stays over
+    LAYER_FIT_SHARE of the background's there (1-spp aliasing leaves a few levels at the edges of a right map)."""
     if pts.count < 16:
         return None
     dof = next((d for d in (6, 4, 3) if pts.conditioning(d) >= LAYER_CONDITION), None)
@@ -401,7 +411,7 @@ def _refined(layer: Layer, ring_b: np.ndarray, start: np.ndarray | None) -> np.n
 def layer_fields(entries: list, layers: list[Layer], unexplained: np.ndarray, bg: tuple[float, float],
                  fs: int) -> None:
     """Each ring entry's map becomes a field: its background translation (`entry.bg`, moved on by `bg`)
-    everywhere, NaN on unexplained texels, each layer's affine (composed, then refined directly) on the layer's
+    everywhere, NaN on unexplained texels, each layer's map (composed, then refined directly) on the layer's
     texels. entries: oldest first, the previous frame last (its map was the identity)."""
     shape, nan = unexplained.shape, np.flatnonzero(unexplained)
     for j, e in enumerate(entries):
@@ -412,17 +422,19 @@ def layer_fields(entries: list, layers: list[Layer], unexplained: np.ndarray, bg
             maps = [layer.affine for layer in layers]
         else:
             ring_b = e.pyr.blurred("flow")
-            maps = [_refined(layer, ring_b, layer.points.fit_to(prev_map, fs, layer.affine, layer.dof)) for layer in layers]
+            maps = [_refined(layer, ring_b, layer.points.fit_to(prev_map, fs, layer.affine, layer.dof))
+                    for layer in layers]
         e.field, e.shift, e.projective = _field(shape, e.bg, nan, layers, maps, fs), None, False
 
 
 def ahead_fields(pyr: Pyramid, index: int, future: list, layers: list[Layer], unexplained: np.ndarray,
-                 entry) -> list:
+                 entry, still: bool = False) -> list:
     """Look-ahead ring entries of a layers frame (`future`: Ahead records of frames index + 1, ...): each one's
-    background translation chained from the frame-to-frame decisions (background_of), each layer's map started
-    from the previous frame's continued by the layer's own step (a steady motion: current -> next is the inverse
-    of current -> previous) and refined directly. The window ends before a frame that is not the next one, moved
-    as one translation (global) or was a cut. entry(index, pyr, field, bg): a ring entry."""
+    background translation chained from the frame-to-frame decisions (background_of; none where the current
+    frame's background was found `still`), each layer's map started from the previous frame's continued by the
+    layer's own step (a steady motion: current -> next is the inverse of current -> previous) and refined directly.
+    The window ends before a frame that is not the next one or was a cut. entry(index, pyr, field, bg): a ring
+    entry."""
     fs = pyr.flow_scale
     out = []
     bg = (0.0, 0.0)
@@ -432,7 +444,7 @@ def ahead_fields(pyr: Pyramid, index: int, future: list, layers: list[Layer], un
     for k, a in enumerate(future):
         if a.index != index + 1 + k or a.decision.model == "reset" or a.pyr.flow.shape != pyr.flow.shape:
             break
-        d = background_of(a.decision, prev, a.pyr) if a.decision.model != "static" else (0.0, 0.0)
+        d = (0.0, 0.0) if still or a.decision.model == "static" else background_of(a.decision, prev, a.pyr)
         bg = (bg[0] - d[0], bg[1] - d[1])
         ring_b = a.pyr.blurred("flow")
         maps = [_refined(layer, ring_b, None if m is None else m @ s) for layer, m, s in zip(layers, maps, step)]

@@ -84,9 +84,9 @@ FULL_CELLS = 9        # filled cells at which the samples alone resolve the pixe
 FULL_CELLS_AHEAD = 1.25   # ... plus this many per look-ahead frame (rounded): more frames fill more cells with
                           # samples of sub-pixel detail that the spatial output renders better (docs/temporal.md,
                           # "Look-ahead")
-FULL_CELLS_FIELDS = 16  # ... where the maps are fields (moving layers): a layer's samples fill the cells along its local
-                        # motion (a turning object's edge moves along one direction), so their mean is trusted less
-                        # (docs/temporal.md, "Moving layers")
+FULL_CELLS_FIELDS = 16  # ... where the maps are fields (moving layers): a layer's samples fill the cells along its
+                        # local motion (a turning object's edge moves along one direction), so their mean is trusted
+                        # less (docs/temporal.md, "Moving layers")
 NEWEST_STEPS = 2      # Gauss-Newton steps per frame for the newest ring frame (MotionRing._refine)
 REFINE_STEPS = 2      # ... and for each older ring frame refined in that frame
 REFINE_EVERY = 3      # older ring frames refined directly at ages 1 + a multiple of this (docs/temporal.md)
@@ -221,7 +221,8 @@ class MotionRing:
             ahead = []
         elif dec.model == "layers":
             ahead = ahead_fields(pyr, index, list(future), *self.frame_layers,
-                                 lambda i, p, fld, bg: RingEntry(i, None, p, shift=None, field=fld, bg=bg))
+                                 lambda i, p, fld, bg: RingEntry(i, None, p, shift=None, field=fld, bg=bg),
+                                 still=bool(dec.measures.get("still_background")))
         else:
             ahead = self._ahead(pyr, index, list(future))
         for e in self.entries + ahead:
@@ -1113,7 +1114,8 @@ class TSSStage:
                 x0, y0, x1, y1 = rect
                 out[y0:y1, x0:x1], cells[y0:y1, x0:x1] = fout[y0:y1, x0:x1], fcells[y0:y1, x0:x1]
             else:
-                out, cells = reference(taps, self.full_cells if all(e.translated for e in taps) else self.field_full_cells)
+                translated = all(e.translated for e in taps)
+                out, cells = reference(taps, self.full_cells if translated else self.field_full_cells)
         else:
             out, cells = self._resolve(frame_in, frame_filtered, pyr, fm, future)
         t2 = time.perf_counter()
@@ -1191,8 +1193,8 @@ class TSSStage:
         self._buffers = _Buffers(self.context, fmt, shape, self.frames + self.lookahead, self.motion.dense_samples)
         self._vrows_sent, self._resident = {}, {}
         defines = kernel_defines(fmt, self.grid, self.eps, self.min_cells, self.full_cells)
-        self._kernel = self.context.kernel("tss", "tss_resolve", kernel_defines(fmt, self.grid, self.eps, self.min_cells,
-                                                                                self.field_full_cells))
+        field_defines = kernel_defines(fmt, self.grid, self.eps, self.min_cells, self.field_full_cells)
+        self._kernel = self.context.kernel("tss", "tss_resolve", field_defines)
         self._kernel_shift = self.context.kernel("tss", "tss_resolve_shift", defines)
         self._kernel_ingest = self.context.kernel("tss", "tss_ingest", defines)
         return self._buffers
