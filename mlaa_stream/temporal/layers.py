@@ -428,17 +428,18 @@ def layer_fields(entries: list, layers: list[Layer], unexplained: np.ndarray, bg
 
 
 def ahead_fields(pyr: Pyramid, index: int, future: list, layers: list[Layer], unexplained: np.ndarray,
-                 entry, still: bool = False) -> list:
+                 entry, still: bool = False, forward: bool = False) -> list:
     """Look-ahead ring entries of a layers frame (`future`: Ahead records of frames index + 1, ...): each one's
     background translation chained from the frame-to-frame decisions (background_of; none where the current
     frame's background was found `still`), each layer's map started from the previous frame's continued by the
     layer's own step (a steady motion: current -> next is the inverse of current -> previous) and refined directly.
     The window ends before a frame that is not the next one or was a cut. entry(index, pyr, field, bg): a ring
-    entry."""
+    entry. `forward`: the layers' maps are to the next frame (a shot's first frame: find_layers run against the
+    frame after it), so they are the step themselves."""
     fs = pyr.flow_scale
     out = []
     bg = (0.0, 0.0)
-    step = [np.linalg.inv(layer.affine) for layer in layers]
+    step = [layer.affine if forward else np.linalg.inv(layer.affine) for layer in layers]
     maps: list[np.ndarray | None] = [np.eye(3) for _ in layers]
     prev, nan = pyr, np.flatnonzero(unexplained)
     for k, a in enumerate(future):

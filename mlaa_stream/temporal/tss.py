@@ -217,14 +217,16 @@ class MotionRing:
             # output stands and the ring starts anew.
             self.entries = []
         # static: every map stays as it is (nothing moved)
+        future = list(future)
+        first = self._first_layers(pyr, index, future) if future and dec.model == "reset" else None
         if not future:
             ahead = []
-        elif dec.model == "layers":
-            ahead = ahead_fields(pyr, index, list(future), *self.frame_layers,
+        elif dec.model == "layers" or first is not None:
+            ahead = ahead_fields(pyr, index, future, *(first or self.frame_layers),
                                  lambda i, p, fld, bg: RingEntry(i, None, p, shift=None, field=fld, bg=bg),
-                                 still=bool(dec.measures.get("still_background")))
+                                 still=bool(dec.measures.get("still_background")), forward=first is not None)
         else:
-            ahead = self._ahead(pyr, index, list(future))
+            ahead = self._ahead(pyr, index, future)
         for e in self.entries + ahead:
             # translations are checked per tile (global branch above); dense and projective maps per region
             if not e.translated or e.projective:
@@ -247,6 +249,15 @@ class MotionRing:
         layer_fields(self.entries, *found, bg, pyr.flow_scale)
         self.frame_layers = found
         return layers_decision(dec, found[0])
+
+    def _first_layers(self, pyr: Pyramid, index: int, future: list[Ahead]):
+        """A shot's first frame with frames ahead: the moving layers from it to the next frame (the maps run forward,
+        layers.ahead_fields), where that frame moved densely; else None."""
+        a = future[0]
+        if not self.layers or a.index != index + 1 or a.decision.model != "dense" or a.pyr.flow.shape != pyr.flow.shape:
+            return None
+        d = background_of(a.decision, pyr, a.pyr)   # the next frame's pixels into this one
+        return find_layers(a.pyr, pyr, (-d[0], -d[1]), self._flow)
 
     def _still_background(self, pyr: Pyramid, dec: Decision) -> bool:
         """One small translation (under STILL_SHIFT px) fitted to a still background and an object moving over it
