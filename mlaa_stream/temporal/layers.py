@@ -226,7 +226,8 @@ class Layer:
         self.inside = self.texels[self.box]   # the texels inside the bounding box
 
 
-def _translation(d: tuple[float, float]) -> np.ndarray:
+def translation_map(d: tuple[float, float]) -> np.ndarray:
+    """The 3x3 map of a translation by d (in the map's own px)."""
     return np.array([[1.0, 0.0, d[0]], [0.0, 1.0, d[1]], [0.0, 0.0, 1.0]])
 
 
@@ -265,7 +266,7 @@ def residual_sum(prev: Pyramid, cur: Pyramid, d: tuple[float, float]) -> float:
 
 def _moved(prev: Pyramid, cur: Pyramid, d: tuple[float, float]) -> np.ndarray:
     fs = cur.flow_scale
-    return _warp(prev.blurred("flow"), _translation((d[0] / fs, d[1] / fs)))
+    return _warp(prev.blurred("flow"), translation_map((d[0] / fs, d[1] / fs)))
 
 
 def still_background(far: Pyramid, cur: Pyramid, moved: tuple[float, float]) -> bool:
@@ -315,8 +316,8 @@ def _fit(pts: LayerPoints, prev_b: np.ndarray, fl: np.ndarray,
     f = fl[pts.iy, pts.ix]
     moved = np.hypot(f[:, 0] - bg_f[0], f[:, 1] - bg_f[1]) > 0.5
     start = np.median(f[moved], axis=0) if np.count_nonzero(moved) >= 16 else np.array(bg_f)
-    m, level = pts.refine(prev_b, _translation((float(start[0]), float(start[1]))), LAYER_STEPS, dof)
-    _, level_bg = pts.refine(prev_b, _translation(bg_f), 0)
+    m, level = pts.refine(prev_b, translation_map((float(start[0]), float(start[1]))), LAYER_STEPS, dof)
+    _, level_bg = pts.refine(prev_b, translation_map(bg_f), 0)
     return (m, dof) if level <= LAYER_FIT_SHARE * level_bg else None
 
 
@@ -330,7 +331,7 @@ def find_layers(prev: Pyramid, cur: Pyramid, bg: tuple[float, float], flow) -> t
     cur_b, prev_b = cur.blurred("flow"), prev.blurred("flow")
     fh, fw = cur_b.shape
     bg_f = (bg[0] / fs, bg[1] / fs)
-    warped_bg, blobs = _changed(prev_b, cur_b, _translation(bg_f))
+    warped_bg, blobs = _changed(prev_b, cur_b, translation_map(bg_f))
     if not blobs.any():
         return None
     merged = cv2.dilate(blobs, np.ones((2 * LAYER_MERGE + 1,) * 2, np.uint8))

@@ -72,7 +72,7 @@ from mlaa_stream.device.colour import device_luts, lut_read
 from mlaa_stream.device.formats import LUT_SIZE, frame_format
 from mlaa_stream.temporal.layers import (STILL_AGE, STILL_SHIFT, ahead_fields, background_of, find_layers,
                                          inverse_compositional, layer_fields, layers_decision, sample_bilinear,
-                                         still_background)
+                                         still_background, translation_map)
 from mlaa_stream.temporal.stage import (LK_ROBUST, Decision, Pyramid, _PMAX, choose_model, sample_field,
                                         decode_table, grey8)
 
@@ -701,7 +701,7 @@ def _texel_grid(fh: int, fw: int) -> tuple[np.ndarray, np.ndarray]:
 
 def _translation(shift: tuple[float, float], fs: int) -> np.ndarray:
     """The homography of a translation by `shift` full-size px, in flow px."""
-    return np.array([[1.0, 0.0, shift[0] / fs], [0.0, 1.0, shift[1] / fs], [0.0, 0.0, 1.0]])
+    return translation_map((shift[0] / fs, shift[1] / fs))
 
 
 def _blur_align(pyr: Pyramid) -> np.ndarray:
