@@ -66,6 +66,8 @@ STILL_AGE = 3            # ... over a ring of at least this many frames, where n
 STILL_MARGIN = 1.0       # ... no larger than the moving background's (still_background) ...
 STILL_SHARE = 0.5        # ... and this share of the textured texels unchanged
 STILL_TEXTURE = 4.0      # grey levels per texel: textured (blurred gradient magnitude)
+LAYER_MISFIT = 0.05     # share of a layer's texels its map may leave over LAYER_LEVEL (a right map: under 1 %; a map
+                        # locked to the period of stripes a box moves over: 10-13 %)
 LAYER_GROW = 1           # texels (flow size): layer labels grown into the background
 
 
@@ -359,6 +361,7 @@ def find_layers(prev: Pyramid, cur: Pyramid, bg: tuple[float, float], flow) -> t
     best = _box_residual(warped_bg, cur_b)
     labels = np.zeros((fh, fw), np.int32)
     fitted: list[tuple[LayerPoints, np.ndarray, int]] = []
+    residuals = []
     for region, fit in fits:
         if fit is None:
             continue
@@ -368,11 +371,16 @@ def find_layers(prev: Pyramid, cur: Pyramid, bg: tuple[float, float], flow) -> t
         labels[take] = len(fitted) + 1
         best = np.where(take, np.minimum(r, best), best)
         fitted.append((LayerPoints(cur_b, region & moved, gx, gy, energy), m, dof))
+        residuals.append(r)
     if not fitted or np.count_nonzero(labels) < LAYER_MIN_SHARE * labels.size:
         return None   # no layers, or too small to pay for a field per ring frame: the ring restarts
     if LAYER_GROW > 0:
         grown = cv2.dilate(labels.astype(np.uint8), np.ones((2 * LAYER_GROW + 1,) * 2, np.uint8))
         labels = np.where(labels == 0, grown, labels)
+    for k, r in enumerate(residuals):
+        mine = labels == k + 1
+        if np.count_nonzero(mine & (r > LAYER_LEVEL)) > LAYER_MISFIT * np.count_nonzero(mine):
+            return None   # a map that fits the texture around a mover but not the mover (stripes' period)
     layers = [Layer(labels == k + 1, pts, m, dof) for k, (pts, m, dof) in enumerate(fitted)]
     # changed texels no layer takes and the background does not explain either: no samples there
     return layers, unexplained & (labels == 0) & (_box_residual(warped_bg, cur_b) > LAYER_LEVEL)
@@ -382,10 +390,14 @@ def _field(shape: tuple[int, int], bg: tuple[float, float], unexplained: np.ndar
            maps: list[np.ndarray | None], fs: int) -> np.ndarray:
     """A ring frame's field (full-size px at flow size): `bg` everywhere, NaN on unexplained texels (`unexplained`:
     their flat indices), each layer's map on its texels (NaN where its map was not found: None); the layers are
-    written over their bounding boxes."""
+    written over their bounding boxes. Background texels that the ring frame shows covered by a layer (where the
+    layer was then: behind a mover, the background it uncovered since) are NaN too: no ghost of the mover."""
     out = np.empty(shape + (2,), np.float32)
     out.view(np.complex64).fill(complex(bg[0], bg[1]))   # (x, y) pairs in one pass (broadcasting a pair: ~10x slower)
     out.reshape(-1, 2)[unexplained] = np.nan
+    covered = _covered(shape, bg, layers, maps, fs)
+    if covered is not None:
+        out[covered] = np.nan
     for layer, a in zip(layers, maps):
         ys, xs = layer.box
         view = out[ys, xs]
@@ -398,6 +410,28 @@ def _field(shape: tuple[int, int], bg: tuple[float, float], unexplained: np.ndar
             off = (np.float32(a[k, 0] - (k == 0)) * x + np.float32(a[k, 1] - (k == 1)) * y + np.float32(a[k, 2])) * fs
             np.copyto(view[..., k], off.astype(np.float32), where=layer.inside)
     return out
+
+
+def _covered(shape: tuple[int, int], bg: tuple[float, float], layers: list[Layer], maps: list[np.ndarray | None],
+             fs: int) -> np.ndarray | None:
+    """Texels of the current frame's background whose position in a ring frame (moved on by `bg`) lay on a layer
+    there: the layer's texels carried by its map into that frame (texel x of the background reads the ring frame
+    at T x; it was the layer's where map^-1 T x is one of the layer's texels now). None where nothing is."""
+    h, w = shape
+    to_ring = translation_map((bg[0] / fs, bg[1] / fs))
+    covered = None
+    for layer, a in zip(layers, maps):
+        if a is None:
+            continue
+        back = np.linalg.inv(a) @ to_ring   # current background texel -> where the layer's texel now is
+        hit = cv2.warpAffine(layer.texels.view(np.uint8), back[:2].astype(np.float64), (w, h),
+                             flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_CONSTANT) > 0
+        covered = hit if covered is None else covered | hit
+    if covered is None:
+        return None
+    for layer in layers:
+        covered &= ~layer.texels
+    return covered if covered.any() else None
 
 
 def _refined(layer: Layer, ring_b: np.ndarray, start: np.ndarray | None) -> np.ndarray | None:
