@@ -158,6 +158,8 @@ def test_moving_in_regions_known_answer():
                                                     regions), gate)
     np.testing.assert_array_equal(moving_in_regions(cur / np.float32(255), prev / np.float32(255), regions), gate)
     assert moving_in_regions(cur, None, regions) is None and moving_in_regions(cur, prev, None) is None
+    none = moving_in_regions(cur, prev, np.zeros_like(regions))   # no region tile: an empty gate, early
+    assert none.shape == (h, w) and none.dtype == np.uint8 and not none.any()
 
 
 def test_unexplained_blobs_known_answer():

@@ -433,3 +433,17 @@ def test_band_growth_keeps_aliasing_and_drops_a_second_motion():
         rows, cols = _bands_growing(slopes, a, *checks[ages.index(a)][2][1:])
         expect = [False, 0.12 * a > BAND_TOL, True, False]
         assert list(rows) == expect and list(cols) == expect, (a, rows)
+
+
+@pytest.mark.parametrize("flow_scale", [1, 2, 3, 4, 8])
+def test_vrows_repeat_each_mask_column_flow_scale_times(flow_scale):
+    """The resolve's per-pixel mask rows: each flow texel's byte repeated flow_scale times along the row, cut to
+    the frame's width (the wide-integer form against np.repeat, seeded masks, widths that cut a texel)."""
+    from mlaa_stream.temporal.tss import vrows_of
+    rng = np.random.default_rng(flow_scale)
+    valid = (rng.random((23, 37)) > 0.4).astype(np.uint8)
+    width = 37 * flow_scale - (flow_scale > 1)
+    rows = vrows_of(valid, flow_scale, width)
+    assert rows.dtype == np.uint8 and rows.flags.c_contiguous
+    assert np.array_equal(rows, np.repeat(valid, flow_scale, 1)[:, :width])
+    assert np.array_equal(vrows_of(valid.astype(bool), flow_scale, width), rows)

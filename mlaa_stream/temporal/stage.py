@@ -557,6 +557,8 @@ def moving_in_regions(cur: np.ndarray, prev: np.ndarray | None, regions: np.ndar
     if prev is None or regions is None or prev.shape != cur.shape or prev.dtype != cur.dtype:
         return None
     h, w = cur.shape[:2]
+    if not np.any(regions):   # no render region: nothing to gate in (most frames that are not renders)
+        return np.zeros((h, w), np.uint8)
     unit = _one_level(cur.dtype)
     moved = cv2.dilate((_largest_difference(cur, prev) >= MOVED_LEVELS * unit).view(np.uint8),
                        np.ones((3, 3), np.uint8))

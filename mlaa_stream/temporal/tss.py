@@ -909,7 +909,18 @@ def shift_launch(width: int, height: int, context) -> tuple[tuple[int, int], tup
 def vrows_of(valid: np.ndarray, flow_scale: int, width: int) -> np.ndarray:
     """A flow-size valid mask with each column repeated flow_scale times, cut to the frame's width: the
     form tss_resolve_shift reads (a pixel's mask byte at its own column, no division)."""
-    return np.ascontiguousarray(np.repeat(np.asarray(valid, np.uint8), flow_scale, 1)[:, :width])
+    v = np.asarray(valid, np.uint8)
+    wide = _WIDE_BYTES.get(flow_scale)
+    if wide is None:
+        return np.ascontiguousarray(np.repeat(v, flow_scale, 1)[:, :width])
+    # each byte copied into every byte of a wider integer (its bytes all equal: no byte order), viewed as bytes:
+    # ~10x faster than np.repeat along a row at 1080p
+    rep = v.astype(wide) * wide(_ONES_BYTES[flow_scale])
+    return np.ascontiguousarray(rep.view(np.uint8).reshape(v.shape[0], -1)[:, :width])
+
+
+_WIDE_BYTES = {1: np.uint8, 2: np.uint16, 4: np.uint32, 8: np.uint64}
+_ONES_BYTES = {1: 0x01, 2: 0x0101, 4: 0x01010101, 8: 0x0101010101010101}
 
 
 def kernel_defines(fmt, grid: int = GRID, eps: float = EPS, min_cells: int = MIN_CELLS,
