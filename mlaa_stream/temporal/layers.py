@@ -434,6 +434,15 @@ def _covered(shape: tuple[int, int], bg: tuple[float, float], layers: list[Layer
     return covered if covered.any() else None
 
 
+def layers_box(layers: list[Layer]) -> tuple[slice, slice]:
+    """The bounding box of the layers' texels: where a field of theirs departs from the background's translation
+    (NaN texels aside)."""
+    ys = [layer.box[0] for layer in layers]
+    xs = [layer.box[1] for layer in layers]
+    return (slice(min(s.start for s in ys), max(s.stop for s in ys)),
+            slice(min(s.start for s in xs), max(s.stop for s in xs)))
+
+
 def _refined(layer: Layer, ring_b: np.ndarray, start: np.ndarray | None) -> np.ndarray | None:
     """A layer's map into another frame from `start`, LAYER_REFINE_STEPS direct steps; None where it leaves a
     median |residual| over LAYER_FIT_LEVEL at the layer's points (or there was no start)."""
@@ -460,6 +469,7 @@ def layer_fields(entries: list, layers: list[Layer], unexplained: np.ndarray, bg
             maps = [_refined(layer, ring_b, layer.points.fit_to(prev_map, fs, layer.affine, layer.dof))
                     for layer in layers]
         e.field, e.shift, e.projective = _field(shape, e.bg, nan, layers, maps, fs), None, False
+        e.field_box = layers_box(layers)
 
 
 def ahead_fields(pyr: Pyramid, index: int, future: list, layers: list[Layer], unexplained: np.ndarray,
@@ -468,7 +478,7 @@ def ahead_fields(pyr: Pyramid, index: int, future: list, layers: list[Layer], un
     background translation chained from the frame-to-frame decisions (background_of; none where the current
     frame's background was found `still`), each layer's map started from the previous frame's continued by the
     layer's own step (a steady motion: current -> next is the inverse of current -> previous) and refined directly.
-    The window ends before a frame that is not the next one or was a cut. entry(index, pyr, field, bg): a ring
+    The window ends before a frame that is not the next one or was a cut. entry(index, pyr, field, bg, box): a ring
     entry. `forward`: the layers' maps are to the next frame (a shot's first frame: find_layers run against the
     frame after it), so they are the step themselves."""
     fs = pyr.flow_scale
@@ -484,7 +494,7 @@ def ahead_fields(pyr: Pyramid, index: int, future: list, layers: list[Layer], un
         bg = (bg[0] - d[0], bg[1] - d[1])
         ring_b = a.pyr.blurred("flow")
         maps = [_refined(layer, ring_b, None if m is None else m @ s) for layer, m, s in zip(layers, maps, step)]
-        out.append(entry(a.index, a.pyr, _field(unexplained.shape, bg, nan, layers, maps, fs), bg))
+        out.append(entry(a.index, a.pyr, _field(unexplained.shape, bg, nan, layers, maps, fs), bg, layers_box(layers)))
         prev = a.pyr
     return out
 

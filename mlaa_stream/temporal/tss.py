@@ -126,6 +126,7 @@ class RingEntry:
     homography: np.ndarray | None = None   # 3x3, current frame's flow px -> this frame's (global frames)
     projective: bool = False          # this frame's map is the homography (per-tile translations), not shift
     bg: tuple[float, float] = (0.0, 0.0)   # the background's translation where the map is a field of layers
+    field_box: tuple[slice, slice] | None = None   # where a field of layers departs from `bg` (NaN aside); None: anywhere
 
     @property
     def translated(self) -> bool:
@@ -200,7 +201,7 @@ class MotionRing:
                     e.shift = (e.shift[0] + d[0], e.shift[1] + d[1])
                     e.projective = False   # decided anew below
                 else:
-                    e.field = self._compose_const(e.field, d, pyr)
+                    e.field, e.field_box = self._compose_const(e.field, d, pyr), None
                     e.bg = (e.bg[0] + d[0], e.bg[1] + d[1])
             if self.refine:
                 self._refine(pyr, index, d)
@@ -223,7 +224,8 @@ class MotionRing:
             ahead = []
         elif dec.model == "layers" or first is not None:
             ahead = ahead_fields(pyr, index, future, *(first or self.frame_layers),
-                                 lambda i, p, fld, bg: RingEntry(i, None, p, shift=None, field=fld, bg=bg),
+                                 lambda i, p, fld, bg, box: RingEntry(i, None, p, shift=None, field=fld, bg=bg,
+                                                                      field_box=box),
                                  still=bool(dec.measures.get("still_background")), forward=first is not None)
         else:
             ahead = self._ahead(pyr, index, future)
@@ -408,24 +410,39 @@ class MotionRing:
                                          flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE)
         else:
             gx, gy = _texel_grid(fh, fw)
-            if e.field is None:
-                mx, my = gx + np.float32(e.shift[0] / fs), gy + np.float32(e.shift[1] / fs)
+            ring = _blur_align(e.pyr)
+            if e.field is not None and e.field_box is not None:
+                # a field of layers: the background's translation everywhere (one affine warp), the field's
+                # own positions only in the layers' box (a full-frame remap cost ~4x as much)
+                ys, xs = e.field_box
+                warped = cv2.warpAffine(ring, np.float64([[1, 0, e.bg[0] / fs], [0, 1, e.bg[1] / fs]]), (fw, fh),
+                                        flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE)
+                box = e.field[ys, xs]
+                warped[ys, xs] = cv2.remap(ring, gx[ys, xs] + box[..., 0] / np.float32(fs),
+                                           gy[ys, xs] + box[..., 1] / np.float32(fs), cv2.INTER_LINEAR,
+                                           borderMode=cv2.BORDER_REPLICATE)
+                nan = np.isnan(e.field[..., 0])   # _field writes NaN to both components
+                warped[nan] = np.nan
             else:
-                mx, my = gx + e.field[..., 0] / np.float32(fs), gy + e.field[..., 1] / np.float32(fs)
-            warped = cv2.remap(_blur_align(e.pyr), mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-            nan = ~np.isfinite(mx) | ~np.isfinite(my)
+                if e.field is None:
+                    mx, my = gx + np.float32(e.shift[0] / fs), gy + np.float32(e.shift[1] / fs)
+                else:
+                    mx, my = gx + e.field[..., 0] / np.float32(fs), gy + e.field[..., 1] / np.float32(fs)
+                warped = cv2.remap(ring, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+                nan = ~np.isfinite(mx) | ~np.isfinite(my)
         cur = _blur_align(pyr)
-        if "align_grad" not in pyr._blur:   # the current frame's, once for every ring frame
-            pyr._blur["align_grad"] = cv2.magnitude(cv2.Sobel(cur, cv2.CV_32F, 1, 0, ksize=3, scale=0.125),
-                                                    cv2.Sobel(cur, cv2.CV_32F, 0, 1, ksize=3, scale=0.125))
-        grad = pyr._blur["align_grad"]
-        # a residual a misplacement of under ALIGN_PX explains is motion error the cells tolerate
-        bad = ~(np.abs(warped - cur) <= ALIGN_LEVEL + ALIGN_PX * grad)     # NaN maps are bad too
-        k = np.ones((3, 3), np.uint8)
-        bad = cv2.erode(bad.astype(np.uint8), k)
+        if "align_level" not in pyr._blur:   # the current frame's, once for every ring frame
+            grad = cv2.magnitude(cv2.Sobel(cur, cv2.CV_32F, 1, 0, ksize=3, scale=0.125),
+                                 cv2.Sobel(cur, cv2.CV_32F, 0, 1, ksize=3, scale=0.125))
+            # a residual a misplacement of under ALIGN_PX explains is motion error the cells tolerate
+            pyr._blur["align_level"] = np.float32(ALIGN_LEVEL) + np.float32(ALIGN_PX) * grad
+        bad = ~(np.abs(warped - cur) <= pyr._blur["align_level"])     # NaN maps are bad too
+        bad = cv2.erode(bad.view(np.uint8), np.ones((3, 3), np.uint8))
         bad = cv2.dilate(bad, np.ones((2 * ALIGN_GROW + 1,) * 2, np.uint8))
-        good = (1 - bad).astype(bool)
-        return (good if nan is None else good & ~nan).astype(np.uint8)
+        good = bad == 0
+        if nan is not None:
+            good &= ~nan
+        return good.view(np.uint8)
 
     def _compose_const(self, fld: np.ndarray, d: tuple[float, float], pyr: Pyramid) -> np.ndarray:
         """field_new(x) = d + field(x + d), at the field's resolution."""
