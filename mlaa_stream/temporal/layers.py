@@ -425,7 +425,7 @@ def _covered(shape: tuple[int, int], bg: tuple[float, float], layers: list[Layer
     to_ring = translation_map((bg[0] / fs, bg[1] / fs))
     covered = None
     for layer, a in zip(layers, maps):
-        if a is None:
+        if a is None or abs(np.linalg.det(a[:2, :2])) < 1e-6:   # no map, or one that folds the layer flat
             continue
         back = np.linalg.inv(a) @ to_ring   # current background texel -> where the layer's texel now is
         where = layer.texels if layer.core is None else layer.core
