@@ -130,7 +130,7 @@ def inverse_compositional(ring_b: np.ndarray, m: np.ndarray, steps: int, xs: np.
         q = pts @ m.T
         r = sample_bilinear(ring_b, q[:, 0] / q[:, 2], q[:, 1] / q[:, 2]) - c
         wr = 1.0 / (1.0 + (r * r) * (1.0 / (robust * robust)))
-        hess = (sd * wr[:, None]).T @ sd   # matrix products: ~10x faster here than einsum and add.reduce
+        hess = (sd * wr[:, None]).T @ sd   # matrix products: faster here than einsum and add.reduce
         b = (wr * r) @ sd
         try:
             dp = np.linalg.solve(hess, b)
@@ -418,9 +418,8 @@ def _covered(shape: tuple[int, int], bg: tuple[float, float], layers: list[Layer
              fs: int) -> np.ndarray | None:
     """Texels of the current frame's background whose position in a ring frame (moved on by `bg`) lay on a layer
     there: the layer's texels carried by its map into that frame (texel x of the background reads the ring frame
-    at T x; it was the layer's where map^-1 T x is one of the layer's texels now: its core, before the labels grew,
-    which the grown margin's background would otherwise lose samples to: rotation 0.2025 -> 0.2038 temporal error).
-    None where nothing is."""
+    at T x; it was the layer's where map^-1 T x is one of the layer's core texels now: before the labels grew, whose
+    margin is background that would lose its samples; docs/temporal.md). None where nothing is."""
     h, w = shape
     to_ring = translation_map((bg[0] / fs, bg[1] / fs))
     covered = None

@@ -606,7 +606,7 @@ class _Refiner:
         wr = 1.0 / (1.0 + (r * r) * (1.0 / (LK_ROBUST * LK_ROBUST)))
         if weights is not None:
             wr = wr * weights
-        a, b_, e = (float(v) for v in self.products @ wr)   # one matrix-vector product (~4x the reductions' speed)
+        a, b_, e = (float(v) for v in self.products @ wr)   # matrix-vector products: faster than five reductions
         bx, by = (float(v) for v in self.gradients @ (wr * r))
         det = a * e - b_ * b_
         step = (0.0, 0.0)
@@ -929,7 +929,7 @@ def vrows_of(valid: np.ndarray, flow_scale: int, width: int) -> np.ndarray:
     if wide is None:
         return np.ascontiguousarray(np.repeat(v, flow_scale, 1)[:, :width])
     # each byte copied into every byte of a wider integer (its bytes all equal: no byte order), viewed as bytes:
-    # ~10x faster than np.repeat along a row at 1080p
+    # ~2x faster than np.repeat along a row at 1080p
     rep = v.astype(wide) * wide(_ONES_BYTES[flow_scale])
     return np.ascontiguousarray(rep.view(np.uint8).reshape(v.shape[0], -1)[:, :width])
 
