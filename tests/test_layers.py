@@ -275,3 +275,28 @@ def test_a_map_locked_to_the_stripes_under_a_mover_is_no_layer(monkeypatch):
     moved = (layer.affine @ centre)[:2] - centre[:2]
     step = 384 / 23
     assert abs(moved[0] * cur.flow_scale + step) > 1.5   # the refused map is px off the box's motion
+
+
+def test_covered_background_is_where_the_layer_was_in_the_ring_frame():
+    """Known answer: a square layer whose map moves it 6 texels left and 2 up per frame (current -> ring frame:
+    x + 6, y + 2) over a still background. In that ring frame the square sat 6 right and 2 down of where it is now,
+    so the background texels there (outside the square now) are covered and take no samples; the field keeps the
+    background's 0 elsewhere and the layer's offset on the square."""
+    h, w = 40, 60
+    core = np.zeros((h, w), bool)
+    core[10:20, 10:25] = True
+    texels = cv2.dilate(core.view(np.uint8), np.ones((3, 3), np.uint8)) > 0   # the labels grown by LAYER_GROW
+    pts = L.LayerPoints(np.ones((h, w), np.float32), texels, np.ones((h, w), np.float32),
+                        np.ones((h, w), np.float32))
+    move = L.translation_map((6.0, 2.0))
+    layer = L.Layer(texels, pts, move, 6, core)
+    covered = L._covered((h, w), (0.0, 0.0), [layer], [move], 1)
+    was = np.zeros((h, w), bool)
+    was[12:22, 16:31] = True          # the core carried by the map into the ring frame
+    np.testing.assert_array_equal(covered, was & ~texels)
+    field = L._field((h, w), (0.0, 0.0), np.array([], np.int64), [layer], [move], 1)
+    assert np.isnan(field[was & ~texels]).all()
+    assert np.array_equal(field[texels], np.broadcast_to(np.float32([6.0, 2.0]), (int(texels.sum()), 2)))
+    rest = ~(was | texels)
+    assert np.array_equal(field[rest], np.zeros((int(rest.sum()), 2), np.float32))
+    assert L._covered((h, w), (0.0, 0.0), [layer], [None], 1) is None   # no map: nothing known covered
