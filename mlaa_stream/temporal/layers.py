@@ -379,11 +379,11 @@ def find_layers(prev: Pyramid, cur: Pyramid, bg: tuple[float, float], flow) -> t
     if LAYER_GROW > 0:
         grown = cv2.dilate(labels.astype(np.uint8), np.ones((2 * LAYER_GROW + 1,) * 2, np.uint8))
         labels = np.where(labels == 0, grown, labels)
-    for k, r in enumerate(residuals):
-        mine = labels == k + 1
+    texels = [labels == k + 1 for k in range(len(fitted))]
+    for mine, r in zip(texels, residuals):
         if np.count_nonzero(mine & (r > LAYER_LEVEL)) > LAYER_MISFIT * np.count_nonzero(mine):
             return None   # a map that fits the texture around a mover but not the mover (stripes' period)
-    layers = [Layer(labels == k + 1, pts, m, dof, core == k + 1) for k, (pts, m, dof) in enumerate(fitted)]
+    layers = [Layer(mine, pts, m, dof, core == k + 1) for k, (mine, (pts, m, dof)) in enumerate(zip(texels, fitted))]
     # changed texels no layer takes and the background does not explain either: no samples there
     return layers, unexplained & (labels == 0) & (_box_residual(warped_bg, cur_b) > LAYER_LEVEL)
 
@@ -461,7 +461,7 @@ def layer_fields(entries: list, layers: list[Layer], unexplained: np.ndarray, bg
     """Each ring entry's map becomes a field: its background translation (`entry.bg`, moved on by `bg`)
     everywhere, NaN on unexplained texels, each layer's map (composed, then refined directly) on the layer's
     texels. entries: oldest first, the previous frame last (its map was the identity)."""
-    shape, nan = unexplained.shape, np.flatnonzero(unexplained)
+    shape, nan, box = unexplained.shape, np.flatnonzero(unexplained), layers_box(layers)
     for j, e in enumerate(entries):
         old_bg = e.bg if e.field is not None or e.shift is None else e.shift
         prev_map = e.field if e.field is not None else np.broadcast_to(np.float32(old_bg), shape + (2,))
@@ -472,8 +472,7 @@ def layer_fields(entries: list, layers: list[Layer], unexplained: np.ndarray, bg
             ring_b = e.pyr.blurred("flow")
             maps = [_refined(layer, ring_b, layer.points.fit_to(prev_map, fs, layer.affine, layer.dof))
                     for layer in layers]
-        e.field, e.shift, e.projective = _field(shape, e.bg, nan, layers, maps, fs), None, False
-        e.field_box = layers_box(layers)
+        e.field, e.shift, e.projective, e.field_box = _field(shape, e.bg, nan, layers, maps, fs), None, False, box
 
 
 def ahead_fields(pyr: Pyramid, index: int, future: list, layers: list[Layer], unexplained: np.ndarray,
@@ -490,7 +489,7 @@ def ahead_fields(pyr: Pyramid, index: int, future: list, layers: list[Layer], un
     bg = (0.0, 0.0)
     step = [layer.affine if forward else np.linalg.inv(layer.affine) for layer in layers]
     maps: list[np.ndarray | None] = [np.eye(3) for _ in layers]
-    prev, nan = pyr, np.flatnonzero(unexplained)
+    prev, nan, box = pyr, np.flatnonzero(unexplained), layers_box(layers)
     for k, a in enumerate(future):
         if a.index != index + 1 + k or a.decision.model == "reset" or a.pyr.flow.shape != pyr.flow.shape:
             break
@@ -498,7 +497,7 @@ def ahead_fields(pyr: Pyramid, index: int, future: list, layers: list[Layer], un
         bg = (bg[0] - d[0], bg[1] - d[1])
         ring_b = a.pyr.blurred("flow")
         maps = [_refined(layer, ring_b, None if m is None else m @ s) for layer, m, s in zip(layers, maps, step)]
-        out.append(entry(a.index, a.pyr, _field(unexplained.shape, bg, nan, layers, maps, fs), bg, layers_box(layers)))
+        out.append(entry(a.index, a.pyr, _field(unexplained.shape, bg, nan, layers, maps, fs), bg, box))
         prev = a.pyr
     return out
 

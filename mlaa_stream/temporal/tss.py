@@ -126,7 +126,8 @@ class RingEntry:
     homography: np.ndarray | None = None   # 3x3, current frame's flow px -> this frame's (global frames)
     projective: bool = False          # this frame's map is the homography (per-tile translations), not shift
     bg: tuple[float, float] = (0.0, 0.0)   # the background's translation where the map is a field of layers
-    field_box: tuple[slice, slice] | None = None   # where a field of layers departs from `bg` (NaN aside); None: anywhere
+    field_box: tuple[slice, slice] | None = None   # where a field of layers departs from `bg` (NaN aside);
+                                                   # None: anywhere
 
     @property
     def translated(self) -> bool:
@@ -415,7 +416,7 @@ class MotionRing:
                 # a field of layers: the background's translation everywhere (one affine warp), the field's
                 # own positions only in the layers' box (a full-frame remap cost ~4x as much)
                 ys, xs = e.field_box
-                warped = cv2.warpAffine(ring, np.float64([[1, 0, e.bg[0] / fs], [0, 1, e.bg[1] / fs]]), (fw, fh),
+                warped = cv2.warpAffine(ring, _translation(e.bg, fs)[:2], (fw, fh),
                                         flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE)
                 box = e.field[ys, xs]
                 warped[ys, xs] = cv2.remap(ring, gx[ys, xs] + box[..., 0] / np.float32(fs),
@@ -925,17 +926,13 @@ def vrows_of(valid: np.ndarray, flow_scale: int, width: int) -> np.ndarray:
     """A flow-size valid mask with each column repeated flow_scale times, cut to the frame's width: the
     form tss_resolve_shift reads (a pixel's mask byte at its own column, no division)."""
     v = np.asarray(valid, np.uint8)
-    wide = _WIDE_BYTES.get(flow_scale)
-    if wide is None:
+    if flow_scale not in (1, 2, 4, 8):
         return np.ascontiguousarray(np.repeat(v, flow_scale, 1)[:, :width])
     # each byte copied into every byte of a wider integer (its bytes all equal: no byte order), viewed as bytes:
     # ~2x faster than np.repeat along a row at 1080p
-    rep = v.astype(wide) * wide(_ONES_BYTES[flow_scale])
+    wide = np.dtype(f"u{flow_scale}").type
+    rep = v.astype(wide) * wide(int.from_bytes(b"\x01" * flow_scale, "little"))
     return np.ascontiguousarray(rep.view(np.uint8).reshape(v.shape[0], -1)[:, :width])
-
-
-_WIDE_BYTES = {1: np.uint8, 2: np.uint16, 4: np.uint32, 8: np.uint64}
-_ONES_BYTES = {1: 0x01, 2: 0x0101, 4: 0x01010101, 8: 0x0101010101010101}
 
 
 def kernel_defines(fmt, grid: int = GRID, eps: float = EPS, min_cells: int = MIN_CELLS,
