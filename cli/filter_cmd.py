@@ -524,13 +524,22 @@ class _SequenceTemporal:
                               f"{self._prev[0]})")
             elif shape != self._prev[1]:
                 self.con.info(f"{label}: temporal history reset (the frame size or type changed)")
+        if self._use_linear(self.runner.read_linear.pop(index, False)) and self._prev is not None:
+            self.con.info(f"{ff.label if ff is not None else f'frame {index}'}: temporal history reset (linear "
+                          f"light and display-encoded frames take separate histories)")
         self._prev = (number, shape)
         self.runner.read_order.pop(index, None)
         return self.stage(frame_in, frame_out, number, future=future) if self.lookahead else \
             self.stage(frame_in, frame_out, number)
 
-    def warm(self, frame_in, frame_out, ff) -> None:
+    def _use_linear(self, linear: bool) -> bool:
+        """The stage's colour space for the next frame (linear light: EXR, untagged float); True when it changed."""
+        use = getattr(self.stage, "set_linear_input", None)
+        return bool(use(linear)) if use is not None else False
+
+    def warm(self, frame_in, frame_out, ff, linear: bool = False) -> None:
         """A frame before the first one to write (--resume): through the stage, output discarded."""
+        self._use_linear(linear)
         number = ff.sequence_number if ff.sequence_number is not None else (self._prev[0] + 1 if self._prev else 0)
         self._prev = (number, (frame_in.shape, frame_in.dtype))
         self.stage(frame_in, frame_out, number)
@@ -700,7 +709,7 @@ class _ImageJob(_Job):
     def run(self, filt, post_hooks, in_flight, times, temporal=None) -> int:
         from mlaa_stream.spatial.filter import Filter
         from mlaa_stream.pipeline import PipelineError, run_pipeline
-        from mlaa_stream.io.sequence import FilterSet, image_sink, image_source
+        from mlaa_stream.io.sequence import FilterSet, image_sink, image_source, is_linear
 
         encoded = filt
 
@@ -727,6 +736,7 @@ class _ImageJob(_Job):
             if id(item.meta[0]) not in read_ahead:   # a look-ahead frame of --resume: read, not written
                 write(item)
         self.read_order: dict = {}
+        self.read_linear: dict = {}   # position -> the frame is linear light (the temporal stage's colour space)
 
         def source():
             """image_source, remembering which file each position is (for the temporal stage)."""
@@ -734,6 +744,7 @@ class _ImageJob(_Job):
             try:
                 for position, item in enumerate(inner):
                     self.read_order[position] = item.meta[0]
+                    self.read_linear[position] = is_linear(item.meta[1])
                     yield item
             finally:
                 inner.close()
@@ -808,7 +819,7 @@ def _warm_up_images(job: "_ImageJob", filt, temporal: "_SequenceTemporal") -> No
     """--resume with the temporal stage: the inputs of the last skipped frames before the first one to
     write go through the spatial filter and the stage (outputs discarded, not in --stats), so the
     first written frame has the history it would have had in an uninterrupted run."""
-    from mlaa_stream.io.sequence import image_source
+    from mlaa_stream.io.sequence import image_source, is_linear
     warm = job.warm_up[-_ring_frames(temporal.stage):]
     stage = temporal.stage
     keep = [(o, len(o.stats)) for o in (stage, getattr(stage, "tss", None), getattr(stage, "blend", None))
@@ -817,7 +828,7 @@ def _warm_up_images(job: "_ImageJob", filt, temporal: "_SequenceTemporal") -> No
     try:
         for item in image_source(warm, job.report, strict=job.strict):
             f = filt.for_item(item) if hasattr(filt, "for_item") else filt
-            temporal.warm(item.frame, f.process(item.frame), item.meta[0])
+            temporal.warm(item.frame, f.process(item.frame), item.meta[0], is_linear(item.meta[1]))
             done += 1
     finally:
         for o, n in keep:

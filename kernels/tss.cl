@@ -2,7 +2,7 @@
 // Reference: mlaa_stream.temporal.tss.tss_reference (the plain statement; the module's header says why).
 //
 // The ring: K input frames as linear light in 16-bit fixed point, L = floor(clamp(lin, 0, 1) 65535 + 0.5)
-// (ltab: the stored code's L, one load), planar by row (row y of a slot: width Ls of R, then G, then B;
+// (ltab: the stored code's L, one load; float frames: at most TSS_TOP, TSS_OVER above 1), planar by row (row y of a slot: width Ls of R, then G, then B;
 // grey frames one plane), written once per frame by tss_ingest. So the resolve reads contiguous 16-bit
 // samples, compares and sums integers and decodes nothing per tap; the output is encoded from L by one
 // load of etab (integer frames: 65536 entries; float frames read the tables).
@@ -28,7 +28,7 @@
 //
 // Buffers: ring = RING_SLOTS slots of height * TSS_PLANES * width ushorts; info = 4 ints per ring entry (slot, kind,
 // field/valid slot, has valid); shift = 2 floats per entry; fields = (slot, fh, fw, 2) floats; valids =
-// (slot, fh, fw) uchar. Defines: GRID, MIN_CELLS, FULL_CELLS, EPSQ (int), LINEAR_INPUT.
+// (slot, fh, fw) uchar. Defines: GRID, MIN_CELLS, FULL_CELLS, EPSQ (int), LINEAR_INPUT, TSS_RANGE (int).
 #pragma OPENCL FP_CONTRACT OFF
 
 #define CELLS (GRID * GRID)
@@ -38,6 +38,17 @@
 #define TSS_PLANES 3
 #endif
 #define TSS_ONE 65535.0f
+// Float frames can hold values above 1 (HDR renders, linear EXR). The ring holds [0, TSS_RANGE] (linear
+// float frames: LINEAR_RANGE of mlaa_stream.temporal.tss, else 1); a sample above it is stored as TSS_OVER and
+// is never averaged: in-range samples top out at TSS_TOP, the colour box is capped there, and a pixel whose
+// 3x3 box or spatial output is over range keeps the spatial pixel. Integer frames have no over-range code
+// (TSS_TOP = TSS_OVER: the cap changes nothing).
+#define TSS_OVER 65535
+#ifdef PIXEL_IS_FLOAT
+#define TSS_TOP 65534
+#else
+#define TSS_TOP 65535
+#endif
 
 // PoCL calls vload16 / convert_* out of line (common.cl's note); a load through an aligned vector type
 // and clang's vector conversion are inline, with the same results.
@@ -55,21 +66,8 @@ typedef uchar16 tss_uchar16_a1 __attribute__((aligned(1)));
 #define TSS_FLOAT16(v) convert_float16(v)
 #endif
 
-#if LINEAR_INPUT || defined(PIXEL_IS_FLOAT)
-// Linear light of pixel i of a float frame (the tables; linear input as it is).
-inline float4 tss_linear(__global const float *luts, __global const PIXEL_T *img, int i)
-{
-    float4 c = load_px(img, i);
-#if LINEAR_INPUT
-    return c;
-#else
-    return (float4)(lut_read(luts, c.x), lut_read(luts, c.y), lut_read(luts, c.z), c.w);
-#endif
-}
-#endif
-
 // The L of sample (plane c) of pixel i of a frame in its own type: ltab for integer frames, the tables
-// and the rounding of ring_of for float frames.
+// (linear input: the value as it is) and the rounding of ring_of for float frames, TSS_OVER above 1.
 inline int tss_level(__global const float *luts, __global const ushort *ltab, __global const PIXEL_T *img,
                      int i, int c)
 {
@@ -82,9 +80,17 @@ inline int tss_level(__global const float *luts, __global const ushort *ltab, __
     return ltab[img[(size_t)i * CHANNELS + c]];
 #endif
 #else
-    const float4 v = tss_linear(luts, img, i);
-    const float x = c == 0 ? v.x : (c == 1 ? v.y : v.z);
-    return (int)(x > 0.0f ? (x < 1.0f ? x * TSS_ONE + 0.5f : TSS_ONE) : 0.0f);
+    const float4 raw = load_px(img, i);
+    const float e = c == 0 ? raw.x : (c == 1 ? raw.y : raw.z);
+    if (e > (float)TSS_RANGE)
+        return TSS_OVER;   // over range (also +inf); NaN reads 0 below
+#if LINEAR_INPUT
+    const float x = TSS_RANGE == 1 ? e : e * (1.0f / (float)TSS_RANGE);
+#else
+    const float x = lut_read(luts, e);
+#endif
+    const float t = x * TSS_ONE + 0.5f;
+    return (int)(x > 0.0f ? (t < (float)TSS_TOP ? t : (float)TSS_TOP) : 0.0f);
 #endif
 }
 
@@ -118,6 +124,10 @@ inline void tss_store(__global const float *luts, __global const ushort *ltab, _
 #endif
     __global PIXEL_T *d = dst + (size_t)i * nc;
     __global const PIXEL_T *sp = spatial + (size_t)i * nc;
+#ifdef PIXEL_IS_FLOAT
+    for (int c = 0; c < TSS_PLANES; ++c)
+        n = tss_level(luts, ltab, spatial, i, c) > TSS_TOP ? 0 : n;   // an over-range spatial pixel stands
+#endif
     if (n < MIN_CELLS) {
         for (int c = 0; c < nc; ++c)
             d[c] = sp[c];
@@ -135,7 +145,7 @@ inline void tss_store(__global const float *luts, __global const ushort *ltab, _
 #if !LINEAR_INPUT && !defined(PIXEL_IS_FLOAT)
         const PIXEL_T e = etab[q];
 #elif LINEAR_INPUT
-        const PIXEL_T e = to_pixel((float)q * (1.0f / TSS_ONE));
+        const PIXEL_T e = to_pixel((float)q * ((float)TSS_RANGE / TSS_ONE));
 #else
         const PIXEL_T e = to_pixel(lut_read(luts + 2 * (LUT_SIZE + 1), (float)q * (1.0f / TSS_ONE)));
 #endif
@@ -146,7 +156,15 @@ inline void tss_store(__global const float *luts, __global const ushort *ltab, _
 #else
         const PIXEL_T sv = sp[c];
 #endif
-#ifdef PIXEL_IS_FLOAT
+#if LINEAR_INPUT
+        {   // one level of the sRGB-encoded values, as for display-encoded frames; above 1 as if the brighter
+            // of the two were shown at white
+            __global const float *enc = luts + 2 * (LUT_SIZE + 1);
+            const float a = (float)e * (1.0f / PIXEL_MAX), b = (float)sv * (1.0f / PIXEL_MAX);
+            const float top = a > b ? a : b, k = top > 1.0f ? 1.0f / top : 1.0f;
+            dead &= fabs(lut_read(enc, a * k) - lut_read(enc, b * k)) <= (1.0f / 255.0f);
+        }
+#elif defined(PIXEL_IS_FLOAT)
         dead &= fabs(e - sv) <= (1.0f / 255.0f);
 #else
         dead &= abs((int)e - (int)sv) <= DEAD_CODES;
@@ -189,7 +207,7 @@ __kernel void tss_resolve(__global const ushort *ring, __global const PIXEL_T *s
     const int x0 = gx > 0 ? gx - 1 : 0, x2 = gx < width - 1 ? gx + 1 : width - 1;
     const int y0 = gy > 0 ? gy - 1 : 0, y2 = gy < height - 1 ? gy + 1 : height - 1;
     int lo[3], hi[3];
-    int flat = 1;
+    int flat = 1, over = 0;
     for (int c = 0; c < TSS_PLANES; ++c) {
         __global const ushort *pl = cur + c * width;
         int mn = 65536, mx = -1;
@@ -200,10 +218,11 @@ __kernel void tss_resolve(__global const ushort *ring, __global const PIXEL_T *s
                 mx = v > mx ? v : mx;
             }
         lo[c] = mn - EPSQ;
-        hi[c] = mx + EPSQ;
+        hi[c] = mx + EPSQ < TSS_TOP ? mx + EPSQ : TSS_TOP;
         flat &= mn == mx;
+        over |= mx > TSS_TOP;
     }
-    if (flat) {
+    if (flat | over) {
         tss_store(luts, ltab, etab, spatial, dst, cells, i, 0, 0.0f, 0.0f, 0.0f);
         return;
     }
@@ -346,7 +365,7 @@ __kernel void tss_resolve_shift(__global const ushort *ring, __global const PIXE
     const int y0 = gy > 0 ? gy - 1 : 0, y2 = gy < height - 1 ? gy + 1 : height - 1;
     int16 lo[TSS_PLANES], hi[TSS_PLANES], s[TSS_PLANES];
     float16 m[TSS_PLANES];
-    int16 flat = (int16)(-1);
+    int16 flat = (int16)(-1), over = (int16)(0);
     for (int c = 0; c < TSS_PLANES; ++c) {
         __global const ushort *pl = cur + c * width;
         int16 mn = (int16)(65536), mx = (int16)(-1);
@@ -359,11 +378,13 @@ __kernel void tss_resolve_shift(__global const ushort *ring, __global const PIXE
             }
         }
         lo[c] = mn - (int16)(EPSQ);
-        hi[c] = mx + (int16)(EPSQ);
+        hi[c] = TSS_MIN(mx + (int16)(EPSQ), (int16)(TSS_TOP));
         s[c] = (int16)(0);
         m[c] = (float16)(0.0f);
         flat &= mn == mx;
+        over |= mx > (int16)(TSS_TOP);
     }
+    flat |= over;                           // over range: the spatial pixel stands, as on a flat one
     const int len = width - x0 < 16 ? width - x0 : 16;
     {
         // a group of 16 flat pixels (most of a frame with flat areas): no ring reads at all

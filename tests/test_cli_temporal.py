@@ -203,3 +203,43 @@ def test_lookahead_on_video_and_refusals(tmp_path):
     res = CliRunner().invoke(main, [str(DEMO / "clip.mp4"), "-o", str(tmp_path / "c.mp4"), "--temporal",
                                     "--temporal-method", "blend", "-q"])   # its default: none, no complaint
     assert res.exit_code == 0, res.output
+
+
+def test_temporal_on_linear_hdr_exr_frames(tmp_path):
+    """A folder of half-float EXRs in linear light with highlights over 1 (a render pipeline's frames): TSS
+    resolves them in linear light, keeps the highlights and moves closer to the supersampled truth; the outputs
+    are the API stage's (TSSStage(linear_input=True) after Filter(linear_input=True)). Before, --temporal wrote
+    NaN and values near 65000 (half frames read as float32) and clipped highlights to 1."""
+    from mlaa_stream.bench.temporal import scene_pan
+    from mlaa_stream.io.images import read_image, write_image
+    from mlaa_stream.spatial.filter import Filter
+    from mlaa_stream.temporal.tss import TSSStage
+
+    sc = scene_pan(8, 160, 90)
+
+    def linear_hdr(u8):   # sRGB-decoded, then 3x: the bright half of the frame goes over 1
+        c = np.asarray(u8, np.float64) / 255.0
+        return (3.0 * np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)).astype(np.float16)
+    frames = [linear_hdr(f) for f in sc.inputs]
+    src = tmp_path / "in"
+    src.mkdir()
+    for i, f in enumerate(frames):
+        write_image(str(src / f"f{i:02d}.exr"), f)
+    for name, extra in (("tss", ["--temporal", "--temporal-method", "tss"]), ("sp", [])):
+        res = CliRunner().invoke(main, [str(src), "-o", str(tmp_path / name), "-q"] + extra)
+        assert res.exit_code == 0, res.output
+    read = lambda name, i: read_image(str(tmp_path / name / f"f{i:02d}.exr")).pixels
+    outs = [read("tss", i) for i in range(8)]
+    spatial = [read("sp", i) for i in range(8)]
+    assert all(o.dtype == np.float16 and np.isfinite(o).all() for o in outs)
+    assert max(float(o.max()) for o in outs) == max(float(f.max()) for f in frames) > 2.0
+    changed = [(o != s).any(-1) for o, s in zip(outs, spatial)]
+    assert np.mean([c.mean() for c in changed[3:]]) > 0.01
+    assert any((c & (o > 1).any(-1)).any() for c, o in zip(changed, outs))   # resolved above 1, not clipped
+    truth = [linear_hdr(t).astype(np.float64) for t in sc.truths]
+    err = lambda xs: sum(float(((x.astype(np.float64) - t) ** 2).sum()) for x, t in zip(xs[3:], truth[3:]))
+    assert err(outs) < 0.9 * err(spatial)
+    stage = TSSStage(bgr=False, lookahead=2, linear_input=True)   # the command line's default look-ahead
+    with Filter(None, bgr=False, linear_input=True) as f:
+        want = [stage(x, f.process(x), i, future=frames[i + 1:i + 3]) for i, x in enumerate(frames)]
+    assert all(np.array_equal(a, b) for a, b in zip(outs, want))

@@ -86,6 +86,57 @@ def test_kernel_matches_reference(stage_parts, channels, dtype, bgr, dense, fs, 
     assert np.array_equal(out[cells < 2], spatial[cells < 2])
 
 
+@pytest.mark.parametrize("linear,dense", [(True, False), (True, True), (False, False), (False, True)])
+def test_kernel_matches_reference_on_hdr_float_frames(stage_parts, linear, dense):
+    """Float frames above 1 (HDR renders; linear light: the ring spans [0, LINEAR_RANGE]): bit-identical to the
+    reference, and every pixel whose 3x3 input box or spatial pixel is over the ring's range keeps the spatial
+    pixel bit for bit (a sample over range is never averaged: before, such values came out clipped or as NaN)."""
+    import cv2
+    from mlaa_stream.temporal.tss import EPS, GRID, LINEAR_RANGE, MIN_CELLS
+    rng = np.random.default_rng(11 + 2 * linear + dense)
+    h, w, fs, k = 37, 53, 2 if dense else 1, 9
+    cur, spatial, ring = _random_ring(rng, h, w, 3, np.float32, k, dense, fs)
+
+    def hdr(f):   # 4x4 blocks at 1x, 3x (over 1, within the linear range) and 5x (over it)
+        gain = rng.choice([1.0, 3.0, 5.0], (h // 4 + 1, w // 4 + 1), p=[0.7, 0.15, 0.15])
+        return (f * gain.repeat(4, 0).repeat(4, 1)[:h, :w, None]).astype(np.float32)
+    ring = [(hdr(f), m, ok) for f, m, ok in ring[:-1]]
+    cur = hdr(cur)
+    ring.append((cur, (0.0, 0.0), None))
+    spatial = hdr(spatial)
+    stage = TSSStage(frames=k + 1, bgr=False, context=stage_parts, dense_samples=dense, linear_input=linear)
+    out, cells = _run_kernel(stage, cur, spatial, ring, False, fs)
+    ref, rcells = tss_frame_reference(spatial, cur, ring, False, fs, GRID, EPS, MIN_CELLS,
+                                      stage.field_full_cells if dense else stage.full_cells, linear)
+    assert np.array_equal(cells, rcells) and cells.max() >= 2
+    assert np.array_equal(out, ref) and np.isfinite(out).all()
+    top = LINEAR_RANGE if linear else 1.0
+    over = cv2.dilate((cur > top).any(-1).astype(np.uint8), np.ones((3, 3), np.uint8),
+                      borderType=cv2.BORDER_REPLICATE).astype(bool) | (spatial > top).any(-1)
+    assert over.mean() > 0.2
+    assert np.array_equal(out[over], spatial[over])
+    changed = (out != spatial).any(-1)
+    assert changed[~over].mean() > 0.05
+    if linear:   # values over 1 within the range are resolved, not clipped
+        assert (changed & (out > 1.0).any(-1)).any()
+
+
+def test_half_float_frames_are_resolved_as_float32(stage_parts):
+    """float16 frames (half EXR) give the float32 run's output in float16 (they were read as float32 bytes)."""
+    sc = scene_pan(6, 96, 64)
+    lin = [(np.asarray(f, np.float32) / 255.0) ** 2.2 for f in sc.inputs]
+    outs = {}
+    for dtype in (np.float32, np.float16):
+        stage = TSSStage(frames=6, bgr=False, context=stage_parts, linear_input=True)
+        outs[dtype] = [stage(f.astype(dtype), f.astype(dtype), i) for i, f in enumerate(lin)]
+    assert all(o.dtype == np.float16 for o in outs[np.float16])
+    half_in = [f.astype(np.float16).astype(np.float32) for f in lin]
+    stage = TSSStage(frames=6, bgr=False, context=stage_parts, linear_input=True)
+    want = [stage(f, f, i).astype(np.float16) for i, f in enumerate(half_in)]
+    assert any(not np.array_equal(o, f.astype(np.float16)) for o, f in zip(outs[np.float16], lin))   # TSS acted
+    assert all(np.array_equal(a, b) for a, b in zip(outs[np.float16], want))
+
+
 @pytest.fixture(scope="module")
 def filt():
     with Filter(None, bgr=False) as f:

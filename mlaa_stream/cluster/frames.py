@@ -24,7 +24,7 @@ from typing import Callable
 
 from mlaa_stream.io.images import check_complete, image_shape, remove_quietly, stale_temp_files
 from mlaa_stream.io.sequence import (FilterSet, FrameFile, Report, consecutive_ahead, frame_number, image_sink,
-                                     image_source)
+                                     image_source, is_linear)
 
 CHUNK_FRAMES = 16  # frames per task: a few seconds of work for a 1080p frame, enough to hide scheduling
 
@@ -149,12 +149,14 @@ def _with_temporal(stage, files: list[FrameFile], warm: set, report: Report, str
     is called with the frame number (a folder: the file's position in name order), as on one machine
     (cli/filter_cmd._SequenceTemporal), and only the frames in `write` reach the sink."""
     read_order: dict[int, FrameFile] = {}
+    read_linear: dict[int, bool] = {}   # position -> linear light (the stage's colour space), as on one machine
 
     def source():
         inner = image_source(files, report, strict=strict, like=like)
         try:
             for position, item in enumerate(inner):
                 read_order[position] = item.meta[0]
+                read_linear[position] = is_linear(item.meta[1])
                 yield item
         finally:
             inner.close()
@@ -164,6 +166,7 @@ def _with_temporal(stage, files: list[FrameFile], warm: set, report: Report, str
         number = frame_number(read_order, index)
         ahead = consecutive_ahead(read_order, index, future)   # as on one machine
         read_order.pop(index, None)
+        stage.stage.set_linear_input(read_linear.pop(index, False))
         return stage(frame_in, frame_out, number, ff in warm, future=ahead)
     hook.lookahead = getattr(stage, "lookahead", 0)
 

@@ -77,8 +77,9 @@ IDENTITY = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0)
 
 
 # --- cheap measurements and the model choice -------------------------------------------------------
-def grey8(frame: np.ndarray, bgr: bool) -> np.ndarray:
-    """The frame's luma as uint8 (what optical flow and the measurements run on)."""
+def grey8(frame: np.ndarray, bgr: bool, linear: bool = False) -> np.ndarray:
+    """The frame's luma as uint8 (what optical flow and the measurements run on). `linear`: the frame is
+    linear light (EXR): its luma is sRGB-encoded first, so dark and bright parts keep their contrast."""
     f = np.asarray(frame)
     if f.dtype == np.float16 or f.dtype == np.float64:
         f = f.astype(np.float32)
@@ -88,11 +89,23 @@ def grey8(frame: np.ndarray, bgr: bool) -> np.ndarray:
         code = {(3, True): cv2.COLOR_BGR2GRAY, (3, False): cv2.COLOR_RGB2GRAY,
                 (4, True): cv2.COLOR_BGRA2GRAY, (4, False): cv2.COLOR_RGBA2GRAY}[(f.shape[2], bool(bgr))]
         f = cv2.cvtColor(np.ascontiguousarray(f), code)
+    if linear:
+        f = _ENCODE_GREY[np.clip(f.astype(np.float32) * np.float32(_GREY_STEPS / _PMAX[f.dtype]), 0, _GREY_STEPS)
+                         .astype(np.int32)]
     if f.dtype == np.uint8:
         return np.ascontiguousarray(f)
     if f.dtype == np.uint16:
         return (f >> 8).astype(np.uint8)
     return np.clip(f * 255.0 + 0.5, 0, 255).astype(np.uint8)
+
+
+# grey8's linear -> sRGB-encoded uint8 table (IEC 61966-2-1), over linear values in steps of 1 / _GREY_STEPS: a
+# step is under half an 8-bit level everywhere (the steepest part, at 0, has slope 12.92 * 255 levels per unit)
+_GREY_STEPS = 8192
+_lin = np.arange(_GREY_STEPS + 1, dtype=np.float64) / _GREY_STEPS
+_ENCODE_GREY = np.clip(255.0 * np.where(_lin <= 0.0031308, 12.92 * _lin, 1.055 * _lin ** (1 / 2.4) - 0.055) + 0.5,
+                       0, 255).astype(np.uint8)
+del _lin
 
 
 def _downscale(img: np.ndarray, factor: int) -> np.ndarray:
@@ -119,8 +132,8 @@ class Pyramid:
     _blur: dict = field(default_factory=dict, repr=False, compare=False)   # see blurred()
 
     @staticmethod
-    def of(frame: np.ndarray, bgr: bool, grey: np.ndarray | None = None) -> "Pyramid":
-        g = grey8(frame, bgr) if grey is None else grey
+    def of(frame: np.ndarray, bgr: bool, grey: np.ndarray | None = None, linear: bool = False) -> "Pyramid":
+        g = grey8(frame, bgr, linear) if grey is None else grey
         fs = scale_for(g.shape[1], FLOW_WIDTH)
         flow = _downscale(g, fs)
         # at least half size: there the aliasing of 1-spp edges averages out (choose_model)
@@ -330,6 +343,17 @@ class TemporalStage:
     def device_name(self) -> str:
         return self.context.name if self.context is not None else "none (temporal stage off)"
 
+    def set_linear_input(self, linear: bool) -> bool:
+        """The colour space of the frames from now on (linear light, e.g. EXR, or display-encoded); True when that
+        changed it: the history starts again."""
+        if bool(linear) == self.linear_input:
+            return False
+        if self._buffers is not None:
+            self.queue.finish()
+        self.linear_input, self._buffers = bool(linear), None   # decode table and kernel rebuilt (_prepare)
+        self.reset()
+        return True
+
     def reset(self) -> None:
         """Forget the history: the next frame is passed through and starts a new one."""
         self._prev: Pyramid | None = None
@@ -387,7 +411,7 @@ class TemporalStage:
 
     def _step(self, frame_in, frame_filtered, index: int, fmt: FrameFormat, regions, measured) -> np.ndarray:
         t0 = time.perf_counter()
-        grey = grey8(frame_in, self.bgr) if measured is None else measured[0].grey
+        grey = grey8(frame_in, self.bgr, self.linear_input) if measured is None else measured[0].grey
         fresh = self._prev is None or self._prev_index is None or index != self._prev_index + 1
         if (not fresh and self._buffers is not None and self._buffers.fmt == fmt
                 and np.array_equal(grey, self._prev.grey)):

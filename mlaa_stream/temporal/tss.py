@@ -4,7 +4,8 @@ Each input pixel of frame t is a point sample of the scene at a known sub-pixel 
 motion is known; a moving camera puts the samples of past frames at new positions inside the current
 frame's pixels (the jitter a renderer's TAA adds on purpose; seed 002's T2x). The stage keeps a ring
 of the last K *input* frames (linear light in 16-bit fixed point, L = floor(clamp(lin, 0, 1) 65535 + 0.5):
-`ring_of`) with a map from the current frame's pixels into each of them, and resolves each output pixel
+`ring_of`; linear-light float frames, `linear_input`: lin / LINEAR_RANGE; a float sample over the range is
+marked OVER and never averaged, and a pixel near one keeps the spatial output) with a map from the current frame's pixels into each of them, and resolves each output pixel
 from the samples that land inside its footprint:
 
     stage = TSSStage(bgr=True, frames=16)
@@ -91,6 +92,9 @@ NEWEST_STEPS = 2      # Gauss-Newton steps per frame for the newest ring frame (
 REFINE_STEPS = 2      # ... and for each older ring frame refined in that frame
 REFINE_EVERY = 3      # older ring frames refined directly at ages 1 + a multiple of this (docs/temporal.md)
 ONE = 65535           # ring samples: linear light in 16-bit fixed point (kernels/tss.cl, ring_of)
+OVER = 65535          # a float frame's sample over the ring's range: never averaged; in-range ones top out at ONE - 1
+LINEAR_RANGE = 4      # linear-light float frames (EXR): the ring holds [0, 4] (highlights 2 stops over white; one
+                      # step 6e-5, under 0.2 of an 8-bit level of the sRGB-encoded value); above, over range
 LANES = 16            # pixels of a row per work item of tss_resolve_shift (int16 / float16 vectors)
 TILE_ROWS = 16        # rows of a tile of projective maps (tss_resolve_shift: one translation per tile and ring frame)
 TSS_LOCAL = 8         # CPU work-group of tss_resolve_shift along the row (docs/temporal.md: speed)
@@ -736,7 +740,7 @@ def linear_of(frame: np.ndarray, bgr: bool, linear_input: bool = False) -> np.nd
     if np.issubdtype(fmt.dtype, np.integer) and not linear_input:
         lin = decode_table(fmt)[raw.astype(np.int64)]
     else:
-        a = raw.astype(np.float32)
+        a = raw.astype(np.float32) * np.float32(1.0 / _PMAX[fmt.dtype])   # load_px's normalisation
         lin = a if linear_input else lut_read(device_luts(), a).astype(np.float32)
     if fmt.channels == 1:
         return np.repeat(lin, 3, -1).astype(np.float32)
@@ -765,25 +769,39 @@ def encode_table(fmt) -> np.ndarray:
     return np.floor(np.clip(enc * pmax + f32(0.5), 0, pmax)).astype(fmt.dtype)
 
 
-def ring_of(frame: np.ndarray, bgr: bool) -> np.ndarray:
-    """(H, W, 3) int32 ring samples L of a frame, as kernels/tss.cl's tss_ingest stores them."""
+def ring_range(dtype, linear_input: bool) -> int:
+    """The linear light the ring's 16 bits span, [0, range] (kernels/tss.cl TSS_RANGE)."""
+    return LINEAR_RANGE if linear_input and not np.issubdtype(np.dtype(dtype), np.integer) else 1
+
+
+def ring_of(frame: np.ndarray, bgr: bool, linear_input: bool = False) -> np.ndarray:
+    """(H, W, 3) int32 ring samples L of a frame, as kernels/tss.cl's tss_ingest stores them (float frames:
+    at most ONE - 1, OVER where the stored value is over the ring's range)."""
     fmt = frame_format(frame, bgr)
-    if np.issubdtype(fmt.dtype, np.integer):
+    if np.issubdtype(fmt.dtype, np.integer) and not linear_input:
         raw = np.asarray(frame).reshape(fmt.height, fmt.width, fmt.channels).astype(np.int64)
         q = level_table(fmt)[raw].astype(np.int32)
         if fmt.channels == 1:
             return np.repeat(q, 3, -1)
         return np.ascontiguousarray(q[..., 2::-1] if fmt.bgr else q[..., :3])
-    lin = linear_of(frame, bgr)
+    rng = ring_range(fmt.dtype, linear_input)
+    lin = linear_of(frame, bgr, linear_input)
+    if rng != 1:
+        lin = (lin * np.float32(1.0 / rng)).astype(np.float32)
+    raw = linear_of(frame, bgr, True)                  # the stored values, in RGB order
     t = lin * np.float32(ONE) + np.float32(0.5)
-    return np.where(lin > 0, np.where(lin < 1, t, np.float32(ONE)), np.float32(0)).astype(np.int32)
+    q = np.where(lin > 0, np.minimum(t, np.float32(ONE - 1)), np.float32(0)).astype(np.int32)
+    return np.where(raw > rng, OVER, q).astype(np.int32)
 
 
 def tss_reference(spatial_q: np.ndarray, cur_q: np.ndarray, ring: list[tuple],
                   flow_scale: int = 1, grid: int = GRID, eps: float = EPS,
-                  min_cells: int = MIN_CELLS, full_cells: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+                  min_cells: int = MIN_CELLS, full_cells: int | None = None,
+                  top: int = ONE, rng: int = 1) -> tuple[np.ndarray, np.ndarray]:
     """The resolve in numpy: returns (out L (H, W, 3) int32, filled cells (H, W) uint8); spatial_q and
-    cur_q are the spatial output's and the current input's ring samples (ring_of).
+    cur_q are the spatial output's and the current input's ring samples (ring_of). `top`: the largest in-range
+    sample (float frames ONE - 1: above it a sample is over range, a box holding one keeps the spatial pixel);
+    `rng`: the linear light the ring spans (ring_range).
 
     ring: (ring samples, map, valid) triples: samples as ring_of gives them (16-bit fixed-point linear),
     map = (dx, dy) translation or a (fh, fw, 2) field at 1/flow_scale, valid = None or (fh, fw) uint8 at
@@ -794,10 +812,12 @@ def tss_reference(spatial_q: np.ndarray, cur_q: np.ndarray, ring: list[tuple],
     ys, xs = np.mgrid[0:h, 0:w].astype(f32)
     pad = np.pad(cur_q, ((1, 1), (1, 1), (0, 0)), mode="edge")
     taps = [pad[1 + dy:1 + dy + h, 1 + dx:1 + dx + w] for dy in (-1, 0, 1) for dx in (-1, 0, 1)]
-    epsq = eps_q(eps)
+    epsq = eps_q(eps, rng)
     lo = np.minimum.reduce(taps) - epsq
-    hi = np.maximum.reduce(taps) + epsq
-    still = (lo == hi - 2 * epsq).all(-1)     # a flat 3x3 neighbourhood: n = 0, the spatial pixel stands
+    mx = np.maximum.reduce(taps)
+    hi = np.minimum(mx + epsq, top)
+    # a flat 3x3 neighbourhood, or one over range: n = 0, the spatial pixel stands
+    still = (lo == mx - epsq).all(-1) | (mx > top).any(-1)
     g2 = grid * grid
     full_cells = FULL_CELLS if full_cells is None else full_cells
     sums = np.zeros((h, w, g2, 3), np.int64)
@@ -851,19 +871,23 @@ def tss_reference(spatial_q: np.ndarray, cur_q: np.ndarray, ring: list[tuple],
     return out, n.astype(np.uint8)
 
 
-def eps_q(eps: float) -> int:
-    """The colour box's widening in ring units (16-bit fixed-point linear)."""
-    return int(round(float(eps) * ONE))
+def eps_q(eps: float, rng: int = 1) -> int:
+    """The colour box's widening in ring units (16-bit fixed-point linear over [0, rng])."""
+    return int(round(float(eps) * ONE / rng))
 
 
-def encode_levels(q: np.ndarray, like: np.ndarray, bgr: bool) -> np.ndarray:
+def encode_levels(q: np.ndarray, like: np.ndarray, bgr: bool, linear_input: bool = False) -> np.ndarray:
     """Ring samples L (H, W, 3) back to the frame's type and layout (alpha taken from `like`), as
-    tss_store does: etab for integer frames, the encode table for float frames."""
+    tss_store does: etab for integer frames, the encode table for float frames, L / ONE for linear input."""
     f32 = np.float32
     fmt = frame_format(like, bgr)
     h, w = fmt.height, fmt.width
     raw = np.asarray(like).reshape(h, w, fmt.channels)
-    if np.issubdtype(fmt.dtype, np.integer):
+    if linear_input:
+        x = q.astype(f32) * (f32(ring_range(fmt.dtype, True)) / f32(ONE))
+        pmax = f32(_PMAX[fmt.dtype])
+        stored = x if fmt.dtype == np.float32 else np.floor(np.clip(x * pmax + f32(0.5), 0, pmax)).astype(fmt.dtype)
+    elif np.issubdtype(fmt.dtype, np.integer):
         stored = encode_table(fmt)[q]
     else:
         stored = lut_read(device_luts()[2 * (LUT_SIZE + 1):], q.astype(f32) * f32(1.0 / ONE)).astype(fmt.dtype)
@@ -877,20 +901,25 @@ def encode_levels(q: np.ndarray, like: np.ndarray, bgr: bool) -> np.ndarray:
 
 def tss_frame_reference(spatial: np.ndarray, cur: np.ndarray, ring: list[tuple], bgr: bool,
                         flow_scale: int = 1, grid: int = GRID, eps: float = EPS,
-                        min_cells: int = MIN_CELLS, full_cells: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+                        min_cells: int = MIN_CELLS, full_cells: int | None = None,
+                        linear_input: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """kernels/tss.cl on whole frames: ring = (input frame, map, valid) triples (frames in the input's
     type); returns (output frame like `spatial`, filled cells (H, W) uint8). Where fewer than
-    min_cells are filled the spatial pixel is copied bit for bit."""
-    rq = [(ring_of(f, bgr), m, ok) for f, m, ok in ring]
-    q, n = tss_reference(ring_of(spatial, bgr), ring_of(cur, bgr), rq, flow_scale, grid, eps, min_cells,
-                         full_cells)
-    enc = encode_levels(q, spatial, bgr)
-    keep = (n < min_cells).reshape(n.shape + (1,) * (np.ndim(spatial) - 2))
-    keep = keep | within_dead_zone(enc, spatial, bgr)
+    min_cells are filled, or the spatial pixel is over range (float frames), the spatial pixel is copied bit
+    for bit."""
+    rq = [(ring_of(f, bgr, linear_input), m, ok) for f, m, ok in ring]
+    dtype = frame_format(spatial, bgr).dtype
+    top = ONE if np.issubdtype(dtype, np.integer) else ONE - 1
+    sq = ring_of(spatial, bgr, linear_input)
+    q, n = tss_reference(sq, ring_of(cur, bgr, linear_input), rq, flow_scale, grid, eps, min_cells,
+                         full_cells, top, ring_range(dtype, linear_input))
+    enc = encode_levels(q, spatial, bgr, linear_input)
+    keep = ((n < min_cells) | (sq > top).any(-1)).reshape(n.shape + (1,) * (np.ndim(spatial) - 2))
+    keep = keep | within_dead_zone(enc, spatial, bgr, linear_input)
     return np.where(keep, spatial, enc).astype(spatial.dtype), n
 
 
-def within_dead_zone(out: np.ndarray, spatial: np.ndarray, bgr: bool) -> np.ndarray:
+def within_dead_zone(out: np.ndarray, spatial: np.ndarray, bgr: bool, linear_input: bool = False) -> np.ndarray:
     """True (shaped to broadcast over the channels) where every colour channel of `out` is within one
     8-bit level of the spatial output's (DEAD_CODES codes of an integer frame, 1/255 of a float one):
     there the resolve moved the pixel by no more than rounding and codec noise would, and the spatial
@@ -900,7 +929,17 @@ def within_dead_zone(out: np.ndarray, spatial: np.ndarray, bgr: bool) -> np.ndar
     h, w = fmt.height, fmt.width
     a = np.asarray(out).reshape(h, w, fmt.channels)[..., :min(fmt.channels, 3)]
     b = np.asarray(spatial).reshape(h, w, fmt.channels)[..., :min(fmt.channels, 3)]
-    if np.issubdtype(fmt.dtype, np.integer):
+    if linear_input:   # one level of the sRGB-encoded values (the encode table, as the kernel reads it); above
+        # 1 as if the brighter of the two were shown at white
+        f32, table = np.float32, device_luts()[2 * (LUT_SIZE + 1):]
+        scale = f32(1.0 / _PMAX[fmt.dtype])
+        a, b = a.astype(f32) * scale, b.astype(f32) * scale
+        top = np.maximum(a, b)
+        k = np.where(top > 1, f32(1.0) / np.where(top > 1, top, f32(1)), f32(1)).astype(f32)
+        ea = lut_read(table, (a * k).astype(f32)).astype(f32)
+        eb = lut_read(table, (b * k).astype(f32)).astype(f32)
+        dead = (np.abs(ea - eb) <= f32(1.0 / 255.0)).all(-1)
+    elif np.issubdtype(fmt.dtype, np.integer):
         dead = (np.abs(a.astype(np.int64) - b.astype(np.int64)) <= dead_codes(fmt.dtype)).all(-1)
     else:
         dead = (np.abs(a.astype(np.float32) - b.astype(np.float32)) <= np.float32(1.0 / 255.0)).all(-1)
@@ -941,8 +980,9 @@ def kernel_defines(fmt, grid: int = GRID, eps: float = EPS, min_cells: int = MIN
     from mlaa_stream.device.formats import defines_for
     full = FULL_CELLS if full_cells is None else int(full_cells)
     dead = dead_codes(fmt.dtype) if np.issubdtype(fmt.dtype, np.integer) else 0
-    return defines_for(fmt, GRID=int(grid), MIN_CELLS=int(min_cells), FULL_CELLS=full, EPSQ=eps_q(eps),
-                       LINEAR_INPUT=int(linear_input), DEAD_CODES=dead)
+    rng = ring_range(fmt.dtype, linear_input)
+    return defines_for(fmt, GRID=int(grid), MIN_CELLS=int(min_cells), FULL_CELLS=full, EPSQ=eps_q(eps, rng),
+                       LINEAR_INPUT=int(linear_input), DEAD_CODES=dead, TSS_RANGE=rng)
 
 
 def cells_view(cells: np.ndarray, out: np.ndarray, grid: int, bgr: bool) -> np.ndarray:
@@ -1007,7 +1047,8 @@ class TSSStage:
     def __init__(self, device: str | int | None = None, *, frames: int = DEFAULT_FRAMES, bgr: bool = True,
                  mode: str = "adaptive", grid: int = GRID, eps: float = EPS, min_cells: int = MIN_CELLS,
                  full_cells: int | None = None, refine: bool = True, fb_check: bool = True, show: str | None = None,
-                 context=None, backend: str = "device", dense_samples: bool = False, lookahead: int = 0):
+                 context=None, backend: str = "device", dense_samples: bool = False, lookahead: int = 0,
+                 linear_input: bool = False):
         if int(frames) < 1:
             raise ValueError(f"frames: expected K >= 1, got {frames!r}")
         if int(lookahead) < 0:
@@ -1019,6 +1060,7 @@ class TSSStage:
         if mode not in ("adaptive", "dense", "global", "static"):
             raise ValueError(f"mode: expected adaptive, dense, global or static, got {mode!r}")
         self.frames, self.bgr, self.mode, self.show = int(frames), bool(bgr), mode, show
+        self.linear_input = bool(linear_input)   # frames are linear light (EXR): no sRGB decode, grey encoded
         self.lookahead = int(lookahead)   # N: frames after the current one the caller hands in (`future`)
         self.grid, self.eps, self.min_cells = int(grid), float(eps), int(min_cells)
         ahead = int(FULL_CELLS_AHEAD * self.lookahead + 0.5)
@@ -1059,6 +1101,17 @@ class TSSStage:
         # hands them to the blend, which would measure the same frame pair again
         self.last_motion: tuple[Pyramid, Decision] | None = None
 
+    def set_linear_input(self, linear: bool) -> bool:
+        """The colour space of the frames from now on (linear light, e.g. EXR, or display-encoded); True when that
+        changed it: the ring starts again (its samples are in the other space)."""
+        if bool(linear) == self.linear_input:
+            return False
+        if self.backend == "device":
+            self.queue.finish()
+        self.linear_input, self._buffers = bool(linear), None   # the kernels are rebuilt with the new define
+        self.reset()
+        return True
+
     def __call__(self, frame_in: np.ndarray, frame_filtered: np.ndarray, index: int,
                  regions: np.ndarray | None = None, future: list[np.ndarray] = ()) -> np.ndarray:
         """`regions` is accepted for the stages' common call (temporal.methods) and not read: TSS takes samples
@@ -1074,8 +1127,13 @@ class TSSStage:
             if f.shape != fin.shape or f.dtype != fin.dtype:
                 break   # a new size or type starts a new ring there: the window ends before it
             ahead.append(f)
+        wide = fin.dtype in (np.float16, np.float64)   # half (EXR) and double: the kernels read float32
+        if wide:
+            fin, fout = fin.astype(np.float32), fout.astype(np.float32)
+            ahead = [f.astype(np.float32) for f in ahead]
         with self._lock:
-            return self._step(fin, fout, int(index), ahead)
+            out = self._step(fin, fout, int(index), ahead)
+        return out.astype(frame_filtered.dtype) if wide and self.show is None else out
 
     def _look_ahead(self, pyr: Pyramid, index: int, future: list[np.ndarray]) -> list[Ahead]:
         """The look-ahead frames' pyramids and frame-to-frame decisions, each measured once (kept by index
@@ -1086,7 +1144,7 @@ class TSSStage:
             i = index + 1 + k
             a = self._seen.get(i)
             if a is None:
-                fp = Pyramid.of(f, self.bgr)
+                fp = Pyramid.of(f, self.bgr, linear=self.linear_input)
                 a = self._seen[i] = Ahead(i, fp, choose_model(prev, fp, self.mode))
             out.append(a)
             prev = a.pyr
@@ -1096,7 +1154,7 @@ class TSSStage:
               future: list[np.ndarray] = ()) -> np.ndarray:
         t0 = time.perf_counter()
         self.last_motion = None
-        grey = grey8(frame_in, self.bgr)
+        grey = grey8(frame_in, self.bgr, self.linear_input)
         fresh = self._prev_index is None or index != self._prev_index + 1 or frame_in.shape != self._shape
         if fresh:   # a new ring: nothing kept from before a jump back or forward is trusted
             self._seen, self._pending, self._resident = {}, {}, {}
@@ -1140,7 +1198,7 @@ class TSSStage:
                 ring = [(self._frames[e.slot], tile_shifts(e.homography, w, h, pyr.flow_scale) if e.projective
                          else e.shift if e.translated else e.field, e.valid) for e in entries]
                 return tss_frame_reference(frame_filtered, frame_in, ring, self.bgr, pyr.flow_scale, self.grid,
-                                           self.eps, self.min_cells, full_cells)
+                                           self.eps, self.min_cells, full_cells, self.linear_input)
             rect = self._layer_rect(fm, pyr, w, h)
             if rect is not None:   # as the device: background translations, then the layers' rectangle
                 out, cells = reference(self._background_entries(taps), self.full_cells)
@@ -1226,8 +1284,9 @@ class TSSStage:
         self.queue.finish()
         self._buffers = _Buffers(self.context, fmt, shape, self.frames + self.lookahead, self.motion.dense_samples)
         self._vrows_sent, self._resident = {}, {}
-        defines = kernel_defines(fmt, self.grid, self.eps, self.min_cells, self.full_cells)
-        field_defines = kernel_defines(fmt, self.grid, self.eps, self.min_cells, self.field_full_cells)
+        defines = kernel_defines(fmt, self.grid, self.eps, self.min_cells, self.full_cells, self.linear_input)
+        field_defines = kernel_defines(fmt, self.grid, self.eps, self.min_cells, self.field_full_cells,
+                                       self.linear_input)
         self._kernel = self.context.kernel("tss", "tss_resolve", field_defines)
         self._kernel_shift = self.context.kernel("tss", "tss_resolve_shift", defines)
         self._kernel_ingest = self.context.kernel("tss", "tss_ingest", defines)
@@ -1388,13 +1447,14 @@ class TSSThenBlend:
 
     def __init__(self, device: str | int | None = None, *, frames: int = DEFAULT_FRAMES, bgr: bool = True,
                  mode: str = "adaptive", show: str | None = None, context=None, blend_mode: str | None = None,
-                 lookahead: int = 0, **blend_kwargs):
+                 lookahead: int = 0, linear_input: bool = False, **blend_kwargs):
         """`blend_mode`: the blend's motion model when not `mode` ("auto": "dense"); `lookahead`: TSS's (the blend
-        reads the past only)."""
+        reads the past only); `linear_input`: both stages' (linear-light frames)."""
         from mlaa_stream.temporal.stage import TemporalStage
-        self.tss = TSSStage(device, frames=frames, bgr=bgr, mode=mode, context=context, lookahead=lookahead)
+        self.tss = TSSStage(device, frames=frames, bgr=bgr, mode=mode, context=context, lookahead=lookahead,
+                            linear_input=linear_input)
         self.blend = TemporalStage(device, bgr=bgr, mode=blend_mode or mode, show=show, context=self.tss.context,
-                                   **blend_kwargs)
+                                   linear_input=linear_input, **blend_kwargs)
 
     @property
     def stats(self) -> list[dict]:
@@ -1405,6 +1465,11 @@ class TSSThenBlend:
     @property
     def lookahead(self) -> int:
         return self.tss.lookahead
+
+    def set_linear_input(self, linear: bool) -> bool:
+        """Both stages' colour space (TSSStage.set_linear_input); True when it changed."""
+        changed = self.tss.set_linear_input(linear)
+        return self.blend.set_linear_input(linear) or changed
 
     def __call__(self, frame_in: np.ndarray, frame_filtered: np.ndarray, index: int,
                  regions: np.ndarray | None = None, future: list[np.ndarray] = ()) -> np.ndarray:
