@@ -243,3 +243,24 @@ def test_temporal_on_linear_hdr_exr_frames(tmp_path):
     with Filter(None, bgr=False, linear_input=True) as f:
         want = [stage(x, f.process(x), i, future=frames[i + 1:i + 3]) for i, x in enumerate(frames)]
     assert all(np.array_equal(a, b) for a, b in zip(outs, want))
+
+
+def test_temporal_on_exr_frames_with_nan_and_inf(tmp_path):
+    """NaN and inf pixels in linear-light EXRs (a renderer's fireflies) pass the temporal stage as the spatial
+    filter passes them (the motion's grey read them as an index out of range and stopped the run)."""
+    from mlaa_stream.io.images import read_image, write_image
+    frames = [(np.asarray(f, np.float32) / 255.0) ** 2.2 for f in _pan_frames(5)]
+    src = tmp_path / "in"
+    src.mkdir()
+    for i, f in enumerate(frames):
+        f = f.copy()
+        f[40:42, 50:52] = np.nan
+        f[10, 10] = np.inf
+        write_image(str(src / f"f{i:02d}.exr"), f)
+    for name, extra in (("t", ["--temporal"]), ("sp", [])):
+        res = CliRunner().invoke(main, [str(src), "-o", str(tmp_path / name), "-q"] + extra)
+        assert res.exit_code == 0, res.output
+    for i in range(5):
+        out, sp = (read_image(str(tmp_path / d / f"f{i:02d}.exr")).pixels for d in ("t", "sp"))
+        assert np.array_equal(np.isnan(out), np.isnan(sp)) and np.isnan(out).any()
+        assert np.array_equal(np.isinf(out), np.isinf(sp))

@@ -90,8 +90,9 @@ def grey8(frame: np.ndarray, bgr: bool, linear: bool = False) -> np.ndarray:
                 (4, True): cv2.COLOR_BGRA2GRAY, (4, False): cv2.COLOR_RGBA2GRAY}[(f.shape[2], bool(bgr))]
         f = cv2.cvtColor(np.ascontiguousarray(f), code)
     if linear:
-        f = _ENCODE_GREY[np.clip(f.astype(np.float32) * np.float32(_GREY_STEPS / _PMAX[f.dtype]), 0, _GREY_STEPS)
-                         .astype(np.int32)]
+        x = np.nan_to_num(f.astype(np.float32) * np.float32(_GREY_STEPS / _PMAX[f.dtype]), nan=0.0,
+                          posinf=_GREY_STEPS, neginf=0.0)   # NaN and inf pixels (EXR) read as black and white
+        f = _ENCODE_GREY[np.clip(x, 0, _GREY_STEPS).astype(np.int32)]
     if f.dtype == np.uint8:
         return np.ascontiguousarray(f)
     if f.dtype == np.uint16:
