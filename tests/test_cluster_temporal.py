@@ -217,3 +217,27 @@ def test_a_warm_up_that_cannot_reach_back_far_enough_says_so():
             assert expect is ShortWarmup and exc.missing == 2
             continue
         assert st.short == expect and st.changes == 1
+
+
+def test_tss_chunks_of_linear_exr_frames_equal_one_machine(client, pan, tmp_path):
+    """Half-float EXRs in linear light with highlights over 1: the workers' stages take them as linear light
+    (set_linear_input per frame, as on one machine): bit for bit, and the stage changed most frames."""
+    from mlaa_stream.cluster.frames import filter_on_cluster
+
+    (tmp_path / "in").mkdir()
+    for k, img in enumerate(pan):
+        write_image(str(tmp_path / "in" / f"p.{101 + k:04d}.exr"),
+                    (3.0 * (np.asarray(img, np.float32) / 255.0) ** 2.2).astype(np.float16))
+    src = str(tmp_path / "in" / "p.%04d.exr")
+    refs = {}
+    for name, args in (("ref", ["--temporal", "--temporal-frames", str(K), "--lookahead", "0"]), ("sp", [])):
+        r = CliRunner().invoke(main, [src, "-o", str(tmp_path / name / "c.%04d.exr"), *args])
+        assert r.exit_code == 0, r.output
+        refs[name] = frames_of(tmp_path / name)
+    report = filter_on_cluster(client, src, str(tmp_path / "c" / "c.%04d.exr"), chunk_frames=CHUNK,
+                               temporal=TemporalSpec("tss", K))
+    assert len(report.written) == N and not report.failed
+    got = frames_of(tmp_path / "c")
+    assert len(got) == N and all(np.array_equal(a, b) for a, b in zip(got, refs["ref"]))
+    assert all(np.isfinite(a).all() for a in got) and max(float(a.max()) for a in got) > 1.5
+    assert sum(not np.array_equal(a, b) for a, b in zip(refs["ref"], refs["sp"])) > N // 2
