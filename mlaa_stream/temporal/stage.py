@@ -97,7 +97,7 @@ def grey8(frame: np.ndarray, bgr: bool, linear: bool = False) -> np.ndarray:
         return np.ascontiguousarray(f)
     if f.dtype == np.uint16:
         return (f >> 8).astype(np.uint8)
-    return np.clip(f * 255.0 + 0.5, 0, 255).astype(np.uint8)
+    return np.clip(np.nan_to_num(f * np.float32(255.0) + np.float32(0.5), nan=0.0), 0, 255).astype(np.uint8)
 
 
 # grey8's linear -> sRGB-encoded uint8 table (IEC 61966-2-1), over linear values in steps of 1 / _GREY_STEPS: a
