@@ -108,21 +108,23 @@ def test_a_build_that_ends_the_driver_process_is_a_kernel_build_error():
 
 
 # Every test of the core passes and of the fast preset (~30 s), and the kernel-vs-reference tests of bridging,
-# reconstruction, GRLAA, FXAA and the FXAA fallback (all of those files on rusticl took 11.5 min here: too long
-# for every CI run).
+# reconstruction, GRLAA, FXAA, the FXAA fallback and temporal supersampling's two resolves (all of those files on
+# rusticl took 11.5 min here: too long for every CI run).
 KERNEL_TESTS = ["tests/test_mlaa.py", "tests/test_bridge.py::test_kernel_matches_reference_on_random_wires",
                 "tests/test_reconstruct.py::test_kernel_matches_reference",
                 "tests/test_overlay.py::test_kernel_matches_reference",
                 "tests/test_overlay.py::test_thin_and_outlined_strokes_match_reference",
                 "tests/test_fxaa.py::test_random_blocks_match_reference",
                 "tests/test_fxaa.py::test_pixel_formats_match_reference",
-                "tests/test_fallback.py::test_kernel_matches_reference", "tests/test_fast.py"]
+                "tests/test_fallback.py::test_kernel_matches_reference", "tests/test_fast.py",
+                "tests/test_tss.py::test_kernel_matches_reference",
+                "tests/test_tss.py::test_kernel_matches_reference_on_hdr_float_frames"]
 
 
 @needs_rusticl
 @pytest.mark.timeout(1600)  # a cold compile cache (a new machine): every kernel built for llvmpipe, ~10 min here
 def test_kernels_match_their_references_on_rusticl():
-    """The kernel-vs-reference tests of every spatial pass, GRLAA and FXAA, run again on rusticl."""
+    """The kernel-vs-reference tests of every spatial pass, GRLAA, FXAA and TSS's resolves, run again on rusticl."""
     root = os.path.join(os.path.dirname(__file__), "..")
     r = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-x",
                         "--timeout=900", *KERNEL_TESTS], cwd=root, env=RUSTICL, capture_output=True, text=True,
