@@ -2,10 +2,10 @@
 // Reference: mlaa_stream.temporal.tss.tss_reference (the plain statement; the module's header says why).
 //
 // The ring: K input frames as linear light in 16-bit fixed point, L = floor(clamp(lin, 0, 1) 65535 + 0.5)
-// (ltab: the stored code's L, one load; float frames: at most TSS_TOP, TSS_OVER above 1), planar by row (row y of a slot: width Ls of R, then G, then B;
-// grey frames one plane), written once per frame by tss_ingest. So the resolve reads contiguous 16-bit
-// samples, compares and sums integers and decodes nothing per tap; the output is encoded from L by one
-// load of etab (integer frames: 65536 entries; float frames read the tables).
+// (ltab: the stored code's L, one load; float frames: at most TSS_TOP, TSS_OVER over range), planar by row
+// (row y of a slot: width Ls of R, then G, then B; grey frames one plane), written once per frame by
+// tss_ingest. So the resolve reads contiguous 16-bit samples, compares and sums integers and decodes nothing
+// per tap; the output is encoded from L by one load of etab (integer frames: 65536 entries; float frames read the tables).
 //
 // Per output pixel x = (gx, gy) (pixel centres at integer coordinates):
 //   box  = the current frame's 3x3 per-plane min/max of L (edges replicated), widened by EPSQ; where
@@ -67,7 +67,7 @@ typedef uchar16 tss_uchar16_a1 __attribute__((aligned(1)));
 #endif
 
 // The L of sample (plane c) of pixel i of a frame in its own type: ltab for integer frames, the tables
-// (linear input: the value as it is) and the rounding of ring_of for float frames, TSS_OVER above 1.
+// (linear input: the value over TSS_RANGE) and the rounding of ring_of for float frames, TSS_OVER over range.
 inline int tss_level(__global const float *luts, __global const ushort *ltab, __global const PIXEL_T *img,
                      int i, int c)
 {

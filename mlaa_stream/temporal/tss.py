@@ -5,8 +5,9 @@ motion is known; a moving camera puts the samples of past frames at new position
 frame's pixels (the jitter a renderer's TAA adds on purpose; seed 002's T2x). The stage keeps a ring
 of the last K *input* frames (linear light in 16-bit fixed point, L = floor(clamp(lin, 0, 1) 65535 + 0.5):
 `ring_of`; linear-light float frames, `linear_input`: lin / LINEAR_RANGE; a float sample over the range is
-marked OVER and never averaged, and a pixel near one keeps the spatial output) with a map from the current frame's pixels into each of them, and resolves each output pixel
-from the samples that land inside its footprint:
+marked OVER and never averaged, and a pixel near one keeps the spatial output) with a map from the current
+frame's pixels into each of them, and resolves each output pixel from the samples that land inside its
+footprint:
 
     stage = TSSStage(bgr=True, frames=16)
     out = stage(frame_in, frame_filtered, index)     # per frame, in order; ring kept inside
