@@ -40,13 +40,15 @@ class Antialiaser:
     `lookahead=N` (files, not live capture): in `stream`, temporal supersampling also reads the N frames after
     each one (each output then waits for N more frames to be read); `aa(frame)` reads the past only.
     `post_hooks` is a list of `(frame, index) -> frame` callables (overlays), applied after it.
+    `linear_input=True`: the frames hold linear light (EXR renders, float, highlights may exceed 1): the filter
+    and the temporal stage take them as they are instead of sRGB-decoding them.
     """
 
     def __init__(self, device: str | int | None = None, *, preset: str | None = None,
                  threshold: float | None = None, metric: str | None = None, linear: bool | None = None,
                  reconstruct: bool | None = None, temporal: Temporal | bool | str | None = None,
                  temporal_frames: int | None = None, post_hooks: Sequence[PostHook] = (), in_flight: int = 2,
-                 lookahead: int = 0):
+                 lookahead: int = 0, linear_input: bool = False):
         if preset is not None and preset not in PRESETS:
             raise ValueError(f"expected a preset among {', '.join(sorted(PRESETS))}, got {preset!r}")
         kwargs = dict(PRESETS.get(preset or "default", {}))
@@ -54,6 +56,8 @@ class Antialiaser:
                            ("reconstruct", reconstruct)):
             if value is not None:
                 kwargs[key] = value
+        if linear_input:
+            kwargs["linear_input"] = True
         method = "auto" if temporal is True else temporal
         if isinstance(method, str) and method not in METHODS:
             raise ValueError(f"temporal: expected True, {', '.join(map(repr, METHODS))} or a callable, got {temporal!r}")
@@ -64,7 +68,7 @@ class Antialiaser:
         self.device_name: str = self._filter.device_name
         if isinstance(method, str):
             temporal = make_stage(method, self._filter.context, bgr=True, frames=temporal_frames,
-                                  regions_from=self._filter, lookahead=lookahead)
+                                  regions_from=self._filter, lookahead=lookahead, linear_input=linear_input)
         elif lookahead:
             raise ValueError("lookahead: needs temporal=True or one of the temporal methods with TSS")
         self.temporal = temporal or None

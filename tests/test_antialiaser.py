@@ -175,3 +175,23 @@ def test_stream_with_lookahead_reads_the_frames_ahead():
     assert all(np.array_equal(a, b) for a, b in zip(outs, expected))
     with pytest.raises(ValueError, match="lookahead"):
         Antialiaser(lookahead=2)
+
+
+def test_linear_input_frames_match_the_filter_and_stage_made_for_linear_light():
+    """Antialiaser(linear_input=True, temporal="tss") on linear-light BGR float frames with highlights over 1 gives
+    what Filter(linear_input=True) and TSSStage(linear_input=True) give, bit for bit; the highlights come back."""
+    import numpy as np
+    from mlaa_stream import Antialiaser
+    from mlaa_stream.bench.temporal import scene_pan
+    from mlaa_stream.spatial.filter import Filter
+    from mlaa_stream.temporal.tss import TSSStage
+    frames = [np.ascontiguousarray(3.0 * (f[..., ::-1].astype(np.float32) / 255.0) ** 2.2)
+              for f in scene_pan(5, 160, 90).inputs]
+    with Antialiaser(linear_input=True, temporal="tss") as aa:
+        outs = [aa(f) for f in frames]
+    stage = TSSStage(bgr=True, linear_input=True)
+    with Filter(None, bgr=True, linear_input=True) as filt:
+        want = [stage(f, filt.process(f), i) for i, f in enumerate(frames)]
+    assert all(np.array_equal(a, b) for a, b in zip(outs, want))
+    assert max(float(o.max()) for o in outs) > 2.0 and all(np.isfinite(o).all() for o in outs)
+    assert any(not np.array_equal(o, f) for o, f in zip(outs[2:], frames[2:]))
