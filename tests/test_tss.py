@@ -97,8 +97,8 @@ def test_kernel_matches_reference_on_hdr_float_frames(stage_parts, linear, dense
     h, w, fs, k = 37, 53, 2 if dense else 1, 9
     cur, spatial, ring = _random_ring(rng, h, w, 3, np.float32, k, dense, fs)
 
-    def hdr(f):   # 4x4 blocks at 1x, 3x (over 1, within the linear range) and 5x (over it)
-        gain = rng.choice([1.0, 3.0, 5.0], (h // 4 + 1, w // 4 + 1), p=[0.7, 0.15, 0.15])
+    def hdr(f):   # 4x4 blocks at 1x, 3x (over 1, within the linear range) and over the linear range
+        gain = rng.choice([1.0, 3.0, 1.25 * LINEAR_RANGE], (h // 4 + 1, w // 4 + 1), p=[0.7, 0.15, 0.15])
         return (f * gain.repeat(4, 0).repeat(4, 1)[:h, :w, None]).astype(np.float32)
     ring = [(hdr(f), m, ok) for f, m, ok in ring[:-1]]
     cur = hdr(cur)

@@ -94,8 +94,8 @@ REFINE_STEPS = 2      # ... and for each older ring frame refined in that frame
 REFINE_EVERY = 3      # older ring frames refined directly at ages 1 + a multiple of this (docs/temporal.md)
 ONE = 65535           # ring samples: linear light in 16-bit fixed point (kernels/tss.cl, ring_of)
 OVER = 65535          # a float frame's sample over the ring's range: never averaged; in-range ones top out at ONE - 1
-LINEAR_RANGE = 4      # linear-light float frames (EXR): the ring holds [0, 4] (highlights 2 stops over white; one
-                      # step 6e-5, under 0.2 of an 8-bit level of the sRGB-encoded value); above, over range
+LINEAR_RANGE = 16     # linear-light float frames (EXR): the ring holds [0, 16] (highlights 4 stops over white; one
+                      # step 2.4e-4: 0.8 of an 8-bit level of the sRGB-encoded value at black, 0.07 at mid-grey)
 LANES = 16            # pixels of a row per work item of tss_resolve_shift (int16 / float16 vectors)
 TILE_ROWS = 16        # rows of a tile of projective maps (tss_resolve_shift: one translation per tile and ring frame)
 TSS_LOCAL = 8         # CPU work-group of tss_resolve_shift along the row (docs/temporal.md: speed)
