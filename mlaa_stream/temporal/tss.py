@@ -50,9 +50,9 @@ TILE_ROWS x LANES pixels (`tile_shifts`, per-tile tables of tss_resolve_shift) a
 (`MotionRing._alignment`): docs/temporal.md, "Pans are not translations". Frames choose_model classes dense:
 moving layers (mlaa_stream.temporal.layers: a background translation and a few affine layers, each ring frame's
 map a field, refined directly, checked per region; resolved by tss_resolve with FULL_CELLS_FIELDS) where they
-explain the frame (docs/temporal.md, "Moving layers"), else the ring restarts. With dense_samples (kept for
-measurements): DIS flow current -> previous composed with each ring frame's field (remap), forward-backward
-checked; the inconsistent pixels are NaN and stay so in every older field (nothing of theirs is trusted).
+explain the frame (docs/temporal.md, "Moving layers"), else the ring restarts; with dense_samples (off by
+default: ~20 ms per ring frame at 1080p) every ring frame's map becomes a field of per-tile translations tracked
+directly from the current frame (`MotionRing._tracked_tiles`; docs/temporal.md, "Dense camera motion").
 
 Look-ahead (files: `TSSStage(lookahead=N)`, called with `future=` the next N raw frames, which
 mlaa_stream.pipeline hands in): the frames after the current one are ring entries too, each one's translation
@@ -99,7 +99,8 @@ LINEAR_RANGE = 16     # linear-light float frames (EXR): the ring holds [0, 16] 
 LANES = 16            # pixels of a row per work item of tss_resolve_shift (int16 / float16 vectors)
 TILE_ROWS = 16        # rows of a tile of projective maps (tss_resolve_shift: one translation per tile and ring frame)
 TSS_LOCAL = 8         # CPU work-group of tss_resolve_shift along the row (docs/temporal.md: speed)
-FB_ABS, FB_REL = 0.5, 0.1   # forward-backward tolerance (px at full size): FB_ABS + FB_REL |v|
+DENSE_TILE, DENSE_WIN, DENSE_FB = 16, 21, 0.3   # dense_samples: tile centres' spacing and LK window (flow px), the
+                      # forward-backward tolerance (full-size px); docs/temporal.md, "Dense camera motion"
 ALIGN_LEVEL, ALIGN_PX, ALIGN_SIGMA, ALIGN_GROW = 10.0, 0.35, 2.0, 3   # MotionRing._alignment
 PROJECTIVE_MIN = 0.25 # px (full size): a global frame uses projective maps where some ring frame's homography departs
                       # from its translation by this much at a corner of the frame (MotionRing._projective)
@@ -212,10 +213,10 @@ class MotionRing:
             if self.refine:
                 self._refine(pyr, index, d)
                 self._projective(pyr, index)
-        elif dec.model == "dense" and self.dense_samples:
-            self._dense(prev, pyr, dec)
         elif dec.model == "dense" and self.layers and (found := self._layers(prev, pyr, dec)) is not None:
             dec = found
+        elif dec.model == "dense" and self.dense_samples:
+            self._tracked_tiles(pyr)
         elif dec.model == "dense":
             # No layers explain the frame (a camera move with parallax, a mover they cannot fit). Measured
             # (docs/temporal.md, TSS section): DIS flow on 1-spp frames is ~0.1-0.2 px off and composing it
@@ -459,34 +460,54 @@ class MotionRing:
         out += np.float32(d)
         return out
 
-    def _dense(self, prev: RingEntry, pyr: Pyramid, dec: Decision) -> None:
-        fs = pyr.flow_scale
-        d = (dec.translation[0] / fs, dec.translation[1] / fs)
-        fb = self._flow(pyr.flow, prev.pyr.flow, d)                        # current -> previous, flow px
-        still = cv2.erode((cv2.absdiff(pyr.flow, prev.pyr.flow) == 0).astype(np.uint8),
-                          np.ones((3, 3), np.uint8)).astype(bool)
-        fb[still] = 0.0   # DIS spreads a mover's motion over the still background (stage.py)
-        fh, fw = fb.shape[:2]
-        gx, gy = np.meshgrid(np.arange(fw, dtype=np.float32), np.arange(fh, dtype=np.float32))
-        mx, my = gx + fb[..., 0], gy + fb[..., 1]
-        bad = np.zeros((fh, fw), bool)
-        if self.fb_check:
-            ff = self._flow(prev.pyr.flow, pyr.flow, (-d[0], -d[1]))        # previous -> current
-            ff[still] = 0.0
-            back = cv2.remap(ff, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-            err = np.hypot(fb[..., 0] + back[..., 0], fb[..., 1] + back[..., 1]) * fs
-            bad = err > FB_ABS + FB_REL * np.hypot(fb[..., 0], fb[..., 1]) * fs
-        step = fb * np.float32(fs)                                          # full-size px
-        step[bad] = np.nan
+    def _tracked_tiles(self, pyr: Pyramid) -> None:
+        """dense_samples: every ring frame's map becomes a field of per-tile translations, each tracked *directly*
+        from the current frame into that ring frame (cv2's pyramidal Lucas-Kanade at tile centres DENSE_TILE flow px
+        apart, started from the ring frame's map before this frame), forward-backward checked (fb_check; over
+        DENSE_FB full-size px: NaN, no samples), bilinear between the centres: the parallax of a dolly or an orbit, which
+        one translation and moving layers do not explain. Started from the map composed with this frame's
+        translation instead, tiles of a still background under a fast mover (the translation is the mover's pull)
+        locked to its stripes' period (docs/temporal.md, "Dense camera motion")."""
+        fs, (fh, fw) = pyr.flow_scale, pyr.flow.shape[:2]
+        half = DENSE_TILE // 2
+        gy, gx = np.mgrid[half:max(fh, half + 1):DENSE_TILE, half:max(fw, half + 1):DENSE_TILE].astype(np.float32)
+        pts = np.stack([gx.ravel(), gy.ravel()], -1)[:, None, :]
+        tx, ty = np.meshgrid((np.arange(fw, dtype=np.float32) - half) / DENSE_TILE,
+                             (np.arange(fh, dtype=np.float32) - half) / DENSE_TILE)
+        # positions in the grid padded by one tile each side (linear extrapolation: a zoom's map grows to the borders)
+        grid_at = (np.clip(tx, -1, gx.shape[1]) + 1, np.clip(ty, -1, gx.shape[0]) + 1)
+        crit = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01)
+        lk = dict(winSize=(DENSE_WIN, DENSE_WIN), maxLevel=2, criteria=crit, flags=cv2.OPTFLOW_USE_INITIAL_FLOW)
         for e in self.entries:
             if e.translated:
-                old = np.empty((fh, fw, 2), np.float32)
-                old[...] = e.shift
-            else:
-                old = e.field
-            # NaN spreads through the bilinear remap to every tap that touches an invalid texel
-            e.field = step + cv2.remap(old, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-            e.shift = None
+                prior = pts + np.float32([e.shift[0] / fs, e.shift[1] / fs])
+            else:   # the field at the tile centres (NaN: no motion known there, start from none)
+                old = e.field[gy.astype(np.int64), gx.astype(np.int64)]
+                prior = pts + (np.where(np.isfinite(old), old, np.float32(0.0)) / np.float32(fs)).reshape(-1, 1, 2)
+            found, ok, _ = cv2.calcOpticalFlowPyrLK(pyr.flow, e.pyr.flow, pts, prior.astype(np.float32), **lk)
+            off = ((found - pts)[:, 0] * np.float32(fs)).reshape(gx.shape + (2,))
+            bad = ok[:, 0] == 0
+            if self.fb_check:
+                back, ok2, _ = cv2.calcOpticalFlowPyrLK(e.pyr.flow, pyr.flow, found, pts.copy(), **lk)
+                bad |= (ok2[:, 0] == 0) | (np.hypot(*(back - pts)[:, 0].T) * fs > DENSE_FB)
+            bad = bad.reshape(gx.shape)
+            off[bad] = np.nan
+            # bilinear between the tile centres (each texel's grid position), clamped at the borders; NaN spreads to
+            # every texel whose read touches a bad tile
+            e.field = cv2.remap(_extrapolated(off), *grid_at, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+            e.shift, e.field_box, e.projective = None, None, False
+
+
+def _extrapolated(grid: np.ndarray) -> np.ndarray:
+    """A (gh, gw, c) grid padded by one row / column each side, linearly extrapolated (2 edge - next; a grid one
+    wide repeats its edge)."""
+    def pad(a: np.ndarray, axis: int) -> np.ndarray:
+        n = a.shape[axis]
+        first, last = np.take(a, [0], axis), np.take(a, [n - 1], axis)
+        if n > 1:
+            first, last = 2 * first - np.take(a, [1], axis), 2 * last - np.take(a, [n - 2], axis)
+        return np.concatenate([first, a, last], axis)
+    return np.ascontiguousarray(pad(pad(grid, 0), 1), dtype=np.float32)
 
 
 class _Refiner:
