@@ -462,12 +462,12 @@ class MotionRing:
 
     def _tracked_tiles(self, pyr: Pyramid) -> None:
         """dense_samples: every ring frame's map becomes a field of per-tile translations, each tracked *directly*
-        from the current frame into that ring frame (cv2's pyramidal Lucas-Kanade at tile centres DENSE_TILE flow px
-        apart, started from the ring frame's map before this frame), forward-backward checked (fb_check; over
-        DENSE_FB full-size px: NaN, no samples), bilinear between the centres: the parallax of a dolly or an orbit, which
-        one translation and moving layers do not explain. Started from the map composed with this frame's
-        translation instead, tiles of a still background under a fast mover (the translation is the mover's pull)
-        locked to its stripes' period (docs/temporal.md, "Dense camera motion")."""
+        from the current frame into that ring frame (cv2's pyramidal Lucas-Kanade at tile centres DENSE_TILE flow
+        px apart), forward-backward checked (fb_check; over DENSE_FB full-size px: NaN, no samples), bilinear
+        between the centres: the parallax of a dolly or an orbit, which one translation and moving layers do not
+        explain (docs/temporal.md, "Dense camera motion"). Each tile starts from the ring frame's map before this
+        frame, not composed with this frame's translation: a fast mover pulls that translation and the still
+        background's tiles would lock to its texture's period."""
         fs, (fh, fw) = pyr.flow_scale, pyr.flow.shape[:2]
         half = DENSE_TILE // 2
         gy, gx = np.mgrid[half:max(fh, half + 1):DENSE_TILE, half:max(fw, half + 1):DENSE_TILE].astype(np.float32)
@@ -492,8 +492,8 @@ class MotionRing:
                 bad |= (ok2[:, 0] == 0) | (np.hypot(*(back - pts)[:, 0].T) * fs > DENSE_FB)
             bad = bad.reshape(gx.shape)
             off[bad] = np.nan
-            # bilinear between the tile centres (each texel's grid position), clamped at the borders; NaN spreads to
-            # every texel whose read touches a bad tile
+            # bilinear between the tile centres (each texel's grid position), extrapolated one tile past the outer
+            # centres and constant beyond; NaN spreads to every texel whose read touches a bad tile
             e.field = cv2.remap(_extrapolated(off), *grid_at, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
             e.shift, e.field_box, e.projective = None, None, False
 
