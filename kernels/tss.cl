@@ -124,10 +124,11 @@ inline void tss_store(__global const float *luts, __global const ushort *ltab, _
 #endif
     __global PIXEL_T *d = dst + (size_t)i * nc;
     __global const PIXEL_T *sp = spatial + (size_t)i * nc;
-#ifdef PIXEL_IS_FLOAT
-    for (int c = 0; c < TSS_PLANES; ++c)
-        n = tss_level(luts, ltab, spatial, i, c) > TSS_TOP ? 0 : n;   // an over-range spatial pixel stands
-#endif
+    int sl[3];   // the spatial pixel's L per plane
+    for (int c = 0; c < TSS_PLANES && n >= MIN_CELLS; ++c) {
+        sl[c] = tss_level(luts, ltab, spatial, i, c);
+        n = sl[c] > TSS_TOP ? 0 : n;    // an over-range spatial pixel (float frames) stands
+    }
     if (n < MIN_CELLS) {
         for (int c = 0; c < nc; ++c)
             d[c] = sp[c];
@@ -139,7 +140,7 @@ inline void tss_store(__global const float *luts, __global const ushort *ltab, _
     PIXEL_T ev[3];
     int dead = 1;
     for (int c = 0; c < TSS_PLANES; ++c) {
-        const float s = (float)tss_level(luts, ltab, spatial, i, c);
+        const float s = (float)sl[c];
         float t = s + (mm[c] / fn - s) * a + 0.5f;
         const int q = (int)(t > 0.0f ? (t < TSS_ONE ? t : TSS_ONE) : 0.0f);
 #if !LINEAR_INPUT && !defined(PIXEL_IS_FLOAT)

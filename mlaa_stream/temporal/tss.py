@@ -468,14 +468,8 @@ class MotionRing:
         explain (docs/temporal.md, "Dense camera motion"). Each tile starts from the ring frame's map before this
         frame, not composed with this frame's translation: a fast mover pulls that translation and the still
         background's tiles would lock to its texture's period."""
-        fs, (fh, fw) = pyr.flow_scale, pyr.flow.shape[:2]
-        half = DENSE_TILE // 2
-        gy, gx = np.mgrid[half:max(fh, half + 1):DENSE_TILE, half:max(fw, half + 1):DENSE_TILE].astype(np.float32)
-        pts = np.stack([gx.ravel(), gy.ravel()], -1)[:, None, :]
-        tx, ty = np.meshgrid((np.arange(fw, dtype=np.float32) - half) / DENSE_TILE,
-                             (np.arange(fh, dtype=np.float32) - half) / DENSE_TILE)
-        # positions in the grid padded by one tile each side (linear extrapolation: a zoom's map grows to the borders)
-        grid_at = (np.clip(tx, -1, gx.shape[1]) + 1, np.clip(ty, -1, gx.shape[0]) + 1)
+        fs = pyr.flow_scale
+        gx, gy, pts, grid_at = _tile_grid(*pyr.flow.shape[:2])
         crit = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01)
         lk = dict(winSize=(DENSE_WIN, DENSE_WIN), maxLevel=2, criteria=crit, flags=cv2.OPTFLOW_USE_INITIAL_FLOW)
         for e in self.entries:
@@ -496,6 +490,22 @@ class MotionRing:
             # centres and constant beyond; NaN spreads to every texel whose read touches a bad tile
             e.field = cv2.remap(_extrapolated(off), *grid_at, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
             e.shift, e.field_box, e.projective = None, None, False
+
+
+@functools.lru_cache(maxsize=4)
+def _tile_grid(fh: int, fw: int):
+    """_tracked_tiles' tile centres on a flow-size frame (made once per size): their x and y (gh, gw), as LK points
+    (n, 1, 2), and each texel's position in the grid padded by one tile each side (cv2.remap maps)."""
+    half = DENSE_TILE // 2
+    gy, gx = np.mgrid[half:max(fh, half + 1):DENSE_TILE, half:max(fw, half + 1):DENSE_TILE].astype(np.float32)
+    pts = np.stack([gx.ravel(), gy.ravel()], -1)[:, None, :]
+    tx, ty = np.meshgrid((np.arange(fw, dtype=np.float32) - half) / DENSE_TILE,
+                         (np.arange(fh, dtype=np.float32) - half) / DENSE_TILE)
+    # linear extrapolation one tile past the outer centres (a zoom's map grows to the borders), constant beyond
+    grid_at = (np.clip(tx, -1, gx.shape[1]) + 1, np.clip(ty, -1, gx.shape[0]) + 1)
+    for a in (gx, gy, pts, *grid_at):
+        a.flags.writeable = False
+    return gx, gy, pts, grid_at
 
 
 def _extrapolated(grid: np.ndarray) -> np.ndarray:
