@@ -39,3 +39,26 @@ def test_homography_maps_recover_a_known_projective_motion():
         if t - u >= 2:
             assert spread.max() > 0.3, ((t, u), float(spread.max()))
         assert np.abs(true).max() > 0.4   # the frames do move
+
+
+def test_linear_light_frames_for_the_hdr_rows():
+    """--hdr's frames: 8-bit sRGB decoded by IEC 61966-2-1 and scaled (0 -> 0, 255 -> scale, 188 -> ~0.5 scale,
+    a code on the linear toe -> code / 12.92 / 255 scale), float32."""
+    from mlaa_stream.bench.tss_check import linear_light
+    out = linear_light(np.array([[0, 255, 188, 10]], np.uint8), 4.0)
+    assert out.dtype == np.float32
+    assert out[0, 0] == 0.0 and abs(out[0, 1] - 4.0) < 1e-6
+    assert abs(out[0, 2] - 4.0 * 0.5029) < 1e-3 and abs(out[0, 3] - 4.0 * 10 / 255 / 12.92) < 1e-6
+
+
+def test_dense_samples_is_a_tss_option():
+    """make_stage passes dense_samples to TSS (alone or before the blend) and refuses it for the blend alone."""
+    import pytest
+    from mlaa_stream.device.context import default_context
+    from mlaa_stream.temporal.methods import make_stage
+    ctx = default_context(None)
+    assert make_stage("tss", ctx, bgr=False, dense_samples=True).motion.dense_samples
+    assert make_stage("auto", ctx, bgr=False, dense_samples=True).tss.motion.dense_samples
+    assert not make_stage("tss", ctx, bgr=False).motion.dense_samples
+    with pytest.raises(ValueError, match="dense_samples"):
+        make_stage("blend", ctx, bgr=False, dense_samples=True)

@@ -25,10 +25,16 @@ the renderer's exact motion (mlaa_stream.yardstick.rendered.reprojection, from e
 "tss:homography", the same resolve with one projective map per frame pair estimated from the frames (ECC,
 homography_maps: slow, a measurement of the model, not of a fast estimator), and "<method>:exact", the method
 with the blend's dense flow replaced by the exact one (TSS as usual). How much better motion could buy.
+--dense-samples: the rows run TSS with dense_samples (per-tile tracked motion on dense frames; named
+"<method>+N:dense"). The "ms" column: the stage's wall time per frame, mean over the frames after the first.
+--hdr SCALE[,SCALE...]: rows for linear-light HDR frames (what an EXR sequence gives): the bench's pan, its input
+and truth sRGB-decoded and multiplied by SCALE, float32, the filter and the stage with linear_input; error
+removed in linear light (the temporal measures as for the other rows, FLIP and damage not scored).
 """
 from __future__ import annotations
 
 import argparse
+import time
 
 import numpy as np
 
@@ -131,6 +137,10 @@ def main(argv: list[str] | None = None) -> int:
                          f"reads, {DEFAULT_LOOKAHEAD})")
     ap.add_argument("--exact-motion", action="store_true",
                     help="oracle rows with the renderer's exact motion on the rendered shots (needs EGL)")
+    ap.add_argument("--dense-samples", action="store_true",
+                    help="TSS tracks per-tile motion on dense frames (dense_samples; slow)")
+    ap.add_argument("--hdr", default="", metavar="SCALE[,SCALE...]",
+                    help="also the pan as linear-light HDR frames times each SCALE (linear_input)")
     args = ap.parse_args(argv)
     lookaheads = [0] if args.method == "blend" else [int(v) for v in args.lookahead.split(",")]   # blend: the past
     for item in args.tss_set:
@@ -147,7 +157,7 @@ def main(argv: list[str] | None = None) -> int:
     with Filter(args.device, bgr=False, keep_regions=needs_regions(args.method)) as filt:
         print(f"device: {filt.device_name}; FLIP {'over all frames' if with_flip else 'not installed'}")
         print(f"{'scene':16s} {'method':8s} {'err.rem':>8s} {'damage':>8s} {'temp.err':>9s} {'flicker':>8s} "
-              f"{'FLIP all':>9s} {'changed':>8s} {'sampled':>8s}  models")
+              f"{'FLIP all':>9s} {'changed':>8s} {'sampled':>8s} {'ms':>6s}  models")
         for s in scenes:
             spatial, regions = [], []
             for f in s.inputs:
@@ -157,16 +167,15 @@ def main(argv: list[str] | None = None) -> int:
             a = scene_scores(spatial, s, with_flip)
             rows = [("mlaa", a, "")]
             for n in lookaheads:
-                stage = make_stage(args.method, filt.context, bgr=False, lookahead=n)
-                outs = np.stack([stage(f, sp, i, regions=r, **({"future": s.inputs[i + 1:i + 1 + n]} if n else {}))
-                                 for i, (f, sp, r) in enumerate(zip(s.inputs, spatial, regions))])
-                stage.close()
+                stage = make_stage(args.method, filt.context, bgr=False, lookahead=n, dense_samples=args.dense_samples)
+                outs, ms = run_stage(stage, s.inputs, spatial, regions, n)
+                stats = stage.stats
                 b = scene_scores(outs, s, with_flip)
                 changed = float(np.mean(np.any((outs != spatial).reshape(outs.shape[:3] + (-1,)), -1)))
-                models = "".join("p" if r.get("projective") else r["model"][0] for r in stage.stats)
-                sampled = float(np.mean([r.get("samples_share", float("nan")) for r in stage.stats]))
-                name = args.method + (f"+{n}" if n else "")
-                rows.append((name, b, f"{changed:8.3f} {sampled:8.3f}  {models}"))
+                models = "".join("p" if r.get("projective") else r["model"][0] for r in stats)
+                sampled = float(np.mean([r.get("samples_share", float("nan")) for r in stats]))
+                name = args.method + (f"+{n}" if n else "") + (":dense" if args.dense_samples else "")
+                rows.append((name, b, f"{changed:8.3f} {sampled:8.3f} {ms:6.0f}  {models}"))
                 if (b["error_removed"] < a["error_removed"] or b["damage"] > a["damage"]
                         or (with_flip and b["flip_all"] > a["flip_all"])):
                     worse.append(f"{s.name} ({name})")
@@ -187,8 +196,57 @@ def main(argv: list[str] | None = None) -> int:
             for name, r, extra in rows:
                 print(f"{s.name:16s} {name:8s} {r['error_removed']:8.3f} {r['damage']:8.4f} "
                       f"{r['temporal_error']:9.3f} {r['flicker']:8.3f} {r['flip_all']:9.5f} {extra}", flush=True)
+    for scale in [float(v) for v in args.hdr.split(",") if v]:
+        worse += hdr_rows(args, scale, lookaheads)
     print("worse than spatial only:", ", ".join(worse) if worse else "none")
     return 0
+
+
+def linear_light(frames: np.ndarray, scale: float) -> np.ndarray:
+    """8-bit sRGB frames as float32 linear light times `scale` (IEC 61966-2-1)."""
+    c = frames.astype(np.float64) / 255.0
+    return (scale * np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)).astype(np.float32)
+
+
+def hdr_rows(args, scale: float, lookaheads: list[int]) -> list[str]:
+    """--hdr: the pan as linear-light frames times `scale`, spatial only against the method (linear_input)."""
+    pan = next(s for s in generate_scenes(names=["pan"]) if s.animated)
+    inputs, truths = linear_light(pan.inputs, scale), linear_light(pan.truths, scale)
+    name, worse = f"pan x{scale:g} lin", []
+    with Filter(args.device, bgr=False, linear_input=True, keep_regions=needs_regions(args.method)) as filt:
+        spatial, regions = [], []
+        for f in inputs:
+            spatial.append(filt.process(f))
+            regions.append(filt.last_regions)
+        spatial = np.stack(spatial)
+        a = M.error_removed(spatial, inputs, truths)
+        print(f"{name:16s} {'mlaa':8s} {a:8.3f} {'-':>8s} {M.temporal_error(spatial, inputs, truths):9.3f} "
+              f"{M.flicker_ratio(spatial, truths):8.3f} {'-':>9s}", flush=True)
+        for n in lookaheads:
+            stage = make_stage(args.method, filt.context, bgr=False, lookahead=n, linear_input=True,
+                               dense_samples=args.dense_samples)
+            outs, ms = run_stage(stage, inputs, spatial, regions, n)
+            b = M.error_removed(outs, inputs, truths)
+            row = args.method + (f"+{n}" if n else "") + (":dense" if args.dense_samples else "")
+            finite = bool(np.isfinite(outs).all())
+            print(f"{name:16s} {row:8s} {b:8.3f} {'-':>8s} {M.temporal_error(outs, inputs, truths):9.3f} "
+                  f"{M.flicker_ratio(outs, truths):8.3f} {'-':>9s} finite {finite}, max {float(outs.max()):.2f} "
+                  f"(input {float(inputs.max()):.2f}), {ms:.0f} ms", flush=True)
+            if b < a or not finite:
+                worse.append(f"{name} ({row})")
+    return worse
+
+
+def run_stage(stage, inputs: np.ndarray, spatial: np.ndarray, regions: list, n: int) -> tuple[np.ndarray, float]:
+    """The stage over a scene (reading n frames ahead): its outputs and wall ms per frame (mean over the frames after
+    the first, which builds the kernels); closes it."""
+    outs, times = [], []
+    for i, (f, sp, r) in enumerate(zip(inputs, spatial, regions)):
+        t0 = time.perf_counter()
+        outs.append(stage(f, sp, i, regions=r, **({"future": inputs[i + 1:i + 1 + n]} if n else {})))
+        times.append((time.perf_counter() - t0) * 1e3)
+    stage.close()
+    return np.stack(outs), float(np.mean(times[1:] or times))
 
 
 if __name__ == "__main__":

@@ -1479,12 +1479,12 @@ class TSSThenBlend:
 
     def __init__(self, device: str | int | None = None, *, frames: int = DEFAULT_FRAMES, bgr: bool = True,
                  mode: str = "adaptive", show: str | None = None, context=None, blend_mode: str | None = None,
-                 lookahead: int = 0, linear_input: bool = False, **blend_kwargs):
-        """`blend_mode`: the blend's motion model when not `mode` ("auto": "dense"); `lookahead`: TSS's (the blend
-        reads the past only); `linear_input`: both stages' (linear-light frames)."""
+                 lookahead: int = 0, linear_input: bool = False, dense_samples: bool = False, **blend_kwargs):
+        """`blend_mode`: the blend's motion model when not `mode` ("auto": "dense"); `lookahead`, `dense_samples`:
+        TSS's (the blend reads the past only); `linear_input`: both stages' (linear-light frames)."""
         from mlaa_stream.temporal.stage import TemporalStage
         self.tss = TSSStage(device, frames=frames, bgr=bgr, mode=mode, context=context, lookahead=lookahead,
-                            linear_input=linear_input)
+                            linear_input=linear_input, dense_samples=dense_samples)
         self.blend = TemporalStage(device, bgr=bgr, mode=blend_mode or mode, show=show, context=self.tss.context,
                                    linear_input=linear_input, **blend_kwargs)
 
