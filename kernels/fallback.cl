@@ -90,6 +90,9 @@
 #ifndef FOOTPRINT_WEIGHTS
 #define FOOTPRINT_WEIGHTS 26
 #endif
+#ifndef REFINE_TABLE
+#define REFINE_TABLE 0
+#endif
 #define COUNTS 4          // bytes per tile in `counts`
 #define NOT_MEASURED 255  // counts[3] of a tile with no busy pixel or a luma range under RENDER_RANGE
 
@@ -415,24 +418,19 @@ inline int8 fp_coherence(float8 tr, float8 det2)
     return n;
 }
 
-// The footprint table for the pixels (x, y) of the tile x0 .. x1 - 1, y0 .. y1 - 1 (at most FALLBACK_TILE each way)
-// whose bit (x - x0) is set in take[y - y0] (footprint.py footprint_reference): dst holds the chain's colours and
-// receives the new ones; a pixel whose 5x5 window is one colour and which the chain left is not written. Alpha is
-// kept. The tile's windows share their reads: luma over (FALLBACK_TILE + 6)^2 pixels, colours (planar) and gradient
-// products over the middle (FALLBACK_TILE + 4)^2; the structure tensor's sums per column of 5 rows (the reference
-// sums in the same order). A row's 8 pixels are the 8 lanes of float8 arithmetic (lane o: column x0 + o; lanes past
-// x1 compute from clamped reads and store nothing): PoCL does not run a tile's pixels in vector lanes by itself.
 #define FP_LC (FALLBACK_TILE + 2 * FP_R + 2)  // luma rows / columns: y0 - 3 .. y0 + FALLBACK_TILE + 2 (x alike)
 #define FP_CC (FALLBACK_TILE + 2 * FP_R)      // colour and gradient rows / columns: y0 - 2 .. y0 + FALLBACK_TILE + 1
 #if FALLBACK_TILE != 8
 #error "footprint_tile runs a tile row as 8 lanes: FALLBACK_TILE 8"
 #endif
-RARELY_CALLED void footprint_tile(__global const PIXEL_T *src, __global const float *luts, __global const float *lin,
-                                  __global const float *table, __global PIXEL_T *dst, int x0, int x1, int y0,
-                                  int y1, int w, int h, const uint *take)
+// The tile's windows: colours (planar) over rows y0 - 2 .. y0 + FALLBACK_TILE + 1 (columns alike) and the gradient
+// products gx^2, gy^2, gx gy of linear luma (central differences) there, luma read over one pixel more each way.
+inline void fp_read_window(__global const PIXEL_T *src, __global const float *luts, __global const float *lin,
+                           int x0, int y0, int w, int h, float wr[FP_CC][FP_CC], float wg[FP_CC][FP_CC],
+                           float wb[FP_CC][FP_CC], float pxx[FP_CC][FP_CC], float pyy[FP_CC][FP_CC],
+                           float pxy[FP_CC][FP_CC])
 {
     float luma[FP_LC][FP_LC];
-    float wr[FP_CC][FP_CC], wg[FP_CC][FP_CC], wb[FP_CC][FP_CC];  // the colours, one plane per channel
     for (int j = 0; j < FP_LC; ++j) {
         const int row = clamp_to(y0 + j - FP_R - 1, h - 1) * w;
         for (int k = 0; k < FP_LC; ++k) {
@@ -445,8 +443,6 @@ RARELY_CALLED void footprint_tile(__global const PIXEL_T *src, __global const fl
             }
         }
     }
-    // gx^2, gy^2, gx gy (central differences) at every colour position
-    float pxx[FP_CC][FP_CC], pyy[FP_CC][FP_CC], pxy[FP_CC][FP_CC];
     for (int j = 1; j <= FP_CC; ++j)
         for (int k = 1; k <= FP_CC; ++k) {
             const float gx = (luma[j][k + 1] - luma[j][k - 1]) * 0.5f;
@@ -455,6 +451,60 @@ RARELY_CALLED void footprint_tile(__global const PIXEL_T *src, __global const fl
             pyy[j - 1][k - 1] = gy * gy;
             pxy[j - 1][k - 1] = gx * gy;
         }
+}
+
+// The bucket per lane (footprint.py footprint_buckets) from the window's sums of the gradient products; `changed`
+// -1 where the pixel's colour differs from the input's.
+inline int8 fp_bucket(float8 sxx, float8 syy, float8 sxy, int8 changed)
+{
+    sxx *= 1.0f / (FP_N * FP_N);
+    syy *= 1.0f / (FP_N * FP_N);
+    sxy *= 1.0f / (FP_N * FP_N);
+    const float8 u = sxx - syy, v = 2.0f * sxy, tr = sxx + syy, det2 = u * u + v * v;
+    const float8 au = fabs(u), av = fabs(v);
+    // octant of the doubled angle: the gradient's orientation in eight bins of pi / 8
+    // (select(a, b, c): b where c, else a)
+    const int8 lower = select(select((int8)5, (int8)4, av < au), select((int8)7, (int8)6, av > au), u >= 0.0f);
+    const int8 upper = select(select((int8)3, (int8)2, av > au), select((int8)1, (int8)0, av < au), u > 0.0f);
+    const int8 octant = select(lower, upper, v >= 0.0f);
+    return ((octant * FP_STRENGTHS + fp_strength(tr, det2)) * FP_COHERENCES + fp_coherence(tr, det2)) * 2 - changed;
+}
+
+// Row y's new colours (mix space, lane o: column x0 + o) stored where bit o of `take` is set and keep[o] is 0;
+// alpha is kept.
+inline void fp_store_row(__global PIXEL_T *dst, __global const float *luts, int x0, int x1, int y, int w, uint take,
+                         const int *keep, const float *outr, const float *outg, const float *outb)
+{
+    for (int x = x0; x < x1; ++x) {
+        const int o = x - x0;
+        if (!((take >> o) & 1u) || keep[o]) continue;
+        const float3 c = fxaa_encode(luts, (float3)(outr[o], outg[o], outb[o]));
+        const int i = IDX(x, y, w);
+#if CHANNELS == 1
+        dst[i] = to_pixel(c.x);
+#else
+        __global PIXEL_T *p = dst + (size_t)i * CHANNELS;
+        p[0] = to_pixel(c.x);
+        p[1] = to_pixel(c.y);
+        p[2] = to_pixel(c.z);
+#endif
+    }
+}
+
+// The footprint table for the pixels (x, y) of the tile x0 .. x1 - 1, y0 .. y1 - 1 (at most FALLBACK_TILE each way)
+// whose bit (x - x0) is set in take[y - y0] (footprint.py footprint_reference): dst holds the chain's colours and
+// receives the new ones; a pixel whose 5x5 window is one colour and which the chain left is not written. Alpha is
+// kept. The tile's windows share their reads: luma over (FALLBACK_TILE + 6)^2 pixels, colours (planar) and gradient
+// products over the middle (FALLBACK_TILE + 4)^2; the structure tensor's sums per column of 5 rows (the reference
+// sums in the same order). A row's 8 pixels are the 8 lanes of float8 arithmetic (lane o: column x0 + o; lanes past
+// x1 compute from clamped reads and store nothing): PoCL does not run a tile's pixels in vector lanes by itself.
+RARELY_CALLED void footprint_tile(__global const PIXEL_T *src, __global const float *luts, __global const float *lin,
+                                  __global const float *table, __global PIXEL_T *dst, int x0, int x1, int y0,
+                                  int y1, int w, int h, const uint *take)
+{
+    float wr[FP_CC][FP_CC], wg[FP_CC][FP_CC], wb[FP_CC][FP_CC];  // the colours, one plane per channel
+    float pxx[FP_CC][FP_CC], pyy[FP_CC][FP_CC], pxy[FP_CC][FP_CC];
+    fp_read_window(src, luts, lin, x0, y0, w, h, wr, wg, wb, pxx, pyy, pxy);
     for (int y = y0; y < y1; ++y) {
         const int r = y - y0;  // the row's windows: rows r .. r + 4 of the colours and of the products
         if (!take[r]) continue;
@@ -501,18 +551,7 @@ RARELY_CALLED void footprint_tile(__global const PIXEL_T *src, __global const fl
             syy += LOAD_FLOAT8_PRIVATE(&cyy[k]);
             sxy += LOAD_FLOAT8_PRIVATE(&cxy[k]);
         }
-        sxx *= 1.0f / (FP_N * FP_N);
-        syy *= 1.0f / (FP_N * FP_N);
-        sxy *= 1.0f / (FP_N * FP_N);
-        const float8 u = sxx - syy, v = 2.0f * sxy, tr = sxx + syy, det2 = u * u + v * v;
-        const float8 au = fabs(u), av = fabs(v);
-        // octant of the doubled angle: the gradient's orientation in eight bins of pi / 8
-        // (select(a, b, c): b where c, else a)
-        const int8 lower = select(select((int8)5, (int8)4, av < au), select((int8)7, (int8)6, av > au), u >= 0.0f);
-        const int8 upper = select(select((int8)3, (int8)2, av > au), select((int8)1, (int8)0, av < au), u > 0.0f);
-        const int8 octant = select(lower, upper, v >= 0.0f);
-        const int8 bucket = ((octant * FP_STRENGTHS + fp_strength(tr, det2)) * FP_COHERENCES
-                             + fp_coherence(tr, det2)) * 2 - changed;
+        const int8 bucket = fp_bucket(sxx, syy, sxy, changed);
         const int8 base = bucket * FOOTPRINT_WEIGHTS;
         const float8 cr = LOAD_FLOAT8_PRIVATE(chr), cg = LOAD_FLOAT8_PRIVATE(chgr), cb = LOAD_FLOAT8_PRIVATE(chb);
         float8 qr = mr, qg = mg, qb = mb;
@@ -545,20 +584,140 @@ RARELY_CALLED void footprint_tile(__global const PIXEL_T *src, __global const fl
         STORE_FLOAT8_PRIVATE(fmin(fmax(qg, lg), hg), outg);
         STORE_FLOAT8_PRIVATE(fmin(fmax(qb, lb), hb), outb);
         STORE_INT8_PRIVATE(flat & ~changed, keep);
-        for (int x = x0; x < x1; ++x) {
-            const int o = x - x0;
-            if (!((take[r] >> o) & 1u) || keep[o]) continue;
-            const float3 c = fxaa_encode(luts, (float3)(outr[o], outg[o], outb[o]));
-            const int i = IDX(x, y, w);
-#if CHANNELS == 1
-            dst[i] = to_pixel(c.x);
-#else
-            __global PIXEL_T *p = dst + (size_t)i * CHANNELS;
-            p[0] = to_pixel(c.x);
-            p[1] = to_pixel(c.y);
-            p[2] = to_pixel(c.z);
+        fp_store_row(dst, luts, x0, x1, y, w, take[r], keep, outr, outg, outb);
+    }
+}
 #endif
+
+#if REFINE_TABLE
+#define RF_IN (FALLBACK_TILE + 2)  // the input's colours: rows y0 - 1 .. y0 + FALLBACK_TILE (columns alike)
+
+// The refine table (spatial/refine.py refine_reference) for the pixels of the tile whose bit is set in take[y - y0]:
+// `mid` holds the colours after the footprint table, dst receives the new ones (alpha kept). The same reads and
+// float8 lanes as footprint_tile, on mid's window, plus the input's 3x3 window.
+RARELY_CALLED void refine_tile(__global const PIXEL_T *src, __global const float *luts, __global const float *lin,
+                               __global const float *table, __global const PIXEL_T *mid, __global PIXEL_T *dst,
+                               int x0, int x1, int y0, int y1, int w, int h, const uint *take)
+{
+    float wr[FP_CC][FP_CC], wg[FP_CC][FP_CC], wb[FP_CC][FP_CC];
+    float pxx[FP_CC][FP_CC], pyy[FP_CC][FP_CC], pxy[FP_CC][FP_CC];
+    fp_read_window(mid, luts, lin, x0, y0, w, h, wr, wg, wb, pxx, pyy, pxy);
+    float ir[RF_IN][RF_IN], ig[RF_IN][RF_IN], ib[RF_IN][RF_IN];
+    for (int j = 0; j < RF_IN; ++j) {
+        const int row = clamp_to(y0 + j - 1, h - 1) * w;
+        for (int k = 0; k < RF_IN; ++k) {
+            const float3 c = mix_channels(src, luts, lin, row + clamp_to(x0 + k - 1, w - 1));
+            ir[j][k] = c.x;
+            ig[j][k] = c.y;
+            ib[j][k] = c.z;
         }
+    }
+    const int keep[FALLBACK_TILE] = {0, 0, 0, 0, 0, 0, 0, 0};
+    for (int y = y0; y < y1; ++y) {
+        const int r = y - y0;
+        if (!take[r]) continue;
+        float8 sxx = 0.0f, syy = 0.0f, sxy = 0.0f;  // per column of 5 rows, then across (footprint_tile's order)
+        for (int k = 0; k < FP_N; ++k) {
+            float8 c8xx = 0.0f, c8yy = 0.0f, c8xy = 0.0f;
+            for (int j = r; j < r + FP_N; ++j) {
+                c8xx += LOAD_FLOAT8_PRIVATE(&pxx[j][k]);
+                c8yy += LOAD_FLOAT8_PRIVATE(&pyy[j][k]);
+                c8xy += LOAD_FLOAT8_PRIVATE(&pxy[j][k]);
+            }
+            sxx += c8xx;
+            syy += c8yy;
+            sxy += c8xy;
+        }
+        int chg[FALLBACK_TILE];
+        for (int o = 0; o < FALLBACK_TILE; ++o)
+            chg[o] = -px_differs(src, mid, IDX(min(x0 + o, w - 1), y, w));
+        const int8 base = fp_bucket(sxx, syy, sxy, LOAD_INT8_PRIVATE(chg)) * REFINE_WEIGHTS;
+        const float8 mr = LOAD_FLOAT8_PRIVATE(&wr[r + FP_R][FP_R]), mg = LOAD_FLOAT8_PRIVATE(&wg[r + FP_R][FP_R]),
+                     mb = LOAD_FLOAT8_PRIVATE(&wb[r + FP_R][FP_R]);
+        float8 qr = mr, qg = mg, qb = mb;
+        for (int j = 0; j < FP_N; ++j)
+            for (int k = 0; k < FP_N; ++k) {
+                const float8 wt = GATHER8(table + j * FP_N + k, base);
+                qr += (LOAD_FLOAT8_PRIVATE(&wr[r + j][k]) - mr) * wt;
+                qg += (LOAD_FLOAT8_PRIVATE(&wg[r + j][k]) - mg) * wt;
+                qb += (LOAD_FLOAT8_PRIVATE(&wb[r + j][k]) - mb) * wt;
+            }
+        for (int j = 0; j < 3; ++j)
+            for (int k = 0; k < 3; ++k) {
+                const float8 wt = GATHER8(table + FP_N * FP_N + j * 3 + k, base);
+                qr += (LOAD_FLOAT8_PRIVATE(&ir[r + j][k]) - mr) * wt;
+                qg += (LOAD_FLOAT8_PRIVATE(&ig[r + j][k]) - mg) * wt;
+                qb += (LOAD_FLOAT8_PRIVATE(&ib[r + j][k]) - mb) * wt;
+            }
+        float8 lr = mr, lg = mg, lb = mb, hr = mr, hg = mg, hb = mb;  // no overshoot: mid's 3x3 range
+        for (int j = r + FP_R - 1; j <= r + FP_R + 1; ++j)
+            for (int k = FP_R - 1; k <= FP_R + 1; ++k) {
+                const float8 tr_ = LOAD_FLOAT8_PRIVATE(&wr[j][k]), tg = LOAD_FLOAT8_PRIVATE(&wg[j][k]),
+                             tb = LOAD_FLOAT8_PRIVATE(&wb[j][k]);
+                lr = fmin(lr, tr_);
+                lg = fmin(lg, tg);
+                lb = fmin(lb, tb);
+                hr = fmax(hr, tr_);
+                hg = fmax(hg, tg);
+                hb = fmax(hb, tb);
+            }
+        float outr[FALLBACK_TILE], outg[FALLBACK_TILE], outb[FALLBACK_TILE];
+        STORE_FLOAT8_PRIVATE(fmin(fmax(qr, lr), hr), outr);
+        STORE_FLOAT8_PRIVATE(fmin(fmax(qg, lg), hg), outg);
+        STORE_FLOAT8_PRIVATE(fmin(fmax(qb, lb), hb), outb);
+        fp_store_row(dst, luts, x0, x1, y, w, take[r], keep, outr, outg, outb);
+    }
+}
+
+// Strong local contrast (refine.py gate): a colour channel of the input spans REFINE_GATE of full scale or more
+// over the pixel's 3x3 window, in stored values.
+inline int strong_contrast(__global const PIXEL_T *src, int x, int y, int w, int h)
+{
+    for (int c = 0; c < COLOUR_CH; ++c) {
+        PIXEL_T lo = src[IDX(x, y, w) * CHANNELS + c], hi = lo;
+        for (int j = max(y - 1, 0); j <= min(y + 1, h - 1); ++j)
+            for (int k = max(x - 1, 0); k <= min(x + 1, w - 1); ++k) {
+                const PIXEL_T v = src[IDX(k, j, w) * CHANNELS + c];
+                lo = min(lo, v);
+                hi = max(hi, v);
+            }
+#ifdef PIXEL_IS_FLOAT
+        if ((hi - lo) * (1.0f / PIXEL_MAX) >= REFINE_GATE) return 1;
+#else
+        if ((int)hi - (int)lo >= REFINE_GATE_LEVELS) return 1;
+#endif
+    }
+    return 0;
+}
+
+// After fxaa_fallback: every pixel of a render region with strong local contrast takes the refine table, but for
+// those the chain changed on a straight edge run; `mid` is a copy of fxaa_fallback's output. One work item per
+// SEGMENT / FALLBACK_TILE tiles of a tile row, as fxaa_fallback.
+__kernel void refine_fallback(__global const PIXEL_T *src, __global const float *luts, __global const float *lin,
+                              __global const uchar *edges, __global const ushort2 *hdist,
+                              __global const ushort2 *vdist, __global const uchar *render,
+                              __global const float *table, __global const PIXEL_T *mid, __global PIXEL_T *dst,
+                              const int w, const int h, const int tiles_x, const int tiles_y)
+{
+    const int t0 = get_global_id(0) * (SEGMENT / FALLBACK_TILE), ty = get_global_id(1);
+    if (t0 >= tiles_x || ty >= tiles_y) return;
+    const int t1 = min(t0 + SEGMENT / FALLBACK_TILE, tiles_x);
+    for (int tx = t0; tx < t1; ++tx) {
+#if FALLBACK_MIN_CHANGED > 0
+        if (!(RENDER_REGIONS && render[ty * tiles_x + tx])) continue;
+#endif
+        const int x0 = tx * FALLBACK_TILE, y0 = ty * FALLBACK_TILE;
+        const int x1 = min(x0 + FALLBACK_TILE, w), y1 = min(y0 + FALLBACK_TILE, h);
+        uint take[FALLBACK_TILE], any = 0;
+        for (int y = y0; y < y1; ++y) {
+            take[y - y0] = 0;
+            for (int x = x0; x < x1; ++x)
+                if (!(ON_LONG_RUN(edges, hdist, vdist, x, y, w) && px_differs(src, mid, IDX(x, y, w)))
+                    && strong_contrast(src, x, y, w, h))
+                    take[y - y0] |= 1u << (x - x0);
+            any |= take[y - y0];
+        }
+        if (any) refine_tile(src, luts, lin, table, mid, dst, x0, x1, y0, y1, w, h, take);
     }
 }
 #endif

@@ -139,8 +139,8 @@ def test_kernel_with_known_tables():
     frame = shaded_polygons(5, 96, 128)
     regions = regions_of(frame)
     assert regions.mean() > 0.9
-    with Filter(footprint_table=None) as n, Filter(footprint_table=identity_table()) as i, \
-            Filter(footprint_table=tent_table()) as t, Filter() as d:
+    with Filter(footprint_table=None) as n, Filter(footprint_table=identity_table(), refine_table=None) as i, \
+            Filter(footprint_table=tent_table(), refine_table=None) as t, Filter() as d:
         chain, ident, tent_out, default = n.process(frame), i.process(frame), t.process(frame), d.process(frame)
     assert np.abs(ident.astype(int) - chain).max() <= 1  # decode / encode round trip of the kept colour
     lin = srgb_to_linear(frame.astype(np.float64) / 255)

@@ -1,12 +1,15 @@
-"""Fit the footprint table (mlaa_stream/spatial/footprint.py) on rendered training views and write it.
+"""Fit the footprint table (mlaa_stream/spatial/footprint.py), or the refine table after it (--refine,
+mlaa_stream/spatial/refine.py), on rendered training views and write it.
 
-    python -m mlaa_stream.bench.footprint_fit [--out mlaa_stream/data/footprint_table.npy] [--sizes 640x360,960x540]
+    python -m mlaa_stream.bench.footprint_fit [--refine] [--out FILE] [--sizes 640x360,960x540]
 
 The training views are cameras in the rendered world (yardstick/rendered.py) that neither a bench scene nor a
 held-out view (bench/rendered_views.py) uses, so both stay out of sample. Each view is rendered like the bench's
 (1 spp at pixel centres; truth: 8x8 jittered samples averaged in linear light) at each size, run through the
 default Filter without the table, and every pixel the table takes (fallback.table_pixels), in all eight flips
-and transposes of the frame, is a sample of the least-squares fit. Needs EGL
+and transposes of the frame, is a sample of the least-squares fit. --refine: the default Filter with the shipped
+footprint table and no refine table gives each view's first stage; its pixels are the table's with strong
+local contrast (refine.gate). Needs EGL
 (`pip install 'mlaa-stream[bench]'`); 2-3 minutes here.
 """
 from __future__ import annotations
@@ -20,6 +23,7 @@ from mlaa_stream.device.formats import frame_format
 from mlaa_stream.spatial.fallback import long_runs, region_pixels, table_pixels, to_mix_space
 from mlaa_stream.spatial.filter import Filter
 from mlaa_stream.spatial.footprint import TABLE_FILE, fit_table
+from mlaa_stream.spatial.refine import REFINE_FILE, fit_refine, gate
 from mlaa_stream.yardstick import metrics as M
 from mlaa_stream.yardstick.rendered import Camera, Renderer, _context, egl_available
 
@@ -46,10 +50,13 @@ def dihedral(a: np.ndarray, k: int) -> np.ndarray:
     return np.ascontiguousarray(a)
 
 
-def training_frames(sizes: list[tuple[int, int]]) -> list[tuple[np.ndarray, ...]]:
-    """(input, truth, chain without the table, mask of the pixels the table takes) per training view and size."""
+def training_frames(sizes: list[tuple[int, int]], refine: bool = False) -> list[tuple[np.ndarray, ...]]:
+    """(input, truth, chain without the table, mask of the pixels the table takes) per training view and size;
+    `refine`: (input, truth, chain with the table and without the refine table, mask of the pixels the refine
+    table takes)."""
     frames = []
-    with Filter(footprint_table=None, keep_regions=True) as chain, Filter(fallback="off") as mlaa:
+    first = {"refine_table": None} if refine else {"footprint_table": None}
+    with Filter(keep_regions=True, **first) as chain, Filter(fallback="off") as mlaa:
         for width, height in sizes:
             renderer = Renderer(_context(), width, height)
             try:
@@ -61,6 +68,8 @@ def training_frames(sizes: list[tuple[int, int]]) -> list[tuple[np.ndarray, ...]
                     runs = long_runs(passes["edges"], passes["hdist"], passes["vdist"])
                     mask = table_pixels(region_pixels(chain.last_regions, height, width), runs,
                                         np.any(out != inp, -1))
+                    if refine:
+                        mask &= gate(inp, 255.0)
                     frames.append((inp, truth, out, mask))
             finally:
                 renderer.release()
@@ -68,7 +77,8 @@ def training_frames(sizes: list[tuple[int, int]]) -> list[tuple[np.ndarray, ...]
 
 
 def samples(frames):
-    """fit_table's samples: every training frame in its eight orientations, in mix space (linear light)."""
+    """fit_table's (and fit_refine's) samples: every training frame in its eight orientations, in mix space (linear
+    light)."""
     for inp, truth, out, mask in frames:
         fmt = frame_format(inp)
         for k in range(8):
@@ -80,21 +90,23 @@ def samples(frames):
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m mlaa_stream.bench.footprint_fit", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--out", default=str(Path(__file__).resolve().parents[1] / "data" / TABLE_FILE),
-                    help="where to write the table (default: the package's)")
+    ap.add_argument("--refine", action="store_true", help="fit the refine table (after the shipped footprint table)")
+    ap.add_argument("--out", default=None, help="where to write the table (default: the package's)")
     ap.add_argument("--sizes", default=DEFAULT_SIZES, help="WxH,... (default %(default)s)")
     args = ap.parse_args(argv)
     ok, why = egl_available()
     if not ok:
         ap.error(f"the training views need a headless OpenGL context: {why}")
     sizes = [tuple(int(v) for v in s.split("x")) for s in args.sizes.split(",")]
-    frames = training_frames(sizes)
-    table = fit_table(samples(frames))
-    np.save(args.out, table)
-    print(f"wrote {args.out}: {table.shape[0]} buckets x {table.shape[1]} weights")
-    with Filter(footprint_table=table) as f:  # in-sample check: the held-out views are rendered_views' job
-        for (inp, truth, out, _), name in zip(frames, [f"{n}_{w}" for w, _ in sizes for n in TRAIN_VIEWS]):
-            print(f"{name:16s} error removed without the table {M.error_removed(out, inp, truth):.3f}, "
+    out = args.out or str(Path(__file__).resolve().parents[1] / "data" / (REFINE_FILE if args.refine else TABLE_FILE))
+    frames = training_frames(sizes, args.refine)
+    table = fit_refine(samples(frames)) if args.refine else fit_table(samples(frames))
+    np.save(out, table)
+    print(f"wrote {out}: {table.shape[0]} buckets x {table.shape[1]} weights")
+    check = {"refine_table": table} if args.refine else {"footprint_table": table, "refine_table": None}
+    with Filter(**check) as f:  # in-sample check: the held-out views are rendered_views' job
+        for (inp, truth, first, _), name in zip(frames, [f"{n}_{w}" for w, _ in sizes for n in TRAIN_VIEWS]):
+            print(f"{name:16s} error removed without the table {M.error_removed(first, inp, truth):.3f}, "
                   f"with it {M.error_removed(f.process(inp), inp, truth):.3f}")
     return 0
 

@@ -13,6 +13,7 @@ from mlaa_stream.device.context import Context
 from mlaa_stream.device.formats import LUT_SIZE, FrameFormat, frame_format
 from mlaa_stream.spatial.footprint import BUCKETS, WEIGHTS, footprint_reference, table_of
 from mlaa_stream.spatial.fxaa import _MAX, fxaa_defines, fxaa_mix_reference, luma_reference
+from mlaa_stream.spatial.refine import REFINE_GATE, REFINE_WEIGHTS, gate, refine_reference, refine_table_of
 
 SEGMENT = 64  # pixels of a tile band per work item of count_changed (a multiple of FALLBACK_TILE)
 
@@ -38,10 +39,11 @@ COUNTS, NOT_MEASURED = 4, 255  # bytes per tile of count_changed's output; k = 3
 SHOW_DIM = 0.35  # Filter(show="regions"): pixels outside render regions keep this share of their colour
 
 def fallback_defines(fmt: FrameFormat, linear: bool, linear_input: bool, everywhere: bool = False,
-                     regions: bool = True, table: bool = True) -> dict:
+                     regions: bool = True, table: bool = True, refine: bool = False) -> dict:
     """Defines for kernels/fallback.cl (FXAA's own at the shader's defaults, plus FALLBACK_*); `everywhere`
     drops the region and colour tests: every edge-bordering pixel is eligible; `regions` False: no render
-    regions (no tile is one unless `everywhere`); `table` False: render regions without the footprint table."""
+    regions (no tile is one unless `everywhere`); `table` False: render regions without the footprint table;
+    `refine`: the refine table's kernel (spatial/refine.py) is built too."""
     return {**fxaa_defines(fmt, linear=linear, linear_input=linear_input), "SEGMENT": SEGMENT,
             "FALLBACK_TILE": FALLBACK_TILE, "FALLBACK_MIN_CHANGED": 0 if everywhere else FALLBACK_MIN_CHANGED,
             "FALLBACK_COLOURS": 0 if everywhere else FALLBACK_COLOURS, "FALLBACK_SAME": float(FALLBACK_SAME / 255.0),
@@ -51,16 +53,22 @@ def fallback_defines(fmt: FrameFormat, linear: bool, linear_input: bool, everywh
             "FALLBACK_KEEP_RUN": 0 if everywhere else FALLBACK_KEEP_RUN, "RENDER_RADIUS": RENDER_RADIUS,
             "RENDER_MIN": RENDER_MIN, "RENDER_DIV": RENDER_DIV, "RENDER_NEAR_PCT": RENDER_NEAR_PCT,
             "RENDER_RANGE": float(RENDER_RANGE), "RENDER_REGIONS": int(regions),
-            "FOOTPRINT_TABLE": int(table), "FOOTPRINT_BUCKETS": BUCKETS, "FOOTPRINT_WEIGHTS": WEIGHTS}
+            "FOOTPRINT_TABLE": int(table), "FOOTPRINT_BUCKETS": BUCKETS, "FOOTPRINT_WEIGHTS": WEIGHTS,
+            "REFINE_TABLE": int(refine), "REFINE_WEIGHTS": REFINE_WEIGHTS, "REFINE_GATE": float(REFINE_GATE),
+            "REFINE_GATE_LEVELS": int(np.ceil(REFINE_GATE * _MAX[np.dtype(fmt.dtype)]))}
 
 
 class FallbackPass:
     """The kernels of kernels/fallback.cl and their per-tile buffers, for one frame format."""
 
     def __init__(self, context: Context, fmt: FrameFormat, linear: bool, linear_input: bool,
-                 everywhere: bool = False, regions: bool = True, table: np.ndarray | None = None):
-        """`table`: the footprint table for render regions (spatial/footprint.py; None: none)."""
-        defs = fallback_defines(fmt, linear, linear_input, everywhere, regions, table is not None)
+                 everywhere: bool = False, regions: bool = True, table: np.ndarray | None = None,
+                 refine: np.ndarray | None = None):
+        """`table`: the footprint table for render regions (spatial/footprint.py; None: none); `refine`: the
+        refine table after it (spatial/refine.py; None: none; only with a footprint table)."""
+        refine = refine if table is not None and (regions or everywhere) else None
+        defs = fallback_defines(fmt, linear, linear_input, everywhere, regions, table is not None,
+                                refine is not None)
         self.fmt = fmt
         self.everywhere = everywhere
         self.regions = regions and not everywhere
@@ -76,10 +84,18 @@ class FallbackPass:
         self._table = context.buffer(4 * BUCKETS * WEIGHTS)  # the footprint table (unused without one)
         if table is not None:
             cl.enqueue_copy(context.queue, self._table, np.ascontiguousarray(table, np.float32), is_blocking=True)
+        self._refine = None
+        if refine is not None:  # its kernel reads a copy of fxaa_fallback's output (mid) and writes dst
+            self._refine = context.kernel("fallback", "refine_fallback", defs)
+            self._refine_table = context.buffer(4 * BUCKETS * REFINE_WEIGHTS)
+            cl.enqueue_copy(context.queue, self._refine_table, np.ascontiguousarray(refine, np.float32),
+                            is_blocking=True)
+            self._mid = context.buffer(fmt.nbytes)
 
     def device_bytes(self) -> int:
-        """Bytes of the per-frame buffers (the footprint table's 15 KB do not grow with the frame)."""
-        return self._counts.size + self._row_sums.size + self._render.size
+        """Bytes of the per-frame buffers (the tables' 15 and 20 KB do not grow with the frame)."""
+        mid = self._mid.size if self._refine is not None else 0
+        return self._counts.size + self._row_sums.size + self._render.size + mid
 
     def read_regions(self, queue, wait_for: list) -> tuple[np.ndarray, cl.Event | None]:
         """The last frame's render-region flag per tile, (tiles_y, tiles_x) uint8, and the event of its copy to
@@ -109,7 +125,13 @@ class FallbackPass:
         events["fallback"] = self._fxaa(queue, (-(-self.fmt.width // SEGMENT), self.tiles[1]), None,
                                         src, luts, lin, edges, hdist, vdist, self._counts, self._render,
                                         self._table, dst, W, H, tx, ty, wait_for=wait_for)
-        return events["fallback"]
+        if self._refine is None:
+            return events["fallback"]
+        events["refine_copy"] = cl.enqueue_copy(queue, self._mid, dst, wait_for=[events["fallback"]])
+        events["refine"] = self._refine(queue, (-(-self.fmt.width // SEGMENT), self.tiles[1]), None,
+                                        src, luts, lin, edges, hdist, vdist, self._render, self._refine_table,
+                                        self._mid, dst, W, H, tx, ty, wait_for=[events["refine_copy"]])
+        return events["refine"]
 
 
 def region_pixels(tiles: np.ndarray, height: int, width: int) -> np.ndarray:
@@ -224,11 +246,13 @@ def from_mix_space(c: np.ndarray, like: np.ndarray, fmt: FrameFormat, decode: bo
 def fallback_reference(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray, hdist: np.ndarray,
                        vdist: np.ndarray, *, linear: bool = True, linear_input: bool = False, bgr: bool = False,
                        everywhere: bool = False, regions: bool = True,
-                       table: np.ndarray | None | str = "default") -> np.ndarray:
+                       table: np.ndarray | None | str = "default",
+                       refine: np.ndarray | None | str = "default") -> np.ndarray:
     """What kernels/fallback.cl makes of `mlaa_out`, the MLAA passes' output of `src` with edge buffer
     `edges` ((h, w) uint8, EDGE_BOTTOM 1 | EDGE_RIGHT 2) and line distances `hdist`, `vdist`, in numpy.
-    `table`: the footprint table ("default": the shipped one; None: none)."""
-    table = table_of(table)
+    `table`: the footprint table ("default": the shipped one; None: none); `refine`: the refine table after it
+    (spatial/refine.py; the same)."""
+    table, refine = table_of(table), refine_table_of(refine)
     fmt, a, mlaa, borders, changed, rgb = _frame_masks(src, mlaa_out, edges, bgr)
     f32 = np.float32
     h, w = fmt.height, fmt.width
@@ -281,6 +305,12 @@ def fallback_reference(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray,
         new, kept = footprint_reference(m_src, mix_space(chain), now_changed, table)
         take = table_pixels(rendered, runs, now_changed) & ~kept
         out[take] = stored(new, chain)[take]
+        if refine is not None and (regions or everywhere):
+            mid = out.reshape(a.shape).copy()
+            mid_changed = np.any(mid != a, -1)
+            new = refine_reference(m_src, mix_space(mid), mid_changed, refine)
+            take = table_pixels(rendered, runs, mid_changed) & gate(a, _MAX[fmt.dtype])
+            out[take] = stored(new, mid)[take]
     return out.reshape(np.asarray(mlaa_out).shape)
 
 

@@ -244,7 +244,8 @@ class Filter:
                  aa_guard: bool = True, bridge: bool = True, grain_guard: bool = True,
                  subpixel: float = SUBPIXEL, fallback: str | bool = "auto", fast: bool = False,
                  preset: str | None = None, context: Context | None = None, show: str | None = None,
-                 keep_regions: bool = False, footprint_table: np.ndarray | None | str = "default"):
+                 keep_regions: bool = False, footprint_table: np.ndarray | None | str = "default",
+                 refine_table: np.ndarray | None | str = "default"):
         """`preset`: one of PRESETS; its options replace the keywords of the same names. `fallback`: FXAA
         for the pixels MLAA leaves (spatial/fallback.py): "auto" where the neighbourhood shows 1-spp
         aliasing and is no flat-colour art, with the footprint table in render regions; "edges" the same
@@ -253,7 +254,8 @@ class Filter:
         `keep_regions`: read every frame's render-region flags back (PendingFrame.regions, `last_regions`)
         for a temporal stage with where="render". `footprint_table`: the fallback's filter table for render
         regions (spatial/footprint.py): "default" the shipped one, None none (render regions then get FXAA
-        only), or a (BUCKETS, WEIGHTS) float32 array."""
+        only), or a (BUCKETS, WEIGHTS) float32 array. `refine_table`: the second table after it
+        (spatial/refine.py): "default", None or a (BUCKETS, REFINE_WEIGHTS) array; only with a footprint table."""
         if show not in SHOWS:
             raise ValueError(f"show: expected None or 'regions', got {show!r}")
         self.show = show
@@ -288,7 +290,10 @@ class Filter:
             raise ValueError(f"fallback: expected one of {', '.join(FALLBACK_MODES)}, got {fallback!r}")
         self.fallback = "off" if self.fast else fallback
         from mlaa_stream.spatial.footprint import table_of
+        from mlaa_stream.spatial.refine import refine_table_of
         self.footprint_table = table_of(footprint_table)
+        refine = refine_table_of(refine_table)
+        self.refine_table = refine if self.footprint_table is not None else None
         self.context = context or default_context(device)
         dev = self.context.device
         props = cl.command_queue_properties.OUT_OF_ORDER_EXEC_MODE_ENABLE
@@ -343,7 +348,8 @@ class Filter:
             from mlaa_stream.spatial.fallback import FallbackPass
             self._fallback = FallbackPass(self.context, fmt, self.options.linear, self.options.linear_input,
                                           everywhere=self.fallback == "everywhere",
-                                          regions=self.fallback != "edges", table=self.footprint_table)
+                                          regions=self.fallback != "edges", table=self.footprint_table,
+                                          refine=self.refine_table)
         return bufs
 
     # -- per frame ---------------------------------------------------------------------------

@@ -163,13 +163,24 @@ def fit_table(samples, ridge: float = 1e-4, min_samples: int = 200) -> np.ndarra
     chain and truth (h, w, 3) float32, `changed` and `mask` (the pixels to fit, render regions) (h, w) bool. A
     bucket with fewer than `min_samples` channel samples keeps the chain's colour; `ridge` (relative to the
     bucket's mean feature energy) keeps rare buckets' filters tame."""
-    a = np.zeros((BUCKETS, WEIGHTS, WEIGHTS))
-    v = np.zeros((BUCKETS, WEIGHTS))
+    def rows():
+        for lin, chain, changed, truth, mask in samples:
+            yield footprint_features(lin, chain)[mask], (truth - lin)[mask], footprint_buckets(lin, changed)[mask]
+    return solve_buckets(rows(), WEIGHTS, identity_table(), ridge, min_samples)
+
+
+def solve_buckets(rows, weights: int, fallback: np.ndarray, ridge: float = 1e-4, min_samples: int = 200
+                  ) -> np.ndarray:
+    """One ridge least-squares filter per bucket: `rows` yields (features (n, 3, weights), targets (n, 3),
+    buckets (n,)) per frame, every colour channel a sample; a bucket with fewer than `min_samples` channel samples
+    keeps its row of `fallback` (BUCKETS, weights)."""
+    a = np.zeros((BUCKETS, weights, weights))
+    v = np.zeros((BUCKETS, weights))
     count = np.zeros(BUCKETS, np.int64)
-    for lin, chain, changed, truth, mask in samples:
-        x = footprint_features(lin, chain)[mask].reshape(-1, WEIGHTS).astype(np.float64)
-        y = (truth - lin)[mask].reshape(-1).astype(np.float64)
-        b = np.repeat(footprint_buckets(lin, changed)[mask], lin.shape[-1])
+    for feats, target, buckets in rows:
+        x = feats.reshape(-1, weights).astype(np.float64)
+        y = target.reshape(-1).astype(np.float64)
+        b = np.repeat(buckets, feats.shape[1])
         order = np.argsort(b, kind="stable")
         starts = np.searchsorted(b[order], np.arange(BUCKETS + 1))
         for q in range(BUCKETS):
@@ -178,9 +189,9 @@ def fit_table(samples, ridge: float = 1e-4, min_samples: int = 200) -> np.ndarra
                 a[q] += x[s].T @ x[s]
                 v[q] += x[s].T @ y[s]
                 count[q] += len(s)
-    table = identity_table()
+    table = np.array(fallback, np.float32)
     for q in range(BUCKETS):
         if count[q] >= min_samples:
-            reg = ridge * np.trace(a[q]) / WEIGHTS + 1e-12
-            table[q] = np.linalg.solve(a[q] + reg * np.eye(WEIGHTS), v[q])
+            reg = ridge * np.trace(a[q]) / weights + 1e-12
+            table[q] = np.linalg.solve(a[q] + reg * np.eye(weights), v[q])
     return table
