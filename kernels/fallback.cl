@@ -592,13 +592,46 @@ RARELY_CALLED void footprint_tile(__global const PIXEL_T *src, __global const fl
 #if REFINE_TABLE
 #define RF_IN (FALLBACK_TILE + 2)  // the input's colours: rows y0 - 1 .. y0 + FALLBACK_TILE (columns alike)
 
-// The refine table (spatial/refine.py refine_reference) for the pixels of the tile whose bit is set in take[y - y0]:
-// `mid` holds the colours after the footprint table, dst receives the new ones (alpha kept). The same reads and
-// float8 lanes as footprint_tile, on mid's window, plus the input's 3x3 window.
+// The refine table (spatial/refine.py refine_reference) for the pixels of the tile whose bit is set in take[y - y0]
+// and whose input has strong local contrast (refine.py gate: a colour channel spans REFINE_GATE of full scale or
+// more over the 3x3 window, in stored values): `mid` holds the colours after the footprint table, dst receives the
+// new ones (alpha kept). The same reads and float8 lanes as footprint_tile, on mid's window, plus the input's 3x3.
 RARELY_CALLED void refine_tile(__global const PIXEL_T *src, __global const float *luts, __global const float *lin,
                                __global const float *table, __global const PIXEL_T *mid, __global PIXEL_T *dst,
-                               int x0, int x1, int y0, int y1, int w, int h, const uint *take)
+                               int x0, int x1, int y0, int y1, int w, int h, uint *take)
 {
+    // the gate, from the input's stored values over the tile and one pixel around it (read once per channel)
+    uint open[FALLBACK_TILE] = {0, 0, 0, 0, 0, 0, 0, 0}, any = 0;
+    for (int c = 0; c < COLOUR_CH; ++c) {
+        float v[RF_IN][RF_IN];
+        for (int j = 0; j < RF_IN; ++j) {
+            const int row = clamp_to(y0 + j - 1, h - 1) * w;
+            for (int k = 0; k < RF_IN; ++k)
+                v[j][k] = (float)src[(size_t)(row + clamp_to(x0 + k - 1, w - 1)) * CHANNELS + c];
+        }
+        for (int r = 0; r < y1 - y0; ++r) {  // a row's 8 pixels as float8 lanes (scalar fmin / fmax are calls)
+            float8 a = LOAD_FLOAT8_PRIVATE(&v[r][0]), b = a;
+            for (int j = r; j < r + 3; ++j)
+                for (int k = 0; k < 3; ++k) {
+                    const float8 t = LOAD_FLOAT8_PRIVATE(&v[j][k]);
+                    a = fmin(a, t);
+                    b = fmax(b, t);
+                }
+            int wide[FALLBACK_TILE];
+#ifdef PIXEL_IS_FLOAT
+            STORE_INT8_PRIVATE((b - a) * (1.0f / PIXEL_MAX) >= REFINE_GATE, wide);
+#else
+            STORE_INT8_PRIVATE(b - a >= (float)REFINE_GATE_LEVELS, wide);  // exact: integers in float
+#endif
+            for (int o = 0; o < FALLBACK_TILE; ++o)
+                open[r] |= (uint)(wide[o] & 1) << o;
+        }
+    }
+    for (int r = 0; r < y1 - y0; ++r) {
+        take[r] &= open[r];
+        any |= take[r];
+    }
+    if (!any) return;
     float wr[FP_CC][FP_CC], wg[FP_CC][FP_CC], wb[FP_CC][FP_CC];
     float pxx[FP_CC][FP_CC], pyy[FP_CC][FP_CC], pxy[FP_CC][FP_CC];
     fp_read_window(mid, luts, lin, x0, y0, w, h, wr, wg, wb, pxx, pyy, pxy);
@@ -669,27 +702,6 @@ RARELY_CALLED void refine_tile(__global const PIXEL_T *src, __global const float
     }
 }
 
-// Strong local contrast (refine.py gate): a colour channel of the input spans REFINE_GATE of full scale or more
-// over the pixel's 3x3 window, in stored values.
-inline int strong_contrast(__global const PIXEL_T *src, int x, int y, int w, int h)
-{
-    for (int c = 0; c < COLOUR_CH; ++c) {
-        PIXEL_T lo = src[IDX(x, y, w) * CHANNELS + c], hi = lo;
-        for (int j = max(y - 1, 0); j <= min(y + 1, h - 1); ++j)
-            for (int k = max(x - 1, 0); k <= min(x + 1, w - 1); ++k) {
-                const PIXEL_T v = src[IDX(k, j, w) * CHANNELS + c];
-                lo = min(lo, v);
-                hi = max(hi, v);
-            }
-#ifdef PIXEL_IS_FLOAT
-        if ((hi - lo) * (1.0f / PIXEL_MAX) >= REFINE_GATE) return 1;
-#else
-        if ((int)hi - (int)lo >= REFINE_GATE_LEVELS) return 1;
-#endif
-    }
-    return 0;
-}
-
 // After fxaa_fallback: every pixel of a render region with strong local contrast takes the refine table, but for
 // those the chain changed on a straight edge run; `mid` is a copy of fxaa_fallback's output. One work item per
 // SEGMENT / FALLBACK_TILE tiles of a tile row, as fxaa_fallback.
@@ -712,8 +724,7 @@ __kernel void refine_fallback(__global const PIXEL_T *src, __global const float 
         for (int y = y0; y < y1; ++y) {
             take[y - y0] = 0;
             for (int x = x0; x < x1; ++x)
-                if (!(ON_LONG_RUN(edges, hdist, vdist, x, y, w) && px_differs(src, mid, IDX(x, y, w)))
-                    && strong_contrast(src, x, y, w, h))
+                if (!(ON_LONG_RUN(edges, hdist, vdist, x, y, w) && px_differs(src, mid, IDX(x, y, w))))
                     take[y - y0] |= 1u << (x - x0);
             any |= take[y - y0];
         }
