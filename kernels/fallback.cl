@@ -609,7 +609,7 @@ RARELY_CALLED void refine_tile(__global const PIXEL_T *src, __global const float
             for (int k = 0; k < RF_IN; ++k)
                 v[j][k] = (float)src[(size_t)(row + clamp_to(x0 + k - 1, w - 1)) * CHANNELS + c];
         }
-        for (int r = 0; r < y1 - y0; ++r) {  // a row's 8 pixels as float8 lanes (scalar fmin / fmax are calls)
+        for (int r = 0; r < y1 - y0; ++r) {  // a row's 8 pixels as float8 lanes (one by one: 3x the time)
             float8 a = LOAD_FLOAT8_PRIVATE(&v[r][0]), b = a;
             for (int j = r; j < r + 3; ++j)
                 for (int k = 0; k < 3; ++k) {
