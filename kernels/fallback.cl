@@ -470,6 +470,44 @@ inline int8 fp_bucket(float8 sxx, float8 syy, float8 sxy, int8 changed)
     return ((octant * FP_STRENGTHS + fp_strength(tr, det2)) * FP_COHERENCES + fp_coherence(tr, det2)) * 2 - changed;
 }
 
+// q += sum over the 5x5 window of row r's lanes (rows r .. r + 4) of (window - m) * the table's weight of the tap,
+// per channel, in the reference's order.
+inline void fp_window_sum(float wr[FP_CC][FP_CC], float wg[FP_CC][FP_CC], float wb[FP_CC][FP_CC], int r,
+                          __global const float *table, int8 base, float8 mr, float8 mg, float8 mb, float8 *qr,
+                          float8 *qg, float8 *qb)
+{
+    for (int j = 0; j < FP_N; ++j)
+        for (int k = 0; k < FP_N; ++k) {
+            const float8 wt = GATHER8(table + j * FP_N + k, base);
+            *qr += (LOAD_FLOAT8_PRIVATE(&wr[r + j][k]) - mr) * wt;
+            *qg += (LOAD_FLOAT8_PRIVATE(&wg[r + j][k]) - mg) * wt;
+            *qb += (LOAD_FLOAT8_PRIVATE(&wb[r + j][k]) - mb) * wt;
+        }
+}
+
+// No overshoot: q clamped, per lane, to the range of the window's 3x3 around row r's pixels and the colour c, into
+// the out arrays.
+inline void fp_clamp_row(float wr[FP_CC][FP_CC], float wg[FP_CC][FP_CC], float wb[FP_CC][FP_CC], int r, float8 cr,
+                         float8 cg, float8 cb, float8 qr, float8 qg, float8 qb, float *outr, float *outg,
+                         float *outb)
+{
+    float8 lr = cr, lg = cg, lb = cb, hr = cr, hg = cg, hb = cb;
+    for (int j = r + FP_R - 1; j <= r + FP_R + 1; ++j)
+        for (int k = FP_R - 1; k <= FP_R + 1; ++k) {
+            const float8 tr_ = LOAD_FLOAT8_PRIVATE(&wr[j][k]), tg = LOAD_FLOAT8_PRIVATE(&wg[j][k]),
+                         tb = LOAD_FLOAT8_PRIVATE(&wb[j][k]);
+            lr = fmin(lr, tr_);
+            lg = fmin(lg, tg);
+            lb = fmin(lb, tb);
+            hr = fmax(hr, tr_);
+            hg = fmax(hg, tg);
+            hb = fmax(hb, tb);
+        }
+    STORE_FLOAT8_PRIVATE(fmin(fmax(qr, lr), hr), outr);
+    STORE_FLOAT8_PRIVATE(fmin(fmax(qg, lg), hg), outg);
+    STORE_FLOAT8_PRIVATE(fmin(fmax(qb, lb), hb), outb);
+}
+
 // Row y's new colours (mix space, lane o: column x0 + o) stored where bit o of `take` is set and keep[o] is 0;
 // alpha is kept.
 inline void fp_store_row(__global PIXEL_T *dst, __global const float *luts, int x0, int x1, int y, int w, uint take,
@@ -555,34 +593,14 @@ RARELY_CALLED void footprint_tile(__global const PIXEL_T *src, __global const fl
         const int8 base = bucket * FOOTPRINT_WEIGHTS;
         const float8 cr = LOAD_FLOAT8_PRIVATE(chr), cg = LOAD_FLOAT8_PRIVATE(chgr), cb = LOAD_FLOAT8_PRIVATE(chb);
         float8 qr = mr, qg = mg, qb = mb;
-        for (int j = 0; j < FP_N; ++j)
-            for (int k = 0; k < FP_N; ++k) {
-                const float8 wt = GATHER8(table + j * FP_N + k, base);
-                qr += (LOAD_FLOAT8_PRIVATE(&wr[r + j][k]) - mr) * wt;
-                qg += (LOAD_FLOAT8_PRIVATE(&wg[r + j][k]) - mg) * wt;
-                qb += (LOAD_FLOAT8_PRIVATE(&wb[r + j][k]) - mb) * wt;
-            }
+        fp_window_sum(wr, wg, wb, r, table, base, mr, mg, mb, &qr, &qg, &qb);
         const float8 wc = GATHER8(table + FP_N * FP_N, base);
         qr += (cr - mr) * wc;
         qg += (cg - mg) * wc;
         qb += (cb - mb) * wc;
-        float8 lr = cr, lg = cg, lb = cb, hr = cr, hg = cg, hb = cb;  // no overshoot: the 3x3 range and the chain
-        for (int j = r + FP_R - 1; j <= r + FP_R + 1; ++j)
-            for (int k = FP_R - 1; k <= FP_R + 1; ++k) {
-                const float8 tr_ = LOAD_FLOAT8_PRIVATE(&wr[j][k]), tg = LOAD_FLOAT8_PRIVATE(&wg[j][k]),
-                             tb = LOAD_FLOAT8_PRIVATE(&wb[j][k]);
-                lr = fmin(lr, tr_);
-                lg = fmin(lg, tg);
-                lb = fmin(lb, tb);
-                hr = fmax(hr, tr_);
-                hg = fmax(hg, tg);
-                hb = fmax(hb, tb);
-            }
         float outr[FALLBACK_TILE], outg[FALLBACK_TILE], outb[FALLBACK_TILE];
         int keep[FALLBACK_TILE];
-        STORE_FLOAT8_PRIVATE(fmin(fmax(qr, lr), hr), outr);
-        STORE_FLOAT8_PRIVATE(fmin(fmax(qg, lg), hg), outg);
-        STORE_FLOAT8_PRIVATE(fmin(fmax(qb, lb), hb), outb);
+        fp_clamp_row(wr, wg, wb, r, cr, cg, cb, qr, qg, qb, outr, outg, outb);  // and the chain's colour
         STORE_INT8_PRIVATE(flat & ~changed, keep);
         fp_store_row(dst, luts, x0, x1, y, w, take[r], keep, outr, outg, outb);
     }
@@ -668,13 +686,7 @@ RARELY_CALLED void refine_tile(__global const PIXEL_T *src, __global const float
         const float8 mr = LOAD_FLOAT8_PRIVATE(&wr[r + FP_R][FP_R]), mg = LOAD_FLOAT8_PRIVATE(&wg[r + FP_R][FP_R]),
                      mb = LOAD_FLOAT8_PRIVATE(&wb[r + FP_R][FP_R]);
         float8 qr = mr, qg = mg, qb = mb;
-        for (int j = 0; j < FP_N; ++j)
-            for (int k = 0; k < FP_N; ++k) {
-                const float8 wt = GATHER8(table + j * FP_N + k, base);
-                qr += (LOAD_FLOAT8_PRIVATE(&wr[r + j][k]) - mr) * wt;
-                qg += (LOAD_FLOAT8_PRIVATE(&wg[r + j][k]) - mg) * wt;
-                qb += (LOAD_FLOAT8_PRIVATE(&wb[r + j][k]) - mb) * wt;
-            }
+        fp_window_sum(wr, wg, wb, r, table, base, mr, mg, mb, &qr, &qg, &qb);
         for (int j = 0; j < 3; ++j)
             for (int k = 0; k < 3; ++k) {
                 const float8 wt = GATHER8(table + FP_N * FP_N + j * 3 + k, base);
@@ -682,22 +694,8 @@ RARELY_CALLED void refine_tile(__global const PIXEL_T *src, __global const float
                 qg += (LOAD_FLOAT8_PRIVATE(&ig[r + j][k]) - mg) * wt;
                 qb += (LOAD_FLOAT8_PRIVATE(&ib[r + j][k]) - mb) * wt;
             }
-        float8 lr = mr, lg = mg, lb = mb, hr = mr, hg = mg, hb = mb;  // no overshoot: mid's 3x3 range
-        for (int j = r + FP_R - 1; j <= r + FP_R + 1; ++j)
-            for (int k = FP_R - 1; k <= FP_R + 1; ++k) {
-                const float8 tr_ = LOAD_FLOAT8_PRIVATE(&wr[j][k]), tg = LOAD_FLOAT8_PRIVATE(&wg[j][k]),
-                             tb = LOAD_FLOAT8_PRIVATE(&wb[j][k]);
-                lr = fmin(lr, tr_);
-                lg = fmin(lg, tg);
-                lb = fmin(lb, tb);
-                hr = fmax(hr, tr_);
-                hg = fmax(hg, tg);
-                hb = fmax(hb, tb);
-            }
         float outr[FALLBACK_TILE], outg[FALLBACK_TILE], outb[FALLBACK_TILE];
-        STORE_FLOAT8_PRIVATE(fmin(fmax(qr, lr), hr), outr);
-        STORE_FLOAT8_PRIVATE(fmin(fmax(qg, lg), hg), outg);
-        STORE_FLOAT8_PRIVATE(fmin(fmax(qb, lb), hb), outb);
+        fp_clamp_row(wr, wg, wb, r, mr, mg, mb, qr, qg, qb, outr, outg, outb);  // mid's 3x3 range
         fp_store_row(dst, luts, x0, x1, y, w, take[r], keep, outr, outg, outb);
     }
 }

@@ -49,27 +49,41 @@ TABLE_FILE = "footprint_table.npy"
 
 def as_table(table: np.ndarray) -> np.ndarray:
     """`table` checked: a (BUCKETS, WEIGHTS) array of finite numbers, as float32."""
+    return checked_table(table, WEIGHTS, "footprint table")
+
+
+def checked_table(table: np.ndarray, weights: int, what: str) -> np.ndarray:
+    """`table` checked: a (BUCKETS, weights) array of finite numbers, as float32; `what` names it in the error."""
     t = np.asarray(table)
-    if t.shape != (BUCKETS, WEIGHTS) or not np.all(np.isfinite(t)):
-        raise ValueError(f"footprint table: expected a ({BUCKETS}, {WEIGHTS}) array of finite numbers, got "
-                         f"shape {t.shape}")
+    if t.shape != (BUCKETS, weights) or not np.all(np.isfinite(t)):
+        raise ValueError(f"{what}: expected a ({BUCKETS}, {weights}) array of finite numbers, got shape {t.shape}")
     return np.ascontiguousarray(t, np.float32)
+
+
+def shipped_table(file: str) -> np.ndarray:
+    """A table file of the package's data folder, as stored."""
+    with resources.files("mlaa_stream").joinpath("data", file).open("rb") as f:
+        return np.load(f)
 
 
 def load_table() -> np.ndarray:
     """The shipped table, (BUCKETS, WEIGHTS) float32."""
-    with resources.files("mlaa_stream").joinpath("data", TABLE_FILE).open("rb") as f:
-        return as_table(np.load(f))
+    return as_table(shipped_table(TABLE_FILE))
 
 
 def table_of(spec: np.ndarray | str | None) -> np.ndarray | None:
     """A table argument (Filter's `footprint_table`, fallback_reference's `table`) resolved: "default" the shipped
     table, None none, an array checked by as_table."""
+    return resolved(spec, "footprint_table", load_table, as_table)
+
+
+def resolved(spec, name: str, load, check):
+    """A table argument resolved: "default" -> load(), None -> None, an array -> check(array)."""
     if isinstance(spec, str):
         if spec != "default":
-            raise ValueError(f"footprint_table: expected 'default', None or an array, got {spec!r}")
-        return load_table()
-    return None if spec is None else as_table(spec)
+            raise ValueError(f"{name}: expected 'default', None or an array, got {spec!r}")
+        return load()
+    return None if spec is None else check(spec)
 
 
 def identity_table() -> np.ndarray:

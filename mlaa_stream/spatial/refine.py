@@ -27,11 +27,10 @@ refine_tile.
 """
 from __future__ import annotations
 
-from importlib import resources
-
 import numpy as np
 
-from mlaa_stream.spatial.footprint import BUCKETS, TABLE_RADIUS, TAPS, _shifted, footprint_buckets, solve_buckets
+from mlaa_stream.spatial.footprint import (BUCKETS, TABLE_RADIUS, TAPS, _shifted, checked_table, footprint_buckets,
+                                           resolved, shipped_table, solve_buckets)
 
 INPUT_TAPS = 9                         # the input's 3x3 window
 REFINE_WEIGHTS = TAPS + INPUT_TAPS     # 25 taps of mid's 5x5 window, then the input's 3x3
@@ -41,27 +40,18 @@ REFINE_FILE = "footprint_refine.npy"
 
 def as_refine_table(table: np.ndarray) -> np.ndarray:
     """`table` checked: a (BUCKETS, REFINE_WEIGHTS) array of finite numbers, as float32."""
-    t = np.asarray(table)
-    if t.shape != (BUCKETS, REFINE_WEIGHTS) or not np.all(np.isfinite(t)):
-        raise ValueError(f"refine table: expected a ({BUCKETS}, {REFINE_WEIGHTS}) array of finite numbers, got "
-                         f"shape {t.shape}")
-    return np.ascontiguousarray(t, np.float32)
+    return checked_table(table, REFINE_WEIGHTS, "refine table")
 
 
 def load_refine_table() -> np.ndarray:
     """The shipped refine table, (BUCKETS, REFINE_WEIGHTS) float32."""
-    with resources.files("mlaa_stream").joinpath("data", REFINE_FILE).open("rb") as f:
-        return as_refine_table(np.load(f))
+    return as_refine_table(shipped_table(REFINE_FILE))
 
 
 def refine_table_of(spec: np.ndarray | str | None) -> np.ndarray | None:
     """Filter's `refine_table` / fallback_reference's `refine` resolved: "default" the shipped table, None none, an
     array checked by as_refine_table."""
-    if isinstance(spec, str):
-        if spec != "default":
-            raise ValueError(f"refine_table: expected 'default', None or an array, got {spec!r}")
-        return load_refine_table()
-    return None if spec is None else as_refine_table(spec)
+    return resolved(spec, "refine_table", load_refine_table, as_refine_table)
 
 
 def refine_features(inp: np.ndarray, mid: np.ndarray) -> np.ndarray:
