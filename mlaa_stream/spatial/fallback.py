@@ -305,7 +305,7 @@ def fallback_reference(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray,
         new, kept = footprint_reference(m_src, mix_space(chain), now_changed, table)
         take = table_pixels(rendered, runs, now_changed) & ~kept
         out[take] = stored(new, chain)[take]
-        if refine is not None and (regions or everywhere):
+        if refine is not None:
             mid = out.reshape(a.shape).copy()
             mid_changed = np.any(mid != a, -1)
             new = refine_reference(m_src, mix_space(mid), mid_changed, refine)

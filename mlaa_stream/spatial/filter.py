@@ -292,8 +292,7 @@ class Filter:
         from mlaa_stream.spatial.footprint import table_of
         from mlaa_stream.spatial.refine import refine_table_of
         self.footprint_table = table_of(footprint_table)
-        refine = refine_table_of(refine_table)
-        self.refine_table = refine if self.footprint_table is not None else None
+        self.refine_table = refine_table_of(refine_table)   # FallbackPass runs it only after a footprint table
         self.context = context or default_context(device)
         dev = self.context.device
         props = cl.command_queue_properties.OUT_OF_ORDER_EXEC_MODE_ENABLE

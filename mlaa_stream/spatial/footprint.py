@@ -99,6 +99,17 @@ def _shifted(a: np.ndarray, dy: int, dx: int) -> np.ndarray:
     return a[np.clip(np.arange(h) + dy, 0, h - 1)][:, np.clip(np.arange(w) + dx, 0, w - 1)]
 
 
+def range3(a: np.ndarray, also: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Per pixel and channel, the (min, max) of `a` over the 3x3 window (reads clamped at the frame's edges) and of
+    `also` at the pixel itself when given."""
+    lo, hi = (a, a) if also is None else (also, also)
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            s = _shifted(a, dy, dx)
+            lo, hi = np.minimum(lo, s), np.maximum(hi, s)
+    return lo, hi
+
+
 def footprint_buckets(lin: np.ndarray, changed: np.ndarray) -> np.ndarray:
     """Bucket per pixel, (h, w) int32, of `lin` ((h, w, 3) float32 RGB in mix space) and `changed` ((h, w) bool:
     the chain changed the pixel)."""
@@ -159,11 +170,7 @@ def footprint_reference(lin: np.ndarray, chain: np.ndarray, changed: np.ndarray,
     pred = lin.copy()
     for k in range(WEIGHTS):  # the kernel's order of summation
         pred += feats[..., k] * weights[:, :, None, k]
-    lo, hi = chain.copy(), chain.copy()
-    for dy in (-1, 0, 1):
-        for dx in (-1, 0, 1):
-            s = _shifted(lin, dy, dx)
-            lo, hi = np.minimum(lo, s), np.maximum(hi, s)
+    lo, hi = range3(lin, chain)
     flat = np.ones(changed.shape, bool)
     r = TABLE_RADIUS
     for dy in range(-r, r + 1):

@@ -30,7 +30,7 @@ from __future__ import annotations
 import numpy as np
 
 from mlaa_stream.spatial.footprint import (BUCKETS, TABLE_RADIUS, TAPS, _shifted, checked_table, footprint_buckets,
-                                           resolved, shipped_table, solve_buckets)
+                                           range3, resolved, shipped_table, solve_buckets)
 
 INPUT_TAPS = 9                         # the input's 3x3 window
 REFINE_WEIGHTS = TAPS + INPUT_TAPS     # 25 taps of mid's 5x5 window, then the input's 3x3
@@ -69,12 +69,7 @@ def gate(stored: np.ndarray, pixel_max: float) -> np.ndarray:
     compares)."""
     a = np.asarray(stored)
     ch = a.shape[-1] if a.ndim == 3 else 1
-    x = a.reshape(a.shape[:2] + (ch,))[..., :min(ch, 3)]
-    lo, hi = x.copy(), x.copy()
-    for dy in (-1, 0, 1):
-        for dx in (-1, 0, 1):
-            s = _shifted(x, dy, dx)
-            lo, hi = np.minimum(lo, s), np.maximum(hi, s)
+    lo, hi = range3(a.reshape(a.shape[:2] + (ch,))[..., :min(ch, 3)])
     if np.issubdtype(a.dtype, np.integer):
         return np.any(hi.astype(np.int64) - lo >= int(np.ceil(REFINE_GATE * pixel_max)), -1)
     f32 = np.float32
@@ -90,11 +85,7 @@ def refine_reference(inp: np.ndarray, mid: np.ndarray, changed: np.ndarray, tabl
     pred = mid.copy()
     for k in range(REFINE_WEIGHTS):  # the kernel's order of summation
         pred += feats[..., k] * weights[:, :, None, k]
-    lo, hi = mid.copy(), mid.copy()
-    for dy in (-1, 0, 1):
-        for dx in (-1, 0, 1):
-            s = _shifted(mid, dy, dx)
-            lo, hi = np.minimum(lo, s), np.maximum(hi, s)
+    lo, hi = range3(mid)
     return np.clip(pred, lo, hi).astype(f32)
 
 
