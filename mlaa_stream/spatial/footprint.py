@@ -160,16 +160,22 @@ def footprint_features(lin: np.ndarray, chain: np.ndarray) -> np.ndarray:
     return np.stack(cols, -1).astype(np.float32)
 
 
+def table_sum(base: np.ndarray, feats: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """base + sum_k feats[..., k] * weights[..., k] per channel, in the kernels' order of summation (k ascending):
+    `base` (h, w, 3), `feats` (h, w, 3, n), `weights` (h, w, n) -- each pixel's table row."""
+    pred = base.copy()
+    for k in range(feats.shape[-1]):
+        pred += feats[..., k] * weights[:, :, None, k]
+    return pred
+
+
 def footprint_reference(lin: np.ndarray, chain: np.ndarray, changed: np.ndarray, table: np.ndarray
                         ) -> tuple[np.ndarray, np.ndarray]:
     """What footprint_tile makes of every pixel: (new colour (h, w, 3) float32 in mix space, kept (h, w) bool:
     one-colour windows the chain left, which keep their stored value)."""
     f32 = np.float32
     feats = footprint_features(lin, chain)
-    weights = table[footprint_buckets(lin, changed)]
-    pred = lin.copy()
-    for k in range(WEIGHTS):  # the kernel's order of summation
-        pred += feats[..., k] * weights[:, :, None, k]
+    pred = table_sum(lin, feats, table[footprint_buckets(lin, changed)])
     lo, hi = range3(lin, chain)
     flat = np.ones(changed.shape, bool)
     r = TABLE_RADIUS

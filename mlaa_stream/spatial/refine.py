@@ -30,7 +30,7 @@ from __future__ import annotations
 import numpy as np
 
 from mlaa_stream.spatial.footprint import (BUCKETS, TABLE_RADIUS, TAPS, _shifted, checked_table, footprint_buckets,
-                                           range3, resolved, shipped_table, solve_buckets)
+                                           range3, resolved, shipped_table, solve_buckets, table_sum)
 
 INPUT_TAPS = 9                         # the input's 3x3 window
 REFINE_WEIGHTS = TAPS + INPUT_TAPS     # 25 taps of mid's 5x5 window, then the input's 3x3
@@ -81,10 +81,7 @@ def refine_reference(inp: np.ndarray, mid: np.ndarray, changed: np.ndarray, tabl
     RGB, `changed` (h, w) bool: mid differs from the input."""
     f32 = np.float32
     feats = refine_features(inp, mid)
-    weights = table[footprint_buckets(mid, changed)]
-    pred = mid.copy()
-    for k in range(REFINE_WEIGHTS):  # the kernel's order of summation
-        pred += feats[..., k] * weights[:, :, None, k]
+    pred = table_sum(mid, feats, table[footprint_buckets(mid, changed)])
     lo, hi = range3(mid)
     return np.clip(pred, lo, hi).astype(f32)
 
