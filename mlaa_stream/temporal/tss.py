@@ -114,6 +114,9 @@ BAND_GROWTH = 0.2     # with 3 ring ages or more checked in a frame, a band is o
                       # with age by this share of BAND_TOL per age (_bands_growing; docs/temporal.md, "The band
                       # check on a pure pan"); 0 = every band over BAND_TOL is off
 BAND_FAR = 0.75       # px (flow): a band departing this much is off at any age
+TRAJECTORY_MIN = 6    # translated ring frames for MotionRing._fit_trajectory (fewer: the fit is noisier than they)
+TRAJECTORY_DEGREE = 2  # the fit's degree in age: 2 follows a camera easing in or out (0.005-0.02 px / frame^2)
+TRAJECTORY_TOL = 0.1  # px (full size): residual RMS per axis up to which the fit replaces the ring's estimates
 REFINE_POINTS = 16384 # _Refiner: points in all (the largest gradients of each tile, at most a whole tile)
 
 
@@ -134,6 +137,8 @@ class RingEntry:
     bg: tuple[float, float] = (0.0, 0.0)   # the background's translation where the map is a field of layers
     field_box: tuple[slice, slice] | None = None   # where a field of layers departs from `bg` (NaN aside);
                                                    # None: anywhere
+    estimate: tuple[float, float] | None = None   # the measured translation where `shift` is the trajectory's
+                                                   # line (MotionRing._fit_trajectory); None: `shift` is measured
 
     @property
     def translated(self) -> bool:
@@ -204,6 +209,8 @@ class MotionRing:
         elif dec.model == "global":
             d = dec.translation
             for e in self.entries:
+                if e.estimate is not None:   # the line is redrawn from the measurements, never from itself
+                    e.shift, e.estimate = e.estimate, None
                 if e.shift is not None:
                     e.shift = (e.shift[0] + d[0], e.shift[1] + d[1])
                     e.projective = False   # decided anew below
@@ -212,6 +219,7 @@ class MotionRing:
                     e.bg = (e.bg[0] + d[0], e.bg[1] + d[1])
             if self.refine:
                 self._refine(pyr, index, d)
+                self._fit_trajectory(index)
                 self._projective(pyr, index)
         elif dec.model == "dense" and self.layers and (found := self._layers(prev, pyr, dec)) is not None:
             dec = found
@@ -363,6 +371,27 @@ class MotionRing:
             self.band_slopes = _band_slopes(checks)
             for e, age, (bad, dy, ty, dx, tx) in checks:
                 e.valid = ref.valid_of(bad, *_bands_growing(self.band_slopes, age, dy, ty, dx, tx))
+
+    def _fit_trajectory(self, index: int) -> None:
+        """A smooth camera path through the ring's translations: each direct estimate of a 1-spp frame is off by how
+        its edges' quantised positions happen to match (0.05-0.1 px, independent of age), and the current frame's
+        own quantisation offsets all of them alike. shift(age) = c + v age + w age^2 (TRAJECTORY_DEGREE) by least
+        squares; c is that common offset (the current frame's pixel centres are where its samples are, by
+        definition), so the maps become v age + w age^2. Only where the fit explains the estimates (residual RMS
+        per axis at most TRAJECTORY_TOL); the measured estimates are kept in `estimate` and the next global frame
+        starts from them, so the fit never feeds itself. docs/temporal.md, "The ring's trajectory"."""
+        todo = [e for e in self.entries if e.shift is not None]
+        if len(todo) < TRAJECTORY_MIN or len(todo) < len(self.entries):
+            return
+        ages = np.array([index - e.index for e in todo], np.float64)
+        xy = np.array([e.shift for e in todo], np.float64)
+        a = np.stack([ages ** p for p in range(TRAJECTORY_DEGREE + 1)], 1)
+        coef = np.linalg.lstsq(a, xy, rcond=None)[0]
+        if np.sqrt(((xy - a @ coef) ** 2).mean(0)).max() > TRAJECTORY_TOL:
+            return
+        line = a[:, 1:] @ coef[1:]   # the offset c dropped
+        for e, s in zip(todo, line):
+            e.estimate, e.shift = e.shift, (float(s[0]), float(s[1]))
 
     def _projective(self, pyr: Pyramid, index: int) -> None:
         """A camera that turns about its eye moves the image by a homography, which one translation fits only
