@@ -548,8 +548,8 @@ def test_dense_samples_track_a_zoom_tile_by_tile(stage_parts):
 def test_trajectory_fit_drops_the_common_offset():
     """Known answers for MotionRing._fit_trajectory: translations c + v age + w age^2 + alternating noise (a 1-spp
     frame's quantised edges) become the least-squares polynomial without its offset c; a shaking camera (residual
-    over TRAJECTORY_TOL) and a ring holding a dense field keep their estimates; the next global frame starts
-    from the measured estimates, not from the line."""
+    over TRAJECTORY_TOL) and a ring holding a dense field keep their estimates; look-ahead frames join the fit
+    from the ring's measured estimates."""
     from mlaa_stream.temporal.tss import TRAJECTORY_DEGREE, TRAJECTORY_TOL, MotionRing, RingEntry
     rng = np.random.default_rng(3)
     index, ages = 20, np.arange(15, 0, -1)
@@ -564,6 +564,15 @@ def test_trajectory_fit_drops_the_common_offset():
     np.testing.assert_allclose(got, want, atol=1e-9)
     assert np.abs(got - motion).max() < 0.08 < np.abs(shifts - motion).max()   # closer than the estimates
     assert [e.estimate for e in ring.entries] == [tuple(s) for s in shifts]
+
+    # look-ahead frames (negative ages) join the same fit, from the ring's measured estimates
+    ahead = [RingEntry(index + k, None, None, shift=(0.35 * k + 0.01, 0.15 * k - 0.02)) for k in (1, 2)]
+    ring._fit_trajectory(index, ahead)
+    every = np.concatenate([ages, [-1, -2]])
+    measured = np.concatenate([shifts, [e.estimate for e in ahead]])
+    coefs = [np.polyfit(every, measured[:, k], TRAJECTORY_DEGREE) for k in range(2)]
+    want = np.stack([np.polyval(c, every) - c[-1] for c in coefs], 1)
+    np.testing.assert_allclose(np.array([e.shift for e in ring.entries + ahead]), want, atol=1e-9)
 
     shaking = motion + rng.choice([-0.3, 0.3], (len(ages), 2))   # residual ~0.3 px
     ring.entries = [RingEntry(index - int(a), None, None, shift=tuple(s)) for a, s in zip(ages, shaking)]
