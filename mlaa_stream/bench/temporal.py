@@ -227,7 +227,8 @@ def _set_tss_constants(pairs: list[str]) -> None:
     """--tss-set NAME=VALUE: the tuning runs of docs/temporal.md, by command."""
     import mlaa_stream.temporal.tss as tss
     names = ("FULL_CELLS", "FULL_CELLS_AHEAD", "REFINE_POINTS", "REFINE_STEPS", "NEWEST_STEPS", "REFINE_EVERY", "TILE_TOL",
-             "BAND_TOL", "BAND_TEXTURE", "STATIC_TOL", "BAND_GROWTH", "BAND_FAR", "TRAJECTORY_MIN", "TRAJECTORY_TOL", "TRAJECTORY_DEGREE", "TRAJECTORY_AHEAD")
+             "BAND_TOL", "BAND_TEXTURE", "STATIC_TOL", "BAND_GROWTH", "BAND_FAR", "TRAJECTORY_MIN", "TRAJECTORY_TOL",
+             "TRAJECTORY_DEGREE", "TRAJECTORY_AHEAD")
     for pair in pairs:
         name, _, value = pair.partition("=")
         if name not in names:

@@ -114,7 +114,7 @@ BAND_GROWTH = 0.2     # with 3 ring ages or more checked in a frame, a band is o
                       # with age by this share of BAND_TOL per age (_bands_growing; docs/temporal.md, "The band
                       # check on a pure pan"); 0 = every band over BAND_TOL is off
 BAND_FAR = 0.75       # px (flow): a band departing this much is off at any age
-TRAJECTORY_MIN = 6    # translated ring frames for MotionRing._fit_trajectory (fewer: the fit is noisier than they)
+TRAJECTORY_MIN = 10   # ring frames (look-ahead ones included) for MotionRing._fit_trajectory: fewer are too noisy
 TRAJECTORY_DEGREE = 2  # the fit's degree in age: 2 follows a camera easing in or out (0.005-0.02 px / frame^2)
 TRAJECTORY_AHEAD = True   # look-ahead frames join the fit (look-ahead 2: damage 0.65 -> 0.54 on the bench pan)
 TRAJECTORY_TOL = 0.1  # px (full size): residual RMS per axis up to which the fit replaces the ring's estimates
@@ -138,8 +138,8 @@ class RingEntry:
     bg: tuple[float, float] = (0.0, 0.0)   # the background's translation where the map is a field of layers
     field_box: tuple[slice, slice] | None = None   # where a field of layers departs from `bg` (NaN aside);
                                                    # None: anywhere
-    estimate: tuple[float, float] | None = None   # the measured translation where `shift` is the trajectory's
-                                                   # line (MotionRing._fit_trajectory); None: `shift` is measured
+    estimate: tuple[float, float] | None = None   # the measured translation where `shift` is the fitted camera
+                                                   # path's (MotionRing._fit_trajectory); None: `shift` is measured
 
     @property
     def translated(self) -> bool:
@@ -197,6 +197,9 @@ class MotionRing:
         look-ahead frames `future` (frames index + 1, index + 2, ...). `decision`: the current frame's motion
         from the previous one when already measured (it came as a look-ahead frame), else measured here."""
         prev = self.entries[-1] if self.entries else None
+        for e in self.entries:   # every frame starts from the measured maps: the fitted path never feeds itself
+            if e.estimate is not None:
+                e.shift, e.estimate = e.estimate, None
         self.band_slopes = None   # set by _refine where it fits them this frame (_ahead reads them)
         self.frame_layers = None
         if fresh or prev is None:
@@ -210,8 +213,6 @@ class MotionRing:
         elif dec.model == "global":
             d = dec.translation
             for e in self.entries:
-                if e.estimate is not None:   # the line is redrawn from the measurements, never from itself
-                    e.shift, e.estimate = e.estimate, None
                 if e.shift is not None:
                     e.shift = (e.shift[0] + d[0], e.shift[1] + d[1])
                     e.projective = False   # decided anew below
@@ -381,8 +382,8 @@ class MotionRing:
         own quantisation offsets all of them alike. shift(age) = c + v age + w age^2 (TRAJECTORY_DEGREE) by least
         squares; c is that common offset (the current frame's pixel centres are where its samples are, by
         definition), so the maps become v age + w age^2. Only where the fit explains the estimates (residual RMS
-        per axis at most TRAJECTORY_TOL); the measured estimates are kept in `estimate` and the next global frame
-        starts from them, so the fit never feeds itself. `ahead`: look-ahead frames (negative ages), fitted with
+        per axis at most TRAJECTORY_TOL); the measured estimates are kept in `estimate` and the next frame starts
+        from them (push), so the fit never feeds itself. `ahead`: look-ahead frames (negative ages), fitted with
         the ring once their own direct estimates are in. docs/temporal.md, "The ring's trajectory"."""
         entries = self.entries + list(ahead)
         todo = [e for e in entries if e.shift is not None]
@@ -394,8 +395,8 @@ class MotionRing:
         coef = np.linalg.lstsq(a, xy, rcond=None)[0]
         if np.sqrt(((xy - a @ coef) ** 2).mean(0)).max() > TRAJECTORY_TOL:
             return
-        line = a[:, 1:] @ coef[1:]   # the offset c dropped
-        for e, s in zip(todo, line):
+        path = a[:, 1:] @ coef[1:]   # the offset c dropped
+        for e, s in zip(todo, path):
             e.estimate, e.shift = (e.shift if e.estimate is None else e.estimate), (float(s[0]), float(s[1]))
 
     def _projective(self, pyr: Pyramid, index: int) -> None:
