@@ -386,18 +386,18 @@ class MotionRing:
         from them (push), so the fit never feeds itself. `ahead`: look-ahead frames (negative ages), fitted with
         the ring once their own direct estimates are in. docs/temporal.md, "The ring's trajectory"."""
         entries = self.entries + list(ahead)
-        todo = [e for e in entries if e.shift is not None]
-        if len(todo) < TRAJECTORY_MIN or len(todo) < len(entries):
+        if len(entries) < TRAJECTORY_MIN or any(e.shift is None for e in entries):
             return
-        ages = np.array([index - e.index for e in todo], np.float64)
-        xy = np.array([e.shift if e.estimate is None else e.estimate for e in todo], np.float64)
+        measured = [e.shift if e.estimate is None else e.estimate for e in entries]
+        ages = np.array([index - e.index for e in entries], np.float64)
+        xy = np.array(measured, np.float64)
         a = np.stack([ages ** p for p in range(TRAJECTORY_DEGREE + 1)], 1)
         coef = np.linalg.lstsq(a, xy, rcond=None)[0]
         if np.sqrt(((xy - a @ coef) ** 2).mean(0)).max() > TRAJECTORY_TOL:
             return
         path = a[:, 1:] @ coef[1:]   # the offset c dropped
-        for e, s in zip(todo, path):
-            e.estimate, e.shift = (e.shift if e.estimate is None else e.estimate), (float(s[0]), float(s[1]))
+        for e, m, s in zip(entries, measured, path):
+            e.estimate, e.shift = m, (float(s[0]), float(s[1]))
 
     def _projective(self, pyr: Pyramid, index: int) -> None:
         """A camera that turns about its eye moves the image by a homography, which one translation fits only
