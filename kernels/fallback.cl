@@ -28,6 +28,11 @@
 // least 1 / RENDER_DIV of its edge-bordering pixels, and its busy tiles not two-toned -- on average at most
 // RENDER_NEAR_PCT % of a busy tile's pixels lie within a tenth of the tile's luma range from its darkest or
 // lightest (text and UI, even through JPEG ringing, are two-toned: 92-96 %; renders 67-78 %).
+// The frame as a whole: where at least RENDER_FRAME_PCT % of the tiles that hold edge-bordering pixels are render
+// regions, the frame is a render, and the two-tone test is dropped in it -- thin features on flat backgrounds (cables
+// against the sky, fences, at 1080p most silhouettes) are two-toned in a render too, and its share of regions falls
+// with the frame's size; text and UI frames, compressed or not, hold under 20 % (docs/spatial_tuning.md,
+// RENDER_FRAME_PCT).
 // The footprint table (mlaa_stream/spatial/footprint.py says what and why): a 1-spp frame holds point samples, its
 // truth the average over each pixel's square footprint; each pixel of a render region becomes a linear filter of
 // its 5x5 window and the chain's colour, one filter per local structure class, clamped to its 3x3 window's range.
@@ -77,6 +82,9 @@
 #endif
 #ifndef RENDER_RANGE
 #define RENDER_RANGE (24.0f / 255.0f)
+#endif
+#ifndef RENDER_FRAME_PCT
+#define RENDER_FRAME_PCT 45
 #endif
 #ifndef RENDER_REGIONS
 #define RENDER_REGIONS 1
@@ -327,21 +335,44 @@ __kernel void render_rows(__global const uchar *counts, __global int4 *rows, con
     }
 }
 
-// render[tile] = 1 where the tiles within RENDER_RADIUS (rows' sums over the column) look like a 1-spp render:
-// RENDER_MIN busy pixels in measured tiles (low-contrast tiles cannot show whether they are two-toned), busy
-// pixels a share of the edge pixels, and not two-toned (the second separable pass). One work item
-// per tile column, a running sum.
-__kernel void render_tiles(__global const int4 *rows, __global uchar *render, const int tiles_x, const int tiles_y)
+// render[tile] = the neighbourhood tests of the tiles within RENDER_RADIUS (rows' sums over the column): RENDER_MIN
+// busy pixels in measured tiles (low-contrast tiles cannot show whether they are two-toned) and busy pixels a share
+// of the edge pixels: bit 1; and not two-toned as well: bit 0 (the second separable pass). shares[tx] = the
+// column's tiles with edge-bordering pixels and, of those, its tiles with bit 0 (render_frame's evidence). One
+// work item per tile column, a running sum.
+__kernel void render_tiles(__global const int4 *rows, __global const uchar *counts, __global uchar *render,
+                           __global int2 *shares, const int tiles_x, const int tiles_y)
 {
     const int tx = get_global_id(0);
     if (tx >= tiles_x) return;
     int4 sum = (int4)(0, 0, 0, 0);
+    int2 share = (int2)(0, 0);
     for (int k = 0; k < RENDER_RADIUS && k < tiles_y; ++k) sum += rows[k * tiles_x + tx];
     for (int ty = 0; ty < tiles_y; ++ty) {
         if (ty + RENDER_RADIUS < tiles_y) sum += rows[(ty + RENDER_RADIUS) * tiles_x + tx];
-        render[ty * tiles_x + tx] = (uchar)(sum.z >= RENDER_MIN && sum.x * RENDER_DIV >= sum.y &&
-                                            sum.w * 100 <= RENDER_NEAR_PCT * (FALLBACK_TILE * FALLBACK_TILE) * sum.z);
+        const int tile = ty * tiles_x + tx;
+        const int busy = sum.z >= RENDER_MIN && sum.x * RENDER_DIV >= sum.y;
+        const int not_two_toned = sum.w * 100 <= RENDER_NEAR_PCT * (FALLBACK_TILE * FALLBACK_TILE) * sum.z;
+        render[tile] = (uchar)((busy << 1) | (busy && not_two_toned));
+        if (counts[COUNTS * tile + 1]) share += (int2)(1, busy && not_two_toned);
         if (ty >= RENDER_RADIUS) sum -= rows[(ty - RENDER_RADIUS) * tiles_x + tx];
+    }
+    shares[tx] = share;
+}
+
+// render[tile] = 1 where the tile is a render region: bit 0 of render_tiles, or bit 1 in a frame where at least
+// RENDER_FRAME_PCT % of the tiles with edge-bordering pixels have bit 0 (a render: the two-tone test is dropped).
+// One work item per tile column; each sums the columns' shares (tiles_x pairs: cheaper than another pass).
+__kernel void render_frame(__global uchar *render, __global const int2 *shares, const int tiles_x, const int tiles_y)
+{
+    const int tx = get_global_id(0);
+    if (tx >= tiles_x) return;
+    int2 total = (int2)(0, 0);
+    for (int k = 0; k < tiles_x; ++k) total += shares[k];
+    const uchar bit = total.x > 0 && total.y * 100 >= RENDER_FRAME_PCT * total.x ? 2 : 1;
+    for (int ty = 0; ty < tiles_y; ++ty) {
+        const int tile = ty * tiles_x + tx;
+        render[tile] = (uchar)((render[tile] & bit) != 0);
     }
 }
 

@@ -67,6 +67,20 @@ def flat_art(seed: int, h: int, w: int) -> np.ndarray:
     return img
 
 
+def cables_on_sky(seed: int, h: int, w: int) -> np.ndarray:
+    """Sub-pixel dark cables (0.5-0.9 px, sagging, sampled at pixel centres: dashed) across a smooth sky: thin
+    features on a flat background, two-toned tiles in a render."""
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float64) + 0.5
+    img = np.stack([0.45 + 0.25 * yy / h + 0.05 * xx / w, 0.6 + 0.2 * yy / h, 0.9 - 0.05 * xx / w], -1)
+    for _ in range(max(2, h // 16)):
+        y0, slope = rng.uniform(4, h - 4), rng.uniform(-0.15, 0.15)
+        width, sag = rng.uniform(0.5, 0.9), rng.uniform(0, 8)
+        centre = y0 + slope * (xx - w / 2) + sag * ((xx - w / 2) / (w / 2)) ** 2
+        img[np.abs(yy - centre) < width / 2] = (0.12, 0.12, 0.14)
+    return np.clip(np.rint(img * 255), 0, 255).astype(np.uint8)
+
+
 def render_beside_art(seed: int) -> np.ndarray:
     """A render-like half (shaded_polygons) beside flat-colour art farther than RENDER_RADIUS tiles: the frame
     has render regions and tiles that are not."""
@@ -189,6 +203,29 @@ def test_two_toned_content_is_no_render_region():
         assert not regions_of(scene.inputs[0]).any(), scene.name
     for seed in range(3):
         assert regions_of(shaded_polygons(seed, 144, 192)).mean() > 0.9
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_render_frame_drops_the_two_tone_test(seed):
+    """Known answer (RENDER_FRAME_PCT): cables on a sky pass the busy tests but are two-toned, so alone, or beside a
+    render that holds under RENDER_FRAME_PCT % of the frame's edge tiles, they are no render region; beside a render
+    that holds most of the frame's edge tiles the frame is a render and they are regions. The kernel's flags equal
+    the reference's in all three frames."""
+    sky = cables_on_sky(seed, 144, 192)
+    gap = np.full((144, (RENDER_RADIUS + 2) * FALLBACK_TILE, 3), 200, np.uint8)
+    render = [shaded_polygons(seed, 144, 192), shaded_polygons(seed + 10, 144, 192)]
+    mostly_render = np.concatenate([*render, gap, sky], 1)
+    mostly_sky = np.concatenate([render[0], gap, sky, sky], 1)
+    assert not regions_of(sky).any()
+    assert regions_of(mostly_render)[:, -192:].mean() > 0.95
+    assert not regions_of(mostly_sky)[:, -384:].any()
+    assert regions_of(mostly_sky)[:, :192].mean() > 0.5  # the render part keeps its own regions
+    with Filter(keep_regions=True) as f:
+        for frame in (sky, mostly_render, mostly_sky):
+            f.process(frame)
+            h, w = frame.shape[:2]
+            tiles = np.repeat(np.repeat(f.last_regions > 0, FALLBACK_TILE, 0), FALLBACK_TILE, 1)[:h, :w]
+            np.testing.assert_array_equal(tiles, regions_of(frame))
 
 
 @pytest.mark.parametrize("seed,small", [(0, True), (1, True), (2, True), (2, False)])

@@ -33,8 +33,11 @@ FALLBACK_KEEP_RUN = 16
 # RENDER_MIN busy pixels in tiles of a luma range of RENDER_RANGE or more, busy pixels at least 1 / RENDER_DIV of its
 # edge-bordering pixels, and busy tiles with on average at most RENDER_NEAR_PCT % of their pixels within a tenth of
 # the tile's luma range from its extremes, counts as busy, and every pixel there takes the footprint table
-# (spatial/footprint.py): the point samples of a 1-spp render towards the average over their footprint.
+# (spatial/footprint.py): the point samples of a 1-spp render towards the average over their footprint. A frame in
+# which at least RENDER_FRAME_PCT % of the tiles holding edge-bordering pixels are render regions is a render: there
+# the two-tone test is dropped (thin features on flat backgrounds are two-toned in renders too).
 RENDER_RADIUS, RENDER_MIN, RENDER_DIV, RENDER_NEAR_PCT, RENDER_RANGE = 7, 48, 10, 88, 24 / 255
+RENDER_FRAME_PCT = 45
 COUNTS, NOT_MEASURED = 4, 255  # bytes per tile of count_changed's output; k = 3 of a tile not measured
 SHOW_DIM = 0.35  # Filter(show="regions"): pixels outside render regions keep this share of their colour
 
@@ -52,6 +55,7 @@ def fallback_defines(fmt: FrameFormat, linear: bool, linear_input: bool, everywh
             "FALLBACK_RICH_MIN": FALLBACK_RICH_MIN, "FALLBACK_RICH_DIV": FALLBACK_RICH_DIV,
             "FALLBACK_KEEP_RUN": 0 if everywhere else FALLBACK_KEEP_RUN, "RENDER_RADIUS": RENDER_RADIUS,
             "RENDER_MIN": RENDER_MIN, "RENDER_DIV": RENDER_DIV, "RENDER_NEAR_PCT": RENDER_NEAR_PCT,
+            "RENDER_FRAME_PCT": RENDER_FRAME_PCT,
             "RENDER_RANGE": float(RENDER_RANGE), "RENDER_REGIONS": int(regions),
             "FOOTPRINT_TABLE": int(table), "FOOTPRINT_BUCKETS": BUCKETS, "FOOTPRINT_WEIGHTS": WEIGHTS,
             "REFINE_TABLE": int(refine), "REFINE_WEIGHTS": REFINE_WEIGHTS, "REFINE_GATE": float(REFINE_GATE),
@@ -77,10 +81,12 @@ class FallbackPass:
         self._fxaa = context.kernel("fallback", "fxaa_fallback", defs)
         self._rows = context.kernel("fallback", "render_rows", defs)
         self._render_tiles = context.kernel("fallback", "render_tiles", defs)
+        self._render_frame = context.kernel("fallback", "render_frame", defs)
         n = self.tiles[0] * self.tiles[1]
         self._counts = context.buffer(COUNTS * n)  # count_changed's four per tile
         self._row_sums = context.buffer(16 * n)  # render_rows' int4 per tile
         self._render = context.buffer(n)  # render_tiles' flag per tile
+        self._shares = context.buffer(8 * self.tiles[0])  # render_tiles' int2 per tile column
         self._table = context.buffer(4 * BUCKETS * WEIGHTS)  # the footprint table (unused without one)
         if table is not None:
             cl.enqueue_copy(context.queue, self._table, np.ascontiguousarray(table, np.float32), is_blocking=True)
@@ -95,7 +101,7 @@ class FallbackPass:
     def device_bytes(self) -> int:
         """Bytes of the per-frame buffers (the tables' 15 and 20 KB do not grow with the frame)."""
         mid = self._mid.size if self._refine is not None else 0
-        return self._counts.size + self._row_sums.size + self._render.size + mid
+        return self._counts.size + self._row_sums.size + self._render.size + self._shares.size + mid
 
     def read_regions(self, queue, wait_for: list) -> tuple[np.ndarray, cl.Event | None]:
         """The last frame's render-region flag per tile, (tiles_y, tiles_x) uint8, and the event of its copy to
@@ -120,8 +126,11 @@ class FallbackPass:
                 events["render_rows"] = self._rows(queue, (self.tiles[1],), None, self._counts, self._row_sums,
                                                    tx, ty, wait_for=wait_for)
                 events["render_tiles"] = self._render_tiles(queue, (self.tiles[0],), None, self._row_sums,
-                                                            self._render, tx, ty, wait_for=[events["render_rows"]])
-                wait_for = [events["render_tiles"]]
+                                                            self._counts, self._render, self._shares, tx, ty,
+                                                            wait_for=[events["render_rows"]])
+                events["render_frame"] = self._render_frame(queue, (self.tiles[0],), None, self._render,
+                                                            self._shares, tx, ty, wait_for=[events["render_tiles"]])
+                wait_for = [events["render_frame"]]
         events["fallback"] = self._fxaa(queue, (-(-self.fmt.width // SEGMENT), self.tiles[1]), None,
                                         src, luts, lin, edges, hdist, vdist, self._counts, self._render,
                                         self._table, dst, W, H, tx, ty, wait_for=wait_for)
@@ -345,5 +354,9 @@ def render_regions(busy: np.ndarray, borders: np.ndarray, luma: np.ndarray) -> n
         return c[y1][:, x1] - c[y0][:, x1] - c[y1][:, x0] + c[y0][:, x0]
 
     b, a, bm, nw = window(busy_t), window(border_t), window(busy_m), window(weighted)
-    flag = (bm >= RENDER_MIN) & (b * RENDER_DIV >= a) & (nw * 100 <= RENDER_NEAR_PCT * t * t * bm)
+    busy_flag = (bm >= RENDER_MIN) & (b * RENDER_DIV >= a)
+    flag = busy_flag & (nw * 100 <= RENDER_NEAR_PCT * t * t * bm)
+    edge_tiles = border_t > 0
+    if edge_tiles.any() and (flag & edge_tiles).sum() * 100 >= RENDER_FRAME_PCT * edge_tiles.sum():
+        flag = busy_flag  # a render: the two-tone test is dropped
     return np.repeat(np.repeat(flag, t, 0), t, 1)[:h, :w]
