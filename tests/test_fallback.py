@@ -228,6 +228,25 @@ def test_a_render_frame_drops_the_two_tone_test(seed):
             np.testing.assert_array_equal(tiles, regions_of(frame))
 
 
+@pytest.mark.parametrize("dtype,channels,bgr", [(np.uint8, 3, True), (np.uint8, 4, False), (np.uint16, 3, False),
+                                                (np.float32, 3, False)])
+def test_kernel_matches_reference_in_a_render_frame(dtype, channels, bgr):
+    """Exact, as test_kernel_matches_reference, on a frame where render_frame drops the two-tone test (a render
+    beside cables on a sky, which become regions only through it), in every stored format."""
+    gap = np.full((144, (RENDER_RADIUS + 2) * FALLBACK_TILE, 3), 200, np.uint8)
+    frame8 = np.concatenate([shaded_polygons(0, 144, 192), shaded_polygons(10, 144, 192), gap,
+                             cables_on_sky(0, 144, 192)], 1)
+    frame = _as(frame8[..., ::-1] if bgr else frame8, dtype, channels)
+    with Filter(bgr=bgr) as f, Filter(bgr=bgr, fallback="off") as g:
+        got, passes = f.process(frame), g.intermediates(frame)
+    assert render_regions_of(frame, passes["out"], passes["edges"], bgr=bgr)[:, -192:].mean() > 0.95
+    want = fallback_reference(frame, passes["out"], passes["edges"], passes["hdist"], passes["vdist"], bgr=bgr)
+    if dtype == np.float32:
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-6)
+    else:
+        np.testing.assert_array_equal(got, want)
+
+
 @pytest.mark.parametrize("seed,small", [(0, True), (1, True), (2, True), (2, False)])
 def test_antialiased_content_is_no_render_region(seed, small):
     """Known answer: the yardstick's already antialiased text, wires and diagonals (8x8 samples per pixel) are no
