@@ -29,10 +29,11 @@
 // RENDER_NEAR_PCT % of a busy tile's pixels lie within a tenth of the tile's luma range from its darkest or
 // lightest (text and UI, even through JPEG ringing, are two-toned: 92-96 %; renders 67-78 %).
 // The frame as a whole: where at least RENDER_FRAME_PCT % of the tiles that hold edge-bordering pixels are render
-// regions, the frame is a render, and the two-tone test is dropped in it -- thin features on flat backgrounds (cables
-// against the sky, fences, at 1080p most silhouettes) are two-toned in a render too, and its share of regions falls
-// with the frame's size; text and UI frames, compressed or not, hold under 20 % (a 1080p mixed frame through JPEG
-// q75: 38 %; docs/spatial_tuning.md, RENDER_FRAME_PCT).
+// regions, the frame is a render, and every tile whose neighbourhood holds a busy pixel is a region -- thin features
+// on flat backgrounds (cables against the sky, fences, at 1080p most silhouettes) are two-toned in a render too, a
+// video codec's smoothing fails the busy counts, and a render's share of regions falls with the frame's size; text
+// and UI frames, compressed or not, hold under 20 % (a 1080p mixed frame through JPEG q75: 38 %), and flat-colour
+// art has no busy pixel (docs/spatial_tuning.md, RENDER_FRAME_PCT).
 // The footprint table (mlaa_stream/spatial/footprint.py says what and why): a 1-spp frame holds point samples, its
 // truth the average over each pixel's square footprint; each pixel of a render region becomes a linear filter of
 // its 5x5 window and the chain's colour, one filter per local structure class, clamped to its 3x3 window's range.
@@ -335,11 +336,11 @@ __kernel void render_rows(__global const uchar *counts, __global int4 *rows, con
     }
 }
 
-// render[tile] = the neighbourhood tests of the tiles within RENDER_RADIUS (rows' sums over the column): RENDER_MIN
-// busy pixels in measured tiles (low-contrast tiles cannot show whether they are two-toned) and busy pixels a share
-// of the edge pixels: bit 1; and not two-toned as well: bit 0 (the second separable pass). shares[tx] = the
-// column's tiles with edge-bordering pixels and, of those, its tiles with bit 0 (render_frame's evidence). One
-// work item per tile column, a running sum.
+// render[tile] = the neighbourhood tests of the tiles within RENDER_RADIUS (rows' sums over the column), bit 0: it
+// looks like a 1-spp render -- RENDER_MIN busy pixels in measured tiles (low-contrast tiles cannot show whether they
+// are two-toned), busy pixels a share of the edge pixels, and not two-toned; bit 1: it holds a busy pixel (the second
+// separable pass). shares[tx] = the column's tiles with edge-bordering pixels and, of those, its tiles with bit 0
+// (render_frame's evidence). One work item per tile column, a running sum.
 __kernel void render_tiles(__global const int4 *rows, __global const uchar *counts, __global uchar *render,
                            __global int2 *shares, const int tiles_x, const int tiles_y)
 {
@@ -351,17 +352,17 @@ __kernel void render_tiles(__global const int4 *rows, __global const uchar *coun
     for (int ty = 0; ty < tiles_y; ++ty) {
         if (ty + RENDER_RADIUS < tiles_y) sum += rows[(ty + RENDER_RADIUS) * tiles_x + tx];
         const int tile = ty * tiles_x + tx;
-        const int busy = sum.z >= RENDER_MIN && sum.x * RENDER_DIV >= sum.y;
-        const int not_two_toned = sum.w * 100 <= RENDER_NEAR_PCT * (FALLBACK_TILE * FALLBACK_TILE) * sum.z;
-        render[tile] = (uchar)((busy << 1) | (busy && not_two_toned));
-        if (counts[COUNTS * tile + 1]) share += (int2)(1, busy && not_two_toned);
+        const int rendered = sum.z >= RENDER_MIN && sum.x * RENDER_DIV >= sum.y &&
+                             sum.w * 100 <= RENDER_NEAR_PCT * (FALLBACK_TILE * FALLBACK_TILE) * sum.z;
+        render[tile] = (uchar)(((sum.x > 0) << 1) | rendered);
+        if (counts[COUNTS * tile + 1]) share += (int2)(1, rendered);
         if (ty >= RENDER_RADIUS) sum -= rows[(ty - RENDER_RADIUS) * tiles_x + tx];
     }
     shares[tx] = share;
 }
 
 // render[tile] = 1 where the tile is a render region: bit 0 of render_tiles, or bit 1 in a frame where at least
-// RENDER_FRAME_PCT % of the tiles with edge-bordering pixels have bit 0 (a render: the two-tone test is dropped).
+// RENDER_FRAME_PCT % of the tiles with edge-bordering pixels have bit 0 (a render: every tile near a busy pixel).
 // One work item per tile column; each sums the columns' shares (tiles_x pairs: cheaper than another pass).
 __kernel void render_frame(__global uchar *render, __global const int2 *shares, const int tiles_x, const int tiles_y)
 {

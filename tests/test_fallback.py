@@ -206,11 +206,12 @@ def test_two_toned_content_is_no_render_region():
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
-def test_a_render_frame_drops_the_two_tone_test(seed):
+def test_a_render_frame_takes_every_busy_neighbourhood(seed):
     """Known answer (RENDER_FRAME_PCT): cables on a sky pass the busy tests but are two-toned, so alone, or beside a
     render that holds under RENDER_FRAME_PCT % of the frame's edge tiles, they are no render region; beside a render
-    that holds most of the frame's edge tiles the frame is a render and they are regions. The kernel's flags equal
-    the reference's in all three frames."""
+    that holds most of the frame's edge tiles the frame is a render and they are regions (flat-colour art beside a
+    render stays out: test_kernel_matches_reference). The kernel's flags equal the reference's in all three
+    frames."""
     sky = cables_on_sky(seed, 144, 192)
     gap = np.full((144, (RENDER_RADIUS + 2) * FALLBACK_TILE, 3), 200, np.uint8)
     render = [shaded_polygons(seed, 144, 192), shaded_polygons(seed + 10, 144, 192)]
@@ -231,8 +232,8 @@ def test_a_render_frame_drops_the_two_tone_test(seed):
 @pytest.mark.parametrize("dtype,channels,bgr", [(np.uint8, 3, True), (np.uint8, 4, False), (np.uint16, 3, False),
                                                 (np.float32, 3, False)])
 def test_kernel_matches_reference_in_a_render_frame(dtype, channels, bgr):
-    """Exact, as test_kernel_matches_reference, on a frame where render_frame drops the two-tone test (a render
-    beside cables on a sky, which become regions only through it), in every stored format."""
+    """Exact, as test_kernel_matches_reference, on a frame that render_frame judges a render (a render beside cables
+    on a sky, which become regions only through it), in every stored format."""
     gap = np.full((144, (RENDER_RADIUS + 2) * FALLBACK_TILE, 3), 200, np.uint8)
     frame8 = np.concatenate([shaded_polygons(0, 144, 192), shaded_polygons(10, 144, 192), gap,
                              cables_on_sky(0, 144, 192)], 1)

@@ -35,7 +35,8 @@ FALLBACK_KEEP_RUN = 16
 # the tile's luma range from its extremes, counts as busy, and every pixel there takes the footprint table
 # (spatial/footprint.py): the point samples of a 1-spp render towards the average over their footprint. A frame in
 # which at least RENDER_FRAME_PCT % of the tiles holding edge-bordering pixels are render regions is a render: there
-# the two-tone test is dropped (thin features on flat backgrounds are two-toned in renders too).
+# every tile whose neighbourhood holds a busy pixel is a region (thin features on flat backgrounds are two-toned in
+# renders too, and a video codec's smoothing fails the busy counts; flat-colour art has no busy pixel).
 RENDER_RADIUS, RENDER_MIN, RENDER_DIV, RENDER_NEAR_PCT, RENDER_RANGE = 7, 48, 10, 88, 24 / 255
 RENDER_FRAME_PCT = 45
 COUNTS, NOT_MEASURED = 4, 255  # bytes per tile of count_changed's output; k = 3 of a tile not measured
@@ -354,9 +355,8 @@ def render_regions(busy: np.ndarray, borders: np.ndarray, luma: np.ndarray) -> n
         return c[y1][:, x1] - c[y0][:, x1] - c[y1][:, x0] + c[y0][:, x0]
 
     b, a, bm, nw = window(busy_t), window(border_t), window(busy_m), window(weighted)
-    busy_flag = (bm >= RENDER_MIN) & (b * RENDER_DIV >= a)
-    flag = busy_flag & (nw * 100 <= RENDER_NEAR_PCT * t * t * bm)
+    flag = (bm >= RENDER_MIN) & (b * RENDER_DIV >= a) & (nw * 100 <= RENDER_NEAR_PCT * t * t * bm)
     edge_tiles = border_t > 0
     if edge_tiles.any() and (flag & edge_tiles).sum() * 100 >= RENDER_FRAME_PCT * edge_tiles.sum():
-        flag = busy_flag  # a render: the two-tone test is dropped
+        flag = b > 0  # a render: every tile near a busy pixel
     return np.repeat(np.repeat(flag, t, 0), t, 1)[:h, :w]
