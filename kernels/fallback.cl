@@ -34,6 +34,13 @@
 // video codec's smoothing fails the busy counts, and a render's share of regions falls with the frame's size; text
 // and UI frames, compressed or not, hold under 20 % (a 1080p mixed frame through JPEG q75: 38 %), and flat-colour
 // art has no busy pixel (docs/spatial_tuning.md, RENDER_FRAME_PCT).
+// A frame that is already supersampled (rendered with several samples per pixel, or downscaled) is no 1-spp render:
+// across its strong luma steps (SUPERSAMPLED_STEP or more between neighbours) coverage blends make ramps -- the next
+// step on one side goes the same way by at least half as much -- where a 1-spp frame has single-pixel steps. Where
+// at least SUPERSAMPLED_PCT % of the strong steps in the tiles that hold edge-bordering pixels are ramps (1-spp
+// renders, also through H.264: 0-8 %; 2x2 and 3x3 supersampled renders: 19-47 %), no tile is a render region and
+// no pixel takes FXAA: the MLAA passes' own already-antialiased test is left to judge its edges
+// (docs/spatial_tuning.md, "SUPERSAMPLED_PCT").
 // The footprint table (mlaa_stream/spatial/footprint.py says what and why): a 1-spp frame holds point samples, its
 // truth the average over each pixel's square footprint; each pixel of a render region becomes a linear filter of
 // its 5x5 window and the chain's colour, one filter per local structure class, clamped to its 3x3 window's range.
@@ -87,6 +94,15 @@
 #ifndef RENDER_FRAME_PCT
 #define RENDER_FRAME_PCT 45
 #endif
+#ifndef SUPERSAMPLED_STEP
+#define SUPERSAMPLED_STEP 0.2f
+#endif
+#ifndef SUPERSAMPLED_PCT
+#define SUPERSAMPLED_PCT 14
+#endif
+#ifndef SUPERSAMPLED_MIN
+#define SUPERSAMPLED_MIN 100
+#endif
 #ifndef RENDER_REGIONS
 #define RENDER_REGIONS 1
 #endif
@@ -102,7 +118,7 @@
 #ifndef REFINE_TABLE
 #define REFINE_TABLE 0
 #endif
-#define COUNTS 4          // bytes per tile in `counts`
+#define COUNTS 6          // bytes per tile in `counts`
 #define NOT_MEASURED 255  // counts[3] of a tile with no busy pixel or a luma range under RENDER_RANGE
 
 // Any stored channel (alpha included) of pixel i differs between a and b.
@@ -279,10 +295,35 @@ RARELY_CALLED int tile_near_extremes(__global const PIXEL_T *src, int x0, int x1
     return near;
 }
 
-// Four counts per tile (tx, ty), at counts[COUNTS * (ty * tiles_x + tx) + k]: k = 0 its pixels that border an edge
+// The tile's strong luma steps (px_luma, SUPERSAMPLED_STEP or more from a pixel to its right or lower neighbour
+// inside the frame) and of those the ramps (the step before or after it goes the same way by at least half as
+// much), as (strong, ramps).
+RARELY_CALLED int2 tile_ramps(__global const PIXEL_T *src, int x0, int x1, int y0, int y1, int w, int h)
+{
+    int2 n = (int2)(0, 0);
+    for (int y = y0; y < y1; ++y)
+        for (int x = x0; x < x1; ++x) {
+            const float a = px_luma(src, x, y, w, h);
+            for (int k = 0; k < 2; ++k) {
+                const int dx = k == 0, dy = k == 1;
+                if (x + dx >= w || y + dy >= h) continue;
+                const float b = px_luma(src, x + dx, y + dy, w, h), c = b - a;
+                if (!(fabs(c) >= SUPERSAMPLED_STEP)) continue;
+                const float before = a - px_luma(src, x - dx, y - dy, w, h);
+                const float after = px_luma(src, x + 2 * dx, y + 2 * dy, w, h) - b;
+                const float mid = 0.5f * c;
+                n.x += 1;
+                n.y += c > 0.0f ? (before >= mid || after >= mid) : (before <= mid || after <= mid);
+            }
+        }
+    return n;
+}
+
+// Six counts per tile (tx, ty), at counts[COUNTS * (ty * tiles_x + tx) + k]: k = 0 its pixels that border an edge
 // and that the MLAA passes changed (dst != src), k = 1 its pixels that border an edge, k = 2 the changed ones
 // whose 3x3 window holds FALLBACK_COLOURS bit-identical colours ("busy"), k = 3 tile_near_extremes where k = 2 is
-// not 0 and there are render regions (else NOT_MEASURED). One work item per SEGMENT pixels (a multiple of
+// not 0 and there are render regions (else NOT_MEASURED), k = 4 and 5 tile_ramps where k = 1 is not 0 and there
+// are render regions (else 0). One work item per SEGMENT pixels (a multiple of
 // FALLBACK_TILE) of a band of FALLBACK_TILE rows.
 __kernel void count_changed(__global const PIXEL_T *src, __global const PIXEL_T *dst,
                             __global const uchar *edges, __global uchar *counts,
@@ -308,6 +349,9 @@ __kernel void count_changed(__global const PIXEL_T *src, __global const PIXEL_T 
         c[1] = (uchar)bordering;
         c[2] = (uchar)busy;
         c[3] = (uchar)(RENDER_REGIONS && busy ? tile_near_extremes(src, t0, t1, y0, y1, w, h) : NOT_MEASURED);
+        const int2 ramps = RENDER_REGIONS && bordering ? tile_ramps(src, t0, t1, y0, y1, w, h) : (int2)(0, 0);
+        c[4] = (uchar)ramps.x;
+        c[5] = (uchar)ramps.y;
     }
 }
 
@@ -339,15 +383,15 @@ __kernel void render_rows(__global const uchar *counts, __global int4 *rows, con
 // render[tile] = the neighbourhood tests of the tiles within RENDER_RADIUS (rows' sums over the column), bit 0: it
 // looks like a 1-spp render -- RENDER_MIN busy pixels in measured tiles (low-contrast tiles cannot show whether they
 // are two-toned), busy pixels a share of the edge pixels, and not two-toned; bit 1: it holds a busy pixel (the second
-// separable pass). shares[tx] = the column's tiles with edge-bordering pixels and, of those, its tiles with bit 0
-// (render_frame's evidence). One work item per tile column, a running sum.
+// separable pass). shares[tx] = the column's tiles with edge-bordering pixels, of those its tiles with bit 0, and
+// their strong steps and ramps (render_frame's evidence). One work item per tile column, a running sum.
 __kernel void render_tiles(__global const int4 *rows, __global const uchar *counts, __global uchar *render,
-                           __global int2 *shares, const int tiles_x, const int tiles_y)
+                           __global int4 *shares, const int tiles_x, const int tiles_y)
 {
     const int tx = get_global_id(0);
     if (tx >= tiles_x) return;
     int4 sum = (int4)(0, 0, 0, 0);
-    int2 share = (int2)(0, 0);
+    int4 share = (int4)(0, 0, 0, 0);
     for (int k = 0; k < RENDER_RADIUS && k < tiles_y; ++k) sum += rows[k * tiles_x + tx];
     for (int ty = 0; ty < tiles_y; ++ty) {
         if (ty + RENDER_RADIUS < tiles_y) sum += rows[(ty + RENDER_RADIUS) * tiles_x + tx];
@@ -355,7 +399,8 @@ __kernel void render_tiles(__global const int4 *rows, __global const uchar *coun
         const int rendered = sum.z >= RENDER_MIN && sum.x * RENDER_DIV >= sum.y &&
                              sum.w * 100 <= RENDER_NEAR_PCT * (FALLBACK_TILE * FALLBACK_TILE) * sum.z;
         render[tile] = (uchar)(((sum.x > 0) << 1) | rendered);
-        if (counts[COUNTS * tile + 1]) share += (int2)(1, rendered);
+        __global const uchar *c = counts + COUNTS * tile;
+        if (c[1]) share += (int4)(1, rendered, c[4], c[5]);
         if (ty >= RENDER_RADIUS) sum -= rows[(ty - RENDER_RADIUS) * tiles_x + tx];
     }
     shares[tx] = share;
@@ -363,17 +408,25 @@ __kernel void render_tiles(__global const int4 *rows, __global const uchar *coun
 
 // render[tile] = 1 where the tile is a render region: bit 0 of render_tiles, or bit 1 in a frame where at least
 // RENDER_FRAME_PCT % of the tiles with edge-bordering pixels have bit 0 (a render: every tile near a busy pixel).
-// One work item per tile column; each sums the columns' shares (tiles_x pairs: cheaper than another pass).
-__kernel void render_frame(__global uchar *render, __global const int2 *shares, const int tiles_x, const int tiles_y)
+// In a supersampled frame (SUPERSAMPLED_MIN strong steps or more, SUPERSAMPLED_PCT % of them ramps) no tile is a
+// region, and the tiles' counts k = 0..2 are cleared: fxaa_fallback then finds no tile busy and none with evidence.
+// One work item per tile column; each sums the columns' shares (tiles_x of them: cheaper than another pass).
+__kernel void render_frame(__global uchar *render, __global uchar *counts, __global const int4 *shares,
+                           const int tiles_x, const int tiles_y)
 {
     const int tx = get_global_id(0);
     if (tx >= tiles_x) return;
-    int2 total = (int2)(0, 0);
+    int4 total = (int4)(0, 0, 0, 0);
     for (int k = 0; k < tiles_x; ++k) total += shares[k];
-    const uchar bit = total.x > 0 && total.y * 100 >= RENDER_FRAME_PCT * total.x ? 2 : 1;
+    const int supersampled = total.z >= SUPERSAMPLED_MIN && total.w * 100 >= SUPERSAMPLED_PCT * total.z;
+    const uchar bit = supersampled ? 0 : total.x > 0 && total.y * 100 >= RENDER_FRAME_PCT * total.x ? 2 : 1;
     for (int ty = 0; ty < tiles_y; ++ty) {
         const int tile = ty * tiles_x + tx;
         render[tile] = (uchar)((render[tile] & bit) != 0);
+        if (supersampled) {
+            __global uchar *c = counts + COUNTS * tile;
+            c[0] = c[1] = c[2] = 0;
+        }
     }
 }
 

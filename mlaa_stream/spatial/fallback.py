@@ -39,7 +39,13 @@ FALLBACK_KEEP_RUN = 16
 # renders too, and a video codec's smoothing fails the busy counts; flat-colour art has no busy pixel).
 RENDER_RADIUS, RENDER_MIN, RENDER_DIV, RENDER_NEAR_PCT, RENDER_RANGE = 7, 48, 10, 88, 24 / 255
 RENDER_FRAME_PCT = 45
-COUNTS, NOT_MEASURED = 4, 255  # bytes per tile of count_changed's output; k = 3 of a tile not measured
+# A supersampled frame (several samples per pixel, or downscaled) is no 1-spp render: where at least
+# SUPERSAMPLED_PCT % of the luma steps of SUPERSAMPLED_STEP or more between neighbours (px_luma, in the tiles holding
+# edge-bordering pixels; at least SUPERSAMPLED_MIN of them) are ramps -- the step before or after goes the same way by
+# half as much or more -- no tile is a render region and no pixel takes FXAA (1-spp renders 0-8 %, supersampled
+# ones 19-47 %: docs/spatial_tuning.md, "SUPERSAMPLED_PCT").
+SUPERSAMPLED_STEP, SUPERSAMPLED_PCT, SUPERSAMPLED_MIN = 0.2, 14, 100
+COUNTS, NOT_MEASURED = 6, 255  # bytes per tile of count_changed's output; k = 3 of a tile not measured
 SHOW_DIM = 0.35  # Filter(show="regions"): pixels outside render regions keep this share of their colour
 
 def fallback_defines(fmt: FrameFormat, linear: bool, linear_input: bool, everywhere: bool = False,
@@ -56,7 +62,8 @@ def fallback_defines(fmt: FrameFormat, linear: bool, linear_input: bool, everywh
             "FALLBACK_RICH_MIN": FALLBACK_RICH_MIN, "FALLBACK_RICH_DIV": FALLBACK_RICH_DIV,
             "FALLBACK_KEEP_RUN": 0 if everywhere else FALLBACK_KEEP_RUN, "RENDER_RADIUS": RENDER_RADIUS,
             "RENDER_MIN": RENDER_MIN, "RENDER_DIV": RENDER_DIV, "RENDER_NEAR_PCT": RENDER_NEAR_PCT,
-            "RENDER_FRAME_PCT": RENDER_FRAME_PCT,
+            "RENDER_FRAME_PCT": RENDER_FRAME_PCT, "SUPERSAMPLED_STEP": float(SUPERSAMPLED_STEP),
+            "SUPERSAMPLED_PCT": SUPERSAMPLED_PCT, "SUPERSAMPLED_MIN": SUPERSAMPLED_MIN,
             "RENDER_RANGE": float(RENDER_RANGE), "RENDER_REGIONS": int(regions),
             "FOOTPRINT_TABLE": int(table), "FOOTPRINT_BUCKETS": BUCKETS, "FOOTPRINT_WEIGHTS": WEIGHTS,
             "REFINE_TABLE": int(refine), "REFINE_WEIGHTS": REFINE_WEIGHTS, "REFINE_GATE": float(REFINE_GATE),
@@ -84,10 +91,10 @@ class FallbackPass:
         self._render_tiles = context.kernel("fallback", "render_tiles", defs)
         self._render_frame = context.kernel("fallback", "render_frame", defs)
         n = self.tiles[0] * self.tiles[1]
-        self._counts = context.buffer(COUNTS * n)  # count_changed's four per tile
+        self._counts = context.buffer(COUNTS * n)  # count_changed's six per tile
         self._row_sums = context.buffer(16 * n)  # render_rows' int4 per tile
         self._render = context.buffer(n)  # render_tiles' flag per tile
-        self._shares = context.buffer(8 * self.tiles[0])  # render_tiles' int2 per tile column
+        self._shares = context.buffer(16 * self.tiles[0])  # render_tiles' int4 per tile column
         self._table = context.buffer(4 * BUCKETS * WEIGHTS)  # the footprint table (unused without one)
         if table is not None:
             cl.enqueue_copy(context.queue, self._table, np.ascontiguousarray(table, np.float32), is_blocking=True)
@@ -130,7 +137,8 @@ class FallbackPass:
                                                             self._counts, self._render, self._shares, tx, ty,
                                                             wait_for=[events["render_rows"]])
                 events["render_frame"] = self._render_frame(queue, (self.tiles[0],), None, self._render,
-                                                            self._shares, tx, ty, wait_for=[events["render_tiles"]])
+                                                            self._counts, self._shares, tx, ty,
+                                                            wait_for=[events["render_tiles"]])
                 wait_for = [events["render_frame"]]
         events["fallback"] = self._fxaa(queue, (-(-self.fmt.width // SEGMENT), self.tiles[1]), None,
                                         src, luts, lin, edges, hdist, vdist, self._counts, self._render,
@@ -284,14 +292,16 @@ def fallback_reference(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray,
             return np.repeat(np.repeat(s3, t, 0), t, 1)[:h, :w]
 
         busy_window = _window_colours(rgb) >= FALLBACK_COLOURS
+        luma = luma_reference(rgb, linear_input)
         busy_px = _busy_pixels(changed, borders, rgb)
         busy_changed = region_sums(busy_px)
-        rendered = (render_regions(busy_px, borders, luma_reference(rgb, linear_input)) if regions
-                    else np.zeros((h, w), bool))
+        rendered = (render_regions(busy_px, borders, luma) if regions else np.zeros((h, w), bool))
         busy = rendered | ((busy_changed >= FALLBACK_RICH_MIN)
                            & (busy_changed * FALLBACK_RICH_DIV >= region_sums(borders)))
         evidence = region_sums(changed & borders) >= FALLBACK_MIN_CHANGED
         eligible = borders & (busy | (evidence & busy_window & ~changed))
+        if regions and supersampled(borders, luma):  # render_frame clears every tile's counts: nothing eligible
+            eligible[:] = False
         runs = long_runs(e, hdist, vdist)
         eligible &= ~runs
     early, fx = fxaa_mix_reference(src, linear=linear, linear_input=linear_input, bgr=bgr)
@@ -324,12 +334,44 @@ def fallback_reference(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray,
     return out.reshape(np.asarray(mlaa_out).shape)
 
 
+def supersampled(borders: np.ndarray, luma: np.ndarray) -> bool:
+    """kernels/fallback.cl's verdict that a frame is already supersampled (render_frame): of the strong luma steps
+    from the pixels of tiles holding edge-bordering pixels (`borders`, (h, w) bool) to their right and lower
+    neighbours, at least SUPERSAMPLED_PCT % are ramps (tile_ramps); `luma` px_luma of the input (h, w)."""
+    f32 = np.float32
+    h, w = luma.shape
+    t = FALLBACK_TILE
+    th, tw = -(-h // t), -(-w // t)
+    tiles = np.zeros((th * t, tw * t), bool)
+    tiles[:h, :w] = borders
+    edge_tiles = tiles.reshape(th, t, tw, t).any((1, 3))
+    counted = np.repeat(np.repeat(edge_tiles, t, 0), t, 1)[:h, :w]
+    pad = np.pad(np.asarray(luma, f32), 2, mode="edge")
+    strong = ramps = 0
+    for dy, dx in ((0, 1), (1, 0)):
+        def at(k: int) -> np.ndarray:  # luma k steps along (dy, dx) from every pixel, clamped to the frame
+            return pad[2 + k * dy:2 + k * dy + h, 2 + k * dx:2 + k * dx + w]
+        a, b = at(0), at(1)
+        c = b - a
+        before, after, half = a - at(-1), at(2) - b, f32(0.5) * c
+        inside = np.ones((h, w), bool)  # the neighbour lies in the frame
+        inside[h - dy:] = False
+        inside[:, w - dx:] = False
+        step = counted & inside & (np.abs(c) >= f32(SUPERSAMPLED_STEP))
+        ramp = np.where(c > 0, (before >= half) | (after >= half), (before <= half) | (after <= half))
+        strong += int(step.sum())
+        ramps += int((step & ramp).sum())
+    return strong >= SUPERSAMPLED_MIN and ramps * 100 >= SUPERSAMPLED_PCT * strong
+
+
 def render_regions(busy: np.ndarray, borders: np.ndarray, luma: np.ndarray) -> np.ndarray:
     """kernels/fallback.cl's render regions per pixel: `busy` and `borders` the pixel masks of count_changed's
     k = 2 and k = 1, `luma` px_luma of the input (h, w)."""
     t, r = FALLBACK_TILE, RENDER_RADIUS
     h, w = busy.shape
     th, tw = -(-h // t), -(-w // t)
+    if supersampled(borders, luma):
+        return np.zeros((h, w), bool)
 
     def per_tile(mask: np.ndarray) -> np.ndarray:
         tiles = np.zeros((th * t, tw * t), np.int64)
