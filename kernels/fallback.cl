@@ -37,7 +37,8 @@
 // A frame that is already supersampled (rendered with several samples per pixel, or downscaled) is no 1-spp render:
 // across its strong luma steps (SUPERSAMPLED_STEP or more between neighbours) coverage blends make ramps -- the next
 // step on one side goes the same way by at least half as much -- where a 1-spp frame has single-pixel steps. Where
-// at least SUPERSAMPLED_PCT % of the strong steps in the tiles that hold edge-bordering pixels are ramps (1-spp
+// at least SUPERSAMPLED_PCT % of the strong steps in the tiles that hold edge-bordering pixels (a quarter of them:
+// even tile rows and columns) are ramps (1-spp
 // renders, also through H.264: 0-8 %; 2x2 and 3x3 supersampled renders: 19-47 %), no tile is a render region and
 // no pixel takes FXAA: the MLAA passes' own already-antialiased test is left to judge its edges
 // (docs/spatial_tuning.md, "SUPERSAMPLED_PCT").
@@ -322,8 +323,8 @@ RARELY_CALLED int2 tile_ramps(__global const PIXEL_T *src, int x0, int x1, int y
 // Six counts per tile (tx, ty), at counts[COUNTS * (ty * tiles_x + tx) + k]: k = 0 its pixels that border an edge
 // and that the MLAA passes changed (dst != src), k = 1 its pixels that border an edge, k = 2 the changed ones
 // whose 3x3 window holds FALLBACK_COLOURS bit-identical colours ("busy"), k = 3 tile_near_extremes where k = 2 is
-// not 0 and there are render regions (else NOT_MEASURED), k = 4 and 5 tile_ramps where k = 1 is not 0 and there
-// are render regions (else 0). One work item per SEGMENT pixels (a multiple of
+// not 0 and there are render regions (else NOT_MEASURED), k = 4 and 5 tile_ramps where k = 1 is not 0, tx and ty
+// are even and there are render regions (else 0). One work item per SEGMENT pixels (a multiple of
 // FALLBACK_TILE) of a band of FALLBACK_TILE rows.
 __kernel void count_changed(__global const PIXEL_T *src, __global const PIXEL_T *dst,
                             __global const uchar *edges, __global uchar *counts,
@@ -349,7 +350,9 @@ __kernel void count_changed(__global const PIXEL_T *src, __global const PIXEL_T 
         c[1] = (uchar)bordering;
         c[2] = (uchar)busy;
         c[3] = (uchar)(RENDER_REGIONS && busy ? tile_near_extremes(src, t0, t1, y0, y1, w, h) : NOT_MEASURED);
-        const int2 ramps = RENDER_REGIONS && bordering ? tile_ramps(src, t0, t1, y0, y1, w, h) : (int2)(0, 0);
+        const int sampled = ((t0 / FALLBACK_TILE) & 1) == 0 && (ty & 1) == 0;  // a quarter of the tiles suffices
+        const int2 ramps = RENDER_REGIONS && bordering && sampled ? tile_ramps(src, t0, t1, y0, y1, w, h)
+                                                                  : (int2)(0, 0);
         c[4] = (uchar)ramps.x;
         c[5] = (uchar)ramps.y;
     }

@@ -7,7 +7,7 @@ import pytest
 
 from mlaa_stream.device.colour import linear_to_srgb, srgb_to_linear
 from mlaa_stream.spatial.fallback import (FALLBACK_MIX, FALLBACK_TILE, FALLBACK_WEIGHT, RENDER_RADIUS,
-                                          fallback_reference, render_regions_of)
+                                          SUPERSAMPLED_PCT, fallback_reference, ramp_counts, render_regions_of)
 from mlaa_stream.spatial.fxaa import fxaa_mix_reference
 from mlaa_stream.spatial.filter import Filter
 
@@ -31,28 +31,41 @@ def textured_aliased(seed: int, h: int = 72, w: int = 96) -> np.ndarray:
     return np.clip(np.rint(img * 255), 0, 255).astype(np.uint8)
 
 
-def shaded_polygons(seed: int, h: int = 72, w: int = 96, cell: int = 4) -> np.ndarray:
+def shaded_polygons(seed: int, h: int = 72, w: int = 96, cell: int = 4, samples: int = 1) -> np.ndarray:
     """Render-like: smoothly shaded texture (bilinear over random texels of `cell` px) under hard-edged shaded
-    polygons sampled at pixel centres -- a 1-spp render's lit, textured surfaces and silhouettes."""
+    polygons sampled at pixel centres -- a 1-spp render's lit, textured surfaces and silhouettes; `samples` > 1:
+    the same scene supersampled, the mean of samples x samples points per pixel (an ordered grid) in linear light."""
     rng = np.random.default_rng(seed)
-    yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
 
-    def smooth(lo: float, hi: float) -> np.ndarray:
-        g = rng.uniform(lo, hi, (h // cell + 2, w // cell + 2))
-        y, x = yy / cell, xx / cell
+    def texels(lo: float, hi: float) -> np.ndarray:
+        return rng.uniform(lo, hi, (h // cell + 2, w // cell + 2))
+
+    def smooth(g: np.ndarray, yy: np.ndarray, xx: np.ndarray) -> np.ndarray:
+        y, x = np.clip(yy / cell, 0, h // cell + 0.999), np.clip(xx / cell, 0, w // cell + 0.999)
         y0, x0 = np.floor(y).astype(int), np.floor(x).astype(int)
         ty, tx = y - y0, x - x0
         return (g[y0, x0] * (1 - ty) * (1 - tx) + g[y0 + 1, x0] * ty * (1 - tx)
                 + g[y0, x0 + 1] * (1 - ty) * tx + g[y0 + 1, x0 + 1] * ty * tx)
 
-    img = np.stack([smooth(0.2, 0.8) for _ in range(3)], -1)
+    ground = [texels(0.2, 0.8) for _ in range(3)]
+    polygons = []
     for _ in range(10):
         a, b = rng.uniform(-1, 1, 2)
         cx, cy = rng.uniform(0, w), rng.uniform(0, h)
-        inside = a * (xx + 0.5 - cx) + b * (yy + 0.5 - cy) > 0
-        inside &= (xx - cx) ** 2 + (yy - cy) ** 2 < rng.uniform(20, 60) ** 2
-        shade = smooth(0.5, 1.0)[..., None] * rng.uniform(0.1, 1, 3)
-        img[inside] = shade[inside]
+        polygons.append((a, b, cx, cy, rng.uniform(20, 60), texels(0.5, 1.0), rng.uniform(0.1, 1, 3)))
+    linear = np.zeros((h, w, 3))
+    offsets = (np.arange(samples) + 0.5) / samples
+    for oy in offsets:
+        for ox in offsets:
+            yy, xx = np.mgrid[0:h, 0:w].astype(np.float64) + [[[oy - 0.5]], [[ox - 0.5]]]  # texels at pixel corners
+            img = np.stack([smooth(g, yy, xx) for g in ground], -1)
+            for a, b, cx, cy, radius, shade_texels, tint in polygons:
+                inside = a * (xx + 0.5 - cx) + b * (yy + 0.5 - cy) > 0
+                inside &= (xx - cx) ** 2 + (yy - cy) ** 2 < radius ** 2
+                shade = smooth(shade_texels, yy, xx)[..., None] * tint
+                img[inside] = shade[inside]
+            linear += srgb_to_linear(img) if samples > 1 else img
+    img = linear_to_srgb(linear / samples ** 2) if samples > 1 else linear
     return np.clip(np.rint(img * 255), 0, 255).astype(np.uint8)
 
 
@@ -246,6 +259,55 @@ def test_kernel_matches_reference_in_a_render_frame(dtype, channels, bgr):
         np.testing.assert_allclose(got, want, rtol=0, atol=1e-6)
     else:
         np.testing.assert_array_equal(got, want)
+
+
+def test_ramp_counts_known_answer():
+    """Known answer (SUPERSAMPLED_*): per row of the sampled tile (0, 0) a hard step, a two-step ramp and a 1-px line
+    (its steps go back: no ramp); a ramp in tile (0, 1) (odd tile column: not sampled), one in tile (0, 4) (no
+    edge-bordering pixel) and tile row 1's (odd) are not counted."""
+    row = np.full(48, 1.0, np.float32)
+    row[:3] = (0.1, 0.5, 0.5)  # 0 -> 1: +0.4, hard (the steps before and after are 0)
+    row[3] = 0.75              # 2 -> 3 and 3 -> 4: +0.25 each, both ramps
+    row[6] = 0.3               # 5 -> 6 -0.7, 6 -> 7 +0.7: a line, no ramp
+    row[10:13] = (0.6, 0.2, 0.6)
+    row[34:37] = (0.6, 0.2, 0.6)
+    luma = np.repeat(row[None], 16, 0)
+    borders = np.zeros((16, 48), bool)
+    borders[:, :16] = True
+    assert ramp_counts(borders, luma) == (8 * 5, 8 * 2)
+
+
+def ramps_beside_render(seed: int) -> np.ndarray:
+    """A render (shaded_polygons) beside sine bars 3 px apart (steps of 0.2-0.4 full scale, each continued by the
+    next): more than SUPERSAMPLED_PCT % of the frame's strong steps are ramps."""
+    xx = np.arange(144)[None, :, None]
+    bars = np.broadcast_to(np.rint(127.5 + 120 * np.sin(xx * 2 * np.pi / 9 + seed)), (144, 144, 3)).astype(np.uint8)
+    return np.concatenate([shaded_polygons(seed, 144, 192), bars], 1)
+
+
+@pytest.mark.parametrize("dtype,channels,bgr", [(np.uint8, 3, False), (np.uint8, 4, True), (np.uint16, 3, False),
+                                                (np.float32, 3, False)])
+def test_a_supersampled_frame_has_no_regions_and_no_fxaa(dtype, channels, bgr, monkeypatch):
+    """Known answer: a frame most of whose strong steps are ramps is judged supersampled -- the render beside the
+    ramps, a region without the verdict, is none, and no pixel takes FXAA: the output is the MLAA passes'. The kernel
+    equals the reference in every stored format."""
+    import mlaa_stream.spatial.fallback as fallback
+    frame8 = ramps_beside_render(0)
+    frame = _as(frame8[..., ::-1] if bgr else frame8, dtype, channels)
+    with monkeypatch.context() as m:
+        m.setattr(fallback, "SUPERSAMPLED_PCT", 101)  # the reference without the verdict
+        assert regions_of(frame)[:, :192].mean() > 0.9
+    with Filter(bgr=bgr, keep_regions=True) as f, Filter(bgr=bgr, fallback="off") as g:
+        got, passes = f.process(frame), g.intermediates(frame)
+        assert not f.last_regions.any()
+    assert not render_regions_of(frame, passes["out"], passes["edges"], bgr=bgr).any()
+    want = fallback_reference(frame, passes["out"], passes["edges"], passes["hdist"], passes["vdist"], bgr=bgr)
+    if dtype == np.float32:
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-6)
+        np.testing.assert_allclose(got, passes["out"], rtol=0, atol=1e-6)
+    else:
+        np.testing.assert_array_equal(got, want)
+        np.testing.assert_array_equal(got, passes["out"])
 
 
 @pytest.mark.parametrize("seed,small", [(0, True), (1, True), (2, True), (2, False)])

@@ -209,3 +209,25 @@ def test_rendered_views_bench_runs(capsys):
     assert rendered_views.main(["--methods", "none,mlaa", "--sizes", "96x54"]) == 0
     out = capsys.readouterr().out
     assert all(f"{name}_96" in out for name in rendered_views.VIEWS) and "mean" in out
+
+
+@needs_egl
+def test_a_supersampled_render_is_left_to_the_mlaa_passes():
+    """Known answer (fallback.py SUPERSAMPLED_*): a held-out view rendered with 3x3 samples per pixel is judged
+    supersampled -- no render regions, no FXAA: the default's output is the MLAA passes' alone -- while the same
+    view at 1 sample per pixel is mostly render regions."""
+    from mlaa_stream.bench.rendered_views import VIEWS
+    from mlaa_stream.spatial.filter import Filter
+    eye, target, fov = VIEWS["low_arches"]
+    renderer = R.Renderer(R._context(), 320, 180)
+    try:
+        cam = R.Camera(eye, target, fov)
+        one, supersampled = renderer.input_frame(cam), renderer.truth_frame(cam, 3)
+    finally:
+        renderer.release()
+    with Filter(keep_regions=True) as f, Filter(fallback="off") as g:
+        f.process(one)
+        assert (f.last_regions > 0).mean() > 0.5
+        out = f.process(supersampled)
+        assert not f.last_regions.any()
+        np.testing.assert_array_equal(out, g.process(supersampled))

@@ -41,7 +41,7 @@ RENDER_RADIUS, RENDER_MIN, RENDER_DIV, RENDER_NEAR_PCT, RENDER_RANGE = 7, 48, 10
 RENDER_FRAME_PCT = 45
 # A supersampled frame (several samples per pixel, or downscaled) is no 1-spp render: where at least
 # SUPERSAMPLED_PCT % of the luma steps of SUPERSAMPLED_STEP or more between neighbours (px_luma, in the tiles holding
-# edge-bordering pixels; at least SUPERSAMPLED_MIN of them) are ramps -- the step before or after goes the same way by
+# edge-bordering pixels, a quarter of them sampled; at least SUPERSAMPLED_MIN steps) are ramps -- the step before or after goes the same way by
 # half as much or more -- no tile is a render region and no pixel takes FXAA (1-spp renders 0-8 %, supersampled
 # ones 19-47 %: docs/spatial_tuning.md, "SUPERSAMPLED_PCT").
 SUPERSAMPLED_STEP, SUPERSAMPLED_PCT, SUPERSAMPLED_MIN = 0.2, 14, 100
@@ -334,10 +334,11 @@ def fallback_reference(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray,
     return out.reshape(np.asarray(mlaa_out).shape)
 
 
-def supersampled(borders: np.ndarray, luma: np.ndarray) -> bool:
-    """kernels/fallback.cl's verdict that a frame is already supersampled (render_frame): of the strong luma steps
-    from the pixels of tiles holding edge-bordering pixels (`borders`, (h, w) bool) to their right and lower
-    neighbours, at least SUPERSAMPLED_PCT % are ramps (tile_ramps); `luma` px_luma of the input (h, w)."""
+def ramp_counts(borders: np.ndarray, luma: np.ndarray) -> tuple[int, int]:
+    """kernels/fallback.cl tile_ramps summed over the frame (render_frame's evidence): the strong luma steps
+    (SUPERSAMPLED_STEP or more) from the pixels of sampled tiles (even tile rows and columns) holding edge-bordering
+    pixels (`borders`, (h, w) bool) to their right and lower neighbours, and of those the ramps; `luma` px_luma of
+    the input (h, w)."""
     f32 = np.float32
     h, w = luma.shape
     t = FALLBACK_TILE
@@ -345,6 +346,8 @@ def supersampled(borders: np.ndarray, luma: np.ndarray) -> bool:
     tiles = np.zeros((th * t, tw * t), bool)
     tiles[:h, :w] = borders
     edge_tiles = tiles.reshape(th, t, tw, t).any((1, 3))
+    edge_tiles[1::2] = False
+    edge_tiles[:, 1::2] = False
     counted = np.repeat(np.repeat(edge_tiles, t, 0), t, 1)[:h, :w]
     pad = np.pad(np.asarray(luma, f32), 2, mode="edge")
     strong = ramps = 0
@@ -353,14 +356,21 @@ def supersampled(borders: np.ndarray, luma: np.ndarray) -> bool:
             return pad[2 + k * dy:2 + k * dy + h, 2 + k * dx:2 + k * dx + w]
         a, b = at(0), at(1)
         c = b - a
-        before, after, half = a - at(-1), at(2) - b, f32(0.5) * c
+        before, after, mid = a - at(-1), at(2) - b, f32(0.5) * c
         inside = np.ones((h, w), bool)  # the neighbour lies in the frame
         inside[h - dy:] = False
         inside[:, w - dx:] = False
         step = counted & inside & (np.abs(c) >= f32(SUPERSAMPLED_STEP))
-        ramp = np.where(c > 0, (before >= half) | (after >= half), (before <= half) | (after <= half))
+        ramp = np.where(c > 0, (before >= mid) | (after >= mid), (before <= mid) | (after <= mid))
         strong += int(step.sum())
         ramps += int((step & ramp).sum())
+    return strong, ramps
+
+
+def supersampled(borders: np.ndarray, luma: np.ndarray) -> bool:
+    """kernels/fallback.cl's verdict that a frame is already supersampled (render_frame): at least SUPERSAMPLED_MIN
+    strong steps (ramp_counts), SUPERSAMPLED_PCT % of them ramps."""
+    strong, ramps = ramp_counts(borders, luma)
     return strong >= SUPERSAMPLED_MIN and ramps * 100 >= SUPERSAMPLED_PCT * strong
 
 
