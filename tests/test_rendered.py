@@ -206,9 +206,12 @@ def test_depth_reprojects_one_frame_onto_the_next(scenes):
 def test_rendered_views_bench_runs(capsys):
     """python -m mlaa_stream.bench.rendered_views at a tiny size: every view rendered, scored and printed."""
     from mlaa_stream.bench import rendered_views
-    assert rendered_views.main(["--methods", "none,mlaa", "--sizes", "96x54"]) == 0
+    assert rendered_views.main(["--methods", "none,mlaa", "--sizes", "96x54", "--samples", "1,2"]) == 0
     out = capsys.readouterr().out
-    assert all(f"{name}_96" in out for name in rendered_views.VIEWS) and "mean" in out
+    assert all(f"{name}_96" in out and f"{name}_96_2x2" in out for name in rendered_views.VIEWS)
+    assert "mean  " in out and "mean 2x2" in out
+    with pytest.raises(SystemExit, match="--samples"):
+        rendered_views.main(["--sizes", "96x54", "--samples", "0"])
 
 
 @needs_egl

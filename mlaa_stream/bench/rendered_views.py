@@ -1,12 +1,15 @@
 """Held-out rendered views: the rendered world (yardstick/rendered.py) seen from cameras that no bench scene uses.
 
     python -m mlaa_stream.bench.rendered_views [--methods none,fxaa,mlaa,mlaa:screen,mlaa:rendered] [--sizes 640x360,960x540]
+                                               [--samples 1,2,3]
 
 The bench's rendered scenes are what the spatial filter's rendered-content rules were measured on; these views
 are not, so a rule that only fits those five scenes shows here. Each view is rendered like the bench's (1 spp at
 pixel centres; truth: 8x8 jittered samples averaged in linear light), at each size, and every method of the
 bench (mlaa_stream.bench.accuracy.METHODS) prints error removed % / damage away from edges (levels) / FLIP per
-view, with the mean error removed. Needs what the rendered scenes need (EGL; `pip install 'mlaa-stream[bench]'`
+view, with the mean error removed. `--samples 2,3`: also inputs already supersampled (2x2, 3x3 samples per pixel on
+an ordered grid, as renderers with supersampling make them; view_WIDTH_NxN): a filter should leave them about as
+they are. Needs what the rendered scenes need (EGL; `pip install 'mlaa-stream[bench]'`
 for FLIP). A benchmark, never a unit test.
 """
 from __future__ import annotations
@@ -30,15 +33,19 @@ VIEWS: dict[str, tuple[tuple, tuple, float]] = {
 }
 
 
-def render_views(sizes: list[tuple[int, int]]) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """{view_WIDTH: (input, truth)} for every view at every size."""
+def render_views(sizes: list[tuple[int, int]], samples: tuple[int, ...] = (1,)) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """{view_WIDTH: (input, truth)} for every view at every size; for every n > 1 of `samples` also
+    {view_WIDTH_NxN: (input supersampled with n x n samples per pixel, truth)}."""
     frames = {}
     for width, height in sizes:
         renderer = Renderer(_context(), width, height)
         try:
             for name, (eye, target, fov) in VIEWS.items():
                 cam = Camera(eye, target, fov)
-                frames[f"{name}_{width}"] = (renderer.input_frame(cam), renderer.truth_frame(cam))
+                truth = renderer.truth_frame(cam)
+                for n in samples:
+                    key = f"{name}_{width}" if n == 1 else f"{name}_{width}_{n}x{n}"
+                    frames[key] = (renderer.input_frame(cam) if n == 1 else renderer.truth_frame(cam, n), truth)
         finally:
             renderer.release()
     return frames
@@ -81,6 +88,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--methods", default="none,fxaa,mlaa,mlaa:screen,mlaa:rendered")
     ap.add_argument("--sizes", default="640x360,960x540")
+    ap.add_argument("--samples", default="1",
+                    help="samples per pixel of the inputs, per axis, comma-separated (1: the 1-spp views)")
     ap.add_argument("--device", default=None)
     args = ap.parse_args(argv)
     ok, why = egl_available()
@@ -91,22 +100,33 @@ def main(argv: list[str] | None = None) -> int:
     if unknown:
         raise SystemExit(f"expected methods from {', '.join(METHODS)}, got {', '.join(unknown)}")
     sizes = [tuple(int(v) for v in s.split("x")) for s in args.sizes.split(",")]
-    frames = render_views(sizes)
+    try:
+        samples = tuple(int(v) for v in args.samples.split(","))
+    except ValueError:
+        samples = ()
+    if not samples or min(samples) < 1:
+        raise SystemExit(f"--samples: expected positive integers, comma-separated, got {args.samples!r}")
+    frames = render_views(sizes, samples)
     with_flip = M.flip_available()  # an optional part ([bench])
-    print("view".ljust(16) + "".join(m.rjust(24) for m in methods))
-    removed = {m: [] for m in methods}
+    print("view".ljust(20) + "".join(m.rjust(24) for m in methods))
+    def group(view: str) -> str:  # the mean's row: "mean" for 1-spp views, "mean NxN" for supersampled ones
+        last = view.rsplit("_", 1)[-1]
+        return f"mean {last}" if "x" in last else "mean"
+
+    removed = {(m, group(v)): [] for m in methods for v in frames}
     cells = {view: [] for view in frames}
     for m in methods:
         proc = METHODS[m](args.device)
         for view, (inp, truth) in frames.items():
             out = proc.process(inp)
             sc = M.score(out, inp, truth, edge_mask(inp, truth), with_flip=with_flip)
-            removed[m].append(sc["error_removed"])
+            removed[m, group(view)].append(sc["error_removed"])
             cells[view].append(f"{sc['error_removed'] * 100:5.1f} / {sc['damage']:.2f}"
                                + (f" / {sc['flip']:.4f}" if with_flip else ""))
     for view, row in cells.items():
-        print(view.ljust(16) + "".join(c.rjust(24) for c in row))
-    print("mean".ljust(16) + "".join(f"{np.mean(removed[m]) * 100:5.1f}".rjust(24) for m in methods))
+        print(view.ljust(20) + "".join(c.rjust(24) for c in row))
+    for g in dict.fromkeys(group(v) for v in frames):
+        print(g.ljust(20) + "".join(f"{np.mean(removed[m, g]) * 100:5.1f}".rjust(24) for m in methods))
     return 0
 
 
