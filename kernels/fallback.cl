@@ -37,11 +37,10 @@
 // A frame that is already supersampled (rendered with several samples per pixel, or downscaled) is no 1-spp render:
 // across its strong luma steps (SUPERSAMPLED_STEP or more between neighbours) coverage blends make ramps -- the next
 // step on one side goes the same way by at least half as much -- where a 1-spp frame has single-pixel steps. Where
-// at least SUPERSAMPLED_PCT % of the strong steps in the tiles that hold edge-bordering pixels (a quarter of them:
-// even tile rows and columns) are ramps (1-spp
-// renders, also through H.264: 0-8 %; 2x2 and 3x3 supersampled renders: 19-47 %), no tile is a render region and
-// no pixel takes FXAA: the MLAA passes' own already-antialiased test is left to judge its edges
-// (docs/spatial_tuning.md, "SUPERSAMPLED_PCT").
+// at least SUPERSAMPLED_PCT % of the strong steps in the tiles that hold edge-bordering pixels (a quarter of them
+// sampled: even tile rows and columns) are ramps (1-spp renders, also through H.264: 0-9 %; 2x2 and 3x3 supersampled
+// renders: 21-47 %), no tile is a render region and no pixel takes FXAA: the MLAA passes' own already-antialiased
+// test judges its edges (docs/spatial_tuning.md, "SUPERSAMPLED_PCT").
 // The footprint table (mlaa_stream/spatial/footprint.py says what and why): a 1-spp frame holds point samples, its
 // truth the average over each pixel's square footprint; each pixel of a render region becomes a linear filter of
 // its 5x5 window and the chain's colour, one filter per local structure class, clamped to its 3x3 window's range.

@@ -1,7 +1,7 @@
 """Held-out rendered views: the rendered world (yardstick/rendered.py) seen from cameras that no bench scene uses.
 
-    python -m mlaa_stream.bench.rendered_views [--methods none,fxaa,mlaa,mlaa:screen,mlaa:rendered] [--sizes 640x360,960x540]
-                                               [--samples 1,2,3]
+    python -m mlaa_stream.bench.rendered_views [--methods none,fxaa,mlaa,mlaa:screen,mlaa:rendered]
+                                               [--sizes 640x360,960x540] [--samples 1,2,3]
 
 The bench's rendered scenes are what the spatial filter's rendered-content rules were measured on; these views
 are not, so a rule that only fits those five scenes shows here. Each view is rendered like the bench's (1 spp at
@@ -33,7 +33,8 @@ VIEWS: dict[str, tuple[tuple, tuple, float]] = {
 }
 
 
-def render_views(sizes: list[tuple[int, int]], samples: tuple[int, ...] = (1,)) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+def render_views(sizes: list[tuple[int, int]],
+                 samples: tuple[int, ...] = (1,)) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """{view_WIDTH: (input, truth)} for every view at every size; for every n > 1 of `samples` also
     {view_WIDTH_NxN: (input supersampled with n x n samples per pixel, truth)}."""
     frames = {}
