@@ -295,7 +295,14 @@ RARELY_CALLED int tile_near_extremes(__global const PIXEL_T *src, int x0, int x1
     return near;
 }
 
-// The tile's strong luma steps (px_luma, SUPERSAMPLED_STEP or more from a pixel to its right or lower neighbour
+// px_luma clipped to display white: tile_ramps' luma (HDR frames' highlights above 1 count as flat, so bright
+// shading gradients and dark-noise steps scaled up with the exposure make no ramps; docs/spatial_tuning.md).
+inline float ramp_luma(__global const PIXEL_T *src, int x, int y, int w, int h)
+{
+    return fmin(px_luma(src, x, y, w, h), 1.0f);
+}
+
+// The tile's strong luma steps (ramp_luma, SUPERSAMPLED_STEP or more from a pixel to its right or lower neighbour
 // inside the frame) and of those the ramps (the step before or after it goes the same way by at least half as
 // much), as (strong, ramps).
 RARELY_CALLED int2 tile_ramps(__global const PIXEL_T *src, int x0, int x1, int y0, int y1, int w, int h)
@@ -303,14 +310,14 @@ RARELY_CALLED int2 tile_ramps(__global const PIXEL_T *src, int x0, int x1, int y
     int2 n = (int2)(0, 0);
     for (int y = y0; y < y1; ++y)
         for (int x = x0; x < x1; ++x) {
-            const float a = px_luma(src, x, y, w, h);
+            const float a = ramp_luma(src, x, y, w, h);
             for (int k = 0; k < 2; ++k) {
                 const int dx = k == 0, dy = k == 1;
                 if (x + dx >= w || y + dy >= h) continue;
-                const float b = px_luma(src, x + dx, y + dy, w, h), c = b - a;
+                const float b = ramp_luma(src, x + dx, y + dy, w, h), c = b - a;
                 if (!(fabs(c) >= SUPERSAMPLED_STEP)) continue;
-                const float before = a - px_luma(src, x - dx, y - dy, w, h);
-                const float after = px_luma(src, x + 2 * dx, y + 2 * dy, w, h) - b;
+                const float before = a - ramp_luma(src, x - dx, y - dy, w, h);
+                const float after = ramp_luma(src, x + 2 * dx, y + 2 * dy, w, h) - b;
                 const float mid = 0.5f * c;
                 n.x += 1;
                 n.y += c > 0.0f ? (before >= mid || after >= mid) : (before <= mid || after <= mid);

@@ -264,7 +264,7 @@ def test_kernel_matches_reference_in_a_render_frame(dtype, channels, bgr):
 def test_ramp_counts_known_answer():
     """Known answer (SUPERSAMPLED_*): per row of the sampled tile (0, 0) a hard step, a two-step ramp and a 1-px line
     (its steps go back: no ramp); a ramp in tile (0, 1) (odd tile column: not sampled), one in tile (0, 4) (no
-    edge-bordering pixel) and tile row 1's (odd) are not counted."""
+    edge-bordering pixel) and tile row 1's (odd) are not counted; luma over 1 counts as 1."""
     row = np.full(48, 1.0, np.float32)
     row[:3] = (0.1, 0.5, 0.5)  # 0 -> 1: +0.4, hard (the steps before and after are 0)
     row[3] = 0.75              # 2 -> 3 and 3 -> 4: +0.25 each, both ramps
@@ -275,6 +275,8 @@ def test_ramp_counts_known_answer():
     borders = np.zeros((16, 48), bool)
     borders[:, :16] = True
     assert ramp_counts(borders, luma) == (8 * 5, 8 * 2)
+    # luma is clipped to display white (HDR frames): four times brighter, only the step from 0.4 to white is left
+    assert ramp_counts(borders, luma * 4) == (8, 0)
 
 
 def ramps_beside_render(seed: int) -> np.ndarray:

@@ -336,7 +336,7 @@ def fallback_reference(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray,
 
 def ramp_counts(borders: np.ndarray, luma: np.ndarray) -> tuple[int, int]:
     """kernels/fallback.cl tile_ramps summed over the frame (render_frame's evidence): the strong luma steps
-    (SUPERSAMPLED_STEP or more) from the pixels of sampled tiles (even tile rows and columns) holding edge-bordering
+    (SUPERSAMPLED_STEP or more, in luma clipped to 1) from the pixels of sampled tiles (even tile rows and columns) holding edge-bordering
     pixels (`borders`, (h, w) bool) to their right and lower neighbours, and of those the ramps; `luma` px_luma of
     the input (h, w)."""
     f32 = np.float32
@@ -349,7 +349,7 @@ def ramp_counts(borders: np.ndarray, luma: np.ndarray) -> tuple[int, int]:
     edge_tiles[1::2] = False
     edge_tiles[:, 1::2] = False
     counted = np.repeat(np.repeat(edge_tiles, t, 0), t, 1)[:h, :w]
-    pad = np.pad(np.asarray(luma, f32), 2, mode="edge")
+    pad = np.pad(np.minimum(np.asarray(luma, f32), f32(1)), 2, mode="edge")  # ramp_luma: clipped to display white
     strong = ramps = 0
     for dy, dx in ((0, 1), (1, 0)):
         def at(k: int) -> np.ndarray:  # luma k steps along (dy, dx) from every pixel, clamped to the frame
