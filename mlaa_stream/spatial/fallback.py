@@ -40,10 +40,10 @@ FALLBACK_KEEP_RUN = 16
 RENDER_RADIUS, RENDER_MIN, RENDER_DIV, RENDER_NEAR_PCT, RENDER_RANGE = 7, 48, 10, 88, 24 / 255
 RENDER_FRAME_PCT = 45
 # A supersampled frame (several samples per pixel, or downscaled) is no 1-spp render: where at least SUPERSAMPLED_PCT %
-# of the luma steps of SUPERSAMPLED_STEP or more between neighbours (px_luma; in the tiles holding edge-bordering
-# pixels, a quarter of them sampled; at least SUPERSAMPLED_MIN steps) are ramps -- the step before or after goes the
-# same way by half as much or more -- no tile is a render region and no pixel takes FXAA (1-spp renders 0-9 %,
-# supersampled ones 21-47 %: docs/spatial_tuning.md, "SUPERSAMPLED_PCT").
+# of the luma steps of SUPERSAMPLED_STEP or more between neighbours (px_luma clipped to 1; in the tiles holding
+# edge-bordering pixels, a quarter of them sampled; at least SUPERSAMPLED_MIN steps) are ramps -- the step before or
+# after goes the same way by half as much or more -- no tile is a render region and no pixel takes FXAA (1-spp
+# renders 0-9 %, supersampled ones 21-47 %: docs/spatial_tuning.md, "SUPERSAMPLED_PCT").
 SUPERSAMPLED_STEP, SUPERSAMPLED_PCT, SUPERSAMPLED_MIN = 0.2, 14, 100
 COUNTS, NOT_MEASURED = 6, 255  # bytes per tile of count_changed's output; k = 3 of a tile not measured
 SHOW_DIM = 0.35  # Filter(show="regions"): pixels outside render regions keep this share of their colour
