@@ -109,11 +109,12 @@ def main(argv: list[str] | None = None) -> int:
         raise SystemExit(f"--samples: expected positive integers, comma-separated, got {args.samples!r}")
     frames = render_views(sizes, samples)
     with_flip = M.flip_available()  # an optional part ([bench])
-    print("view".ljust(20) + "".join(m.rjust(24) for m in methods))
+
     def group(view: str) -> str:  # the mean's row: "mean" for 1-spp views, "mean NxN" for supersampled ones
         last = view.rsplit("_", 1)[-1]
         return f"mean {last}" if "x" in last else "mean"
 
+    print("view".ljust(20) + "".join(m.rjust(24) for m in methods))
     removed = {(m, group(v)): [] for m in methods for v in frames}
     cells = {view: [] for view in frames}
     for m in methods:
