@@ -158,6 +158,17 @@ def region_pixels(tiles: np.ndarray, height: int, width: int) -> np.ndarray:
     return np.repeat(np.repeat(np.asarray(tiles) > 0, FALLBACK_TILE, 0), FALLBACK_TILE, 1)[:height, :width]
 
 
+def tile_sums(mask: np.ndarray) -> np.ndarray:
+    """A (h, w) mask counted per FALLBACK_TILE^2 tile (partial tiles at the right and bottom edges): (tiles_y,
+    tiles_x) int64."""
+    t = FALLBACK_TILE
+    h, w = mask.shape
+    th, tw = -(-h // t), -(-w // t)
+    tiles = np.zeros((th * t, tw * t), np.int64)
+    tiles[:h, :w] = mask
+    return tiles.reshape(th, t, tw, t).sum((1, 3))
+
+
 def table_pixels(regions: np.ndarray, runs: np.ndarray, changed: np.ndarray) -> np.ndarray:
     """The pixels the footprint table takes (kernels/fallback.cl fallback_tile): render regions, but for pixels the
     chain changed on a straight edge run (long_runs)."""
@@ -225,7 +236,10 @@ def render_regions_of(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray, 
     """The render regions kernels/fallback.cl finds in `src` (per pixel, (h, w) bool), given the MLAA passes'
     output and edge buffer (Filter.intermediates: "out", "edges")."""
     _, _, _, borders, changed, rgb = _frame_masks(src, mlaa_out, edges, bgr)
-    return render_regions(_busy_pixels(changed, borders, rgb), borders, luma_reference(rgb, linear_input))
+    luma = luma_reference(rgb, linear_input)
+    if supersampled(borders, luma):
+        return np.zeros(borders.shape, bool)
+    return render_regions(_busy_pixels(changed, borders, rgb), borders, luma)
 
 
 def _busy_pixels(changed: np.ndarray, borders: np.ndarray, rgb: np.ndarray) -> np.ndarray:
@@ -285,9 +299,7 @@ def fallback_reference(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray,
         th, tw = -(-h // t), -(-w // t)
 
         def region_sums(mask: np.ndarray) -> np.ndarray:  # per pixel: the mask's count over its 3x3 tiles
-            tiles = np.zeros((th * t, tw * t), np.int32)
-            tiles[:h, :w] = mask
-            pad = np.pad(tiles.reshape(th, t, tw, t).sum((1, 3)), 1)
+            pad = np.pad(tile_sums(mask), 1)
             s3 = sum(pad[dy:dy + th, dx:dx + tw] for dy in range(3) for dx in range(3))
             return np.repeat(np.repeat(s3, t, 0), t, 1)[:h, :w]
 
@@ -295,12 +307,14 @@ def fallback_reference(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray,
         luma = luma_reference(rgb, linear_input)
         busy_px = _busy_pixels(changed, borders, rgb)
         busy_changed = region_sums(busy_px)
-        rendered = (render_regions(busy_px, borders, luma) if regions else np.zeros((h, w), bool))
+        frame_supersampled = regions and supersampled(borders, luma)  # render_frame then clears every tile's counts
+        rendered = (render_regions(busy_px, borders, luma) if regions and not frame_supersampled
+                    else np.zeros((h, w), bool))
         busy = rendered | ((busy_changed >= FALLBACK_RICH_MIN)
                            & (busy_changed * FALLBACK_RICH_DIV >= region_sums(borders)))
         evidence = region_sums(changed & borders) >= FALLBACK_MIN_CHANGED
         eligible = borders & (busy | (evidence & busy_window & ~changed))
-        if regions and supersampled(borders, luma):  # render_frame clears every tile's counts: nothing eligible
+        if frame_supersampled:  # no tile busy, none with evidence
             eligible[:] = False
         runs = long_runs(e, hdist, vdist)
         eligible &= ~runs
@@ -336,19 +350,15 @@ def fallback_reference(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray,
 
 def ramp_counts(borders: np.ndarray, luma: np.ndarray) -> tuple[int, int]:
     """kernels/fallback.cl tile_ramps summed over the frame (render_frame's evidence): the strong luma steps
-    (SUPERSAMPLED_STEP or more, in luma clipped to 1) from the pixels of sampled tiles (even tile rows and columns) holding edge-bordering
-    pixels (`borders`, (h, w) bool) to their right and lower neighbours, and of those the ramps; `luma` px_luma of
-    the input (h, w)."""
+    (SUPERSAMPLED_STEP or more, in luma clipped to 1) from the pixels of sampled tiles (even tile rows and columns)
+    holding edge-bordering pixels (`borders`, (h, w) bool) to their right and lower neighbours, and of those the
+    ramps; `luma` px_luma of the input (h, w)."""
     f32 = np.float32
     h, w = luma.shape
-    t = FALLBACK_TILE
-    th, tw = -(-h // t), -(-w // t)
-    tiles = np.zeros((th * t, tw * t), bool)
-    tiles[:h, :w] = borders
-    edge_tiles = tiles.reshape(th, t, tw, t).any((1, 3))
+    edge_tiles = tile_sums(borders) > 0
     edge_tiles[1::2] = False
     edge_tiles[:, 1::2] = False
-    counted = np.repeat(np.repeat(edge_tiles, t, 0), t, 1)[:h, :w]
+    counted = region_pixels(edge_tiles, h, w)
     pad = np.pad(np.minimum(np.asarray(luma, f32), f32(1)), 2, mode="edge")  # ramp_luma: clipped to display white
     strong = ramps = 0
     for dy, dx in ((0, 1), (1, 0)):
@@ -375,20 +385,12 @@ def supersampled(borders: np.ndarray, luma: np.ndarray) -> bool:
 
 
 def render_regions(busy: np.ndarray, borders: np.ndarray, luma: np.ndarray) -> np.ndarray:
-    """kernels/fallback.cl's render regions per pixel: `busy` and `borders` the pixel masks of count_changed's
-    k = 2 and k = 1, `luma` px_luma of the input (h, w)."""
+    """kernels/fallback.cl's render regions per pixel in a frame that is not supersampled (the callers' test):
+    `busy` and `borders` the pixel masks of count_changed's k = 2 and k = 1, `luma` px_luma of the input (h, w)."""
     t, r = FALLBACK_TILE, RENDER_RADIUS
     h, w = busy.shape
     th, tw = -(-h // t), -(-w // t)
-    if supersampled(borders, luma):
-        return np.zeros((h, w), bool)
-
-    def per_tile(mask: np.ndarray) -> np.ndarray:
-        tiles = np.zeros((th * t, tw * t), np.int64)
-        tiles[:h, :w] = mask
-        return tiles.reshape(th, t, tw, t).sum((1, 3))
-
-    busy_t, border_t = per_tile(busy), per_tile(borders)
+    busy_t, border_t = tile_sums(busy), tile_sums(borders)
     f32 = np.float32
     lum = np.full((th * t, tw * t), np.nan, f32)
     lum[:h, :w] = luma
@@ -411,4 +413,4 @@ def render_regions(busy: np.ndarray, borders: np.ndarray, luma: np.ndarray) -> n
     edge_tiles = border_t > 0
     if edge_tiles.any() and (flag & edge_tiles).sum() * 100 >= RENDER_FRAME_PCT * edge_tiles.sum():
         flag = b > 0  # a render: every tile near a busy pixel
-    return np.repeat(np.repeat(flag, t, 0), t, 1)[:h, :w]
+    return region_pixels(flag, h, w)
