@@ -92,6 +92,24 @@ def test_reprojection_of_the_pan_is_its_rotation():
 def test_unknown_name_is_refused(tmp_path):
     with pytest.raises(ValueError, match="expected scene names"):
         R.generate_rendered(small=True, names=["nope"], cache_dir=tmp_path)
+    with pytest.raises(ValueError, match="expected a world"):
+        R.build_world("moon")
+
+
+@pytest.mark.parametrize("name", R.WORLDS)
+def test_every_world_is_complete(name):
+    """Each world's meshes have a material and a place in the draw order, each material's texture is made, every
+    mesh is finite with indices in range; the worlds share no texture maker by name only (each name, one maker)."""
+    world = R.build_world(name)
+    assert set(world.meshes) <= set(world.materials) and set(world.meshes) <= set(world.draw_order)
+    assert {m.texture for m in world.materials.values()} <= set(world.textures)
+    for mesh in world.meshes.values():
+        assert np.isfinite(mesh.pos).all() and np.isfinite(mesh.nrm).all() and np.isfinite(mesh.uv).all()
+        assert mesh.idx.max() < len(mesh.pos) and len(mesh.idx) % 3 == 0
+        np.testing.assert_allclose(np.linalg.norm(mesh.nrm, axis=1), 1.0, atol=1e-6)
+    other = R.build_world(next(w for w in R.WORLDS if w != name))
+    for tex in set(world.textures) & set(other.textures):
+        assert world.textures[tex] == other.textures[tex]
 
 
 # --- rendered scenes ----------------------------------------------------------------------------
@@ -212,6 +230,35 @@ def test_rendered_views_bench_runs(capsys):
     assert "mean  " in out and "mean 2x2" in out
     with pytest.raises(SystemExit, match="--samples"):
         rendered_views.main(["--sizes", "96x54", "--samples", "0"])
+    assert rendered_views.main(["--methods", "none,mlaa", "--sizes", "96x54", "--world", "town"]) == 0
+    out = capsys.readouterr().out
+    assert all(f"{name}_96" in out for name in rendered_views.TOWN_VIEWS)
+    assert not any(f"{name}_96" in out for name in rendered_views.VIEWS)
+
+
+@needs_egl
+def test_the_town_renders_like_the_plaza():
+    """The second world through the same renderer: 1-spp input and 8x8 truth differ on edges (a few per cent of the
+    pixels) and agree where the input is flat, as the plaza's scenes do (test_truth_differs_but_is_close_away_...)."""
+    from mlaa_stream.bench.rendered_views import TOWN_VIEWS
+    from mlaa_stream.yardstick.scenes import edge_mask
+    renderer = R.Renderer(R._context(), 320, 180, "town")
+    try:
+        for eye, target, fov in TOWN_VIEWS.values():
+            cam = R.Camera(eye, target, fov)
+            inp, truth = renderer.input_frame(cam), renderer.truth_frame(cam)
+            assert inp.shape == truth.shape == (180, 320, 3) and inp.dtype == truth.dtype == np.uint8
+            assert 0.01 < edge_mask(inp, truth).mean() < 0.25
+            d = np.abs(inp.astype(np.int16) - truth).max(axis=-1)
+            assert np.median(d) <= 1
+            # where the input is flat over 5x5 pixels (no edge near), the truth matches it
+            pad = np.pad(inp.astype(np.int16), ((2, 2), (2, 2), (0, 0)), mode="edge")
+            win = np.lib.stride_tricks.sliding_window_view(pad, (5, 5), axis=(0, 1))
+            flat = (win.max(axis=(-1, -2)) - win.min(axis=(-1, -2))).max(-1) <= 2
+            assert flat.mean() > 0.05 and np.percentile(d[flat], 95) <= 1
+            assert inp.std() > 10   # not an empty frame: houses, street and sky
+    finally:
+        renderer.release()
 
 
 @needs_egl

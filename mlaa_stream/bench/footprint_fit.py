@@ -36,6 +36,14 @@ TRAIN_VIEWS: dict[str, tuple[tuple, tuple, float]] = {
     "far": ((10.0, 1.7, -25.0), (-2.0, 2.0, -40.0), 35.0),        # through the chain-link fence
     "top": ((0.0, 8.0, -5.0), (0.0, 0.0, -20.0), 65.0),           # down on the colonnade's roofline
 }
+# the second world's training views (yardstick/town.py; its held-out views are rendered_views.TOWN_VIEWS)
+TOWN_TRAIN_VIEWS: dict[str, tuple[tuple, tuple, float]] = {
+    "back_left": ((-4.5, 1.7, -30.0), (-2.0, 2.5, -5.0), 50.0),   # back along the left pavement
+    "across": ((4.5, 1.6, -50.0), (-6.0, 4.0, -55.0), 55.0),       # across the street at the left facades
+    "bikes_high": ((0.0, 4.0, -2.0), (5.0, 0.0, -12.0), 45.0),     # down on the bicycles and the kerb
+    "tower_tele": ((-2.0, 1.5, -80.0), (3.0, 20.0, -260.0), 20.0),  # long lens up the street to the tower
+}
+WORLD_TRAIN_VIEWS = {"plaza": TRAIN_VIEWS, "town": TOWN_TRAIN_VIEWS}
 DEFAULT_SIZES = "640x360,960x540"
 
 
@@ -50,17 +58,18 @@ def dihedral(a: np.ndarray, k: int) -> np.ndarray:
     return np.ascontiguousarray(a)
 
 
-def training_frames(sizes: list[tuple[int, int]], refine: bool = False) -> list[tuple[np.ndarray, ...]]:
+def training_frames(sizes: list[tuple[int, int]], refine: bool = False,
+                    worlds: tuple[str, ...] = ("plaza",)) -> list[tuple[np.ndarray, ...]]:
     """(input, truth, chain without the table, mask of the pixels the table takes) per training view and size;
     `refine`: (input, truth, chain with the table and without the refine table, mask of the pixels the refine
     table takes)."""
     frames = []
     first = {"refine_table": None} if refine else {"footprint_table": None}
     with Filter(keep_regions=True, **first) as chain, Filter(fallback="off") as mlaa:
-        for width, height in sizes:
-            renderer = Renderer(_context(), width, height)
+        for world, (width, height) in [(w, s) for w in worlds for s in sizes]:
+            renderer = Renderer(_context(), width, height, world)
             try:
-                for eye, target, fov in TRAIN_VIEWS.values():
+                for eye, target, fov in WORLD_TRAIN_VIEWS[world].values():
                     cam = Camera(eye, target, fov)
                     inp, truth = renderer.input_frame(cam), renderer.truth_frame(cam)
                     out = chain.process(inp)
@@ -93,19 +102,25 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--refine", action="store_true", help="fit the refine table (after the shipped footprint table)")
     ap.add_argument("--out", default=None, help="where to write the table (default: the package's)")
     ap.add_argument("--sizes", default=DEFAULT_SIZES, help="WxH,... (default %(default)s)")
+    ap.add_argument("--worlds", default="plaza", help="the rendered worlds whose training views are fitted, "
+                    f"comma-separated, of {', '.join(WORLD_TRAIN_VIEWS)} (default %(default)s)")
     args = ap.parse_args(argv)
+    worlds = tuple(args.worlds.split(","))
+    if not worlds or any(w not in WORLD_TRAIN_VIEWS for w in worlds):
+        ap.error(f"--worlds: expected names from {', '.join(WORLD_TRAIN_VIEWS)}, got {args.worlds!r}")
     ok, why = egl_available()
     if not ok:
         ap.error(f"the training views need a headless OpenGL context: {why}")
     sizes = [tuple(int(v) for v in s.split("x")) for s in args.sizes.split(",")]
     out = args.out or str(Path(__file__).resolve().parents[1] / "data" / (REFINE_FILE if args.refine else TABLE_FILE))
-    frames = training_frames(sizes, args.refine)
+    frames = training_frames(sizes, args.refine, worlds)
     table = fit_refine(samples(frames)) if args.refine else fit_table(samples(frames))
     np.save(out, table)
     print(f"wrote {out}: {table.shape[0]} buckets x {table.shape[1]} weights")
     check = {"refine_table": table} if args.refine else {"footprint_table": table, "refine_table": None}
     with Filter(**check) as f:  # in-sample check: the held-out views are rendered_views' job
-        for (inp, truth, first, _), name in zip(frames, [f"{n}_{w}" for w, _ in sizes for n in TRAIN_VIEWS]):
+        names = [f"{n}_{w}" for world in worlds for w, _ in sizes for n in WORLD_TRAIN_VIEWS[world]]
+        for (inp, truth, first, _), name in zip(frames, names):
             print(f"{name:16s} error removed without the table {M.error_removed(first, inp, truth):.3f}, "
                   f"with it {M.error_removed(f.process(inp), inp, truth):.3f}")
     return 0

@@ -31,17 +31,26 @@ VIEWS: dict[str, tuple[tuple, tuple, float]] = {
     "side_road": ((8.0, 2.5, -5.0), (0.0, 1.5, -15.0), 45.0),  # across the spheres to the fence and cables
     "far_tele": ((3.0, 1.2, -30.0), (-5.0, 3.0, -60.0), 25.0),  # long lens towards the pylons
 }
+# the second world (yardstick/town.py): nothing of the filter was measured or fitted on it
+TOWN_VIEWS: dict[str, tuple[tuple, tuple, float]] = {
+    "street_down": ((0.3, 1.7, 6.0), (0.0, 3.2, -60.0), 55.0),  # down the street: facades, wires, bollards
+    "facade_oblique": ((-3.0, 1.6, -12.0), (9.0, 5.0, -38.0), 50.0),  # along the right facades: windows, balconies
+    "balcony_high": ((-5.0, 9.5, -20.0), (6.0, 3.0, -42.0), 50.0),  # from a balcony: roofs, lamps, the fountain
+    "bikes_close": ((1.5, 1.3, -3.0), (4.7, 0.5, -9.0), 40.0),  # bicycles with sub-pixel spokes, cobbles
+    "tele_wires": ((0.5, 2.0, 0.0), (1.0, 7.5, -140.0), 18.0),  # long lens: tram wires, lamps, the tower
+}
+WORLD_VIEWS = {"plaza": VIEWS, "town": TOWN_VIEWS}
 
 
-def render_views(sizes: list[tuple[int, int]],
-                 samples: tuple[int, ...] = (1,)) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """{view_WIDTH: (input, truth)} for every view at every size; for every n > 1 of `samples` also
+def render_views(sizes: list[tuple[int, int]], samples: tuple[int, ...] = (1,),
+                 world: str = "plaza") -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """{view_WIDTH: (input, truth)} for every view of `world` at every size; for every n > 1 of `samples` also
     {view_WIDTH_NxN: (input supersampled with n x n samples per pixel, truth)}."""
     frames = {}
     for width, height in sizes:
-        renderer = Renderer(_context(), width, height)
+        renderer = Renderer(_context(), width, height, world)
         try:
-            for name, (eye, target, fov) in VIEWS.items():
+            for name, (eye, target, fov) in WORLD_VIEWS[world].items():
                 cam = Camera(eye, target, fov)
                 truth = renderer.truth_frame(cam)
                 for n in samples:
@@ -56,11 +65,11 @@ VIEW_PAN_PX = 0.45     # the held-out pans' image motion per frame at the centre
 VIEW_DOLLY_M = 0.04    # the held-out dollies' step along the view direction per frame, metres (the bench's: 0.05)
 
 
-def view_cameras(width: int, height: int, frames: int = 8) -> dict[str, list[Camera]]:
-    """The held-out shots' cameras, one per frame: from every view of VIEWS a yaw pan of VIEW_PAN_PX px per frame
+def view_cameras(width: int, height: int, frames: int = 8, world: str = "plaza") -> dict[str, list[Camera]]:
+    """The held-out shots' cameras, one per frame: from every view of `world` a yaw pan of VIEW_PAN_PX px per frame
     ("<view>_pan") and a dolly of VIEW_DOLLY_M per frame ("<view>_dolly")."""
     shots = {}
-    for name, (eye, target, fov) in VIEWS.items():
+    for name, (eye, target, fov) in WORLD_VIEWS[world].items():
         e, t = np.asarray(eye, float), np.asarray(target, float)
         step = VIEW_PAN_PX * 2 * math.tan(math.radians(fov) / 2) / height
         forward = (t - e) / np.linalg.norm(t - e) * VIEW_DOLLY_M
@@ -69,13 +78,13 @@ def view_cameras(width: int, height: int, frames: int = 8) -> dict[str, list[Cam
     return shots
 
 
-def view_shots(width: int, height: int, frames: int = 8) -> list[Scene]:
+def view_shots(width: int, height: int, frames: int = 8, world: str = "plaza") -> list[Scene]:
     """Animated held-out shots for the temporal stage (mlaa_stream.bench.tss_check --views): view_cameras' shots,
     input and truth as the bench's shots."""
     shots = []
-    renderer = Renderer(_context(), width, height)
+    renderer = Renderer(_context(), width, height, world)
     try:
-        for name, cams in view_cameras(width, height, frames).items():
+        for name, cams in view_cameras(width, height, frames, world).items():
             inputs = np.stack([renderer.input_frame(c) for c in cams])
             truths = np.stack([renderer.truth_frame(c) for c in cams])
             edges = np.stack([edge_mask(a, b) for a, b in zip(inputs, truths)])
@@ -91,6 +100,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--sizes", default="640x360,960x540")
     ap.add_argument("--samples", default="1",
                     help="samples per pixel of the inputs, per axis, comma-separated (1: the 1-spp views)")
+    ap.add_argument("--world", default="plaza", choices=sorted(WORLD_VIEWS),
+                    help="plaza: the world of the bench's rendered scenes (other cameras); town: a second world "
+                         "(yardstick/town.py) with its own textures, geometry and light")
     ap.add_argument("--device", default=None)
     args = ap.parse_args(argv)
     ok, why = egl_available()
@@ -107,7 +119,7 @@ def main(argv: list[str] | None = None) -> int:
         samples = ()
     if not samples or min(samples) < 1:
         raise SystemExit(f"--samples: expected positive integers, comma-separated, got {args.samples!r}")
-    frames = render_views(sizes, samples)
+    frames = render_views(sizes, samples, args.world)
     with_flip = M.flip_available()  # an optional part ([bench])
 
     def group(view: str) -> str:  # the mean's row: "mean" for 1-spp views, "mean NxN" for supersampled ones

@@ -14,7 +14,8 @@ least MIN_CELLS filled cells; mean over frames), and the motion model of each fr
 g global, p global with projective maps, l moving layers, d dense; TSS's models where the method has TSS). A scene is "worse"
 when the stage loses in error removed, damage or all-frame FLIP.
 --views adds held-out rendered shots (mlaa_stream.bench.rendered_views.view_shots: a pan and a dolly from each
-held-out view at 640x360, rendered here: a few minutes), shots no constant was measured on.
+held-out view at 640x360, rendered here: a few minutes), shots no constant was measured on; `--world town`: the
+second world's (yardstick/town.py) instead of the plaza's.
 --lookahead N[,N...]: the method with TSS reading N frames after the current one too (a row per N, named
 "<method>+N" for N > 0; what `--lookahead N` runs; default DEFAULT_LOOKAHEAD, what `--temporal` reads); each
 row is checked against spatial only.
@@ -76,19 +77,20 @@ def scene_scores(outs: np.ndarray, scene, with_flip: bool) -> dict[str, float]:
     return r
 
 
-def shot_cameras(name: str, width: int, height: int, frames: int) -> list | None:
-    """The cameras of a rendered shot of this check (the bench's EXACT_SHOTS, the held-out view shots), else None."""
+def shot_cameras(name: str, width: int, height: int, frames: int, world: str = "plaza") -> list | None:
+    """The cameras of a rendered shot of this check (the bench's EXACT_SHOTS, the held-out view shots of `world`),
+    else None."""
     from mlaa_stream.bench.rendered_views import view_cameras
     from mlaa_stream.yardstick import rendered as R
     if name in EXACT_SHOTS:
         return R.shot(name, width, height)
-    return view_cameras(width, height, frames).get(name)
+    return view_cameras(width, height, frames, world).get(name)
 
 
-def exact_maps(cams: list, width: int, height: int) -> dict[tuple[int, int], np.ndarray]:
+def exact_maps(cams: list, width: int, height: int, world: str = "plaza") -> dict[tuple[int, int], np.ndarray]:
     """A shot's exact motion: maps[t, u] = frame t's (H, W, 2) offsets into frame u, for u < t."""
     from mlaa_stream.yardstick import rendered as R
-    depths = R.depth_frames(cams, width, height)
+    depths = R.depth_frames(cams, width, height, world=world)
     return {(t, u): R.reprojection(cams[t], cams[u], depths[t]) for t in range(len(cams)) for u in range(t)}
 
 
@@ -131,6 +133,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--device", default=None)
     ap.add_argument("--method", default="auto", choices=METHODS)
     ap.add_argument("--views", action="store_true", help="also held-out rendered shots (needs EGL)")
+    ap.add_argument("--world", default="plaza", choices=("plaza", "town"),
+                    help="the world of the --views shots (default %(default)s)")
     ap.add_argument("--tss-set", action="append", default=[], metavar="NAME=VALUE")
     ap.add_argument("--lookahead", default=str(DEFAULT_LOOKAHEAD), metavar="N[,N...]",
                     help="frames after the current one TSS also reads; a row per value (default: what --temporal "
@@ -152,7 +156,7 @@ def main(argv: list[str] | None = None) -> int:
     scenes = [s for s in every if s.animated] + [m for m in [rendered_mover(every)] if m is not None]
     if args.views:
         from mlaa_stream.bench.rendered_views import view_shots
-        scenes += view_shots(640, 360)
+        scenes += view_shots(640, 360, world=args.world)
     worse = []
     with Filter(args.device, bgr=False, keep_regions=needs_regions(args.method)) as filt:
         print(f"device: {filt.device_name}; FLIP {'over all frames' if with_flip else 'not installed'}")
@@ -179,10 +183,11 @@ def main(argv: list[str] | None = None) -> int:
                 if (b["error_removed"] < a["error_removed"] or b["damage"] > a["damage"]
                         or (with_flip and b["flip_all"] > a["flip_all"])):
                     worse.append(f"{s.name} ({name})")
-            cams = (shot_cameras(s.name, s.inputs.shape[2], s.inputs.shape[1], len(s.inputs))
+            cams = (shot_cameras(s.name, s.inputs.shape[2], s.inputs.shape[1], len(s.inputs), args.world)
                     if args.exact_motion else None)
             if cams is not None:
-                maps = exact_maps(cams, s.inputs.shape[2], s.inputs.shape[1])
+                maps = exact_maps(cams, s.inputs.shape[2], s.inputs.shape[1],
+                                  "plaza" if s.name in EXACT_SHOTS else args.world)
                 rows.append(("tss:exact", scene_scores(exact_tss(s, spatial, maps), s, with_flip), ""))
                 homographies = homography_maps(s.inputs)
                 rows.append(("tss:homography", scene_scores(exact_tss(s, spatial, homographies), s, with_flip), ""))

@@ -43,11 +43,6 @@ PAN_PX_PER_FRAME = 0.3  # image motion of the pan at the image centre
 FLAT_COLOUR = (200, 48, 40)  # sRGB8 of the unlit banner: its truth must equal it exactly
 GL_SRGB8_ALPHA8 = 0x8C43  # textures store sRGB codes; the sampler decodes to linear before filtering
 NEAR, FAR = 0.2, 2500.0
-SUN_DIR = (-0.45, 0.75, 0.48)  # towards the sun (normalised in the shader setup)
-SUN = (2.0, 1.85, 1.6)  # linear radiance of the sun
-SKY_ZENITH, SKY_HORIZON = (0.18, 0.32, 0.62), (0.62, 0.72, 0.85)  # linear
-AMBIENT_SKY, AMBIENT_GROUND = (0.16, 0.19, 0.26), (0.07, 0.06, 0.05)  # hemisphere light, linear
-FOG_DENSITY = 0.0035  # per metre: distant pylons fade into the horizon colour
 
 
 # --- the EGL context ------------------------------------------------------------------------------
@@ -433,6 +428,12 @@ MATERIALS = {
 }
 
 
+# The plaza's draw order (World.draw_order); the sky is drawn at the very end where nothing was drawn
+# (the pass is fragment-bound).
+DRAW_ORDER = ("red_gloss", "blue_gloss", "chrome", "gold", "sign", "banner", "marble", "stone", "bricks",
+              "wood", "steel", "rail", "cable", "tiles", "grass", "leaves", "chainlink")
+
+
 def _ground() -> dict[str, list[Mesh]]:
     """A 4 km ground to the horizon and a tiled plaza in front of the colonnade."""
     return {"grass": [quad((0, 0, -800), (2000, 0, 0), (0, 0, 2000))],
@@ -600,12 +601,50 @@ def _combine(groups) -> dict[str, list[Mesh]]:
     return out
 
 
-@lru_cache(maxsize=1)
-def build_world() -> dict[str, Mesh]:
-    """material name -> one merged mesh: the whole world, the same for every scene."""
+@dataclass(frozen=True)
+class Lighting:
+    """A world's sun, sky and fog (all linear light)."""
+
+    sun_dir: tuple  # towards the sun (normalised in the shader setup)
+    sun: tuple  # radiance of the sun
+    sky_zenith: tuple
+    sky_horizon: tuple  # also the fog's colour
+    ambient_sky: tuple  # hemisphere light from above ...
+    ambient_ground: tuple  # ... and from below
+    fog_density: float  # per metre
+
+
+@dataclass(frozen=True)
+class World:
+    """What a Renderer draws: material name -> one merged mesh, the materials, the textures they read (name ->
+    (maker, alpha-tested)), the draw order (small and near things first, alpha-tested cards last: llvmpipe's
+    early depth test then skips shading the occluded parts of big surfaces) and the light."""
+
+    meshes: dict
+    materials: dict
+    textures: dict
+    draw_order: tuple
+    light: Lighting
+
+
+PLAZA_LIGHT = Lighting(sun_dir=(-0.45, 0.75, 0.48), sun=(2.0, 1.85, 1.6), sky_zenith=(0.18, 0.32, 0.62),
+                       sky_horizon=(0.62, 0.72, 0.85), ambient_sky=(0.16, 0.19, 0.26),
+                       ambient_ground=(0.07, 0.06, 0.05),
+                       fog_density=0.0035)  # distant pylons fade into the horizon colour
+WORLDS = ("plaza", "town")  # plaza: the bench's scenes and the held-out views; town: yardstick/town.py
+
+
+@lru_cache(maxsize=2)
+def build_world(name: str = "plaza") -> World:
+    """The named world, the same for every scene drawn in it."""
+    if name == "town":
+        from mlaa_stream.yardstick.town import town_world  # a second world, for held-out views only
+        return town_world()
+    if name != "plaza":
+        raise ValueError(f"expected a world from {', '.join(WORLDS)}, got {name!r}")
     groups = _combine([_ground(), _colonnade(), _railing(), _power_line(), _fence(), _trees(),
                        _ornaments(), _pylons()])
-    return {k: merge(v) for k, v in groups.items() if v}
+    return World({k: merge(v) for k, v in groups.items() if v}, MATERIALS, TEXTURES, DRAW_ORDER, PLAZA_LIGHT)
 
 
 # --- cameras --------------------------------------------------------------------------------------
@@ -782,13 +821,6 @@ void main() {
 """
 
 
-# Small and near things first, the ground last, alpha-tested cards after the opaque ones and the
-# sky at the very end where nothing was drawn: llvmpipe's early depth test then skips shading the
-# occluded parts of the big surfaces (the pass is fragment-bound).
-DRAW_ORDER = ["red_gloss", "blue_gloss", "chrome", "gold", "sign", "banner", "marble", "stone", "bricks",
-              "wood", "steel", "rail", "cable", "tiles", "grass", "leaves", "chainlink"]
-
-
 def _mat_bytes(m: np.ndarray) -> bytes:
     return np.ascontiguousarray(m.T, dtype=np.float32).tobytes()  # GLSL reads column-major
 
@@ -797,23 +829,24 @@ class Renderer:
     """The world on one GL context at one size: textures, meshes, an 8-bit target for the input
     and a float32 target for the truth passes (sharing one depth buffer)."""
 
-    def __init__(self, ctx, width: int, height: int):
+    def __init__(self, ctx, width: int, height: int, world: str = "plaza"):
         import moderngl
         self.mgl = moderngl
         self.ctx, self.width, self.height = ctx, width, height
+        self.world = build_world(world)
         self.prog = ctx.program(vertex_shader=VERTEX_SHADER, fragment_shader=FRAGMENT_SHADER)
         self.sky = ctx.program(vertex_shader=SKY_VERTEX, fragment_shader=SKY_FRAGMENT)
         self.sky_vao = ctx.vertex_array(self.sky, [])
-        self.textures = {name: self._texture(name) for name in TEXTURES}
-        self.draws = []  # (material, vertex array, buffers) in DRAW_ORDER
-        world = build_world()
-        for name in sorted(world, key=DRAW_ORDER.index):
-            mesh = world[name]
+        self.textures = {name: self._texture(name) for name in self.world.textures}
+        self.draws = []  # (material, vertex array, buffers) in the world's draw order
+        order = self.world.draw_order
+        for name in sorted(self.world.meshes, key=order.index):
+            mesh = self.world.meshes[name]
             data = np.hstack([mesh.pos, mesh.nrm, mesh.uv]).astype(np.float32)
             vbo, ibo = ctx.buffer(data.tobytes()), ctx.buffer(mesh.idx.astype(np.uint32).tobytes())
             vao = ctx.vertex_array(self.prog, [(vbo, "3f 3f 2f", "in_pos", "in_nrm", "in_uv")],
                                    index_buffer=ibo, index_element_size=4)
-            self.draws.append((MATERIALS[name], vao, (vbo, ibo)))
+            self.draws.append((self.world.materials[name], vao, (vbo, ibo)))
         depth = ctx.depth_renderbuffer((width, height))
         self.fbo8 = ctx.framebuffer([ctx.renderbuffer((width, height), 4)], depth)
         self.fbo32 = ctx.framebuffer([ctx.renderbuffer((width, height), 4, dtype="f4")], depth)
@@ -821,7 +854,7 @@ class Renderer:
 
     def _texture(self, name: str):
         """Upload a procedural texture with its own mip chain (sRGB8, trilinear, repeating)."""
-        make, alpha_tested = TEXTURES[name]
+        make, alpha_tested = self.world.textures[name]
         seed = int(hashlib.sha256(name.encode()).hexdigest()[:8], 16)
         levels = mip_chain(make(np.random.default_rng(seed)), alpha_tested)
         # numpy row 0 is the image's top; GL's first row is v = 0, the bottom: flip on upload
@@ -835,12 +868,14 @@ class Renderer:
         return tex
 
     def _set_lights(self) -> None:
-        sun = np.asarray(SUN_DIR, float)
+        light = self.world.light
+        sun = np.asarray(light.sun_dir, float)
         p = self.prog
         p["u_sun_dir"].value = tuple(sun / np.linalg.norm(sun))
-        p["u_sun"].value, p["u_fog"].value, p["u_fog_density"].value = SUN, SKY_HORIZON, FOG_DENSITY
-        p["u_amb_sky"].value, p["u_amb_ground"].value = AMBIENT_SKY, AMBIENT_GROUND
-        self.sky["u_zenith"].value, self.sky["u_horizon"].value = SKY_ZENITH, SKY_HORIZON
+        p["u_sun"].value, p["u_fog"].value = light.sun, light.sky_horizon
+        p["u_fog_density"].value = light.fog_density
+        p["u_amb_sky"].value, p["u_amb_ground"].value = light.ambient_sky, light.ambient_ground
+        self.sky["u_zenith"].value, self.sky["u_horizon"].value = light.sky_zenith, light.sky_horizon
         self.sky["u_size"].value = (float(self.width), float(self.height))
 
     def draw(self, cam: Camera, dx: float, dy: float, encode: bool) -> None:
@@ -927,10 +962,12 @@ def reprojection(cam_from: Camera, cam_to: Camera, depth: np.ndarray) -> np.ndar
     return np.stack([px - xs, py - ys], -1).astype(np.float32)
 
 
-def depth_frames(cams: list[Camera], width: int, height: int, renderer: Renderer | None = None) -> np.ndarray:
-    """Each camera's window depth (Renderer.depth_frame): (T, H, W) float32 (not cached: ~0.3 s a frame)."""
+def depth_frames(cams: list[Camera], width: int, height: int, renderer: Renderer | None = None,
+                 world: str = "plaza") -> np.ndarray:
+    """Each camera's window depth (Renderer.depth_frame) in `world` (or `renderer`'s): (T, H, W) float32 (not
+    cached: ~0.3 s a frame)."""
     own = renderer is None
-    r = Renderer(_context(), width, height) if own else renderer
+    r = Renderer(_context(), width, height, world) if own else renderer
     try:
         return np.stack([r.depth_frame(c) for c in cams])
     finally:
