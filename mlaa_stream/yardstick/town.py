@@ -14,17 +14,17 @@ import math
 
 import numpy as np
 
-from mlaa_stream.yardstick.rendered import (Lighting, Material, Mesh, World, _cable, _combine, _fbm, _lin, _rgba,
-                                            _sag, _value_noise, beam, box, cylinder, merge, quad, sphere, tex_metal,
-                                            tex_white, torus)
+from mlaa_stream.yardstick.world import (Lighting, Material, Mesh, World, beam, box, cable, combine, cylinder, fbm,
+                                      linear_tint, merge, quad, rgba, sag, sphere, tex_metal, tex_white, torus,
+                                      value_noise)
 
 
 # --- textures -------------------------------------------------------------------------------------
 def tex_plaster(rng: np.random.Generator, size: int = 256) -> np.ndarray:
     """Light plaster with blotches and fine grain; materials tint it per house."""
-    blot, fine = _fbm(size, 3, 5, rng), _value_noise(size, 96, rng)
+    blot, fine = fbm(size, 3, 5, rng), value_noise(size, 96, rng)
     v = 0.78 + 0.14 * blot + 0.06 * fine
-    return _rgba(v[..., None] * np.array([0.97, 0.94, 0.88]))
+    return rgba(v[..., None] * np.array([0.97, 0.94, 0.88]))
 
 
 def tex_window(rng: np.random.Generator, size: int = 256) -> np.ndarray:
@@ -32,8 +32,8 @@ def tex_window(rng: np.random.Generator, size: int = 256) -> np.ndarray:
     y, x = (np.mgrid[0:size, 0:size] + 0.5) / size
     frame = (x < 0.08) | (x > 0.92) | (y < 0.06) | (y > 0.94) | (np.abs(x - 0.5) < 0.03) | (np.abs(y - 0.42) < 0.025)
     glass = np.stack([0.10 + 0.25 * (1 - y), 0.13 + 0.28 * (1 - y), 0.18 + 0.32 * (1 - y)], -1)
-    glass *= (0.85 + 0.3 * _value_noise(size, 4, rng))[..., None]
-    return _rgba(np.where(frame[..., None], np.array([0.92, 0.91, 0.88]), glass))
+    glass *= (0.85 + 0.3 * value_noise(size, 4, rng))[..., None]
+    return rgba(np.where(frame[..., None], np.array([0.92, 0.91, 0.88]), glass))
 
 
 def tex_roof(rng: np.random.Generator, size: int = 256) -> np.ndarray:
@@ -45,7 +45,7 @@ def tex_roof(rng: np.random.Generator, size: int = 256) -> np.ndarray:
     bulge = np.sqrt(np.clip(1 - (2 * fx - 1) ** 2, 0, 1))
     tone = rng.uniform(0.8, 1.1, (8, 9))[row, np.floor(x * 8 + 0.5 * (row % 2)).astype(int) % 9]
     v = tone * (0.45 + 0.45 * bulge) * (0.55 + 0.45 * np.clip(fy / 0.3, 0, 1))
-    return _rgba(v[..., None] * np.array([0.78, 0.36, 0.24]))
+    return rgba(v[..., None] * np.array([0.78, 0.36, 0.24]))
 
 
 def tex_cobbles(rng: np.random.Generator, size: int = 256) -> np.ndarray:
@@ -57,18 +57,18 @@ def tex_cobbles(rng: np.random.Generator, size: int = 256) -> np.ndarray:
     dx = x - cx - 0.5 - jit[cy, cx, 1]
     d = np.maximum(np.abs(dx), np.abs(dy))
     stone = np.clip((0.5 - d) / 0.12, 0, 1)
-    tone = rng.uniform(0.75, 1.05, (8, 8))[cy, cx] * (0.85 + 0.25 * _fbm(size, 8, 3, rng))
+    tone = rng.uniform(0.75, 1.05, (8, 8))[cy, cx] * (0.85 + 0.25 * fbm(size, 8, 3, rng))
     v = 0.12 + stone * tone * 0.5
-    return _rgba(v[..., None] * np.array([0.95, 0.95, 1.0]))
+    return rgba(v[..., None] * np.array([0.95, 0.95, 1.0]))
 
 
 def tex_awning(rng: np.random.Generator, size: int = 128) -> np.ndarray:
     """Striped awning fabric: 8 red and cream stripes along u."""
     x = (np.arange(size) + 0.5) / size
     stripe = (np.floor(x * 8) % 2 == 0)[None, :].repeat(size, 0)
-    weave = 0.92 + 0.08 * _value_noise(size, 64, rng)
+    weave = 0.92 + 0.08 * value_noise(size, 64, rng)
     rgb = np.where(stripe[..., None], np.array([0.70, 0.10, 0.10]), np.array([0.93, 0.88, 0.76]))
-    return _rgba(rgb * weave[..., None])
+    return rgba(rgb * weave[..., None])
 
 
 def tex_grate(rng: np.random.Generator, size: int = 128, bars: int = 4, bar_px: float = 6.0) -> np.ndarray:
@@ -77,7 +77,7 @@ def tex_grate(rng: np.random.Generator, size: int = 128, bars: int = 4, bar_px: 
     p = size / bars
     d = np.minimum(np.minimum(x % p, p - x % p), np.minimum(y % p, p - y % p))
     alpha = np.clip(bar_px / 2 + 0.5 - d, 0, 1)
-    return _rgba(np.full((size, size, 3), 0.8), alpha)
+    return rgba(np.full((size, size, 3), 0.8), alpha)
 
 
 def tex_ivy(rng: np.random.Generator, size: int = 256, leaves: int = 160) -> np.ndarray:
@@ -129,7 +129,7 @@ MATERIALS = {
     "iron": Material("metal", (1.0, 1.0), tint=(0.05, 0.05, 0.06), specular=0.5, shininess=50),
     "wire": Material("metal", (1.0, 1.0), tint=(0.03, 0.03, 0.03), specular=0.3, shininess=30),
     "bike_red": Material("white", tint=(0.5, 0.04, 0.03), specular=0.9, shininess=120),
-    "lamp": Material("white", tint=_lin((255, 236, 190)), emissive=True),
+    "lamp": Material("white", tint=linear_tint((255, 236, 190)), emissive=True),
     "brass": Material("white", tint=(0.55, 0.40, 0.12), specular=1.2, shininess=150),
 }
 
@@ -205,7 +205,7 @@ def _houses() -> dict[str, list[Mesh]]:
             groups.append(_house(side, z, length, int(rng.integers(2, 5)), PLASTERS[int(rng.integers(3))], rng,
                                  shop=bool(rng.random() < 0.35)))
             z -= length
-    return _combine(groups)
+    return combine(groups)
 
 
 def _tram_wires() -> dict[str, list[Mesh]]:
@@ -214,9 +214,9 @@ def _tram_wires() -> dict[str, list[Mesh]]:
     zs = np.arange(5.0, -180.0, -25.0)
     for x in (-1.4, 1.4):
         for za, zb in zip(zs[:-1], zs[1:]):
-            out["wire"] += _cable(_sag((x, 6.0, za), (x, 6.0, zb), 0.15, 6), 0.012)
+            out["wire"] += cable(sag((x, 6.0, za), (x, 6.0, zb), 0.15, 6), 0.012)
     for z in zs:
-        out["wire"] += _cable(_sag((-STREET_X, 7.0, z), (STREET_X, 7.0, z), 0.6, 8), 0.01)
+        out["wire"] += cable(sag((-STREET_X, 7.0, z), (STREET_X, 7.0, z), 0.6, 8), 0.01)
     return out
 
 
@@ -277,7 +277,7 @@ def _street_furniture() -> dict[str, list[Mesh]]:
                              cylinder((0.0, 0.0, -70.0), (0.0, 2.2, -70.0), 0.14, seg=16),
                              sphere((0.0, 2.35, -70.0), 0.22)],
                    "kerb": [cylinder((0.0, 0.0, -70.0), (0.0, 0.45, -70.0), 2.0, seg=48)]})
-    return _combine(groups)
+    return combine(groups)
 
 
 def _tower() -> dict[str, list[Mesh]]:
@@ -300,5 +300,5 @@ def _tower() -> dict[str, list[Mesh]]:
 
 
 def town_world() -> World:
-    groups = _combine([_ground(), _houses(), _tram_wires(), _street_furniture(), _tower()])
+    groups = combine([_ground(), _houses(), _tram_wires(), _street_furniture(), _tower()])
     return World({k: merge(v) for k, v in groups.items() if v}, MATERIALS, TEXTURES, DRAW_ORDER, LIGHT)
