@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from mlaa_stream.yardstick.scenes import TRUTH_SPP, Scene, edge_mask, encode8, srgb8_to_linear
+from mlaa_stream.yardstick.town import town_world  # a second world, for held-out views only
 from mlaa_stream.yardstick.world import (Lighting, Material, Mesh, World, beam, box, cable, combine, cylinder, fbm,
                                       hexahedron, linear_tint, merge, quad, rgba, sag, sphere, tex_metal, tex_white,
                                       torus, value_noise)
@@ -404,7 +405,6 @@ WORLDS = ("plaza", "town")  # plaza: the bench's scenes and the held-out views; 
 def build_world(name: str = "plaza") -> World:
     """The named world, the same for every scene drawn in it."""
     if name == "town":
-        from mlaa_stream.yardstick.town import town_world  # a second world, for held-out views only
         return town_world()
     if name != "plaza":
         raise ValueError(f"expected a world from {', '.join(WORLDS)}, got {name!r}")
