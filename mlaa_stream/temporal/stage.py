@@ -148,6 +148,23 @@ class Pyramid:
             self._blur[level] = cv2.GaussianBlur(getattr(self, level).astype(np.float32), (0, 0), LK_SIGMA)
         return self._blur[level]
 
+    def gradients(self, level: str = "flow") -> tuple[np.ndarray, ...]:
+        """The blurred grey's (`blurred`) Sobel gradients and their products, float32: (gx, gy, gx gx, gx gy,
+        gy gy). The current frame's choose_model (global_translation) and its direct refiner (tss._Refiner) read
+        the same; kept until drop_gradients() (five frame-size planes, 10 MB at 1080p flow size)."""
+        key = "gradients_" + level
+        if key not in self._blur:
+            b = self.blurred(level)
+            gx = cv2.Sobel(b, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
+            gy = cv2.Sobel(b, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
+            self._blur[key] = (gx, gy, gx * gx, gx * gy, gy * gy)
+        return self._blur[key]
+
+    def drop_gradients(self) -> None:
+        """Free what gradients() kept (a frame whose motion is measured needs them no more)."""
+        for key in [k for k in self._blur if k.startswith("gradients_")]:
+            del self._blur[key]
+
 
 def histogram_distance(a: np.ndarray, b: np.ndarray, bins: int = 32) -> float:
     """Half the L1 distance of the normalised grey histograms: 0 same, 1 disjoint."""
@@ -164,22 +181,25 @@ def changed_fraction(a: np.ndarray, b: np.ndarray, level: float) -> float:
 
 def global_translation(prev: np.ndarray, cur: np.ndarray, start: tuple[float, float] = (0.0, 0.0),
                        iterations: int = LK_ITERATIONS, sigma: float | None = LK_SIGMA,
-                       tol: float = LK_TOL) -> tuple[float, float]:
+                       tol: float = LK_TOL, grads: tuple[np.ndarray, ...] | None = None) -> tuple[float, float]:
     """Translation d with cur(x) ~ prev(x + d), by robust Gauss-Newton on the whole frame (global
     Lucas-Kanade on blurred grey, residuals weighted 1 / (1 + (r / LK_ROBUST)^2) so that a mover does not
     pull the estimate; blurring first keeps the aliasing of 1-spp frames out of the gradients).
     The gradients are the current frame's, computed once (inverse-additive form: at the solution
     the warped previous frame matches the current one); stops when a step is under `tol` px.
-    sigma=None: prev and cur are float32 frames already blurred (Pyramid.blurred)."""
+    sigma=None: prev and cur are float32 frames already blurred (Pyramid.blurred). `grads`: cur's
+    (gx, gy, gx gx, gx gy, gy gy) where the caller has them (Pyramid.gradients; sigma None)."""
     if sigma is None:
         p, c = prev, cur
     else:
         p = cv2.GaussianBlur(prev.astype(np.float32), (0, 0), sigma)
         c = cv2.GaussianBlur(cur.astype(np.float32), (0, 0), sigma)
     h, w = p.shape
-    gx = cv2.Sobel(c, cv2.CV_32F, 1, 0, ksize=3, scale=0.125).ravel()
-    gy = cv2.Sobel(c, cv2.CV_32F, 0, 1, ksize=3, scale=0.125).ravel()
-    gxx, gxy, gyy = gx * gx, gx * gy, gy * gy
+    if grads is None:
+        gx = cv2.Sobel(c, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
+        gy = cv2.Sobel(c, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
+        grads = (gx, gy, gx * gx, gx * gy, gy * gy)
+    gx, gy, gxx, gxy, gyy = (g.ravel() for g in grads)
     d = np.array(start, np.float64)
     inv_r2 = 1.0 / (LK_ROBUST * LK_ROBUST)
     for _ in range(iterations):
@@ -187,9 +207,13 @@ def global_translation(prev: np.ndarray, cur: np.ndarray, start: tuple[float, fl
         pw = cv2.warpAffine(p, warp, (w, h), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
                             borderMode=cv2.BORDER_REPLICATE)
         r = cv2.subtract(c, pw).ravel()
-        wr = 1.0 / (1.0 + inv_r2 * (r * r))
+        wr = r * r    # wr = 1 / (1 + inv_r2 r^2), in place (frame-size float32 temporaries)
+        wr *= inv_r2
+        wr += 1.0
+        np.divide(1.0, wr, out=wr)
         a, b_, e = float(np.dot(wr, gxx)), float(np.dot(wr, gxy)), float(np.dot(wr, gyy))
-        wrr = wr * r
+        wrr = pw.ravel()   # the warped frame is read no more: its buffer takes wr r
+        np.multiply(wr, r, out=wrr)
         bx, by = float(np.dot(wrr, gx)), float(np.dot(wrr, gy))
         det = a * e - b_ * b_
         if not det > 1e-6 * max(a * e, 1e-12):  # no texture to anchor a translation
@@ -251,7 +275,7 @@ def choose_model(prev: Pyramid, cur: Pyramid, mode: str = "adaptive") -> Decisio
     ds = global_translation(prev.blurred("small"), cur.blurred("small"), (start[0] / ss, start[1] / ss),
                             sigma=None)
     d = global_translation(prev.blurred("flow"), cur.blurred("flow"), (ds[0] * ss, ds[1] * ss),
-                           iterations=LK_FINE_ITERATIONS, sigma=None)
+                           iterations=LK_FINE_ITERATIONS, sigma=None, grads=cur.gradients("flow"))
     res = small_residual(prev.small, cur.small, (d[0] / ss, d[1] / ss))
     m["residual_mean"] = rm = float(res.mean()) if res.size else 0.0
     # Outliers that survive a 3x3 erosion: regions the translation does not explain (a mover), not
@@ -426,6 +450,7 @@ class TemporalStage:
             dec = measured[1]
         else:
             dec = choose_model(self._prev, pyr, self.mode)
+            pyr.drop_gradients()   # kept for TSS's refiner (Pyramid.gradients), which this stage has not
         gate, chosen = None, dec.model
         if self.where == "render":
             gate = (moving_in_regions(frame_in, self._prev_raw, regions, frame_filtered)

@@ -72,9 +72,9 @@ import numpy as np
 
 from mlaa_stream.device.colour import device_luts, lut_read
 from mlaa_stream.device.formats import LUT_SIZE, frame_format
-from mlaa_stream.temporal.layers import (STILL_AGE, STILL_SHIFT, ahead_fields, background_of, find_layers,
-                                         inverse_compositional, layer_fields, layers_decision, sample_bilinear,
-                                         still_background, translation_map)
+from mlaa_stream.temporal.layers import (STILL_AGE, STILL_SHIFT, CompositionalPoints, ahead_fields, background_of,
+                                         find_layers, inverse_compositional, layer_fields, layers_decision,
+                                         sample_bilinear, still_background, translation_map)
 from mlaa_stream.temporal.stage import (LK_ROBUST, Decision, Pyramid, _PMAX, choose_model, sample_field,
                                         decode_table, grey8)
 
@@ -255,6 +255,7 @@ class MotionRing:
         self.entries.append(RingEntry(index, None, pyr))
         if len(self.entries) > self.frames:
             del self.entries[0]
+        pyr.drop_gradients()   # choose_model's and the refiner's: this frame's motion is measured
         return FrameMotion(dec, list(self.entries), ahead)
 
     def _layers(self, prev: RingEntry, pyr: Pyramid, dec: Decision) -> Decision | None:
@@ -299,7 +300,7 @@ class MotionRing:
     def _refiner(self, pyr: Pyramid) -> _Refiner:
         """The direct refiner of the current frame (made once per frame)."""
         if self._refiner_pyr is not pyr or self._last_refiner is None:
-            self._last_refiner, self._refiner_pyr = _Refiner(pyr.blurred("flow")), pyr
+            self._last_refiner, self._refiner_pyr = _Refiner(pyr.blurred("flow"), grads=pyr.gradients("flow")), pyr
         return self._last_refiner
 
     def _ahead(self, pyr: Pyramid, index: int, future: list[Ahead]) -> list[RingEntry]:
@@ -570,30 +571,37 @@ class _Refiner:
     the frame-to-frame test of choose_model and drift apart over the ring) and that tile takes no samples
     from that frame."""
 
-    def __init__(self, cur_b: np.ndarray, points: int | None = None):
+    def __init__(self, cur_b: np.ndarray, points: int | None = None, grads: tuple[np.ndarray, ...] | None = None):
+        """`grads`: cur_b's (gx, gy, gx gx, gx gy, gy gy) where the caller has them (Pyramid.gradients)."""
         self.last_check = None   # (bad tiles, row deviations, textured rows, column deviations, textured columns)
         points = REFINE_POINTS if points is None else int(points)
         self.h, self.w = h, w = cur_b.shape
         points = -(-points // max(-(-h // TILE) * -(-w // TILE), 1))    # per tile
-        gx = cv2.Sobel(cur_b, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
-        gy = cv2.Sobel(cur_b, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
+        if grads is None:
+            gx = cv2.Sobel(cur_b, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
+            gy = cv2.Sobel(cur_b, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
+            grads = (gx, gy, gx * gx, gx * gy, gy * gy)
+        gx, gy, gxx, gxy, gyy = grads   # each product once: the energy and the tiles' Hessians read them
         self.ty, self.tx = h // TILE, w // TILE
-        energy = gx * gx + gy * gy
-        # the points: each tile's largest gradients (partial tiles at the right and bottom count too)
+        # the points: each tile's largest gradients (partial tiles at the right and bottom count too), picked by
+        # argpartition of the negated energy, written negated into the padded frame (one pass less than negating
+        # the tile blocks; the padding's 0 and -0 compare equal)
         t = TILE
         ny, nx = -(-h // t), -(-w // t)
         pad = np.zeros((ny * t, nx * t), np.float32)
-        pad[:h, :w] = energy
-        blocks = pad.reshape(ny, t, nx, t).transpose(0, 2, 1, 3).reshape(ny, nx, t * t)
+        neg = pad[:h, :w]
+        np.add(gxx, gyy, out=neg)   # the energy
+        np.negative(neg, out=neg)
+        neg_blocks = pad.reshape(ny, t, nx, t).transpose(0, 2, 1, 3).reshape(ny, nx, t * t)
         k = min(points, t * t)
-        top = np.argpartition(-blocks, k - 1, axis=-1)[..., :k] if k < t * t else np.broadcast_to(
-            np.arange(t * t), blocks.shape)
+        top = np.argpartition(neg_blocks, k - 1, axis=-1)[..., :k] if k < t * t else np.broadcast_to(
+            np.arange(t * t), neg_blocks.shape)
         by, bx = np.meshgrid(np.arange(ny), np.arange(nx), indexing="ij")
         ys = (by[..., None] * t + top // t).ravel()
         xs = (bx[..., None] * t + top % t).ravel()
         keep = (ys < h) & (xs < w)
         ys, xs = ys[keep], xs[keep]
-        keep = energy[ys, xs] > 0
+        keep = neg[ys, xs] < 0   # energy > 0
         ys, xs = ys[keep], xs[keep]
         self.ys, self.xs = ys.astype(np.float64), xs.astype(np.float64)
         self.iy, self.ix = ys, xs
@@ -601,11 +609,16 @@ class _Refiner:
         self.gx, self.gy = gx[ys, xs].astype(np.float64), gy[ys, xs].astype(np.float64)
         self.gxx, self.gxy, self.gyy = self.gx * self.gx, self.gx * self.gy, self.gy * self.gy
         self.products, self.gradients = np.stack([self.gxx, self.gxy, self.gyy]), np.stack([self.gx, self.gy])
+        # the bands' indices and texture (the same for every step), and homography()'s steepest-descent matrix
+        self.nr, self.nc = -(-h // BAND), -(-w // BAND)
+        self.ry, self.cx = ys // BAND, xs // BAND
+        self.band_gyy, self.band_gxx = np.bincount(self.ry, self.gyy, self.nr), np.bincount(self.cx, self.gxx, self.nc)
+        self._ic: CompositionalPoints | None = None
         if self.ty and self.tx:
             # per-tile Hessians: the whole tile's for the texture test, the points' for the tile's step
             def tiles(a):
                 return a[:self.ty * t, :self.tx * t].reshape(self.ty, t, self.tx, t).sum((1, 3), dtype=np.float64)
-            fa, fb, fc = tiles(gx * gx), tiles(gx * gy), tiles(gy * gy)
+            fa, fb, fc = tiles(gxx), tiles(gxy), tiles(gyy)
             self.textured = (fa * fc - fb * fb > 1e-3 * np.maximum(fa * fc, 1e-12)) & (
                 np.minimum(fa, fc) > TILE_TEXTURE * t * t)
             self.tile = (np.minimum(ys // t, self.ty - 1) * self.tx + np.minimum(xs // t, self.tx - 1))
@@ -626,19 +639,18 @@ class _Refiner:
     def homography(self, ring_b: np.ndarray, m: np.ndarray, steps: int) -> np.ndarray:
         """`steps` inverse-compositional Gauss-Newton steps of the homography m with cur(x) ~ ring(m x) (flow px),
         at the points, robust weights as step() (layers.inverse_compositional)."""
+        if self._ic is None:   # made on the first call: every homography of this frame reuses it
+            self._ic = CompositionalPoints(self.xs, self.ys, self.gx, self.gy, (self.h, self.w), 8)
         return inverse_compositional(ring_b, m, steps, self.xs, self.ys, self.c, self.gx, self.gy, (self.h, self.w),
-                                     8, LK_ROBUST)
+                                     8, LK_ROBUST, self._ic)
 
-    def _band_steps(self, r: np.ndarray):
-        """Each row band's 1-D vertical step and each column band's horizontal step from residuals r
-        at the points, with whether the band has the texture to measure it."""
-        nr, nc = -(-self.h // BAND), -(-self.w // BAND)
-        ry, cx = self.iy // BAND, self.ix // BAND
-        gyy = np.bincount(ry, self.gyy, nr)
-        gxx = np.bincount(cx, self.gxx, nc)
+    def _band_steps(self, rgx: np.ndarray, rgy: np.ndarray):
+        """Each row band's 1-D vertical step and each column band's horizontal step from the residuals times the
+        gradients at the points (rgx = r gx, rgy = r gy), with whether the band has the texture to measure it."""
+        gyy, gxx = self.band_gyy, self.band_gxx
         with np.errstate(divide="ignore", invalid="ignore"):
-            dy = np.bincount(ry, r * self.gy, nr) / gyy
-            dx = np.bincount(cx, r * self.gx, nc) / gxx
+            dy = np.bincount(self.ry, rgy, self.nr) / gyy
+            dx = np.bincount(self.cx, rgx, self.nc) / gxx
         return (dy, gyy > BAND_TEXTURE * BAND * self.w), (dx, gxx > BAND_TEXTURE * BAND * self.h)
 
     def _band_deviations(self, bands, step: tuple[float, float]):
@@ -667,7 +679,7 @@ class _Refiner:
             sx = tx & (np.abs(d[0] + dx) < STATIC_TOL) & (abs(fx) > 2 * STATIC_TOL)
         if not sy.any() and not sx.any():
             return None
-        return (~sy[self.iy // BAND] & ~sx[self.ix // BAND]).astype(np.float64)
+        return (~sy[self.ry] & ~sx[self.cx]).astype(np.float64)
 
     def step(self, ring_b: np.ndarray, d: tuple[float, float], check: bool = True,
              weights: np.ndarray | None = None):
@@ -685,13 +697,14 @@ class _Refiner:
         if det > 1e-6 * max(a * e, 1e-12):
             step = ((e * bx - b_ * by) / det, (a * by - b_ * bx) / det)
         new = (d[0] + step[0], d[1] + step[1])
-        bands = self._band_steps(r) if STATIC_TOL > 0 or check else None   # once for the weights and the check
+        rgx, rgy = r * self.gx, r * self.gy   # the bands' and the tiles' right-hand sides
+        bands = self._band_steps(rgx, rgy) if STATIC_TOL > 0 or check else None   # once for the weights and the check
         self.band_weights = self._band_weights(d, bands, step)
         if not check or not (self.ty and self.tx):
             return new, None
         nt = self.ty * self.tx
-        tbx = np.bincount(self.tile, self.gx * r, nt).reshape(self.ty, self.tx)
-        tby = np.bincount(self.tile, self.gy * r, nt).reshape(self.ty, self.tx)
+        tbx = np.bincount(self.tile, rgx, nt).reshape(self.ty, self.tx)
+        tby = np.bincount(self.tile, rgy, nt).reshape(self.ty, self.tx)
         with np.errstate(divide="ignore", invalid="ignore"):
             sx = (self.tc * tbx - self.tb * tby) / self.tdet
             sy = (self.ta * tby - self.tb * tbx) / self.tdet
@@ -715,10 +728,12 @@ class _Refiner:
         h, w = self.h, self.w
         if not bad.any() and not rows.any() and not cols.any():
             return None
-        valid = np.ones((h, w), np.uint8)
-        valid[np.repeat(rows, BAND)[:h], :] = 0
-        valid[:, np.repeat(cols, BAND)[:w]] = 0
-        valid[:self.ty * TILE, :self.tx * TILE][np.kron(bad, np.ones((TILE, TILE), bool))] = 0
+        # rows and columns outside the bad bands, then the bad tiles cleared through a (tiles, TILE, tiles, TILE)
+        # view of the frame's whole tiles (no full-size index masks)
+        ok = ~np.repeat(rows, BAND)[:h, None] & ~np.repeat(cols, BAND)[:w]
+        tiles = ok[:self.ty * TILE, :self.tx * TILE].reshape(self.ty, TILE, self.tx, TILE)   # a view
+        tiles &= ~bad[:, None, :, None]
+        valid = ok.view(np.uint8)
         # the last partial row/column of tiles follows its neighbour (band masks included: measured so,
         # bench pan error removed 0.732; masking the bands after this copy gave 0.721)
         if self.ty * TILE < h:
