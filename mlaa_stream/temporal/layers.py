@@ -159,9 +159,15 @@ def inverse_compositional(ring_b: np.ndarray, m: np.ndarray, steps: int, xs: np.
     m = np.array(m, np.float64)
     for _ in range(steps):
         q = pts @ m.T
-        r = sample_bilinear(ring_b, q[:, 0] / q[:, 2], q[:, 1] / q[:, 2]) - c
-        wr = 1.0 / (1.0 + (r * r) * (1.0 / (robust * robust)))
-        hess = (sd * wr[:, None]).T @ sd   # matrix products: faster here than einsum and add.reduce
+        r = sample_bilinear(ring_b, q[:, 0] / q[:, 2], q[:, 1] / q[:, 2])
+        r -= c
+        wr = r * r   # 1 / (1 + (r / robust)^2), in place
+        wr *= 1.0 / (robust * robust)
+        wr += 1.0
+        np.divide(1.0, wr, out=wr)
+        # sd * wr[:, None] as one flat product (a broadcast over rows of dof values is slower), then matrix
+        # products: faster here than einsum and add.reduce
+        hess = (sd.ravel() * np.repeat(wr, sd.shape[1])).reshape(sd.shape).T @ sd
         b = (wr * r) @ sd
         try:
             dp = np.linalg.solve(hess, b)

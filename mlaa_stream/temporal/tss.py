@@ -325,7 +325,9 @@ class MotionRing:
             e = RingEntry(a.index, None, a.pyr, shift=d)
             if self.refine and moved:
                 ref = self._refiner(pyr)
-                s, e.valid, check = ref.refine(a.pyr.blurred("flow"), (d[0] / fs, d[1] / fs), NEWEST_STEPS)
+                # with band slopes the mask is made below from the check: none from the refinement
+                s, e.valid, check = ref.refine(a.pyr.blurred("flow"), (d[0] / fs, d[1] / fs), NEWEST_STEPS,
+                                               mask=self.band_slopes is None)
                 e.shift = (s[0] * fs, s[1] * fs)
                 if self.band_slopes is not None and check is not None:   # a frame ahead's age is negative
                     bad, dy, ty, dx, tx = check
@@ -353,25 +355,27 @@ class MotionRing:
             return
 
         checks = []
+        newest, older = todo[-1], todo[:-1]
+        # by age alone, not by what was refined before: the state after K frames is then the same
+        # however the run started (--resume's warm-up, a cluster chunk's: docs/cluster.md)
+        due = [e for e in older if (index - e.index - 1) % REFINE_EVERY == 0]
+        # frames checked at three ages or more get their masks from the bands' growth below, not from refine
+        growing = BAND_GROWTH > 0 and (NEWEST_STEPS > 0) + (REFINE_STEPS > 0) * len(due) >= 3
 
         def refine(e: RingEntry, steps: int) -> None:
-            s, e.valid, check = ref.refine(e.pyr.blurred("flow"), (e.shift[0] / fs, e.shift[1] / fs), steps)
+            s, e.valid, check = ref.refine(e.pyr.blurred("flow"), (e.shift[0] / fs, e.shift[1] / fs), steps,
+                                           mask=not growing)
             e.shift = (s[0] * fs, s[1] * fs)
             if check is not None:
                 checks.append((e, index - e.index, check))
 
-        newest = todo[-1]
         before = newest.shift
         refine(newest, NEWEST_STEPS)
         corr = (newest.shift[0] - before[0], newest.shift[1] - before[1])
-        older = todo[:-1]
         for e in older:
             e.shift = (e.shift[0] + corr[0], e.shift[1] + corr[1])
-        for e in older:
-            # by age alone, not by what was refined before: the state after K frames is then the same
-            # however the run started (--resume's warm-up, a cluster chunk's: docs/cluster.md)
-            if (index - e.index - 1) % REFINE_EVERY == 0:
-                refine(e, REFINE_STEPS)
+        for e in due:
+            refine(e, REFINE_STEPS)
         if BAND_GROWTH > 0 and len({a for _, a, _ in checks}) >= 3:
             self.band_slopes = _band_slopes(checks)
             for e, age, (bad, dy, ty, dx, tx) in checks:
@@ -479,7 +483,10 @@ class MotionRing:
                                  cv2.Sobel(cur, cv2.CV_32F, 0, 1, ksize=3, scale=0.125))
             # a residual a misplacement of under ALIGN_PX explains is motion error the cells tolerate
             pyr._blur["align_level"] = np.float32(ALIGN_LEVEL) + np.float32(ALIGN_PX) * grad
-        bad = ~(np.abs(warped - cur) <= pyr._blur["align_level"])     # NaN maps are bad too
+        np.subtract(warped, cur, out=warped)   # |warped - cur|, in place (a frame-size temporary)
+        np.abs(warped, out=warped)
+        bad = np.less_equal(warped, pyr._blur["align_level"])
+        np.logical_not(bad, out=bad)   # NaN maps are bad too
         bad = cv2.erode(bad.view(np.uint8), np.ones((3, 3), np.uint8))
         bad = cv2.dilate(bad, np.ones((2 * ALIGN_GROW + 1,) * 2, np.uint8))
         good = bad == 0
@@ -597,18 +604,25 @@ class _Refiner:
         top = np.argpartition(neg_blocks, k - 1, axis=-1)[..., :k] if k < t * t else np.broadcast_to(
             np.arange(t * t), neg_blocks.shape)
         by, bx = np.meshgrid(np.arange(ny), np.arange(nx), indexing="ij")
-        ys = (by[..., None] * t + top // t).ravel()
-        xs = (bx[..., None] * t + top % t).ravel()
+        row, col = np.divmod(top, t)
+        ys = (by[..., None] * t + row).ravel()
+        xs = (bx[..., None] * t + col).ravel()
         keep = (ys < h) & (xs < w)
         ys, xs = ys[keep], xs[keep]
         keep = neg[ys, xs] < 0   # energy > 0
         ys, xs = ys[keep], xs[keep]
         self.ys, self.xs = ys.astype(np.float64), xs.astype(np.float64)
         self.iy, self.ix = ys, xs
-        self.c = cur_b[ys, xs].astype(np.float64)
-        self.gx, self.gy = gx[ys, xs].astype(np.float64), gy[ys, xs].astype(np.float64)
-        self.gxx, self.gxy, self.gyy = self.gx * self.gx, self.gx * self.gy, self.gy * self.gy
-        self.products, self.gradients = np.stack([self.gxx, self.gxy, self.gyy]), np.stack([self.gx, self.gy])
+        at = ys * w + xs   # flat indices
+        self.c = cur_b.ravel().take(at).astype(np.float64)
+        # the gradients and their products at the points, written into the stacks the steps' matrix products read
+        self.gradients, self.products = np.empty((2, ys.size)), np.empty((3, ys.size))
+        self.gx, self.gy = self.gradients
+        self.gx[:], self.gy[:] = gx.ravel().take(at), gy.ravel().take(at)
+        self.gxx, self.gxy, self.gyy = self.products
+        np.multiply(self.gx, self.gx, out=self.gxx)
+        np.multiply(self.gx, self.gy, out=self.gxy)
+        np.multiply(self.gy, self.gy, out=self.gyy)
         # the bands' indices and texture (the same for every step), and homography()'s steepest-descent matrix
         self.nr, self.nc = -(-h // BAND), -(-w // BAND)
         self.ry, self.cx = ys // BAND, xs // BAND
@@ -682,14 +696,19 @@ class _Refiner:
         return (~sy[self.ry] & ~sx[self.cx]).astype(np.float64)
 
     def step(self, ring_b: np.ndarray, d: tuple[float, float], check: bool = True,
-             weights: np.ndarray | None = None):
+             weights: np.ndarray | None = None, mask: bool = True):
         """One step from d (flow px, cur(x) ~ ring(x + d)): returns (new d, valid mask or None).
-        weights: per point (the previous step's band_weights); self.band_weights: this step's."""
+        weights: per point (the previous step's band_weights); self.band_weights: this step's. mask=False: the
+        check's valid mask is not made (None; the caller makes its own from last_check)."""
         h, w = self.h, self.w
-        r = self.c - self._sample(ring_b, d)
-        wr = 1.0 / (1.0 + (r * r) * (1.0 / (LK_ROBUST * LK_ROBUST)))
+        r = self._sample(ring_b, d)
+        np.subtract(self.c, r, out=r)
+        wr = r * r   # 1 / (1 + (r / LK_ROBUST)^2), in place
+        wr *= 1.0 / (LK_ROBUST * LK_ROBUST)
+        wr += 1.0
+        np.divide(1.0, wr, out=wr)
         if weights is not None:
-            wr = wr * weights
+            wr *= weights
         a, b_, e = (float(v) for v in self.products @ wr)   # matrix-vector products: faster than five reductions
         bx, by = (float(v) for v in self.gradients @ (wr * r))
         det = a * e - b_ * b_
@@ -711,14 +730,17 @@ class _Refiner:
         bad = self.textured & (np.hypot(sx - step[0], sy - step[1]) > TILE_TOL)
         dy, ty, dx, tx = self._band_deviations(bands, step)
         self.last_check = (bad, dy, ty, dx, tx)   # the tiles and bands of this check (MotionRing._refine)
+        if not mask:
+            return new, None
         return new, self.valid_of(bad, ty & (np.abs(dy) > BAND_TOL), tx & (np.abs(dx) > BAND_TOL))
 
-    def refine(self, ring_b: np.ndarray, d: tuple[float, float], steps: int):
+    def refine(self, ring_b: np.ndarray, d: tuple[float, float], steps: int, mask: bool = True):
         """`steps` steps from d (flow px), each with the previous one's band weights, the last with the checks:
-        returns (d, valid mask or None, the last check's (bad tiles, dy, ty, dx, tx) or None)."""
+        returns (d, valid mask or None, the last check's (bad tiles, dy, ty, dx, tx) or None). mask=False: no
+        valid mask (None) where the caller makes its own from the check (step)."""
         weights, valid, self.last_check = None, None, None
         for k in range(steps):
-            d, valid = self.step(ring_b, d, check=k == steps - 1, weights=weights)
+            d, valid = self.step(ring_b, d, check=k == steps - 1, weights=weights, mask=mask)
             weights = self.band_weights
         check, self.last_check = self.last_check, None
         return d, valid, check
