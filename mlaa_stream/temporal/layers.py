@@ -301,12 +301,19 @@ def _hull(mask: np.ndarray) -> np.ndarray:
 
 def residual_sum(prev: Pyramid, cur: Pyramid, d: tuple[float, float]) -> float:
     """Sum of |cur - prev moved by d (full-size px)| over the blurred flow-size grey."""
-    return float(np.abs(_moved(prev, cur, d) - cur.blurred("flow")).sum())
+    return float(_residual(prev, cur, d).sum())
 
 
 def _moved(prev: Pyramid, cur: Pyramid, d: tuple[float, float]) -> np.ndarray:
     fs = cur.flow_scale
     return _warp(prev.blurred("flow"), translation_map((d[0] / fs, d[1] / fs)))
+
+
+def _residual(prev: Pyramid, cur: Pyramid, d: tuple[float, float]) -> np.ndarray:
+    """|prev moved by d - cur| on the blurred flow-size grey (in place on the warp: no frame-size temporaries)."""
+    r = _moved(prev, cur, d)
+    np.subtract(r, cur.blurred("flow"), out=r)
+    return np.abs(r, out=r)
 
 
 def still_background(far: Pyramid, cur: Pyramid, moved: tuple[float, float]) -> bool:
@@ -316,12 +323,11 @@ def still_background(far: Pyramid, cur: Pyramid, moved: tuple[float, float]) -> 
     (a still background is the same texels; a moving object over it changes its own). Each alone is fooled: a slow
     vector pan's 1-spp frames keep most near-horizontal edges unchanged for frames (share 0.54-0.67 at ages 3-5),
     and a large textured object turning leaves a residual sum near the moving background's (ratio 0.94-0.96)."""
-    c = cur.blurred("flow")
-    still = np.abs(_moved(far, cur, (0.0, 0.0)) - c)
-    if float(still.sum()) > STILL_MARGIN * float(np.abs(_moved(far, cur, moved) - c).sum()):
+    still = _residual(far, cur, (0.0, 0.0))
+    if float(still.sum()) > STILL_MARGIN * float(_residual(far, cur, moved).sum()):
         return False
     if "still_texture" not in cur._blur:
-        gx, gy = cur.gradients("flow")[:2]   # the Sobel gradients of c
+        gx, gy = cur.gradients("flow")[:2]   # the Sobel gradients of the blurred flow-size grey
         cur._blur["still_texture"] = cv2.magnitude(gx, gy) > STILL_TEXTURE
     tex = cur._blur["still_texture"]
     textured = np.count_nonzero(tex)
