@@ -276,6 +276,12 @@ def _job_for(kind: str, output: str) -> type:
                    "more frames; implies --temporal). Default with the temporal stage: 2 (steadier and more "
                    "error removed on every shot where it takes samples, ~1.1x its time: docs/temporal.md, "
                    "\"Look-ahead\"); 0 reads the past only.")
+@click.option("--dense-motion", is_flag=True, default=False,
+              help="Temporal supersampling tracks motion tile by tile where one camera motion does not "
+                   "explain a frame (a dolly, an orbit: near and far content move apart) instead of "
+                   "keeping the spatial output there. More error removed and less damage on such shots; "
+                   "slow: 3-7x the stage's time on those frames (docs/temporal.md, \"Dollies through "
+                   "tracked tiles\"). Implies --temporal.")
 @click.option("--temporal-mode", type=click.Choice(["adaptive", "dense", "global", "static"]),
               default="adaptive", show_default=True,
               help="Motion model: adaptive picks per frame the cheapest that explains it "
@@ -300,7 +306,8 @@ def filter_command(ctx: click.Context, input_path: str, output: str, overwrite: 
                    rate: float, video_backend: str,
                    overlay: str | None, cluster: str | None, chunk_frames: int, progress_path: str | None,
                    in_flight: int, temporal: bool | None,
-                   temporal_frames: int | None, temporal_method: str, lookahead: int | None, temporal_mode: str,
+                   temporal_frames: int | None, temporal_method: str, lookahead: int | None, dense_motion: bool,
+                   temporal_mode: str,
                    temporal_k: float | None, stats_path: str | None, show: str | None,
                    device: str | None, verbose: int, quiet: bool) -> None:
     """Remove jaggies from an image, a folder of images, a frame sequence or a video.
@@ -321,7 +328,7 @@ def filter_command(ctx: click.Context, input_path: str, output: str, overwrite: 
                            overlay=overlay, in_flight=in_flight, device=device, progress_path=progress_path,
                            cluster=cluster, chunk_frames=chunk_frames,
                            temporal=TemporalOptions(temporal, temporal_mode, temporal_k, stats_path, show,
-                                                    temporal_frames, temporal_method, lookahead))
+                                                    temporal_frames, temporal_method, lookahead, dense_motion))
     except Terminated as exc:
         con.error(f"terminated by {exc}; complete outputs are kept, the one in progress was removed")
         code = 128 + exc.signum
@@ -375,6 +382,7 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
         if temporal.wanted and kind == "image":
             con.info("a single image: spatial antialiasing only (temporal needs a sequence)")
             temporal.enabled, temporal.show, temporal.stats_path, temporal.lookahead = False, None, None, None
+            temporal.dense_motion = False
         if temporal.spec() is not None and not kwargs.get("fast"):
             from mlaa_stream.temporal.methods import needs_regions
             kwargs["keep_regions"] = needs_regions(temporal.method)  # the stage reads the filter's regions
@@ -383,6 +391,9 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
         if temporal.lookahead and temporal.spec() is not None and temporal.method == "blend":
             raise Usage("--lookahead needs a --temporal-method with TSS (auto, tss, tss+blend): the blend "
                         "reads the past only")
+        if temporal.dense_motion and temporal.spec() is not None and temporal.method == "blend":
+            raise Usage("--dense-motion needs a --temporal-method with TSS (auto, tss, tss+blend): the blend "
+                        "has its own dense flow")
         job = _job_for(kind, output)
         runner = job(input_path, output, kind, con, overwrite=overwrite, resume=resume,
                      frames=frames, codec=codec, container=container, audio=audio,
@@ -456,10 +467,11 @@ class TemporalOptions:
     frames: int | None = None
     method: str = "auto"
     lookahead: int | None = None   # --lookahead; None: DEFAULT_LOOKAHEAD with a method that has TSS
+    dense_motion: bool = False     # --dense-motion: TSS's dense_samples
 
     @property
     def wanted(self) -> bool:
-        return bool(self.enabled or self.show or self.stats_path or self.lookahead)
+        return bool(self.enabled or self.show or self.stats_path or self.lookahead or self.dense_motion)
 
     def stage(self, filt):
         """The temporal stage sharing the filter's OpenCL context, or None when off."""
@@ -468,10 +480,10 @@ class TemporalOptions:
 
     def spec(self):
         """The settings as a TemporalSpec (what the cluster's workers get), or None when off."""
-        if self.enabled is False or (self.enabled is None and not (self.show or self.stats_path or self.lookahead)):
-            return None  # off unless asked for; --show history, --stats and --lookahead imply it
+        if self.enabled is False or (self.enabled is None and not self.wanted):
+            return None  # off unless asked for; --show history, --stats, --lookahead and --dense-motion imply it
         from mlaa_stream.cluster.temporal import TemporalSpec
-        return TemporalSpec(self.method, self.frames, self.mode, self.k, self.frames_ahead)
+        return TemporalSpec(self.method, self.frames, self.mode, self.k, self.frames_ahead, self.dense_motion)
 
     @property
     def frames_ahead(self) -> int:

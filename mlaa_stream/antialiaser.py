@@ -40,6 +40,8 @@ class Antialiaser:
     `lookahead=N` (files, not live capture): in `stream`, temporal supersampling also reads the N frames after
     each one (each output then waits for N more frames to be read); `aa(frame)` reads the past only.
     `post_hooks` is a list of `(frame, index) -> frame` callables (overlays), applied after it.
+    `dense_motion=True`: temporal supersampling tracks motion tile by tile where one camera motion does not
+    explain a frame (dollies, orbits; TSSStage's dense_samples: more error removed there, several times slower).
     `linear_input=True`: the frames hold linear light (EXR renders, float, highlights may exceed 1): the filter
     and the temporal stage take them as they are instead of sRGB-decoding them.
     """
@@ -48,7 +50,7 @@ class Antialiaser:
                  threshold: float | None = None, metric: str | None = None, linear: bool | None = None,
                  reconstruct: bool | None = None, temporal: Temporal | bool | str | None = None,
                  temporal_frames: int | None = None, post_hooks: Sequence[PostHook] = (), in_flight: int = 2,
-                 lookahead: int = 0, linear_input: bool = False):
+                 lookahead: int = 0, linear_input: bool = False, dense_motion: bool = False):
         if preset is not None and preset not in PRESETS:
             raise ValueError(f"expected a preset among {', '.join(sorted(PRESETS))}, got {preset!r}")
         kwargs = dict(PRESETS.get(preset or "default", {}))
@@ -68,9 +70,10 @@ class Antialiaser:
         self.device_name: str = self._filter.device_name
         if isinstance(method, str):
             temporal = make_stage(method, self._filter.context, bgr=True, frames=temporal_frames,
-                                  regions_from=self._filter, lookahead=lookahead, linear_input=linear_input)
-        elif lookahead:
-            raise ValueError("lookahead: needs temporal=True or one of the temporal methods with TSS")
+                                  regions_from=self._filter, lookahead=lookahead, linear_input=linear_input,
+                                  dense_samples=dense_motion)
+        elif lookahead or dense_motion:
+            raise ValueError("lookahead, dense_motion: need temporal=True or one of the temporal methods with TSS")
         self.temporal = temporal or None
         self.post_hooks = list(post_hooks)
         self.in_flight = in_flight

@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import signal
 
+import numpy as np
 import pytest
 
 from mlaa_stream.device.context import Context, DeviceError, default_context
@@ -51,3 +52,29 @@ SUMMARY_LINES: list[str] = []
 def pytest_terminal_summary(terminalreporter) -> None:
     for line in SUMMARY_LINES:
         terminalreporter.write_line(line)
+
+
+@pytest.fixture
+def zoom_frames():
+    """_zoom: a dolly's frames (tests of the temporal stage's dense motion)."""
+    return _zoom
+
+
+def _zoom(z: float, n: int = 6, seed: int = 8, w: int = 160, h: int = 120):
+    """A textured plane zooming by z per frame about the centre (a dolly), w x h: 1-spp frames (point samples at
+    pixel centres), box-filtered truths and the zoom's centre in pixels."""
+    import cv2
+    rng = np.random.default_rng(seed)
+    up = 4
+    tex = cv2.GaussianBlur(rng.random((h * up, w * up)).astype(np.float32), (0, 0), 5)
+    tex = np.clip((tex - tex.mean()) / tex.std() * 60 + 128, 0, 255).astype(np.float32)
+    tex[::97] = 240.0   # thin bright lines: aliasing to resolve
+    cxh, cyh = (w * up - 1) / 2, (h * up - 1) / 2
+    frames, truths = [], []
+    for t in range(n):
+        s = z ** t
+        hi = cv2.warpAffine(tex, np.float32([[s, 0, (1 - s) * cxh], [0, s, (1 - s) * cyh]]), (w * up, h * up),
+                            flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
+        frames.append(np.round(hi[up // 2::up, up // 2::up]).astype(np.uint8))
+        truths.append(np.round(cv2.resize(hi, (w, h), interpolation=cv2.INTER_AREA)).astype(np.uint8))
+    return frames, truths, ((cxh - up // 2) / up, (cyh - up // 2) / up)

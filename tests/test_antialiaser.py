@@ -175,6 +175,20 @@ def test_stream_with_lookahead_reads_the_frames_ahead():
     assert all(np.array_equal(a, b) for a, b in zip(outs, expected))
     with pytest.raises(ValueError, match="lookahead"):
         Antialiaser(lookahead=2)
+    with pytest.raises(ValueError, match="dense_motion"):
+        Antialiaser(dense_motion=True)
+
+
+def test_dense_motion_tracks_a_dolly(zoom_frames):
+    """Antialiaser(temporal="tss", dense_motion=True): TSS's dense_samples; a dolly (one camera motion per frame
+    would be a translation) gets tracked tiles after its first frames."""
+    frames, _, _ = zoom_frames(1.01, w=320, h=240)
+    with Antialiaser(temporal="tss", dense_motion=True) as aa:
+        assert aa.temporal.motion.dense_samples
+        aa.temporal.motion.mode = "global"   # one camera motion per frame: the translation the tiles replace
+        for f in frames:
+            aa(np.repeat(f[..., None], 3, -1))
+        assert all(r.get("tracked") for r in aa.temporal.stats[2:])
 
 
 def test_linear_input_frames_match_the_filter_and_stage_made_for_linear_light():

@@ -500,27 +500,28 @@ def test_vrows_repeat_each_mask_column_flow_scale_times(flow_scale):
     assert np.array_equal(vrows_of(valid.astype(bool), flow_scale, width), rows)
 
 
-def test_dense_samples_track_a_zoom_tile_by_tile(stage_parts):
+def _zoom_field_errors(entries, t: int, z: float, centre) -> np.ndarray:
+    """Each ring frame's field against the exact zoom map, px (texels it keeps), after asserting it keeps most."""
+    h, w = entries[0].pyr.flow.shape
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float32)
+    errs = []
+    for e in entries[:-1]:
+        k = z ** (e.index - t) - 1.0
+        exact = np.stack([k * (xs - centre[0]), k * (ys - centre[1])], -1)
+        ok = np.isfinite(e.field[..., 0])
+        assert ok.mean() > 0.5
+        errs.append(np.abs(e.field[ok] - exact[ok]).max(-1))
+    return np.concatenate(errs)
+
+
+def test_dense_samples_track_a_zoom_tile_by_tile(stage_parts, zoom_frames):
     """dense_samples: a textured plane zooming 1 % per frame about the centre (a dolly; dense to the motion models)
     keeps its ring, each ring frame's field the exact zoom map within 0.2 px at 95 % of the texels it keeps (median
     under 0.06; the tile centres' grid misplaced by a few px or clamped at the borders gave 0.2-0.5), and the
     output is closer to the box-filtered truth than the spatial output; without the option the ring restarts every
     frame and the spatial output stands."""
-    import cv2
-    rng = np.random.default_rng(8)
-    w, h, up, z = 160, 120, 4, 1.01
-    tex = cv2.GaussianBlur(rng.random((h * up, w * up)).astype(np.float32), (0, 0), 5)
-    tex = np.clip((tex - tex.mean()) / tex.std() * 60 + 128, 0, 255).astype(np.float32)
-    tex[::97] = 240.0   # thin bright lines: aliasing to resolve
-    cxh, cyh = (w * up - 1) / 2, (h * up - 1) / 2
-    frames, truths = [], []
-    for t in range(6):
-        s = z ** t
-        hi = cv2.warpAffine(tex, np.float32([[s, 0, (1 - s) * cxh], [0, s, (1 - s) * cyh]]), (w * up, h * up),
-                            flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
-        frames.append(np.round(hi[up // 2::up, up // 2::up]).astype(np.uint8))
-        truths.append(np.round(cv2.resize(hi, (w, h), interpolation=cv2.INTER_AREA)).astype(np.uint8))
-    cx, cy = (cxh - up // 2) / up, (cyh - up // 2) / up   # the zoom's centre in pixels of the frames
+    z = 1.01
+    frames, truths, centre = zoom_frames(z)
     outs = {}
     for dense in (False, True):
         st = TSSStage(frames=6, bgr=False, context=stage_parts, mode="dense", dense_samples=dense)
@@ -529,20 +530,45 @@ def test_dense_samples_track_a_zoom_tile_by_tile(stage_parts):
         for t, f in enumerate(frames):
             outs[dense].append(st(f, f, t))
             if dense and t == len(frames) - 1:
-                errs = []
-                ys, xs = np.mgrid[0:h, 0:w].astype(np.float32)
-                for e in st.motion.entries[:-1]:
-                    k = z ** (e.index - t) - 1.0
-                    exact = np.stack([k * (xs - cx), k * (ys - cy)], -1)
-                    ok = np.isfinite(e.field[..., 0])
-                    assert ok.mean() > 0.5
-                    errs.append(np.abs(e.field[ok] - exact[ok]).max(-1))
-                errs = np.concatenate(errs)
+                errs = _zoom_field_errors(st.motion.entries, t, z, centre)
                 assert np.percentile(errs, 95) < 0.2 and np.median(errs) < 0.06
         st.close()
     assert all(np.array_equal(o, f) for o, f in zip(outs[False], frames))
     err = lambda xs: sum(float(((x.astype(float) - y) ** 2).sum()) for x, y in zip(xs[2:], truths[2:]))
     assert err(outs[True]) < 0.97 * err(frames)   # 0.955 measured: the texture is smooth but for its lines
+
+
+def test_dense_samples_track_a_dolly_the_translation_fails(stage_parts, zoom_frames):
+    """dense_samples on global frames: where one translation fails the tile check over most of the frame (the zoom
+    above, decided global), the ring's maps become tracked tiles (stats "tracked"), within 0.2 px of the exact
+    zoom at 95 % of the texels kept, and the output is closer to the truth than with the translations; without the
+    option, and on a pure translation with it, the maps stay translations."""
+    z = 1.01
+    frames, truths, centre = zoom_frames(z, w=320, h=240)   # 30 tiles of the check (PARALLAX_TILES)
+    outs = {}
+    for dense in (False, True):
+        st = TSSStage(frames=6, bgr=False, context=stage_parts, mode="global", dense_samples=dense)
+        outs[dense] = [st(f, f, t) for t, f in enumerate(frames)]
+        tracked = [bool(r.get("tracked")) for r in st.stats]
+        if dense:
+            assert all(tracked[2:]), tracked   # the newest ring frame's tiles fail from the second frame on
+            errs = _zoom_field_errors(st.motion.entries, len(frames) - 1, z, centre)
+            assert np.percentile(errs, 95) < 0.2 and np.median(errs) < 0.06
+        else:
+            assert not any(tracked) and all(e.translated for e in st.motion.entries)
+        st.close()
+    err = lambda xs: sum(float(((x.astype(float) - y) ** 2).sum()) for x, y in zip(xs[2:], truths[2:]))
+    assert err(outs[True]) < 0.985 * err(outs[False])   # 0.976 measured (the translations: 1.001 of the input's)
+    # a pure translation (the same plane panned 0.3 / 0.2 px per frame) keeps one translation per ring frame
+    import cv2
+    tex = zoom_frames(1.0, 1, w=320, h=240)[1][0]   # any smooth texture with lines
+    pan = [cv2.warpAffine(tex, np.float32([[1, 0, 0.3 * t], [0, 1, 0.2 * t]]), tex.shape[1::-1],
+                          borderMode=cv2.BORDER_REFLECT) for t in range(6)]
+    st = TSSStage(frames=6, bgr=False, context=stage_parts, mode="global", dense_samples=True)
+    for t, f in enumerate(pan):
+        st(f, f, t)
+    assert not any(r.get("tracked") for r in st.stats) and all(e.translated for e in st.motion.entries)
+    st.close()
 
 
 def test_trajectory_fit_drops_the_common_offset():

@@ -11,8 +11,9 @@ damage away from edges (levels), temporal error, flicker energy, FLIP as the mea
 bench's FLIP column scores frame 0 only, which a temporal stage returns unchanged), the share of pixels
 whose output differs from the spatial output, the share that took samples (stats "samples_share": at
 least MIN_CELLS filled cells; mean over frames), and the motion model of each frame (r reset, s static,
-g global, p global with projective maps, l moving layers, d dense; TSS's models where the method has TSS). A scene is "worse"
-when the stage loses in error removed, damage or all-frame FLIP.
+g global, p global with projective maps, t global with tracked tiles (dense_samples), l moving layers, d dense;
+TSS's models where the method has TSS). A scene is "worse" when the stage loses in error removed, damage or
+all-frame FLIP.
 --views adds held-out rendered shots (mlaa_stream.bench.rendered_views.view_shots: a pan and a dolly from each
 held-out view at 640x360, rendered here: a few minutes), shots no constant was measured on; `--world town`: the
 second world's (yardstick/town.py) instead of the plaza's.
@@ -176,7 +177,8 @@ def main(argv: list[str] | None = None) -> int:
                 stats = stage.stats
                 b = scene_scores(outs, s, with_flip)
                 changed = float(np.mean(np.any((outs != spatial).reshape(outs.shape[:3] + (-1,)), -1)))
-                models = "".join("p" if r.get("projective") else r["model"][0] for r in stats)
+                models = "".join("p" if r.get("projective") else "t" if r.get("tracked") else r["model"][0]
+                                 for r in stats)
                 sampled = float(np.mean([r.get("samples_share", float("nan")) for r in stats]))
                 name = args.method + (f"+{n}" if n else "") + (":dense" if args.dense_samples else "")
                 rows.append((name, b, f"{changed:8.3f} {sampled:8.3f} {ms:6.0f}  {models}"))

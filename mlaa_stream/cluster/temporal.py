@@ -34,6 +34,7 @@ class TemporalSpec:
     mode: str = "adaptive"
     k: float | None = None   # the blend's velocity-difference strength (None: its default)
     lookahead: int = 0       # frames after the current one TSS also reads: each chunk reads that many past its end
+    dense_samples: bool = False   # TSS tracks per-tile motion where one translation fails (the CLI's --dense-motion)
 
     def __post_init__(self):
         from mlaa_stream.temporal.methods import check
@@ -54,7 +55,8 @@ class TemporalSpec:
         made with keep_regions=needs_regions(method)), frames in RGB order."""
         from mlaa_stream.temporal.methods import make_stage
         return make_stage(self.method, filt.context, bgr=False, frames=self.frames, mode=self.mode, k=self.k,
-                          show=show, regions_from=filt, lookahead=self.lookahead)
+                          show=show, regions_from=filt, lookahead=self.lookahead,
+                          dense_samples=self.dense_samples and self.method != "blend")
 
 
 # A chunk's warm-up may reach back at most this many times `warmup` frames to find `warmup` changes.

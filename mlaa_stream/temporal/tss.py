@@ -101,6 +101,12 @@ TILE_ROWS = 16        # rows of a tile of projective maps (tss_resolve_shift: on
 TSS_LOCAL = 8         # CPU work-group of tss_resolve_shift along the row (docs/temporal.md: speed)
 DENSE_TILE, DENSE_WIN, DENSE_FB = 16, 21, 0.3   # dense_samples: tile centres' spacing and LK window (flow px), the
                       # forward-backward tolerance (full-size px); docs/temporal.md, "Dense camera motion"
+PARALLAX_SHARE = 0.5   # dense_samples: a global frame whose ring frames fail the tile check (TILE_TOL) on over this
+                      # share of the textured tiles at every age checked is a camera moving with parallax (dollies:
+                      # 0.58-1.0; rendered pans 0.02-0.27; a flat-colour pan's few textured tiles 0.36-0.50): its maps
+                      # are tracked per tile (MotionRing._tracked_tiles) instead of one translation ...
+PARALLAX_TILES = 24   # ... judged on at least this many textured tiles (docs/temporal.md, "Dollies through tracked
+                      # tiles")
 ALIGN_LEVEL, ALIGN_PX, ALIGN_SIGMA, ALIGN_GROW = 10.0, 0.35, 2.0, 3   # MotionRing._alignment
 PROJECTIVE_MIN = 0.25 # px (full size): a global frame uses projective maps where some ring frame's homography departs
                       # from its translation by this much at a corner of the frame (MotionRing._projective)
@@ -178,6 +184,7 @@ class MotionRing:
         self._last_refiner: _Refiner | None = None   # this frame's, made by _refine, used by _projective
         self._refiner_pyr: Pyramid | None = None     # the frame _last_refiner was made for
         self.band_slopes = None                      # each band's deviation per frame of age (_refine, _band_slopes)
+        self.tiles_off = None                        # the share of textured tiles off at every checked age (_refine)
         self.frame_layers = None                    # this frame's (layers, unexplained texels) where it has layers
 
     def reset(self) -> None:
@@ -201,6 +208,7 @@ class MotionRing:
             if e.estimate is not None:
                 e.shift, e.estimate = e.estimate, None
         self.band_slopes = None   # set by _refine where it fits them this frame (_ahead reads them)
+        self.tiles_off = None     # set by _refine: the share of textured tiles off at every checked age (parallax)
         self.frame_layers = None
         if fresh or prev is None:
             dec = Decision("reset", measures={"cut": False})
@@ -221,12 +229,16 @@ class MotionRing:
                     e.bg = (e.bg[0] + d[0], e.bg[1] + d[1])
             if self.refine:
                 self._refine(pyr, index, d)
-                self._fit_trajectory(index)
-                self._projective(pyr, index)
+                if self._parallax(pyr):
+                    self._tracked_tiles(pyr, self.entries)
+                    dec = Decision("global", dec.translation, {**dec.measures, "tracked": True})
+                else:
+                    self._fit_trajectory(index)
+                    self._projective(pyr, index)
         elif dec.model == "dense" and self.layers and (found := self._layers(prev, pyr, dec)) is not None:
             dec = found
         elif dec.model == "dense" and self.dense_samples:
-            self._tracked_tiles(pyr)
+            self._tracked_tiles(pyr, self.entries)
         elif dec.model == "dense":
             # No layers explain the frame (a camera move with parallax, a mover they cannot fit). Measured
             # (docs/temporal.md, TSS section): DIS flow on 1-spp frames is ~0.1-0.2 px off and composing it
@@ -246,7 +258,9 @@ class MotionRing:
                                  still=bool(dec.measures.get("still_background")), forward=first is not None)
         else:
             ahead = self._ahead(pyr, index, future)
-            if ahead and dec.model == "global" and self.refine and TRAJECTORY_AHEAD:
+            if dec.measures.get("tracked"):
+                self._tracked_tiles(pyr, ahead)
+            elif ahead and dec.model == "global" and self.refine and TRAJECTORY_AHEAD:
                 self._fit_trajectory(index, ahead)
         for e in self.entries + ahead:
             # translations are checked per tile (global branch above); dense and projective maps per region
@@ -376,6 +390,9 @@ class MotionRing:
             e.shift = (e.shift[0] + corr[0], e.shift[1] + corr[1])
         for e in due:
             refine(e, REFINE_STEPS)
+        textured = int(ref.textured.sum()) if checks else 0
+        if textured >= PARALLAX_TILES:   # the share of textured tiles off, at the checked age where it is least
+            self.tiles_off = min(float(bad.sum()) for _, _, (bad, *_rest) in checks) / textured
         if BAND_GROWTH > 0 and len({a for _, a, _ in checks}) >= 3:
             self.band_slopes = _band_slopes(checks)
             for e, age, (bad, dy, ty, dx, tx) in checks:
@@ -503,19 +520,30 @@ class MotionRing:
         out += np.float32(d)
         return out
 
-    def _tracked_tiles(self, pyr: Pyramid) -> None:
-        """dense_samples: every ring frame's map becomes a field of per-tile translations, each tracked *directly*
+    def _parallax(self, pyr: Pyramid) -> bool:
+        """dense_samples: does this global frame's translation fail over most of the frame (over PARALLAX_SHARE of
+        the textured tiles off at every ring age checked, PARALLAX_TILES of them at least)? A camera moving forward
+        or sideways past near and far content (a dolly) moves the image by a field, not one translation: the tile
+        check then keeps samples only where the field happens to be near the translation, and those pass with up to
+        TILE_TOL of error. A projective pan's older frames fail the translation's check too, but its newest does
+        not; a few textured tiles of flat-colour art fail at random (1-spp edges move in jumps)."""
+        return self.dense_samples and self.tiles_off is not None and self.tiles_off > PARALLAX_SHARE
+
+    def _tracked_tiles(self, pyr: Pyramid, entries: list[RingEntry]) -> None:
+        """dense_samples: each of `entries` (ring or look-ahead frames) gets as its map a field of per-tile
+        translations, each tracked *directly*
         from the current frame into that ring frame (cv2's pyramidal Lucas-Kanade at tile centres DENSE_TILE flow
         px apart), forward-backward checked (fb_check; over DENSE_FB full-size px: NaN, no samples), bilinear
         between the centres: the parallax of a dolly or an orbit, which one translation and moving layers do not
-        explain (docs/temporal.md, "Dense camera motion"). Each tile starts from the ring frame's map before this
-        frame, not composed with this frame's translation: a fast mover pulls that translation and the still
-        background's tiles would lock to its texture's period."""
+        explain (docs/temporal.md, "Dense camera motion"). On a dense frame each tile starts from the ring frame's
+        map before this frame, not composed with this frame's translation: a fast mover pulls that translation and
+        the still background's tiles would lock to its texture's period. On a global frame with parallax
+        (_parallax) the maps are the ring's composed and refined ones."""
         fs = pyr.flow_scale
         gx, gy, pts, grid_at = _tile_grid(*pyr.flow.shape[:2])
         crit = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01)
         lk = dict(winSize=(DENSE_WIN, DENSE_WIN), maxLevel=2, criteria=crit, flags=cv2.OPTFLOW_USE_INITIAL_FLOW)
-        for e in self.entries:
+        for e in entries:
             if e.translated:
                 prior = pts + np.float32([e.shift[0] / fs, e.shift[1] / fs])
             else:   # the field at the tile centres (NaN: no motion known there, start from none)
