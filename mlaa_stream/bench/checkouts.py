@@ -3,6 +3,9 @@
 Each checkout (a git worktree, e.g. `git worktree add /tmp/old <commit>`) runs in its own process with its own
 `mlaa_stream` on the path and times `Filter().process` on 1920x1080 frames: the yardstick's mixed timing frame, a
 photograph, and a 1-spp render (the rendered atrium still tiled 3x3, where the rendered scenes are available).
+`--stage tss`: the temporal supersampling stage instead (TSSStage, K = 16, causal) on the 1080p timing pan of
+mlaa_stream.bench.temporal (the frames as their own spatial output): its host motion (stats "flow_ms"), its resolve
+("resolve_ms") and the whole call, median over the frames after the K warm-up frames.
 Rounds alternate the checkouts (A, B, A, B, ...), so a busy machine slows all of them alike; the report is the
 median over rounds of each checkout's median ms per frame, and its ratio to the first checkout's. A benchmark,
 never a unit test.
@@ -52,11 +55,34 @@ for name, fr in frames.items():
 print(json.dumps(out))
 """
 
+# --stage tss: the same contract, for the temporal supersampling stage on the 1080p timing pan
+_TSS_TIMER = r"""
+import json, sys, time
+import numpy as np
+from mlaa_stream.bench.temporal import _pan_frames
+from mlaa_stream.temporal.tss import TSSStage
+from mlaa_stream.yardstick.scenes import timing_frame
+runs, k = int(sys.argv[1]), 16
+frames = _pan_frames(k + runs, timing_frame(1936, 1096))
+with TSSStage(None, frames=k, bgr=False) as st:
+    ts = []
+    for i, f in enumerate(frames):
+        t = time.perf_counter()
+        st(f, f, i)
+        ts.append(time.perf_counter() - t)
+    rows = st.stats[k:]
+    print(json.dumps({"pan motion": float(np.median([r["flow_ms"] for r in rows])),
+                      "pan resolve": float(np.median([r["resolve_ms"] for r in rows])),
+                      "pan stage": 1000 * float(np.median(ts[k:]))}))
+"""
+TIMERS = {"filter": _TIMER, "tss": _TSS_TIMER}
 
-def time_checkout(root: Path, runs: int) -> dict[str, float]:
-    """Median ms per frame of each timing frame in checkout `root` (a fresh process)."""
+
+def time_checkout(root: Path, runs: int, stage: str = "filter") -> dict[str, float]:
+    """Median ms per frame of each timing frame (`stage` "filter") or of the TSS stage's parts ("tss") in checkout
+    `root` (a fresh process)."""
     env = {**os.environ, "PYTHONPATH": str(root)}
-    done = subprocess.run([sys.executable, "-c", _TIMER, str(runs)], cwd=root, env=env, capture_output=True,
+    done = subprocess.run([sys.executable, "-c", TIMERS[stage], str(runs)], cwd=root, env=env, capture_output=True,
                           text=True, check=True)
     return json.loads(done.stdout.strip().splitlines()[-1])
 
@@ -66,12 +92,14 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("checkouts", nargs="+", type=Path, help="checkout roots; ratios are to the first")
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--runs", type=int, default=15, help="frames timed per frame kind and round")
+    ap.add_argument("--stage", choices=sorted(TIMERS), default="filter",
+                    help="filter: the default spatial filter; tss: the temporal supersampling stage on a 1080p pan")
     args = ap.parse_args(argv)
     roots = [p.resolve() for p in args.checkouts]
     results: dict[Path, list[dict[str, float]]] = {r: [] for r in roots}
     for k in range(args.rounds):
         for r in roots:
-            results[r].append(time_checkout(r, args.runs))
+            results[r].append(time_checkout(r, args.runs, args.stage))
             print(f"round {k + 1}: {r}: " + ", ".join(f"{n} {v:.1f} ms" for n, v in results[r][-1].items()),
                   flush=True)
     names = [n for n in results[roots[0]][0] if all(n in res[0] for res in results.values())]
