@@ -16,7 +16,7 @@ TSS's models where the method has TSS). A scene is "worse" when the stage loses 
 all-frame FLIP.
 --views adds held-out rendered shots (mlaa_stream.bench.rendered_views.view_shots: a pan and a dolly from each
 held-out view at 640x360, rendered here: a few minutes), shots no constant was measured on; `--world town`: the
-second world's (yardstick/town.py) instead of the plaza's.
+second world's (yardstick/town.py) instead of the plaza's; `--view-frames N`: N frames per shot (default 8).
 --lookahead N[,N...]: the method with TSS reading N frames after the current one too (a row per N, named
 "<method>+N" for N > 0; what `--lookahead N` runs; default DEFAULT_LOOKAHEAD, what `--temporal` reads); each
 row is checked against spatial only.
@@ -136,6 +136,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--views", action="store_true", help="also held-out rendered shots (needs EGL)")
     ap.add_argument("--world", default="plaza", choices=("plaza", "town"),
                     help="the world of the --views shots (default %(default)s)")
+    ap.add_argument("--view-frames", type=int, default=8, metavar="N",
+                    help="frames per --views shot (default %(default)s; more: longer rings, a few minutes more)")
     ap.add_argument("--tss-set", action="append", default=[], metavar="NAME=VALUE")
     ap.add_argument("--lookahead", default=str(DEFAULT_LOOKAHEAD), metavar="N[,N...]",
                     help="frames after the current one TSS also reads; a row per value (default: what --temporal "
@@ -157,7 +159,7 @@ def main(argv: list[str] | None = None) -> int:
     scenes = [s for s in every if s.animated] + [m for m in [rendered_mover(every)] if m is not None]
     if args.views:
         from mlaa_stream.bench.rendered_views import view_shots
-        scenes += view_shots(640, 360, world=args.world)
+        scenes += view_shots(640, 360, args.view_frames, world=args.world)
     worse = []
     with Filter(args.device, bgr=False, keep_regions=needs_regions(args.method)) as filt:
         print(f"device: {filt.device_name}; FLIP {'over all frames' if with_flip else 'not installed'}")

@@ -107,6 +107,9 @@ PARALLAX_SHARE = 0.5   # dense_samples: a global frame whose ring frames fail th
                       # are tracked per tile (MotionRing._tracked_tiles) instead of one translation ...
 PARALLAX_TILES = 24   # ... judged on at least this many textured tiles (docs/temporal.md, "Dollies through tracked
                       # tiles")
+TRACKED_AGE = 7       # dense_samples: ring frames up to this many frames old are tracked; older ones leave the ring
+                      # (16-frame dollies: never worse than spatial only with 7, damage over it with all 15; a dolly's
+                      # field departs further from a tile's translation with age)
 ALIGN_LEVEL, ALIGN_PX, ALIGN_SIGMA, ALIGN_GROW = 10.0, 0.35, 2.0, 3   # MotionRing._alignment
 PROJECTIVE_MIN = 0.25 # px (full size): a global frame uses projective maps where some ring frame's homography departs
                       # from its translation by this much at a corner of the frame (MotionRing._projective)
@@ -538,7 +541,11 @@ class MotionRing:
         explain (docs/temporal.md, "Dense camera motion"). On a dense frame each tile starts from the ring frame's
         map before this frame, not composed with this frame's translation: a fast mover pulls that translation and
         the still background's tiles would lock to its texture's period. On a global frame with parallax
-        (_parallax) the maps are the ring's composed and refined ones."""
+        (_parallax) the maps are the ring's composed and refined ones. Ring frames over TRACKED_AGE frames old
+        leave the ring."""
+        if entries is self.entries and len(self.entries) > TRACKED_AGE:   # the newest past frame is 1 frame old
+            del self.entries[:len(self.entries) - TRACKED_AGE]
+            entries = self.entries
         fs = pyr.flow_scale
         gx, gy, pts, grid_at = _tile_grid(*pyr.flow.shape[:2])
         crit = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01)
