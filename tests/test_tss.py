@@ -571,6 +571,20 @@ def test_dense_samples_track_a_dolly_the_translation_fails(stage_parts, zoom_fra
     st.close()
 
 
+def test_tracked_frames_keep_only_the_newest_ring_frames(stage_parts, zoom_frames):
+    """dense_samples: on a tracked frame, ring frames over TRACKED_AGE frames old leave the ring (a dolly's field
+    departs from a tile's translation with age); a K = 16 ring on a 10-frame dolly holds TRACKED_AGE past frames
+    and the current one, the newest TRACKED_AGE frames in order."""
+    from mlaa_stream.temporal.tss import TRACKED_AGE
+    frames, _, _ = zoom_frames(1.01, n=TRACKED_AGE + 3, w=320, h=240)
+    st = TSSStage(frames=16, bgr=False, context=stage_parts, mode="global", dense_samples=True)
+    for t, f in enumerate(frames):
+        st(f, f, t)
+    assert st.stats[-1].get("tracked")
+    assert [e.index for e in st.motion.entries] == list(range(len(frames) - TRACKED_AGE - 1, len(frames)))
+    st.close()
+
+
 def test_trajectory_fit_drops_the_common_offset():
     """Known answers for MotionRing._fit_trajectory: translations c + v age + w age^2 + alternating noise (a 1-spp
     frame's quantised edges) become the least-squares polynomial without its offset c; a shaking camera (residual
