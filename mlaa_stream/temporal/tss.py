@@ -232,7 +232,7 @@ class MotionRing:
                     e.bg = (e.bg[0] + d[0], e.bg[1] + d[1])
             if self.refine:
                 self._refine(pyr, index, d)
-                if self._parallax(pyr):
+                if self._parallax():
                     self._tracked_tiles(pyr, self.entries)
                     dec = Decision("global", dec.translation, {**dec.measures, "tracked": True})
                 else:
@@ -523,7 +523,7 @@ class MotionRing:
         out += np.float32(d)
         return out
 
-    def _parallax(self, pyr: Pyramid) -> bool:
+    def _parallax(self) -> bool:
         """dense_samples: does this global frame's translation fail over most of the frame (over PARALLAX_SHARE of
         the textured tiles off at every ring age checked, PARALLAX_TILES of them at least)? A camera moving forward
         or sideways past near and far content (a dolly) moves the image by a field, not one translation: the tile
@@ -534,11 +534,10 @@ class MotionRing:
 
     def _tracked_tiles(self, pyr: Pyramid, entries: list[RingEntry]) -> None:
         """dense_samples: each of `entries` (ring or look-ahead frames) gets as its map a field of per-tile
-        translations, each tracked *directly*
-        from the current frame into that ring frame (cv2's pyramidal Lucas-Kanade at tile centres DENSE_TILE flow
-        px apart), forward-backward checked (fb_check; over DENSE_FB full-size px: NaN, no samples), bilinear
-        between the centres: the parallax of a dolly or an orbit, which one translation and moving layers do not
-        explain (docs/temporal.md, "Dense camera motion"). On a dense frame each tile starts from the ring frame's
+        translations, each tracked *directly* from the current frame into that frame (cv2's pyramidal Lucas-Kanade
+        at tile centres DENSE_TILE flow px apart), forward-backward checked (fb_check; over DENSE_FB full-size px:
+        NaN, no samples), bilinear between the centres: the parallax of a dolly or an orbit, which one translation
+        and moving layers do not explain (docs/temporal.md, "Dense camera motion"). On a dense frame each tile starts from the ring frame's
         map before this frame, not composed with this frame's translation: a fast mover pulls that translation and
         the still background's tiles would lock to its texture's period. On a global frame with parallax
         (_parallax) the maps are the ring's composed and refined ones. Ring frames over TRACKED_AGE frames old
