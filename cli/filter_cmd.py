@@ -278,9 +278,9 @@ def _job_for(kind: str, output: str) -> type:
                    "\"Look-ahead\"); 0 reads the past only.")
 @click.option("--dense-motion", is_flag=True, default=False,
               help="Temporal supersampling tracks motion tile by tile where one camera motion does not "
-                   "explain a frame (a dolly, an orbit: near and far content move apart) instead of "
-                   "keeping the spatial output there. More error removed and less damage on such shots; "
-                   "slow: 3-7x the stage's time on those frames (docs/temporal.md, \"Dollies through "
+                   "explain a frame (a dolly, an orbit: near and far content move apart). More error "
+                   "removed on such shots, and with --temporal-method tss less damage than without it; "
+                   "slow: ~3x the stage's time on those frames (docs/temporal.md, \"Dollies through "
                    "tracked tiles\"). Implies --temporal.")
 @click.option("--temporal-mode", type=click.Choice(["adaptive", "dense", "global", "static"]),
               default="adaptive", show_default=True,
