@@ -537,11 +537,11 @@ class MotionRing:
         translations, each tracked *directly* from the current frame into that frame (cv2's pyramidal Lucas-Kanade
         at tile centres DENSE_TILE flow px apart), forward-backward checked (fb_check; over DENSE_FB full-size px:
         NaN, no samples), bilinear between the centres: the parallax of a dolly or an orbit, which one translation
-        and moving layers do not explain (docs/temporal.md, "Dense camera motion"). On a dense frame each tile starts from the ring frame's
-        map before this frame, not composed with this frame's translation: a fast mover pulls that translation and
-        the still background's tiles would lock to its texture's period. On a global frame with parallax
-        (_parallax) the maps are the ring's composed and refined ones. Ring frames over TRACKED_AGE frames old
-        leave the ring."""
+        and moving layers do not explain (docs/temporal.md, "Dense camera motion"). On a dense frame each tile
+        starts from the ring frame's map before this frame, not composed with this frame's translation: a fast mover
+        pulls that translation and the still background's tiles would lock to its texture's period. On a global
+        frame with parallax (_parallax) the maps are the ring's composed and refined ones. Ring frames over
+        TRACKED_AGE frames old leave the ring."""
         if entries is self.entries and len(self.entries) > TRACKED_AGE:   # the newest past frame is 1 frame old
             del self.entries[:len(self.entries) - TRACKED_AGE]
             entries = self.entries
