@@ -39,8 +39,13 @@
 // step on one side goes the same way by at least half as much -- where a 1-spp frame has single-pixel steps. Where
 // at least SUPERSAMPLED_PCT % of the strong steps in the tiles that hold edge-bordering pixels (a quarter of them
 // sampled: even tile rows and columns) are ramps (1-spp renders, also through H.264: 0-9 %; 2x2 and 3x3 supersampled
-// renders: 21-47 %), no tile is a render region and no pixel takes FXAA: the MLAA passes' own already-antialiased
-// test judges its edges (docs/spatial_tuning.md, "SUPERSAMPLED_PCT").
+// renders: 21-47 %), no pixel outside render regions takes FXAA: the MLAA passes' own already-antialiased test
+// judges its edges (docs/spatial_tuning.md, "SUPERSAMPLED_PCT").
+// In such a frame render regions are judged locally: a tile stays a region where, over its neighbourhood's sampled
+// tiles, under RENDER_RAMP_PCT % of the clean transitions (a strong step at a stair's end, or two steps the same
+// way, between two plateaus) are ramps. Magnified photographic textures make ramps too, enough to take a whole 1-spp render for a
+// supersampled one, while its geometric edges stay hard steps; a supersampled frame's edges are ramps everywhere
+// (docs/spatial_tuning.md, "RENDER_RAMP_PCT").
 // The footprint table (mlaa_stream/spatial/footprint.py says what and why): a 1-spp frame holds point samples, its
 // truth the average over each pixel's square footprint; each pixel of a render region becomes a linear filter of
 // its 5x5 window and the chain's colour, one filter per local structure class, clamped to its 3x3 window's range.
@@ -103,6 +108,12 @@
 #ifndef SUPERSAMPLED_MIN
 #define SUPERSAMPLED_MIN 100
 #endif
+#ifndef RENDER_RAMP_PCT
+#define RENDER_RAMP_PCT 50
+#endif
+#ifndef RAMP_FLANK
+#define RAMP_FLANK 0.2f
+#endif
 #ifndef RENDER_REGIONS
 #define RENDER_REGIONS 1
 #endif
@@ -118,7 +129,7 @@
 #ifndef REFINE_TABLE
 #define REFINE_TABLE 0
 #endif
-#define COUNTS 6          // bytes per tile in `counts`
+#define COUNTS 8          // bytes per tile in `counts`
 #define NOT_MEASURED 255  // counts[3] of a tile with no busy pixel or a luma range under RENDER_RANGE
 
 // Any stored channel (alpha included) of pixel i differs between a and b.
@@ -304,10 +315,15 @@ inline float ramp_luma(__global const PIXEL_T *src, int x, int y, int w, int h)
 
 // The tile's strong luma steps (ramp_luma, SUPERSAMPLED_STEP or more from a pixel to its right or lower neighbour
 // inside the frame) and of those the ramps (the step before or after it goes the same way by at least half as
-// much), as (strong, ramps).
-RARELY_CALLED int2 tile_ramps(__global const PIXEL_T *src, int x0, int x1, int y0, int y1, int w, int h)
+// much); and its clean transitions and of those the ramps: with d(k) the step from k to k + 1 along the direction
+// (pixel 0 the tile's, pixel 2 inside the frame, clamped reads), a hard stair end -- |d0| >= SUPERSAMPLED_STEP with
+// |d(-1)|, |d1| <= RAMP_FLANK |d0|, and on one side across the direction the step does not go on the same way by at
+// least half as much (where a 1-spp edge's staircase shifts; pixel-aligned edges and the runs between stairs do not
+// count) -- or a ramp: d0 and d1 the same way, T = d0 + d1 with |T| >= SUPERSAMPLED_STEP, both over RAMP_FLANK |T|
+// and |d(-1)|, |d2| <= RAMP_FLANK |T| (one pixel between two plateaus). As (strong, ramps, clean, clean ramps).
+RARELY_CALLED int4 tile_ramps(__global const PIXEL_T *src, int x0, int x1, int y0, int y1, int w, int h)
 {
-    int2 n = (int2)(0, 0);
+    int4 n = (int4)(0, 0, 0, 0);
     for (int y = y0; y < y1; ++y)
         for (int x = x0; x < x1; ++x) {
             const float a = ramp_luma(src, x, y, w, h);
@@ -315,22 +331,42 @@ RARELY_CALLED int2 tile_ramps(__global const PIXEL_T *src, int x0, int x1, int y
                 const int dx = k == 0, dy = k == 1;
                 if (x + dx >= w || y + dy >= h) continue;
                 const float b = ramp_luma(src, x + dx, y + dy, w, h), c = b - a;
-                if (!(fabs(c) >= SUPERSAMPLED_STEP)) continue;
+                if (!(fabs(c) > RAMP_FLANK * SUPERSAMPLED_STEP)) continue;  // no strong step, no clean ramp
                 const float before = a - ramp_luma(src, x - dx, y - dy, w, h);
-                const float after = ramp_luma(src, x + 2 * dx, y + 2 * dy, w, h) - b;
-                const float mid = 0.5f * c;
-                n.x += 1;
-                n.y += c > 0.0f ? (before >= mid || after >= mid) : (before <= mid || after <= mid);
+                const float l2 = ramp_luma(src, x + 2 * dx, y + 2 * dy, w, h), after = l2 - b;
+                if (fabs(c) >= SUPERSAMPLED_STEP) {
+                    const float mid = 0.5f * c;
+                    n.x += 1;
+                    n.y += c > 0.0f ? (before >= mid || after >= mid) : (before <= mid || after <= mid);
+                }
+                if (x + 2 * dx >= w || y + 2 * dy >= h) continue;
+                const float t = c + after, at = fabs(t), ac = fabs(c), aa = fabs(after);
+                const float d2 = ramp_luma(src, x + 3 * dx, y + 3 * dy, w, h) - l2;
+                int hard = ac >= SUPERSAMPLED_STEP && fabs(before) <= RAMP_FLANK * ac && aa <= RAMP_FLANK * ac;
+                if (hard) {  // ... at a stair's end: beside it (one pixel across the direction) it does not go on
+                    int ends = 0;
+                    for (int sd = -1; sd <= 1; sd += 2) {
+                        const float cs = ramp_luma(src, x + dx + sd * dy, y + dy + sd * dx, w, h)
+                                         - ramp_luma(src, x + sd * dy, y + sd * dx, w, h);
+                        ends |= !(cs * c > 0.0f && fabs(cs) >= 0.5f * ac);
+                    }
+                    hard = ends;
+                }
+                const int ramp = at >= SUPERSAMPLED_STEP && c * t > 0.0f && after * t > 0.0f &&
+                                 fmin(ac, aa) > RAMP_FLANK * at && fabs(before) <= RAMP_FLANK * at &&
+                                 fabs(d2) <= RAMP_FLANK * at;
+                n.z += hard | ramp;
+                n.w += ramp;
             }
         }
     return n;
 }
 
-// Six counts per tile (tx, ty), at counts[COUNTS * (ty * tiles_x + tx) + k]: k = 0 its pixels that border an edge
-// and that the MLAA passes changed (dst != src), k = 1 its pixels that border an edge, k = 2 the changed ones
+// Eight counts per tile (tx, ty), at counts[COUNTS * (ty * tiles_x + tx) + k]: k = 0 its pixels that border an
+// edge and that the MLAA passes changed (dst != src), k = 1 its pixels that border an edge, k = 2 the changed ones
 // whose 3x3 window holds FALLBACK_COLOURS bit-identical colours ("busy"), k = 3 tile_near_extremes where k = 2 is
-// not 0 and there are render regions (else NOT_MEASURED), k = 4 and 5 tile_ramps where k = 1 is not 0, tx and ty
-// are even and there are render regions (else 0). One work item per SEGMENT pixels (a multiple of
+// not 0 and there are render regions (else NOT_MEASURED), k = 4 .. 7 tile_ramps where k = 1 is not 0, tx and ty
+// are even and there are render regions (else 0; at most 128 each). One work item per SEGMENT pixels (a multiple of
 // FALLBACK_TILE) of a band of FALLBACK_TILE rows.
 __kernel void count_changed(__global const PIXEL_T *src, __global const PIXEL_T *dst,
                             __global const uchar *edges, __global uchar *counts,
@@ -357,30 +393,32 @@ __kernel void count_changed(__global const PIXEL_T *src, __global const PIXEL_T 
         c[2] = (uchar)busy;
         c[3] = (uchar)(RENDER_REGIONS && busy ? tile_near_extremes(src, t0, t1, y0, y1, w, h) : NOT_MEASURED);
         const int sampled = ((t0 / FALLBACK_TILE) & 1) == 0 && (ty & 1) == 0;  // a quarter of the tiles suffices
-        const int2 ramps = RENDER_REGIONS && bordering && sampled ? tile_ramps(src, t0, t1, y0, y1, w, h)
-                                                                  : (int2)(0, 0);
+        const int4 ramps = RENDER_REGIONS && bordering && sampled ? tile_ramps(src, t0, t1, y0, y1, w, h)
+                                                                  : (int4)(0, 0, 0, 0);
         c[4] = (uchar)ramps.x;
         c[5] = (uchar)ramps.y;
+        c[6] = (uchar)ramps.z;
+        c[7] = (uchar)ramps.w;
     }
 }
 
-// A tile's four terms of the render-region sums: busy pixels, edge-bordering pixels, busy pixels of a measured
-// tile, and those weighted by its near count.
-inline int4 region_terms(__global const uchar *counts, int tile)
+// A tile's six terms of the render-region sums: busy pixels, edge-bordering pixels, busy pixels of a measured
+// tile, those weighted by its near count, clean transitions and clean ramps (two lanes unused).
+inline int8 region_terms(__global const uchar *counts, int tile)
 {
     __global const uchar *c = counts + COUNTS * tile;
     const int busy = c[2], measured = c[3] != NOT_MEASURED;
-    return (int4)(busy, c[1], measured ? busy : 0, measured ? busy * c[3] : 0);
+    return (int8)(busy, c[1], measured ? busy : 0, measured ? busy * c[3] : 0, c[6], c[7], 0, 0);
 }
 
 // rows[tile] = region_terms summed over the tiles tx - RENDER_RADIUS .. tx + RENDER_RADIUS of its row, clamped to
 // the frame (the first of the two separable passes of render regions). One work item per tile row, a running sum.
-__kernel void render_rows(__global const uchar *counts, __global int4 *rows, const int tiles_x, const int tiles_y)
+__kernel void render_rows(__global const uchar *counts, __global int8 *rows, const int tiles_x, const int tiles_y)
 {
     const int ty = get_global_id(0);
     if (ty >= tiles_y) return;
     const int row = ty * tiles_x;
-    int4 sum = (int4)(0, 0, 0, 0);
+    int8 sum = (int8)(0);
     for (int k = 0; k < RENDER_RADIUS && k < tiles_x; ++k) sum += region_terms(counts, row + k);
     for (int tx = 0; tx < tiles_x; ++tx) {
         if (tx + RENDER_RADIUS < tiles_x) sum += region_terms(counts, row + tx + RENDER_RADIUS);
@@ -392,22 +430,24 @@ __kernel void render_rows(__global const uchar *counts, __global int4 *rows, con
 // render[tile] = the neighbourhood tests of the tiles within RENDER_RADIUS (rows' sums over the column), bit 0: it
 // looks like a 1-spp render -- RENDER_MIN busy pixels in measured tiles (low-contrast tiles cannot show whether they
 // are two-toned), busy pixels a share of the edge pixels, and not two-toned; bit 1: it holds a busy pixel (the second
-// separable pass). shares[tx] = the column's tiles with edge-bordering pixels, of those its tiles with bit 0, and
-// their strong steps and ramps (render_frame's evidence). One work item per tile column, a running sum.
-__kernel void render_tiles(__global const int4 *rows, __global const uchar *counts, __global uchar *render,
+// separable pass); bit 2: under RENDER_RAMP_PCT % of its clean transitions are ramps (or it has none).
+// shares[tx] = the column's tiles with edge-bordering pixels, of those its tiles with bit 0, and their strong steps
+// and ramps (render_frame's evidence). One work item per tile column, a running sum.
+__kernel void render_tiles(__global const int8 *rows, __global const uchar *counts, __global uchar *render,
                            __global int4 *shares, const int tiles_x, const int tiles_y)
 {
     const int tx = get_global_id(0);
     if (tx >= tiles_x) return;
-    int4 sum = (int4)(0, 0, 0, 0);
+    int8 sum = (int8)(0);
     int4 share = (int4)(0, 0, 0, 0);
     for (int k = 0; k < RENDER_RADIUS && k < tiles_y; ++k) sum += rows[k * tiles_x + tx];
     for (int ty = 0; ty < tiles_y; ++ty) {
         if (ty + RENDER_RADIUS < tiles_y) sum += rows[(ty + RENDER_RADIUS) * tiles_x + tx];
         const int tile = ty * tiles_x + tx;
-        const int rendered = sum.z >= RENDER_MIN && sum.x * RENDER_DIV >= sum.y &&
-                             sum.w * 100 <= RENDER_NEAR_PCT * (FALLBACK_TILE * FALLBACK_TILE) * sum.z;
-        render[tile] = (uchar)(((sum.x > 0) << 1) | rendered);
+        const int rendered = sum.s2 >= RENDER_MIN && sum.s0 * RENDER_DIV >= sum.s1 &&
+                             sum.s3 * 100 <= RENDER_NEAR_PCT * (FALLBACK_TILE * FALLBACK_TILE) * sum.s2;
+        const int hard = sum.s5 * 100 < RENDER_RAMP_PCT * (sum.s4 > 1 ? sum.s4 : 1);
+        render[tile] = (uchar)((hard << 2) | ((sum.s0 > 0) << 1) | rendered);
         __global const uchar *c = counts + COUNTS * tile;
         if (c[1]) share += (int4)(1, rendered, c[4], c[5]);
         if (ty >= RENDER_RADIUS) sum -= rows[(ty - RENDER_RADIUS) * tiles_x + tx];
@@ -417,8 +457,9 @@ __kernel void render_tiles(__global const int4 *rows, __global const uchar *coun
 
 // render[tile] = 1 where the tile is a render region: bit 0 of render_tiles, or bit 1 in a frame where at least
 // RENDER_FRAME_PCT % of the tiles with edge-bordering pixels have bit 0 (a render: every tile near a busy pixel).
-// In a supersampled frame (SUPERSAMPLED_MIN strong steps or more, SUPERSAMPLED_PCT % of them ramps) no tile is a
-// region, and the tiles' counts k = 0..2 are cleared: fxaa_fallback then finds no tile busy and none with evidence.
+// In a supersampled frame (SUPERSAMPLED_MIN strong steps or more, SUPERSAMPLED_PCT % of them ramps) only tiles with
+// bit 2 as well (the neighbourhood's clean transitions mostly hard steps), and the tiles' counts k = 0..2 are
+// cleared: fxaa_fallback then finds no tile busy and none with evidence outside render regions.
 // One work item per tile column; each sums the columns' shares (tiles_x of them: cheaper than another pass).
 __kernel void render_frame(__global uchar *render, __global uchar *counts, __global const int4 *shares,
                            const int tiles_x, const int tiles_y)
@@ -428,10 +469,10 @@ __kernel void render_frame(__global uchar *render, __global uchar *counts, __glo
     int4 total = (int4)(0, 0, 0, 0);
     for (int k = 0; k < tiles_x; ++k) total += shares[k];
     const int supersampled = total.z >= SUPERSAMPLED_MIN && total.w * 100 >= SUPERSAMPLED_PCT * total.z;
-    const uchar bit = supersampled ? 0 : total.x > 0 && total.y * 100 >= RENDER_FRAME_PCT * total.x ? 2 : 1;
+    const uchar bit = total.x > 0 && total.y * 100 >= RENDER_FRAME_PCT * total.x ? 2 : 1;
     for (int ty = 0; ty < tiles_y; ++ty) {
         const int tile = ty * tiles_x + tx;
-        render[tile] = (uchar)((render[tile] & bit) != 0);
+        render[tile] = (uchar)((render[tile] & bit) != 0 && (!supersampled || (render[tile] & 4) != 0));
         if (supersampled) {
             __global uchar *c = counts + COUNTS * tile;
             c[0] = c[1] = c[2] = 0;

@@ -7,8 +7,9 @@ import pytest
 
 from mlaa_stream.device.colour import linear_to_srgb, srgb_to_linear
 from mlaa_stream.spatial.fallback import (FALLBACK_MIX, FALLBACK_TILE, FALLBACK_WEIGHT, RENDER_RADIUS,
-                                          SUPERSAMPLED_PCT, fallback_reference, ramp_counts, render_regions_of)
-from mlaa_stream.spatial.fxaa import fxaa_mix_reference
+                                          SUPERSAMPLED_PCT, _frame_masks, fallback_reference, ramp_counts,
+                                          region_pixels, render_regions_of, step_counts)
+from mlaa_stream.spatial.fxaa import fxaa_mix_reference, luma_reference
 from mlaa_stream.spatial.filter import Filter
 
 
@@ -279,6 +280,26 @@ def test_ramp_counts_known_answer():
     assert ramp_counts(borders, luma * 4) == (8, 0)
 
 
+def test_clean_transitions_known_answer():
+    """Known answer (RAMP_FLANK, stair ends): in the sampled tile (0, 0) a hard step between plateaus that moves one
+    pixel right between rows 3 and 4 -- only the two rows where it shifts and the one vertical step of the stair are
+    stair ends, the runs between go on beside themselves; in tile (0, 2) one pixel halfway between two plateaus (a
+    clean ramp, stairs or not); in tile (0, 4) a ramp over four pixels (its steps continue, not clean, none strong);
+    tile row 1 (odd) is not counted."""
+    row = np.full(48, 0.2, np.float32)
+    row[20], row[21:32] = 0.5, 0.8           # x = 19 -> 21: +0.3, +0.3 between flat runs
+    row[36:40], row[40:] = (0.35, 0.5, 0.65, 0.8), 0.8
+    luma = np.repeat(row[None], 16, 0)
+    luma[:4, 4:16] = 0.8                     # rows 0-3: +0.6 from x = 3 to 4 ...
+    luma[4:, 5:16] = 0.8                     # ... rows 4-15: from x = 4 to 5
+    borders = np.ones((16, 48), bool)
+    strong, ramps, clean, clean_ramps = step_counts(borders, luma)
+    assert (int(clean.sum()), int(clean_ramps.sum())) == (2 + 1 + 8, 8)
+    assert clean[3, 3] == clean[4, 4] == clean[3, 4] == 1 and clean[:8, 19].all()  # (3, 4): the step below it
+    assert not clean[8:].any() and not clean[:, 32:].any()
+    assert (int(strong.sum()), int(ramps.sum())) == (8 + 1 + 16, 16)      # every row's step, the stair, the ramps
+
+
 def ramps_beside_render(seed: int) -> np.ndarray:
     """A render (shaded_polygons) beside sine bars 3 px apart (steps of 0.2-0.4 full scale, each continued by the
     next): more than SUPERSAMPLED_PCT % of the frame's strong steps are ramps."""
@@ -289,27 +310,33 @@ def ramps_beside_render(seed: int) -> np.ndarray:
 
 @pytest.mark.parametrize("dtype,channels,bgr", [(np.uint8, 3, False), (np.uint8, 4, True), (np.uint16, 3, False),
                                                 (np.float32, 3, False)])
-def test_a_supersampled_frame_has_no_regions_and_no_fxaa(dtype, channels, bgr, monkeypatch):
-    """Known answer: a frame most of whose strong steps are ramps is judged supersampled -- the render beside the
-    ramps, a region without the verdict, is none, and no pixel takes FXAA: the output is the MLAA passes'. The kernel
-    equals the reference in every stored format."""
-    import mlaa_stream.spatial.fallback as fallback
+def test_a_supersampled_frame_takes_no_fxaa_and_regions_stay_local(dtype, channels, bgr):
+    """Known answer: a frame most of whose strong steps are ramps is judged supersampled, and no pixel outside
+    render regions takes FXAA: there the output is the MLAA passes'. Render regions are judged locally
+    (RENDER_RAMP_PCT): the render's tiles within RENDER_RADIUS tiles of the bars, whose clean transitions are all
+    ramps, are none; its tiles farther away, hard steps only, stay regions. The kernel equals the reference in every
+    stored format."""
     frame8 = ramps_beside_render(0)
     frame = _as(frame8[..., ::-1] if bgr else frame8, dtype, channels)
-    with monkeypatch.context() as m:
-        m.setattr(fallback, "SUPERSAMPLED_PCT", 101)  # the reference without the verdict
-        assert regions_of(frame)[:, :192].mean() > 0.9
     with Filter(bgr=bgr, keep_regions=True) as f, Filter(bgr=bgr, fallback="off") as g:
         got, passes = f.process(frame), g.intermediates(frame)
-        assert not f.last_regions.any()
-    assert not render_regions_of(frame, passes["out"], passes["edges"], bgr=bgr).any()
+        tiles = f.last_regions.astype(bool)
+    _, _, _, borders, _, rgb = _frame_masks(frame, passes["out"], passes["edges"], bgr)
+    strong, ramps = ramp_counts(borders, luma_reference(rgb, False))
+    assert ramps * 100 >= SUPERSAMPLED_PCT * strong
+    render_tiles = 192 // FALLBACK_TILE
+    assert tiles[:, :render_tiles - RENDER_RADIUS].all()
+    assert not tiles[:, render_tiles - RENDER_RADIUS:].any()
+    regions = render_regions_of(frame, passes["out"], passes["edges"], bgr=bgr)
+    np.testing.assert_array_equal(regions, region_pixels(tiles, *regions.shape))
     want = fallback_reference(frame, passes["out"], passes["edges"], passes["hdist"], passes["vdist"], bgr=bgr)
+    outside = ~regions
     if dtype == np.float32:
         np.testing.assert_allclose(got, want, rtol=0, atol=1e-6)
-        np.testing.assert_allclose(got, passes["out"], rtol=0, atol=1e-6)
+        np.testing.assert_allclose(got[outside], passes["out"][outside], rtol=0, atol=1e-6)
     else:
         np.testing.assert_array_equal(got, want)
-        np.testing.assert_array_equal(got, passes["out"])
+        np.testing.assert_array_equal(got[outside], passes["out"][outside])
 
 
 @pytest.mark.parametrize("seed,small", [(0, True), (1, True), (2, True), (2, False)])

@@ -118,7 +118,7 @@ KERNEL_TESTS = ["tests/test_mlaa.py", "tests/test_bridge.py::test_kernel_matches
                 "tests/test_fxaa.py::test_pixel_formats_match_reference",
                 "tests/test_fallback.py::test_kernel_matches_reference",
                 "tests/test_fallback.py::test_kernel_matches_reference_in_a_render_frame",
-                "tests/test_fallback.py::test_a_supersampled_frame_has_no_regions_and_no_fxaa",
+                "tests/test_fallback.py::test_a_supersampled_frame_takes_no_fxaa_and_regions_stay_local",
                 "tests/test_refine.py::test_kernel_with_known_tables",
                 "tests/test_fast.py",
                 "tests/test_tss.py::test_kernel_matches_reference",

@@ -112,6 +112,32 @@ def test_every_world_is_complete(name):
         assert world.textures[tex] == other.textures[tex]
 
 
+@pytest.mark.parametrize("name", R.WORLDS)
+def test_photographic_textures_replace_the_opaque_ones(name):
+    """yardstick/photo_textures.py: each set replaces every opaque texture but signs, windows, white and metal with a
+    512 x 512 opaque photograph (varied: a standard deviation over 10 levels), keeps the others' makers, and leaves
+    the world otherwise as it was; "procedural" is the world itself, an unknown set is refused."""
+    from mlaa_stream.yardstick.photo_textures import KEPT, TEXTURE_SETS, with_textures
+    world = R.build_world(name)
+    assert with_textures(world, "procedural") is world
+    with pytest.raises(ValueError, match="expected a texture set"):
+        with_textures(world, "oils")
+    for kind in TEXTURE_SETS[1:]:
+        photo = with_textures(world, kind)
+        assert photo.meshes is world.meshes and photo.materials is world.materials
+        replaced = 0
+        for tex, (make, alpha_tested) in world.textures.items():
+            new_make, new_alpha = photo.textures[tex]
+            if alpha_tested or tex in KEPT or "sign" in tex or "window" in tex:
+                assert (new_make, new_alpha) == (make, alpha_tested), tex
+                continue
+            img = new_make(np.random.default_rng(0))
+            assert img.shape == (512, 512, 4) and img.dtype == np.uint8 and (img[..., 3] == 255).all()
+            assert img[..., :3].std() > 10, (kind, tex)
+            replaced += 1
+        assert replaced >= 4
+
+
 # --- rendered scenes ----------------------------------------------------------------------------
 @needs_egl
 def test_shapes_and_dtypes(scenes):
@@ -234,6 +260,9 @@ def test_rendered_views_bench_runs(capsys):
     out = capsys.readouterr().out
     assert all(f"{name}_96" in out for name in rendered_views.TOWN_VIEWS)
     assert not any(f"{name}_96" in out for name in rendered_views.VIEWS)
+    assert rendered_views.main(["--methods", "none", "--sizes", "96x54", "--textures", "relief"]) == 0
+    out = capsys.readouterr().out
+    assert all(f"{name}_96" in out for name in rendered_views.VIEWS)
 
 
 @needs_egl
@@ -263,9 +292,10 @@ def test_the_town_renders_like_the_plaza():
 
 @needs_egl
 def test_a_supersampled_render_is_left_to_the_mlaa_passes():
-    """Known answer (fallback.py SUPERSAMPLED_*): a held-out view rendered with 3x3 samples per pixel is judged
-    supersampled -- no render regions, no FXAA: the default's output is the MLAA passes' alone -- while the same
-    view at 1 sample per pixel is mostly render regions."""
+    """Known answer (fallback.py SUPERSAMPLED_*, RENDER_RAMP_PCT): a held-out view rendered with 3x3 samples per pixel
+    is judged supersampled -- no FXAA outside render regions, and its edges, ramps, leave under a tenth of the tiles
+    render regions (measured: 6.7 %): the default's error against the 8x8 truth is within 5 % of the MLAA passes'
+    alone (measured 0.7 %) -- while the same view at 1 sample per pixel is mostly render regions."""
     from mlaa_stream.bench.rendered_views import VIEWS
     from mlaa_stream.spatial.filter import Filter
     eye, target, fov = VIEWS["low_arches"]
@@ -273,11 +303,39 @@ def test_a_supersampled_render_is_left_to_the_mlaa_passes():
     try:
         cam = R.Camera(eye, target, fov)
         one, supersampled = renderer.input_frame(cam), renderer.truth_frame(cam, 3)
+        truth = renderer.truth_frame(cam).astype(np.float64)
     finally:
         renderer.release()
     with Filter(keep_regions=True) as f, Filter(fallback="off") as g:
         f.process(one)
         assert (f.last_regions > 0).mean() > 0.5
         out = f.process(supersampled)
-        assert not f.last_regions.any()
-        np.testing.assert_array_equal(out, g.process(supersampled))
+        assert (f.last_regions > 0).mean() < 0.1
+        mlaa_only = g.process(supersampled)
+    assert ((out - truth) ** 2).mean() <= 1.05 * ((mlaa_only - truth) ** 2).mean()
+
+
+@needs_egl
+def test_a_render_with_photographic_walls_keeps_its_render_regions():
+    """Known answer (fallback.py RENDER_RAMP_PCT): a 1-spp view whose walls and floors are photographs (the relief
+    set: magnified hill shading makes smooth ramps) is judged supersampled frame-wide -- over SUPERSAMPLED_PCT % of
+    its strong steps are ramps -- yet its geometric edges are hard steps, so most tiles stay render regions and the
+    default removes far more error than the MLAA passes alone (measured: 75 % regions, 0.586 against 0.440)."""
+    from mlaa_stream.bench.rendered_views import VIEWS
+    from mlaa_stream.spatial import fallback as F
+    from mlaa_stream.spatial.filter import Filter
+    renderer = R.Renderer(R._context(), 320, 180, "plaza", "relief")
+    try:
+        cam = R.Camera(*VIEWS["low_arches"])
+        one, truth = renderer.input_frame(cam), renderer.truth_frame(cam).astype(np.float64)
+    finally:
+        renderer.release()
+    with Filter(keep_regions=True) as f, Filter(fallback="off") as g:
+        out, passes = f.process(one), g.intermediates(one)
+        assert (f.last_regions > 0).mean() > 0.6
+    _, _, _, borders, _, rgb = F._frame_masks(one, passes["out"], passes["edges"], False)
+    assert F.supersampled(borders, F.luma_reference(rgb, False))
+
+    def removed(img: np.ndarray) -> float:
+        return 1 - ((img - truth) ** 2).mean() / ((one - truth) ** 2).mean()
+    assert removed(out) > removed(passes["out"]) + 0.1

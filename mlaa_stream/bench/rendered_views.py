@@ -2,6 +2,7 @@
 
     python -m mlaa_stream.bench.rendered_views [--methods none,fxaa,mlaa,mlaa:screen,mlaa:rendered]
                                                [--sizes 640x360,960x540] [--samples 1,2,3]
+                                               [--world plaza|town] [--textures procedural|photo|relief]
 
 The bench's rendered scenes are what the spatial filter's rendered-content rules were measured on; these views
 are not, so a rule that only fits those five scenes shows here. Each view is rendered like the bench's (1 spp at
@@ -9,7 +10,8 @@ pixel centres; truth: 8x8 jittered samples averaged in linear light), at each si
 bench (mlaa_stream.bench.accuracy.METHODS) prints error removed % / damage away from edges (levels) / FLIP per
 view, with the mean error removed. `--samples 2,3`: also inputs already supersampled (2x2, 3x3 samples per pixel on
 an ordered grid, as renderers with supersampling make them; view_WIDTH_NxN): a filter should leave them about as
-they are. Needs what the rendered scenes need (EGL; `pip install 'mlaa-stream[bench]'`
+they are. `--textures photo|relief`: the worlds' walls, roofs and floors textured with photographs (as real scenes
+are; yardstick/photo_textures.py). Needs what the rendered scenes need (EGL; `pip install 'mlaa-stream[bench]'`
 for FLIP). A benchmark, never a unit test.
 """
 from __future__ import annotations
@@ -21,6 +23,7 @@ import numpy as np
 
 from mlaa_stream.bench.accuracy import METHODS
 from mlaa_stream.yardstick import metrics as M
+from mlaa_stream.yardstick.photo_textures import TEXTURE_SETS
 from mlaa_stream.yardstick.rendered import Camera, Renderer, _context, _yawed, egl_available
 from mlaa_stream.yardstick.scenes import Scene, edge_mask
 
@@ -42,13 +45,14 @@ TOWN_VIEWS: dict[str, tuple[tuple, tuple, float]] = {
 WORLD_VIEWS = {"plaza": VIEWS, "town": TOWN_VIEWS}
 
 
-def render_views(sizes: list[tuple[int, int]], samples: tuple[int, ...] = (1,),
-                 world: str = "plaza") -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """{view_WIDTH: (input, truth)} for every view of `world` at every size; for every n > 1 of `samples` also
-    {view_WIDTH_NxN: (input supersampled with n x n samples per pixel, truth)}."""
+def render_views(sizes: list[tuple[int, int]], samples: tuple[int, ...] = (1,), world: str = "plaza",
+                 textures: str = "procedural") -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """{view_WIDTH: (input, truth)} for every view of `world` (its surfaces textured by the set `textures`) at every
+    size; for every n > 1 of `samples` also {view_WIDTH_NxN: (input supersampled with n x n samples per pixel,
+    truth)}."""
     frames = {}
     for width, height in sizes:
-        renderer = Renderer(_context(), width, height, world)
+        renderer = Renderer(_context(), width, height, world, textures)
         try:
             for name, (eye, target, fov) in WORLD_VIEWS[world].items():
                 cam = Camera(eye, target, fov)
@@ -103,6 +107,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--world", default="plaza", choices=sorted(WORLD_VIEWS),
                     help="plaza: the world of the bench's rendered scenes (other cameras); town: a second world "
                          "(yardstick/town.py) with its own textures, geometry and light")
+    ap.add_argument("--textures", default="procedural", choices=TEXTURE_SETS,
+                    help="the world's procedural textures, or photographs on its walls, roofs and floors "
+                         "(yardstick/photo_textures.py: 'photo' crops of a portrait, 'relief' a hill-shaded "
+                         "elevation model and a product photograph)")
     ap.add_argument("--device", default=None)
     args = ap.parse_args(argv)
     ok, why = egl_available()
@@ -119,7 +127,7 @@ def main(argv: list[str] | None = None) -> int:
         samples = ()
     if not samples or min(samples) < 1:
         raise SystemExit(f"--samples: expected positive integers, comma-separated, got {args.samples!r}")
-    frames = render_views(sizes, samples, args.world)
+    frames = render_views(sizes, samples, args.world, args.textures)
     with_flip = M.flip_available()  # an optional part ([bench])
 
     def group(view: str) -> str:  # the mean's row: "mean" for 1-spp views, "mean NxN" for supersampled ones

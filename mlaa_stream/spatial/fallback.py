@@ -42,10 +42,16 @@ RENDER_FRAME_PCT = 45
 # A supersampled frame (several samples per pixel, or downscaled) is no 1-spp render: where at least SUPERSAMPLED_PCT %
 # of the luma steps of SUPERSAMPLED_STEP or more between neighbours (px_luma clipped to 1; in the tiles holding
 # edge-bordering pixels, a quarter of them sampled; at least SUPERSAMPLED_MIN steps) are ramps -- the step before or
-# after goes the same way by half as much or more -- no tile is a render region and no pixel takes FXAA (1-spp
-# renders 0-9 %, supersampled ones 21-47 %: docs/spatial_tuning.md, "SUPERSAMPLED_PCT").
+# after goes the same way by half as much or more -- no pixel outside render regions takes FXAA (1-spp renders with
+# procedural textures 0-9 %, supersampled ones 21-47 %: docs/spatial_tuning.md, "SUPERSAMPLED_PCT") ...
 SUPERSAMPLED_STEP, SUPERSAMPLED_PCT, SUPERSAMPLED_MIN = 0.2, 14, 100
-COUNTS, NOT_MEASURED = 6, 255  # bytes per tile of count_changed's output; k = 3 of a tile not measured
+# ... and there render regions are judged locally: a tile stays one where, in its neighbourhood's sampled tiles,
+# under RENDER_RAMP_PCT % of the clean transitions are ramps -- a transition is clean where the luma steps beside
+# it are at most RAMP_FLANK of it: a hard step at a stair's end (1-spp geometry) or one pixel between two plateaus
+# (a coverage blend; a magnified texture's too). Photographic textures push a 1-spp render's frame-wide ramp share
+# to 21 %, its geometric edges stay hard (docs/spatial_tuning.md, "RENDER_RAMP_PCT").
+RENDER_RAMP_PCT, RAMP_FLANK = 50, 0.2
+COUNTS, NOT_MEASURED = 8, 255  # bytes per tile of count_changed's output; k = 3 of a tile not measured
 SHOW_DIM = 0.35  # Filter(show="regions"): pixels outside render regions keep this share of their colour
 
 def fallback_defines(fmt: FrameFormat, linear: bool, linear_input: bool, everywhere: bool = False,
@@ -64,6 +70,7 @@ def fallback_defines(fmt: FrameFormat, linear: bool, linear_input: bool, everywh
             "RENDER_MIN": RENDER_MIN, "RENDER_DIV": RENDER_DIV, "RENDER_NEAR_PCT": RENDER_NEAR_PCT,
             "RENDER_FRAME_PCT": RENDER_FRAME_PCT, "SUPERSAMPLED_STEP": float(SUPERSAMPLED_STEP),
             "SUPERSAMPLED_PCT": SUPERSAMPLED_PCT, "SUPERSAMPLED_MIN": SUPERSAMPLED_MIN,
+            "RENDER_RAMP_PCT": RENDER_RAMP_PCT, "RAMP_FLANK": float(RAMP_FLANK),
             "RENDER_RANGE": float(RENDER_RANGE), "RENDER_REGIONS": int(regions),
             "FOOTPRINT_TABLE": int(table), "FOOTPRINT_BUCKETS": BUCKETS, "FOOTPRINT_WEIGHTS": WEIGHTS,
             "REFINE_TABLE": int(refine), "REFINE_WEIGHTS": REFINE_WEIGHTS, "REFINE_GATE": float(REFINE_GATE),
@@ -91,8 +98,8 @@ class FallbackPass:
         self._render_tiles = context.kernel("fallback", "render_tiles", defs)
         self._render_frame = context.kernel("fallback", "render_frame", defs)
         n = self.tiles[0] * self.tiles[1]
-        self._counts = context.buffer(COUNTS * n)  # count_changed's six per tile
-        self._row_sums = context.buffer(16 * n)  # render_rows' int4 per tile
+        self._counts = context.buffer(COUNTS * n)  # count_changed's eight per tile
+        self._row_sums = context.buffer(32 * n)  # render_rows' int8 per tile
         self._render = context.buffer(n)  # render_tiles' flag per tile
         self._shares = context.buffer(16 * self.tiles[0])  # render_tiles' int4 per tile column
         self._table = context.buffer(4 * BUCKETS * WEIGHTS)  # the footprint table (unused without one)
@@ -236,10 +243,7 @@ def render_regions_of(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray, 
     """The render regions kernels/fallback.cl finds in `src` (per pixel, (h, w) bool), given the MLAA passes'
     output and edge buffer (Filter.intermediates: "out", "edges")."""
     _, _, _, borders, changed, rgb = _frame_masks(src, mlaa_out, edges, bgr)
-    luma = luma_reference(rgb, linear_input)
-    if supersampled(borders, luma):
-        return np.zeros(borders.shape, bool)
-    return render_regions(_busy_pixels(changed, borders, rgb), borders, luma)
+    return render_regions(_busy_pixels(changed, borders, rgb), borders, luma_reference(rgb, linear_input))
 
 
 def _busy_pixels(changed: np.ndarray, borders: np.ndarray, rgb: np.ndarray) -> np.ndarray:
@@ -308,14 +312,13 @@ def fallback_reference(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray,
         busy_px = _busy_pixels(changed, borders, rgb)
         busy_changed = region_sums(busy_px)
         frame_supersampled = regions and supersampled(borders, luma)  # render_frame then clears every tile's counts
-        rendered = (render_regions(busy_px, borders, luma) if regions and not frame_supersampled
-                    else np.zeros((h, w), bool))
+        rendered = render_regions(busy_px, borders, luma) if regions else np.zeros((h, w), bool)
         busy = rendered | ((busy_changed >= FALLBACK_RICH_MIN)
                            & (busy_changed * FALLBACK_RICH_DIV >= region_sums(borders)))
         evidence = region_sums(changed & borders) >= FALLBACK_MIN_CHANGED
         eligible = borders & (busy | (evidence & busy_window & ~changed))
-        if frame_supersampled:  # no tile busy, none with evidence
-            eligible[:] = False
+        if frame_supersampled:  # no tile busy, none with evidence: FXAA in render regions only
+            eligible &= rendered
         runs = long_runs(e, hdist, vdist)
         eligible &= ~runs
     early, fx = fxaa_mix_reference(src, linear=linear, linear_input=linear_input, bgr=bgr)
@@ -348,33 +351,57 @@ def fallback_reference(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray,
     return out.reshape(np.asarray(mlaa_out).shape)
 
 
-def ramp_counts(borders: np.ndarray, luma: np.ndarray) -> tuple[int, int]:
-    """kernels/fallback.cl tile_ramps summed over the frame (render_frame's evidence): the strong luma steps
-    (SUPERSAMPLED_STEP or more, in luma clipped to 1) from the pixels of sampled tiles (even tile rows and columns)
-    holding edge-bordering pixels (`borders`, (h, w) bool) to their right and lower neighbours, and of those the
-    ramps; `luma` px_luma of the input (h, w)."""
+def step_counts(borders: np.ndarray, luma: np.ndarray) -> tuple[np.ndarray, ...]:
+    """kernels/fallback.cl tile_ramps per pixel, both directions summed: (strong steps, ramps among them, clean
+    transitions, ramps among them), each (h, w) int, counted from the pixels of sampled tiles (even tile rows and
+    columns) holding edge-bordering pixels (`borders`, (h, w) bool) to their right and lower neighbours; `luma`
+    px_luma of the input (h, w)."""
     f32 = np.float32
     h, w = luma.shape
     edge_tiles = tile_sums(borders) > 0
     edge_tiles[1::2] = False
     edge_tiles[:, 1::2] = False
     counted = region_pixels(edge_tiles, h, w)
-    pad = np.pad(np.minimum(np.asarray(luma, f32), f32(1)), 2, mode="edge")  # ramp_luma: clipped to display white
-    strong = ramps = 0
+    pad = np.pad(np.minimum(np.asarray(luma, f32), f32(1)), 3, mode="edge")  # ramp_luma: clipped to display white
+    q, big = f32(RAMP_FLANK), f32(SUPERSAMPLED_STEP)
+    out = [np.zeros((h, w), np.int64) for _ in range(4)]
     for dy, dx in ((0, 1), (1, 0)):
-        def at(k: int) -> np.ndarray:  # luma k steps along (dy, dx) from every pixel, clamped to the frame
-            return pad[2 + k * dy:2 + k * dy + h, 2 + k * dx:2 + k * dx + w]
-        a, b = at(0), at(1)
+        def at(k: int, side: int = 0) -> np.ndarray:
+            # luma k steps along (dy, dx) and `side` across it from every pixel, clamped to the frame
+            y0, x0 = 3 + k * dy + side * dx, 3 + k * dx + side * dy
+            return pad[y0:y0 + h, x0:x0 + w]
+        a, b, l2 = at(0), at(1), at(2)
         c = b - a
-        before, after, mid = a - at(-1), at(2) - b, f32(0.5) * c
+        before, after, mid = a - at(-1), l2 - b, f32(0.5) * c
         inside = np.ones((h, w), bool)  # the neighbour lies in the frame
         inside[h - dy:] = False
         inside[:, w - dx:] = False
-        step = counted & inside & (np.abs(c) >= f32(SUPERSAMPLED_STEP))
+        step = counted & inside & (np.abs(c) >= big)
         ramp = np.where(c > 0, (before >= mid) | (after >= mid), (before <= mid) | (after <= mid))
-        strong += int(step.sum())
-        ramps += int((step & ramp).sum())
-    return strong, ramps
+        inside[h - 2 * dy:] = False  # a clean transition needs the pixel after the neighbour in the frame too
+        inside[:, w - 2 * dx:] = False
+        t, ac, aa = c + after, np.abs(c), np.abs(after)
+        at_ = np.abs(t)
+        d2 = at(3) - l2
+        goes_on = np.ones((h, w), bool)  # the step goes on beside the pixel, on both sides across the direction
+        for side in (-1, 1):
+            cs = at(1, side) - at(0, side)
+            goes_on &= (cs * c > 0) & (np.abs(cs) >= f32(0.5) * ac)
+        hard = (ac >= big) & (np.abs(before) <= q * ac) & (aa <= q * ac) & ~goes_on
+        clean_ramp = ((at_ >= big) & (c * t > 0) & (after * t > 0) & (np.minimum(ac, aa) > q * at_)
+                      & (np.abs(before) <= q * at_) & (np.abs(d2) <= q * at_))
+        m = counted & inside
+        out[0] += step
+        out[1] += step & ramp
+        out[2] += m & (hard | clean_ramp)
+        out[3] += m & clean_ramp
+    return tuple(out)
+
+
+def ramp_counts(borders: np.ndarray, luma: np.ndarray) -> tuple[int, int]:
+    """The frame's strong steps and ramps among them (step_counts summed: render_frame's evidence)."""
+    strong, ramps, _, _ = step_counts(borders, luma)
+    return int(strong.sum()), int(ramps.sum())
 
 
 def supersampled(borders: np.ndarray, luma: np.ndarray) -> bool:
@@ -385,8 +412,8 @@ def supersampled(borders: np.ndarray, luma: np.ndarray) -> bool:
 
 
 def render_regions(busy: np.ndarray, borders: np.ndarray, luma: np.ndarray) -> np.ndarray:
-    """kernels/fallback.cl's render regions per pixel in a frame that is not supersampled (the callers' test):
-    `busy` and `borders` the pixel masks of count_changed's k = 2 and k = 1, `luma` px_luma of the input (h, w)."""
+    """kernels/fallback.cl's render regions per pixel (render_tiles and render_frame): `busy` and `borders` the pixel
+    masks of count_changed's k = 2 and k = 1, `luma` px_luma of the input (h, w)."""
     t, r = FALLBACK_TILE, RENDER_RADIUS
     h, w = busy.shape
     th, tw = -(-h // t), -(-w // t)
@@ -413,4 +440,7 @@ def render_regions(busy: np.ndarray, borders: np.ndarray, luma: np.ndarray) -> n
     edge_tiles = border_t > 0
     if edge_tiles.any() and (flag & edge_tiles).sum() * 100 >= RENDER_FRAME_PCT * edge_tiles.sum():
         flag = b > 0  # a render: every tile near a busy pixel
+    if supersampled(borders, luma):  # regions only where the neighbourhood's clean transitions are mostly hard
+        _, _, clean, clean_ramps = step_counts(borders, luma)
+        flag &= window(tile_sums(clean_ramps)) * 100 < RENDER_RAMP_PCT * np.maximum(window(tile_sums(clean)), 1)
     return region_pixels(flag, h, w)

@@ -595,11 +595,13 @@ class Renderer:
     """The world on one GL context at one size: textures, meshes, an 8-bit target for the input
     and a float32 target for the truth passes (sharing one depth buffer)."""
 
-    def __init__(self, ctx, width: int, height: int, world: str = "plaza"):
+    def __init__(self, ctx, width: int, height: int, world: str = "plaza", textures: str = "procedural"):
+        """`textures`: the world's own procedural textures, or a set of photographs (yardstick/photo_textures.py)."""
         import moderngl
+        from mlaa_stream.yardstick.photo_textures import with_textures
         self.mgl = moderngl
         self.ctx, self.width, self.height = ctx, width, height
-        self.world = build_world(world)
+        self.world = with_textures(build_world(world), textures)
         self.prog = ctx.program(vertex_shader=VERTEX_SHADER, fragment_shader=FRAGMENT_SHADER)
         self.sky = ctx.program(vertex_shader=SKY_VERTEX, fragment_shader=SKY_FRAGMENT)
         self.sky_vao = ctx.vertex_array(self.sky, [])
