@@ -39,8 +39,10 @@
 // step on one side goes the same way by at least half as much -- where a 1-spp frame has single-pixel steps. Where
 // at least SUPERSAMPLED_PCT % of the strong steps in the tiles that hold edge-bordering pixels (a quarter of them
 // sampled: even tile rows and columns) are ramps (1-spp renders, also through H.264: 0-9 %; 2x2 and 3x3 supersampled
-// renders: 21-47 %), no pixel outside render regions takes FXAA: the MLAA passes' own already-antialiased test
-// judges its edges (docs/spatial_tuning.md, "SUPERSAMPLED_PCT").
+// renders: 21-47 %), or where at least SUPERSAMPLED_CLEAN_PCT % of its clean transitions (below) are ramps
+// (photo-textured renders with 3x3 samples per pixel whose strong steps are mostly hard), no pixel outside render
+// regions takes FXAA: the MLAA passes' own already-antialiased test judges its edges (docs/spatial_tuning.md,
+// "SUPERSAMPLED_PCT", "SUPERSAMPLED_CLEAN_PCT").
 // In such a frame render regions are judged locally: a tile stays a region where, over its neighbourhood's sampled
 // tiles, under RENDER_RAMP_PCT % of the clean transitions (a strong step at a stair's end, or two steps the same
 // way, between two plateaus) are ramps. Magnified photographic textures make ramps too, enough to take a whole 1-spp render for a
@@ -107,6 +109,9 @@
 #endif
 #ifndef SUPERSAMPLED_MIN
 #define SUPERSAMPLED_MIN 100
+#endif
+#ifndef SUPERSAMPLED_CLEAN_PCT
+#define SUPERSAMPLED_CLEAN_PCT 75
 #endif
 #ifndef RENDER_RAMP_PCT
 #define RENDER_RAMP_PCT 50
@@ -431,15 +436,15 @@ __kernel void render_rows(__global const uchar *counts, __global int8 *rows, con
 // looks like a 1-spp render -- RENDER_MIN busy pixels in measured tiles (low-contrast tiles cannot show whether they
 // are two-toned), busy pixels a share of the edge pixels, and not two-toned; bit 1: it holds a busy pixel (the second
 // separable pass); bit 2: under RENDER_RAMP_PCT % of its clean transitions are ramps (or it has none).
-// shares[tx] = the column's tiles with edge-bordering pixels, of those its tiles with bit 0, and their strong steps
-// and ramps (render_frame's evidence). One work item per tile column, a running sum.
+// shares[tx] = the column's tiles with edge-bordering pixels, of those its tiles with bit 0, and their strong steps,
+// ramps, clean transitions and clean ramps (render_frame's evidence). One work item per tile column, a running sum.
 __kernel void render_tiles(__global const int8 *rows, __global const uchar *counts, __global uchar *render,
-                           __global int4 *shares, const int tiles_x, const int tiles_y)
+                           __global int8 *shares, const int tiles_x, const int tiles_y)
 {
     const int tx = get_global_id(0);
     if (tx >= tiles_x) return;
     int8 sum = (int8)(0);
-    int4 share = (int4)(0, 0, 0, 0);
+    int8 share = (int8)(0);
     for (int k = 0; k < RENDER_RADIUS && k < tiles_y; ++k) sum += rows[k * tiles_x + tx];
     for (int ty = 0; ty < tiles_y; ++ty) {
         if (ty + RENDER_RADIUS < tiles_y) sum += rows[(ty + RENDER_RADIUS) * tiles_x + tx];
@@ -449,7 +454,7 @@ __kernel void render_tiles(__global const int8 *rows, __global const uchar *coun
         const int hard = sum.s5 * 100 < RENDER_RAMP_PCT * (sum.s4 > 1 ? sum.s4 : 1);
         render[tile] = (uchar)((hard << 2) | ((sum.s0 > 0) << 1) | rendered);
         __global const uchar *c = counts + COUNTS * tile;
-        if (c[1]) share += (int4)(1, rendered, c[4], c[5]);
+        if (c[1]) share += (int8)(1, rendered, c[4], c[5], c[6], c[7], 0, 0);
         if (ty >= RENDER_RADIUS) sum -= rows[(ty - RENDER_RADIUS) * tiles_x + tx];
     }
     shares[tx] = share;
@@ -457,19 +462,21 @@ __kernel void render_tiles(__global const int8 *rows, __global const uchar *coun
 
 // render[tile] = 1 where the tile is a render region: bit 0 of render_tiles, or bit 1 in a frame where at least
 // RENDER_FRAME_PCT % of the tiles with edge-bordering pixels have bit 0 (a render: every tile near a busy pixel).
-// In a supersampled frame (SUPERSAMPLED_MIN strong steps or more, SUPERSAMPLED_PCT % of them ramps) only tiles with
-// bit 2 as well (the neighbourhood's clean transitions mostly hard steps), and the tiles' counts k = 0..2 are
-// cleared: fxaa_fallback then finds no tile busy and none with evidence outside render regions.
+// In a supersampled frame (SUPERSAMPLED_MIN strong steps or more, SUPERSAMPLED_PCT % of them ramps, or as many clean
+// transitions, SUPERSAMPLED_CLEAN_PCT % of them ramps) only tiles with bit 2 as well (the neighbourhood's clean
+// transitions mostly hard steps), and the tiles' counts k = 0..2 are cleared: fxaa_fallback then finds no tile
+// busy and none with evidence outside render regions.
 // One work item per tile column; each sums the columns' shares (tiles_x of them: cheaper than another pass).
-__kernel void render_frame(__global uchar *render, __global uchar *counts, __global const int4 *shares,
+__kernel void render_frame(__global uchar *render, __global uchar *counts, __global const int8 *shares,
                            const int tiles_x, const int tiles_y)
 {
     const int tx = get_global_id(0);
     if (tx >= tiles_x) return;
-    int4 total = (int4)(0, 0, 0, 0);
+    int8 total = (int8)(0);
     for (int k = 0; k < tiles_x; ++k) total += shares[k];
-    const int supersampled = total.z >= SUPERSAMPLED_MIN && total.w * 100 >= SUPERSAMPLED_PCT * total.z;
-    const uchar bit = total.x > 0 && total.y * 100 >= RENDER_FRAME_PCT * total.x ? 2 : 1;
+    const int supersampled = (total.s2 >= SUPERSAMPLED_MIN && total.s3 * 100 >= SUPERSAMPLED_PCT * total.s2) ||
+                             (total.s4 >= SUPERSAMPLED_MIN && total.s5 * 100 >= SUPERSAMPLED_CLEAN_PCT * total.s4);
+    const uchar bit = total.s0 > 0 && total.s1 * 100 >= RENDER_FRAME_PCT * total.s0 ? 2 : 1;
     for (int ty = 0; ty < tiles_y; ++ty) {
         const int tile = ty * tiles_x + tx;
         render[tile] = (uchar)((render[tile] & bit) != 0 && (!supersampled || (render[tile] & 4) != 0));

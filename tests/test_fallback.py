@@ -8,7 +8,7 @@ import pytest
 from mlaa_stream.device.colour import linear_to_srgb, srgb_to_linear
 from mlaa_stream.spatial.fallback import (FALLBACK_MIX, FALLBACK_TILE, FALLBACK_WEIGHT, RENDER_RADIUS,
                                           SUPERSAMPLED_PCT, _frame_masks, fallback_reference, ramp_counts,
-                                          region_pixels, render_regions_of, step_counts)
+                                          region_pixels, render_regions_of, step_counts, supersampled)
 from mlaa_stream.spatial.fxaa import fxaa_mix_reference, luma_reference
 from mlaa_stream.spatial.filter import Filter
 
@@ -337,6 +337,29 @@ def test_a_supersampled_frame_takes_no_fxaa_and_regions_stay_local(dtype, channe
     else:
         np.testing.assert_array_equal(got, want)
         np.testing.assert_array_equal(got[outside], passes["out"][outside])
+
+
+def test_clean_ramps_alone_make_a_frame_supersampled():
+    """Known answer (SUPERSAMPLED_CLEAN_PCT): bars whose every edge is one pixel halfway between two plateaus (steps
+    of 0.15, none strong) crossed by 1-px lines every 16 rows (strong steps, none a ramp: the MLAA passes' edges) --
+    a frame whose strong steps are under SUPERSAMPLED_PCT % ramps -- is judged supersampled by its clean transitions,
+    all ramps: no pixel outside render regions takes FXAA, and the kernel equals the reference."""
+    levels = np.array([0.2, 0.2, 0.2, 0.35, 0.5, 0.5, 0.5, 0.35])
+    luma8 = np.repeat(np.tile(levels, 12)[None], 96, 0)
+    luma8[7::16] = 0.9
+    frame = np.rint(255 * luma8)[..., None].repeat(3, 2).astype(np.uint8)
+    with Filter(keep_regions=True) as f, Filter(fallback="off") as g:
+        got, passes = f.process(frame), g.intermediates(frame)
+    _, _, _, borders, _, rgb = _frame_masks(frame, passes["out"], passes["edges"], False)
+    luma = luma_reference(rgb, False)
+    strong, ramps, clean, clean_ramps = (int(a.sum()) for a in step_counts(borders, luma))
+    assert strong >= 100 and ramps * 100 < SUPERSAMPLED_PCT * strong
+    assert clean >= 100 and clean_ramps == clean
+    assert supersampled(borders, luma)
+    want = fallback_reference(frame, passes["out"], passes["edges"], passes["hdist"], passes["vdist"])
+    np.testing.assert_array_equal(got, want)
+    outside = ~render_regions_of(frame, passes["out"], passes["edges"])
+    np.testing.assert_array_equal(got[outside], passes["out"][outside])
 
 
 @pytest.mark.parametrize("seed,small", [(0, True), (1, True), (2, True), (2, False)])

@@ -51,6 +51,10 @@ SUPERSAMPLED_STEP, SUPERSAMPLED_PCT, SUPERSAMPLED_MIN = 0.2, 14, 100
 # (a coverage blend; a magnified texture's too). Photographic textures push a 1-spp render's frame-wide ramp share
 # to 21 %, its geometric edges stay hard (docs/spatial_tuning.md, "RENDER_RAMP_PCT").
 RENDER_RAMP_PCT, RAMP_FLANK = 50, 0.2
+# A frame is judged supersampled too where SUPERSAMPLED_CLEAN_PCT % or more of its clean transitions (at least
+# SUPERSAMPLED_MIN) are ramps: photo-textured renders with 3x3 samples per pixel whose strong steps are under
+# SUPERSAMPLED_PCT % ramps (1-spp renders: 0-73 %, photo-textured ones the top; docs/spatial_tuning.md).
+SUPERSAMPLED_CLEAN_PCT = 75
 COUNTS, NOT_MEASURED = 8, 255  # bytes per tile of count_changed's output; k = 3 of a tile not measured
 SHOW_DIM = 0.35  # Filter(show="regions"): pixels outside render regions keep this share of their colour
 
@@ -71,6 +75,7 @@ def fallback_defines(fmt: FrameFormat, linear: bool, linear_input: bool, everywh
             "RENDER_FRAME_PCT": RENDER_FRAME_PCT, "SUPERSAMPLED_STEP": float(SUPERSAMPLED_STEP),
             "SUPERSAMPLED_PCT": SUPERSAMPLED_PCT, "SUPERSAMPLED_MIN": SUPERSAMPLED_MIN,
             "RENDER_RAMP_PCT": RENDER_RAMP_PCT, "RAMP_FLANK": float(RAMP_FLANK),
+            "SUPERSAMPLED_CLEAN_PCT": SUPERSAMPLED_CLEAN_PCT,
             "RENDER_RANGE": float(RENDER_RANGE), "RENDER_REGIONS": int(regions),
             "FOOTPRINT_TABLE": int(table), "FOOTPRINT_BUCKETS": BUCKETS, "FOOTPRINT_WEIGHTS": WEIGHTS,
             "REFINE_TABLE": int(refine), "REFINE_WEIGHTS": REFINE_WEIGHTS, "REFINE_GATE": float(REFINE_GATE),
@@ -101,7 +106,7 @@ class FallbackPass:
         self._counts = context.buffer(COUNTS * n)  # count_changed's eight per tile
         self._row_sums = context.buffer(32 * n)  # render_rows' int8 per tile
         self._render = context.buffer(n)  # render_tiles' flag per tile
-        self._shares = context.buffer(16 * self.tiles[0])  # render_tiles' int4 per tile column
+        self._shares = context.buffer(32 * self.tiles[0])  # render_tiles' int8 per tile column
         self._table = context.buffer(4 * BUCKETS * WEIGHTS)  # the footprint table (unused without one)
         if table is not None:
             cl.enqueue_copy(context.queue, self._table, np.ascontiguousarray(table, np.float32), is_blocking=True)
@@ -406,9 +411,11 @@ def ramp_counts(borders: np.ndarray, luma: np.ndarray) -> tuple[int, int]:
 
 def supersampled(borders: np.ndarray, luma: np.ndarray) -> bool:
     """kernels/fallback.cl's verdict that a frame is already supersampled (render_frame): at least SUPERSAMPLED_MIN
-    strong steps (ramp_counts), SUPERSAMPLED_PCT % of them ramps."""
-    strong, ramps = ramp_counts(borders, luma)
-    return strong >= SUPERSAMPLED_MIN and ramps * 100 >= SUPERSAMPLED_PCT * strong
+    strong steps, SUPERSAMPLED_PCT % of them ramps, or at least SUPERSAMPLED_MIN clean transitions,
+    SUPERSAMPLED_CLEAN_PCT % of them ramps (step_counts)."""
+    strong, ramps, clean, clean_ramps = (int(a.sum()) for a in step_counts(borders, luma))
+    return ((strong >= SUPERSAMPLED_MIN and ramps * 100 >= SUPERSAMPLED_PCT * strong)
+            or (clean >= SUPERSAMPLED_MIN and clean_ramps * 100 >= SUPERSAMPLED_CLEAN_PCT * clean))
 
 
 def render_regions(busy: np.ndarray, borders: np.ndarray, luma: np.ndarray) -> np.ndarray:
