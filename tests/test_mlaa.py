@@ -323,8 +323,10 @@ def test_buffers_allocated_once_per_frame_size(filt):
     assert filt._buffers is not bufs
     # 8-bit RGB: 2 x 2 frame slots (12), edges (1), distances (8), weights (8), moved-feature flags (1) and
     # their shares (16, float4), bridging (17: found bits 1, links 8, their claims 4, the claim pass's
-    # verdicts 4), the fallback's tile counts (1/64), the refine table's copy of the frame (3)
-    assert filt.device_bytes_per_pixel() <= 67  # (+ per-row-segment flags: a little more on small frames)
+    # verdicts 4), the fallback's per-tile counts, region sums and flags (41/64), the refine table's copy of the
+    # frame (3)
+    # (+ per-row-segment and per-tile-column buffers: a little more on small frames; this 30 x 20 one: 67.07)
+    assert filt.device_bytes_per_pixel() <= 67.5
 
 
 def test_submit_overlaps_and_keeps_order(filt):
