@@ -32,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mlaa_stream.yardstick.photo_textures import with_textures
 from mlaa_stream.yardstick.scenes import TRUTH_SPP, Scene, edge_mask, encode8, srgb8_to_linear
 from mlaa_stream.yardstick.town import town_world  # a second world, for held-out views only
 from mlaa_stream.yardstick.world import (Lighting, Material, Mesh, World, beam, box, cable, combine, cylinder, fbm,
@@ -598,7 +599,6 @@ class Renderer:
     def __init__(self, ctx, width: int, height: int, world: str = "plaza", textures: str = "procedural"):
         """`textures`: the world's own procedural textures, or a set of photographs (yardstick/photo_textures.py)."""
         import moderngl
-        from mlaa_stream.yardstick.photo_textures import with_textures
         self.mgl = moderngl
         self.ctx, self.width, self.height = ctx, width, height
         self.world = with_textures(build_world(world), textures)
