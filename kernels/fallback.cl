@@ -45,9 +45,9 @@
 // "SUPERSAMPLED_PCT", "SUPERSAMPLED_CLEAN_PCT").
 // In such a frame render regions are judged locally: a tile stays a region where, over its neighbourhood's sampled
 // tiles, under RENDER_RAMP_PCT % of the clean transitions (a strong step at a stair's end, or two steps the same
-// way, between two plateaus) are ramps. Magnified photographic textures make ramps too, enough to take a whole 1-spp render for a
-// supersampled one, while its geometric edges stay hard steps; a supersampled frame's edges are ramps everywhere
-// (docs/spatial_tuning.md, "RENDER_RAMP_PCT").
+// way, between two plateaus) are ramps. Magnified photographic textures make ramps too, enough to take a whole
+// 1-spp render for a supersampled one, while its geometric edges stay hard steps; a supersampled frame's edges are
+// ramps everywhere (docs/spatial_tuning.md, "RENDER_RAMP_PCT").
 // The footprint table (mlaa_stream/spatial/footprint.py says what and why): a 1-spp frame holds point samples, its
 // truth the average over each pixel's square footprint; each pixel of a render region becomes a linear filter of
 // its 5x5 window and the chain's colour, one filter per local structure class, clamped to its 3x3 window's range.

@@ -413,7 +413,12 @@ def supersampled(borders: np.ndarray, luma: np.ndarray) -> bool:
     """kernels/fallback.cl's verdict that a frame is already supersampled (render_frame): at least SUPERSAMPLED_MIN
     strong steps, SUPERSAMPLED_PCT % of them ramps, or at least SUPERSAMPLED_MIN clean transitions,
     SUPERSAMPLED_CLEAN_PCT % of them ramps (step_counts)."""
-    strong, ramps, clean, clean_ramps = (int(a.sum()) for a in step_counts(borders, luma))
+    return _supersampled_by(step_counts(borders, luma))
+
+
+def _supersampled_by(counts: tuple[np.ndarray, ...]) -> bool:
+    """supersampled's verdict from step_counts' four per-pixel counts."""
+    strong, ramps, clean, clean_ramps = (int(a.sum()) for a in counts)
     return ((strong >= SUPERSAMPLED_MIN and ramps * 100 >= SUPERSAMPLED_PCT * strong)
             or (clean >= SUPERSAMPLED_MIN and clean_ramps * 100 >= SUPERSAMPLED_CLEAN_PCT * clean))
 
@@ -447,7 +452,8 @@ def render_regions(busy: np.ndarray, borders: np.ndarray, luma: np.ndarray) -> n
     edge_tiles = border_t > 0
     if edge_tiles.any() and (flag & edge_tiles).sum() * 100 >= RENDER_FRAME_PCT * edge_tiles.sum():
         flag = b > 0  # a render: every tile near a busy pixel
-    if supersampled(borders, luma):  # regions only where the neighbourhood's clean transitions are mostly hard
-        _, _, clean, clean_ramps = step_counts(borders, luma)
+    counts = step_counts(borders, luma)
+    if _supersampled_by(counts):  # regions only where the neighbourhood's clean transitions are mostly hard
+        _, _, clean, clean_ramps = counts
         flag &= window(tile_sums(clean_ramps)) * 100 < RENDER_RAMP_PCT * np.maximum(window(tile_sums(clean)), 1)
     return region_pixels(flag, h, w)
