@@ -41,10 +41,10 @@
 #endif
 #define GROUP 8
 
-// PoCL's CPU build calls vload8 / vstore8 / vload4, rint and sqrt out of line (a call, with the live
-// vector registers saved around it); a load or store through a vector type of the element's alignment
-// is one instruction on the same bytes, and clang's rint and sqrt builtins are one instruction too
-// (sqrt lane by lane: vectorised back into vsqrtps). All exact.
+// PoCL's CPU build calls vload8 / vstore8 / vload4 / vload2, rint, floor and sqrt out of line (a call, with
+// the live vector registers saved around it); a load or store through a vector type of the element's
+// alignment is one instruction on the same bytes, and clang's rint, floor and sqrt builtins are one
+// instruction too (sqrt lane by lane: vectorised back into vsqrtps). All exact.
 #ifdef POCL_DEVICE_ADDRESS_BITS
 typedef uchar8 uchar8_a1 __attribute__((aligned(1)));
 typedef ushort4 ushort4_a2 __attribute__((aligned(2)));
@@ -65,6 +65,7 @@ typedef short8 short8_a2 __attribute__((aligned(2)));
 #define STORE_UCHAR8_PRIVATE(v, p) (*(__private uchar8_a1 *)(p) = (v))
 #define LOAD_USHORT4(p) (*(__global const ushort4_a2 *)(p))
 #define RINT(x) __builtin_rintf(x)
+#define FLOOR(x) __builtin_floorf(x)
 #define SQRT(x) __builtin_sqrtf(x)
 #else
 #define LOAD_UCHAR16(p) vload16(0, p)
@@ -80,8 +81,11 @@ typedef short8 short8_a2 __attribute__((aligned(2)));
 #define STORE_UCHAR8_PRIVATE(v, p) vstore8(v, 0, p)
 #define LOAD_USHORT4(p) vload4(0, p)
 #define RINT(x) rint(x)
+#define FLOOR(x) floor(x)
 #define SQRT(x) sqrt(x)
 #endif
+// Element pair i of a float array (vload2(i, p)'s value), as two loads everywhere.
+#define LOAD_FLOAT2(p, i) ((float2)((p)[2 * (i)], (p)[2 * (i) + 1]))
 
 // A rarely taken helper called from several places of a hot kernel: out of line on PoCL, where inlining it
 // everywhere bloats the kernel (blend.cl's feature helpers: blend pass 8.6 -> 6.8 ms on the 1080p mixed frame);

@@ -228,12 +228,11 @@ __kernel void tss_resolve(__global const ushort *ring, __global const PIXEL_T *s
         return;
     }
 
+    // per footprint cell: integer sums and a count, written from a cell's first sample on (used: the cells
+    // with one, a bit each; CELLS <= 64)
     int sum[CELLS * 3];
     int cnt[CELLS];
-    for (int k = 0; k < CELLS; ++k) {
-        cnt[k] = 0;
-        sum[3 * k] = sum[3 * k + 1] = sum[3 * k + 2] = 0;
-    }
+    ulong used = 0;
     const float xf = (float)gx, yf = (float)gy;
     const int vx = gx / fs < fw - 1 ? gx / fs : fw - 1, vy = gy / fs < fh - 1 ? gy / fs : fh - 1;
     for (int j = 0; j < n_ring; ++j) {
@@ -253,8 +252,8 @@ __kernel void tss_resolve(__global const ushort *ring, __global const PIXEL_T *s
             int x1 = x0 + 1 < fw - 1 ? x0 + 1 : fw - 1, y1 = y0 + 1 < fh - 1 ? y0 + 1 : fh - 1;
             float ax = fx - (float)x0, ay = fy - (float)y0;
             __global const float *f = fields + (size_t)fslot * fw * fh * 2;
-            float2 f00 = vload2(y0 * fw + x0, f), f01 = vload2(y0 * fw + x1, f);
-            float2 f10 = vload2(y1 * fw + x0, f), f11 = vload2(y1 * fw + x1, f);
+            float2 f00 = LOAD_FLOAT2(f, y0 * fw + x0), f01 = LOAD_FLOAT2(f, y0 * fw + x1);
+            float2 f10 = LOAD_FLOAT2(f, y1 * fw + x0), f11 = LOAD_FLOAT2(f, y1 * fw + x1);
             float2 top = f00 + (f01 - f00) * ax, bot = f10 + (f11 - f10) * ax;
             float2 o = top + (bot - top) * ay;
             px = xf + o.x;
@@ -262,7 +261,7 @@ __kernel void tss_resolve(__global const ushort *ring, __global const PIXEL_T *s
         }
         if (!(px == px) || !(py == py))
             continue;   // NaN: no trusted motion (forward-backward inconsistency)
-        const float sx = floor(px + 0.5f), sy = floor(py + 0.5f);
+        const float sx = FLOOR(px + 0.5f), sy = FLOOR(py + 0.5f);
         if (sx < 0.0f || sx > (float)(width - 1) || sy < 0.0f || sy > (float)(height - 1))
             continue;
         __global const ushort *r = ring + ((size_t)slot * height + (size_t)sy) * rowlen + (size_t)sx;
@@ -274,18 +273,25 @@ __kernel void tss_resolve(__global const ushort *ring, __global const PIXEL_T *s
         }
         if (!ok)
             continue;
-        float cx = floor((sx - px + 0.5f) * (float)GRID), cy = floor((sy - py + 0.5f) * (float)GRID);
+        float cx = FLOOR((sx - px + 0.5f) * (float)GRID), cy = FLOOR((sy - py + 0.5f) * (float)GRID);
         int ix = cx < 0.0f ? 0 : (cx > (float)(GRID - 1) ? GRID - 1 : (int)cx);
         int iy = cy < 0.0f ? 0 : (cy > (float)(GRID - 1) ? GRID - 1 : (int)cy);
-        int k = iy * GRID + ix;
-        for (int c = 0; c < TSS_PLANES; ++c)
-            sum[3 * k + c] += v[c];
-        cnt[k] += 1;
+        const int k = iy * GRID + ix;
+        if ((used >> k) & 1) {
+            for (int c = 0; c < TSS_PLANES; ++c)
+                sum[3 * k + c] += v[c];
+            cnt[k] += 1;
+        } else {
+            for (int c = 0; c < TSS_PLANES; ++c)
+                sum[3 * k + c] = v[c];
+            cnt[k] = 1;
+            used |= (ulong)1 << k;
+        }
     }
     int n = 0;
     float m[3] = {0.0f, 0.0f, 0.0f};
-    for (int k = 0; k < CELLS; ++k) {
-        if (cnt[k] > 0) {
+    for (int k = 0; used != 0; ++k, used >>= 1) {   // the filled cells in ascending order (tss_reference's)
+        if (used & 1) {
             const float inv = 1.0f / (float)cnt[k];
             for (int c = 0; c < TSS_PLANES; ++c)
                 m[c] += (float)sum[3 * k + c] * inv;

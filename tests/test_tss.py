@@ -86,6 +86,27 @@ def test_kernel_matches_reference(stage_parts, channels, dtype, bgr, dense, fs, 
     assert np.array_equal(out[cells < 2], spatial[cells < 2])
 
 
+@pytest.mark.parametrize("grid", [3, 8])
+def test_kernel_matches_reference_at_other_grids(stage_parts, grid):
+    """Both resolves at footprints of 3x3 and 8x8 cells (tss_resolve keeps one bit per cell in a 64-bit word:
+    8x8 fills its top bit) against the reference: bit-identical; a grid over 8 is refused."""
+    from mlaa_stream.temporal.tss import EPS, MIN_CELLS
+    rng = np.random.default_rng(40 + grid)
+    h, w, fs, k = 37, 53, 2, 24
+    for dense in (True, False):
+        cur, spatial, ring = _random_ring(rng, h, w, 3, np.uint8, k, dense, fs)
+        if dense:   # small motion: most samples pass the colour box and spread over the footprint's cells
+            ring = [(f, m * np.float32(0.3), ok) if isinstance(m, np.ndarray) else (f, m, ok) for f, m, ok in ring]
+        stage = TSSStage(frames=k + 1, bgr=False, context=stage_parts, dense_samples=dense, grid=grid)
+        out, cells = _run_kernel(stage, cur, spatial, ring, False, fs)
+        ref, rcells = tss_frame_reference(spatial, cur, ring, False, fs, grid, EPS, MIN_CELLS,
+                                          stage.field_full_cells if dense else stage.full_cells)
+        assert np.array_equal(cells, rcells) and cells.max() >= 4
+        assert np.array_equal(out, ref)
+    with pytest.raises(ValueError, match="grid: expected 1 to 8"):
+        TSSStage(frames=4, context=stage_parts, grid=9)
+
+
 @pytest.mark.parametrize("linear,dense", [(True, False), (True, True), (False, False), (False, True)])
 def test_kernel_matches_reference_on_hdr_float_frames(stage_parts, linear, dense):
     """Float frames above 1 (HDR renders; linear light: the ring spans [0, LINEAR_RANGE]): bit-identical to the

@@ -3,9 +3,12 @@
 Each checkout (a git worktree, e.g. `git worktree add /tmp/old <commit>`) runs in its own process with its own
 `mlaa_stream` on the path and times `Filter().process` on 1920x1080 frames: the yardstick's mixed timing frame, a
 photograph, and a 1-spp render (the rendered atrium still tiled 3x3, where the rendered scenes are available).
-`--stage tss`: the temporal supersampling stage instead (TSSStage, K = 16, causal) on the 1080p timing pan of
-mlaa_stream.bench.temporal (the frames as their own spatial output): its host motion (stats "flow_ms"), its resolve
-("resolve_ms") and the whole call, median over the frames after the K warm-up frames.
+`--stage tss`: the temporal supersampling stage instead (TSSStage, K = 16, causal) on three 1080p shots (the frames
+as their own spatial output): mlaa_stream.bench.temporal's timing pan (one translation per ring frame:
+tss_resolve_shift) and turning layer (moving layers: tss_resolve over the layers' box), and the timing frame zooming
+0.3 % per frame with dense_samples (`--dense-motion`: every timed frame resolved through tracked tiles, tss_resolve
+over the frame); per shot its host motion (stats "flow_ms"), its resolve ("resolve_ms")
+and the whole call, median over the frames after the K warm-up frames.
 Rounds alternate the checkouts (A, B, A, B, ...), so a busy machine slows all of them alike; the report is the
 median over rounds of each checkout's median ms per frame, and its ratio to the first checkout's. A benchmark,
 never a unit test.
@@ -55,25 +58,32 @@ for name, fr in frames.items():
 print(json.dumps(out))
 """
 
-# --stage tss: the same contract, for the temporal supersampling stage on the 1080p timing pan
+# --stage tss: the same contract, for the temporal supersampling stage on three 1080p shots
 _TSS_TIMER = r"""
 import json, sys, time
+import cv2
 import numpy as np
-from mlaa_stream.bench.temporal import _pan_frames
+from mlaa_stream.bench.temporal import _pan_frames, _turning_frames
 from mlaa_stream.temporal.tss import TSSStage
 from mlaa_stream.yardstick.scenes import timing_frame
 runs, k = int(sys.argv[1]), 16
-frames = _pan_frames(k + runs, timing_frame(1936, 1096))
-with TSSStage(None, frames=k, bgr=False) as st:
-    ts = []
-    for i, f in enumerate(frames):
-        t = time.perf_counter()
-        st(f, f, i)
-        ts.append(time.perf_counter() - t)
-    rows = st.stats[k:]
-    print(json.dumps({"pan motion": float(np.median([r["flow_ms"] for r in rows])),
-                      "pan resolve": float(np.median([r["resolve_ms"] for r in rows])),
-                      "pan stage": 1000 * float(np.median(ts[k:]))}))
+base = timing_frame(1936, 1096)
+zoom = [cv2.warpAffine(base, cv2.getRotationMatrix2D((968.3, 548.2), 0.0, 1.0 + 0.003 * t), (1936, 1096),
+                       flags=cv2.INTER_LINEAR)[8:1088, 8:1928] for t in range(k + runs)]
+out = {}
+for shot, frames, dense in (("pan", _pan_frames(k + runs, base), False),
+                            ("turning", _turning_frames(k + runs, base), False), ("dolly", zoom, True)):
+    with TSSStage(None, frames=k, bgr=False, dense_samples=dense) as st:
+        ts = []
+        for i, f in enumerate(frames):
+            t = time.perf_counter()
+            st(f, f, i)
+            ts.append(time.perf_counter() - t)
+        rows = st.stats[k:]
+        out.update({f"{shot} motion": float(np.median([r["flow_ms"] for r in rows])),
+                    f"{shot} resolve": float(np.median([r["resolve_ms"] for r in rows])),
+                    f"{shot} stage": 1000 * float(np.median(ts[k:]))})
+print(json.dumps(out))
 """
 TIMERS = {"filter": _TIMER, "tss": _TSS_TIMER}
 
@@ -93,7 +103,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--runs", type=int, default=15, help="frames timed per frame kind and round")
     ap.add_argument("--stage", choices=sorted(TIMERS), default="filter",
-                    help="filter: the default spatial filter; tss: the temporal supersampling stage on a 1080p pan")
+                    help="filter: the default spatial filter; tss: the temporal supersampling stage on 1080p "
+                         "shots (a pan, a turning layer, a dolly with dense motion)")
     args = ap.parse_args(argv)
     roots = [p.resolve() for p in args.checkouts]
     results: dict[Path, list[dict[str, float]]] = {r: [] for r in roots}

@@ -1195,6 +1195,8 @@ class TSSStage:
             raise ValueError(f"backend: expected 'device' or 'numpy', got {backend!r}")
         if show not in (None, "history"):
             raise ValueError(f"show: expected None or 'history', got {show!r}")
+        if not 1 <= int(grid) <= 8:   # kernels/tss.cl keeps one bit per footprint cell in a 64-bit word
+            raise ValueError(f"grid: expected 1 to 8 footprint cells per side, got {grid!r}")
         if mode not in ("adaptive", "dense", "global", "static"):
             raise ValueError(f"mode: expected adaptive, dense, global or static, got {mode!r}")
         self.frames, self.bgr, self.mode, self.show = int(frames), bool(bgr), mode, show
