@@ -108,8 +108,8 @@ def test_a_build_that_ends_the_driver_process_is_a_kernel_build_error():
 
 
 # Every test of the core passes and of the fast preset (~30 s), and the kernel-vs-reference tests of bridging,
-# reconstruction, GRLAA, FXAA, the FXAA fallback and temporal supersampling's two resolves (all of those files on
-# rusticl took 11.5 min here: too long for every CI run).
+# reconstruction, GRLAA, FXAA, the FXAA fallback, the moire pass and temporal supersampling's two resolves (all of
+# those files on rusticl took 11.5 min here: too long for every CI run).
 KERNEL_TESTS = ["tests/test_mlaa.py", "tests/test_bridge.py::test_kernel_matches_reference_on_random_wires",
                 "tests/test_reconstruct.py::test_kernel_matches_reference",
                 "tests/test_overlay.py::test_kernel_matches_reference",
@@ -120,6 +120,7 @@ KERNEL_TESTS = ["tests/test_mlaa.py", "tests/test_bridge.py::test_kernel_matches
                 "tests/test_fallback.py::test_kernel_matches_reference_in_a_render_frame",
                 "tests/test_fallback.py::test_a_supersampled_frame_takes_no_fxaa_and_regions_stay_local",
                 "tests/test_refine.py::test_kernel_with_known_tables",
+                "tests/test_moire.py::test_kernel_matches_reference",
                 "tests/test_fast.py",
                 "tests/test_tss.py::test_kernel_matches_reference",
                 "tests/test_tss.py::test_kernel_matches_reference_on_hdr_float_frames"]

@@ -245,7 +245,7 @@ class Filter:
                  subpixel: float = SUBPIXEL, fallback: str | bool = "auto", fast: bool = False,
                  preset: str | None = None, context: Context | None = None, show: str | None = None,
                  keep_regions: bool = False, footprint_table: np.ndarray | None | str = "default",
-                 refine_table: np.ndarray | None | str = "default"):
+                 refine_table: np.ndarray | None | str = "default", moire: bool = True):
         """`preset`: one of PRESETS; its options replace the keywords of the same names. `fallback`: FXAA
         for the pixels MLAA leaves (spatial/fallback.py): "auto" where the neighbourhood shows 1-spp
         aliasing and is no flat-colour art, with the footprint table in render regions; "edges" the same
@@ -255,7 +255,9 @@ class Filter:
         for a temporal stage with where="render". `footprint_table`: the fallback's filter table for render
         regions (spatial/footprint.py): "default" the shipped one, None none (render regions then get FXAA
         only), or a (BUCKETS, WEIGHTS) float32 array. `refine_table`: the second table after it
-        (spatial/refine.py): "default", None or a (BUCKETS, REFINE_WEIGHTS) array; only with a footprint table."""
+        (spatial/refine.py): "default", None or a (BUCKETS, REFINE_WEIGHTS) array; only with a footprint table.
+        `moire`: the last pass, point-sampled moire in two-colour art low-passed across its lines
+        (spatial/moire.py)."""
         if show not in SHOWS:
             raise ValueError(f"show: expected None or 'regions', got {show!r}")
         self.show = show
@@ -289,6 +291,7 @@ class Filter:
         if fallback not in FALLBACK_MODES:
             raise ValueError(f"fallback: expected one of {', '.join(FALLBACK_MODES)}, got {fallback!r}")
         self.fallback = "off" if self.fast else fallback
+        self.moire = bool(moire) and not self.fast
         from mlaa_stream.spatial.footprint import table_of
         from mlaa_stream.spatial.refine import refine_table_of
         self.footprint_table = table_of(footprint_table)
@@ -307,6 +310,7 @@ class Filter:
         self._recon_buf = None
         self._bridger = None
         self._fallback = None
+        self._moire = None
         self._fast = None
         self._frame_no = 0
         self._lock = threading.Lock()
@@ -349,6 +353,9 @@ class Filter:
                                           everywhere=self.fallback == "everywhere",
                                           regions=self.fallback != "edges", table=self.footprint_table,
                                           refine=self.refine_table)
+        if self.moire:
+            from mlaa_stream.spatial.moire import MoirePass
+            self._moire = MoirePass(self.context, fmt, self.options.linear, self.options.linear_input)
         return bufs
 
     # -- per frame ---------------------------------------------------------------------------
@@ -419,6 +426,8 @@ class Filter:
         if self._fallback is not None:  # FXAA where MLAA left pixels of an aliased neighbourhood
             last = self._fallback.enqueue(q, src, dst, bufs.edges, bufs.hdist, bufs.vdist, self._luts, self._lin,
                                           wait_for=[last], events=ev)
+        if self._moire is not None:  # moire in two-colour art; the blend's feature shares are free by now
+            last = self._moire.enqueue(q, src, dst, bufs.edges, self._luts, bufs.shares, wait_for=[last], events=ev)
         return last
 
     def profile(self, frame: np.ndarray, runs: int = 20, warmup: int = 3) -> dict[str, float]:
