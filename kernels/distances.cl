@@ -69,3 +69,38 @@ __kernel void vline_distances(__global const uchar *edges, __global ushort2 *vdi
         }
     }
 }
+
+// The same distances for GPUs (the filter picks it on devices that are not CPUs): one work item per column and
+// VCHUNK rows, so a frame has tens of thousands of work items instead of width / SEGMENT, and neighbouring work
+// items read neighbouring bytes. A line running into the chunk from above is followed up to its start, one
+// running out of it down to its end (read, not written: each chunk writes its own rows).
+#ifndef VCHUNK
+#define VCHUNK 32
+#endif
+
+// Does the line along the right border of column x go on from row y - 1 into row y (1 <= y < height)? Both rows
+// have the edge and no bottom edge of row y - 1 (in column x or x + 1) crosses between them.
+inline int vline_goes_on(__global const uchar *edges, int x, int y, int width)
+{
+    const size_t i = (size_t)y * width + x;
+    return (edges[i] & EDGE_RIGHT) && (edges[i - width] & EDGE_RIGHT)
+           && !((edges[i - width] | edges[i - width + 1]) & EDGE_BOTTOM);
+}
+
+__kernel void vline_distances_columns(__global const uchar *edges, __global ushort2 *vdist,
+                                      const int width, const int height)
+{
+    const int x = get_global_id(0), y0 = get_global_id(1) * VCHUNK;
+    if (x >= width - 1 || y0 >= height) return;
+    const int y1 = y0 + VCHUNK < height ? y0 + VCHUNK : height;
+    for (int y = y0; y < y1;) {
+        if (!(edges[(size_t)y * width + x] & EDGE_RIGHT)) { ++y; continue; }
+        int s = y, e = y;
+        if (y == y0)
+            while (s > 0 && vline_goes_on(edges, x, s, width)) --s;
+        while (e + 1 < height && vline_goes_on(edges, x, e + 1, width)) ++e;
+        const int last = e < y1 ? e : y1 - 1;
+        for (int j = y; j <= last; ++j) vdist[(size_t)j * width + x] = (ushort2)((ushort)(j - s), (ushort)(e - j));
+        y = e + 1;
+    }
+}

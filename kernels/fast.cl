@@ -349,6 +349,43 @@ __kernel void fast_vshapes(__global const uchar *edges, __global const uchar *bl
     }
 }
 
+// fast_vshapes for GPUs (FastPasses picks it on devices that are not CPUs): one work item per column and
+// FAST_VCHUNK rows instead of one per strip of 64 columns, so a frame has tens of thousands of work items and
+// neighbouring work items read neighbouring bytes. A run reaching into the chunk from above is followed up to its
+// start, one leaving it down to its end, each at most L_UNKNOWN + 1 rows past the chunk: a pixel farther than
+// L_UNKNOWN from its run's end gets L_UNKNOWN whatever lies beyond. The same bytes as fast_vshapes.
+#ifndef FAST_VCHUNK
+#define FAST_VCHUNK 32
+#endif
+
+// Does the run of right edges in column x go on from row y - 1 into row y (1 <= y < height)? Both rows have the
+// right edge and no bottom edge of row y - 1 in column x or x + 1 lies between (fast_vshapes' `cont`).
+inline int vrun_goes_on(__global const uchar *edges, int x, int y, int width)
+{
+    const int i = y * width + x;
+    return (edges[i] & E_RIGHT) && (edges[i - width] & E_RIGHT) && !(edges[i - width] & E_BOTTOM)
+           && !(x + 1 < width && (edges[i - width + 1] & E_BOTTOM));
+}
+
+__kernel void fast_vshapes_columns(__global const uchar *edges, __global uchar2 *vshapes, const int width,
+                                   const int height)
+{
+    const int x = get_global_id(0), y0 = get_global_id(1) * FAST_VCHUNK;
+    if (x >= width || y0 >= height) return;
+    const int y1 = y0 + FAST_VCHUNK < height ? y0 + FAST_VCHUNK : height;
+    for (int y = y0; y < y1;) {
+        if (!(edges[y * width + x] & E_RIGHT)) { ++y; continue; }
+        int s = y, e = y;
+        if (y == y0)
+            while (s > 0 && y0 - s <= L_UNKNOWN && vrun_goes_on(edges, x, s, width)) --s;
+        while (e + 1 < height && e - (y1 - 1) <= L_UNKNOWN && vrun_goes_on(edges, x, e + 1, width)) ++e;
+        const uchar c0 = v_crossing(edges, x, s - 1, width, height), c1 = v_crossing(edges, x, e, width, height);
+        const int last = e < y1 ? e : y1 - 1;
+        for (int t = y; t <= last; ++t) vshapes[t * width + x] = (uchar2)(shape_byte(t - s, c0), shape_byte(e - t, c1));
+        y = e + 1;
+    }
+}
+
 // Pass 3 (seed 004 "edge reconstruction"): each edge of the pixel rebuilt from its two L shapes (the line's
 // ends and crossings) as seed 000's silhouette: from half a pixel at an end with a crossing to nothing at the
 // line's middle; where it covers this pixel, the colour across the edge is mixed in (seed 000 eq. 2's

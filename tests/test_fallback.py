@@ -127,7 +127,8 @@ def _as(img8: np.ndarray, dtype, channels: int) -> np.ndarray:
 def test_kernel_matches_reference(mode, dtype, channels, bgr):
     """Exact: the pass is FXAA's kernel code (bit-identical to fxaa_reference, test_fxaa) behind integer
     gates, so the output must equal fallback_reference of the MLAA passes' output to the last bit
-    (float32: within 1e-6 of full scale)."""
+    (float32: within 1e-5 of full scale, test_fxaa's tolerance: OpenCL lets a device round divisions and square
+    roots within a few ulps; an NVIDIA H200 gave 1.5e-6 on one value of this case)."""
     frame8 = render_beside_art(12)
     if mode == "auto" and channels == 3:  # the case must have render regions and tiles outside them
         regions = regions_of(frame8)
@@ -142,7 +143,7 @@ def test_kernel_matches_reference(mode, dtype, channels, bgr):
     if channels > 1 or mode == "everywhere":  # (grey: channel 0 alone gives MLAA too few jaggies to open the gates)
         assert changed.sum() > 20, "the case must exercise the pass"
     if dtype == np.float32:
-        np.testing.assert_allclose(got, want, rtol=0, atol=1e-6)
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-5)
     else:
         np.testing.assert_array_equal(got, want)
 

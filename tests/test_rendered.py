@@ -339,3 +339,22 @@ def test_a_render_with_photographic_walls_keeps_its_render_regions():
     def removed(img: np.ndarray) -> float:
         return 1 - ((img - truth) ** 2).mean() / ((one - truth) ** 2).mean()
     assert removed(out) > removed(passes["out"]) + 0.1
+
+
+def test_a_machine_without_egl_reads_the_cache_and_names_what_it_cannot_render(tmp_path, monkeypatch):
+    """The cache is all a machine without EGL needs (a GPU box with the scenes carried over, say); a scene not in
+    it raises SceneUnavailable naming the scene and the cache."""
+    from mlaa_stream.yardstick.scenes import Scene, SceneUnavailable, generate_scenes
+    monkeypatch.setattr(R, "egl_available", lambda: (False, "no EGL here (test)"))
+    monkeypatch.setenv("MLAA_STREAM_CACHE", str(tmp_path))
+    rng = np.random.default_rng(3)
+    w, h = R.SIZES[False]
+    for name in R.SCENE_NAMES:
+        ins = rng.integers(0, 256, (2, h, w, 3), dtype=np.uint8)
+        R._save(R.cache_path(R.default_cache_dir(), name, False),
+                Scene(name, R.CATEGORY, ins, ins, np.zeros((2, h, w), bool)))
+    got = generate_scenes(names=["rendered"])
+    assert [s.name for s in got] == list(R.SCENE_NAMES) and all(R.LAST_RUN.cached.values())
+    R.cache_path(R.default_cache_dir(), "rendered_orbit", False).unlink()
+    with pytest.raises(SceneUnavailable, match="rendered_orbit.*no EGL here"):
+        generate_scenes(names=["rendered"])

@@ -22,6 +22,7 @@ FAST_THRESHOLD = 0.06  # weighted RGB difference (Rec. 709 weights), fraction of
 FAST_MAX_LEN = 31  # longest line an L shape follows, in pixels (5 bits of its byte)
 FAST_ROWS = 8  # rows per work item of the edge pass (each row's bottom edges are the next one's top edges)
 FAST_COLS = 64  # columns of a block (kernels/fast.cl: the shape sweeps' 64-bit masks)
+FAST_VCHUNK = 32  # rows per work item of fast_vshapes_columns (GPUs)
 E_TOP, E_RIGHT, E_BOTTOM, E_LEFT = 1, 2, 4, 8
 SIDE_A, SIDE_B, LONG = 1, 2, 128
 LUMA_WEIGHTS = np.array([0.2126, 0.7152, 0.0722])
@@ -30,7 +31,8 @@ LUMA_WEIGHTS = np.array([0.2126, 0.7152, 0.0722])
 def fast_defines(threshold: float = FAST_THRESHOLD, max_len: int = FAST_MAX_LEN) -> dict[str, object]:
     if not 2 <= int(max_len) <= 31:
         raise ValueError(f"max_len: expected 2..31 pixels (5 bits per L shape), got {max_len}")
-    return {"FAST_THRESHOLD": float(threshold), "FAST_MAX_LEN": int(max_len), "FAST_ROWS": FAST_ROWS}
+    return {"FAST_THRESHOLD": float(threshold), "FAST_MAX_LEN": int(max_len), "FAST_ROWS": FAST_ROWS,
+            "FAST_VCHUNK": FAST_VCHUNK}
 
 
 def _rgb(frame: np.ndarray) -> np.ndarray:
@@ -262,7 +264,9 @@ class FastPasses:
         # the edge pass in work groups of one work item on a CPU: with 8 (CPU_LOCAL) it is slower (docs/fast.md)
         self._edges_local = (1, 1) if context.device.type & cl.device_type.CPU else None
         self._k_hshapes = context.kernel("fast", "fast_hshapes", defs)
-        self._k_vshapes = context.kernel("fast", "fast_vshapes", defs)
+        self._column_sweeps = context.column_sweeps   # fast_vshapes_columns: a work item per column and chunk
+        self._k_vshapes = context.kernel("fast", "fast_vshapes_columns" if self._column_sweeps else "fast_vshapes",
+                                         defs)
         self._k_blend = context.kernel("fast", "fast_blend", defs)
         self._lin = linear_levels(context, "fast", defs, fmt, luts)  # integer frames: one load per level
         self._trap = cl.Buffer(context.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
@@ -283,8 +287,12 @@ class FastPasses:
                                          self.blocks, W, H, wait_for=wait_for)
         ev["fast_hshapes"] = self._k_hshapes(queue, (h,), None, self.edges, self.blocks, self.hshapes, W, H,
                                              wait_for=[ev["fast_edges"]])
-        ev["fast_vshapes"] = self._k_vshapes(queue, (bx,), None, self.edges, self.blocks, self.vshapes, W, H,
-                                             wait_for=[ev["fast_edges"]])
+        if self._column_sweeps:
+            ev["fast_vshapes"] = self._k_vshapes(queue, (w, -(-h // FAST_VCHUNK)), None, self.edges, self.vshapes,
+                                                 W, H, wait_for=[ev["fast_edges"]])
+        else:
+            ev["fast_vshapes"] = self._k_vshapes(queue, (bx,), None, self.edges, self.blocks, self.vshapes, W, H,
+                                                 wait_for=[ev["fast_edges"]])
         ev["fast_blend"] = self._k_blend(queue, (bx, h), None, src, self.edges, self.blocks, self.hshapes,
                                          self.vshapes, luts, self._lin, self._trap, dst, W, H,
                                          wait_for=[ev["fast_hshapes"], ev["fast_vshapes"]])

@@ -65,6 +65,7 @@ SHOWS = (None, "regions")  # Filter(show=...): debug views
 # with square ends, not a curve's bump: its areas are scaled by STEM_K (kernels/weights.cl, docs/spatial_tuning.md).
 STEM_MIN_L, STEM_K = 8, 0.25
 SEGMENT = 64  # pixels of a row per work item in the per-pixel passes (kernels/common.cl)
+VCHUNK = 32   # rows per work item of vline_distances_columns (kernels/distances.cl; GPUs)
 EDGE_ROWS = 4  # rows per work item in detect_edges (kernels/edges.cl): each row's CIELAB and samples shared
 
 # Named quality presets -> Filter keyword arguments (the CLI's --preset).
@@ -167,7 +168,7 @@ class FilterOptions:
             "SUBPIXEL_SHARE": float(SUBPIXEL_SHARE),
             "SUBPIXEL_END": float(self.subpixel * SUBPIXEL_END / SUBPIXEL) if SUBPIXEL > 0 else 0.0,
             "GRAIN_GUARD": int(self.grain_guard), "GRAIN_STEP": GRAIN_STEP, "GRAIN_MIN": GRAIN_MIN,
-            "SEGMENT": SEGMENT, "EDGE_ROWS": EDGE_ROWS,
+            "SEGMENT": SEGMENT, "EDGE_ROWS": EDGE_ROWS, "VCHUNK": VCHUNK,
             "RAMP_TEST": int(self.ramp > 0),
             "RAMP": float(self.ramp),
             "RAMP_NUM": ramp_fraction(self.ramp)[0], "RAMP_DEN": ramp_fraction(self.ramp)[1],
@@ -335,7 +336,8 @@ class Filter:
         self._k_edges = k("edges", "detect_edges", defs)
         self._lin = linear_levels(self.context, "edges", defs, fmt, self._luts)
         self._k_hdist = k("distances", "hline_distances", defs)
-        self._k_vdist = k("distances", "vline_distances", defs)
+        self._k_vdist = k("distances", "vline_distances_columns" if self.context.column_sweeps else "vline_distances",
+                          defs)
         self._k_weights = k("weights", "blend_weights", defs)
         self._k_blend = k("blend", "blend_neighbours", defs)
         self._k_shares = k("blend", "feature_shares", defs)
@@ -411,8 +413,8 @@ class Filter:
                                     np.float32(self.options.threshold), wait_for=after)
         ev["hlines"] = self._k_hdist(q, (max(h - 1, 1),), None, bufs.edges, bufs.hdist, W, H,
                                      wait_for=[ev["edges"]])
-        ev["vlines"] = self._k_vdist(q, (-(-w // SEGMENT),), None, bufs.edges, bufs.vdist, W, H,
-                                     wait_for=[ev["edges"]])
+        g_vlines = (w, -(-h // VCHUNK)) if self.context.column_sweeps else (-(-w // SEGMENT),)
+        ev["vlines"] = self._k_vdist(q, g_vlines, None, bufs.edges, bufs.vdist, W, H, wait_for=[ev["edges"]])
         ev["weights"] = self._k_weights(q, g2, None, src, bufs.edges, bufs.hdist, bufs.vdist, self._table,
                                         bufs.weights, W, H, wait_for=[ev["hlines"], ev["vlines"]])
         ev["copy"] = cl.enqueue_copy(q, dst, src, byte_count=bufs.fmt.nbytes, wait_for=after)

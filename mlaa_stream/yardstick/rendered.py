@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from mlaa_stream.yardstick.photo_textures import with_textures
-from mlaa_stream.yardstick.scenes import TRUTH_SPP, Scene, edge_mask, encode8, srgb8_to_linear
+from mlaa_stream.yardstick.scenes import TRUTH_SPP, Scene, SceneUnavailable, edge_mask, encode8, srgb8_to_linear
 from mlaa_stream.yardstick.town import town_world  # a second world, for held-out views only
 from mlaa_stream.yardstick.world import (Lighting, Material, Mesh, World, beam, box, cable, combine, cylinder, fbm,
                                       hexahedron, linear_tint, merge, quad, rgba, sag, sphere, tex_metal, tex_white,
@@ -803,7 +803,7 @@ def generate_rendered(small: bool = False, names: list[str] | None = None,
                       cache_dir: Path | None = None, *, use_cache: bool = True) -> list[Scene]:
     """The rendered scenes (or the named ones), from the cache when there, else rendered and cached.
 
-    Raises RuntimeError when a scene must be rendered and no EGL context can be made."""
+    Raises SceneUnavailable (a RuntimeError) when a scene must be rendered and no EGL context can be made."""
     names = list(SCENE_NAMES) if names is None else list(names)
     unknown = [n for n in names if n not in SCENE_NAMES]
     if unknown:
@@ -823,7 +823,8 @@ def generate_rendered(small: bool = False, names: list[str] | None = None,
                 if renderer is None:
                     ok, why = egl_available()
                     if not ok:
-                        raise RuntimeError(f"cannot render the '{CATEGORY}' scenes: {why}")
+                        raise SceneUnavailable(f"rendered scenes need a headless OpenGL context to render "
+                                               f"{name} (not in the cache {cache_dir}): {why}")
                     renderer = Renderer(_context(), *SIZES[bool(small)])
                 scene = render_scene(name, small, renderer)
                 if use_cache:
