@@ -7,6 +7,7 @@ import sys
 import click
 
 from mlaa_stream.device.context import DEVICE_ENV, DeviceError, _all_devices, default_choice, list_devices, select_device
+from mlaa_stream.device.drivers import unregistered_gpu_drivers
 
 
 @click.command("devices")
@@ -19,9 +20,14 @@ def devices_command() -> None:
         why = f"${DEVICE_ENV}={env}" if env else default_choice(_all_devices())[1]
     except DeviceError as exc:
         click.echo(f"mlaa-stream: {exc}", err=True)
+        for driver in unregistered_gpu_drivers():
+            click.echo(f"mlaa-stream: {driver.hint()}", err=True)
         sys.exit(3)
     for info in infos:
         mark = "*" if (info.name, info.platform) == (chosen.name.strip(), chosen.platform.name.strip()) else " "
         click.echo(f"{mark} {info.index}: {info.name}  [{info.kind}, {info.platform}, "
                    f"{info.compute_units} compute units, {info.global_mem_mb} MiB]")
     click.echo(f"* picked by default: {why} (--device N or ${DEVICE_ENV} picks another)")
+    if not any(info.kind == "GPU" for info in infos):
+        for driver in unregistered_gpu_drivers():
+            click.echo(f"note: {driver.hint()}")

@@ -101,3 +101,30 @@ def test_frames_of_sizes_off_the_work_group_grid_match_the_reference(shape):
     out = Filter(bridge=False).process(frame)
     ref = mlaa_reference(frame)
     assert np.abs(out.astype(int) - ref.astype(int)).max() <= 1
+
+
+def test_a_gpu_driver_without_an_icd_file_is_named_with_the_fix(tmp_path, monkeypatch):
+    """As on a GPU container: the vendor's library mounted, only PoCL registered (docs/portability.md)."""
+    from mlaa_stream.device import drivers
+    libs, vendors = tmp_path / "nvidia" / "lib64", tmp_path / "vendors"
+    libs.mkdir(parents=True)
+    vendors.mkdir()
+    (libs / "libnvidia-opencl.so.1").write_bytes(b"\x7fELF")
+    (libs / "libnvidia-opencl.so.580.159.04").write_bytes(b"\x7fELF")
+    (vendors / "pocl.icd").write_text("libpocl.so.2\n")
+    env = {drivers.VENDORS_ENV: str(vendors)}
+    found = drivers.unregistered_gpu_drivers((str(tmp_path / "empty"), str(libs)), env)
+    assert [(d.vendor, d.library, d.icd_name) for d in found] == [
+        ("NVIDIA", str(libs / "libnvidia-opencl.so.1"), "nvidia.icd")]
+    assert f"echo {libs / 'libnvidia-opencl.so.1'} > /etc/OpenCL/vendors/nvidia.icd" in found[0].hint()
+    # the command says it where it lists no GPU
+    monkeypatch.setattr(drivers, "LIBRARY_DIRS", (str(libs),))
+    monkeypatch.setenv(drivers.VENDORS_ENV, str(vendors))
+    res = CliRunner().invoke(main, ["devices"])
+    assert res.exit_code == 0 and ("note: NVIDIA's OpenCL driver is at" in res.output) == (" [GPU," not in res.output)
+    # registered (by a path or by the bare name, in the folder or as the one file $OCL_ICD_VENDORS names): silent
+    (vendors / "nvidia.icd").write_text(f"{libs / 'libnvidia-opencl.so.1'}\n")
+    assert drivers.unregistered_gpu_drivers((str(libs),), env) == []
+    one = tmp_path / "only.icd"
+    one.write_text("libnvidia-opencl.so.1\n")
+    assert drivers.unregistered_gpu_drivers((str(libs),), {drivers.VENDORS_ENV: str(one)}) == []
