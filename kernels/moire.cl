@@ -1,4 +1,4 @@
-// moire.cl -- point-sampled moire in two-colour art, low-passed across its lines (issue 15: the perspective
+// moire.cl -- point-sampled moire in two-colour art, low-passed (issue 15: the perspective
 // checkerboard). Reference: mlaa_stream.spatial.moire.moire_reference (the module's header says why).
 //
 // A pattern finer than the pixel grid (a checkerboard towards its horizon, a far grid of wires) is sampled
@@ -17,8 +17,8 @@
 //     region = line_v pixels (a band of moire, not one line of tiny text: its glyphs' bars are line pixels too)
 //   fire_v = two colours && lines >= MOIRE_LINES && MOIRE_ENDS * ends >= lines && region >= MOIRE_REGION;
 //   fire_h alike with line_h
-//   fire_v: out = (in(y-1) + in(y+1)) / 4 + in(y) / 2 in mix space (linear light when DECODE), encoded;
-//   else fire_h: the same across x; else the pixel stays (dst: the passes' output). Alpha stays.
+//   fire_v or fire_h: out = the input's 3 x 3 binomial ([1 2 1] / 4 along the row, then down the column) in mix
+//   space (linear light when DECODE), encoded; else the pixel stays (dst: the passes' output). Alpha stays.
 // Two kernels: moire_lines writes each pixel's line bits (bit 0 line_v, bit 1 line_h) and each tile's counts;
 // moire_lowpass, one work item per tile of MOIRE_TILE^2 pixels, skips every tile whose region holds under
 // MOIRE_REGION lines of both kinds: a frame without such patterns costs little more than a read of its edge
@@ -202,33 +202,34 @@ __kernel void moire_lowpass(__global const PIXEL_T *src, __global const uchar *s
             const ulong sum = (P[py + q][px + q] + P[py][px]) - (P[py][px + q] + P[py + q][px]);
             const int nv = (int)(sum & 1023), nh = (int)((sum >> 10) & 1023);
             const int ev = (int)((sum >> 20) & 1023), eh = (int)((sum >> 30) & 1023);
-            int axis = -1;   // 0: across the rows (line_v), 1: across the columns
-            if (sv >= MOIRE_REGION && nv >= MOIRE_LINES && MOIRE_ENDS * ev >= nv)
-                axis = 0;
-            else if (sh >= MOIRE_REGION && nh >= MOIRE_LINES && MOIRE_ENDS * eh >= nh)
-                axis = 1;
-            if (axis < 0 || !(two || moire_two_colours(src, x, y, w, h)))
+            const int fire = (sv >= MOIRE_REGION && nv >= MOIRE_LINES && MOIRE_ENDS * ev >= nv)
+                             || (sh >= MOIRE_REGION && nh >= MOIRE_LINES && MOIRE_ENDS * eh >= nh);
+            if (!fire || !(two || moire_two_colours(src, x, y, w, h)))
                 continue;
             const int i = y * w + x;
-            const int a = axis == 0 ? moire_at(x, y - 1, w, h) : moire_at(x - 1, y, w, h);
-            const int b = axis == 0 ? moire_at(x, y + 1, w, h) : moire_at(x + 1, y, w, h);
+            // the 3 x 3 window (clamped), row by row: k[3 r + c] is pixel (x + c - 1, y + r - 1)
+            int k[9];
+            for (int r = 0; r < 3; ++r)
+                for (int c = 0; c < 3; ++c)
+                    k[3 * r + c] = moire_at(x + c - 1, y + r - 1, w, h);
             const int planes = CHANNELS == 1 ? 1 : 3;
 #if DECODE && defined(PIXEL_IS_FLOAT)
             // display-encoded float frames: the tables span [0, 1]; a value outside it keeps the pixel
             int outside = 0;
-            for (int c = 0; c < planes; ++c) {
-                const int k[3] = {a, b, i};
-                for (int t = 0; t < 3; ++t) {
+            for (int c = 0; c < planes; ++c)
+                for (int t = 0; t < 9; ++t) {
                     const float v = src[(size_t)k[t] * CHANNELS + c];
                     outside |= !(v >= 0.0f && v <= 1.0f);
                 }
-            }
             if (outside)
                 continue;
 #endif
             for (int c = 0; c < planes; ++c) {
-                float m = 0.25f * (moire_mix(luts, src, a, c) + moire_mix(luts, src, b, c))
-                          + 0.5f * moire_mix(luts, src, i, c);
+                float row[3];   // [1 2 1] / 4 along each row, then the same down the three
+                for (int r = 0; r < 3; ++r)
+                    row[r] = 0.25f * (moire_mix(luts, src, k[3 * r], c) + moire_mix(luts, src, k[3 * r + 2], c))
+                             + 0.5f * moire_mix(luts, src, k[3 * r + 1], c);
+                float m = 0.25f * (row[0] + row[2]) + 0.5f * row[1];
 #if DECODE
                 m = lut_read(luts + 2 * (LUT_SIZE + 1), m);
 #endif

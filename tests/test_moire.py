@@ -54,9 +54,10 @@ def test_kernel_matches_reference(checker, k):
 
 def test_known_answer_dashes_alternating_row_by_row_become_their_mean():
     """Blocks of 4 columns that alternate colour row by row between solid blocks (dashes of isolated row pixels
-    with an end on each side, as a pattern finer than the rows gives): inside, every pixel becomes [1 2 1] / 4 of
-    its column in linear light -- the alternating ones the mean of the two colours, the solid ones their colour
-    (within one level: the tables); the frame's border rows keep the passes' output."""
+    with an end on each side, as a pattern finer than the rows gives): inside, every pixel becomes the 3 x 3
+    binomial ([1 2 1] x [1 2 1] / 16) of the input in linear light -- a block's inner columns exactly the mean of
+    the two colours, its border columns and their solid neighbours a quarter or so of the way -- within one level
+    (the tables); the frame's border rows keep the passes' output."""
     h, w = 40, 48
     yy, xx = np.mgrid[0:h, 0:w]
     alternating = (xx // 4) % 2 == 0
@@ -64,11 +65,16 @@ def test_known_answer_dashes_alternating_row_by_row_become_their_mean():
     fire_v, fire_h = moire_fires(frame, Filter(moire=False).intermediates(frame)["edges"])
     assert fire_v[4:-4, 4:-4].all() and not fire_h.any()
     out = Filter().process(frame).astype(np.float64)
-    mean = linear_to_srgb((srgb_to_linear(np.float64(A) / 255) + srgb_to_linear(np.float64(B) / 255)) / 2) * 255
+    lin = srgb_to_linear(frame / 255.0)
+    kernel = np.outer([1, 2, 1], [1, 2, 1]) / 16.0
+    want = sum(kernel[dy + 1, dx + 1] * np.roll(lin, (-dy, -dx), (0, 1)) for dy in (-1, 0, 1) for dx in (-1, 0, 1))
+    want = linear_to_srgb(want) * 255
     inner = np.zeros((h, w), bool)
     inner[4:-4, 4:-4] = True
-    assert np.abs(out[inner & alternating] - mean).max() <= 1.0
-    assert np.abs(out[inner & ~alternating] - np.float64(A)).max() <= 1.0
+    assert np.abs(out[inner] - want[inner]).max() <= 1.0
+    mean = linear_to_srgb((srgb_to_linear(np.float64(A) / 255) + srgb_to_linear(np.float64(B) / 255)) / 2) * 255
+    middle = inner & alternating & (xx % 4 > 0) & (xx % 4 < 3)
+    assert middle.sum() > 100 and np.abs(out[middle] - mean).max() <= 1.0
 
 
 @pytest.mark.parametrize("pattern", ["ruled_1px", "ruled_every_3", "checker_1px", "sparse_dashes", "third_colour"])

@@ -257,7 +257,7 @@ class Filter:
         regions (spatial/footprint.py): "default" the shipped one, None none (render regions then get FXAA
         only), or a (BUCKETS, WEIGHTS) float32 array. `refine_table`: the second table after it
         (spatial/refine.py): "default", None or a (BUCKETS, REFINE_WEIGHTS) array; only with a footprint table.
-        `moire`: the last pass, point-sampled moire in two-colour art low-passed across its lines
+        `moire`: the last pass, point-sampled moire in two-colour art low-passed (a 3 x 3 binomial)
         (spatial/moire.py)."""
         if show not in SHOWS:
             raise ValueError(f"show: expected None or 'regions', got {show!r}")

@@ -1,10 +1,11 @@
-"""Point-sampled moire in two-colour art, low-passed across its lines (issue 15: the perspective checkerboard).
+"""Point-sampled moire in two-colour art, low-passed (issue 15: the perspective checkerboard).
 
 A pattern finer than the pixel grid -- a checkerboard towards its horizon, a far grid of lines -- comes out of 1-spp
 sampling as dashed lines one pixel thick that alternate row by row: each row is another phase of the pattern, and
 the truth there is close to the mean of neighbouring rows (a grey haze with faint stripes), where MLAA reads stair
 steps and FXAA only blurs a little. Where a two-colour window is dense with such dashed isolated lines, the last
-pass of the default chain replaces the pixel with [1 2 1] / 4 of the input across the lines, in linear light.
+pass of the default chain replaces the pixel with the input's 3 x 3 binomial ([1 2 1] / 4 along rows and columns), in
+linear light.
 kernels/moire.cl states the rule; `moire_reference` computes the same in numpy. Why these constants:
 docs/spatial_tuning.md, "Moire in two-colour art".
 
@@ -135,7 +136,8 @@ def _region_sum(m: np.ndarray) -> np.ndarray:
 
 
 def moire_fires(colours: np.ndarray, edges: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Where the kernel low-passes across the rows (fire_v) and, elsewhere, across the columns (fire_h)."""
+    """Where the rule holds for lines across the rows (fire_v) and, elsewhere, across the columns (fire_h); the kernel
+    low-passes where either does."""
     line_v, line_h = line_bits(colours, edges)
     tone = two_colours(colours)
     fires = []
@@ -165,16 +167,19 @@ def moire_reference(src: np.ndarray, out: np.ndarray, edges: np.ndarray, *, line
     luts = device_luts()
     v = colours.astype(f32) * (f32(1.0) / pmax)
     mix = lut_read(luts, v).astype(f32) if decode else v
-    for fire, (dy, dx) in ((fire_v, (1, 0)), (fire_h, (0, 1))):
-        m = f32(0.25) * (_clamped(mix, -dy, -dx) + _clamped(mix, dy, dx)) + f32(0.5) * mix
-        if decode:
-            m = lut_read(luts[2 * (LUT_SIZE + 1):], m).astype(f32)
-        if decode and fmt.dtype == np.float32:   # the tables span [0, 1]: a value outside keeps the pixel
-            inside = (v >= 0) & (v <= 1)
-            fire = fire & (inside & _clamped(inside, -dy, -dx) & _clamped(inside, dy, dx)).all(-1)
-        if fmt.dtype == np.float32:
-            q = m
-        else:
-            q = np.floor(np.clip(m * pmax + f32(0.5), f32(0), pmax))
-        res[..., :planes] = np.where(fire[..., None], q.astype(fmt.dtype), res[..., :planes])
+    fire = fire_v | fire_h
+    row = f32(0.25) * (_clamped(mix, 0, -1) + _clamped(mix, 0, 1)) + f32(0.5) * mix   # the kernel's order
+    m = f32(0.25) * (_clamped(row, -1, 0) + _clamped(row, 1, 0)) + f32(0.5) * row
+    if decode:
+        m = lut_read(luts[2 * (LUT_SIZE + 1):], m).astype(f32)
+    if decode and fmt.dtype == np.float32:   # the tables span [0, 1]: a value outside the 3 x 3 keeps the pixel
+        inside = ((v >= 0) & (v <= 1)).all(-1)
+        for dy in (-1, 0, 1):
+            for dx in (-1, 0, 1):
+                fire = fire & _clamped(inside, dy, dx)
+    if fmt.dtype == np.float32:
+        q = m
+    else:
+        q = np.floor(np.clip(m * pmax + f32(0.5), f32(0), pmax))
+    res[..., :planes] = np.where(fire[..., None], q.astype(fmt.dtype), res[..., :planes])
     return res.reshape(np.shape(out))
