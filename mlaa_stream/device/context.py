@@ -201,7 +201,7 @@ class Context:
         self.poison: int | None = None  # a byte pattern for new buffers (see `buffer`)
         # The sweeps along columns (line distances, the fast preset's right-edge shapes): a work item per column and
         # chunk of rows on GPUs (thousands of threads, neighbours read neighbouring bytes), a work item per strip
-        # of 64 columns walking every row on CPUs (a few long sequential loops; docs/performance.md)
+        # of 64 columns walking every row on CPUs (a few long sequential loops; docs/portability.md, "On an NVIDIA GPU")
         self.column_sweeps = not (self.device.type & cl.device_type.CPU)
 
     @property
