@@ -76,6 +76,19 @@ class Console:
             click.echo(f"mlaa-stream: {msg}", err=True)
 
 
+def _warn_unseen_gpu(filt, device: str | None, con: Console) -> None:
+    """The default device is a CPU while a GPU's OpenCL driver sits on the machine unregistered (a GPU container
+    without its ICD file): say so once, with the fix (mlaa_stream/device/drivers.py)."""
+    import pyopencl as cl
+
+    from mlaa_stream.device.context import DEVICE_ENV
+    from mlaa_stream.device.drivers import unregistered_gpu_drivers
+    if device or os.environ.get(DEVICE_ENV) or not filt.context.device.type & cl.device_type.CPU:
+        return
+    for driver in unregistered_gpu_drivers():
+        con.warn(f"running on the CPU: {driver.hint()}")
+
+
 class Terminated(KeyboardInterrupt):
     """SIGTERM or SIGHUP arrived: unwinds every stage as Ctrl-C does (outputs in progress removed)."""
 
@@ -430,6 +443,7 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
             con.error(str(exc))
             return EXIT_USAGE if isinstance(exc, ValueError) else EXIT_FAILED
         con.info(f"device: {filt.device_name}")
+        _warn_unseen_gpu(filt, device, con)
         times = StageTimes()
         stage = temporal.stage(filt) if kind != "image" and cluster is None else None  # workers: their own
         if stage is not None and kind != "video":

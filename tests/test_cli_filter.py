@@ -551,3 +551,24 @@ def test_show_regions_dims_what_is_not_a_render(tmp_path):
     assert np.abs(b - a * SHOW_DIM).max() <= 1.0
     result = run(src, "-o", tmp_path / "fast.png", "--show", "regions", "--preset", "fast")
     assert result.exit_code == 2 and "--show regions" in stderr(result)
+
+
+def test_a_gpu_driver_the_loader_cannot_see_is_named_when_the_filter_runs_on_the_cpu(tmp_path, monkeypatch):
+    """A GPU container without the driver's ICD file: the frames come out (on the CPU) and a warning says how to
+    register the GPU; none when a device is asked for."""
+    from mlaa_stream.device import drivers
+    libs = tmp_path / "lib64"
+    libs.mkdir()
+    (libs / "libnvidia-opencl.so.1").write_bytes(b"\x7fELF")
+    (tmp_path / "vendors").mkdir()
+    monkeypatch.setattr(drivers, "LIBRARY_DIRS", (str(libs),))
+    monkeypatch.setenv(drivers.VENDORS_ENV, str(tmp_path / "vendors"))
+    monkeypatch.delenv("MLAA_STREAM_DEVICE", raising=False)
+    src = tmp_path / "in.png"
+    write_png(src, staircase())
+    r = run(src, "-o", tmp_path / "out.png")
+    assert r.exit_code == 0, stderr(r)
+    on_cpu = "CPU" in CliRunner().invoke(main, ["devices"]).output.splitlines()[0]
+    assert ("warning: running on the CPU: NVIDIA's OpenCL driver is at" in stderr(r)) == on_cpu
+    r = run(src, "-o", tmp_path / "out2.png", "--device", "0")
+    assert r.exit_code == 0 and "running on the CPU" not in stderr(r)
