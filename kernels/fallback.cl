@@ -42,7 +42,9 @@
 // renders: 21-47 %), or where at least SUPERSAMPLED_CLEAN_PCT % of its clean transitions (below) are ramps
 // (photo-textured renders with 3x3 samples per pixel whose strong steps are mostly hard), no pixel outside render
 // regions takes FXAA: the MLAA passes' own already-antialiased test judges its edges (docs/spatial_tuning.md,
-// "SUPERSAMPLED_PCT", "SUPERSAMPLED_CLEAN_PCT").
+// "SUPERSAMPLED_PCT", "SUPERSAMPLED_CLEAN_PCT"). Either verdict holds only while under SUPERSAMPLED_HARD_PCT % of the
+// strong steps are hard stair ends (clean transitions that are no ramps): 1-spp geometry, where photographic
+// textures make the ramps (docs/spatial_tuning.md, "SUPERSAMPLED_HARD_PCT").
 // In such a frame render regions are judged locally: a tile stays a region where, over its neighbourhood's sampled
 // tiles, under RENDER_RAMP_PCT % of the clean transitions (a strong step at a stair's end, or two steps the same
 // way, between two plateaus) are ramps. Magnified photographic textures make ramps too, enough to take a whole
@@ -112,6 +114,9 @@
 #endif
 #ifndef SUPERSAMPLED_CLEAN_PCT
 #define SUPERSAMPLED_CLEAN_PCT 75
+#endif
+#ifndef SUPERSAMPLED_HARD_PCT
+#define SUPERSAMPLED_HARD_PCT 12
 #endif
 #ifndef RENDER_RAMP_PCT
 #define RENDER_RAMP_PCT 50
@@ -463,7 +468,8 @@ __kernel void render_tiles(__global const int8 *rows, __global const uchar *coun
 // render[tile] = 1 where the tile is a render region: bit 0 of render_tiles, or bit 1 in a frame where at least
 // RENDER_FRAME_PCT % of the tiles with edge-bordering pixels have bit 0 (a render: every tile near a busy pixel).
 // In a supersampled frame (SUPERSAMPLED_MIN strong steps or more, SUPERSAMPLED_PCT % of them ramps, or as many clean
-// transitions, SUPERSAMPLED_CLEAN_PCT % of them ramps) only tiles with bit 2 as well (the neighbourhood's clean
+// transitions, SUPERSAMPLED_CLEAN_PCT % of them ramps; hard stair ends, clean transitions that are no ramps, under
+// SUPERSAMPLED_HARD_PCT % of the strong steps) only tiles with bit 2 as well (the neighbourhood's clean
 // transitions mostly hard steps), and the tiles' counts k = 0..2 are cleared: fxaa_fallback then finds no tile
 // busy and none with evidence outside render regions.
 // One work item per tile column; each sums the columns' shares (tiles_x of them: cheaper than another pass).
@@ -474,8 +480,9 @@ __kernel void render_frame(__global uchar *render, __global uchar *counts, __glo
     if (tx >= tiles_x) return;
     int8 total = (int8)(0);
     for (int k = 0; k < tiles_x; ++k) total += shares[k];
-    const int supersampled = (total.s2 >= SUPERSAMPLED_MIN && total.s3 * 100 >= SUPERSAMPLED_PCT * total.s2) ||
-                             (total.s4 >= SUPERSAMPLED_MIN && total.s5 * 100 >= SUPERSAMPLED_CLEAN_PCT * total.s4);
+    const int supersampled = ((total.s2 >= SUPERSAMPLED_MIN && total.s3 * 100 >= SUPERSAMPLED_PCT * total.s2) ||
+                              (total.s4 >= SUPERSAMPLED_MIN && total.s5 * 100 >= SUPERSAMPLED_CLEAN_PCT * total.s4)) &&
+                             (total.s4 - total.s5) * 100 < SUPERSAMPLED_HARD_PCT * total.s2;
     const uchar bit = total.s0 > 0 && total.s1 * 100 >= RENDER_FRAME_PCT * total.s0 ? 2 : 1;
     for (int ty = 0; ty < tiles_y; ++ty) {
         const int tile = ty * tiles_x + tx;

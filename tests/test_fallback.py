@@ -7,7 +7,7 @@ import pytest
 
 from mlaa_stream.device.colour import linear_to_srgb, srgb_to_linear
 from mlaa_stream.spatial.fallback import (FALLBACK_MIX, FALLBACK_TILE, FALLBACK_WEIGHT, RENDER_RADIUS,
-                                          SUPERSAMPLED_PCT, _frame_masks, fallback_reference, ramp_counts,
+                                          SUPERSAMPLED_HARD_PCT, SUPERSAMPLED_PCT, _frame_masks, fallback_reference, ramp_counts,
                                           region_pixels, render_regions_of, step_counts, supersampled)
 from mlaa_stream.spatial.fxaa import fxaa_mix_reference, luma_reference
 from mlaa_stream.spatial.filter import Filter
@@ -303,9 +303,12 @@ def test_clean_transitions_known_answer():
 
 def ramps_beside_render(seed: int) -> np.ndarray:
     """A render (shaded_polygons) beside sine bars 3 px apart (steps of 0.2-0.4 full scale, each continued by the
-    next): more than SUPERSAMPLED_PCT % of the frame's strong steps are ramps."""
+    next) crossed by black 1-px lines every 32 rows (edges: the bars' tiles are counted): more than SUPERSAMPLED_PCT
+    % of the frame's strong steps are ramps, under SUPERSAMPLED_HARD_PCT % hard stair ends."""
     xx = np.arange(144)[None, :, None]
     bars = np.broadcast_to(np.rint(127.5 + 120 * np.sin(xx * 2 * np.pi / 9 + seed)), (144, 144, 3)).astype(np.uint8)
+    bars = bars.copy()
+    bars[16::32] = 0
     return np.concatenate([shaded_polygons(seed, 144, 192), bars], 1)
 
 
@@ -325,6 +328,7 @@ def test_a_supersampled_frame_takes_no_fxaa_and_regions_stay_local(dtype, channe
     _, _, _, borders, _, rgb = _frame_masks(frame, passes["out"], passes["edges"], bgr)
     strong, ramps = ramp_counts(borders, luma_reference(rgb, False))
     assert ramps * 100 >= SUPERSAMPLED_PCT * strong
+    assert supersampled(borders, luma_reference(rgb, False))
     render_tiles = 192 // FALLBACK_TILE
     assert tiles[:, :render_tiles - RENDER_RADIUS].all()
     assert not tiles[:, render_tiles - RENDER_RADIUS:].any()
@@ -338,6 +342,33 @@ def test_a_supersampled_frame_takes_no_fxaa_and_regions_stay_local(dtype, channe
     else:
         np.testing.assert_array_equal(got, want)
         np.testing.assert_array_equal(got[outside], passes["out"][outside])
+
+
+@pytest.mark.parametrize("dtype,channels", [(np.uint8, 3), (np.uint16, 3), (np.float32, 3)])
+def test_hard_stair_ends_keep_a_frame_with_smooth_texture_a_render(dtype, channels):
+    """Known answer (SUPERSAMPLED_HARD_PCT): the render beside sine bars without crossing lines -- most of its
+    counted strong steps are ramps (a magnified photographic texture's look), yet at least SUPERSAMPLED_HARD_PCT % of
+    them are hard stair ends (1-spp geometry; supersampled frames measured 1-9 %) -- is no supersampled frame: the
+    render's tiles beside the bars stay render regions, and the kernel equals the reference."""
+    xx = np.arange(144)[None, :, None]
+    bars = np.broadcast_to(np.rint(127.5 + 120 * np.sin(xx * 2 * np.pi / 9)), (144, 144, 3)).astype(np.uint8)
+    frame = _as(np.concatenate([shaded_polygons(0, 144, 192), bars], 1), dtype, channels)
+    with Filter(keep_regions=True) as f, Filter(fallback="off") as g:
+        got, passes = f.process(frame), g.intermediates(frame)
+        tiles = f.last_regions.astype(bool)
+    _, _, _, borders, _, rgb = _frame_masks(frame, passes["out"], passes["edges"], False)
+    luma = luma_reference(rgb, False)
+    strong, ramps, clean, clean_ramps = (int(a.sum()) for a in step_counts(borders, luma))
+    assert strong >= 100 and ramps * 100 >= SUPERSAMPLED_PCT * strong
+    assert (clean - clean_ramps) * 100 >= SUPERSAMPLED_HARD_PCT * strong
+    assert not supersampled(borders, luma)
+    render_tiles = 192 // FALLBACK_TILE
+    assert tiles[:, :render_tiles].mean() > 0.9
+    want = fallback_reference(frame, passes["out"], passes["edges"], passes["hdist"], passes["vdist"])
+    if dtype == np.float32:
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-6)
+    else:
+        np.testing.assert_array_equal(got, want)
 
 
 def test_clean_ramps_alone_make_a_frame_supersampled():

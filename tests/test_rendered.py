@@ -317,10 +317,11 @@ def test_a_supersampled_render_is_left_to_the_mlaa_passes():
 
 @needs_egl
 def test_a_render_with_photographic_walls_keeps_its_render_regions():
-    """Known answer (fallback.py RENDER_RAMP_PCT): a 1-spp view whose walls and floors are photographs (the relief
-    set: magnified hill shading makes smooth ramps) is judged supersampled frame-wide -- over SUPERSAMPLED_PCT % of
-    its strong steps are ramps -- yet its geometric edges are hard steps, so most tiles stay render regions and the
-    default removes far more error than the MLAA passes alone (measured: 75 % regions, 0.586 against 0.440)."""
+    """Known answer (fallback.py SUPERSAMPLED_HARD_PCT): a 1-spp view whose walls and floors are photographs (the
+    relief set: magnified hill shading makes smooth ramps) has over SUPERSAMPLED_PCT % of its strong steps ramps, as
+    supersampled frames do, yet its geometric edges keep SUPERSAMPLED_HARD_PCT % or more of them hard stair ends: it
+    is judged no supersampled frame, nearly every tile is a render region and the default removes far more error
+    than the MLAA passes alone (measured: 18.4 % ramps, 13.3 % hard stair ends, 97 % regions, 0.683 against 0.440)."""
     from mlaa_stream.bench.rendered_views import VIEWS
     from mlaa_stream.spatial import fallback as F
     from mlaa_stream.spatial.filter import Filter
@@ -332,13 +333,17 @@ def test_a_render_with_photographic_walls_keeps_its_render_regions():
         renderer.release()
     with Filter(keep_regions=True) as f, Filter(fallback="off") as g:
         out, passes = f.process(one), g.intermediates(one)
-        assert (f.last_regions > 0).mean() > 0.6
+        assert (f.last_regions > 0).mean() > 0.9
     _, _, _, borders, _, rgb = F._frame_masks(one, passes["out"], passes["edges"], False)
-    assert F.supersampled(borders, F.luma_reference(rgb, False))
+    luma = F.luma_reference(rgb, False)
+    strong, ramps, clean, clean_ramps = (int(a.sum()) for a in F.step_counts(borders, luma))
+    assert ramps * 100 >= F.SUPERSAMPLED_PCT * strong
+    assert (clean - clean_ramps) * 100 >= F.SUPERSAMPLED_HARD_PCT * strong
+    assert not F.supersampled(borders, luma)
 
     def removed(img: np.ndarray) -> float:
         return 1 - ((img - truth) ** 2).mean() / ((one - truth) ** 2).mean()
-    assert removed(out) > removed(passes["out"]) + 0.1
+    assert removed(out) > removed(passes["out"]) + 0.2
 
 
 def test_a_machine_without_egl_reads_the_cache_and_names_what_it_cannot_render(tmp_path, monkeypatch):

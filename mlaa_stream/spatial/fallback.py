@@ -55,6 +55,11 @@ RENDER_RAMP_PCT, RAMP_FLANK = 50, 0.2
 # SUPERSAMPLED_MIN) are ramps: photo-textured renders with 3x3 samples per pixel whose strong steps are under
 # SUPERSAMPLED_PCT % ramps (1-spp renders: 0-73 %, photo-textured ones the top; docs/spatial_tuning.md).
 SUPERSAMPLED_CLEAN_PCT = 75
+# Neither makes a frame supersampled where SUPERSAMPLED_HARD_PCT % or more of its strong steps are hard stair ends
+# (clean transitions that are no ramps): 1-spp geometry, whatever ramps its textures make (1-spp renders judged
+# supersampled by their photographic textures 11.6-22.8 %, 3x3-sampled frames 1.0-9.0 %, 2x2-sampled 3.6-14.6 %;
+# docs/spatial_tuning.md, "SUPERSAMPLED_HARD_PCT").
+SUPERSAMPLED_HARD_PCT = 12
 COUNTS, NOT_MEASURED = 8, 255  # bytes per tile of count_changed's output; k = 3 of a tile not measured
 SHOW_DIM = 0.35  # Filter(show="regions"): pixels outside render regions keep this share of their colour
 
@@ -75,7 +80,7 @@ def fallback_defines(fmt: FrameFormat, linear: bool, linear_input: bool, everywh
             "RENDER_FRAME_PCT": RENDER_FRAME_PCT, "SUPERSAMPLED_STEP": float(SUPERSAMPLED_STEP),
             "SUPERSAMPLED_PCT": SUPERSAMPLED_PCT, "SUPERSAMPLED_MIN": SUPERSAMPLED_MIN,
             "RENDER_RAMP_PCT": RENDER_RAMP_PCT, "RAMP_FLANK": float(RAMP_FLANK),
-            "SUPERSAMPLED_CLEAN_PCT": SUPERSAMPLED_CLEAN_PCT,
+            "SUPERSAMPLED_CLEAN_PCT": SUPERSAMPLED_CLEAN_PCT, "SUPERSAMPLED_HARD_PCT": SUPERSAMPLED_HARD_PCT,
             "RENDER_RANGE": float(RENDER_RANGE), "RENDER_REGIONS": int(regions),
             "FOOTPRINT_TABLE": int(table), "FOOTPRINT_BUCKETS": BUCKETS, "FOOTPRINT_WEIGHTS": WEIGHTS,
             "REFINE_TABLE": int(refine), "REFINE_WEIGHTS": REFINE_WEIGHTS, "REFINE_GATE": float(REFINE_GATE),
@@ -412,15 +417,17 @@ def ramp_counts(borders: np.ndarray, luma: np.ndarray) -> tuple[int, int]:
 def supersampled(borders: np.ndarray, luma: np.ndarray) -> bool:
     """kernels/fallback.cl's verdict that a frame is already supersampled (render_frame): at least SUPERSAMPLED_MIN
     strong steps, SUPERSAMPLED_PCT % of them ramps, or at least SUPERSAMPLED_MIN clean transitions,
-    SUPERSAMPLED_CLEAN_PCT % of them ramps (step_counts)."""
+    SUPERSAMPLED_CLEAN_PCT % of them ramps (step_counts); either only while hard stair ends (clean transitions that
+    are no ramps) number under SUPERSAMPLED_HARD_PCT % of the strong steps."""
     return _supersampled_by(step_counts(borders, luma))
 
 
 def _supersampled_by(counts: tuple[np.ndarray, ...]) -> bool:
     """supersampled's verdict from step_counts' four per-pixel counts."""
     strong, ramps, clean, clean_ramps = (int(a.sum()) for a in counts)
-    return ((strong >= SUPERSAMPLED_MIN and ramps * 100 >= SUPERSAMPLED_PCT * strong)
-            or (clean >= SUPERSAMPLED_MIN and clean_ramps * 100 >= SUPERSAMPLED_CLEAN_PCT * clean))
+    return (((strong >= SUPERSAMPLED_MIN and ramps * 100 >= SUPERSAMPLED_PCT * strong)
+             or (clean >= SUPERSAMPLED_MIN and clean_ramps * 100 >= SUPERSAMPLED_CLEAN_PCT * clean))
+            and (clean - clean_ramps) * 100 < SUPERSAMPLED_HARD_PCT * strong)
 
 
 def render_regions(busy: np.ndarray, borders: np.ndarray, luma: np.ndarray) -> np.ndarray:
