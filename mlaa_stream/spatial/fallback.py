@@ -56,9 +56,9 @@ RENDER_RAMP_PCT, RAMP_FLANK = 50, 0.2
 # SUPERSAMPLED_PCT % ramps (1-spp renders: 0-73 %, photo-textured ones the top; docs/spatial_tuning.md).
 SUPERSAMPLED_CLEAN_PCT = 75
 # Neither makes a frame supersampled where SUPERSAMPLED_HARD_PCT % or more of its strong steps are hard stair ends
-# (clean transitions that are no ramps): 1-spp geometry, whatever ramps its textures make (1-spp renders judged
-# supersampled by their photographic textures 11.6-22.8 %, 3x3-sampled frames 1.0-9.0 %, 2x2-sampled 3.6-14.6 %;
-# docs/spatial_tuning.md, "SUPERSAMPLED_HARD_PCT").
+# (clean transitions that are no ramps): 1-spp geometry, whatever ramps its textures make (1-spp renders that their
+# photographic textures' ramps took for supersampled 10.0-22.8 %, 3x3-sampled frames 1.0-9.5 %, 2x2-sampled
+# 3.6-14.6 %; docs/spatial_tuning.md, "SUPERSAMPLED_HARD_PCT").
 SUPERSAMPLED_HARD_PCT = 12
 COUNTS, NOT_MEASURED = 8, 255  # bytes per tile of count_changed's output; k = 3 of a tile not measured
 SHOW_DIM = 0.35  # Filter(show="regions"): pixels outside render regions keep this share of their colour
