@@ -116,7 +116,8 @@ def test_every_world_is_complete(name):
 def test_photographic_textures_replace_the_opaque_ones(name):
     """yardstick/photo_textures.py: each set replaces every opaque texture but signs, windows, white and metal with a
     512 x 512 opaque photograph (varied: a standard deviation over 10 levels), keeps the others' makers, and leaves
-    the world otherwise as it was; "procedural" is the world itself, an unknown set is refused."""
+    the world otherwise as it was; with a repeat only the materials that read a replaced texture tile it that much
+    finer; "procedural" is the world itself, an unknown set or a repeat under 0 is refused."""
     from mlaa_stream.yardstick.photo_textures import KEPT, TEXTURE_SETS, with_textures
     world = R.build_world(name)
     assert with_textures(world, "procedural") is world
@@ -136,6 +137,14 @@ def test_photographic_textures_replace_the_opaque_ones(name):
             assert img[..., :3].std() > 10, (kind, tex)
             replaced += 1
         assert replaced >= 4
+        dense = with_textures(world, kind, repeat=4)
+        assert dense.textures.keys() == photo.textures.keys() and dense.meshes is world.meshes
+        for mat, m in world.materials.items():
+            swapped = photo.textures[m.texture] is not world.textures[m.texture]
+            want = (m.tile[0] / 4, m.tile[1] / 4) if swapped else m.tile
+            assert dense.materials[mat].tile == want and dense.materials[mat].texture == m.texture, mat
+    with pytest.raises(ValueError, match="positive texture repeat"):
+        with_textures(world, "photo", repeat=0)
 
 
 # --- rendered scenes ----------------------------------------------------------------------------

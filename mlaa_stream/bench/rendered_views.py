@@ -3,6 +3,7 @@
     python -m mlaa_stream.bench.rendered_views [--methods none,fxaa,mlaa,mlaa:screen,mlaa:rendered]
                                                [--sizes 640x360,960x540] [--samples 1,2,3]
                                                [--world plaza|town] [--textures procedural|photo|relief]
+                                               [--texture-repeat 4]
 
 The bench's rendered scenes are what the spatial filter's rendered-content rules were measured on; these views
 are not, so a rule that only fits those five scenes shows here. Each view is rendered like the bench's (1 spp at
@@ -46,13 +47,14 @@ WORLD_VIEWS = {"plaza": VIEWS, "town": TOWN_VIEWS}
 
 
 def render_views(sizes: list[tuple[int, int]], samples: tuple[int, ...] = (1,), world: str = "plaza",
-                 textures: str = "procedural") -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """{view_WIDTH: (input, truth)} for every view of `world` (its surfaces textured by the set `textures`) at every
-    size; for every n > 1 of `samples` also {view_WIDTH_NxN: (input supersampled with n x n samples per pixel,
-    truth)}."""
+                 textures: str = "procedural",
+                 texture_repeat: float = 1.0) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """{view_WIDTH: (input, truth)} for every view of `world` (its surfaces textured by the set `textures`, repeated
+    `texture_repeat` times as often) at every size; for every n > 1 of `samples` also {view_WIDTH_NxN: (input
+    supersampled with n x n samples per pixel, truth)}."""
     frames = {}
     for width, height in sizes:
-        renderer = Renderer(_context(), width, height, world, textures)
+        renderer = Renderer(_context(), width, height, world, textures, texture_repeat)
         try:
             for name, (eye, target, fov) in WORLD_VIEWS[world].items():
                 cam = Camera(eye, target, fov)
@@ -111,6 +113,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="the world's procedural textures, or photographs on its walls, roofs and floors "
                          "(yardstick/photo_textures.py: 'photo' crops of a portrait, 'relief' a hill-shaded "
                          "elevation model and a product photograph)")
+    ap.add_argument("--texture-repeat", type=float, default=1.0,
+                    help="with --textures photo|relief: the photographs repeat this many times as often across "
+                         "their surfaces (4: finer texels, minified through the mipmaps as on far walls)")
     ap.add_argument("--device", default=None)
     args = ap.parse_args(argv)
     ok, why = egl_available()
@@ -127,7 +132,7 @@ def main(argv: list[str] | None = None) -> int:
         samples = ()
     if not samples or min(samples) < 1:
         raise SystemExit(f"--samples: expected positive integers, comma-separated, got {args.samples!r}")
-    frames = render_views(sizes, samples, args.world, args.textures)
+    frames = render_views(sizes, samples, args.world, args.textures, args.texture_repeat)
     with_flip = M.flip_available()  # an optional part ([bench])
 
     def group(view: str) -> str:  # the mean's row: "mean" for 1-spp views, "mean NxN" for supersampled ones

@@ -72,11 +72,15 @@ def _makers(kind: str) -> list[Callable]:
     return [relief[0], _product, relief[1], relief[2]]
 
 
-def with_textures(world: World, kind: str) -> World:
+def with_textures(world: World, kind: str, repeat: float = 1.0) -> World:
     """`world` with its opaque textures (but for signs, windows, white and metal) replaced by the set `kind` (one of
-    TEXTURE_SETS; "procedural" returns the world unchanged), in the order of the world's texture table."""
+    TEXTURE_SETS; "procedural" returns the world unchanged), in the order of the world's texture table. `repeat`:
+    the replaced textures repeat that many times as often across their surfaces (> 1: finer texels, minified
+    through the mipmaps as far walls in real scenes are)."""
     if kind not in TEXTURE_SETS:
         raise ValueError(f"expected a texture set from {', '.join(TEXTURE_SETS)}, got {kind!r}")
+    if not repeat > 0:
+        raise ValueError(f"expected a positive texture repeat, got {repeat!r}")
     if kind == "procedural":
         return world
     makers, textures, k = _makers(kind), dict(world.textures), 0
@@ -85,4 +89,9 @@ def with_textures(world: World, kind: str) -> World:
             continue
         textures[name] = (makers[k % len(makers)], False)
         k += 1
-    return replace(world, textures=textures)
+    if repeat == 1.0:
+        return replace(world, textures=textures)
+    replaced = {name for name in textures if textures[name] is not world.textures[name]}
+    materials = {name: replace(m, tile=(m.tile[0] / repeat, m.tile[1] / repeat)) if m.texture in replaced else m
+                 for name, m in world.materials.items()}
+    return replace(world, textures=textures, materials=materials)

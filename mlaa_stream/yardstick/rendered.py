@@ -596,12 +596,14 @@ class Renderer:
     """The world on one GL context at one size: textures, meshes, an 8-bit target for the input
     and a float32 target for the truth passes (sharing one depth buffer)."""
 
-    def __init__(self, ctx, width: int, height: int, world: str = "plaza", textures: str = "procedural"):
-        """`textures`: the world's own procedural textures, or a set of photographs (yardstick/photo_textures.py)."""
+    def __init__(self, ctx, width: int, height: int, world: str = "plaza", textures: str = "procedural",
+                 texture_repeat: float = 1.0):
+        """`textures`: the world's own procedural textures, or a set of photographs (yardstick/photo_textures.py),
+        repeated `texture_repeat` times as often across their surfaces."""
         import moderngl
         self.mgl = moderngl
         self.ctx, self.width, self.height = ctx, width, height
-        self.world = with_textures(build_world(world), textures)
+        self.world = with_textures(build_world(world), textures, texture_repeat)
         self.prog = ctx.program(vertex_shader=VERTEX_SHADER, fragment_shader=FRAGMENT_SHADER)
         self.sky = ctx.program(vertex_shader=SKY_VERTEX, fragment_shader=SKY_FRAGMENT)
         self.sky_vao = ctx.vertex_array(self.sky, [])
