@@ -7,8 +7,9 @@ import pytest
 
 from mlaa_stream.device.colour import linear_to_srgb, srgb_to_linear
 from mlaa_stream.spatial.fallback import (FALLBACK_MIX, FALLBACK_TILE, FALLBACK_WEIGHT, RENDER_RADIUS,
-                                          SUPERSAMPLED_HARD_PCT, SUPERSAMPLED_PCT, _frame_masks, fallback_reference, ramp_counts,
-                                          region_pixels, render_regions_of, step_counts, supersampled)
+                                          SUPERSAMPLED_HARD_PCT, SUPERSAMPLED_MIN, SUPERSAMPLED_PCT, _frame_masks,
+                                          fallback_reference, ramp_counts, region_pixels, render_regions_of,
+                                          step_counts, supersampled)
 from mlaa_stream.spatial.fxaa import fxaa_mix_reference, luma_reference
 from mlaa_stream.spatial.filter import Filter
 
@@ -371,13 +372,15 @@ def test_hard_stair_ends_keep_a_frame_with_smooth_texture_a_render(dtype, channe
         np.testing.assert_array_equal(got, want)
 
 
-def test_clean_ramps_alone_make_a_frame_supersampled():
+@pytest.mark.parametrize("rows,periods", [(96, 12), (32, 6)])
+def test_clean_ramps_alone_make_a_frame_supersampled(rows, periods):
     """Known answer (SUPERSAMPLED_CLEAN_PCT): bars whose every edge is one pixel halfway between two plateaus (steps
     of 0.15, none strong) crossed by 1-px lines every 16 rows (strong steps, none a ramp: the MLAA passes' edges) --
     a frame whose strong steps are under SUPERSAMPLED_PCT % ramps -- is judged supersampled by its clean transitions,
-    all ramps: no pixel outside render regions takes FXAA, and the kernel equals the reference."""
+    all ramps: no pixel outside render regions takes FXAA, and the kernel equals the reference. The 32 x 48 frame
+    counts 84 clean transitions: at least SUPERSAMPLED_MIN, under the 100 once asked."""
     levels = np.array([0.2, 0.2, 0.2, 0.35, 0.5, 0.5, 0.5, 0.35])
-    luma8 = np.repeat(np.tile(levels, 12)[None], 96, 0)
+    luma8 = np.repeat(np.tile(levels, periods)[None], rows, 0)
     luma8[7::16] = 0.9
     frame = np.rint(255 * luma8)[..., None].repeat(3, 2).astype(np.uint8)
     with Filter(keep_regions=True) as f, Filter(fallback="off") as g:
@@ -385,8 +388,8 @@ def test_clean_ramps_alone_make_a_frame_supersampled():
     _, _, _, borders, _, rgb = _frame_masks(frame, passes["out"], passes["edges"], False)
     luma = luma_reference(rgb, False)
     strong, ramps, clean, clean_ramps = (int(a.sum()) for a in step_counts(borders, luma))
-    assert strong >= 100 and ramps * 100 < SUPERSAMPLED_PCT * strong
-    assert clean >= 100 and clean_ramps == clean
+    assert strong >= SUPERSAMPLED_MIN and ramps * 100 < SUPERSAMPLED_PCT * strong
+    assert clean >= SUPERSAMPLED_MIN and clean_ramps == clean
     assert supersampled(borders, luma)
     want = fallback_reference(frame, passes["out"], passes["edges"], passes["hdist"], passes["vdist"])
     np.testing.assert_array_equal(got, want)

@@ -44,7 +44,7 @@ RENDER_FRAME_PCT = 45
 # edge-bordering pixels, a quarter of them sampled; at least SUPERSAMPLED_MIN steps) are ramps -- the step before or
 # after goes the same way by half as much or more -- no pixel outside render regions takes FXAA (1-spp renders with
 # procedural textures 0-9 %, supersampled ones 21-47 %: docs/spatial_tuning.md, "SUPERSAMPLED_PCT") ...
-SUPERSAMPLED_STEP, SUPERSAMPLED_PCT, SUPERSAMPLED_MIN = 0.2, 14, 100
+SUPERSAMPLED_STEP, SUPERSAMPLED_PCT, SUPERSAMPLED_MIN = 0.2, 14, 64
 # ... and there render regions are judged locally: a tile stays one where, in its neighbourhood's sampled tiles,
 # under RENDER_RAMP_PCT % of the clean transitions are ramps -- a transition is clean where the luma steps beside
 # it are at most RAMP_FLANK of it: a hard step at a stair's end (1-spp geometry) or one pixel between two plateaus
