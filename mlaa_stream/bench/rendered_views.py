@@ -3,7 +3,7 @@
     python -m mlaa_stream.bench.rendered_views [--methods none,fxaa,mlaa,mlaa:screen,mlaa:rendered]
                                                [--sizes 640x360,960x540] [--samples 1,2,3]
                                                [--world plaza|town] [--textures procedural|photo|relief]
-                                               [--texture-repeat 4]
+                                               [--texture-repeat 4] [--msaa 4]
 
 The bench's rendered scenes are what the spatial filter's rendered-content rules were measured on; these views
 are not, so a rule that only fits those five scenes shows here. Each view is rendered like the bench's (1 spp at
@@ -12,7 +12,9 @@ bench (mlaa_stream.bench.accuracy.METHODS) prints error removed % / damage away 
 view, with the mean error removed. `--samples 2,3`: also inputs already supersampled (2x2, 3x3 samples per pixel on
 an ordered grid, as renderers with supersampling make them; view_WIDTH_NxN): a filter should leave them about as
 they are. `--textures photo|relief`: the worlds' walls, roofs and floors textured with photographs (as real scenes
-are; yardstick/photo_textures.py). Needs what the rendered scenes need (EGL; `pip install 'mlaa-stream[bench]'`
+are; yardstick/photo_textures.py; `--texture-repeat 4`: four times finer). `--msaa 4`: also inputs drawn with MSAA
+(view_WIDTH_msaa4: edges from 4 coverage samples, shading once per pixel, as games with multisampling draw them).
+Needs what the rendered scenes need (EGL; `pip install 'mlaa-stream[bench]'`
 for FLIP). A benchmark, never a unit test.
 """
 from __future__ import annotations
@@ -47,11 +49,12 @@ WORLD_VIEWS = {"plaza": VIEWS, "town": TOWN_VIEWS}
 
 
 def render_views(sizes: list[tuple[int, int]], samples: tuple[int, ...] = (1,), world: str = "plaza",
-                 textures: str = "procedural",
-                 texture_repeat: float = 1.0) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+                 textures: str = "procedural", texture_repeat: float = 1.0,
+                 msaa: tuple[int, ...] = ()) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """{view_WIDTH: (input, truth)} for every view of `world` (its surfaces textured by the set `textures`, repeated
     `texture_repeat` times as often) at every size; for every n > 1 of `samples` also {view_WIDTH_NxN: (input
-    supersampled with n x n samples per pixel, truth)}."""
+    supersampled with n x n samples per pixel, truth)}; for every n of `msaa` {view_WIDTH_msaaN: (input drawn with
+    n-sample MSAA, truth)}."""
     frames = {}
     for width, height in sizes:
         renderer = Renderer(_context(), width, height, world, textures, texture_repeat)
@@ -62,6 +65,8 @@ def render_views(sizes: list[tuple[int, int]], samples: tuple[int, ...] = (1,), 
                 for n in samples:
                     key = f"{name}_{width}" if n == 1 else f"{name}_{width}_{n}x{n}"
                     frames[key] = (renderer.input_frame(cam) if n == 1 else renderer.truth_frame(cam, n), truth)
+                for n in msaa:
+                    frames[f"{name}_{width}_msaa{n}"] = (renderer.msaa_frame(cam, n), truth)
         finally:
             renderer.release()
     return frames
@@ -116,6 +121,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--texture-repeat", type=float, default=1.0,
                     help="with --textures photo|relief: the photographs repeat this many times as often across "
                          "their surfaces (4: finer texels, minified through the mipmaps as on far walls)")
+    ap.add_argument("--msaa", default="",
+                    help="also inputs drawn with MSAA, this many samples per pixel (comma-separated; as games draw "
+                         "them: coverage per sample, shading once per pixel; view_WIDTH_msaaN)")
     ap.add_argument("--device", default=None)
     args = ap.parse_args(argv)
     ok, why = egl_available()
@@ -132,12 +140,21 @@ def main(argv: list[str] | None = None) -> int:
         samples = ()
     if not samples or min(samples) < 1:
         raise SystemExit(f"--samples: expected positive integers, comma-separated, got {args.samples!r}")
-    frames = render_views(sizes, samples, args.world, args.textures, args.texture_repeat)
+    try:
+        msaa = tuple(int(v) for v in args.msaa.split(",")) if args.msaa else ()
+    except ValueError:
+        msaa = (0,)
+    if msaa and min(msaa) < 2:
+        raise SystemExit(f"--msaa: expected sample counts of 2 or more, comma-separated, got {args.msaa!r}")
+    try:
+        frames = render_views(sizes, samples, args.world, args.textures, args.texture_repeat, msaa)
+    except ValueError as e:
+        raise SystemExit(f"--msaa: {e}") from None
     with_flip = M.flip_available()  # an optional part ([bench])
 
-    def group(view: str) -> str:  # the mean's row: "mean" for 1-spp views, "mean NxN" for supersampled ones
+    def group(view: str) -> str:  # the mean's row: "mean" for 1-spp views, "mean NxN" / "mean msaaN" for the others
         last = view.rsplit("_", 1)[-1]
-        return f"mean {last}" if "x" in last else "mean"
+        return f"mean {last}" if "x" in last or last.startswith("msaa") else "mean"
 
     print("view".ljust(20) + "".join(m.rjust(24) for m in methods))
     removed = {(m, group(v)): [] for m in methods for v in frames}

@@ -704,6 +704,26 @@ class Renderer:
         """The supersampled truth encoded like the other scenes' (encode8): (H, W, 3) uint8."""
         return encode8(self.truth_linear(cam, spp))
 
+    def msaa_frame(self, cam: Camera, samples: int = 4) -> np.ndarray:
+        """The world as a game with MSAA draws it: coverage and depth from `samples` samples per pixel, each
+        fragment shaded once, resolved (the samples' mean) in linear light and encoded like the truth: (H, W, 3)
+        uint8. Raises ValueError when the GL driver offers no such sample count (llvmpipe: 4, not 8)."""
+        key = f"_msaa{samples}"
+        if not hasattr(self, key):
+            size = (self.width, self.height)
+            try:
+                colour = self.ctx.renderbuffer(size, 4, samples=samples, dtype="f4")
+            except self.mgl.Error as e:
+                raise ValueError(f"this GL driver draws no MSAA with {samples} samples: {e}") from None
+            setattr(self, key, self.ctx.framebuffer([colour], self.ctx.depth_renderbuffer(size, samples=samples)))
+        fbo = getattr(self, key)
+        fbo.use()
+        fbo.clear(0, 0, 0, 1, depth=1.0)
+        self.draw(cam, 0.0, 0.0, encode=False)
+        self.ctx.copy_framebuffer(self.fbo32, fbo)  # the resolve: the mean of each pixel's samples
+        lin = np.frombuffer(self.fbo32.read(components=3, dtype="f4"), np.float32).reshape(self.height, self.width, 3)
+        return encode8(np.flipud(lin).astype(np.float64))
+
     def release(self) -> None:
         for _, vao, bufs in self.draws:
             vao.release()
@@ -713,6 +733,8 @@ class Renderer:
             t.release()
         for obj in (self.sky_vao, self.prog, self.sky, self.fbo8, self.fbo32):
             obj.release()
+        for key in [k for k in vars(self) if k.startswith("_msaa")]:
+            getattr(self, key).release()
 
 
 def reprojection(cam_from: Camera, cam_to: Camera, depth: np.ndarray) -> np.ndarray:
