@@ -100,6 +100,9 @@
 #ifndef RENDER_RANGE
 #define RENDER_RANGE (24.0f / 255.0f)
 #endif
+#ifndef RENDER_DIV_1SPP
+#define RENDER_DIV_1SPP 20
+#endif
 #ifndef RENDER_FRAME_PCT
 #define RENDER_FRAME_PCT 45
 #endif
@@ -440,9 +443,11 @@ __kernel void render_rows(__global const uchar *counts, __global int8 *rows, con
 // render[tile] = the neighbourhood tests of the tiles within RENDER_RADIUS (rows' sums over the column), bit 0: it
 // looks like a 1-spp render -- RENDER_MIN busy pixels in measured tiles (low-contrast tiles cannot show whether they
 // are two-toned), busy pixels a share of the edge pixels, and not two-toned; bit 1: it holds a busy pixel (the second
-// separable pass); bit 2: under RENDER_RAMP_PCT % of its clean transitions are ramps (or it has none).
+// separable pass); bit 2: under RENDER_RAMP_PCT % of its clean transitions are ramps (or it has none); bit 3: bit 0
+// with busy pixels only 1 / RENDER_DIV_1SPP of the edge pixels (render_frame takes it in 1-spp frames).
 // shares[tx] = the column's tiles with edge-bordering pixels, of those its tiles with bit 0, and their strong steps,
-// ramps, clean transitions and clean ramps (render_frame's evidence). One work item per tile column, a running sum.
+// ramps, clean transitions and clean ramps (render_frame's evidence), and its tiles with bit 3. One work item per
+// tile column, a running sum.
 __kernel void render_tiles(__global const int8 *rows, __global const uchar *counts, __global uchar *render,
                            __global int8 *shares, const int tiles_x, const int tiles_y)
 {
@@ -454,12 +459,14 @@ __kernel void render_tiles(__global const int8 *rows, __global const uchar *coun
     for (int ty = 0; ty < tiles_y; ++ty) {
         if (ty + RENDER_RADIUS < tiles_y) sum += rows[(ty + RENDER_RADIUS) * tiles_x + tx];
         const int tile = ty * tiles_x + tx;
-        const int rendered = sum.s2 >= RENDER_MIN && sum.s0 * RENDER_DIV >= sum.s1 &&
+        const int measured = sum.s2 >= RENDER_MIN &&
                              sum.s3 * 100 <= RENDER_NEAR_PCT * (FALLBACK_TILE * FALLBACK_TILE) * sum.s2;
+        const int rendered = measured && sum.s0 * RENDER_DIV >= sum.s1;
+        const int relaxed = measured && sum.s0 * RENDER_DIV_1SPP >= sum.s1;
         const int hard = sum.s5 * 100 < RENDER_RAMP_PCT * (sum.s4 > 1 ? sum.s4 : 1);
-        render[tile] = (uchar)((hard << 2) | ((sum.s0 > 0) << 1) | rendered);
+        render[tile] = (uchar)((relaxed << 3) | (hard << 2) | ((sum.s0 > 0) << 1) | rendered);
         __global const uchar *c = counts + COUNTS * tile;
-        if (c[1]) share += (int8)(1, rendered, c[4], c[5], c[6], c[7], 0, 0);
+        if (c[1]) share += (int8)(1, rendered, c[4], c[5], c[6], c[7], relaxed, 0);
         if (ty >= RENDER_RADIUS) sum -= rows[(ty - RENDER_RADIUS) * tiles_x + tx];
     }
     shares[tx] = share;
@@ -467,6 +474,9 @@ __kernel void render_tiles(__global const int8 *rows, __global const uchar *coun
 
 // render[tile] = 1 where the tile is a render region: bit 0 of render_tiles, or bit 1 in a frame where at least
 // RENDER_FRAME_PCT % of the tiles with edge-bordering pixels have bit 0 (a render: every tile near a busy pixel).
+// In a frame whose hard stair ends (clean transitions that are no ramps) are SUPERSAMPLED_HARD_PCT % or more of its
+// strong steps -- 1-spp geometry -- bit 3 stands for bit 0: a video codec's blur makes the MLAA passes skip many of
+// a compressed render's edges as already antialiased, and fewer of its pixels count as busy.
 // In a supersampled frame (SUPERSAMPLED_MIN strong steps or more, SUPERSAMPLED_PCT % of them ramps, or as many clean
 // transitions, SUPERSAMPLED_CLEAN_PCT % of them ramps; hard stair ends, clean transitions that are no ramps, under
 // SUPERSAMPLED_HARD_PCT % of the strong steps) only tiles with bit 2 as well (the neighbourhood's clean
@@ -483,7 +493,9 @@ __kernel void render_frame(__global uchar *render, __global uchar *counts, __glo
     const int supersampled = ((total.s2 >= SUPERSAMPLED_MIN && total.s3 * 100 >= SUPERSAMPLED_PCT * total.s2) ||
                               (total.s4 >= SUPERSAMPLED_MIN && total.s5 * 100 >= SUPERSAMPLED_CLEAN_PCT * total.s4)) &&
                              (total.s4 - total.s5) * 100 < SUPERSAMPLED_HARD_PCT * total.s2;
-    const uchar bit = total.s0 > 0 && total.s1 * 100 >= RENDER_FRAME_PCT * total.s0 ? 2 : 1;
+    const int one_spp = total.s2 > 0 && (total.s4 - total.s5) * 100 >= SUPERSAMPLED_HARD_PCT * total.s2;
+    const int regions = one_spp ? total.s6 : total.s1;
+    const uchar bit = total.s0 > 0 && regions * 100 >= RENDER_FRAME_PCT * total.s0 ? 2 : (one_spp ? 8 : 1);
     for (int ty = 0; ty < tiles_y; ++ty) {
         const int tile = ty * tiles_x + tx;
         render[tile] = (uchar)((render[tile] & bit) != 0 && (!supersampled || (render[tile] & 4) != 0));

@@ -356,6 +356,38 @@ def test_a_render_with_photographic_walls_keeps_its_render_regions():
 
 
 @needs_egl
+def test_a_compressed_render_keeps_its_render_regions():
+    """Known answer (fallback.py RENDER_DIV_1SPP): the town's tele_wires view at 640x360 through H.264 (crf 23): the
+    codec's blur makes the MLAA passes skip many of its edges, so under a tenth of its edge pixels are busy; its hard
+    stair ends, SUPERSAMPLED_HARD_PCT % or more of its strong steps, mark 1-spp geometry, where a twentieth suffices:
+    the frame is a render and nearly every tile a region (measured 95 %; 18 % with a tenth), and the default removes
+    far more of the error (measured 0.392; 0.193 with a tenth). The kernel's regions equal the reference's."""
+    from mlaa_stream.bench.codec_check import through_h264
+    from mlaa_stream.bench.rendered_views import TOWN_VIEWS
+    from mlaa_stream.spatial import fallback as F
+    from mlaa_stream.spatial.filter import Filter
+    renderer = R.Renderer(R._context(), 640, 360, "town")
+    try:
+        cam = R.Camera(*TOWN_VIEWS["tele_wires"])
+        raw, truth = renderer.input_frame(cam), renderer.truth_frame(cam).astype(np.float64)
+    finally:
+        renderer.release()
+    frame = through_h264(np.stack([raw, raw]), 23)[0]
+    with Filter(keep_regions=True) as f, Filter(fallback="off") as g:
+        out, passes = f.process(frame), g.intermediates(frame)
+        tiles = f.last_regions.astype(bool)
+    _, _, _, borders, changed, rgb = F._frame_masks(frame, passes["out"], passes["edges"], False)
+    strong, _, clean, clean_ramps = (int(a.sum()) for a in F.step_counts(borders, F.luma_reference(rgb, False)))
+    assert (clean - clean_ramps) * 100 >= F.SUPERSAMPLED_HARD_PCT * strong
+    assert (changed & borders).sum() * F.RENDER_DIV < borders.sum()
+    assert tiles.mean() > 0.8
+    regions = F.render_regions_of(frame, passes["out"], passes["edges"])
+    np.testing.assert_array_equal(regions, F.region_pixels(tiles, *regions.shape))
+    removed = 1 - ((out - truth) ** 2).mean() / ((frame - truth) ** 2).mean()
+    assert removed > 0.3
+
+
+@needs_egl
 def test_an_msaa_frame_antialiases_edges_and_keeps_the_shading():
     """Known answer (Renderer.msaa_frame): MSAA shades each pixel once, so where the 1-spp input's 3x3 is flat (within
     2 levels) the MSAA frame equals it within a level (measured: 99.5 % of those pixels); its edges are resolved

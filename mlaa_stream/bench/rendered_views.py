@@ -3,7 +3,7 @@
     python -m mlaa_stream.bench.rendered_views [--methods none,fxaa,mlaa,mlaa:screen,mlaa:rendered]
                                                [--sizes 640x360,960x540] [--samples 1,2,3]
                                                [--world plaza|town] [--textures procedural|photo|relief]
-                                               [--texture-repeat 4] [--msaa 4]
+                                               [--texture-repeat 4] [--msaa 4] [--crf 18,23]
 
 The bench's rendered scenes are what the spatial filter's rendered-content rules were measured on; these views
 are not, so a rule that only fits those five scenes shows here. Each view is rendered like the bench's (1 spp at
@@ -14,6 +14,7 @@ an ordered grid, as renderers with supersampling make them; view_WIDTH_NxN): a f
 they are. `--textures photo|relief`: the worlds' walls, roofs and floors textured with photographs (as real scenes
 are; yardstick/photo_textures.py; `--texture-repeat 4`: four times finer). `--msaa 4`: also inputs drawn with MSAA
 (view_WIDTH_msaa4: edges from 4 coverage samples, shading once per pixel, as games with multisampling draw them).
+`--crf 18,23`: also each 1-spp view through H.264 (view_WIDTH_crfN), as rendered video reaches the filter.
 Needs what the rendered scenes need (EGL; `pip install 'mlaa-stream[bench]'`
 for FLIP). A benchmark, never a unit test.
 """
@@ -124,6 +125,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--msaa", default="",
                     help="also inputs drawn with MSAA, this many samples per pixel (comma-separated; as games draw "
                          "them: coverage per sample, shading once per pixel; view_WIDTH_msaaN)")
+    ap.add_argument("--crf", default="",
+                    help="also every 1-spp view through H.264 at these CRFs (comma-separated; libx264 through PyAV, "
+                         "as mlaa_stream.bench.codec_check; view_WIDTH_crfN), scored against the clean truth")
     ap.add_argument("--device", default=None)
     args = ap.parse_args(argv)
     ok, why = egl_available()
@@ -150,11 +154,21 @@ def main(argv: list[str] | None = None) -> int:
         frames = render_views(sizes, samples, args.world, args.textures, args.texture_repeat, msaa)
     except ValueError as e:
         raise SystemExit(f"--msaa: {e}") from None
+    try:
+        crfs = tuple(int(v) for v in args.crf.split(",")) if args.crf else ()
+    except ValueError:
+        raise SystemExit(f"--crf: expected integers, comma-separated, got {args.crf!r}") from None
+    if crfs:
+        from mlaa_stream.bench.codec_check import through_h264
+        for view, (inp, truth) in list(frames.items()):
+            if view.rsplit("_", 1)[-1].isdigit():  # a 1-spp view
+                for crf in crfs:
+                    frames[f"{view}_crf{crf}"] = (through_h264(np.stack([inp, inp]), crf)[0], truth)
     with_flip = M.flip_available()  # an optional part ([bench])
 
-    def group(view: str) -> str:  # the mean's row: "mean" for 1-spp views, "mean NxN" / "mean msaaN" for the others
+    def group(view: str) -> str:  # the mean's row: "mean" for 1-spp views, "mean NxN" / "mean msaaN" / "mean crfN"
         last = view.rsplit("_", 1)[-1]
-        return f"mean {last}" if "x" in last or last.startswith("msaa") else "mean"
+        return f"mean {last}" if "x" in last or last.startswith(("msaa", "crf")) else "mean"
 
     print("view".ljust(20) + "".join(m.rjust(24) for m in methods))
     removed = {(m, group(v)): [] for m in methods for v in frames}

@@ -39,6 +39,10 @@ FALLBACK_KEEP_RUN = 16
 # renders too, and a video codec's smoothing fails the busy counts; flat-colour art has no busy pixel).
 RENDER_RADIUS, RENDER_MIN, RENDER_DIV, RENDER_NEAR_PCT, RENDER_RANGE = 7, 48, 10, 88, 24 / 255
 RENDER_FRAME_PCT = 45
+# In a frame whose hard stair ends are SUPERSAMPLED_HARD_PCT % or more of its strong steps (1-spp geometry, below),
+# busy pixels need only be 1 / RENDER_DIV_1SPP of the edge-bordering ones: a video codec's blur makes the MLAA passes
+# skip many of a compressed render's edges as already antialiased (docs/spatial_tuning.md, "RENDER_DIV_1SPP").
+RENDER_DIV_1SPP = 20
 # A supersampled frame (several samples per pixel, or downscaled) is no 1-spp render: where at least SUPERSAMPLED_PCT %
 # of the luma steps of SUPERSAMPLED_STEP or more between neighbours (px_luma clipped to 1; in the tiles holding
 # edge-bordering pixels, a quarter of them sampled; at least SUPERSAMPLED_MIN steps) are ramps -- the step before or
@@ -76,7 +80,8 @@ def fallback_defines(fmt: FrameFormat, linear: bool, linear_input: bool, everywh
             "FALLBACK_WEIGHT": float(FALLBACK_WEIGHT), "FALLBACK_MIX": float(FALLBACK_MIX),
             "FALLBACK_RICH_MIN": FALLBACK_RICH_MIN, "FALLBACK_RICH_DIV": FALLBACK_RICH_DIV,
             "FALLBACK_KEEP_RUN": 0 if everywhere else FALLBACK_KEEP_RUN, "RENDER_RADIUS": RENDER_RADIUS,
-            "RENDER_MIN": RENDER_MIN, "RENDER_DIV": RENDER_DIV, "RENDER_NEAR_PCT": RENDER_NEAR_PCT,
+            "RENDER_MIN": RENDER_MIN, "RENDER_DIV": RENDER_DIV, "RENDER_DIV_1SPP": RENDER_DIV_1SPP,
+            "RENDER_NEAR_PCT": RENDER_NEAR_PCT,
             "RENDER_FRAME_PCT": RENDER_FRAME_PCT, "SUPERSAMPLED_STEP": float(SUPERSAMPLED_STEP),
             "SUPERSAMPLED_PCT": SUPERSAMPLED_PCT, "SUPERSAMPLED_MIN": SUPERSAMPLED_MIN,
             "RENDER_RAMP_PCT": RENDER_RAMP_PCT, "RAMP_FLANK": float(RAMP_FLANK),
@@ -455,11 +460,14 @@ def render_regions(busy: np.ndarray, borders: np.ndarray, luma: np.ndarray) -> n
         return c[y1][:, x1] - c[y0][:, x1] - c[y1][:, x0] + c[y0][:, x0]
 
     b, a, bm, nw = window(busy_t), window(border_t), window(busy_m), window(weighted)
-    flag = (bm >= RENDER_MIN) & (b * RENDER_DIV >= a) & (nw * 100 <= RENDER_NEAR_PCT * t * t * bm)
+    counts = step_counts(borders, luma)
+    strong, _, clean, clean_ramps = (int(c.sum()) for c in counts)
+    one_spp = strong > 0 and (clean - clean_ramps) * 100 >= SUPERSAMPLED_HARD_PCT * strong
+    div = RENDER_DIV_1SPP if one_spp else RENDER_DIV
+    flag = (bm >= RENDER_MIN) & (b * div >= a) & (nw * 100 <= RENDER_NEAR_PCT * t * t * bm)
     edge_tiles = border_t > 0
     if edge_tiles.any() and (flag & edge_tiles).sum() * 100 >= RENDER_FRAME_PCT * edge_tiles.sum():
         flag = b > 0  # a render: every tile near a busy pixel
-    counts = step_counts(borders, luma)
     if _supersampled_by(counts):  # regions only where the neighbourhood's clean transitions are mostly hard
         _, _, clean, clean_ramps = counts
         flag &= window(tile_sums(clean_ramps)) * 100 < RENDER_RAMP_PCT * np.maximum(window(tile_sums(clean)), 1)
