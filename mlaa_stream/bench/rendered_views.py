@@ -3,7 +3,7 @@
     python -m mlaa_stream.bench.rendered_views [--methods none,fxaa,mlaa,mlaa:screen,mlaa:rendered]
                                                [--sizes 640x360,960x540] [--samples 1,2,3]
                                                [--world plaza|town] [--textures procedural|photo|relief]
-                                               [--texture-repeat 4] [--msaa 4] [--crf 18,23]
+                                               [--texture-repeat 4] [--msaa 4] [--crf 18,23] [--verdicts]
 
 The bench's rendered scenes are what the spatial filter's rendered-content rules were measured on; these views
 are not, so a rule that only fits those five scenes shows here. Each view is rendered like the bench's (1 spp at
@@ -106,6 +106,37 @@ def view_shots(width: int, height: int, frames: int = 8, world: str = "plaza") -
     return shots
 
 
+def _int_list(option: str, text: str, minimum: int) -> tuple[int, ...]:
+    """A comma-separated option's integers (none for ''), each at least `minimum`, or exit naming the option."""
+    try:
+        values = tuple(int(v) for v in text.split(",")) if text else ()
+    except ValueError:
+        values = (minimum - 1,)
+    if values and min(values) < minimum:
+        raise SystemExit(f"{option}: expected integers of {minimum} or more, comma-separated, got {text!r}")
+    return values
+
+
+def print_verdicts(frames: dict[str, tuple[np.ndarray, np.ndarray]], device: str | None = None) -> None:
+    """Per view the fallback's frame evidence (spatial/fallback.py step_counts): ramps among strong steps, ramps
+    among clean transitions, hard stair ends among strong steps, and the verdicts drawn from them."""
+    from mlaa_stream.spatial.fallback import _frame_masks, _supersampled_by, one_spp_geometry, step_counts
+    from mlaa_stream.spatial.filter import Filter
+    from mlaa_stream.spatial.fxaa import luma_reference
+    print("view".ljust(24) + "ramps %".rjust(9) + "clean ramps %".rjust(15) + "hard stair ends %".rjust(19)
+          + "  verdict")
+    with Filter(fallback="off", device=device) as passes_only:
+        for view, (inp, _) in frames.items():
+            passes = passes_only.intermediates(inp)
+            _, _, _, borders, _, rgb = _frame_masks(inp, passes["out"], passes["edges"], False)
+            counts = step_counts(borders, luma_reference(rgb, False))
+            strong, ramps, clean, clean_ramps = (int(a.sum()) for a in counts)
+            verdict = ("supersampled" if _supersampled_by(counts)
+                       else "1-spp geometry" if one_spp_geometry(strong, clean, clean_ramps) else "-")
+            print(view.ljust(24) + f"{100 * ramps / max(strong, 1):9.1f}{100 * clean_ramps / max(clean, 1):15.1f}"
+                  f"{100 * (clean - clean_ramps) / max(strong, 1):19.1f}  {verdict}")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--methods", default="none,fxaa,mlaa,mlaa:screen,mlaa:rendered")
@@ -128,6 +159,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--crf", default="",
                     help="also every 1-spp view through H.264 at these CRFs (comma-separated; libx264 through PyAV, "
                          "as mlaa_stream.bench.codec_check; view_WIDTH_crfN), scored against the clean truth")
+    ap.add_argument("--verdicts", action="store_true",
+                    help="also print each view's frame evidence: ramps and hard stair ends among its steps, and "
+                         "whether it is judged supersampled or 1-spp geometry (docs/spatial_tuning.md)")
     ap.add_argument("--device", default=None)
     args = ap.parse_args(argv)
     ok, why = egl_available()
@@ -138,26 +172,14 @@ def main(argv: list[str] | None = None) -> int:
     if unknown:
         raise SystemExit(f"expected methods from {', '.join(METHODS)}, got {', '.join(unknown)}")
     sizes = [tuple(int(v) for v in s.split("x")) for s in args.sizes.split(",")]
-    try:
-        samples = tuple(int(v) for v in args.samples.split(","))
-    except ValueError:
-        samples = ()
-    if not samples or min(samples) < 1:
-        raise SystemExit(f"--samples: expected positive integers, comma-separated, got {args.samples!r}")
-    try:
-        msaa = tuple(int(v) for v in args.msaa.split(",")) if args.msaa else ()
-    except ValueError:
-        msaa = (0,)
-    if msaa and min(msaa) < 2:
-        raise SystemExit(f"--msaa: expected sample counts of 2 or more, comma-separated, got {args.msaa!r}")
+    samples = _int_list("--samples", args.samples, 1)
+    if not samples:
+        raise SystemExit("--samples: expected positive integers, comma-separated, got ''")
+    msaa, crfs = _int_list("--msaa", args.msaa, 2), _int_list("--crf", args.crf, 0)
     try:
         frames = render_views(sizes, samples, args.world, args.textures, args.texture_repeat, msaa)
     except ValueError as e:
         raise SystemExit(f"--msaa: {e}") from None
-    try:
-        crfs = tuple(int(v) for v in args.crf.split(",")) if args.crf else ()
-    except ValueError:
-        raise SystemExit(f"--crf: expected integers, comma-separated, got {args.crf!r}") from None
     if crfs:
         from mlaa_stream.bench.codec_check import through_h264
         for view, (inp, truth) in list(frames.items()):
@@ -185,6 +207,8 @@ def main(argv: list[str] | None = None) -> int:
         print(view.ljust(20) + "".join(c.rjust(24) for c in row))
     for g in dict.fromkeys(group(v) for v in frames):
         print(g.ljust(20) + "".join(f"{np.mean(removed[m, g]) * 100:5.1f}".rjust(24) for m in methods))
+    if args.verdicts:
+        print_verdicts(frames, args.device)
     return 0
 
 

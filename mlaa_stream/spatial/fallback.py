@@ -427,6 +427,12 @@ def supersampled(borders: np.ndarray, luma: np.ndarray) -> bool:
     return _supersampled_by(step_counts(borders, luma))
 
 
+def one_spp_geometry(strong: int, clean: int, clean_ramps: int) -> bool:
+    """kernels/fallback.cl render_frame's `one_spp`: hard stair ends (clean transitions that are no ramps) are
+    SUPERSAMPLED_HARD_PCT % or more of the frame's strong steps (and it has some)."""
+    return strong > 0 and (clean - clean_ramps) * 100 >= SUPERSAMPLED_HARD_PCT * strong
+
+
 def _supersampled_by(counts: tuple[np.ndarray, ...]) -> bool:
     """supersampled's verdict from step_counts' four per-pixel counts."""
     strong, ramps, clean, clean_ramps = (int(a.sum()) for a in counts)
@@ -462,8 +468,7 @@ def render_regions(busy: np.ndarray, borders: np.ndarray, luma: np.ndarray) -> n
     b, a, bm, nw = window(busy_t), window(border_t), window(busy_m), window(weighted)
     counts = step_counts(borders, luma)
     strong, _, clean, clean_ramps = (int(c.sum()) for c in counts)
-    one_spp = strong > 0 and (clean - clean_ramps) * 100 >= SUPERSAMPLED_HARD_PCT * strong
-    div = RENDER_DIV_1SPP if one_spp else RENDER_DIV
+    div = RENDER_DIV_1SPP if one_spp_geometry(strong, clean, clean_ramps) else RENDER_DIV
     flag = (bm >= RENDER_MIN) & (b * div >= a) & (nw * 100 <= RENDER_NEAR_PCT * t * t * bm)
     edge_tiles = border_t > 0
     if edge_tiles.any() and (flag & edge_tiles).sum() * 100 >= RENDER_FRAME_PCT * edge_tiles.sum():

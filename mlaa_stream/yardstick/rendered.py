@@ -620,6 +620,7 @@ class Renderer:
         depth = ctx.depth_renderbuffer((width, height))
         self.fbo8 = ctx.framebuffer([ctx.renderbuffer((width, height), 4)], depth)
         self.fbo32 = ctx.framebuffer([ctx.renderbuffer((width, height), 4, dtype="f4")], depth)
+        self.msaa_fbos = {}  # samples -> multisample target (msaa_frame), made when first asked for
         self._set_lights()
 
     def _texture(self, name: str):
@@ -708,15 +709,15 @@ class Renderer:
         """The world as a game with MSAA draws it: coverage and depth from `samples` samples per pixel, each
         fragment shaded once, resolved (the samples' mean) in linear light and encoded like the truth: (H, W, 3)
         uint8. Raises ValueError when the GL driver offers no such sample count (llvmpipe: 4, not 8)."""
-        key = f"_msaa{samples}"
-        if not hasattr(self, key):
+        if samples not in self.msaa_fbos:
             size = (self.width, self.height)
             try:
                 colour = self.ctx.renderbuffer(size, 4, samples=samples, dtype="f4")
             except self.mgl.Error as e:
                 raise ValueError(f"this GL driver draws no MSAA with {samples} samples: {e}") from None
-            setattr(self, key, self.ctx.framebuffer([colour], self.ctx.depth_renderbuffer(size, samples=samples)))
-        fbo = getattr(self, key)
+            depth = self.ctx.depth_renderbuffer(size, samples=samples)
+            self.msaa_fbos[samples] = self.ctx.framebuffer([colour], depth)
+        fbo = self.msaa_fbos[samples]
         fbo.use()
         fbo.clear(0, 0, 0, 1, depth=1.0)
         self.draw(cam, 0.0, 0.0, encode=False)
@@ -733,8 +734,8 @@ class Renderer:
             t.release()
         for obj in (self.sky_vao, self.prog, self.sky, self.fbo8, self.fbo32):
             obj.release()
-        for key in [k for k in vars(self) if k.startswith("_msaa")]:
-            getattr(self, key).release()
+        for fbo in self.msaa_fbos.values():
+            fbo.release()
 
 
 def reprojection(cam_from: Camera, cam_to: Camera, depth: np.ndarray) -> np.ndarray:
