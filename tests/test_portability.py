@@ -57,8 +57,8 @@ def test_pocl_only_constructs_are_guarded(name):
 
 # -- device choice ----------------------------------------------------------------------------------
 class _Fake:
-    def __init__(self, platform: str, name: str, kind):
-        self.platform = type("P", (), {"name": platform})()
+    def __init__(self, platform: str, name: str, kind, version: str = "OpenCL 3.0"):
+        self.platform = type("P", (), {"name": platform, "version": version})()
         self.name, self.type = name, kind
 
 
@@ -71,11 +71,45 @@ def test_default_choice_prefers_real_gpus_then_pocl():
     rusticl = _Fake("rusticl", "llvmpipe", cl.device_type.CPU)
     pocl = _Fake("Portable Computing Language", "pthread-cpu", cl.device_type.CPU)
     gpu = _Fake("NVIDIA CUDA", "H200", cl.device_type.GPU)
-    assert default_choice([grind, rusticl, pocl, gpu])[0] is gpu
-    dev, why = default_choice([grind, rusticl, pocl])
+    builds = lambda d: None  # noqa: E731 - every compiler builds
+    assert default_choice([grind, rusticl, pocl, gpu], builds)[0] is gpu
+    dev, why = default_choice([grind, rusticl, pocl], builds)
     assert dev is pocl and "PoCL" in why  # a simulator is never the default, nor a slower CPU runtime
-    assert default_choice([grind, rusticl])[0] is rusticl
-    assert default_choice([grind])[0] is grind
+    assert default_choice([grind, rusticl], builds)[0] is rusticl
+    assert default_choice([grind], builds)[0] is grind
+
+
+def test_a_cpu_runtime_that_cannot_build_for_this_cpu_is_skipped_with_its_reason():
+    """PoCL from PyPI (LLVM 14) cannot build for CPUs newer than its LLVM (an AMD Zen 5: "unknown target CPU
+    'generic'"): the next CPU runtime that builds is the default, and with none a DeviceError says what to install."""
+    import pyopencl as cl
+
+    from mlaa_stream.device.context import DeviceError, default_choice
+
+    old = _Fake("Portable Computing Language", "pthread-AMD EPYC", cl.device_type.CPU,
+                "OpenCL 3.0 PoCL 3.0-rc2  Linux, Release, RELOC, LLVM 14.0.6, SLEEF, DISTRO, POCL_DEBUG")
+    new = _Fake("Portable Computing Language", "pthread-skylake-avx512-AMD EPYC", cl.device_type.CPU)
+    rusticl = _Fake("rusticl", "llvmpipe", cl.device_type.CPU)
+    asked = []
+
+    def problem(d):
+        asked.append(d)
+        return "error: unknown target CPU 'generic'" if d is old else None
+
+    dev, why = default_choice([rusticl, old, new], problem)
+    assert dev is new and asked == [old, new]  # PoCLs first, in listing order; rusticl never asked
+    assert "skipped pthread-AMD EPYC (Portable Computing Language: PoCL 3.0-rc2, LLVM 14.0.6)" in why
+    assert "unknown target CPU 'generic'" in why
+    dev, why = default_choice([rusticl, old], problem)
+    assert dev is rusticl and "first CPU runtime that builds" in why and "skipped pthread-AMD EPYC" in why
+    with pytest.raises(DeviceError, match="no CPU runtime here can build for this CPU .*pocl-opencl-icd"):
+        default_choice([old], problem)
+
+
+def test_the_default_device_builds_the_probe():
+    from mlaa_stream.device.context import compile_problem, select_device
+
+    assert compile_problem(select_device(None)) is None
 
 
 # -- a second OpenCL implementation: Mesa's rusticl on llvmpipe --------------------------------------

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import re
 import threading
 from dataclasses import dataclass
 from importlib import resources
@@ -118,6 +119,43 @@ SIMULATORS = ("oclgrind",)
 # CPU runtimes in order of preference when there is no GPU: PoCL is the one the kernels are tuned for
 # (their inline loads, builtins and work-group shapes were measured on it); others after it, in listing order.
 CPU_PREFERENCE = ("portable computing language",)
+# A CPU runtime compiles for the CPU it runs on and its LLVM must know that CPU: PoCL from PyPI (PoCL 3.0, LLVM 14)
+# fails every build on CPUs newer than LLVM 14 ("unknown target CPU 'generic'", measured on an AMD EPYC of family
+# 26, Zen 5). Before a CPU runtime is picked by default it builds this one-line kernel.
+PROBE_SOURCE = "__kernel void probe(__global int *p) { p[get_global_id(0)] += 1; }"
+NO_CPU_COMPILER_HINT = (
+    "install a PoCL whose LLVM knows this CPU (Debian/Ubuntu: 'apt-get install pocl-opencl-icd') or Mesa's "
+    "rusticl ('apt-get install mesa-opencl-icd', then RUSTICL_ENABLE=llvmpipe): mlaa-stream picks the first CPU "
+    "runtime that builds")
+_probed: dict[tuple[str, str, str], str | None] = {}
+
+
+def compile_problem(dev) -> str | None:
+    """None when `dev`'s compiler builds PROBE_SOURCE; otherwise the compiler's complaint, in one line.
+    Asked once per device and process."""
+    key = (dev.platform.name, dev.platform.version, dev.name)
+    if key not in _probed:
+        options = ["-cl-std=CL1.2"]
+        if needs_child_build(dev):  # a driver that may end the process on a failed build
+            problem = check_build_in_child(dev, PROBE_SOURCE, options)
+        else:
+            try:
+                cl.Program(cl.Context([dev]), PROBE_SOURCE).build(options=options)
+                problem = None
+            except cl.Error as exc:
+                problem = str(exc)
+        if problem is not None:  # the compiler's own line ("error: ..."), else the driver's message
+            lines = [ln.strip() for ln in problem.splitlines() if ln.strip()]
+            problem = next((ln for ln in lines if "error" in ln.lower() and "clBuildProgram" not in ln),
+                           lines[-1] if lines else "the build failed")
+        _probed[key] = problem
+    return _probed[key]
+
+
+def _runtime(dev) -> str:
+    """The platform and its compiler, short: "Portable Computing Language: PoCL 3.0-rc2, LLVM 14.0.6"."""
+    found = re.findall(r"(?:PoCL|LLVM|Mesa) [^\s,]+", getattr(dev.platform, "version", ""))
+    return dev.platform.name.strip() + (": " + ", ".join(found) if found else "")
 
 
 def _is_simulator(dev) -> bool:
@@ -125,19 +163,27 @@ def _is_simulator(dev) -> bool:
     return any(s in text for s in SIMULATORS)
 
 
-def default_choice(devices: list) -> tuple[object, str]:
-    """The device used when none is asked for, and why: a GPU that is not a simulator, else the
-    preferred CPU runtime (PoCL), else the first device."""
+def default_choice(devices: list, problem=compile_problem) -> tuple[object, str]:
+    """The device used when none is asked for, and why: a GPU that is not a simulator, else the first CPU
+    runtime whose compiler builds (`problem(device)` is None; PoCL first), else the first device. Raises
+    DeviceError when there are CPU runtimes and none of them can build for this CPU."""
     gpus = [d for d in devices if _kind(d) == "GPU" and not _is_simulator(d)]
     if gpus:
         return gpus[0], "a GPU"
     cpus = [d for d in devices if _kind(d) == "CPU"]
-    for name in CPU_PREFERENCE:
-        for d in cpus:
-            if name in d.platform.name.lower():
-                return d, "no GPU; PoCL is the CPU runtime the kernels are tuned for"
-    if cpus:
-        return cpus[0], "no GPU; the first CPU runtime"
+    preferred = [d for name in CPU_PREFERENCE for d in cpus if name in d.platform.name.lower()]
+    skipped = []
+    for d in preferred + [d for d in cpus if d not in preferred]:
+        complaint = problem(d)
+        if complaint is not None:
+            skipped.append(f"{d.name.strip()} ({_runtime(d)}): {complaint}")
+            continue
+        why = ("no GPU; PoCL is the CPU runtime the kernels are tuned for" if d in preferred
+               else "no GPU; the first CPU runtime that builds")
+        return d, why + "".join(f"; skipped {s}" for s in skipped)
+    if skipped:
+        raise DeviceError("no CPU runtime here can build for this CPU (" + "; ".join(skipped) + "): "
+                          + NO_CPU_COMPILER_HINT)
     return devices[0], "no GPU or CPU device; the first device (a simulator or accelerator)"
 
 
