@@ -8,6 +8,11 @@
 // and from the passes' options (mlaa_stream.mlaa.FilterOptions.pass_defines):
 //   LINEAR_INPUT 1 when samples are linear light (EXR), 0 when sRGB-encoded
 //   BLEND_LINEAR 1 to mix pixels in linear light (DECODE: sRGB samples are decoded to mix, encoded after)
+#ifdef POCL_DEVICE_ADDRESS_BITS
+// PoCL's clang 15 (Debian's PoCL 3.1) prints "use of logical '&&' with constant operand" to stderr where a define
+// turns an operand into a constant (fallback.cl with FXAA everywhere): intended, so not said
+#pragma clang diagnostic ignored "-Wconstant-logical-operand"
+#endif
 #ifndef PIXEL_T
 #define PIXEL_T uchar
 #endif
