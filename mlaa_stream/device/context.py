@@ -125,9 +125,9 @@ CPU_PREFERENCE = ("portable computing language",)
 # 26, Zen 5). Before a CPU runtime is picked by default it builds this one-line kernel.
 PROBE_SOURCE = "__kernel void probe(__global int *p) { p[get_global_id(0)] += 1; }"
 NO_CPU_COMPILER_HINT = (
-    "install a PoCL whose LLVM knows this CPU (Debian/Ubuntu: 'apt-get install pocl-opencl-icd') or Mesa's "
-    "rusticl ('apt-get install mesa-opencl-icd', then RUSTICL_ENABLE=llvmpipe): mlaa-stream picks the first CPU "
-    "runtime that builds")
+    "install your distribution's PoCL, whose LLVM is newer (Debian/Ubuntu: 'apt-get install pocl-opencl-icd'; "
+    "Fedora: 'dnf install pocl'), or Mesa's rusticl ('apt-get install mesa-opencl-icd', then "
+    "RUSTICL_ENABLE=llvmpipe): mlaa-stream picks the first CPU runtime that builds (docs/portability.md)")
 _probed: dict[tuple[str, str, str], str | None] = {}
 
 
