@@ -1551,7 +1551,12 @@ class TSSStage:
         taps[..., 2] = np.take_along_axis(whole[..., 1].astype(np.int32), order, -1)
         last = np.ones(cell.shape, bool)
         last[..., :-1] = cell[..., 1:] != cell[..., :-1]
-        taps[..., 3] = np.where(last, (cell[..., :, None] == cell[..., None, :]).sum(-1), 0)
+        # a cell's frame count on its last frame: the run's length in the sorted cells (position - run start + 1)
+        pos = np.arange(cell.shape[-1], dtype=np.int32)
+        first = np.ones(cell.shape, bool)
+        first[..., 1:] = last[..., :-1]
+        start = np.maximum.accumulate(np.where(first, pos, 0), axis=-1)
+        taps[..., 3] = np.where(last, pos - start + 1, 0)
         vslots = np.array([e.slot if e.valid is not None else -1 for e in entries], np.int32)[order]
         return (np.ascontiguousarray(taps), np.ascontiguousarray(vslots),
                 (TILE_ROWS, tx) if projective else (height, 1))
