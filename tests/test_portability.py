@@ -102,8 +102,29 @@ def test_a_cpu_runtime_that_cannot_build_for_this_cpu_is_skipped_with_its_reason
     assert "unknown target CPU 'generic'" in why
     dev, why = default_choice([rusticl, old], problem)
     assert dev is rusticl and "first CPU runtime that builds" in why and "skipped pthread-AMD EPYC" in why
-    with pytest.raises(DeviceError, match="no CPU runtime here can build for this CPU .*pocl-opencl-icd"):
+    with pytest.raises(DeviceError, match="no device here builds kernels .*pocl-opencl-icd"):
         default_choice([old], problem)
+
+
+def test_a_gpu_whose_compiler_fails_is_passed_over_for_the_cpu():
+    """A GPU driver that is installed but cannot build (a broken or mismatched install) is skipped like a CPU runtime
+    that cannot: the CPU serves, and the reason names the GPU."""
+    import pyopencl as cl
+
+    from mlaa_stream.device.context import DeviceError, default_choice
+
+    gpu = _Fake("NVIDIA CUDA", "H200", cl.device_type.GPU)
+    gpu2 = _Fake("NVIDIA CUDA", "H100", cl.device_type.GPU)
+    pocl = _Fake("Portable Computing Language", "pthread-cpu", cl.device_type.CPU)
+    broken = {gpu: "clBuildProgram failed: BUILD_PROGRAM_FAILURE"}
+    dev, why = default_choice([gpu, gpu2, pocl], lambda d: broken.get(d))
+    assert dev is gpu2 and why.startswith("a GPU; skipped H200")
+    broken[gpu2] = "clCreateContext failed: DEVICE_NOT_AVAILABLE"
+    dev, why = default_choice([gpu, gpu2, pocl], lambda d: broken.get(d))
+    assert dev is pocl and why.startswith("no GPU that builds; PoCL") and "skipped H100" in why
+    broken[pocl] = "error: unknown target CPU 'generic'"
+    with pytest.raises(DeviceError, match="no device here builds kernels .*H200.*H100.*pthread-cpu"):
+        default_choice([gpu, gpu2, pocl], lambda d: broken.get(d))
 
 
 def test_the_default_device_builds_the_probe():

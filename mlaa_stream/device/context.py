@@ -165,26 +165,35 @@ def _is_simulator(dev) -> bool:
 
 
 def default_choice(devices: list, problem=compile_problem) -> tuple[object, str]:
-    """The device used when none is asked for, and why: a GPU that is not a simulator, else the first CPU
-    runtime whose compiler builds (`problem(device)` is None; PoCL first), else the first device. Raises
-    DeviceError when there are CPU runtimes and none of them can build for this CPU."""
-    gpus = [d for d in devices if _kind(d) == "GPU" and not _is_simulator(d)]
-    if gpus:
-        return gpus[0], "a GPU"
-    cpus = [d for d in devices if _kind(d) == "CPU"]
-    preferred = [d for name in CPU_PREFERENCE for d in cpus if name in d.platform.name.lower()]
-    skipped = []
-    for d in preferred + [d for d in cpus if d not in preferred]:
+    """The device used when none is asked for, and why: the first GPU that is not a simulator and whose compiler
+    builds (`problem(device)` is None: a GPU driver that is installed but broken is passed over), else the first
+    CPU runtime that builds (PoCL first), else the first device. Raises DeviceError when there are GPUs or CPU
+    runtimes and none of them builds."""
+    skipped: list[str] = []
+
+    def chosen(d, why: str) -> tuple[object, str]:
+        return d, why + "".join(f"; skipped {s}" for s in skipped)
+
+    def builds(d) -> bool:
         complaint = problem(d)
         if complaint is not None:
             skipped.append(f"{d.name.strip()} ({_runtime(d)}): {complaint}")
-            continue
-        why = ("no GPU; PoCL is the CPU runtime the kernels are tuned for" if d in preferred
-               else "no GPU; the first CPU runtime that builds")
-        return d, why + "".join(f"; skipped {s}" for s in skipped)
+        return complaint is None
+
+    gpus = [d for d in devices if _kind(d) == "GPU" and not _is_simulator(d)]
+    for d in gpus:
+        if builds(d):
+            return chosen(d, "a GPU")
+    no_gpu = "no GPU that builds" if gpus else "no GPU"
+    cpus = [d for d in devices if _kind(d) == "CPU"]
+    preferred = [d for name in CPU_PREFERENCE for d in cpus if name in d.platform.name.lower()]
+    for d in preferred + [d for d in cpus if d not in preferred]:
+        if builds(d):
+            return chosen(d, f"{no_gpu}; PoCL is the CPU runtime the kernels are tuned for" if d in preferred
+                          else f"{no_gpu}; the first CPU runtime that builds")
     if skipped:
-        raise DeviceError("no CPU runtime here can build for this CPU (" + "; ".join(skipped) + "): "
-                          + NO_CPU_COMPILER_HINT)
+        raise DeviceError("no device here builds kernels (" + "; ".join(skipped) + ")"
+                          + (": " + NO_CPU_COMPILER_HINT if cpus else ""))
     return devices[0], "no GPU or CPU device; the first device (a simulator or accelerator)"
 
 
