@@ -122,7 +122,8 @@ SIMULATORS = ("oclgrind",)
 CPU_PREFERENCE = ("portable computing language",)
 # A CPU runtime compiles for the CPU it runs on and its LLVM must know that CPU: PoCL from PyPI (PoCL 3.0, LLVM 14)
 # fails every build on CPUs newer than LLVM 14 ("unknown target CPU 'generic'", measured on an AMD EPYC of family
-# 26, Zen 5). Before a CPU runtime is picked by default it builds this one-line kernel.
+# 26, Zen 5). Before a device is picked by default (a GPU too: a driver can be installed and broken) it builds this
+# one-line kernel.
 PROBE_SOURCE = "__kernel void probe(__global int *p) { p[get_global_id(0)] += 1; }"
 NO_CPU_COMPILER_HINT = (
     "install your distribution's PoCL, whose LLVM is newer (Debian/Ubuntu: 'apt-get install pocl-opencl-icd'; "
