@@ -127,6 +127,34 @@ def test_a_gpu_whose_compiler_fails_is_passed_over_for_the_cpu():
         default_choice([gpu, gpu2, pocl], lambda d: broken.get(d))
 
 
+def test_a_failed_probe_is_reported_by_the_compilers_own_line(monkeypatch):
+    """compile_problem keeps the compiler's error line out of pyopencl's multi-line message (what `mlaa-stream
+    devices` and the DeviceError show), and asks each device once per process."""
+    import pyopencl as cl
+
+    from mlaa_stream.device import context as dev
+
+    device = dev.select_device(None)
+    calls = []
+
+    class Failing:
+        def __init__(self, ctx, src):
+            calls.append(src)
+
+        def build(self, options=None):
+            raise cl.RuntimeError("clBuildProgram failed: BUILD_PROGRAM_FAILURE - clBuildProgram failed\n"
+                                  "Build on <pyopencl.Device 'pthread-AMD EPYC'>:\n\n"
+                                  "error: unknown target CPU 'generic'\nDevice pthread-AMD EPYC failed to build")
+
+    monkeypatch.setattr(dev, "_probed", {})
+    monkeypatch.setattr(dev, "needs_child_build", lambda d: False)
+    monkeypatch.setattr(dev.cl, "Program", Failing)
+    assert dev.compile_problem(device) == "error: unknown target CPU 'generic'"
+    assert dev.compile_problem(device) == "error: unknown target CPU 'generic'" and len(calls) == 1
+    with pytest.raises(dev.DeviceError, match="no device here builds kernels .*unknown target CPU 'generic'"):
+        dev.default_choice([device])
+
+
 def test_the_default_device_builds_the_probe():
     from mlaa_stream.device.context import compile_problem, select_device
 
