@@ -6,8 +6,9 @@ import sys
 
 import click
 
-from mlaa_stream.device.context import DEVICE_ENV, DeviceError, _all_devices, default_choice, list_devices, select_device
-from mlaa_stream.device.drivers import unregistered_gpu_drivers
+from mlaa_stream.device.context import (DEVICE_ENV, DeviceError, _all_devices, default_choice, list_devices,
+                                        select_device)
+from mlaa_stream.device.drivers import unregistered_gpu_drivers, unregistered_pip_runtimes
 
 
 @click.command("devices")
@@ -22,6 +23,8 @@ def devices_command() -> None:
         click.echo(f"mlaa-stream: {exc}", err=True)
         for driver in unregistered_gpu_drivers():
             click.echo(f"mlaa-stream: {driver.hint()}", err=True)
+        for hint in unregistered_pip_runtimes():
+            click.echo(f"mlaa-stream: {hint}", err=True)
         sys.exit(3)
     for info in infos:
         mark = "*" if (info.name, info.platform) == (chosen.name.strip(), chosen.platform.name.strip()) else " "

@@ -128,3 +128,21 @@ def test_a_gpu_driver_without_an_icd_file_is_named_with_the_fix(tmp_path, monkey
     one = tmp_path / "only.icd"
     one.write_text("libnvidia-opencl.so.1\n")
     assert drivers.unregistered_gpu_drivers((str(libs),), {drivers.VENDORS_ENV: str(one)}) == []
+
+
+def test_a_pip_installed_intel_cpu_runtime_without_an_icd_file_is_named_with_the_fix(tmp_path):
+    """pip cannot write an ICD file: where Intel's CPU runtime sits in the environment unregistered, the hint says
+    how to register it (with the library path its own libraries need)."""
+    from mlaa_stream.device import drivers
+    (tmp_path / "lib").mkdir()
+    (tmp_path / "lib" / "libintelocl.so").write_bytes(b"\x7fELF")
+    vendors = tmp_path / "vendors"
+    vendors.mkdir()
+    (vendors / "pocl.icd").write_text("libpocl.so.2\n")
+    env = {drivers.VENDORS_ENV: str(vendors)}
+    (hint,) = drivers.unregistered_pip_runtimes(str(tmp_path), env)
+    lib = tmp_path / "lib" / "libintelocl.so"
+    assert f"echo {lib} > /etc/OpenCL/vendors/intel-cpu.icd" in hint and f"LD_LIBRARY_PATH={tmp_path / 'lib'}" in hint
+    (vendors / "intel.icd").write_text(f"{lib}\n")
+    assert drivers.unregistered_pip_runtimes(str(tmp_path), env) == []
+    assert drivers.unregistered_pip_runtimes(str(tmp_path / "none"), env) == []

@@ -128,7 +128,9 @@ PROBE_SOURCE = "__kernel void probe(__global int *p) { p[get_global_id(0)] += 1;
 NO_CPU_COMPILER_HINT = (
     "install your distribution's PoCL, whose LLVM is newer (Debian/Ubuntu: 'apt-get install pocl-opencl-icd'; "
     "Fedora: 'dnf install pocl'), or Mesa's rusticl ('apt-get install mesa-opencl-icd', then "
-    "RUSTICL_ENABLE=llvmpipe): mlaa-stream picks the first CPU runtime that builds (docs/portability.md)")
+    "RUSTICL_ENABLE=llvmpipe), or with pip alone Intel's CPU runtime ('pip install intel-opencl-rt "
+    "intel-cmplr-lib-rt', a proprietary licence; `mlaa-stream devices` then says how to register it): mlaa-stream "
+    "picks the first CPU runtime that builds (docs/portability.md)")
 _probed: dict[tuple[str, str, str], str | None] = {}
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import glob
 import os
+import sys
 from dataclasses import dataclass
 
 # Vendor OpenCL drivers for GPUs: (vendor, library file name as the ICD file names it, ICD file name).
@@ -72,3 +73,16 @@ def unregistered_gpu_drivers(library_dirs: tuple[str, ...] | None = None,
                 found.append(UnregisteredDriver(vendor, exact if exact in hits else hits[0], icd))
                 break
     return found
+
+
+def unregistered_pip_runtimes(prefix: str | None = None, environ: dict[str, str] | None = None) -> list[str]:
+    """How to register a CPU runtime that pip installed into this environment but could not give an ICD file:
+    Intel's (PyPI `intel-opencl-rt` with `intel-cmplr-lib-rt`, a proprietary licence), which builds where PyPI's PoCL
+    cannot (docs/portability.md, "Default device"). Empty where there is none or an ICD file names it."""
+    prefix = sys.prefix if prefix is None else prefix
+    lib = os.path.join(prefix, "lib", "libintelocl.so")
+    if not os.path.exists(lib) or os.path.basename(lib) in registered_libraries(environ):
+        return []
+    return [f"Intel's CPU OpenCL runtime is installed here ({lib}) but no ICD file names it: register it with "
+            f"'echo {lib} > {VENDORS_DIR}/intel-cpu.icd' (or in a folder of your own that ${VENDORS_ENV} names) and "
+            f"run with LD_LIBRARY_PATH={os.path.dirname(lib)}"]
