@@ -474,6 +474,6 @@ def render_regions(busy: np.ndarray, borders: np.ndarray, luma: np.ndarray) -> n
     if edge_tiles.any() and (flag & edge_tiles).sum() * 100 >= RENDER_FRAME_PCT * edge_tiles.sum():
         flag = b > 0  # a render: every tile near a busy pixel
     if _supersampled_by(counts):  # regions only where the neighbourhood's clean transitions are mostly hard
-        _, _, clean, clean_ramps = counts
-        flag &= window(tile_sums(clean_ramps)) * 100 < RENDER_RAMP_PCT * np.maximum(window(tile_sums(clean)), 1)
+        _, _, clean_px, clean_ramps_px = counts
+        flag &= window(tile_sums(clean_ramps_px)) * 100 < RENDER_RAMP_PCT * np.maximum(window(tile_sums(clean_px)), 1)
     return region_pixels(flag, h, w)

@@ -697,9 +697,12 @@ class Renderer:
             for dx in offsets:
                 self.fbo32.clear(0, 0, 0, 1, depth=1.0)
                 self.draw(cam, dx, dy, encode=False)
-                acc += np.frombuffer(self.fbo32.read(components=3, dtype="f4"),
-                                     np.float32).reshape(self.height, self.width, 3)
+                acc += self._linear_rows()
         return np.flipud(acc / (spp * spp))
+
+    def _linear_rows(self) -> np.ndarray:
+        """The float target's RGB as GL stores it, bottom row first: (H, W, 3) float32."""
+        return np.frombuffer(self.fbo32.read(components=3, dtype="f4"), np.float32).reshape(self.height, self.width, 3)
 
     def truth_frame(self, cam: Camera, spp: int = TRUTH_SPP) -> np.ndarray:
         """The supersampled truth encoded like the other scenes' (encode8): (H, W, 3) uint8."""
@@ -722,8 +725,7 @@ class Renderer:
         fbo.clear(0, 0, 0, 1, depth=1.0)
         self.draw(cam, 0.0, 0.0, encode=False)
         self.ctx.copy_framebuffer(self.fbo32, fbo)  # the resolve: the mean of each pixel's samples
-        lin = np.frombuffer(self.fbo32.read(components=3, dtype="f4"), np.float32).reshape(self.height, self.width, 3)
-        return encode8(np.flipud(lin).astype(np.float64))
+        return encode8(np.flipud(self._linear_rows()).astype(np.float64))
 
     def release(self) -> None:
         for _, vao, bufs in self.draws:
