@@ -304,6 +304,10 @@ def _job_for(kind: str, output: str) -> type:
                    "history sooner; 0 keeps it regardless of speed).")
 @click.option("--stats", "stats_path", type=click.Path(dir_okay=False), default=None,
               help="Write per-frame temporal statistics (motion model used, ms) to this CSV.")
+@click.option("--keep", "keep", multiple=True, metavar="X,Y,W,H",
+              help="Leave this rectangle of every frame exactly as it is (burned-in subtitles, a HUD or a slate "
+                   "over a render, which the filter would soften); pixels or % of the frame, e.g. "
+                   "0,85%,100%,15% for the bottom 15 %. Repeat for several.")
 @click.option("--show", type=click.Choice(["history", "regions"]), default=None,
               help="Debug view instead of the image: history = the temporal stage's samples per pixel "
                    "(implies --temporal); regions = the output with everything outside render regions "
@@ -321,7 +325,7 @@ def filter_command(ctx: click.Context, input_path: str, output: str, overwrite: 
                    in_flight: int, temporal: bool | None,
                    temporal_frames: int | None, temporal_method: str, lookahead: int | None, dense_motion: bool,
                    temporal_mode: str,
-                   temporal_k: float | None, stats_path: str | None, show: str | None,
+                   temporal_k: float | None, stats_path: str | None, keep: tuple[str, ...], show: str | None,
                    device: str | None, verbose: int, quiet: bool) -> None:
     """Remove jaggies from an image, a folder of images, a frame sequence or a video.
 
@@ -339,7 +343,7 @@ def filter_command(ctx: click.Context, input_path: str, output: str, overwrite: 
                            encoder_preset=encoder_preset, pix_fmt=pix_fmt, rate=rate,
                            video_backend=video_backend, start=start, end=end,
                            overlay=overlay, in_flight=in_flight, device=device, progress_path=progress_path,
-                           cluster=cluster, chunk_frames=chunk_frames,
+                           cluster=cluster, chunk_frames=chunk_frames, keep=keep,
                            temporal=TemporalOptions(temporal, temporal_mode, temporal_k, stats_path, show,
                                                     temporal_frames, temporal_method, lookahead, dense_motion))
     except Terminated as exc:
@@ -358,7 +362,7 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
             temporal: "TemporalOptions | None" = None, bridge: bool | None = None, rate: float = 24.0,
             audio: str = "copy", progress_path: str | None = None, start: str | None = None,
             end: str | None = None, container: str | None = None, cluster: str | None = None,
-            chunk_frames: int = 16) -> int:
+            chunk_frames: int = 16, keep: tuple[str, ...] = ()) -> int:
     """Check everything that can be checked without a device, then build the filter and run."""
     temporal = temporal or TemporalOptions()
     show_regions = temporal.show == "regions"
@@ -366,6 +370,13 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
         con.error("--overwrite and --resume contradict each other: choose one")
         return EXIT_USAGE
     kwargs = _filter_kwargs(ctx, preset, threshold, metric, display_space, reconstruct, bridge)
+    if keep:
+        from mlaa_stream.spatial.keep import keep_rects
+        try:
+            kwargs["keep"] = keep_rects(keep)
+        except ValueError as exc:
+            con.error(f"--{exc}")
+            return EXIT_USAGE
     if show_regions:  # the spatial filter's view: it does not imply the temporal stage
         temporal.show = None
         if kwargs.get("fast"):

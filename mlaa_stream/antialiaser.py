@@ -16,6 +16,7 @@ import numpy as np
 
 from mlaa_stream.spatial.filter import PRESETS, Filter
 from mlaa_stream.spatial.fast_filter import FastFilter
+from mlaa_stream.spatial.keep import KeepRect, keep_rects, restore_kept
 from mlaa_stream.pipeline import PostHook, Temporal, stream_items
 from mlaa_stream.temporal.methods import METHODS, make_stage, needs_regions
 
@@ -44,13 +45,16 @@ class Antialiaser:
     explain a frame (dollies, orbits; TSSStage's dense_samples: more error removed there, several times slower).
     `linear_input=True`: the frames hold linear light (EXR renders, float, highlights may exceed 1): the filter
     and the temporal stage take them as they are instead of sRGB-decoding them.
+    `keep`: rectangles every output frame takes unchanged from its input (subtitles, a HUD over a render:
+    spatial/keep.py), as KeepRect or 'X,Y,W,H' strings in pixels or % of the frame.
     """
 
     def __init__(self, device: str | int | None = None, *, preset: str | None = None,
                  threshold: float | None = None, metric: str | None = None, linear: bool | None = None,
                  reconstruct: bool | None = None, temporal: Temporal | bool | str | None = None,
                  temporal_frames: int | None = None, post_hooks: Sequence[PostHook] = (), in_flight: int = 2,
-                 lookahead: int = 0, linear_input: bool = False, dense_motion: bool = False):
+                 lookahead: int = 0, linear_input: bool = False, dense_motion: bool = False,
+                 keep: Sequence[KeepRect | str] | str | None = None):
         if preset is not None and preset not in PRESETS:
             raise ValueError(f"expected a preset among {', '.join(sorted(PRESETS))}, got {preset!r}")
         kwargs = dict(PRESETS.get(preset or "default", {}))
@@ -60,6 +64,8 @@ class Antialiaser:
                 kwargs[key] = value
         if linear_input:
             kwargs["linear_input"] = True
+        if keep is not None:
+            kwargs["keep"] = keep_rects(keep)
         method = "auto" if temporal is True else temporal
         if isinstance(method, str) and method not in METHODS:
             raise ValueError(f"temporal: expected True, {', '.join(map(repr, METHODS))} or a callable, got {temporal!r}")
@@ -85,7 +91,7 @@ class Antialiaser:
         self._check_open()
         out = self._filter.process(frame)
         if self.temporal is not None:
-            out = self.temporal(frame, out, self.index)
+            out = restore_kept(frame, self.temporal(frame, out, self.index), self._filter.keep)
         for hook in self.post_hooks:
             out = hook(out, self.index)
         self.index += 1

@@ -22,6 +22,7 @@ from typing import Any, Callable, Iterable, Iterator, Protocol, Sequence
 import numpy as np
 
 from mlaa_stream.io.item import Item
+from mlaa_stream.spatial.keep import restore_kept
 
 Temporal = Callable[[np.ndarray, np.ndarray, int], np.ndarray]
 PostHook = Callable[[np.ndarray, int], np.ndarray]
@@ -178,6 +179,8 @@ def stream_items(source: Iterable, filt: FrameFilter, *, in_flight: int = 2, que
     pending: deque = deque()   # (item, pending result): submitted to the filter
     ready: deque = deque()     # (item, filtered frame): collected, waiting for the frames after it (look-ahead)
     ahead = max(0, int(getattr(temporal, "lookahead", 0) or 0)) if temporal is not None else 0
+    # a temporal stage mixes frames: the filter's keep rectangles (spatial/keep.py) are restored after it too
+    kept = getattr(getattr(filt, "encoded", filt), "keep", ()) if temporal is not None else ()
     upstream: _Failure | None = None  # read or submit failure: frames before it still come out
     lost: _Failure | None = None  # a submitted frame's result failed: frames before it still come out
     failure: _Failure | None = None  # failure while finishing a frame: nothing after it comes out
@@ -201,7 +204,7 @@ def stream_items(source: Iterable, filt: FrameFilter, *, in_flight: int = 2, que
             while len(pending) >= in_flight and failure is None and lost is None:
                 lost = _collect(pending.popleft(), ready, times)
                 while ready and failure is None and lost is None and len(ready) - 1 + len(pending) >= ahead:
-                    item, failure = _finish(ready, pending, ahead, temporal, post_hooks, times)
+                    item, failure = _finish(ready, pending, ahead, temporal, post_hooks, times, kept)
                     if failure is None:
                         yield item
             if failure is not None or lost is not None:
@@ -212,7 +215,7 @@ def stream_items(source: Iterable, filt: FrameFilter, *, in_flight: int = 2, que
         if lost is not None:
             _settle(pending)   # frames after one the filter failed on: neither written nor read ahead
         while ready and failure is None:   # the frames before a read or filter failure still come out
-            item, failure = _finish(ready, pending, ahead, temporal, post_hooks, times)
+            item, failure = _finish(ready, pending, ahead, temporal, post_hooks, times, kept)
             if failure is None:
                 yield item
         failure = failure or lost or upstream
@@ -249,9 +252,9 @@ def _collect(entry: tuple, ready: deque, times: StageTimes) -> _Failure | None:
 
 
 def _finish(ready: deque, pending: deque, ahead: int, temporal: Temporal | None, post_hooks: Sequence[PostHook],
-            times: StageTimes) -> tuple[Item, _Failure | None]:
-    """Run the temporal stage (with the raw frames of the next `ahead` items read) and the post hooks on the
-    oldest collected frame."""
+            times: StageTimes, kept: Sequence = ()) -> tuple[Item, _Failure | None]:
+    """Run the temporal stage (with the raw frames of the next `ahead` items read; then the input put back in
+    the `kept` rectangles) and the post hooks on the oldest collected frame."""
     item, out = ready.popleft()
     stage = "temporal"
     try:
@@ -267,6 +270,8 @@ def _finish(ready: deque, pending: deque, ahead: int, temporal: Temporal | None,
             t2 = time.perf_counter()
             times.temporal += t2 - t1
             t1 = t2
+        if kept:
+            out = restore_kept(item.frame, out, kept)
         stage = "post"
         for hook in post_hooks:
             out = hook(out, item.index)

@@ -18,6 +18,7 @@ import pyopencl as cl
 
 from mlaa_stream.device.formats import frame_format
 from mlaa_stream.spatial.filter import Filter, PendingFrame
+from mlaa_stream.spatial.keep import kept_patches
 
 
 class FastFilter(Filter):
@@ -62,7 +63,8 @@ class FastFilter(Filter):
             self._held = [(e, k) for e, k in self._held if e.command_execution_status != complete]
             self._held.append((done, (frame, out, src, dst)))
             self.queue.flush()
-        return PendingFrame(out, done, frame.dtype, frame.shape, keep=(frame, src, dst))
+        return PendingFrame(out, done, frame.dtype, frame.shape, keep=(frame, src, dst),
+                            kept=kept_patches(frame, self.keep))
 
     def close(self) -> None:
         try:

@@ -13,6 +13,7 @@ from __future__ import annotations
 import threading
 from dataclasses import dataclass
 from fractions import Fraction
+from typing import Sequence
 
 import numpy as np
 import pyopencl as cl
@@ -20,6 +21,7 @@ import pyopencl as cl
 from mlaa_stream.device.colour import device_luts
 from mlaa_stream.device.context import Context, default_context, linear_levels
 from mlaa_stream.device.formats import FrameFormat, defines_for, frame_format
+from mlaa_stream.spatial.keep import KeepRect, kept_patches, keep_rects, restore_patches
 from mlaa_stream.spatial.nonfinite import NonFinite, replace_non_finite
 
 METRICS = {"lab": 0, "luma": 1, "rgb": 2}
@@ -180,8 +182,9 @@ class PendingFrame:
 
     def __init__(self, host_out: np.ndarray, event, out_dtype: np.dtype, shape: tuple, keep=(),
                  non_finite: NonFinite | None = None, regions: tuple | None = None, dim: bool = False,
-                 owner: "Filter | None" = None):
+                 owner: "Filter | None" = None, kept: list | None = None):
         self._out, self._event, self._dtype, self._shape = host_out, event, out_dtype, shape
+        self._kept = kept or []  # the input inside the filter's keep rectangles (spatial/keep.py)
         self._keep = keep  # host arrays that must outlive the non-blocking copies
         self._non_finite = non_finite
         self._regions = regions  # (per-tile flags or None, the event of their copy or None), or None
@@ -208,7 +211,8 @@ class PendingFrame:
             if self._dim:
                 from mlaa_stream.spatial.fallback import dim_outside_regions
                 out = dim_outside_regions(out, flags)
-        return out if out.dtype == self._dtype else out.astype(self._dtype)
+        out = out if out.dtype == self._dtype else out.astype(self._dtype)
+        return restore_patches(out, self._kept)
 
 
 class _FrameBuffers:
@@ -246,7 +250,8 @@ class Filter:
                  subpixel: float = SUBPIXEL, fallback: str | bool = "auto", fast: bool = False,
                  preset: str | None = None, context: Context | None = None, show: str | None = None,
                  keep_regions: bool = False, footprint_table: np.ndarray | None | str = "default",
-                 refine_table: np.ndarray | None | str = "default", moire: bool = True):
+                 refine_table: np.ndarray | None | str = "default", moire: bool = True,
+                 keep: Sequence[KeepRect | str] | str | None = None):
         """`preset`: one of PRESETS; its options replace the keywords of the same names. `fallback`: FXAA
         for the pixels MLAA leaves (spatial/fallback.py): "auto" where the neighbourhood shows 1-spp
         aliasing and is no flat-colour art, with the footprint table in render regions; "edges" the same
@@ -258,10 +263,12 @@ class Filter:
         only), or a (BUCKETS, WEIGHTS) float32 array. `refine_table`: the second table after it
         (spatial/refine.py): "default", None or a (BUCKETS, REFINE_WEIGHTS) array; only with a footprint table.
         `moire`: the last pass, point-sampled moire in two-colour art low-passed (a 3 x 3 binomial)
-        (spatial/moire.py)."""
+        (spatial/moire.py). `keep`: rectangles left exactly as they are in every frame (subtitles, a HUD over a
+        render; spatial/keep.py): KeepRect or 'X,Y,W,H' strings in pixels or % of the frame."""
         if show not in SHOWS:
             raise ValueError(f"show: expected None or 'regions', got {show!r}")
         self.show = show
+        self.keep = keep_rects(keep)
         self.keep_regions = bool(keep_regions) or show == "regions"
         self.last_regions: np.ndarray | None = None  # the flags of the frame collected last (keep_regions)
         self.regions_owner: "Filter" = self  # whose last_regions this filter's frames set (io.sequence.FilterSet)
@@ -390,7 +397,7 @@ class Filter:
             self.queue.flush()
         return PendingFrame(host_out, down, np.dtype(frame.dtype), frame.shape, keep=(staging,),
                             non_finite=non_finite, regions=regions, dim=self.show == "regions",
-                            owner=self.regions_owner)
+                            owner=self.regions_owner, kept=kept_patches(frame, self.keep))
 
     def _enqueue_passes(self, bufs: _FrameBuffers, src, dst, after: list, queue=None,
                         events: dict | None = None):
