@@ -331,6 +331,8 @@ def read_video(info: VideoInfo, *, check_length: bool = True, start: float | Non
                     if start and ft is not None and ft < start - half:
                         continue
                     if end is not None and ft is not None and ft >= end - half:
+                        if not n:
+                            raise _nothing_between(path, start, end, info)
                         return
                     if (frame.width, frame.height) != (info.width, info.height):
                         raise VideoReadError(
@@ -346,10 +348,19 @@ def read_video(info: VideoInfo, *, check_length: bool = True, start: float | Non
                     n += 1
         except (av.error.FFmpegError, EOFError) as exc:
             raise VideoReadError(f"{path}: decoding stopped at frame {n}: {exc}", n) from exc
+        if not n and (start or end is not None):
+            raise _nothing_between(path, start, end, info)
         if check_length and not start and end is None:
             _check_length(info, n, last_time)
     finally:
         container.close()
+
+
+def _nothing_between(path: str, start: float | None, end: float | None, info: VideoInfo) -> VideoReadError:
+    """The error for a trim (--start/--end) that holds no frame: nothing is worth writing."""
+    length = f" (the video is {info.duration:.3f} s long)" if info.duration else ""
+    return VideoReadError(f"{path}: no frame between {start or 0:g} s and "
+                          f"{'the end' if end is None else f'{end:g} s'}{length}", 0)
 
 
 def _check_length(info: VideoInfo, n: int, last_time: float | None) -> None:
