@@ -1,5 +1,6 @@
 """A trim that holds no frame (--start at or past the end, --end 0) is an error and writes nothing, instead of
-an empty, unplayable video with exit code 0."""
+an empty, unplayable video with exit code 0; --start/--end refuse NaN, infinity and negative frame numbers
+(NaN used to end in a traceback)."""
 from __future__ import annotations
 
 import os
@@ -8,6 +9,7 @@ import pytest
 from click.testing import CliRunner
 
 from mlaa_stream.cli.main import main
+from mlaa_stream.io.video import parse_time
 
 CLIP = os.path.join(os.path.dirname(__file__), "..", "fixtures", "demo", "clip.mp4")  # 10 frames at 24 fps
 
@@ -34,3 +36,14 @@ def test_a_trim_without_frames_keeps_the_output_it_would_overwrite(tmp_path):
     out.write_bytes(b"earlier output")
     r = run(CLIP, "-o", out, "-y", "--start", "9:00")
     assert r.exit_code == 1 and out.read_bytes() == b"earlier output"
+
+
+@pytest.mark.parametrize("bad", ["nan", "infinity", "1e400", "-5f", "1:nan"])
+def test_parse_time_refuses_non_finite_times_and_negative_frames(bad):
+    with pytest.raises(ValueError, match="expected a time"):
+        parse_time(bad, None)
+
+
+def test_a_nan_start_is_a_usage_error(tmp_path):
+    r = run(CLIP, "-o", tmp_path / "t.mp4", "--start", "nan")
+    assert r.exit_code == 2 and "expected a time" in stderr(r)

@@ -10,6 +10,7 @@ The output is encoded under a temporary name in its directory and renamed when c
 """
 from __future__ import annotations
 
+import math
 import os
 import sys
 from dataclasses import dataclass
@@ -292,9 +293,12 @@ def parse_time(text: str, fps: Fraction | None) -> float:
     t = (text or "").strip()
     try:
         if t.endswith("f"):
-            return int(t[:-1]) / float(fps or 25)
+            frame = int(t[:-1])
+            if frame < 0:
+                raise ValueError
+            return frame / float(fps or 25)
         parts = [float(p) for p in t.split(":")]
-        if not parts or len(parts) > 3 or any(p < 0 for p in parts):
+        if not parts or len(parts) > 3 or any(not math.isfinite(p) or p < 0 for p in parts):
             raise ValueError
         return sum(p * 60 ** k for k, p in enumerate(reversed(parts)))
     except ValueError:
