@@ -43,6 +43,9 @@ DEFAULT_ENCODER_PRESET = "veryfast"
 LOSSLESS_RGB_CODECS = frozenset({"ffv1", "libx264rgb", "png", "qtrle", "utvideo", "huffyuv", "ffvhuff"})
 # Encoders whose time base must be 1/fps-like (MPEG-4 part 2 limits the denominator to 16 bits).
 _FPS_TIME_BASE_CODECS = frozenset({"mpeg4", "mpeg2video", "mpeg1video", "h263", "msmpeg4v2"})
+# Containers that store one index entry per tick of the time base (AVI): a finer time base than the frame
+# rate declares that rate (an MP4 source's 1/12288 -> 600 fps) and fills the gaps with empty frames.
+_FPS_TIME_BASE_FORMATS = frozenset({"avi"})
 _UNSPECIFIED = {"colorspace": 2, "color_primaries": 2, "color_trc": 2, "color_range": 0}
 
 
@@ -507,7 +510,8 @@ class VideoWriter:
         stream.width, stream.height = info.width, info.height
         stream.pix_fmt = self.pix_fmt
         if self.codec in _FPS_TIME_BASE_CODECS or info.time_base is None or \
-                self.container_format in _RAW_FORMATS:  # y4m reads its frame rate from the time base
+                self.container_format in _RAW_FORMATS or \
+                self._out.format.name in _FPS_TIME_BASE_FORMATS:  # y4m reads its frame rate from the time base
             self._time_base = Fraction(1, 1) / rate
         else:
             self._time_base = info.time_base
