@@ -6,7 +6,7 @@ from __future__ import annotations
 import os
 from fractions import Fraction
 
-from mlaa_stream.cli.filter_cmd import EXIT_FAILED, EXIT_OK, Failed, Usage, _check_writable, _Job
+from mlaa_stream.cli.filter_cmd import EXIT_FAILED, EXIT_OK, Failed, Usage, _check_writable, _Job, _VideoJob
 
 
 def _sequence_plan(job: _Job) -> list:
@@ -133,6 +133,7 @@ class VideoToImagesJob(_Job):
             self.info = probe_video(self.input)
         except VideoError as exc:
             raise Failed(str(exc)) from exc
+        self.start, self.end = _VideoJob._trim(self)  # --start/--end, as for a video out
         if self.info.audio_streams:
             self.con.warn(f"{self.input}: audio is not written to images")
         self.overwrite = o["overwrite"]
@@ -154,8 +155,8 @@ class VideoToImagesJob(_Job):
             self.written += 1
 
         try:
-            run_pipeline(read_video(self.info), filt, sink, in_flight=in_flight, post_hooks=post_hooks,
-                         temporal=temporal, times=times, on_frame=progress.update)
+            run_pipeline(read_video(self.info, start=self.start, end=self.end), filt, sink, in_flight=in_flight,
+                         post_hooks=post_hooks, temporal=temporal, times=times, on_frame=progress.update)
         except PipelineError as exc:
             cause = exc.cause
             if isinstance(cause, (VideoReadError, ImageWriteError)):
