@@ -450,6 +450,10 @@ class VideoWriter:
         if raw and not pix_fmt:
             pix_fmt = _raw_pix_fmt(container_format, info)
         audio = audio or ("copy" if copy_audio else "none")
+        held = [k for k, n in (("audio", info.audio_streams), ("subtitle", info.subtitle_streams)) if n]
+        dropped = []  # the writer's first warnings
+        if raw and audio != "none" and info.path != PIPE and held:
+            dropped.append(f"{path}: {' and '.join(held)} streams not kept: {container_format} holds video only")
         if info.path == PIPE or raw:
             audio = "none"  # a pipe is read once (its audio is not there to copy); y4m holds video only
         if audio not in ("copy", "aac", "none"):
@@ -470,7 +474,7 @@ class VideoWriter:
         self.pix_fmt = pix_fmt or choose_pix_fmt(codec, info.pix_fmt, info.width, info.height) or "yuv420p"
         self.frames_written = 0
         self.last_time: float | None = None  # seconds, end of the last frame written
-        self.warnings: list[str] = []
+        self.warnings: list[str] = dropped
         self._tmp = None if path == PIPE else temp_path_for(path)  # standard output: written as it comes
         self._options = {**encoder_options(codec, crf, preset), **(extra_options or {})}
         self._audio_in = None
