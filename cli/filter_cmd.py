@@ -396,6 +396,15 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
             con.info("a single image: spatial antialiasing only (temporal needs a sequence)")
             temporal.enabled, temporal.show, temporal.stats_path, temporal.lookahead = False, None, None, None
             temporal.dense_motion = False
+        for what, path in (("--progress", progress_path if progress_path != "-" else None),
+                           ("--stats", temporal.stats_path)):
+            if path:  # written during or after the run: a missing folder would end it in a traceback
+                folder = os.path.dirname(os.path.abspath(path))
+                if not os.path.isdir(folder):
+                    raise Failed(f"{what} {path}: the folder {folder} does not exist")
+                if os.path.isdir(path):
+                    raise Failed(f"{what} {path}: is a folder; expected a file name")
+                _check_writable(folder)
         if temporal.spec() is not None and not kwargs.get("fast"):
             from mlaa_stream.temporal.methods import needs_regions
             kwargs["keep_regions"] = needs_regions(temporal.method)  # the stage reads the filter's regions
