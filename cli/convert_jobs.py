@@ -123,14 +123,18 @@ class VideoToImagesJob(_Job):
     FIRST_NUMBER = 1
 
     def prepare(self) -> None:
-        from mlaa_stream.io.video import VideoError, probe_video
+        from mlaa_stream.io.video import PIPE, VideoError, open_pipe, probe_video
 
         o = self.opts
         folder = os.path.dirname(os.path.abspath(self.output))
         os.makedirs(folder, exist_ok=True)
         _check_writable(folder)
+        self.pipe_in = None
         try:
-            self.info = probe_video(self.input)
+            if self.input == PIPE:  # read once: the open container goes on to read_video
+                self.info, self.pipe_in = open_pipe()
+            else:
+                self.info = probe_video(self.input)
         except VideoError as exc:
             raise Failed(str(exc)) from exc
         self.start, self.end = _VideoJob._trim(self)  # --start/--end, as for a video out
@@ -155,8 +159,9 @@ class VideoToImagesJob(_Job):
             self.written += 1
 
         try:
-            run_pipeline(read_video(self.info, start=self.start, end=self.end), filt, sink, in_flight=in_flight,
-                         post_hooks=post_hooks, temporal=temporal, times=times, on_frame=progress.update)
+            run_pipeline(read_video(self.info, start=self.start, end=self.end, container=self.pipe_in), filt, sink,
+                         in_flight=in_flight, post_hooks=post_hooks, temporal=temporal, times=times,
+                         on_frame=progress.update)
         except PipelineError as exc:
             cause = exc.cause
             if isinstance(cause, (VideoReadError, ImageWriteError)):
