@@ -389,6 +389,9 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
                 parse_address(cluster)
             except ClusterAddressError as exc:
                 raise Usage(str(exc)) from exc
+        if output == "-" and kind != "video":  # else a folder named '-', or a file OpenImageIO cannot write
+            raise Usage("-o - (standard output) takes a video read from a video file or standard input; "
+                        "write images to a file, a folder or a frame pattern")
         if (start is not None or end is not None) and kind != "video":
             raise Usage("--start/--end trim a video; for a frame pattern use --frames A-B")
         post_hooks = _load_post_hooks(overlay, device)
