@@ -140,6 +140,9 @@ class VideoToImagesJob(_Job):
         self.start, self.end = _VideoJob._trim(self)  # --start/--end, as for a video out
         if self.info.audio_streams:
             self.con.warn(f"{self.input}: audio is not written to images")
+        if self.info.rotation:  # a phone's video: a player turns it, an image viewer will not
+            self.con.warn(f"{self.input}: displayed rotated by {self.info.rotation} degrees; the images are "
+                          f"written as stored, not rotated")
         self.overwrite = o["overwrite"]
 
     def nothing_to_do(self) -> bool:
