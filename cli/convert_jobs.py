@@ -6,7 +6,7 @@ from __future__ import annotations
 import os
 from fractions import Fraction
 
-from mlaa_stream.cli.filter_cmd import EXIT_FAILED, EXIT_OK, Failed, Usage, _check_writable, _Job
+from mlaa_stream.cli.filter_cmd import EXIT_FAILED, EXIT_OK, Failed, Usage, _check_writable, _Job, _VideoJob
 
 
 def _sequence_plan(job: _Job) -> list:
@@ -123,18 +123,26 @@ class VideoToImagesJob(_Job):
     FIRST_NUMBER = 1
 
     def prepare(self) -> None:
-        from mlaa_stream.io.video import VideoError, probe_video
+        from mlaa_stream.io.video import PIPE, VideoError, open_pipe, probe_video
 
         o = self.opts
         folder = os.path.dirname(os.path.abspath(self.output))
         os.makedirs(folder, exist_ok=True)
         _check_writable(folder)
+        self.pipe_in = None
         try:
-            self.info = probe_video(self.input)
+            if self.input == PIPE:  # read once: the open container goes on to read_video
+                self.info, self.pipe_in = open_pipe()
+            else:
+                self.info = probe_video(self.input)
         except VideoError as exc:
             raise Failed(str(exc)) from exc
+        self.start, self.end = _VideoJob._trim(self)  # --start/--end, as for a video out
         if self.info.audio_streams:
             self.con.warn(f"{self.input}: audio is not written to images")
+        if self.info.rotation:  # a phone's video: a player turns it, an image viewer will not
+            self.con.warn(f"{self.input}: displayed rotated by {self.info.rotation} degrees; the images are "
+                          f"written as stored, not rotated")
         self.overwrite = o["overwrite"]
 
     def nothing_to_do(self) -> bool:
@@ -154,8 +162,9 @@ class VideoToImagesJob(_Job):
             self.written += 1
 
         try:
-            run_pipeline(read_video(self.info), filt, sink, in_flight=in_flight, post_hooks=post_hooks,
-                         temporal=temporal, times=times, on_frame=progress.update)
+            run_pipeline(read_video(self.info, start=self.start, end=self.end, container=self.pipe_in), filt, sink,
+                         in_flight=in_flight, post_hooks=post_hooks, temporal=temporal, times=times,
+                         on_frame=progress.update)
         except PipelineError as exc:
             cause = exc.cause
             if isinstance(cause, (VideoReadError, ImageWriteError)):

@@ -400,6 +400,9 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
                 parse_address(cluster)
             except ClusterAddressError as exc:
                 raise Usage(str(exc)) from exc
+        if output == "-" and kind != "video":  # else a folder named '-', or a file OpenImageIO cannot write
+            raise Usage("-o - (standard output) takes a video read from a video file or standard input; "
+                        "write images to a file, a folder or a frame pattern")
         if (start is not None or end is not None) and kind != "video":
             raise Usage("--start/--end trim a video; for a frame pattern use --frames A-B")
         post_hooks = _load_post_hooks(overlay, device)
@@ -407,6 +410,15 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
             con.info("a single image: spatial antialiasing only (temporal needs a sequence)")
             temporal.enabled, temporal.show, temporal.stats_path, temporal.lookahead = False, None, None, None
             temporal.dense_motion = False
+        for what, path in (("--progress", progress_path if progress_path != "-" else None),
+                           ("--stats", temporal.stats_path)):
+            if path:  # written during or after the run: a missing folder would end it in a traceback
+                folder = os.path.dirname(os.path.abspath(path))
+                if not os.path.isdir(folder):
+                    raise Failed(f"{what} {path}: the folder {folder} does not exist")
+                if os.path.isdir(path):
+                    raise Failed(f"{what} {path}: is a folder; expected a file name")
+                _check_writable(folder)
         if temporal.spec() is not None and not kwargs.get("fast"):
             from mlaa_stream.temporal.methods import needs_regions
             kwargs["keep_regions"] = needs_regions(temporal.method)  # the stage reads the filter's regions

@@ -329,9 +329,15 @@ def _write_file(tmp: str, pixels: np.ndarray, spec: oiio.ImageSpec, final: str) 
     err = "" if ok else out.geterror()
     ok = out.close() and ok
     if ok:
-        problem = check_complete(tmp, spec.width, spec.height, spec.nchannels)
-        if problem is not None:
-            ok, err = False, f"the written file is incomplete: {problem}"
+        written = image_shape(tmp)
+        if written is not None and written[:2] == (spec.width, spec.height) and written[2] != spec.nchannels:
+            # JPEG drops alpha and GIF adds it without an error: a format limit, not a failed write
+            ok, err = False, (f"{out.format_name()} does not support {spec.nchannels}-channel images "
+                              f"(it wrote {written[2]}); PNG, TIFF and EXR keep them")
+        else:
+            problem = check_complete(tmp, spec.width, spec.height, spec.nchannels)
+            if problem is not None:
+                ok, err = False, f"the written file is incomplete: {problem}"
     if not ok:
         err = err or out.geterror() or oiio.geterror() or "unknown error"
         if (os.strerror(errno.ENOSPC) in err or os.strerror(errno.EDQUOT) in err

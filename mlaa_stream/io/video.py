@@ -10,6 +10,7 @@ The output is encoded under a temporary name in its directory and renamed when c
 """
 from __future__ import annotations
 
+import math
 import os
 import sys
 from dataclasses import dataclass
@@ -42,6 +43,9 @@ DEFAULT_ENCODER_PRESET = "veryfast"
 LOSSLESS_RGB_CODECS = frozenset({"ffv1", "libx264rgb", "png", "qtrle", "utvideo", "huffyuv", "ffvhuff"})
 # Encoders whose time base must be 1/fps-like (MPEG-4 part 2 limits the denominator to 16 bits).
 _FPS_TIME_BASE_CODECS = frozenset({"mpeg4", "mpeg2video", "mpeg1video", "h263", "msmpeg4v2"})
+# Containers that store one index entry per tick of the time base (AVI): a finer time base than the frame
+# rate declares that rate (an MP4 source's 1/12288 -> 600 fps) and fills the gaps with empty frames.
+_FPS_TIME_BASE_FORMATS = frozenset({"avi"})
 _UNSPECIFIED = {"colorspace": 2, "color_primaries": 2, "color_trc": 2, "color_range": 0}
 
 
@@ -292,9 +296,12 @@ def parse_time(text: str, fps: Fraction | None) -> float:
     t = (text or "").strip()
     try:
         if t.endswith("f"):
-            return int(t[:-1]) / float(fps or 25)
+            frame = int(t[:-1])
+            if frame < 0:
+                raise ValueError
+            return frame / float(fps or 25)
         parts = [float(p) for p in t.split(":")]
-        if not parts or len(parts) > 3 or any(p < 0 for p in parts):
+        if not parts or len(parts) > 3 or any(not math.isfinite(p) or p < 0 for p in parts):
             raise ValueError
         return sum(p * 60 ** k for k, p in enumerate(reversed(parts)))
     except ValueError:
@@ -331,6 +338,8 @@ def read_video(info: VideoInfo, *, check_length: bool = True, start: float | Non
                     if start and ft is not None and ft < start - half:
                         continue
                     if end is not None and ft is not None and ft >= end - half:
+                        if not n:
+                            raise _nothing_between(path, start, end, info)
                         return
                     if (frame.width, frame.height) != (info.width, info.height):
                         raise VideoReadError(
@@ -346,10 +355,19 @@ def read_video(info: VideoInfo, *, check_length: bool = True, start: float | Non
                     n += 1
         except (av.error.FFmpegError, EOFError) as exc:
             raise VideoReadError(f"{path}: decoding stopped at frame {n}: {exc}", n) from exc
+        if not n and (start or end is not None):
+            raise _nothing_between(path, start, end, info)
         if check_length and not start and end is None:
             _check_length(info, n, last_time)
     finally:
         container.close()
+
+
+def _nothing_between(path: str, start: float | None, end: float | None, info: VideoInfo) -> VideoReadError:
+    """The error for a trim (--start/--end) that holds no frame: nothing is worth writing."""
+    length = f" (the video is {info.duration:.3f} s long)" if info.duration else ""
+    return VideoReadError(f"{path}: no frame between {start or 0:g} s and "
+                          f"{'the end' if end is None else f'{end:g} s'}{length}", 0)
 
 
 def _check_length(info: VideoInfo, n: int, last_time: float | None) -> None:
@@ -432,6 +450,10 @@ class VideoWriter:
         if raw and not pix_fmt:
             pix_fmt = _raw_pix_fmt(container_format, info)
         audio = audio or ("copy" if copy_audio else "none")
+        held = [k for k, n in (("audio", info.audio_streams), ("subtitle", info.subtitle_streams)) if n]
+        dropped = []  # the writer's first warnings
+        if raw and audio != "none" and info.path != PIPE and held:
+            dropped.append(f"{path}: {' and '.join(held)} streams not kept: {container_format} holds video only")
         if info.path == PIPE or raw:
             audio = "none"  # a pipe is read once (its audio is not there to copy); y4m holds video only
         if audio not in ("copy", "aac", "none"):
@@ -452,7 +474,7 @@ class VideoWriter:
         self.pix_fmt = pix_fmt or choose_pix_fmt(codec, info.pix_fmt, info.width, info.height) or "yuv420p"
         self.frames_written = 0
         self.last_time: float | None = None  # seconds, end of the last frame written
-        self.warnings: list[str] = []
+        self.warnings: list[str] = dropped
         self._tmp = None if path == PIPE else temp_path_for(path)  # standard output: written as it comes
         self._options = {**encoder_options(codec, crf, preset), **(extra_options or {})}
         self._audio_in = None
@@ -492,7 +514,8 @@ class VideoWriter:
         stream.width, stream.height = info.width, info.height
         stream.pix_fmt = self.pix_fmt
         if self.codec in _FPS_TIME_BASE_CODECS or info.time_base is None or \
-                self.container_format in _RAW_FORMATS:  # y4m reads its frame rate from the time base
+                self.container_format in _RAW_FORMATS or \
+                self._out.format.name in _FPS_TIME_BASE_FORMATS:  # y4m reads its frame rate from the time base
             self._time_base = Fraction(1, 1) / rate
         else:
             self._time_base = info.time_base
