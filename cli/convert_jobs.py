@@ -6,7 +6,7 @@ from __future__ import annotations
 import os
 from fractions import Fraction
 
-from mlaa_stream.cli.filter_cmd import EXIT_FAILED, EXIT_OK, Failed, Usage, _check_writable, _Job, _VideoJob
+from mlaa_stream.cli.filter_cmd import EXIT_FAILED, EXIT_OK, Failed, Usage, _check_writable, _Job, video_trim
 
 
 def _sequence_plan(job: _Job) -> list:
@@ -137,7 +137,7 @@ class VideoToImagesJob(_Job):
                 self.info = probe_video(self.input)
         except VideoError as exc:
             raise Failed(str(exc)) from exc
-        self.start, self.end = _VideoJob._trim(self)  # --start/--end, as for a video out
+        self.start, self.end = video_trim(self.opts, self.info)  # --start/--end, as for a video out
         if self.info.audio_streams:
             self.con.warn(f"{self.input}: audio is not written to images")
         if self.info.rotation:  # a phone's video: a player turns it, an image viewer will not

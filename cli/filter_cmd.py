@@ -153,6 +153,22 @@ def _check_writable(folder: str) -> None:
         raise OSError(exc.errno, f"{folder}: cannot write in this folder ({exc.strerror})") from exc
 
 
+def video_trim(opts: dict, info) -> tuple[float | None, float | None]:
+    """--start/--end of a video input in seconds (None: not given); refused when empty or backwards."""
+    from mlaa_stream.io.video import parse_time
+
+    try:
+        start = parse_time(opts["start"], info.fps) if opts.get("start") is not None else None
+        end = parse_time(opts["end"], info.fps) if opts.get("end") is not None else None
+    except ValueError as exc:
+        raise Usage(f"--start/--end: {exc}") from exc
+    if start is not None and end is not None and end <= start:
+        raise Usage(f"--end ({opts['end']}) must come after --start ({opts['start']})")
+    if opts["video_backend"] == "opencv" and (start or end is not None):
+        raise Usage("--start/--end need the pyav video backend")
+    return start, end
+
+
 def _load_post_hooks(overlay: str | None, device: str | None) -> list:
     """The --overlay hook: our frames are RGB (decoded video, OpenImageIO), not cv2's BGR."""
     if overlay is None:
@@ -954,20 +970,7 @@ class _VideoJob(_Job):
             self.con.info(f"{path}: removed (a temporary file left by an interrupted run)")
 
     def _trim(self) -> tuple[float | None, float | None]:
-        """--start/--end in seconds (None: not given); refused when empty or backwards."""
-        from mlaa_stream.io.video import parse_time
-
-        o = self.opts
-        try:
-            start = parse_time(o["start"], self.info.fps) if o.get("start") is not None else None
-            end = parse_time(o["end"], self.info.fps) if o.get("end") is not None else None
-        except ValueError as exc:
-            raise Usage(f"--start/--end: {exc}") from exc
-        if start is not None and end is not None and end <= start:
-            raise Usage(f"--end ({o['end']}) must come after --start ({o['start']})")
-        if o["video_backend"] == "opencv" and (start or end is not None):
-            raise Usage("--start/--end need the pyav video backend")
-        return start, end
+        return video_trim(self.opts, self.info)
 
     def nothing_to_do(self) -> bool:
         return False
