@@ -162,7 +162,8 @@ class VideoToImagesJob(_Job):
             self.written += 1
 
         try:
-            run_pipeline(read_video(self.info, start=self.start, end=self.end, container=self.pipe_in), filt, sink,
+            run_pipeline(read_video(self.info, start=self.start, end=self.end, container=self.pipe_in,
+                                    require_frames=True), filt, sink,
                          in_flight=in_flight, post_hooks=post_hooks, temporal=temporal, times=times,
                          on_frame=progress.update)
         except PipelineError as exc:

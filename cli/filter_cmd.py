@@ -1018,7 +1018,8 @@ class _VideoJob(_Job):
         if self.opts["video_backend"] == "opencv":
             source = read_video_cv(self.info)
         else:
-            source = read_video(self.info, start=self.start, end=self.end, container=self.pipe_in)
+            source = read_video(self.info, start=self.start, end=self.end, container=self.pipe_in,
+                                require_frames=True)
         total = self.info.frames
         if total and self.info.fps and (self.start or self.end is not None):
             duration = (self.end if self.end is not None else total / float(self.info.fps)) - (self.start or 0)

@@ -310,11 +310,14 @@ def parse_time(text: str, fps: Fraction | None) -> float:
 
 
 def read_video(info: VideoInfo, *, check_length: bool = True, start: float | None = None,
-               end: float | None = None, container=None) -> Iterator[Item]:
-    """Decode every frame of `info.path` to `info.sample_format`; Item.meta is a FrameTime.
+               end: float | None = None, container=None, require_frames: bool = False) -> Iterator[Item]:
+    """Decode every frame of `info.path` (between `start` and `end` seconds where given) to
+    `info.sample_format`; Item.meta is a FrameTime.
 
     Raises VideoReadError naming the frame where decoding stopped, also when the stream ends well
-    before the length its container declares (a truncated file that decodes without an error).
+    before the length its container declares (a truncated file that decodes without an error), and with
+    `require_frames` when a trim holds no frame (a user's --start/--end: nothing worth writing; a cluster's
+    last segment may be empty).
     """
     _require_av()
     path = info.path if info.path != PIPE else "standard input"
@@ -338,7 +341,7 @@ def read_video(info: VideoInfo, *, check_length: bool = True, start: float | Non
                     if start and ft is not None and ft < start - half:
                         continue
                     if end is not None and ft is not None and ft >= end - half:
-                        if not n:
+                        if not n and require_frames:
                             raise _nothing_between(path, start, end, info)
                         return
                     if (frame.width, frame.height) != (info.width, info.height):
@@ -355,7 +358,7 @@ def read_video(info: VideoInfo, *, check_length: bool = True, start: float | Non
                     n += 1
         except (av.error.FFmpegError, EOFError) as exc:
             raise VideoReadError(f"{path}: decoding stopped at frame {n}: {exc}", n) from exc
-        if not n and (start or end is not None):
+        if not n and require_frames and (start or end is not None):
             raise _nothing_between(path, start, end, info)
         if check_length and not start and end is None:
             _check_length(info, n, last_time)
