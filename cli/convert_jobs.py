@@ -51,8 +51,10 @@ class SequenceToVideoJob(_Job):
         self.plan = _sequence_plan(self)
         first = read_image(self.plan[0].src)
         if first.pixels.dtype.kind == "f":
+            # PNG frames of linear-light EXRs are sRGB-encoded (io/images.py write_image); float TIFFs stay float
             raise Usage(f"{self.plan[0].src}: float (linear-light) images cannot be encoded to video here; "
-                        f"write PNG/TIFF frames, or convert them to 8/16-bit display values first")
+                        f"filter them to PNG frames first (linear light is encoded to sRGB there), then make the "
+                        f"video from those")
         w, h, c = image_shape(self.plan[0].src)
         bits = 16 if first.pixels.dtype.itemsize == 2 else 8
         rate = Fraction(o["rate"]).limit_denominator(1001)

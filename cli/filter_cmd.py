@@ -27,14 +27,15 @@ Examples:
   mlaa-stream in.mp4 -o out.mp4                      H.264, CRF 18, preset veryfast, audio copied
   mlaa-stream in.mov -o mid.mkv --codec ffv1         lossless intermediate (also: libx264rgb --crf 0)
   mlaa-stream in.mp4 -o out.mp4 --preset soft --metric luma --threshold 0.08
-  mlaa-stream in.mp4 -o 'frames/%04d.png'            a video to images; 'shot/%04d.exr' -o out.mp4 back
+  mlaa-stream in.mp4 -o 'frames/%04d.png'            a video to images; 'shot/%04d.png' -o out.mp4 back
   mlaa-stream in.mkv --start 1:30 --end 2:00 -o clip.mkv   trim (seconds, h:m:s or frames like 300f)
   vspipe -c y4m script.vpy - | mlaa-stream - -o - -f y4m | ffmpeg -i - out.mkv   pipes
 
 \b
 Images and sequences go through OpenImageIO: bit depth (8/16-bit, half, float), channels, alpha
 (passed through unchanged) and metadata are kept; palette PNGs come out as RGB(A). EXRs tagged
-linear (and untagged float images) are taken as linear light, others as sRGB-encoded. In a folder,
+linear (and untagged float images) are taken as linear light, others as sRGB-encoded; linear light
+written to a format of display values (PNG, JPEG) is encoded to sRGB, clipped to 0-1. In a folder,
 files that are not images by their extension are skipped with a warning; a file that cannot be
 read or written is reported and the others are still processed. A sequence (%04d pattern) must keep
 one size, channel count and sample type; the first frame that differs stops it. Gaps in the
@@ -644,7 +645,7 @@ class _ImageJob(_Job):
 
         o, con = self.opts, self.con
         self.strict = self.kind == "pattern"
-        self.report = Report(say=con.error, inform=con.info)
+        self.report = Report(say=con.error, inform=con.info, caution=con.warn)
         numbers = None
         if self.kind == "image":
             srcs = [self.input]
@@ -795,6 +796,8 @@ class _ImageJob(_Job):
         progress = self._progress(len(read_plan))
         say = self.report.say
         self.report.say = lambda msg: (progress.clear(), say(msg))
+        caution = self.report.caution
+        self.report.caution = lambda msg: (progress.clear(), caution(msg))
         write = image_sink(self.report, overwrite=self.opts["overwrite"], strict=self.strict)
 
         def sink(item) -> None:
