@@ -232,8 +232,9 @@ def _job_for(kind: str, output: str) -> type:
               help="Output file, folder (same names as the inputs) or frame pattern (clean/%04d.png).")
 @click.option("-y", "--overwrite", is_flag=True, help="Replace outputs that exist (never an input).")
 @click.option("--resume", is_flag=True,
-              help="Skip inputs whose output exists already (folders and sequences); --temporal on a "
-                   "sequence warms up from the skipped frames just before the first one to write.")
+              help="Skip inputs whose output exists already (folders, sequences, a video written as images); "
+                   "--temporal on a sequence warms up from the skipped frames just before the first one to "
+                   "write; a video's skipped frames are still filtered with --temporal or --overlay, not written.")
 @click.option("--frames", metavar="A-B", help="Frame numbers of a %04d pattern, e.g. 1001-1100 "
               "(default: every number found; gaps are reported).")
 @click.option("--preset", type=click.Choice(sorted(PRESETS)), default=None,

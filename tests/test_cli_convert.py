@@ -67,6 +67,35 @@ def test_a_video_becomes_numbered_images_from_1(tmp_path):
     assert "audio is not written to images" in stderr(r)
 
 
+def test_a_video_to_images_resumes_skipping_complete_outputs(tmp_path):
+    img = tmp_path / "img"
+    assert run(CLIP, "-o", img / "f_%04d.png").exit_code == 0
+    first = {n: read_image(str(img / n)).pixels for n in os.listdir(img)}
+    for n in range(6, 11):   # an interrupted run: frames 6-10 missing, 3 half written, 2 "done" differently
+        (img / f"f_{n:04d}.png").unlink()
+    (img / "f_0003.png").write_bytes((img / "f_0003.png").read_bytes()[:100])
+    write_image(str(img / "f_0002.png"), np.zeros((48, 64, 3), np.uint8), overwrite=True)
+    marker = (img / "f_0002.png").read_bytes()
+    r = run(CLIP, "-o", img / "f_%04d.png")
+    assert r.exit_code == 2 and "--overwrite to replace or --resume to skip" in stderr(r)
+    r = run(CLIP, "-o", img / "f_%04d.png", "--resume", "-v")
+    assert r.exit_code == 0, stderr(r)
+    assert "f_0003.png: incomplete" in stderr(r) and "--resume: 4 outputs exist and are skipped" in stderr(r)
+    assert (img / "f_0002.png").read_bytes() == marker   # complete: kept
+    assert sorted(os.listdir(img)) == sorted(first)
+    for n in [3] + list(range(6, 11)):   # written again, as the whole run wrote them
+        np.testing.assert_array_equal(read_image(str(img / f"f_{n:04d}.png")).pixels, first[f"f_{n:04d}.png"])
+    tem = tmp_path / "tem"   # with the temporal stage every frame is filtered (its history), the done ones not written
+    assert run(CLIP, "-o", tem / "f_%04d.png", "--temporal").exit_code == 0
+    whole = {n: read_image(str(tem / n)).pixels for n in os.listdir(tem)}
+    for n in range(6, 11):
+        (tem / f"f_{n:04d}.png").unlink()
+    r = run(CLIP, "-o", tem / "f_%04d.png", "--temporal", "--resume")
+    assert r.exit_code == 0, stderr(r)
+    for name, pixels in whole.items():
+        np.testing.assert_array_equal(read_image(str(tem / name)).pixels, pixels)
+
+
 def test_float_frames_to_video_are_refused_and_existing_outputs_need_y(tmp_path):
     folder = tmp_path / "exr"
     folder.mkdir()
