@@ -211,6 +211,26 @@ def _kind_of(path: str) -> str:
     return "video"  # probe_video says so if it is not one either
 
 
+def _warn_unused_options(ctx: click.Context, con: Console, kind: str, job: type) -> None:
+    """Options given on the command line (not defaults) that this job has no use for: a warning each, not an
+    error (--rate with a video input, the encoder's options with images out)."""
+    from mlaa_stream.cli.convert_jobs import SequenceToVideoJob, VideoToImagesJob
+
+    def given(name: str) -> bool:
+        return ctx.get_parameter_source(name) == click.core.ParameterSource.COMMANDLINE
+
+    if given("rate") and job is not SequenceToVideoJob:
+        why = "a video keeps its own frame rate" if job is _VideoJob else "images have no frame rate"
+        con.warn(f"--rate has no effect here: it sets the frame rate of a video made from images; {why}")
+    if job is _ImageJob or job is VideoToImagesJob:   # images out: no video encoder
+        encoder = (("codec", "--codec"), ("crf", "--crf"), ("encoder_preset", "--encoder-preset"),
+                   ("pix_fmt", "--pix-fmt"))
+        unused = [flag for name, flag in encoder if given(name)]
+        if unused:
+            con.warn(f"{', '.join(unused)} {'has' if len(unused) == 1 else 'have'} no effect here: "
+                     f"{'it sets' if len(unused) == 1 else 'they set'} the video encoder, and the output is images")
+
+
 def _job_for(kind: str, output: str) -> type:
     """The job for an input kind and an output: same kind (video -> video, images -> images), or a
     conversion: a folder or pattern -> a video file (by its extension), a video -> a frame pattern."""
@@ -457,6 +477,7 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
                      encoder_preset=encoder_preset, pix_fmt=pix_fmt, rate=rate,
                      video_backend=video_backend, filter_kwargs=kwargs)
         runner.prepare()
+        _warn_unused_options(ctx, con, kind, job)
     except Usage as exc:
         con.error(str(exc))
         return EXIT_USAGE

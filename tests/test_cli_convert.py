@@ -96,6 +96,24 @@ def test_a_video_to_images_resumes_skipping_complete_outputs(tmp_path):
         np.testing.assert_array_equal(read_image(str(tem / name)).pixels, pixels)
 
 
+def test_options_given_for_another_kind_of_output_are_named_once_as_having_no_effect(tmp_path):
+    r = run(CLIP, "-o", tmp_path / "v.mp4", "--rate", "30")   # video -> video: its own rate
+    assert r.exit_code == 0, stderr(r)
+    assert stderr(r).count("--rate has no effect here") == 1 and "keeps its own frame rate" in stderr(r)
+    assert video_frames(tmp_path / "v.mp4")[1] == 24.0
+    r = run(CLIP, "-o", tmp_path / "img" / "f_%04d.png", "--rate", "30", "--crf", "20", "--pix-fmt", "yuv444p")
+    assert r.exit_code == 0, stderr(r)
+    assert "--rate has no effect here" in stderr(r) and "images have no frame rate" in stderr(r)
+    assert stderr(r).count("--crf, --pix-fmt have no effect here: they set the video encoder") == 1
+    staircases(tmp_path / "seq", 2)
+    r = run(tmp_path / "seq", "-o", tmp_path / "o", "--codec", "ffv1")
+    assert r.exit_code == 0 and "--codec has no effect here: it sets the video encoder" in stderr(r)
+    r = run(tmp_path / "seq", "-o", tmp_path / "o.mp4", "--rate", "30", "--crf", "20")   # used: no warning
+    assert r.exit_code == 0 and "no effect" not in stderr(r)
+    r = run(CLIP, "-o", tmp_path / "img2" / "f_%04d.png")   # defaults are not "given"
+    assert r.exit_code == 0 and "no effect" not in stderr(r)
+
+
 def test_float_frames_to_video_are_refused_and_existing_outputs_need_y(tmp_path):
     folder = tmp_path / "exr"
     folder.mkdir()
