@@ -51,8 +51,10 @@ class SequenceToVideoJob(_Job):
         self.plan = _sequence_plan(self)
         first = read_image(self.plan[0].src)
         if first.pixels.dtype.kind == "f":
+            # PNG frames of linear-light EXRs are sRGB-encoded (io/images.py write_image); float TIFFs stay float
             raise Usage(f"{self.plan[0].src}: float (linear-light) images cannot be encoded to video here; "
-                        f"write PNG/TIFF frames, or convert them to 8/16-bit display values first")
+                        f"filter them to PNG frames first (linear light is encoded to sRGB there), then make the "
+                        f"video from those")
         w, h, c = image_shape(self.plan[0].src)
         bits = 16 if first.pixels.dtype.itemsize == 2 else 8
         rate = Fraction(o["rate"]).limit_denominator(1001)
@@ -144,26 +146,80 @@ class VideoToImagesJob(_Job):
             self.con.warn(f"{self.input}: displayed rotated by {self.info.rotation} degrees; the images are "
                           f"written as stored, not rotated")
         self.overwrite = o["overwrite"]
+        self.done: set[int] = set()   # frame numbers whose complete output exists (--resume): not written again
+        existing = self._existing_outputs()
+        if existing and o["resume"]:
+            self.done = self._complete(existing)
+            self.con.info(f"--resume: {len(self.done)} outputs exist and are skipped")
+        elif existing and not o["overwrite"]:
+            more = f" (and {len(existing) - 1} more)" if len(existing) > 1 else ""
+            raise Usage(f"{existing[0][1]}: exists{more}; use --overwrite to replace or --resume to skip "
+                        f"existing outputs")
+
+    def _existing_outputs(self) -> list[tuple[int, str]]:
+        """(number, path) of the files the frame pattern already names, from FIRST_NUMBER on (checked before
+        decoding: the frame count of a trimmed or piped video is known only at its end)."""
+        from mlaa_stream.io.sequence import expand_pattern
+
+        found, _ = expand_pattern(self.output)
+        return [(n, path) for n, path in found if n >= self.FIRST_NUMBER]
+
+    def _complete(self, existing: list[tuple[int, str]]) -> set[int]:
+        """--resume: the numbers of the existing outputs that are complete (the video's size and channels, PNG/JPEG
+        end marker), as for a folder (_ImageJob._keep_complete); an incomplete one is removed and written again."""
+        from mlaa_stream.io.images import check_complete
+
+        channels = 4 if self.info.has_alpha else 3
+        done = set()
+        for n, path in existing:
+            why = check_complete(path, self.info.width, self.info.height, channels, decode=False)
+            if why is None:
+                done.add(n)
+                continue
+            self.con.warn(f"{path}: incomplete ({why}); it is written again")
+            try:
+                os.unlink(path)
+            except OSError as exc:
+                raise Failed(f"{path}: incomplete and cannot be removed ({exc.strerror})") from exc
+        return done
 
     def nothing_to_do(self) -> bool:
         return False
 
     def run(self, filt, post_hooks, in_flight, times, temporal=None) -> int:
         from mlaa_stream.io.images import ImageWriteError, write_image
+        from mlaa_stream.io.item import Item
         from mlaa_stream.io.sequence import frame_path
         from mlaa_stream.io.video import VideoReadError, read_video
         from mlaa_stream.pipeline import PipelineError, run_pipeline
 
-        progress = self._progress(self.info.frames)
+        # --resume: the frames already written are still decoded (the video is read in order) but, unless the
+        # temporal stage (its history) or an overlay (its frame numbers: the pipeline's positions) needs the
+        # whole stream, not filtered; either way not written again.
+        drop = bool(self.done) and temporal is None and not post_hooks
+        total = self.info.frames
+        progress = self._progress(total - len(self.done) if drop and total else total)
+
+        def source():
+            """The decoded frames, each with its output's number (meta), those done left out where `drop`."""
+            inner = read_video(self.info, start=self.start, end=self.end, container=self.pipe_in,
+                               require_frames=True)
+            try:
+                for position, item in enumerate(inner):
+                    number = self.FIRST_NUMBER + position
+                    if not (drop and number in self.done):
+                        yield Item(item.frame, number)
+            finally:
+                inner.close()
 
         def sink(item) -> None:
-            write_image(frame_path(self.output, self.FIRST_NUMBER + item.index), item.frame,
-                        overwrite=self.overwrite)
+            if item.meta in self.done:
+                return
+            write_image(frame_path(self.output, item.meta), item.frame, overwrite=self.overwrite)
             self.written += 1
 
         try:
-            run_pipeline(read_video(self.info, start=self.start, end=self.end, container=self.pipe_in,
-                                    require_frames=True), filt, sink,
+            run_pipeline(source(), filt, sink,
                          in_flight=in_flight, post_hooks=post_hooks, temporal=temporal, times=times,
                          on_frame=progress.update)
         except PipelineError as exc:

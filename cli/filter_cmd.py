@@ -27,14 +27,15 @@ Examples:
   mlaa-stream in.mp4 -o out.mp4                      H.264, CRF 18, preset veryfast, audio copied
   mlaa-stream in.mov -o mid.mkv --codec ffv1         lossless intermediate (also: libx264rgb --crf 0)
   mlaa-stream in.mp4 -o out.mp4 --preset soft --metric luma --threshold 0.08
-  mlaa-stream in.mp4 -o 'frames/%04d.png'            a video to images; 'shot/%04d.exr' -o out.mp4 back
+  mlaa-stream in.mp4 -o 'frames/%04d.png'            a video to images; 'shot/%04d.png' -o out.mp4 back
   mlaa-stream in.mkv --start 1:30 --end 2:00 -o clip.mkv   trim (seconds, h:m:s or frames like 300f)
   vspipe -c y4m script.vpy - | mlaa-stream - -o - -f y4m | ffmpeg -i - out.mkv   pipes
 
 \b
 Images and sequences go through OpenImageIO: bit depth (8/16-bit, half, float), channels, alpha
 (passed through unchanged) and metadata are kept; palette PNGs come out as RGB(A). EXRs tagged
-linear (and untagged float images) are taken as linear light, others as sRGB-encoded. In a folder,
+linear (and untagged float images) are taken as linear light, others as sRGB-encoded; linear light
+written to a format of display values (PNG, JPEG) is encoded to sRGB, clipped to 0-1. In a folder,
 files that are not images by their extension are skipped with a warning; a file that cannot be
 read or written is reported and the others are still processed. A sequence (%04d pattern) must keep
 one size, channel count and sample type; the first frame that differs stops it. Gaps in the
@@ -210,6 +211,26 @@ def _kind_of(path: str) -> str:
     return "video"  # probe_video says so if it is not one either
 
 
+def _warn_unused_options(ctx: click.Context, con: Console, kind: str, job: type) -> None:
+    """Options given on the command line (not defaults) that this job has no use for: a warning each, not an
+    error (--rate with a video input, the encoder's options with images out)."""
+    from mlaa_stream.cli.convert_jobs import SequenceToVideoJob, VideoToImagesJob
+
+    def given(name: str) -> bool:
+        return ctx.get_parameter_source(name) == click.core.ParameterSource.COMMANDLINE
+
+    if given("rate") and job is not SequenceToVideoJob:
+        why = "a video keeps its own frame rate" if job is _VideoJob else "images have no frame rate"
+        con.warn(f"--rate has no effect here: it sets the frame rate of a video made from images; {why}")
+    if job is _ImageJob or job is VideoToImagesJob:   # images out: no video encoder
+        encoder = (("codec", "--codec"), ("crf", "--crf"), ("encoder_preset", "--encoder-preset"),
+                   ("pix_fmt", "--pix-fmt"))
+        unused = [flag for name, flag in encoder if given(name)]
+        if unused:
+            con.warn(f"{', '.join(unused)} {'has' if len(unused) == 1 else 'have'} no effect here: "
+                     f"{'it sets' if len(unused) == 1 else 'they set'} the video encoder, and the output is images")
+
+
 def _job_for(kind: str, output: str) -> type:
     """The job for an input kind and an output: same kind (video -> video, images -> images), or a
     conversion: a folder or pattern -> a video file (by its extension), a video -> a frame pattern."""
@@ -231,8 +252,9 @@ def _job_for(kind: str, output: str) -> type:
               help="Output file, folder (same names as the inputs) or frame pattern (clean/%04d.png).")
 @click.option("-y", "--overwrite", is_flag=True, help="Replace outputs that exist (never an input).")
 @click.option("--resume", is_flag=True,
-              help="Skip inputs whose output exists already (folders and sequences); --temporal on a "
-                   "sequence warms up from the skipped frames just before the first one to write.")
+              help="Skip inputs whose output exists already (folders, sequences, a video written as images); "
+                   "--temporal on a sequence warms up from the skipped frames just before the first one to "
+                   "write; a video's skipped frames are still filtered with --temporal or --overlay, not written.")
 @click.option("--frames", metavar="A-B", help="Frame numbers of a %04d pattern, e.g. 1001-1100 "
               "(default: every number found; gaps are reported).")
 @click.option("--preset", type=click.Choice(sorted(PRESETS)), default=None,
@@ -455,6 +477,7 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
                      encoder_preset=encoder_preset, pix_fmt=pix_fmt, rate=rate,
                      video_backend=video_backend, filter_kwargs=kwargs)
         runner.prepare()
+        _warn_unused_options(ctx, con, kind, job)
     except Usage as exc:
         con.error(str(exc))
         return EXIT_USAGE
@@ -644,7 +667,7 @@ class _ImageJob(_Job):
 
         o, con = self.opts, self.con
         self.strict = self.kind == "pattern"
-        self.report = Report(say=con.error, inform=con.info)
+        self.report = Report(say=con.error, inform=con.info, caution=con.warn)
         numbers = None
         if self.kind == "image":
             srcs = [self.input]
@@ -795,6 +818,8 @@ class _ImageJob(_Job):
         progress = self._progress(len(read_plan))
         say = self.report.say
         self.report.say = lambda msg: (progress.clear(), say(msg))
+        caution = self.report.caution
+        self.report.caution = lambda msg: (progress.clear(), caution(msg))
         write = image_sink(self.report, overwrite=self.opts["overwrite"], strict=self.strict)
 
         def sink(item) -> None:
@@ -854,7 +879,8 @@ class _ImageJob(_Job):
                 report = run_chunks(client, self.plan, self.opts["filter_kwargs"],
                                     overwrite=self.opts["overwrite"], strict=self.strict,
                                     chunk_frames=self.opts["chunk_frames"], on_frames=progress.update,
-                                    temporal=self.opts.get("temporal_spec"), say=lambda msg: (progress.clear(), self.con.error(msg)))
+                                    temporal=self.opts.get("temporal_spec"),
+                                    say=lambda msg: (progress.clear(), self.con.error(msg)))
         except ClusterAddressError as exc:
             progress.close()
             raise Usage(str(exc)) from exc

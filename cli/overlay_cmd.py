@@ -106,13 +106,16 @@ def _run(input_path: str, output: str, lines_path: str, frame: int, strength: fl
         _err(str(exc))
         return EXIT_FAILED
     try:
-        write_image(output, put_back(out), image.spec, overwrite=overwrite)
+        encoded = write_image(output, put_back(out), image.spec, overwrite=overwrite, linear=is_linear(image))
     except ImageWriteError as exc:
         _err(str(exc))
         return EXIT_USAGE if "exists" in str(exc) else EXIT_FAILED
     except OSError as exc:
         _err(f"{output}: {exc.strerror or exc}")
         return EXIT_FAILED
+    if encoded and not quiet:  # linear light in a format of display values, as the filter command says
+        click.echo(f"mlaa-stream: warning: {input_path}: linear light encoded to sRGB for {output} (EXR and "
+                   f"float TIFF keep it linear)", err=True)
     if verbose:
         click.echo(f"mlaa-stream: wrote {output}", err=True)
     return EXIT_OK

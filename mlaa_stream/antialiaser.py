@@ -68,7 +68,8 @@ class Antialiaser:
             kwargs["keep"] = keep_rects(keep)
         method = "auto" if temporal is True else temporal
         if isinstance(method, str) and method not in METHODS:
-            raise ValueError(f"temporal: expected True, {', '.join(map(repr, METHODS))} or a callable, got {temporal!r}")
+            raise ValueError(f"temporal: expected True, {', '.join(map(repr, METHODS))} or a callable, "
+                             f"got {temporal!r}")
         if isinstance(method, str) and needs_regions(method) and not kwargs.get("fast"):
             kwargs["keep_regions"] = True  # the stage reads the filter's render regions
         # the fast preset without host copies on CPU devices (spatial/fast_filter.py)

@@ -67,12 +67,62 @@ def test_a_video_becomes_numbered_images_from_1(tmp_path):
     assert "audio is not written to images" in stderr(r)
 
 
+def test_a_video_to_images_resumes_skipping_complete_outputs(tmp_path):
+    img = tmp_path / "img"
+    assert run(CLIP, "-o", img / "f_%04d.png").exit_code == 0
+    first = {n: read_image(str(img / n)).pixels for n in os.listdir(img)}
+    for n in range(6, 11):   # an interrupted run: frames 6-10 missing, 3 half written, 2 "done" differently
+        (img / f"f_{n:04d}.png").unlink()
+    (img / "f_0003.png").write_bytes((img / "f_0003.png").read_bytes()[:100])
+    write_image(str(img / "f_0002.png"), np.zeros((48, 64, 3), np.uint8), overwrite=True)
+    marker = (img / "f_0002.png").read_bytes()
+    r = run(CLIP, "-o", img / "f_%04d.png")
+    assert r.exit_code == 2 and "--overwrite to replace or --resume to skip" in stderr(r)
+    r = run(CLIP, "-o", img / "f_%04d.png", "--resume", "-v")
+    assert r.exit_code == 0, stderr(r)
+    assert "f_0003.png: incomplete" in stderr(r) and "--resume: 4 outputs exist and are skipped" in stderr(r)
+    assert (img / "f_0002.png").read_bytes() == marker   # complete: kept
+    assert sorted(os.listdir(img)) == sorted(first)
+    for n in [3] + list(range(6, 11)):   # written again, as the whole run wrote them
+        np.testing.assert_array_equal(read_image(str(img / f"f_{n:04d}.png")).pixels, first[f"f_{n:04d}.png"])
+    tem = tmp_path / "tem"   # with the temporal stage every frame is filtered (its history), the done ones not written
+    assert run(CLIP, "-o", tem / "f_%04d.png", "--temporal").exit_code == 0
+    whole = {n: read_image(str(tem / n)).pixels for n in os.listdir(tem)}
+    for n in range(6, 11):
+        (tem / f"f_{n:04d}.png").unlink()
+    r = run(CLIP, "-o", tem / "f_%04d.png", "--temporal", "--resume")
+    assert r.exit_code == 0, stderr(r)
+    for name, pixels in whole.items():
+        np.testing.assert_array_equal(read_image(str(tem / name)).pixels, pixels)
+
+
+def test_options_given_for_another_kind_of_output_are_named_once_as_having_no_effect(tmp_path):
+    r = run(CLIP, "-o", tmp_path / "v.mp4", "--rate", "30")   # video -> video: its own rate
+    assert r.exit_code == 0, stderr(r)
+    assert stderr(r).count("--rate has no effect here") == 1 and "keeps its own frame rate" in stderr(r)
+    assert video_frames(tmp_path / "v.mp4")[1] == 24.0
+    r = run(CLIP, "-o", tmp_path / "img" / "f_%04d.png", "--rate", "30", "--crf", "20", "--pix-fmt", "yuv444p")
+    assert r.exit_code == 0, stderr(r)
+    assert "--rate has no effect here" in stderr(r) and "images have no frame rate" in stderr(r)
+    assert stderr(r).count("--crf, --pix-fmt have no effect here: they set the video encoder") == 1
+    staircases(tmp_path / "seq", 2)
+    r = run(tmp_path / "seq", "-o", tmp_path / "o", "--codec", "ffv1")
+    assert r.exit_code == 0 and "--codec has no effect here: it sets the video encoder" in stderr(r)
+    r = run(tmp_path / "seq", "-o", tmp_path / "o.mp4", "--rate", "30", "--crf", "20")   # used: no warning
+    assert r.exit_code == 0 and "no effect" not in stderr(r)
+    r = run(CLIP, "-o", tmp_path / "img2" / "f_%04d.png")   # defaults are not "given"
+    assert r.exit_code == 0 and "no effect" not in stderr(r)
+
+
 def test_float_frames_to_video_are_refused_and_existing_outputs_need_y(tmp_path):
     folder = tmp_path / "exr"
     folder.mkdir()
     write_image(str(folder / "a.0001.exr"), np.full((8, 8, 3), 0.5, np.float16))
     r = run(folder, "-o", tmp_path / "o.mp4")
-    assert r.exit_code == 2 and "cannot be encoded to video" in stderr(r)
+    assert r.exit_code == 2 and "cannot be encoded to video" in stderr(r) and "PNG frames" in stderr(r)
+    r = run(folder / "a.%04d.exr", "-o", tmp_path / "png" / "a.%04d.png")   # as suggested: PNG frames (sRGB)
+    assert r.exit_code == 0 and "encoded to sRGB for .png" in stderr(r)
+    assert run(tmp_path / "png", "-o", tmp_path / "p.mp4").exit_code == 0
     staircases(tmp_path / "seq", 3)
     (tmp_path / "o.mp4").write_bytes(b"keep")
     r = run(tmp_path / "seq", "-o", tmp_path / "o.mp4")

@@ -309,6 +309,23 @@ def test_sequence_resume_skips_complete_outputs(tmp_path):
     assert r.exit_code == 2 and "contradict" in stderr(r)
 
 
+def test_a_linear_exr_sequence_to_png_is_srgb_encoded_once_said_and_to_exr_unchanged(tmp_path):
+    (tmp_path / "ex").mkdir()
+    flat = np.full((12, 16, 3), 0.2, np.float16)   # no edges: the filter leaves it as it is
+    for n in (1, 2):
+        make_demo.write_oiio(str(tmp_path / "ex" / f"{n:04d}.exr"), flat, "half", {"oiio:ColorSpace": "lin_rec709"})
+    r = run(tmp_path / "ex" / "%04d.exr", "-o", tmp_path / "o" / "%04d.png")
+    assert r.exit_code == 0, stderr(r)
+    want = round((1.055 * float(np.float16(0.2)) ** (1 / 2.4) - 0.055) * 255)   # sRGB of linear 0.2: 124
+    for n in (1, 2):
+        png = read_image(str(tmp_path / "o" / f"{n:04d}.png"))
+        assert png.pixels.dtype == np.uint8 and (png.pixels == want).all()
+    assert stderr(r).count("encoded to sRGB for .png") == 1
+    r = run(tmp_path / "ex" / "%04d.exr", "-o", tmp_path / "e" / "%04d.exr")
+    assert r.exit_code == 0 and "sRGB" not in stderr(r)
+    np.testing.assert_array_equal(read_image(str(tmp_path / "e" / "0001.exr")).pixels, flat)
+
+
 @pytest.mark.parametrize("change", ["size", "channels", "depth"])
 def test_a_sequence_whose_frames_change_stops_naming_the_frame(tmp_path, change):
     make_sequence(tmp_path / "seq", range(1, 4))

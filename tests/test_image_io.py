@@ -176,3 +176,26 @@ def test_unknown_output_extension_is_a_write_error_naming_the_file(tmp_path):
     with pytest.raises(ImageWriteError, match="out.nope: no OpenImageIO writer"):
         write_image(str(tmp_path / "out.nope"), np.ones((2, 2, 3), np.uint8))
     assert os.listdir(tmp_path) == []
+
+
+def test_linear_exr_written_to_png_is_encoded_to_srgb_and_to_exr_or_float_tiff_kept_linear(tmp_path):
+    from mlaa_stream.io.sequence import is_linear
+
+    arr = np.zeros((3, 4, 4), np.float16)
+    arr[..., :3], arr[..., 3] = 0.2, 0.5   # linear grey 0.2, alpha 0.5
+    write_raw(tmp_path / "in.exr", arr, "half", {"oiio:ColorSpace": "lin_rec709"})
+    im = read_image(str(tmp_path / "in.exr"))
+    assert is_linear(im)
+    lin = float(np.float16(0.2))
+    want = round((1.055 * lin ** (1 / 2.4) - 0.055) * 255)   # IEC 61966-2-1 encode: 124
+    assert want == 124
+    assert write_image(str(tmp_path / "out.png"), im.pixels, im.spec, linear=True) is True
+    png = read_image(str(tmp_path / "out.png"))
+    assert png.pixels.dtype == np.uint8
+    assert (png.pixels[..., :3] == want).all() and (png.pixels[..., 3] == 128).all()   # alpha is not light
+    assert "srgb" in png.spec.get_string_attribute("oiio:ColorSpace").lower()
+    for ext in (".exr", ".tif"):   # float formats: linear values as they are
+        assert write_image(str(tmp_path / f"out{ext}"), im.pixels, im.spec, linear=True) is False
+        back = read_image(str(tmp_path / f"out{ext}"))
+        np.testing.assert_array_equal(back.pixels.astype(np.float16), arr)
+    assert leftovers(tmp_path) == []

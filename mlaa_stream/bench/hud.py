@@ -7,8 +7,9 @@ antialiased already (or pixel-aligned UI), so a filter should leave it as it is,
 around it. Bases: the bench's rendered atrium and stress scenes (frame 0) and the held-out views
 (bench/rendered_views.py) at each size. Overlays, each composited into input and truth alike:
 `subs` -- two lines of white DejaVu Sans (16 and 20 px) near the bottom, antialiased (8x8 coverage) and blended in
-sRGB as subtitle renderers do; `ui_aa` / `ui_aliased` -- two crops of the text_ui scene's boxes (its 8x8 truth, or
-its 1-spp input with its own truth) at the top left and the right. Per frame and method: RMSE against the truth
+sRGB as subtitle renderers do; `subs_outline` -- the same with a black outline 1.5 px wide; `ui_aa` / `ui_aliased`
+-- two crops of the text_ui scene's boxes (its 8x8 truth, or its 1-spp input with its own truth) at the top left
+and the right. Per frame and method: RMSE against the truth
 inside the overlay (8-bit levels; its pixels and one around, for the subtitles) and error removed outside it (%).
 `mlaa+keep` is the default filter with the overlays' bounding boxes given as keep rectangles (spatial/keep.py), as a
 user who knows where they are would. Needs EGL (the rendered scenes). A benchmark, never a unit test.
@@ -22,7 +23,7 @@ import numpy as np
 from mlaa_stream.bench.accuracy import METHODS
 from mlaa_stream.yardstick.scenes import coverage, generate_scenes, text_polygons
 
-OVERLAYS = ("subs", "ui_aa", "ui_aliased")
+OVERLAYS = ("subs", "subs_outline", "ui_aa", "ui_aliased")
 UI_CROPS = ((4, 4, 60, 200), (110, 4, 60, 180))  # (row, column, height, width) of the text_ui scene's frame
 
 
@@ -33,15 +34,24 @@ def _grow(mask: np.ndarray) -> np.ndarray:
     return np.any([p[dy:dy + h, dx:dx + w] for dy in range(3) for dx in range(3)], 0)
 
 
-def subtitle_coverage(height: int, width: int) -> np.ndarray:
-    """Coverage (0..1, height x width) of two subtitle lines near the bottom, from 8x8 samples per pixel."""
+def subtitle_coverage(height: int, width: int, outline: float = 0.0) -> np.ndarray:
+    """Coverage (0..1, height x width) of two subtitle lines near the bottom, from 8x8 samples per pixel; with
+    `outline` > 0 the glyphs grown by that many pixels (a subtitle's outline: the samples within that distance)."""
     lines = (("The quick brown fox jumps", 0.12 * width, height - 24, 20),
              ("over the lazy dog 0123", 0.2 * width, height - 52, 16))
-    cov = np.zeros((height, width))
+    samples = np.zeros((height * 8, width * 8), bool)
     for text, x, y, size in lines:
-        c = coverage(text_polygons(text, x, y, size), 8, 0, height, 0, width)
-        cov = np.maximum(cov, c.reshape(height, 8, width, 8).mean((1, 3)))
-    return cov
+        samples |= coverage(text_polygons(text, x, y, size), 8, 0, height, 0, width)
+    r = int(round(outline * 8))
+    if r:
+        grown = samples.copy()
+        for dy in range(-r, r + 1):
+            dx = int((r * r - dy * dy) ** 0.5)
+            row = np.roll(samples, dy, 0)
+            for sx in range(-dx, dx + 1):
+                grown |= np.roll(row, sx, 1)
+        samples = grown
+    return samples.reshape(height, 8, width, 8).mean((1, 3))
 
 
 def composite(base: tuple[np.ndarray, np.ndarray], overlay: str,
@@ -50,10 +60,11 @@ def composite(base: tuple[np.ndarray, np.ndarray], overlay: str,
     inp, truth = base[0].copy(), base[1].copy()
     h, w = inp.shape[:2]
     mask = np.zeros((h, w), bool)
-    if overlay == "subs":
+    if overlay in ("subs", "subs_outline"):
         cov = subtitle_coverage(h, w)[..., None]
-        inp, truth = ((np.round(a * (1 - cov) + 255 * cov)).astype(np.uint8) for a in (inp, truth))
-        mask = _grow(cov[..., 0] > 0.02)
+        ring = subtitle_coverage(h, w, 1.5)[..., None] if overlay == "subs_outline" else np.zeros_like(cov)
+        inp, truth = ((np.round((a * (1 - ring)) * (1 - cov) + 255 * cov)).astype(np.uint8) for a in (inp, truth))
+        mask = _grow(np.maximum(cov, ring)[..., 0] > 0.02)
     else:
         src_in, src_truth = ui["text_ui_aa" if overlay == "ui_aa" else "text_ui"]
         for (sy, sx, ph, pw), (dy, dx) in zip(UI_CROPS, ((8, 8), (150, w - 190))):

@@ -12,7 +12,9 @@ import itertools
 import os
 import re
 import shutil
+import tempfile
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Callable
 
 import numpy as np
@@ -288,12 +290,57 @@ def output_spec(spec: oiio.ImageSpec, pixels: np.ndarray) -> oiio.ImageSpec:
     return out
 
 
+@lru_cache(maxsize=None)
+def stored_format(ext: str, fmt: str, nchannels: int = 3) -> str:
+    """The sample type OpenImageIO's writer for `ext` stores when asked for `fmt` (PNG: 'uint8' for 'half';
+    TIFF keeps floats), found by opening a 1x1 image of `nchannels` in a scratch folder: writers decide this in open(),
+    after which the header (PNG's gAMA/sRGB chunk) is written and the colour-space tag can no longer change."""
+    with tempfile.TemporaryDirectory(prefix="mlaa-probe") as folder:
+        probe = os.path.join(folder, "probe" + ext)
+        out = oiio.ImageOutput.create(probe)
+        if out is None:
+            oiio.geterror()  # clear it: the real write reports the missing writer, naming the file
+            return fmt
+        try:
+            if not out.open(probe, oiio.ImageSpec(1, 1, nchannels, fmt)):
+                out.geterror()
+                return fmt
+            stored = str(out.spec().format)
+            out.write_image(np.zeros((1, 1, nchannels), np.float32))  # closing without pixels makes libpng complain
+        finally:
+            out.close()
+    return stored
+
+
+def is_display_encoded(path: str, spec: oiio.ImageSpec) -> bool:
+    """True when `path`'s format stores the spec's samples as integers (PNG, JPEG, 8/16-bit TIFF): display
+    values, which linear light must be encoded for (floats: EXR, float TIFF, stay linear)."""
+    stored = stored_format(os.path.splitext(path)[1].lower(), str(spec.format), spec.nchannels)
+    return stored not in ("half", "float", "double")
+
+
+def srgb_encoded(pixels: np.ndarray, spec: oiio.ImageSpec) -> tuple[np.ndarray, oiio.ImageSpec]:
+    """Linear-light float `pixels` encoded to sRGB (clipped to [0, 1] first) for an integer format, and the
+    spec tagged sRGB; alpha and depth channels stay as they are (they are not light)."""
+    from mlaa_stream.device.colour import linear_to_srgb
+
+    out = pixels.astype(np.float32)
+    keep = {spec.alpha_channel, spec.z_channel}
+    colour = [c for c in range(pixels.shape[2]) if c not in keep]
+    out[:, :, colour] = linear_to_srgb(out[:, :, colour])
+    spec = oiio.ImageSpec(spec)
+    spec.attribute("oiio:ColorSpace", "sRGB")
+    return out, spec
+
+
 def write_image(path: str, pixels: np.ndarray, spec: oiio.ImageSpec | None = None, *,
-                overwrite: bool = False) -> None:
+                overwrite: bool = False, linear: bool = False) -> bool:
     """Write `pixels` to `path` atomically (temporary name, then rename), in the spec's sample type.
 
-    Without a spec the sample type is the array's. A full disk raises OSError(ENOSPC); any other
-    failure raises ImageWriteError naming the file.
+    Without a spec the sample type is the array's. `linear`: float pixels are linear light (is_linear);
+    where the format stores integers they are encoded to sRGB (srgb_encoded), else written as they are.
+    True when they were encoded. A full disk raises OSError(ENOSPC); any other failure raises
+    ImageWriteError naming the file.
     """
     pixels = np.ascontiguousarray(pixels)
     if pixels.ndim == 2:
@@ -305,6 +352,9 @@ def write_image(path: str, pixels: np.ndarray, spec: oiio.ImageSpec | None = Non
                                   f"got {pixels.dtype}")
         spec = oiio.ImageSpec(pixels.shape[1], pixels.shape[0], pixels.shape[2], fmt)
     spec = output_spec(spec, pixels)
+    encode = linear and pixels.dtype.kind == "f" and is_display_encoded(path, spec)
+    if encode:
+        pixels, spec = srgb_encoded(pixels, spec)
     tmp = temp_path_for(path)
     try:
         _write_file(tmp, pixels, spec, path)
@@ -312,6 +362,7 @@ def write_image(path: str, pixels: np.ndarray, spec: oiio.ImageSpec | None = Non
     except BaseException:
         remove_quietly(tmp)
         raise
+    return encode
 
 
 def _write_file(tmp: str, pixels: np.ndarray, spec: oiio.ImageSpec, final: str) -> None:

@@ -49,10 +49,18 @@ class Report:
 
     say: Callable[[str], None] = lambda msg: None
     inform: Callable[[str], None] = lambda msg: None  # details (the CLI's -v)
+    caution: Callable[[str], None] = lambda msg: None  # about the whole run (the CLI's warning), once each
     written: list[str] = field(default_factory=list)
     skipped: list[str] = field(default_factory=list)  # resume: outputs already complete
     failed: list[str] = field(default_factory=list)  # messages naming the file
     warnings: list[str] = field(default_factory=list)
+    cautioned: set[str] = field(default_factory=set)
+
+    def caution_once(self, msg: str) -> None:
+        """Say `msg` through `caution` the first time only (it holds for every frame of the run)."""
+        if msg not in self.cautioned:
+            self.cautioned.add(msg)
+            self.caution(msg)
 
     def fail(self, msg: str) -> None:
         self.failed.append(msg)
@@ -238,7 +246,8 @@ def image_source(files: list[FrameFile], report: Report, *, strict: bool,
 
 
 def image_sink(report: Report, *, overwrite: bool, strict: bool) -> Callable[[Item], None]:
-    """Write each filtered frame back in its source's format and metadata, atomically.
+    """Write each filtered frame back in its source's format and metadata, atomically; linear-light frames
+    written to an integer format are encoded to sRGB (write_image), said once through report.caution.
 
     A full disk (or a read-only file system) always stops the run; other write failures stop a
     sequence (strict) but only skip the file in a folder.
@@ -246,7 +255,7 @@ def image_sink(report: Report, *, overwrite: bool, strict: bool) -> Callable[[It
     def sink(item: Item) -> None:
         ff, image, merge = item.meta
         try:
-            write_image(ff.dst, merge(item.frame), image.spec, overwrite=overwrite)
+            encoded = write_image(ff.dst, merge(item.frame), image.spec, overwrite=overwrite, linear=is_linear(image))
         except ImageWriteError as exc:
             if strict:
                 raise
@@ -258,6 +267,11 @@ def image_sink(report: Report, *, overwrite: bool, strict: bool) -> Callable[[It
             report.fail(f"{ff.dst}: cannot write: {exc.strerror or exc}")
             return
         report.written.append(ff.dst)
+        if encoded:  # linear light in a format of display values (PNG, JPEG, 8/16-bit TIFF)
+            ext = os.path.splitext(ff.dst)[1].lower() or ff.dst
+            report.caution_once(f"linear-light frames ({os.path.splitext(ff.src)[1].lower() or 'float'}) are "
+                                f"encoded to sRGB for {ext}, a format of display values (EXR and float TIFF "
+                                f"keep them linear)")
 
     return sink
 

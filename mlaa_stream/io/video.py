@@ -252,7 +252,8 @@ def _copy_tags(src: dict, dst) -> None:
 _ATTACHMENT_FORMATS = ("matroska",)
 
 
-def copy_chapters_and_attachments(src, out, offset: float = 0.0, end: float | None = None) -> tuple[set[str], list[str]]:
+def copy_chapters_and_attachments(src, out, offset: float = 0.0,
+                                  end: float | None = None) -> tuple[set[str], list[str]]:
     """Copy the chapters and attachment streams of the open input `src` into the output `out` (before its
     header is written). Chapters are shifted by -`offset` seconds (a trimmed start) and cut at `end`
     (output seconds); those outside are left out. Attachments (MKV fonts, cover art) only where the

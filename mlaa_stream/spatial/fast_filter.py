@@ -5,7 +5,8 @@ Filter.submit copies a frame into a staging array, uploads it, and downloads the
 the frame per call, about 2 ms of a 1080p frame here, which is most of what the fast passes cost on a frame
 with few edges (docs/fast.md). Here the kernels read the frame and write a new array directly (buffers over
 host memory, USE_HOST_PTR): fast_edges copies the frame into it and fast_blend writes the pixels it changes.
-`process` reads the caller's array itself; `submit` (the caller may reuse its array at once) one copy of it. Frames this cannot take (float frames, whose non-finite samples are replaced on the way
+`process` reads the caller's array itself; `submit` (the caller may reuse its array at once) one copy of it.
+Frames this cannot take (float frames, whose non-finite samples are replaced on the way
 in; arrays that are not C-contiguous in the device's sample type; other devices) go through Filter.submit.
 
     with FastFilter() as f:                  # Filter(preset="fast") options
