@@ -13,6 +13,7 @@ from mlaa_stream.device.context import Context
 from mlaa_stream.device.formats import LUT_SIZE, FrameFormat, frame_format
 from mlaa_stream.spatial.footprint import BUCKETS, WEIGHTS, footprint_reference, table_of
 from mlaa_stream.spatial.fxaa import _MAX, fxaa_defines, fxaa_mix_reference, luma_reference
+from mlaa_stream.spatial.overlays import overlay_defines, overlay_tiles
 from mlaa_stream.spatial.refine import REFINE_GATE, REFINE_WEIGHTS, gate, refine_reference, refine_table_of
 
 SEGMENT = 64  # pixels of a tile band per work item of count_changed (a multiple of FALLBACK_TILE)
@@ -112,10 +113,14 @@ class FallbackPass:
         self._rows = context.kernel("fallback", "render_rows", defs)
         self._render_tiles = context.kernel("fallback", "render_tiles", defs)
         self._render_frame = context.kernel("fallback", "render_frame", defs)
+        overlay_defs = {**defs, **overlay_defines()}
+        self._overlay_counts = context.kernel("overlays", "overlay_counts", overlay_defs)
+        self._overlay_tiles = context.kernel("overlays", "overlay_tiles", overlay_defs)
         n = self.tiles[0] * self.tiles[1]
         self._counts = context.buffer(COUNTS * n)  # count_changed's eight per tile
         self._row_sums = context.buffer(32 * n)  # render_rows' int8 per tile
         self._render = context.buffer(n)  # render_tiles' flag per tile
+        self._overlays = context.buffer(2 * n)  # overlay_counts' two per tile (kernels/overlays.cl)
         self._shares = context.buffer(32 * self.tiles[0])  # render_tiles' int8 per tile column
         self._table = context.buffer(4 * BUCKETS * WEIGHTS)  # the footprint table (unused without one)
         if table is not None:
@@ -131,7 +136,8 @@ class FallbackPass:
     def device_bytes(self) -> int:
         """Bytes of the per-frame buffers (the tables' 15 and 20 KB do not grow with the frame)."""
         mid = self._mid.size if self._refine is not None else 0
-        return self._counts.size + self._row_sums.size + self._render.size + self._shares.size + mid
+        return (self._counts.size + self._row_sums.size + self._render.size + self._shares.size + self._overlays.size
+                + mid)
 
     def read_regions(self, queue, wait_for: list) -> tuple[np.ndarray, cl.Event | None]:
         """The last frame's render-region flag per tile, (tiles_y, tiles_x) uint8, and the event of its copy to
@@ -161,7 +167,12 @@ class FallbackPass:
                 events["render_frame"] = self._render_frame(queue, (self.tiles[0],), None, self._render,
                                                             self._counts, self._shares, tx, ty,
                                                             wait_for=[events["render_tiles"]])
-                wait_for = [events["render_frame"]]
+                events["overlay_counts"] = self._overlay_counts(queue, (-(-self.fmt.width // SEGMENT), self.tiles[1]),
+                                                                None, src, self._render, self._overlays, W, H, tx, ty,
+                                                                wait_for=[events["render_frame"]])
+                events["overlay_tiles"] = self._overlay_tiles(queue, (self.tiles[1],), None, self._overlays,
+                                                              self._render, tx, ty, wait_for=[events["overlay_counts"]])
+                wait_for = [events["overlay_tiles"]]
         events["fallback"] = self._fxaa(queue, (-(-self.fmt.width // SEGMENT), self.tiles[1]), None,
                                         src, luts, lin, edges, hdist, vdist, self._counts, self._render,
                                         self._table, dst, W, H, tx, ty, wait_for=wait_for)
@@ -258,7 +269,8 @@ def render_regions_of(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray, 
     """The render regions kernels/fallback.cl finds in `src` (per pixel, (h, w) bool), given the MLAA passes'
     output and edge buffer (Filter.intermediates: "out", "edges")."""
     _, _, _, borders, changed, rgb = _frame_masks(src, mlaa_out, edges, bgr)
-    return render_regions(_busy_pixels(changed, borders, rgb), borders, luma_reference(rgb, linear_input))
+    return render_regions(_busy_pixels(changed, borders, rgb), borders, luma_reference(rgb, linear_input),
+                          overlay_tiles(src, bgr))
 
 
 def _busy_pixels(changed: np.ndarray, borders: np.ndarray, rgb: np.ndarray) -> np.ndarray:
@@ -327,7 +339,8 @@ def fallback_reference(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray,
         busy_px = _busy_pixels(changed, borders, rgb)
         busy_changed = region_sums(busy_px)
         frame_supersampled = regions and supersampled(borders, luma)  # render_frame then clears every tile's counts
-        rendered = render_regions(busy_px, borders, luma) if regions else np.zeros((h, w), bool)
+        rendered = (render_regions(busy_px, borders, luma, overlay_tiles(src, bgr)) if regions
+                    else np.zeros((h, w), bool))
         busy = rendered | ((busy_changed >= FALLBACK_RICH_MIN)
                            & (busy_changed * FALLBACK_RICH_DIV >= region_sums(borders)))
         evidence = region_sums(changed & borders) >= FALLBACK_MIN_CHANGED
@@ -441,9 +454,11 @@ def _supersampled_by(counts: tuple[np.ndarray, ...]) -> bool:
             and (clean - clean_ramps) * 100 < SUPERSAMPLED_HARD_PCT * strong)
 
 
-def render_regions(busy: np.ndarray, borders: np.ndarray, luma: np.ndarray) -> np.ndarray:
+def render_regions(busy: np.ndarray, borders: np.ndarray, luma: np.ndarray,
+                   overlays: np.ndarray | None = None) -> np.ndarray:
     """kernels/fallback.cl's render regions per pixel (render_tiles and render_frame): `busy` and `borders` the pixel
-    masks of count_changed's k = 2 and k = 1, `luma` px_luma of the input (h, w)."""
+    masks of count_changed's k = 2 and k = 1, `luma` px_luma of the input (h, w); `overlays` (per tile, spatial/
+    overlays.py overlay_tiles, kernels/overlays.cl after render_frame): tiles of text over a render, no regions."""
     t, r = FALLBACK_TILE, RENDER_RADIUS
     h, w = busy.shape
     th, tw = -(-h // t), -(-w // t)
@@ -476,4 +491,6 @@ def render_regions(busy: np.ndarray, borders: np.ndarray, luma: np.ndarray) -> n
     if _supersampled_by(counts):  # regions only where the neighbourhood's clean transitions are mostly hard
         _, _, clean_px, clean_ramps_px = counts
         flag &= window(tile_sums(clean_ramps_px)) * 100 < RENDER_RAMP_PCT * np.maximum(window(tile_sums(clean_px)), 1)
+    if overlays is not None:
+        flag &= ~overlays
     return region_pixels(flag, h, w)

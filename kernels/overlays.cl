@@ -1,0 +1,178 @@
+// overlays.cl -- text drawn over a render (subtitles, a HUD's lettering, a slate) is no part of the render: the
+// tiles that hold it leave the render regions (fallback.cl) after render_frame, so the FXAA fallback and the
+// footprint and refine tables do not soften it (spatial/overlays.py is the reference; docs/spatial_tuning.md,
+// "Text over a render").
+//
+// What tells it apart: a subtitle renderer blends an exactly flat ink colour into whatever lies behind, so beside
+// each pixel of ink there are coverage mixes -- colours on the segment between the ink and the pixel beyond. A 1-spp
+// render has no coverage mixes: beside a flat area (sky, a clipped highlight) its pixels are samples of another
+// surface. Per pixel p and each of its four neighbours F (the pixel beyond p, away from F, is Q), on 8-bit levels:
+//   boundary:  F differs from p, F equals one of its own eight neighbours (a flat colour), F's luma is within
+//              OVERLAY_EXTREME levels of the darkest or lightest of the tile's window (ink is an extreme: white
+//              letters, a black outline), and |p - F| > OVERLAY_CONTRAST levels;
+//   mix:       a boundary where p lies on the segment F -> Q: at t in (1 / OVERLAY_LO, 1 - 1 / OVERLAY_LO) of it and
+//              off it by at most 1 / OVERLAY_OFF of its length.
+// Per tile: its boundary pixels (nb) and mixes (nm). A tile is overlay where its 3x3 tiles hold at least
+// OVERLAY_SEED_MIN mixes, OVERLAY_SEED_PCT % of their boundary pixels, or where it touches such a tile and holds a
+// mix for every OVERLAY_GROW_DIV boundary pixels (the ends of a line of text). Thin text on a flat box (strokes of
+// one pixel: no flat ink, no monotone ramp) is not found: `keep` rectangles (spatial/keep.py) are for it.
+#pragma OPENCL FP_CONTRACT OFF
+
+#ifndef OVERLAY_CONTRAST
+#define OVERLAY_CONTRAST 64
+#endif
+#ifndef OVERLAY_EXTREME
+#define OVERLAY_EXTREME 2
+#endif
+#ifndef OVERLAY_LO
+#define OVERLAY_LO 20
+#endif
+#ifndef OVERLAY_OFF
+#define OVERLAY_OFF 10
+#endif
+#ifndef OVERLAY_SEED_MIN
+#define OVERLAY_SEED_MIN 32
+#endif
+#ifndef OVERLAY_SEED_PCT
+#define OVERLAY_SEED_PCT 35
+#endif
+#ifndef OVERLAY_GROW_DIV
+#define OVERLAY_GROW_DIV 5
+#endif
+#define OV_R 2                               // the tile's window: 2 pixels around it (F's neighbours)
+#define OV_N (FALLBACK_TILE + 2 * OV_R)
+
+// Pixel i's colour as 8-bit levels in R, G, B order (overlays.py levels8), into c[0 .. 2].
+inline void levels8(__global const PIXEL_T *src, int i, int *c)
+{
+#if CHANNELS == 1
+    const PIXEL_T r = src[i], g = r, b = r;
+#else
+    __global const PIXEL_T *p = src + (size_t)i * CHANNELS;
+#if ORDER_BGR
+    const PIXEL_T r = p[2], g = p[1], b = p[0];
+#else
+    const PIXEL_T r = p[0], g = p[1], b = p[2];
+#endif
+#endif
+    const PIXEL_T v[3] = {r, g, b};
+    for (int k = 0; k < 3; ++k) {
+#ifdef PIXEL_IS_FLOAT
+        const float f = fmin(fmax(v[k], 0.0f), 1.0f) * 255.0f;
+        c[k] = (int)(f + 0.5f);  // truncation of a non-negative value: floor
+#else
+        c[k] = PIXEL_MAX > 255.0f ? ((int)v[k] * 255 + 32767) / 65535 : (int)v[k];
+#endif
+    }
+}
+
+// (boundary pixels, mixes) of the tile whose top-left pixel is (x0, y0). Plain int arrays, one per channel (private
+// arrays of 3-vectors miscompile on Mesa's llvmpipe).
+inline int2 tile_overlay_counts(__global const PIXEL_T *src, int x0, int y0, int w, int h)
+{
+    int qr[OV_N][OV_N], qg[OV_N][OV_N], qb[OV_N][OV_N], lum[OV_N][OV_N], inside[OV_N][OV_N];
+    int lmax = -1, lmin = 1 << 30;
+    for (int j = 0; j < OV_N; ++j)
+        for (int k = 0; k < OV_N; ++k) {
+            const int y = y0 + j - OV_R, x = x0 + k - OV_R;
+            int c[3] = {-1, -1, -1};
+            inside[j][k] = x >= 0 && y >= 0 && x < w && y < h;
+            if (inside[j][k]) levels8(src, IDX(x, y, w), c);
+            qr[j][k] = c[0];
+            qg[j][k] = c[1];
+            qb[j][k] = c[2];
+            lum[j][k] = 54 * c[0] + 183 * c[1] + 19 * c[2];  // overlays.py LUMA_WEIGHTS
+            if (inside[j][k]) {
+                lmax = max(lmax, lum[j][k]);
+                lmin = min(lmin, lum[j][k]);
+            }
+        }
+#define OV_SAME(j0, k0, j1, k1) (qr[j0][k0] == qr[j1][k1] && qg[j0][k0] == qg[j1][k1] && qb[j0][k0] == qb[j1][k1])
+    int flat[OV_N][OV_N];  // equals one of its eight neighbours (rows and columns 1 .. OV_N - 2)
+    for (int j = 1; j < OV_N - 1; ++j)
+        for (int k = 1; k < OV_N - 1; ++k) {
+            int same = 0;
+            for (int dj = -1; dj <= 1; ++dj)
+                for (int dk = -1; dk <= 1; ++dk)
+                    if ((dj || dk) && inside[j + dj][k + dk])
+                        same |= OV_SAME(j + dj, k + dk, j, k);
+            flat[j][k] = same;
+        }
+    const int ext = OVERLAY_EXTREME * 256;
+    int nb = 0, nm = 0;
+    for (int j = OV_R; j < OV_R + FALLBACK_TILE; ++j)
+        for (int k = OV_R; k < OV_R + FALLBACK_TILE; ++k) {
+            if (!inside[j][k]) continue;
+            int boundary = 0, mix = 0;
+            for (int d = 0; d < 4; ++d) {
+                const int dj = d == 2 ? 1 : (d == 3 ? -1 : 0), dk = d == 0 ? 1 : (d == 1 ? -1 : 0);
+                const int fj = j + dj, fk = k + dk, bj = j - dj, bk = k - dk;  // F, and Q beyond p
+                if (!inside[fj][fk] || !flat[fj][fk] || OV_SAME(fj, fk, j, k)) continue;
+                if (!(lum[fj][fk] >= lmax - ext || lum[fj][fk] <= lmin + ext)) continue;
+                const long vr = qr[j][k] - qr[fj][fk], vg = qg[j][k] - qg[fj][fk], vb = qb[j][k] - qb[fj][fk];
+                const long vv = vr * vr + vg * vg + vb * vb;
+                if (vv <= OVERLAY_CONTRAST * OVERLAY_CONTRAST) continue;
+                boundary = 1;
+                if (!inside[bj][bk]) continue;
+                const long er = qr[bj][bk] - qr[fj][fk], eg = qg[bj][bk] - qg[fj][fk], eb = qb[bj][bk] - qb[fj][fk];
+                const long dd = er * er + eg * eg + eb * eb, vd = vr * er + vg * eg + vb * eb;
+                mix |= dd > 0 && OVERLAY_LO * vd > dd && OVERLAY_LO * vd < (OVERLAY_LO - 1) * dd &&
+                       OVERLAY_OFF * OVERLAY_OFF * (vv * dd - vd * vd) <= dd * dd;
+            }
+            nb += boundary;
+            nm += mix;
+        }
+#undef OV_SAME
+    return (int2)(nb, nm);
+}
+
+// counts[2 tile] = boundary pixels, counts[2 tile + 1] = mixes, for tiles within two tiles of a render region
+// (the rest are never read: 0). One work item per SEGMENT / FALLBACK_TILE tiles of a tile row.
+__kernel void overlay_counts(__global const PIXEL_T *src, __global const uchar *render, __global uchar *counts,
+                             const int w, const int h, const int tiles_x, const int tiles_y)
+{
+    const int t0 = get_global_id(0) * (SEGMENT / FALLBACK_TILE), ty = get_global_id(1);
+    if (t0 >= tiles_x || ty >= tiles_y) return;
+    const int t1 = min(t0 + SEGMENT / FALLBACK_TILE, tiles_x);
+    for (int tx = t0; tx < t1; ++tx) {
+        int near = 0;
+        for (int j = max(ty - 2, 0); j <= min(ty + 2, tiles_y - 1); ++j)
+            for (int k = max(tx - 2, 0); k <= min(tx + 2, tiles_x - 1); ++k)
+                near |= render[j * tiles_x + k];
+        const int2 n = near ? tile_overlay_counts(src, tx * FALLBACK_TILE, ty * FALLBACK_TILE, w, h) : (int2)(0, 0);
+        counts[2 * (ty * tiles_x + tx)] = (uchar)n.x;
+        counts[2 * (ty * tiles_x + tx) + 1] = (uchar)n.y;
+    }
+}
+
+// Tile (tx, ty)'s 3x3 tiles hold OVERLAY_SEED_MIN mixes or more, OVERLAY_SEED_PCT % of their boundary pixels.
+inline int overlay_seed(__global const uchar *counts, int tx, int ty, int tiles_x, int tiles_y)
+{
+    int sb = 0, sm = 0;
+    for (int j = max(ty - 1, 0); j <= min(ty + 1, tiles_y - 1); ++j)
+        for (int k = max(tx - 1, 0); k <= min(tx + 1, tiles_x - 1); ++k) {
+            sb += counts[2 * (j * tiles_x + k)];
+            sm += counts[2 * (j * tiles_x + k) + 1];
+        }
+    return sm >= OVERLAY_SEED_MIN && 100 * sm >= OVERLAY_SEED_PCT * sb;
+}
+
+// A render region that is overlay (a seed, or beside one with a mix for every OVERLAY_GROW_DIV boundary pixels)
+// stops being one. One work item per tile row.
+__kernel void overlay_tiles(__global const uchar *counts, __global uchar *render, const int tiles_x,
+                            const int tiles_y)
+{
+    const int ty = get_global_id(0);
+    if (ty >= tiles_y) return;
+    for (int tx = 0; tx < tiles_x; ++tx) {
+        const int tile = ty * tiles_x + tx;
+        if (!render[tile]) continue;
+        int overlay = overlay_seed(counts, tx, ty, tiles_x, tiles_y);
+        const int nb = counts[2 * tile], nm = counts[2 * tile + 1];
+        if (!overlay && nm >= 1 && OVERLAY_GROW_DIV * nm >= nb)
+            for (int j = max(ty - 1, 0); j <= min(ty + 1, tiles_y - 1) && !overlay; ++j)
+                for (int k = max(tx - 1, 0); k <= min(tx + 1, tiles_x - 1) && !overlay; ++k)
+                    overlay = (j != ty || k != tx) && overlay_seed(counts, k, j, tiles_x, tiles_y);
+        if (overlay) render[tile] = 0;
+    }
+}

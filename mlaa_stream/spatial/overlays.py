@@ -1,0 +1,104 @@
+"""Text over a render -- subtitles, a HUD's lettering, a slate -- leaves the render regions (kernels/overlays.cl).
+
+In a frame judged a 1-spp render every busy neighbourhood is a render region (spatial/fallback.py), and there the FXAA
+fallback and the footprint and refine tables move every pixel toward what a box filter over the point samples
+would give. Antialiased text composited over the render is no point sample: those passes blur it (white subtitles
+over the bench's renders by 20 levels RMSE, outlined ones by 34; docs/spatial_tuning.md, "Text over a render").
+Its signature is the subtitle renderer's blend: an exactly flat, extreme ink colour with coverage mixes beside it,
+which a 1-spp render does not make. The kernel's comment gives the rule; this module holds its constants and its
+numpy reference, which tests/test_overlays.py holds the kernel to.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from mlaa_stream.device.formats import frame_format
+
+# (tuning: docs/spatial_tuning.md, "Text over a render")
+OVERLAY_CONTRAST = 64   # levels (8-bit, RGB distance) between a boundary pixel and the flat colour beside it
+OVERLAY_EXTREME = 2     # levels of luma from the darkest or lightest of the tile's window: the flat colour is ink
+OVERLAY_LO, OVERLAY_OFF = 20, 10  # a mix: t in (1/20, 19/20) along flat -> beyond, off the segment <= 1/10 of it
+OVERLAY_SEED_MIN, OVERLAY_SEED_PCT, OVERLAY_GROW_DIV = 32, 35, 5
+LUMA_WEIGHTS = np.array([54, 183, 19], np.int64)  # Rec. 709 luma in 256ths, on 8-bit levels
+TILE, RADIUS = 8, 2     # fallback.py FALLBACK_TILE; the tile's window reaches RADIUS pixels around it
+
+
+def overlay_defines() -> dict:
+    """The constants as kernels/overlays.cl's defines."""
+    return {"OVERLAY_CONTRAST": OVERLAY_CONTRAST, "OVERLAY_EXTREME": OVERLAY_EXTREME, "OVERLAY_LO": OVERLAY_LO,
+            "OVERLAY_OFF": OVERLAY_OFF, "OVERLAY_SEED_MIN": OVERLAY_SEED_MIN, "OVERLAY_SEED_PCT": OVERLAY_SEED_PCT,
+            "OVERLAY_GROW_DIV": OVERLAY_GROW_DIV}
+
+
+def levels8(frame: np.ndarray, bgr: bool = False) -> np.ndarray:
+    """(h, w, 3) int64 8-bit levels in R, G, B order of a uint8 / uint16 / float frame (floats clipped to [0, 1])."""
+    fmt = frame_format(frame, bgr)
+    a = np.asarray(frame).reshape(fmt.height, fmt.width, fmt.channels)
+    a = np.repeat(a[..., :1], 3, -1) if fmt.channels == 1 else a[..., :3]
+    if fmt.bgr and fmt.channels >= 3:
+        a = a[..., ::-1]
+    if a.dtype == np.uint8:
+        return a.astype(np.int64)
+    if a.dtype == np.uint16:
+        return (a.astype(np.int64) * 255 + 32767) // 65535
+    f = np.clip(a.astype(np.float32), np.float32(0), np.float32(1)) * np.float32(255)
+    return np.floor(f + np.float32(0.5)).astype(np.int64)
+
+
+def overlay_counts(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per tile (tiles_y, tiles_x): boundary pixels and mixes of the 8-bit levels `q` (h, w, 3)."""
+    h, w = q.shape[:2]
+    th, tw = -(-h // TILE), -(-w // TILE)
+    lum = q @ LUMA_WEIGHTS
+    padded = np.pad(lum.astype(np.float64), ((RADIUS, th * TILE - h + RADIUS), (RADIUS, tw * TILE - w + RADIUS)),
+                    constant_values=np.nan)
+    win = np.lib.stride_tricks.sliding_window_view(padded, (TILE + 2 * RADIUS,) * 2)[::TILE, ::TILE]
+    lmax = np.repeat(np.repeat(np.nanmax(win, (2, 3)), TILE, 0), TILE, 1)[:h, :w]
+    lmin = np.repeat(np.repeat(np.nanmin(win, (2, 3)), TILE, 0), TILE, 1)[:h, :w]
+    qp = np.pad(q, ((1, 1), (1, 1), (0, 0)), constant_values=-1)  # outside the frame: equal to nothing
+    flat = np.zeros((h, w), bool)
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            if dy or dx:
+                flat |= np.all(qp[1 + dy:1 + dy + h, 1 + dx:1 + dx + w] == q, -1)
+    flat_p, lum_p = np.pad(flat, 1), np.pad(lum, 1)
+    inside = np.pad(np.ones((h, w), bool), 1)
+    ext = OVERLAY_EXTREME * 256
+    boundary, mix = np.zeros((h, w), bool), np.zeros((h, w), bool)
+    for dy, dx in ((0, 1), (0, -1), (1, 0), (-1, 0)):
+        at_f = (slice(1 + dy, 1 + dy + h), slice(1 + dx, 1 + dx + w))
+        at_q = (slice(1 - dy, 1 - dy + h), slice(1 - dx, 1 - dx + w))
+        f, beyond = qp[at_f], qp[at_q]
+        v = q - f
+        vv = (v * v).sum(-1)
+        b = (inside[at_f] & flat_p[at_f] & ~np.all(f == q, -1)
+             & ((lum_p[at_f] >= lmax - ext) | (lum_p[at_f] <= lmin + ext))
+             & (vv > OVERLAY_CONTRAST * OVERLAY_CONTRAST))
+        e = beyond - f
+        dd, vd = (e * e).sum(-1), (v * e).sum(-1)
+        m = (b & inside[at_q] & (dd > 0) & (OVERLAY_LO * vd > dd) & (OVERLAY_LO * vd < (OVERLAY_LO - 1) * dd)
+             & (OVERLAY_OFF * OVERLAY_OFF * (vv * dd - vd * vd) <= dd * dd))
+        boundary |= b
+        mix |= m
+
+    def per_tile(mask: np.ndarray) -> np.ndarray:
+        p = np.zeros((th * TILE, tw * TILE), np.int64)
+        p[:h, :w] = mask
+        return p.reshape(th, TILE, tw, TILE).sum((1, 3))
+    return per_tile(boundary), per_tile(mix)
+
+
+def _sum3x3(t: np.ndarray) -> np.ndarray:
+    p = np.pad(t, 1)
+    return sum(p[1 + a:1 + a + t.shape[0], 1 + b:1 + b + t.shape[1]] for a in (-1, 0, 1) for b in (-1, 0, 1))
+
+
+def overlay_tiles(frame: np.ndarray, bgr: bool = False) -> np.ndarray:
+    """kernels/overlays.cl's verdict per tile (tiles_y, tiles_x) bool: the tile holds text over a render (a seed:
+    its 3x3 tiles hold OVERLAY_SEED_MIN mixes or more, OVERLAY_SEED_PCT % of their boundary pixels; or beside a seed
+    with a mix for every OVERLAY_GROW_DIV boundary pixels). Render regions that are overlay stop being ones."""
+    nb, nm = overlay_counts(levels8(frame, bgr))
+    sb, sm = _sum3x3(nb), _sum3x3(nm)
+    seed = (sm >= OVERLAY_SEED_MIN) & (100 * sm >= OVERLAY_SEED_PCT * sb)
+    grows = (nm >= 1) & (OVERLAY_GROW_DIV * nm >= nb)
+    return seed | (grows & (_sum3x3(seed.astype(np.int64)) > 0))
