@@ -66,63 +66,81 @@ inline void levels8(__global const PIXEL_T *src, int i, int *c)
     }
 }
 
-// (boundary pixels, mixes) of the tile whose top-left pixel is (x0, y0). Plain int arrays, one per channel (private
-// arrays of 3-vectors miscompile on Mesa's llvmpipe).
+// (boundary pixels, mixes) of the tile whose top-left pixel is (x0, y0). The window's levels in plain int arrays, one
+// per channel (private arrays of 3-vectors and all() of their comparisons came out wrong on Mesa's llvmpipe); most
+// pairs fail the contrast test, tested for a row's 8 pixels at once, and only the pairs that pass take the luma
+// extremes (once per tile), the flat test and the mix test (lazily: 56 -> 7.5 ms per 1080p render here).
 inline int2 tile_overlay_counts(__global const PIXEL_T *src, int x0, int y0, int w, int h)
 {
-    int qr[OV_N][OV_N], qg[OV_N][OV_N], qb[OV_N][OV_N], lum[OV_N][OV_N], inside[OV_N][OV_N];
-    int lmax = -1, lmin = 1 << 30;
-    for (int j = 0; j < OV_N; ++j)
+    int qr[OV_N][OV_N], qg[OV_N][OV_N], qb[OV_N][OV_N];  // -1 outside the frame
+    const int interior = x0 >= OV_R && y0 >= OV_R && x0 + FALLBACK_TILE + OV_R <= w && y0 + FALLBACK_TILE + OV_R <= h;
+    for (int j = 0; j < OV_N; ++j) {
+        const int y = y0 + j - OV_R;
         for (int k = 0; k < OV_N; ++k) {
-            const int y = y0 + j - OV_R, x = x0 + k - OV_R;
+            const int x = x0 + k - OV_R;
             int c[3] = {-1, -1, -1};
-            inside[j][k] = x >= 0 && y >= 0 && x < w && y < h;
-            if (inside[j][k]) levels8(src, IDX(x, y, w), c);
+            if (interior || (x >= 0 && y >= 0 && x < w && y < h)) levels8(src, IDX(x, y, w), c);
             qr[j][k] = c[0];
             qg[j][k] = c[1];
             qb[j][k] = c[2];
-            lum[j][k] = 54 * c[0] + 183 * c[1] + 19 * c[2];  // overlays.py LUMA_WEIGHTS
-            if (inside[j][k]) {
-                lmax = max(lmax, lum[j][k]);
-                lmin = min(lmin, lum[j][k]);
-            }
         }
+    }
+#define OV_IN(j, k) (qr[j][k] >= 0)
 #define OV_SAME(j0, k0, j1, k1) (qr[j0][k0] == qr[j1][k1] && qg[j0][k0] == qg[j1][k1] && qb[j0][k0] == qb[j1][k1])
-    int flat[OV_N][OV_N];  // equals one of its eight neighbours (rows and columns 1 .. OV_N - 2)
-    for (int j = 1; j < OV_N - 1; ++j)
-        for (int k = 1; k < OV_N - 1; ++k) {
-            int same = 0;
-            for (int dj = -1; dj <= 1; ++dj)
-                for (int dk = -1; dk <= 1; ++dk)
-                    if ((dj || dk) && inside[j + dj][k + dk])
-                        same |= OV_SAME(j + dj, k + dk, j, k);
-            flat[j][k] = same;
-        }
+#define OV_LUM(j, k) (54 * qr[j][k] + 183 * qg[j][k] + 19 * qb[j][k])
+    int lmax = -1, lmin = -1;  // the window's luma extremes, found at the first pair of enough contrast
     const int ext = OVERLAY_EXTREME * 256;
-    int nb = 0, nm = 0;
-    for (int j = OV_R; j < OV_R + FALLBACK_TILE; ++j)
-        for (int k = OV_R; k < OV_R + FALLBACK_TILE; ++k) {
-            if (!inside[j][k]) continue;
-            int boundary = 0, mix = 0;
-            for (int d = 0; d < 4; ++d) {
-                const int dj = d == 2 ? 1 : (d == 3 ? -1 : 0), dk = d == 0 ? 1 : (d == 1 ? -1 : 0);
-                const int fj = j + dj, fk = k + dk, bj = j - dj, bk = k - dk;  // F, and Q beyond p
-                if (!inside[fj][fk] || !flat[fj][fk] || OV_SAME(fj, fk, j, k)) continue;
-                if (!(lum[fj][fk] >= lmax - ext || lum[fj][fk] <= lmin + ext)) continue;
-                const long vr = qr[j][k] - qr[fj][fk], vg = qg[j][k] - qg[fj][fk], vb = qb[j][k] - qb[fj][fk];
-                const long vv = vr * vr + vg * vg + vb * vb;
-                if (vv <= OVERLAY_CONTRAST * OVERLAY_CONTRAST) continue;
-                boundary = 1;
-                if (!inside[bj][bk]) continue;
-                const long er = qr[bj][bk] - qr[fj][fk], eg = qg[bj][bk] - qg[fj][fk], eb = qb[bj][bk] - qb[fj][fk];
-                const long dd = er * er + eg * eg + eb * eb, vd = vr * er + vg * eg + vb * eb;
-                mix |= dd > 0 && OVERLAY_LO * vd > dd && OVERLAY_LO * vd < (OVERLAY_LO - 1) * dd &&
-                       OVERLAY_OFF * OVERLAY_OFF * (vv * dd - vd * vd) <= dd * dd;
+    uint boundary[FALLBACK_TILE] = {0, 0, 0, 0, 0, 0, 0, 0}, mix[FALLBACK_TILE] = {0, 0, 0, 0, 0, 0, 0, 0};
+    for (int d = 0; d < 4; ++d) {
+        const int dj = d == 2 ? 1 : (d == 3 ? -1 : 0), dk = d == 0 ? 1 : (d == 1 ? -1 : 0);
+        for (int r = 0; r < FALLBACK_TILE; ++r) {
+            const int j = OV_R + r, fj = j + dj, bj = j - dj;
+            // the contrast test for the row's 8 pixels at once, as int8 lanes (one by one: 3x the time)
+            const int8 vr8 = LOAD_INT8_PRIVATE(&qr[j][OV_R]) - LOAD_INT8_PRIVATE(&qr[fj][OV_R + dk]);
+            const int8 vg8 = LOAD_INT8_PRIVATE(&qg[j][OV_R]) - LOAD_INT8_PRIVATE(&qg[fj][OV_R + dk]);
+            const int8 vb8 = LOAD_INT8_PRIVATE(&qb[j][OV_R]) - LOAD_INT8_PRIVATE(&qb[fj][OV_R + dk]);
+            int strong[FALLBACK_TILE];
+            STORE_INT8_PRIVATE(vr8 * vr8 + vg8 * vg8 + vb8 * vb8 > OVERLAY_CONTRAST * OVERLAY_CONTRAST, strong);
+            for (int o = 0; o < FALLBACK_TILE; ++o) {
+                const int k = OV_R + o, fk = k + dk, bk = k - dk;  // p, F beside it, Q beyond p
+                if (!strong[o] || !OV_IN(j, k) || !OV_IN(fj, fk)) continue;
+                if (lmax < 0) {
+                    lmin = 1 << 30;
+                    for (int a = 0; a < OV_N; ++a)
+                        for (int b = 0; b < OV_N; ++b)
+                            if (OV_IN(a, b)) {
+                                lmax = max(lmax, OV_LUM(a, b));
+                                lmin = min(lmin, OV_LUM(a, b));
+                            }
+                }
+                const int lf = OV_LUM(fj, fk);
+                if (!(lf >= lmax - ext || lf <= lmin + ext)) continue;
+                int flat = 0;  // F equals one of its eight neighbours
+                for (int a = -1; a <= 1 && !flat; ++a)
+                    for (int b = -1; b <= 1 && !flat; ++b)
+                        flat = (a || b) && OV_IN(fj + a, fk + b) && OV_SAME(fj + a, fk + b, fj, fk);
+                if (!flat) continue;
+                boundary[r] |= 1u << o;
+                if (!OV_IN(bj, bk)) continue;
+                const int vr = qr[j][k] - qr[fj][fk], vg = qg[j][k] - qg[fj][fk], vb = qb[j][k] - qb[fj][fk];
+                const int vv = vr * vr + vg * vg + vb * vb;  // at most 3 * 255^2
+                const int er = qr[bj][bk] - qr[fj][fk], eg = qg[bj][bk] - qg[fj][fk], eb = qb[bj][bk] - qb[fj][fk];
+                const int dd = er * er + eg * eg + eb * eb, vd = vr * er + vg * eg + vb * eb;
+                // products of two such sums need 64 bits
+                if (dd > 0 && OVERLAY_LO * vd > dd && OVERLAY_LO * vd < (OVERLAY_LO - 1) * dd &&
+                    OVERLAY_OFF * OVERLAY_OFF * ((long)vv * dd - (long)vd * vd) <= (long)dd * dd)
+                    mix[r] |= 1u << o;
             }
-            nb += boundary;
-            nm += mix;
         }
+    }
+    int nb = 0, nm = 0;
+    for (int r = 0; r < FALLBACK_TILE; ++r) {
+        nb += popcount(boundary[r]);
+        nm += popcount(mix[r]);
+    }
+#undef OV_IN
 #undef OV_SAME
+#undef OV_LUM
     return (int2)(nb, nm);
 }
 
