@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 from fractions import Fraction
 
+from mlaa_stream.io.sequence import FIRST_FRAME_NUMBER
 from mlaa_stream.cli.filter_cmd import EXIT_FAILED, EXIT_OK, Failed, Usage, _check_writable, _Job, video_trim
 
 
@@ -122,7 +123,7 @@ class SequenceToVideoJob(_Job):
 class VideoToImagesJob(_Job):
     """A video -> numbered images through a frame pattern (clean/%04d.png), numbered from 1 as ffmpeg does."""
 
-    FIRST_NUMBER = 1
+    FIRST_NUMBER = FIRST_FRAME_NUMBER   # as a folder written through a pattern (io/sequence.py plan_images)
 
     def prepare(self) -> None:
         from mlaa_stream.io.video import PIPE, VideoError, open_pipe, probe_video

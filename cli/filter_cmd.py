@@ -249,7 +249,8 @@ def _job_for(kind: str, output: str) -> type:
 @click.command("filter", epilog=EPILOG, context_settings={"max_content_width": 100})
 @click.argument("input_path", metavar="INPUT")
 @click.option("-o", "--output", required=True, metavar="OUTPUT",
-              help="Output file, folder (same names as the inputs) or frame pattern (clean/%04d.png).")
+              help="Output file, folder (same names as the inputs) or frame pattern (clean/%04d.png: a sequence "
+                   "keeps its numbers, a folder's images are numbered in name order from 1).")
 @click.option("-y", "--overwrite", is_flag=True, help="Replace outputs that exist (never an input).")
 @click.option("--resume", is_flag=True,
               help="Skip inputs whose output exists already (folders, sequences, a video written as images); "
@@ -709,7 +710,7 @@ class _ImageJob(_Job):
             if same_file(ff.src, ff.dst):
                 raise Usage(f"{ff.dst}: output is the input {ff.src}; choose another output")
         dst_dirs = sorted({os.path.dirname(os.path.abspath(ff.dst)) for ff in self.plan})
-        if self.kind != "image":
+        if self.kind != "image" or is_pattern(self.output):   # a pattern's folder is made, as for a video's frames
             for d in dst_dirs:
                 try:
                     os.makedirs(d, exist_ok=True)

@@ -280,6 +280,31 @@ def test_sequence_with_a_frame_range_and_an_output_pattern(tmp_path):
     assert sorted(os.listdir(tmp_path / "o")) == ["c_1002.png", "c_1003.png", "c_1004.png"]
 
 
+def test_a_folder_or_one_image_to_an_output_pattern_is_numbered_in_name_order_from_1(tmp_path):
+    (tmp_path / "in").mkdir()
+    for k, name in enumerate(("b.png", "a.png", "c.png")):   # name order, not the order written
+        write_png(tmp_path / "in" / name, staircase(slope=2 + k))
+    out = tmp_path / "o" / "%04d.png"
+    r = run(tmp_path / "in", "-o", out)
+    assert r.exit_code == 0, stderr(r)
+    assert sorted(os.listdir(tmp_path / "o")) == ["0001.png", "0002.png", "0003.png"]   # never a literal %04d
+    for n, name in ((1, "a.png"), (3, "c.png")):
+        alone = tmp_path / f"alone_{n}.png"
+        assert run(tmp_path / "in" / name, "-o", alone).exit_code == 0
+        np.testing.assert_array_equal(read_image(str(tmp_path / "o" / f"{n:04d}.png")).pixels,
+                                      read_image(str(alone)).pixels)
+    r = run(tmp_path / "in", "-o", out)
+    assert r.exit_code == 2 and "0001.png: exists (and 2 more)" in stderr(r)
+    (tmp_path / "o" / "0002.png").unlink()
+    r = run(tmp_path / "in", "-o", out, "--resume", "-v")
+    assert r.exit_code == 0 and "--resume: 2 outputs exist and are skipped" in stderr(r)
+    assert sorted(os.listdir(tmp_path / "o")) == ["0001.png", "0002.png", "0003.png"]
+    assert run(tmp_path / "in", "-o", out, "--overwrite").exit_code == 0
+    r = run(tmp_path / "in" / "b.png", "-o", tmp_path / "one" / "f_%03d.png")   # one image: frame 1
+    assert r.exit_code == 0, stderr(r)
+    assert os.listdir(tmp_path / "one") == ["f_001.png"]
+
+
 def test_sequence_gaps_are_reported(tmp_path):
     make_sequence(tmp_path / "seq", [1, 2, 5, 6, 9])
     r = run(tmp_path / "seq" / "shot.%04d.png", "-o", tmp_path / "o")

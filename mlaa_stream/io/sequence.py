@@ -21,6 +21,9 @@ from mlaa_stream.io.item import Item
 
 _PRINTF = re.compile(r"%(0?)(\d*)d")
 _FATAL_ERRNOS = {errno.ENOSPC, errno.EDQUOT, errno.EROFS}
+# the first number of frames written through a pattern from unnumbered inputs (a video, a folder, one image):
+# 1, as FFmpeg's image2 muxer numbers them
+FIRST_FRAME_NUMBER = 1
 
 
 @dataclass(frozen=True)
@@ -294,7 +297,10 @@ def consecutive_ahead(read_order: dict, position: int, future) -> list:
 
 
 def plan_images(src_paths: list[str], output: str, numbers: list[int | None] | None = None) -> list[FrameFile]:
-    """Pair each input with its output path; without numbers (a folder) each file gets its position in the list."""
+    """Pair each input with its output path; without numbers (a folder) each file gets its position in the list,
+    and where `output` is a frame pattern, numbers in list order from FIRST_FRAME_NUMBER (the names to write)."""
+    if numbers is None and is_pattern(output):
+        numbers = list(range(FIRST_FRAME_NUMBER, FIRST_FRAME_NUMBER + len(src_paths)))
     if numbers is None:
         return [FrameFile(src, output_path(src, output, None), None, k) for k, src in enumerate(src_paths)]
     return [FrameFile(src, output_path(src, output, n), n) for src, n in zip(src_paths, numbers)]
