@@ -213,7 +213,7 @@ def _kind_of(path: str) -> str:
 
 def _warn_unused_options(ctx: click.Context, con: Console, kind: str, job: type) -> None:
     """Options given on the command line (not defaults) that this job has no use for: a warning each, not an
-    error (--rate with a video input, the encoder's options with images out)."""
+    error (--rate with a video input, the encoder's, container's and audio options with images out)."""
     from mlaa_stream.cli.convert_jobs import SequenceToVideoJob, VideoToImagesJob
 
     def given(name: str) -> bool:
@@ -222,13 +222,20 @@ def _warn_unused_options(ctx: click.Context, con: Console, kind: str, job: type)
     if given("rate") and job is not SequenceToVideoJob:
         why = "a video keeps its own frame rate" if job is _VideoJob else "images have no frame rate"
         con.warn(f"--rate has no effect here: it sets the frame rate of a video made from images; {why}")
-    if job is _ImageJob or job is VideoToImagesJob:   # images out: no video encoder
+    if job is _ImageJob or job is VideoToImagesJob:   # images out: no video encoder, container or audio
         encoder = (("codec", "--codec"), ("crf", "--crf"), ("encoder_preset", "--encoder-preset"),
                    ("pix_fmt", "--pix-fmt"))
         unused = [flag for name, flag in encoder if given(name)]
+        sets = ["the video encoder"] if unused else []
+        for name, flag, what in (("container", "-f/--format", "the video container"),
+                                 ("audio", "--audio", "the video's audio tracks")):
+            if given(name):
+                unused.append(flag)
+                sets.append(what)
         if unused:
+            what = sets[0] if len(sets) == 1 else f"{', '.join(sets[:-1])} and {sets[-1]}"
             con.warn(f"{', '.join(unused)} {'has' if len(unused) == 1 else 'have'} no effect here: "
-                     f"{'it sets' if len(unused) == 1 else 'they set'} the video encoder, and the output is images")
+                     f"{'it sets' if len(unused) == 1 else 'they set'} {what}, and the output is images")
 
 
 def _job_for(kind: str, output: str) -> type:

@@ -112,6 +112,15 @@ def test_options_given_for_another_kind_of_output_are_named_once_as_having_no_ef
     assert r.exit_code == 0 and "no effect" not in stderr(r)
     r = run(CLIP, "-o", tmp_path / "img2" / "f_%04d.png")   # defaults are not "given"
     assert r.exit_code == 0 and "no effect" not in stderr(r)
+    r = run(CLIP, "-o", tmp_path / "img3" / "f_%04d.png", "--crf", "20", "-f", "mkv", "--audio", "aac")
+    assert r.exit_code == 0, stderr(r)
+    assert stderr(r).count("no effect here") == 1
+    assert ("--crf, -f/--format, --audio have no effect here: they set the video encoder, the video container "
+            "and the video's audio tracks, and the output is images") in stderr(r)
+    r = run(tmp_path / "seq", "-o", tmp_path / "o", "--audio", "none", "-y")   # a folder out too
+    assert r.exit_code == 0 and "--audio has no effect here: it sets the video's audio tracks" in stderr(r)
+    r = run(tmp_path / "seq", "-o", tmp_path / "o", "--format", "mp4", "-y")
+    assert r.exit_code == 0 and "-f/--format has no effect here: it sets the video container" in stderr(r)
 
 
 def test_float_frames_to_video_are_refused_and_existing_outputs_need_y(tmp_path):
