@@ -669,7 +669,7 @@ class _ImageJob(_Job):
     """An image, a folder of images or a numbered sequence."""
 
     def prepare(self) -> None:
-        from mlaa_stream.io.images import remove_quietly, stale_temp_files
+        from mlaa_stream.io.images import is_image_path, remove_quietly, stale_temp_files
         from mlaa_stream.io.sequence import (Report, expand_pattern, format_ranges, is_pattern, list_folder,
                                 parse_frames, plan_images, same_file)
 
@@ -711,6 +711,12 @@ class _ImageJob(_Job):
             if os.path.exists(self.output) and not os.path.isdir(self.output):
                 raise Usage(f"{self.output}: expected a folder (or a %04d pattern) for "
                             f"{'a folder' if self.kind == 'folder' else 'a sequence'}, got a file")
+            if not os.path.exists(self.output) and is_image_path(self.output):
+                # out.png would become a folder named out.png: more likely one image was meant, which many are not
+                stem, ext = os.path.splitext(self.output)
+                many = "a folder" if self.kind == "folder" else "a sequence"
+                raise Usage(f"{self.output}: names one image, and {many} has many; give a folder or a frame "
+                            f"pattern such as {stem}/%04d{ext} (a folder named so: end it with /)")
             self.output = os.path.join(self.output, "")  # a folder, created below
         self.plan = plan_images(srcs, self.output, numbers)
         for ff in self.plan:

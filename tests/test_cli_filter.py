@@ -305,6 +305,17 @@ def test_a_folder_or_one_image_to_an_output_pattern_is_numbered_in_name_order_fr
     assert os.listdir(tmp_path / "one") == ["f_001.png"]
 
 
+
+def test_a_folder_or_sequence_to_one_image_name_is_refused_naming_a_pattern(tmp_path):
+    make_sequence(tmp_path / "seq", (1, 2))
+    for src in (tmp_path / "seq", tmp_path / "seq" / "shot.%04d.png"):
+        r = run(src, "-o", tmp_path / "out.png")
+        assert r.exit_code == 2 and f"{tmp_path / 'out'}/%04d.png" in stderr(r), stderr(r)
+        assert not (tmp_path / "out.png").exists()
+    r = run(tmp_path / "seq", "-o", f"{tmp_path / 'dir.png'}/")   # a folder named so, asked for
+    assert r.exit_code == 0 and sorted(os.listdir(tmp_path / "dir.png")) == ["shot.0001.png", "shot.0002.png"]
+
+
 def test_sequence_gaps_are_reported(tmp_path):
     make_sequence(tmp_path / "seq", [1, 2, 5, 6, 9])
     r = run(tmp_path / "seq" / "shot.%04d.png", "-o", tmp_path / "o")
