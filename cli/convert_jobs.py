@@ -6,8 +6,8 @@ from __future__ import annotations
 import os
 from fractions import Fraction
 
-from mlaa_stream.io.sequence import FIRST_FRAME_NUMBER
 from mlaa_stream.cli.filter_cmd import EXIT_FAILED, EXIT_OK, Failed, Usage, _check_writable, _Job, video_trim
+from mlaa_stream.io.sequence import FIRST_FRAME_NUMBER
 
 
 def _sequence_plan(job: _Job) -> list:
