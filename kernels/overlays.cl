@@ -13,9 +13,10 @@
 //   mix:       a boundary where p lies on the segment F -> Q: at t in (1 / OVERLAY_LO, 1 - 1 / OVERLAY_LO) of it and
 //              off it by at most 1 / OVERLAY_OFF of its length.
 // Per tile: its boundary pixels (nb) and mixes (nm). A tile is overlay where its 3x3 tiles hold at least
-// OVERLAY_SEED_MIN mixes, OVERLAY_SEED_PCT % of their boundary pixels, or where it touches such a tile and holds a
-// mix for every OVERLAY_GROW_DIV boundary pixels (the ends of a line of text). Thin text on a flat box (strokes of
-// one pixel: no flat ink, no monotone ramp) is not found: `keep` rectangles (spatial/keep.py) are for it.
+// OVERLAY_SEED_MIN mixes, OVERLAY_SEED_PCT % of their boundary pixels, or where it holds a mix for every
+// OVERLAY_GROW_DIV boundary pixels and touches such a tile -- two steps of growth (the ends of a line of text, the
+// tiles between its lines). Thin text on a flat box (strokes of one pixel: no flat ink, no monotone ramp) is not
+// found: `keep` rectangles (spatial/keep.py) are for it.
 #pragma OPENCL FP_CONTRACT OFF
 
 #ifndef OVERLAY_CONTRAST
@@ -144,8 +145,9 @@ inline int2 tile_overlay_counts(__global const PIXEL_T *src, int x0, int y0, int
     return (int2)(nb, nm);
 }
 
-// counts[2 tile] = boundary pixels, counts[2 tile + 1] = mixes, for tiles within two tiles of a render region
-// (the rest are never read: 0). One work item per SEGMENT / FALLBACK_TILE tiles of a tile row.
+// counts[2 tile] = boundary pixels, counts[2 tile + 1] = mixes, for tiles within three tiles of a render region
+// (what overlay_tiles reads for a region: the rest stay 0). One work item per SEGMENT / FALLBACK_TILE tiles of a
+// tile row.
 __kernel void overlay_counts(__global const PIXEL_T *src, __global const uchar *render, __global uchar *counts,
                              const int w, const int h, const int tiles_x, const int tiles_y)
 {
@@ -154,8 +156,8 @@ __kernel void overlay_counts(__global const PIXEL_T *src, __global const uchar *
     const int t1 = min(t0 + SEGMENT / FALLBACK_TILE, tiles_x);
     for (int tx = t0; tx < t1; ++tx) {
         int near = 0;
-        for (int j = max(ty - 2, 0); j <= min(ty + 2, tiles_y - 1); ++j)
-            for (int k = max(tx - 2, 0); k <= min(tx + 2, tiles_x - 1); ++k)
+        for (int j = max(ty - 3, 0); j <= min(ty + 3, tiles_y - 1); ++j)
+            for (int k = max(tx - 3, 0); k <= min(tx + 3, tiles_x - 1); ++k)
                 near |= render[j * tiles_x + k];
         const int2 n = near ? tile_overlay_counts(src, tx * FALLBACK_TILE, ty * FALLBACK_TILE, w, h) : (int2)(0, 0);
         counts[2 * (ty * tiles_x + tx)] = (uchar)n.x;
@@ -163,34 +165,58 @@ __kernel void overlay_counts(__global const PIXEL_T *src, __global const uchar *
     }
 }
 
-// Tile (tx, ty)'s 3x3 tiles hold OVERLAY_SEED_MIN mixes or more, OVERLAY_SEED_PCT % of their boundary pixels.
-inline int overlay_seed(__global const uchar *counts, int tx, int ty, int tiles_x, int tiles_y)
+// seeds[tile] = 1 where the tile's 3x3 tiles hold OVERLAY_SEED_MIN mixes or more, OVERLAY_SEED_PCT % of their
+// boundary pixels. One work item per tile row.
+__kernel void overlay_seeds(__global const uchar *counts, __global uchar *seeds, const int tiles_x, const int tiles_y)
 {
-    int sb = 0, sm = 0;
-    for (int j = max(ty - 1, 0); j <= min(ty + 1, tiles_y - 1); ++j)
-        for (int k = max(tx - 1, 0); k <= min(tx + 1, tiles_x - 1); ++k) {
-            sb += counts[2 * (j * tiles_x + k)];
-            sm += counts[2 * (j * tiles_x + k) + 1];
-        }
-    return sm >= OVERLAY_SEED_MIN && 100 * sm >= OVERLAY_SEED_PCT * sb;
+    const int ty = get_global_id(0);
+    if (ty >= tiles_y) return;
+    for (int tx = 0; tx < tiles_x; ++tx) {
+        int sb = 0, sm = 0;
+        for (int j = max(ty - 1, 0); j <= min(ty + 1, tiles_y - 1); ++j)
+            for (int k = max(tx - 1, 0); k <= min(tx + 1, tiles_x - 1); ++k) {
+                sb += counts[2 * (j * tiles_x + k)];
+                sm += counts[2 * (j * tiles_x + k) + 1];
+            }
+        seeds[ty * tiles_x + tx] = (uchar)(sm >= OVERLAY_SEED_MIN && 100 * sm >= OVERLAY_SEED_PCT * sb);
+    }
 }
 
-// A render region that is overlay (a seed, or beside one with a mix for every OVERLAY_GROW_DIV boundary pixels)
-// stops being one. One work item per tile row.
-__kernel void overlay_tiles(__global const uchar *counts, __global uchar *render, const int tiles_x,
-                            const int tiles_y)
+// The tile holds a mix for every OVERLAY_GROW_DIV boundary pixels (one a seed may grow into).
+inline int overlay_grows(__global const uchar *counts, int tile)
+{
+    const int nb = counts[2 * tile], nm = counts[2 * tile + 1];
+    return nm >= 1 && OVERLAY_GROW_DIV * nm >= nb;
+}
+
+// One growth step's verdict for tile (tx, ty): a seed, or a tile that grows beside a seed.
+inline int overlay_once(__global const uchar *counts, __global const uchar *seeds, int tx, int ty, int tiles_x,
+                        int tiles_y)
+{
+    const int tile = ty * tiles_x + tx;
+    if (seeds[tile]) return 1;
+    if (!overlay_grows(counts, tile)) return 0;
+    for (int j = max(ty - 1, 0); j <= min(ty + 1, tiles_y - 1); ++j)
+        for (int k = max(tx - 1, 0); k <= min(tx + 1, tiles_x - 1); ++k)
+            if (seeds[j * tiles_x + k]) return 1;
+    return 0;
+}
+
+// A render region that is overlay after two growth steps from the seeds (the ends of a line of text, the tiles
+// between its lines) stops being one. One work item per tile row.
+__kernel void overlay_tiles(__global const uchar *counts, __global const uchar *seeds, __global uchar *render,
+                            const int tiles_x, const int tiles_y)
 {
     const int ty = get_global_id(0);
     if (ty >= tiles_y) return;
     for (int tx = 0; tx < tiles_x; ++tx) {
         const int tile = ty * tiles_x + tx;
         if (!render[tile]) continue;
-        int overlay = overlay_seed(counts, tx, ty, tiles_x, tiles_y);
-        const int nb = counts[2 * tile], nm = counts[2 * tile + 1];
-        if (!overlay && nm >= 1 && OVERLAY_GROW_DIV * nm >= nb)
+        int overlay = overlay_once(counts, seeds, tx, ty, tiles_x, tiles_y);
+        if (!overlay && overlay_grows(counts, tile))
             for (int j = max(ty - 1, 0); j <= min(ty + 1, tiles_y - 1) && !overlay; ++j)
                 for (int k = max(tx - 1, 0); k <= min(tx + 1, tiles_x - 1) && !overlay; ++k)
-                    overlay = (j != ty || k != tx) && overlay_seed(counts, k, j, tiles_x, tiles_y);
+                    overlay = overlay_once(counts, seeds, k, j, tiles_x, tiles_y);
         if (overlay) render[tile] = 0;
     }
 }

@@ -54,11 +54,14 @@ def run_kernels(device, frame: np.ndarray, bgr: bool = False, render: np.ndarray
     src = cl.Buffer(device.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(frame))
     reg = cl.Buffer(device.ctx, mf.READ_WRITE | mf.COPY_HOST_PTR, hostbuf=flags)
     counts = cl.Buffer(device.ctx, mf.READ_WRITE, 2 * tx * ty)
+    seeds = cl.Buffer(device.ctx, mf.READ_WRITE, tx * ty)
     k_counts = device.kernel("overlays", "overlay_counts", defs)
+    k_seeds = device.kernel("overlays", "overlay_seeds", defs)
     k_tiles = device.kernel("overlays", "overlay_tiles", defs)
     W, H, TX, TY = (np.int32(v) for v in (fmt.width, fmt.height, tx, ty))
     k_counts(device.queue, (-(-fmt.width // SEGMENT), ty), None, src, reg, counts, W, H, TX, TY)
-    k_tiles(device.queue, (ty,), None, counts, reg, TX, TY)
+    k_seeds(device.queue, (ty,), None, counts, seeds, TX, TY)
+    k_tiles(device.queue, (ty,), None, counts, seeds, reg, TX, TY)
     c = np.empty(2 * tx * ty, np.uint8)
     cl.enqueue_copy(device.queue, c, counts)
     cl.enqueue_copy(device.queue, flags, reg)
@@ -91,7 +94,7 @@ def test_kernel_matches_the_reference(device, kind):
 @pytest.mark.parametrize("outline", [False, True])
 def test_subtitles_over_a_render_are_found_and_the_render_is_not(device, outline):
     """Known answer: the tiles under white (or outlined) antialiased text are overlay; a render without text has
-    none; tiles far from every region are not even counted."""
+    none; tiles more than three tiles from every region are not even counted."""
     plain = point_sampled_render(64, 160, 7)
     frame, text = with_subtitle(plain, outline)
     _, flags = run_kernels(device, plain)
@@ -103,7 +106,7 @@ def test_subtitles_over_a_render_are_found_and_the_render_is_not(device, outline
     render = np.zeros((8, 20), bool)
     render[0, 0] = True
     counts, _ = run_kernels(device, frame, render=render)
-    assert not counts[3:].any() and not counts[:, 3:].any()
+    assert not counts[4:].any() and not counts[:, 4:].any()
 
 
 def test_the_filter_keeps_subtitles_over_a_render_out_of_its_regions(device):

@@ -19,6 +19,7 @@ OVERLAY_CONTRAST = 64   # levels (8-bit, RGB distance) between a boundary pixel 
 OVERLAY_EXTREME = 2     # levels of luma from the darkest or lightest of the tile's window: the flat colour is ink
 OVERLAY_LO, OVERLAY_OFF = 20, 10  # a mix: t in (1/20, 19/20) along flat -> beyond, off the segment <= 1/10 of it
 OVERLAY_SEED_MIN, OVERLAY_SEED_PCT, OVERLAY_GROW_DIV = 32, 35, 5
+OVERLAY_GROW_STEPS = 2  # kernels/overlays.cl overlay_tiles: two steps (its counts reach three tiles from a region)
 LUMA_WEIGHTS = np.array([54, 183, 19], np.int64)  # Rec. 709 luma in 256ths, on 8-bit levels
 TILE, RADIUS = 8, 2     # fallback.py FALLBACK_TILE; the tile's window reaches RADIUS pixels around it
 
@@ -95,10 +96,13 @@ def _sum3x3(t: np.ndarray) -> np.ndarray:
 
 def overlay_tiles(frame: np.ndarray, bgr: bool = False) -> np.ndarray:
     """kernels/overlays.cl's verdict per tile (tiles_y, tiles_x) bool: the tile holds text over a render (a seed:
-    its 3x3 tiles hold OVERLAY_SEED_MIN mixes or more, OVERLAY_SEED_PCT % of their boundary pixels; or beside a seed
-    with a mix for every OVERLAY_GROW_DIV boundary pixels). Render regions that are overlay stop being ones."""
+    its 3x3 tiles hold OVERLAY_SEED_MIN mixes or more, OVERLAY_SEED_PCT % of their boundary pixels; or, in
+    OVERLAY_GROW_STEPS steps from the seeds, a tile with a mix for every OVERLAY_GROW_DIV boundary pixels beside an
+    overlay tile). Render regions that are overlay stop being ones."""
     nb, nm = overlay_counts(levels8(frame, bgr))
     sb, sm = _sum3x3(nb), _sum3x3(nm)
-    seed = (sm >= OVERLAY_SEED_MIN) & (100 * sm >= OVERLAY_SEED_PCT * sb)
+    overlay = (sm >= OVERLAY_SEED_MIN) & (100 * sm >= OVERLAY_SEED_PCT * sb)
     grows = (nm >= 1) & (OVERLAY_GROW_DIV * nm >= nb)
-    return seed | (grows & (_sum3x3(seed.astype(np.int64)) > 0))
+    for _ in range(OVERLAY_GROW_STEPS):
+        overlay = overlay | (grows & (_sum3x3(overlay.astype(np.int64)) > 0))
+    return overlay
