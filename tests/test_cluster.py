@@ -133,7 +133,8 @@ def test_a_video_in_segments_equals_one_machine(client, clip60, tmp_path):
 
 
 def test_a_video_on_the_command_line_cluster(clip60, tmp_path):
-    r = CliRunner().invoke(main, [clip60, "-o", str(tmp_path / "o.mp4"), "--cluster", "local:2", "--chunk-frames", "20"])
+    r = CliRunner().invoke(main, [clip60, "-o", str(tmp_path / "o.mp4"), "--cluster", "local:2",
+                                  "--chunk-frames", "20"])
     assert r.exit_code == 0, r.output
     frames, streams = decoded(tmp_path / "o.mp4")
     assert len(frames) == 60 and streams == [("video", "h264"), ("audio", "aac")]
@@ -150,3 +151,22 @@ def test_a_joined_video_keeps_chapters_and_attachments(client, tmp_path):
     assert n == 24 and warnings == []
     assert chapters(tmp_path / "o.mkv") == [(0.0, 0.5, "One"), (0.5, 1.0, "Two")]
     assert attachments(tmp_path / "o.mkv") == [("Font One.ttf", "application/x-truetype-font", FONT)]
+
+
+def test_keep_rectangles_travel_to_the_workers(client, reference, tmp_path):
+    """filter_on_cluster(keep=...): each worker's filter leaves the rectangle as the input has it."""
+    from mlaa_stream.cluster.frames import filter_on_cluster
+    from mlaa_stream.io.images import read_image
+
+    report = filter_on_cluster(client, str(reference / "in" / "shot.%04d.png"), str(tmp_path / "c.%04d.png"),
+                               chunk_frames=20, keep=["0,50%,100%,50%"])
+    assert len(report.written) == 60 and not report.failed
+    changed = []
+    for k in (1001, 1030, 1060):
+        src = read_image(str(reference / "in" / f"shot.{k}.png")).pixels
+        out = read_image(str(tmp_path / f"c.{k}.png")).pixels
+        ref = read_image(str(reference / "ref" / f"c.{k}.png")).pixels
+        np.testing.assert_array_equal(out[20:], src[20:])
+        np.testing.assert_array_equal(out[:20], ref[:20])
+        changed.append(np.any(ref[20:] != src[20:]))
+    assert any(changed)  # the filter would change the kept half

@@ -238,8 +238,11 @@ def filter_on_cluster(client, input_path: str, output: str, *, preset: str | Non
     (mlaa_stream.cluster.temporal) turns the temporal stage on, with a warm-up per chunk."""
     from mlaa_stream.io.sequence import (expand_pattern, is_pattern, list_folder, plan_images)
     from mlaa_stream.spatial.filter import PRESETS
+    from mlaa_stream.spatial.keep import keep_rects
 
     kwargs = dict(PRESETS.get(preset or "default", {}), **filter_kwargs)
+    if "keep" in kwargs:  # KeepRects in a tuple: the workers key their filters by the options (_worker_filter)
+        kwargs["keep"] = keep_rects(kwargs["keep"])
     strict = is_pattern(input_path)
     if strict:
         found, _missing = expand_pattern(input_path)

@@ -45,7 +45,8 @@ class Segment:
         return f"segment {self.index} (frames {first}-{last})"
 
 
-def plan_segments(duration: float, fps: Fraction | None, output: str, seconds: float = SEGMENT_SECONDS) -> list[Segment]:
+def plan_segments(duration: float, fps: Fraction | None, output: str,
+                  seconds: float = SEGMENT_SECONDS) -> list[Segment]:
     """Time ranges of whole frames covering [0, duration): the last one runs to the end."""
     frame = 1.0 / float(fps or 25)
     per = max(1, int(round(seconds / frame)))  # frames per segment
@@ -221,6 +222,7 @@ def filter_video_on_cluster(client, source: str, output: str, *, preset: str | N
 
     from mlaa_stream.io.video import probe_video
     from mlaa_stream.spatial.filter import PRESETS
+    from mlaa_stream.spatial.keep import keep_rects
 
     if os.path.exists(output) and not overwrite:
         raise FileExistsError(f"{output}: exists; pass overwrite=True")
@@ -228,6 +230,8 @@ def filter_video_on_cluster(client, source: str, output: str, *, preset: str | N
     if not info.duration:
         raise ClusterVideoError(f"{source}: the container declares no duration: the video cannot be split")
     kwargs = dict(PRESETS.get(preset or "default", {}), **filter_kwargs)
+    if "keep" in kwargs:  # KeepRects in a tuple: the workers key their filters by the options (frames._worker_filter)
+        kwargs["keep"] = keep_rects(kwargs["keep"])
     segments = plan_segments(info.duration, info.fps, output, segment_seconds)
     futures = {client.submit(encode_segment, source, seg, kwargs, codec, crf, encoder_preset, pix_fmt, temporal,
                              retries=1, pure=False, key=f"mlaa-seg-{seg.index}-{os.getpid()}-{id(segments)}"): seg
