@@ -12,6 +12,10 @@
 //              letters, a black outline), and |p - F| > OVERLAY_CONTRAST levels;
 //   mix:       a boundary where p lies on the segment F -> Q: at t in (1 / OVERLAY_LO, 1 - 1 / OVERLAY_LO) of it and
 //              off it by at most 1 / OVERLAY_OFF of its length.
+// A video codec leaves no ink exactly flat, so a second test holds for white or black ink (luma within OVERLAY_INK
+// levels of either): F within OVERLAY_NOISY_FLAT levels of a neighbour in every channel, within OVERLAY_NOISY_EXTREME
+// of the window's extremes, and for a mix the ramp ends at Q (the pixel beyond Q goes on along Q - F by at most
+// 1 / OVERLAY_RAMP_END of it: a glyph's edge meets its background, a highlight's falloff goes on).
 // Per tile: its boundary pixels (nb) and mixes (nm). A tile is overlay where its 3x3 tiles hold at least
 // OVERLAY_SEED_MIN mixes, OVERLAY_SEED_PCT % of their boundary pixels, or where it holds a mix for every
 // OVERLAY_GROW_DIV boundary pixels and touches such a tile -- two steps of growth (the ends of a line of text, the
@@ -39,6 +43,18 @@
 #endif
 #ifndef OVERLAY_GROW_DIV
 #define OVERLAY_GROW_DIV 5
+#endif
+#ifndef OVERLAY_INK
+#define OVERLAY_INK 20
+#endif
+#ifndef OVERLAY_NOISY_FLAT
+#define OVERLAY_NOISY_FLAT 4
+#endif
+#ifndef OVERLAY_NOISY_EXTREME
+#define OVERLAY_NOISY_EXTREME 8
+#endif
+#ifndef OVERLAY_RAMP_END
+#define OVERLAY_RAMP_END 10
 #endif
 #define OV_R 2                               // the tile's window: 2 pixels around it (F's neighbours)
 #define OV_N (FALLBACK_TILE + 2 * OV_R)
@@ -90,7 +106,7 @@ inline int2 tile_overlay_counts(__global const PIXEL_T *src, int x0, int y0, int
 #define OV_SAME(j0, k0, j1, k1) (qr[j0][k0] == qr[j1][k1] && qg[j0][k0] == qg[j1][k1] && qb[j0][k0] == qb[j1][k1])
 #define OV_LUM(j, k) (54 * qr[j][k] + 183 * qg[j][k] + 19 * qb[j][k])
     int lmax = -1, lmin = -1;  // the window's luma extremes, found at the first pair of enough contrast
-    const int ext = OVERLAY_EXTREME * 256;
+    const int ext = OVERLAY_EXTREME * 256, ext_noisy = OVERLAY_NOISY_EXTREME * 256;
     uint boundary[FALLBACK_TILE] = {0, 0, 0, 0, 0, 0, 0, 0}, mix[FALLBACK_TILE] = {0, 0, 0, 0, 0, 0, 0, 0};
     for (int d = 0; d < 4; ++d) {
         const int dj = d == 2 ? 1 : (d == 3 ? -1 : 0), dk = d == 0 ? 1 : (d == 1 ? -1 : 0);
@@ -115,12 +131,25 @@ inline int2 tile_overlay_counts(__global const PIXEL_T *src, int x0, int y0, int
                             }
                 }
                 const int lf = OV_LUM(fj, fk);
-                if (!(lf >= lmax - ext || lf <= lmin + ext)) continue;
-                int flat = 0;  // F equals one of its eight neighbours
-                for (int a = -1; a <= 1 && !flat; ++a)
-                    for (int b = -1; b <= 1 && !flat; ++b)
-                        flat = (a || b) && OV_IN(fj + a, fk + b) && OV_SAME(fj + a, fk + b, fj, fk);
-                if (!flat) continue;
+                // the exact test: F equals a neighbour, its luma within OVERLAY_EXTREME of the window's extremes
+                int exact = lf >= lmax - ext || lf <= lmin + ext;
+                // the codec's test: white or black ink, F within OVERLAY_NOISY_FLAT of a neighbour in every channel,
+                // its luma within OVERLAY_NOISY_EXTREME of the extremes (and below, the ramp ends at Q)
+                int noisy = (lf >= (255 - OVERLAY_INK) * 256 || lf <= OVERLAY_INK * 256) &&
+                            (lf >= lmax - ext_noisy || lf <= lmin + ext_noisy);
+                if (!exact && !noisy) continue;
+                int flat = 0, near = 0;  // F equals one of its eight neighbours / is within the codec's tolerance
+                for (int a = -1; a <= 1; ++a)
+                    for (int b = -1; b <= 1; ++b) {
+                        if (!(a || b) || !OV_IN(fj + a, fk + b)) continue;
+                        flat |= OV_SAME(fj + a, fk + b, fj, fk);
+                        near |= abs(qr[fj + a][fk + b] - qr[fj][fk]) <= OVERLAY_NOISY_FLAT &&
+                                abs(qg[fj + a][fk + b] - qg[fj][fk]) <= OVERLAY_NOISY_FLAT &&
+                                abs(qb[fj + a][fk + b] - qb[fj][fk]) <= OVERLAY_NOISY_FLAT;
+                    }
+                exact &= flat;
+                noisy &= near;
+                if (!exact && !noisy) continue;
                 boundary[r] |= 1u << o;
                 if (!OV_IN(bj, bk)) continue;
                 const int vr = qr[j][k] - qr[fj][fk], vg = qg[j][k] - qg[fj][fk], vb = qb[j][k] - qb[fj][fk];
@@ -128,9 +157,16 @@ inline int2 tile_overlay_counts(__global const PIXEL_T *src, int x0, int y0, int
                 const int er = qr[bj][bk] - qr[fj][fk], eg = qg[bj][bk] - qg[fj][fk], eb = qb[bj][bk] - qb[fj][fk];
                 const int dd = er * er + eg * eg + eb * eb, vd = vr * er + vg * eg + vb * eb;
                 // products of two such sums need 64 bits
-                if (dd > 0 && OVERLAY_LO * vd > dd && OVERLAY_LO * vd < (OVERLAY_LO - 1) * dd &&
-                    OVERLAY_OFF * OVERLAY_OFF * ((long)vv * dd - (long)vd * vd) <= (long)dd * dd)
-                    mix[r] |= 1u << o;
+                if (!(dd > 0 && OVERLAY_LO * vd > dd && OVERLAY_LO * vd < (OVERLAY_LO - 1) * dd &&
+                      OVERLAY_OFF * OVERLAY_OFF * ((long)vv * dd - (long)vd * vd) <= (long)dd * dd)) continue;
+                if (!exact) {  // the codec's test: the pixel beyond Q goes on along Q - F by <= 1 / OVERLAY_RAMP_END
+                    const int cj = bj - dj, ck = bk - dk;
+                    if (!OV_IN(cj, ck)) continue;
+                    const int go = (qr[cj][ck] - qr[bj][bk]) * er + (qg[cj][ck] - qg[bj][bk]) * eg +
+                                   (qb[cj][ck] - qb[bj][bk]) * eb;
+                    if (OVERLAY_RAMP_END * go > dd) continue;
+                }
+                mix[r] |= 1u << o;
             }
         }
     }

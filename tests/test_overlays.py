@@ -68,7 +68,13 @@ def run_kernels(device, frame: np.ndarray, bgr: bool = False, render: np.ndarray
     return c.reshape(ty, tx, 2), flags.astype(bool)
 
 
-@pytest.mark.parametrize("kind", ["uint8", "uint16", "float32", "bgr", "grey", "rgba"])
+def codec_noise(frame: np.ndarray, seed: int) -> np.ndarray:
+    """+-3 levels of seeded noise: no colour stays exactly flat, as after a video codec."""
+    noise = np.random.default_rng(seed).integers(-3, 4, frame.shape)
+    return np.clip(frame.astype(np.int64) + noise, 0, 255).astype(np.uint8)
+
+
+@pytest.mark.parametrize("kind", ["uint8", "uint16", "float32", "bgr", "grey", "rgba", "noisy"])
 def test_kernel_matches_the_reference(device, kind):
     """Seeded renders with and without subtitles at sizes that are not multiples of the tile, every sample type."""
     for seed, (h, w) in ((1, (61, 83)), (2, (48, 96))):
@@ -83,6 +89,8 @@ def test_kernel_matches_the_reference(device, kind):
             frame = np.ascontiguousarray(frame[..., 1])
         elif kind == "rgba":
             frame = np.concatenate([frame, np.full((h, w, 1), 200, np.uint8)], -1)
+        elif kind == "noisy":
+            frame = codec_noise(frame, seed)
         counts, flags = run_kernels(device, frame, bgr=bgr)
         nb, nm = O.overlay_counts(O.levels8(frame, bgr))
         np.testing.assert_array_equal(counts[..., 0], nb)
@@ -91,17 +99,19 @@ def test_kernel_matches_the_reference(device, kind):
         assert nm.sum() > 0
 
 
-@pytest.mark.parametrize("outline", [False, True])
-def test_subtitles_over_a_render_are_found_and_the_render_is_not(device, outline):
-    """Known answer: the tiles under white (or outlined) antialiased text are overlay; a render without text has
-    none; tiles more than three tiles from every region are not even counted."""
+@pytest.mark.parametrize("outline, noisy", [(False, False), (True, False), (True, True)])
+def test_subtitles_over_a_render_are_found_and_the_render_is_not(device, outline, noisy):
+    """Known answer: the tiles under white (or outlined) antialiased text are overlay, with a codec's noise too; a
+    render without text has none; tiles more than three tiles from every region are not even counted."""
     plain = point_sampled_render(64, 160, 7)
     frame, text = with_subtitle(plain, outline)
+    if noisy:
+        plain, frame = codec_noise(plain, 3), codec_noise(frame, 3)
     _, flags = run_kernels(device, plain)
     assert flags.all()
     _, flags = run_kernels(device, frame)
     text_tiles = text.reshape(8, T, 20, T).any((1, 3))
-    assert (~flags[text_tiles]).mean() > (0.6 if outline else 0.9)
+    assert (~flags[text_tiles]).mean() > (0.5 if noisy else 0.6 if outline else 0.9)
     assert flags[:4].all()  # the rows above the text stay regions
     render = np.zeros((8, 20), bool)
     render[0, 0] = True

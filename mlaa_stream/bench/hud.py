@@ -1,6 +1,6 @@
 """Text over a render: subtitles and HUD boxes composited over rendered frames -- does the filter leave them alone?
 
-    python -m mlaa_stream.bench.hud [--methods none,fxaa,mlaa,mlaa:screen,mlaa+keep] [--sizes 640x360]
+    python -m mlaa_stream.bench.hud [--methods none,fxaa,mlaa,mlaa:screen,mlaa+keep] [--sizes 640x360] [--crf 18,23]
 
 Game captures and rendered video carry text the renderer did not draw: subtitles, a HUD, a slate. It is
 antialiased already (or pixel-aligned UI), so a filter should leave it as it is, while it antialiases the render
@@ -12,7 +12,8 @@ sRGB as subtitle renderers do; `subs_outline` -- the same with a black outline 1
 and the right. Per frame and method: RMSE against the truth
 inside the overlay (8-bit levels; its pixels and one around, for the subtitles) and error removed outside it (%).
 `mlaa+keep` is the default filter with the overlays' bounding boxes given as keep rectangles (spatial/keep.py), as a
-user who knows where they are would. Needs EGL (the rendered scenes). A benchmark, never a unit test.
+user who knows where they are would. `--crf 18,23`: also each composite through H.264 (the codec's error counted as
+the input's). Needs EGL (the rendered scenes). A benchmark, never a unit test.
 """
 from __future__ import annotations
 
@@ -116,6 +117,9 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--methods", default="none,fxaa,mlaa,mlaa:screen,mlaa+keep")
     ap.add_argument("--sizes", default="640x360")
+    ap.add_argument("--crf", default="",
+                    help="also every frame through H.264 at these CRFs (comma-separated; as rendered video with "
+                         "burned-in subtitles reaches the filter; FRAME|OVERLAY|crfN), scored against the clean truth")
     ap.add_argument("--device", default=None)
     args = ap.parse_args(argv)
     from mlaa_stream.yardstick.rendered import egl_available
@@ -129,6 +133,12 @@ def main(argv: list[str] | None = None) -> int:
     sizes = [tuple(int(v) for v in s.split("x")) for s in args.sizes.split(",")]
     ui = {sc.name: (sc.inputs[0], sc.truths[0]) for sc in generate_scenes(names=["text_ui", "antialiased"])}
     frames = {f"{name}|{ov}": composite(base, ov, ui) for name, base in bases(sizes).items() for ov in OVERLAYS}
+    crfs = [int(c) for c in args.crf.split(",") if c.strip()]
+    if crfs:
+        from mlaa_stream.bench.codec_check import through_h264
+        for key, (inp, truth, mask, rects) in list(frames.items()):
+            for crf in crfs:
+                frames[f"{key}|crf{crf}"] = (through_h264(np.stack([inp, inp]), crf)[0], truth, mask, rects)
     from mlaa_stream.spatial.filter import Filter
     procs = {m: (METHODS[m](args.device) if m != "mlaa+keep" else None) for m in methods}
     print("RMSE inside the overlay (levels) / error removed outside it (%)")
@@ -143,10 +153,10 @@ def main(argv: list[str] | None = None) -> int:
             else:
                 out = procs[m].process(inp)
             inside, rest = scores(out, inp, truth, mask)
-            totals.setdefault((key.split("|")[1], m), []).append((inside, rest))
+            totals.setdefault(("|".join(key.split("|")[1:]), m), []).append((inside, rest))
             row += f"{inside:7.2f} / {rest:5.1f}".rjust(16)
         print(row, flush=True)
-    for ov in OVERLAYS:
+    for ov in [*OVERLAYS, *(f"{o}|crf{c}" for o in OVERLAYS for c in crfs)]:
         cells = [totals[(ov, m)] for m in methods]
         print(f"mean {ov}".ljust(34) + "".join(f"{np.mean([a for a, _ in c]):7.2f} / {np.mean([b for _, b in c]):5.1f}"
                                                .rjust(16) for c in cells))

@@ -20,6 +20,9 @@ OVERLAY_EXTREME = 2     # levels of luma from the darkest or lightest of the til
 OVERLAY_LO, OVERLAY_OFF = 20, 10  # a mix: t in (1/20, 19/20) along flat -> beyond, off the segment <= 1/10 of it
 OVERLAY_SEED_MIN, OVERLAY_SEED_PCT, OVERLAY_GROW_DIV = 32, 35, 5
 OVERLAY_GROW_STEPS = 2  # kernels/overlays.cl overlay_tiles: two steps (its counts reach three tiles from a region)
+# a video codec's test: white or black ink (luma within OVERLAY_INK levels), flat within OVERLAY_NOISY_FLAT levels per
+# channel, extreme within OVERLAY_NOISY_EXTREME, and the ramp ends at Q (the next step along <= 1/OVERLAY_RAMP_END)
+OVERLAY_INK, OVERLAY_NOISY_FLAT, OVERLAY_NOISY_EXTREME, OVERLAY_RAMP_END = 20, 4, 8, 10
 LUMA_WEIGHTS = np.array([54, 183, 19], np.int64)  # Rec. 709 luma in 256ths, on 8-bit levels
 TILE, RADIUS = 8, 2     # fallback.py FALLBACK_TILE; the tile's window reaches RADIUS pixels around it
 
@@ -28,7 +31,8 @@ def overlay_defines() -> dict:
     """The constants as kernels/overlays.cl's defines."""
     return {"OVERLAY_CONTRAST": OVERLAY_CONTRAST, "OVERLAY_EXTREME": OVERLAY_EXTREME, "OVERLAY_LO": OVERLAY_LO,
             "OVERLAY_OFF": OVERLAY_OFF, "OVERLAY_SEED_MIN": OVERLAY_SEED_MIN, "OVERLAY_SEED_PCT": OVERLAY_SEED_PCT,
-            "OVERLAY_GROW_DIV": OVERLAY_GROW_DIV}
+            "OVERLAY_GROW_DIV": OVERLAY_GROW_DIV, "OVERLAY_INK": OVERLAY_INK, "OVERLAY_NOISY_FLAT": OVERLAY_NOISY_FLAT,
+            "OVERLAY_NOISY_EXTREME": OVERLAY_NOISY_EXTREME, "OVERLAY_RAMP_END": OVERLAY_RAMP_END}
 
 
 def levels8(frame: np.ndarray, bgr: bool = False) -> np.ndarray:
@@ -56,31 +60,38 @@ def overlay_counts(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     win = np.lib.stride_tricks.sliding_window_view(padded, (TILE + 2 * RADIUS,) * 2)[::TILE, ::TILE]
     lmax = np.repeat(np.repeat(np.nanmax(win, (2, 3)), TILE, 0), TILE, 1)[:h, :w]
     lmin = np.repeat(np.repeat(np.nanmin(win, (2, 3)), TILE, 0), TILE, 1)[:h, :w]
-    qp = np.pad(q, ((1, 1), (1, 1), (0, 0)), constant_values=-1)  # outside the frame: equal to nothing
-    flat = np.zeros((h, w), bool)
+    qp = np.pad(q, ((1, 1), (1, 1), (0, 0)), constant_values=-1000)  # outside the frame: equal to nothing
+    flat, near = np.zeros((h, w), bool), np.zeros((h, w), bool)
     for dy in (-1, 0, 1):
         for dx in (-1, 0, 1):
             if dy or dx:
-                flat |= np.all(qp[1 + dy:1 + dy + h, 1 + dx:1 + dx + w] == q, -1)
-    flat_p, lum_p = np.pad(flat, 1), np.pad(lum, 1)
-    inside = np.pad(np.ones((h, w), bool), 1)
-    ext = OVERLAY_EXTREME * 256
+                d = np.abs(qp[1 + dy:1 + dy + h, 1 + dx:1 + dx + w] - q)
+                flat |= np.all(d == 0, -1)
+                near |= np.all(d <= OVERLAY_NOISY_FLAT, -1)
+    flat_p, near_p, lum_p = np.pad(flat, 1), np.pad(near, 1), np.pad(lum, 1)
+    inside, inside2 = np.pad(np.ones((h, w), bool), 1), np.pad(np.ones((h, w), bool), 2)
+    q2 = np.pad(q, ((2, 2), (2, 2), (0, 0)))
+    ext, ext_noisy = OVERLAY_EXTREME * 256, OVERLAY_NOISY_EXTREME * 256
     boundary, mix = np.zeros((h, w), bool), np.zeros((h, w), bool)
     for dy, dx in ((0, 1), (0, -1), (1, 0), (-1, 0)):
         at_f = (slice(1 + dy, 1 + dy + h), slice(1 + dx, 1 + dx + w))
         at_q = (slice(1 - dy, 1 - dy + h), slice(1 - dx, 1 - dx + w))
-        f, beyond = qp[at_f], qp[at_q]
+        at_c = (slice(2 - 2 * dy, 2 - 2 * dy + h), slice(2 - 2 * dx, 2 - 2 * dx + w))  # the pixel beyond Q
+        f, beyond, lf = qp[at_f], qp[at_q], lum_p[at_f]
         v = q - f
         vv = (v * v).sum(-1)
-        b = (inside[at_f] & flat_p[at_f] & ~np.all(f == q, -1)
-             & ((lum_p[at_f] >= lmax - ext) | (lum_p[at_f] <= lmin + ext))
-             & (vv > OVERLAY_CONTRAST * OVERLAY_CONTRAST))
+        strong = inside[at_f] & (vv > OVERLAY_CONTRAST * OVERLAY_CONTRAST)
+        exact = strong & flat_p[at_f] & ((lf >= lmax - ext) | (lf <= lmin + ext))
+        noisy = (strong & near_p[at_f] & ((lf >= (255 - OVERLAY_INK) * 256) | (lf <= OVERLAY_INK * 256))
+                 & ((lf >= lmax - ext_noisy) | (lf <= lmin + ext_noisy)))
         e = beyond - f
         dd, vd = (e * e).sum(-1), (v * e).sum(-1)
-        m = (b & inside[at_q] & (dd > 0) & (OVERLAY_LO * vd > dd) & (OVERLAY_LO * vd < (OVERLAY_LO - 1) * dd)
-             & (OVERLAY_OFF * OVERLAY_OFF * (vv * dd - vd * vd) <= dd * dd))
-        boundary |= b
-        mix |= m
+        between = (inside[at_q] & (dd > 0) & (OVERLAY_LO * vd > dd) & (OVERLAY_LO * vd < (OVERLAY_LO - 1) * dd)
+                   & (OVERLAY_OFF * OVERLAY_OFF * (vv * dd - vd * vd) <= dd * dd))
+        go_on = ((q2[at_c] - beyond) * e).sum(-1)
+        ends = inside2[at_c] & (OVERLAY_RAMP_END * go_on <= dd)
+        boundary |= exact | noisy
+        mix |= between & (exact | (noisy & ends))
 
     def per_tile(mask: np.ndarray) -> np.ndarray:
         p = np.zeros((th * TILE, tw * TILE), np.int64)
