@@ -453,7 +453,14 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
             raise Usage("--start/--end trim a video; for a frame pattern use --frames A-B")
         post_hooks = _load_post_hooks(overlay, device)
         if temporal.wanted and kind == "image":
-            con.info("a single image: spatial antialiasing only (temporal needs a sequence)")
+            # --stats and --show history ask for something the run will not make (no file, no view): warned
+            unmade = [flag for flag, on in (("--stats", temporal.stats_path), ("--show history", temporal.show))
+                      if on]
+            if unmade:
+                con.warn(f"{', '.join(unmade)} {'has' if len(unmade) == 1 else 'have'} no effect here: a single "
+                         f"image gets spatial antialiasing only (temporal needs a sequence)")
+            else:
+                con.info("a single image: spatial antialiasing only (temporal needs a sequence)")
             temporal.enabled, temporal.show, temporal.stats_path, temporal.lookahead = False, None, None, None
             temporal.dense_motion = False
         for what, path in (("--progress", progress_path if progress_path != "-" else None),
