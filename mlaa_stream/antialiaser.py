@@ -17,7 +17,7 @@ import numpy as np
 from mlaa_stream.spatial.filter import PRESETS, Filter
 from mlaa_stream.spatial.fast_filter import FastFilter
 from mlaa_stream.spatial.keep import KeepRect, keep_rects, restore_kept
-from mlaa_stream.pipeline import PostHook, Temporal, stream_items
+from mlaa_stream.pipeline import PipelineError, PostHook, Temporal, stream_items
 from mlaa_stream.temporal.methods import METHODS, make_stage, needs_regions
 
 
@@ -102,7 +102,8 @@ class Antialiaser:
         """Yield the antialiased frames of a cv2.VideoCapture (read until it ends) or an iterable.
 
         Decoding runs in a reader thread and frames overlap on the device; leaving the loop early
-        (break) stops the reader. Errors are raised as PipelineError naming the frame index.
+        (break) stops the reader. Errors are raised as PipelineError naming the frame index (counted as
+        `index` is: across calls and streams, the number the post hooks and the temporal stage get).
         """
         self._check_open()
         frames = _capture_frames(source) if hasattr(source, "read") and hasattr(source, "isOpened") else source
@@ -115,10 +116,17 @@ class Antialiaser:
                 return user_temporal(a, b, base + i, **future)
             temporal.lookahead = getattr(user_temporal, "lookahead", 0)   # the pipeline reads it
         hooks = [(lambda h: (lambda f, i: h(f, base + i)))(h) for h in self.post_hooks]
-        for item in stream_items(frames, self._filter, in_flight=self.in_flight,
-                                 temporal=temporal, post_hooks=hooks):
-            self.index = base + item.index + 1
-            yield item.frame
+        try:
+            for item in stream_items(frames, self._filter, in_flight=self.in_flight,
+                                     temporal=temporal, post_hooks=hooks):
+                self.index = base + item.index + 1
+                yield item.frame
+        except PipelineError as exc:
+            if not base:
+                raise
+            # the pipeline counts from this stream's first frame; name the frame as the hooks and the
+            # temporal stage saw it (self.index's numbering, across calls and streams)
+            raise PipelineError(exc.stage, base + exc.index, exc.cause, exc.meta) from exc.cause
 
     def _check_open(self) -> None:
         if self._closed:

@@ -117,6 +117,23 @@ def test_a_bad_frame_names_its_index():
     assert pipeline_threads() == []
 
 
+
+def test_a_failing_post_hook_is_named_by_the_index_it_was_given():
+    # after two calls the stream's frames are 2, 3, ...: the error names the number the hook got, as index does
+    frames = captured_frames()[:5]
+
+    def hook(frame, i):
+        if i == 3:
+            raise ValueError("bad overlay")
+        return frame
+    with Antialiaser(post_hooks=[hook]) as aa:
+        aa(frames[0])
+        aa(frames[1])
+        with pytest.raises(PipelineError, match="post failed at frame 3: bad overlay") as info:
+            list(aa.stream(frames[2:]))
+        assert info.value.index == 3 and aa.index == 3
+    assert pipeline_threads() == []
+
 def test_closed_antialiaser_refuses_work_and_presets_are_checked():
     aa = Antialiaser(preset=sorted(mlaa_stream.PRESETS)[0])
     aa.close()
