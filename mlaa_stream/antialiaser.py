@@ -106,7 +106,11 @@ class Antialiaser:
         `index` is: across calls and streams, the number the post hooks and the temporal stage get).
         """
         self._check_open()
-        frames = _capture_frames(source) if hasattr(source, "read") and hasattr(source, "isOpened") else source
+        capture = hasattr(source, "read") and hasattr(source, "isOpened")
+        if capture and not source.isOpened():
+            # a capture that could not open its file or camera reads nothing: say so instead of ending at once
+            raise ValueError("the capture is not open (cv2.VideoCapture could not open its file or camera)")
+        frames = _capture_frames(source) if capture else source
         base = self.index
         temporal = None
         if self.temporal is not None:

@@ -134,6 +134,16 @@ def test_a_failing_post_hook_is_named_by_the_index_it_was_given():
         assert info.value.index == 3 and aa.index == 3
     assert pipeline_threads() == []
 
+
+def test_a_capture_that_did_not_open_is_an_error_not_an_empty_stream():
+    cap = cv2.VideoCapture(os.path.join(os.path.dirname(CLIP), "no_such_clip.mp4"))
+    assert not cap.isOpened()
+    with Antialiaser() as aa:
+        with pytest.raises(ValueError, match="capture is not open"):
+            list(aa.stream(cap))
+        assert aa.index == 0
+    assert pipeline_threads() == []
+
 def test_closed_antialiaser_refuses_work_and_presets_are_checked():
     aa = Antialiaser(preset=sorted(mlaa_stream.PRESETS)[0])
     aa.close()
