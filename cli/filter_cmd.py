@@ -238,6 +238,27 @@ def _warn_unused_options(ctx: click.Context, con: Console, kind: str, job: type)
                      f"{'it sets' if len(unused) == 1 else 'they set'} {what}, and the output is images")
 
 
+def _warn_unused_temporal_options(ctx: click.Context, con: Console, temporal: "TemporalOptions") -> None:
+    """The temporal stage's settings given on the command line where they do nothing: a warning each run, as
+    _warn_unused_options does (they do not turn the stage on; --lookahead, --dense-motion, --stats do)."""
+    def given(name: str) -> bool:
+        return ctx.get_parameter_source(name) == click.core.ParameterSource.COMMANDLINE
+
+    flags = (("temporal_frames", "--temporal-frames"), ("temporal_method", "--temporal-method"),
+             ("temporal_mode", "--temporal-mode"), ("temporal_k", "--temporal-k"))
+    if temporal.spec() is None:
+        unused = [flag for name, flag in flags if given(name)]
+        if unused:
+            con.warn(f"{', '.join(unused)} {'has' if len(unused) == 1 else 'have'} no effect here: the temporal "
+                     f"stage is off (--temporal turns it on)")
+        return
+    if temporal.method == "blend" and given("temporal_frames"):
+        con.warn("--temporal-frames has no effect with --temporal-method blend: it sets the ring of temporal "
+                 "supersampling, which the blend does not use")
+    if temporal.method == "tss" and given("temporal_k"):
+        con.warn("--temporal-k has no effect with --temporal-method tss: it sets the blend's velocity weight")
+
+
 def _job_for(kind: str, output: str) -> type:
     """The job for an input kind and an output: same kind (video -> video, images -> images), or a
     conversion: a folder or pattern -> a video file (by its extension), a video -> a frame pattern."""
@@ -452,6 +473,8 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
         if (start is not None or end is not None) and kind != "video":
             raise Usage("--start/--end trim a video; for a frame pattern use --frames A-B")
         post_hooks = _load_post_hooks(overlay, device)
+        if not (temporal.wanted and kind == "image"):   # a single image with the stage asked for: said below
+            _warn_unused_temporal_options(ctx, con, temporal)
         if temporal.wanted and kind == "image":
             # --stats and --show history ask for something the run will not make (no file, no view): warned
             unmade = [flag for flag, on in (("--stats", temporal.stats_path), ("--show history", temporal.show))
