@@ -35,7 +35,8 @@ class Antialiaser:
 
     Options are the Filter's (`preset` first, explicit keywords override it). `temporal=True` (or
     "auto") adds temporal supersampling (mlaa_stream.temporal.tss.TSSStage: the input's samples of the
-    last `temporal_frames` frames accumulated along the motion; its ring is kept between calls) and the
+    last `temporal_frames` frames (default 16; a TSS setting, refused without TSS) accumulated along the motion;
+    its ring is kept between calls) and the
     reprojection blend on moving edges of render regions; "tss", "blend" and "tss+blend" are the other
     methods of mlaa_stream.temporal.methods; or pass any `(frame_in, frame_filtered, index) -> frame` stage.
     `lookahead=N` (files, not live capture): in `stream`, temporal supersampling also reads the N frames after
@@ -70,6 +71,9 @@ class Antialiaser:
         if isinstance(method, str) and method not in METHODS:
             raise ValueError(f"temporal: expected True, {', '.join(map(repr, METHODS))} or a callable, "
                              f"got {temporal!r}")
+        if method == "blend" and temporal_frames is not None:   # make_stage leaves it to the CLI's warning
+            raise ValueError("temporal_frames: the ring of temporal supersampling, which the blend method does not "
+                             "use; use a method with TSS")
         if isinstance(method, str) and needs_regions(method) and not kwargs.get("fast"):
             kwargs["keep_regions"] = True  # the stage reads the filter's render regions
         # the fast preset without host copies on CPU devices (spatial/fast_filter.py)
@@ -79,8 +83,9 @@ class Antialiaser:
             temporal = make_stage(method, self._filter.context, bgr=True, frames=temporal_frames,
                                   regions_from=self._filter, lookahead=lookahead, linear_input=linear_input,
                                   dense_samples=dense_motion)
-        elif lookahead or dense_motion:
-            raise ValueError("lookahead, dense_motion: need temporal=True or one of the temporal methods with TSS")
+        elif lookahead or dense_motion or temporal_frames is not None:
+            raise ValueError("lookahead, dense_motion, temporal_frames: need temporal=True or one of the temporal "
+                             "methods with TSS")
         self.temporal = temporal or None
         self.post_hooks = list(post_hooks)
         self.in_flight = in_flight

@@ -153,6 +153,17 @@ def test_closed_antialiaser_refuses_work_and_presets_are_checked():
         Antialiaser(preset="nonesuch")
 
 
+
+def test_temporal_frames_where_no_ring_takes_them_is_refused():
+    # it was dropped silently without TSS, and 0 became the default ring of 16
+    for kwargs in ({}, {"temporal": "blend"}, {"temporal": lambda a, b, i: b}):
+        with pytest.raises(ValueError, match="temporal_frames"):
+            Antialiaser(temporal_frames=4, **kwargs)
+    with pytest.raises(ValueError, match="frames: expected K >= 1, got 0"):
+        Antialiaser(temporal="tss", temporal_frames=0)
+    with Antialiaser(temporal="tss", temporal_frames=3) as aa:
+        assert aa.temporal.frames == 3
+
 def test_temporal_true_keeps_history_between_calls():
     """Antialiaser(temporal=True): the second frame of a static shot uses the history (model 'static')."""
     import numpy as np
