@@ -489,6 +489,13 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
         for what, path in (("--progress", progress_path if progress_path != "-" else None),
                            ("--stats", temporal.stats_path)):
             if path:  # written during or after the run: a missing folder would end it in a traceback
+                from mlaa_stream.io.images import is_image_path
+                from mlaa_stream.io.sequence import same_file
+                from mlaa_stream.io.video import is_video_path
+                # a text file named as an image or a video is an input or output mistyped: it would be written over
+                if is_image_path(path) or is_video_path(path) or (input_path != "-" and same_file(path, input_path)):
+                    raise Usage(f"{what} {path}: names an image or video (the input, an output?), which it would "
+                                f"replace with text; choose a .csv or .txt name")
                 folder = os.path.dirname(os.path.abspath(path))
                 if not os.path.isdir(folder):
                     raise Failed(f"{what} {path}: the folder {folder} does not exist")
