@@ -756,6 +756,9 @@ class _ImageJob(_Job):
                             f"pattern such as {stem}/%04d{ext} (a folder named so: end it with /)")
             self.output = os.path.join(self.output, "")  # a folder, created below
         self.plan = plan_images(srcs, self.output, numbers)
+        # each file's place in the whole plan: the post hooks' frame index (--overlay's frames), whatever
+        # --resume skips, look-ahead reads add or an unreadable file of a folder leaves out
+        self.positions = {id(ff): i for i, ff in enumerate(self.plan)}
         for ff in self.plan:
             if same_file(ff.src, ff.dst):
                 raise Usage(f"{ff.dst}: output is the input {ff.src}; choose another output")
@@ -878,17 +881,21 @@ class _ImageJob(_Job):
                 write(item)
         self.read_order: dict = {}
         self.read_linear: dict = {}   # position -> the frame is linear light (the temporal stage's colour space)
+        positions = getattr(self, "positions", {})
+        hook_index: dict = {}   # position read -> the file's place in the whole plan (self.positions)
 
         def source():
-            """image_source, remembering which file each position is (for the temporal stage)."""
+            """image_source, remembering which file each position is (for the temporal stage and the hooks)."""
             inner = image_source(read_plan, self.report, strict=self.strict)
             try:
                 for position, item in enumerate(inner):
                     self.read_order[position] = item.meta[0]
                     self.read_linear[position] = is_linear(item.meta[1])
+                    hook_index[position] = positions.get(id(item.meta[0]), position)
                     yield item
             finally:
                 inner.close()
+        post_hooks = [(lambda h: (lambda f, i: h(f, hook_index.get(i, i))))(h) for h in post_hooks]
         if temporal is not None and getattr(self, "warm_up", None):
             self._warm_up(filt, temporal)
         try:
