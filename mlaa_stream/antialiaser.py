@@ -125,17 +125,21 @@ class Antialiaser:
                 return user_temporal(a, b, base + i, **future)
             temporal.lookahead = getattr(user_temporal, "lookahead", 0)   # the pipeline reads it
         hooks = [(lambda h: (lambda f, i: h(f, base + i)))(h) for h in self.post_hooks]
+        items = stream_items(frames, self._filter, in_flight=self.in_flight, temporal=temporal, post_hooks=hooks)
         try:
-            for item in stream_items(frames, self._filter, in_flight=self.in_flight,
-                                     temporal=temporal, post_hooks=hooks):
+            for item in items:
                 self.index = base + item.index + 1
                 yield item.frame
+                # closed while the loop held a frame: stop here rather than refill the freed device buffers
+                self._check_open()
         except PipelineError as exc:
             if not base:
                 raise
             # the pipeline counts from this stream's first frame; name the frame as the hooks and the
             # temporal stage saw it (self.index's numbering, across calls and streams)
             raise PipelineError(exc.stage, base + exc.index, exc.cause, exc.meta) from exc.cause
+        finally:
+            items.close()   # stops the reader thread now, whatever ends the loop
 
     def _check_open(self) -> None:
         if self._closed:

@@ -151,6 +151,14 @@ def test_closed_antialiaser_refuses_work_and_presets_are_checked():
         aa(captured_frames()[0])
     with pytest.raises(ValueError, match="expected a preset among"):
         Antialiaser(preset="nonesuch")
+    # closed in the middle of a stream: the next frame is refused (it went on, refilling freed device buffers)
+    aa = Antialiaser(temporal="tss")
+    frames = aa.stream(captured_frames()[:5])
+    next(frames)
+    aa.close()
+    with pytest.raises(RuntimeError, match="closed"):
+        next(frames)
+    assert aa.index == 1 and pipeline_threads() == []
 
 
 
