@@ -14,12 +14,22 @@ from mlaa_stream.cli.options import CommandError
 
 def read_image(path: str) -> np.ndarray:
     """An image as float32 (H, W, 3), 0..1 for integer files; alpha dropped, grey repeated."""
+    return read_image_encoding(path)[0]
+
+
+def read_image_encoding(path: str) -> tuple[np.ndarray, bool]:
+    """read_image's pixels and whether they are linear light (as mlaa_stream.io.sequence.is_linear: a colour
+    space tagged linear/ACES, or untagged float such as EXR)."""
     import OpenImageIO as oiio
 
     inp = oiio.ImageInput.open(path)
     if inp is None:
         raise CommandError(f"{path}: cannot open ({oiio.geterror()})")
     try:
+        spec = inp.spec()
+        cs = spec.get_string_attribute("oiio:ColorSpace", "").lower()
+        floating = spec.format.basetype in (oiio.FLOAT, oiio.HALF, oiio.DOUBLE)
+        linear = any(k in cs for k in ("lin", "aces", "scene_linear", "raw")) or (not cs and floating)
         arr = inp.read_image(format="float")
         if arr is None:
             raise CommandError(f"{path}: cannot read pixels ({inp.geterror()})")
@@ -30,7 +40,7 @@ def read_image(path: str) -> np.ndarray:
         arr = arr[..., None]
     if arr.shape[2] < 3:
         arr = np.repeat(arr[..., :1], 3, axis=2)
-    return np.ascontiguousarray(arr[..., :3])
+    return np.ascontiguousarray(arr[..., :3]), linear
 
 
 def compare_numbers(out: np.ndarray, truth: np.ndarray, inp: np.ndarray | None,
@@ -62,11 +72,24 @@ def _f(v: float, fmt: str) -> str:
 @click.option("--flip/--no-flip", default=True, show_default=True,
               help="Also score NVIDIA FLIP (needs 'pip install flip-evaluator'; centre crop <= 256x256).")
 def compare_command(out_path, truth_path, input_path, flip) -> None:
-    """Score a filtered image OUT against a reference TRUTH (and the input IN)."""
+    """Score a filtered image OUT against a reference TRUTH (and the input IN).
+
+    A linear-light image (EXR, untagged float) among display-encoded ones is compared sRGB-encoded.
+    """
     from mlaa_stream.yardstick import metrics as M
 
-    out, truth = read_image(out_path), read_image(truth_path)
-    inp = read_image(input_path) if input_path else None
+    images = [read_image_encoding(p) if p else (None, False) for p in (out_path, truth_path, input_path)]
+    named = [(p, img, lin) for p, (img, lin) in zip((out_path, truth_path, input_path), images) if p]
+    if len({lin for _, _, lin in named}) > 1:
+        # linear light (EXR) against display values (PNG): the same picture scores tens of levels apart; compare
+        # both as display values, as the filter writes linear light to PNG (clipped to 0-1, sRGB-encoded)
+        from mlaa_stream.device.colour import linear_to_srgb
+        images = [(None if img is None else linear_to_srgb(img).astype(np.float32) if lin else img, lin)
+                  for img, lin in images]
+        click.echo("mlaa-stream: note: " + ", ".join(p for p, _, lin in named if lin)
+                   + ": linear light, compared sRGB-encoded (clipped to 0-1) against display-encoded images",
+                   err=True)
+    out, truth, inp = (img for img, _ in images)
     for name, img in ((out_path, out), (input_path, inp)):
         if img is not None and img.shape != truth.shape:
             raise CommandError(f"{name}: expected {truth.shape[1]}x{truth.shape[0]} like "

@@ -81,7 +81,7 @@ class SequenceToVideoJob(_Job):
     def run(self, filt, post_hooks, in_flight, times, temporal=None) -> int:
         import numpy as np
 
-        from mlaa_stream.io.sequence import Report, image_source
+        from mlaa_stream.io.sequence import Report, image_source, is_linear
         from mlaa_stream.pipeline import PipelineError, run_pipeline
 
         report = Report(say=self.con.error, inform=self.con.info)
@@ -94,10 +94,12 @@ class SequenceToVideoJob(_Job):
             self.writer.write(np.ascontiguousarray(frame))
 
         self.read_order: dict = {}  # position -> FrameFile, for the temporal stage (_SequenceTemporal)
+        self.read_linear: dict = {}  # position -> the frame is linear light: _SequenceTemporal reads it too
 
         def source():
             for position, item in enumerate(image_source(self.plan, report, strict=True)):
                 self.read_order[position] = item.meta[0]
+                self.read_linear[position] = is_linear(item.meta[1])
                 yield item
 
         try:

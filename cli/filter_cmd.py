@@ -238,6 +238,27 @@ def _warn_unused_options(ctx: click.Context, con: Console, kind: str, job: type)
                      f"{'it sets' if len(unused) == 1 else 'they set'} {what}, and the output is images")
 
 
+def _warn_unused_temporal_options(ctx: click.Context, con: Console, temporal: "TemporalOptions") -> None:
+    """The temporal stage's settings given on the command line where they do nothing: a warning each run, as
+    _warn_unused_options does (they do not turn the stage on; --lookahead, --dense-motion, --stats do)."""
+    def given(name: str) -> bool:
+        return ctx.get_parameter_source(name) == click.core.ParameterSource.COMMANDLINE
+
+    flags = (("temporal_frames", "--temporal-frames"), ("temporal_method", "--temporal-method"),
+             ("temporal_mode", "--temporal-mode"), ("temporal_k", "--temporal-k"))
+    if temporal.spec() is None:
+        unused = [flag for name, flag in flags if given(name)]
+        if unused:
+            con.warn(f"{', '.join(unused)} {'has' if len(unused) == 1 else 'have'} no effect here: the temporal "
+                     f"stage is off (--temporal turns it on)")
+        return
+    if temporal.method == "blend" and given("temporal_frames"):
+        con.warn("--temporal-frames has no effect with --temporal-method blend: it sets the ring of temporal "
+                 "supersampling, which the blend does not use")
+    if temporal.method == "tss" and given("temporal_k"):
+        con.warn("--temporal-k has no effect with --temporal-method tss: it sets the blend's velocity weight")
+
+
 def _job_for(kind: str, output: str) -> type:
     """The job for an input kind and an output: same kind (video -> video, images -> images), or a
     conversion: a folder or pattern -> a video file (by its extension), a video -> a frame pattern."""
@@ -452,13 +473,29 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
         if (start is not None or end is not None) and kind != "video":
             raise Usage("--start/--end trim a video; for a frame pattern use --frames A-B")
         post_hooks = _load_post_hooks(overlay, device)
+        if not (temporal.wanted and kind == "image"):   # a single image with the stage asked for: said below
+            _warn_unused_temporal_options(ctx, con, temporal)
         if temporal.wanted and kind == "image":
-            con.info("a single image: spatial antialiasing only (temporal needs a sequence)")
+            # --stats and --show history ask for something the run will not make (no file, no view): warned
+            unmade = [flag for flag, on in (("--stats", temporal.stats_path), ("--show history", temporal.show))
+                      if on]
+            if unmade:
+                con.warn(f"{', '.join(unmade)} {'has' if len(unmade) == 1 else 'have'} no effect here: a single "
+                         f"image gets spatial antialiasing only (temporal needs a sequence)")
+            else:
+                con.info("a single image: spatial antialiasing only (temporal needs a sequence)")
             temporal.enabled, temporal.show, temporal.stats_path, temporal.lookahead = False, None, None, None
             temporal.dense_motion = False
         for what, path in (("--progress", progress_path if progress_path != "-" else None),
                            ("--stats", temporal.stats_path)):
             if path:  # written during or after the run: a missing folder would end it in a traceback
+                from mlaa_stream.io.images import is_image_path
+                from mlaa_stream.io.sequence import same_file
+                from mlaa_stream.io.video import is_video_path
+                # a text file named as an image or a video is an input or output mistyped: it would be written over
+                if is_image_path(path) or is_video_path(path) or (input_path != "-" and same_file(path, input_path)):
+                    raise Usage(f"{what} {path}: names an image or video (the input, an output?), which it would "
+                                f"replace with text; choose a .csv or .txt name")
                 folder = os.path.dirname(os.path.abspath(path))
                 if not os.path.isdir(folder):
                     raise Failed(f"{what} {path}: the folder {folder} does not exist")
@@ -719,6 +756,9 @@ class _ImageJob(_Job):
                             f"pattern such as {stem}/%04d{ext} (a folder named so: end it with /)")
             self.output = os.path.join(self.output, "")  # a folder, created below
         self.plan = plan_images(srcs, self.output, numbers)
+        # each file's place in the whole plan: the post hooks' frame index (--overlay's frames), whatever
+        # --resume skips, look-ahead reads add or an unreadable file of a folder leaves out
+        self.positions = {id(ff): i for i, ff in enumerate(self.plan)}
         for ff in self.plan:
             if same_file(ff.src, ff.dst):
                 raise Usage(f"{ff.dst}: output is the input {ff.src}; choose another output")
@@ -841,17 +881,21 @@ class _ImageJob(_Job):
                 write(item)
         self.read_order: dict = {}
         self.read_linear: dict = {}   # position -> the frame is linear light (the temporal stage's colour space)
+        positions = getattr(self, "positions", {})
+        hook_index: dict = {}   # position read -> the file's place in the whole plan (self.positions)
 
         def source():
-            """image_source, remembering which file each position is (for the temporal stage)."""
+            """image_source, remembering which file each position is (for the temporal stage and the hooks)."""
             inner = image_source(read_plan, self.report, strict=self.strict)
             try:
                 for position, item in enumerate(inner):
                     self.read_order[position] = item.meta[0]
                     self.read_linear[position] = is_linear(item.meta[1])
+                    hook_index[position] = positions.get(id(item.meta[0]), position)
                     yield item
             finally:
                 inner.close()
+        post_hooks = [(lambda h: (lambda f, i: h(f, hook_index.get(i, i))))(h) for h in post_hooks]
         if temporal is not None and getattr(self, "warm_up", None):
             self._warm_up(filt, temporal)
         try:

@@ -17,7 +17,7 @@ import numpy as np
 from mlaa_stream.spatial.filter import PRESETS, Filter
 from mlaa_stream.spatial.fast_filter import FastFilter
 from mlaa_stream.spatial.keep import KeepRect, keep_rects, restore_kept
-from mlaa_stream.pipeline import PostHook, Temporal, stream_items
+from mlaa_stream.pipeline import PipelineError, PostHook, Temporal, stream_items
 from mlaa_stream.temporal.methods import METHODS, make_stage, needs_regions
 
 
@@ -35,7 +35,8 @@ class Antialiaser:
 
     Options are the Filter's (`preset` first, explicit keywords override it). `temporal=True` (or
     "auto") adds temporal supersampling (mlaa_stream.temporal.tss.TSSStage: the input's samples of the
-    last `temporal_frames` frames accumulated along the motion; its ring is kept between calls) and the
+    last `temporal_frames` frames (default 16; a TSS setting, refused without TSS) accumulated along the motion;
+    its ring is kept between calls) and the
     reprojection blend on moving edges of render regions; "tss", "blend" and "tss+blend" are the other
     methods of mlaa_stream.temporal.methods; or pass any `(frame_in, frame_filtered, index) -> frame` stage.
     `lookahead=N` (files, not live capture): in `stream`, temporal supersampling also reads the N frames after
@@ -70,6 +71,9 @@ class Antialiaser:
         if isinstance(method, str) and method not in METHODS:
             raise ValueError(f"temporal: expected True, {', '.join(map(repr, METHODS))} or a callable, "
                              f"got {temporal!r}")
+        if method == "blend" and temporal_frames is not None:   # make_stage leaves it to the CLI's warning
+            raise ValueError("temporal_frames: the ring of temporal supersampling, which the blend method does not "
+                             "use; use a method with TSS")
         if isinstance(method, str) and needs_regions(method) and not kwargs.get("fast"):
             kwargs["keep_regions"] = True  # the stage reads the filter's render regions
         # the fast preset without host copies on CPU devices (spatial/fast_filter.py)
@@ -79,8 +83,9 @@ class Antialiaser:
             temporal = make_stage(method, self._filter.context, bgr=True, frames=temporal_frames,
                                   regions_from=self._filter, lookahead=lookahead, linear_input=linear_input,
                                   dense_samples=dense_motion)
-        elif lookahead or dense_motion:
-            raise ValueError("lookahead, dense_motion: need temporal=True or one of the temporal methods with TSS")
+        elif lookahead or dense_motion or temporal_frames is not None:
+            raise ValueError("lookahead, dense_motion, temporal_frames: need temporal=True or one of the temporal "
+                             "methods with TSS")
         self.temporal = temporal or None
         self.post_hooks = list(post_hooks)
         self.in_flight = in_flight
@@ -102,10 +107,15 @@ class Antialiaser:
         """Yield the antialiased frames of a cv2.VideoCapture (read until it ends) or an iterable.
 
         Decoding runs in a reader thread and frames overlap on the device; leaving the loop early
-        (break) stops the reader. Errors are raised as PipelineError naming the frame index.
+        (break) stops the reader. Errors are raised as PipelineError naming the frame index (counted as
+        `index` is: across calls and streams, the number the post hooks and the temporal stage get).
         """
         self._check_open()
-        frames = _capture_frames(source) if hasattr(source, "read") and hasattr(source, "isOpened") else source
+        capture = hasattr(source, "read") and hasattr(source, "isOpened")
+        if capture and not source.isOpened():
+            # a capture that could not open its file or camera reads nothing: say so instead of ending at once
+            raise ValueError("the capture is not open (cv2.VideoCapture could not open its file or camera)")
+        frames = _capture_frames(source) if capture else source
         base = self.index
         temporal = None
         if self.temporal is not None:
@@ -115,10 +125,21 @@ class Antialiaser:
                 return user_temporal(a, b, base + i, **future)
             temporal.lookahead = getattr(user_temporal, "lookahead", 0)   # the pipeline reads it
         hooks = [(lambda h: (lambda f, i: h(f, base + i)))(h) for h in self.post_hooks]
-        for item in stream_items(frames, self._filter, in_flight=self.in_flight,
-                                 temporal=temporal, post_hooks=hooks):
-            self.index = base + item.index + 1
-            yield item.frame
+        items = stream_items(frames, self._filter, in_flight=self.in_flight, temporal=temporal, post_hooks=hooks)
+        try:
+            for item in items:
+                self.index = base + item.index + 1
+                yield item.frame
+                # closed while the loop held a frame: stop here rather than refill the freed device buffers
+                self._check_open()
+        except PipelineError as exc:
+            if not base:
+                raise
+            # the pipeline counts from this stream's first frame; name the frame as the hooks and the
+            # temporal stage saw it (self.index's numbering, across calls and streams)
+            raise PipelineError(exc.stage, base + exc.index, exc.cause, exc.meta) from exc.cause
+        finally:
+            items.close()   # stops the reader thread now, whatever ends the loop
 
     def _check_open(self) -> None:
         if self._closed:

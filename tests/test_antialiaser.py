@@ -117,6 +117,33 @@ def test_a_bad_frame_names_its_index():
     assert pipeline_threads() == []
 
 
+
+def test_a_failing_post_hook_is_named_by_the_index_it_was_given():
+    # after two calls the stream's frames are 2, 3, ...: the error names the number the hook got, as index does
+    frames = captured_frames()[:5]
+
+    def hook(frame, i):
+        if i == 3:
+            raise ValueError("bad overlay")
+        return frame
+    with Antialiaser(post_hooks=[hook]) as aa:
+        aa(frames[0])
+        aa(frames[1])
+        with pytest.raises(PipelineError, match="post failed at frame 3: bad overlay") as info:
+            list(aa.stream(frames[2:]))
+        assert info.value.index == 3 and aa.index == 3
+    assert pipeline_threads() == []
+
+
+def test_a_capture_that_did_not_open_is_an_error_not_an_empty_stream():
+    cap = cv2.VideoCapture(os.path.join(os.path.dirname(CLIP), "no_such_clip.mp4"))
+    assert not cap.isOpened()
+    with Antialiaser() as aa:
+        with pytest.raises(ValueError, match="capture is not open"):
+            list(aa.stream(cap))
+        assert aa.index == 0
+    assert pipeline_threads() == []
+
 def test_closed_antialiaser_refuses_work_and_presets_are_checked():
     aa = Antialiaser(preset=sorted(mlaa_stream.PRESETS)[0])
     aa.close()
@@ -124,7 +151,26 @@ def test_closed_antialiaser_refuses_work_and_presets_are_checked():
         aa(captured_frames()[0])
     with pytest.raises(ValueError, match="expected a preset among"):
         Antialiaser(preset="nonesuch")
+    # closed in the middle of a stream: the next frame is refused (it went on, refilling freed device buffers)
+    aa = Antialiaser(temporal="tss")
+    frames = aa.stream(captured_frames()[:5])
+    next(frames)
+    aa.close()
+    with pytest.raises(RuntimeError, match="closed"):
+        next(frames)
+    assert aa.index == 1 and pipeline_threads() == []
 
+
+
+def test_temporal_frames_where_no_ring_takes_them_is_refused():
+    # it was dropped silently without TSS, and 0 became the default ring of 16
+    for kwargs in ({}, {"temporal": "blend"}, {"temporal": lambda a, b, i: b}):
+        with pytest.raises(ValueError, match="temporal_frames"):
+            Antialiaser(temporal_frames=4, **kwargs)
+    with pytest.raises(ValueError, match="frames: expected K >= 1, got 0"):
+        Antialiaser(temporal="tss", temporal_frames=0)
+    with Antialiaser(temporal="tss", temporal_frames=3) as aa:
+        assert aa.temporal.frames == 3
 
 def test_temporal_true_keeps_history_between_calls():
     """Antialiaser(temporal=True): the second frame of a static shot uses the history (model 'static')."""

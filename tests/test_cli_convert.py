@@ -58,6 +58,17 @@ def test_a_folder_becomes_a_lossless_video_equal_to_the_filtered_frames(tmp_path
         assert np.array_equal(frames[k], read_image(str(tmp_path / "frames" / name)).pixels)
 
 
+
+def test_a_folder_becomes_a_video_with_the_temporal_stage(tmp_path):
+    # the temporal stage reads the job's per-frame colour space: it stopped at the first frame with an
+    # AttributeError ('SequenceToVideoJob' object has no attribute 'read_linear')
+    staircases(tmp_path / "seq", 4)
+    r = run(tmp_path / "seq", "-o", tmp_path / "out.mkv", "--codec", "libx264rgb", "--crf", "0", "--temporal",
+            "--stats", tmp_path / "s.csv")
+    assert r.exit_code == 0, stderr(r)
+    assert len(video_frames(tmp_path / "out.mkv")[0]) == 4
+    assert len((tmp_path / "s.csv").read_text().splitlines()) == 5
+
 def test_a_video_becomes_numbered_images_from_1(tmp_path):
     r = run(CLIP, "-o", tmp_path / "img" / "f_%04d.png")
     assert r.exit_code == 0, stderr(r)

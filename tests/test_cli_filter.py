@@ -522,6 +522,37 @@ def test_overlay_option_calls_load_overlay_lazily(tmp_path, monkeypatch):
     assert calls[0] == ("load", str(geo)) and [c[1] for c in calls[1:]] == list(range(10))
 
 
+
+def test_overlay_frames_of_a_folder_keep_their_index_through_resume_and_a_bad_file(tmp_path, monkeypatch):
+    # the hook's index is the file's place in the folder: --resume (writing only f3) and an unreadable f1 used
+    # to restart the count at the first file read, drawing another frame's lines
+    calls = []
+
+    def load_overlay(path, bgr=True, device=None):
+        def hook(frame, index):
+            calls.append(index)
+            return frame
+        return hook
+
+    monkeypatch.setitem(sys.modules, "mlaa_stream.overlay.grlaa",
+                        types.SimpleNamespace(load_overlay=load_overlay))
+    geo = tmp_path / "roads.geojson"
+    geo.write_text("{}")
+    (tmp_path / "in").mkdir()
+    for k in range(4):
+        write_png(tmp_path / "in" / f"f{k}.png", staircase())
+    assert run(tmp_path / "in", "-o", tmp_path / "o", "--overlay", geo).exit_code == 0
+    assert calls == [0, 1, 2, 3]
+    calls.clear()
+    (tmp_path / "o" / "f3.png").unlink()
+    r = run(tmp_path / "in", "-o", tmp_path / "o", "--overlay", geo, "--resume")
+    assert r.exit_code == 0, stderr(r)
+    assert calls == [3]
+    calls.clear()
+    (tmp_path / "in" / "f1.png").write_bytes(b"not a png")
+    r = run(tmp_path / "in", "-o", tmp_path / "o2", "--overlay", geo)
+    assert r.exit_code == 1 and calls == [0, 2, 3], stderr(r)
+
 def test_overlay_with_the_real_overlay_module_draws_in_rgb(tmp_path):
     pytest.importorskip("mlaa_stream.overlay.grlaa")
     geo = tmp_path / "road.geojson"

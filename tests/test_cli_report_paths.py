@@ -32,6 +32,21 @@ def test_a_report_file_in_a_missing_folder_is_refused_before_the_run(tmp_path, o
     assert os.listdir(tmp_path) == []
 
 
+
+@pytest.mark.parametrize("option", [["--progress"], ["--temporal", "--stats"]])
+def test_a_report_file_named_as_an_image_or_video_is_refused(tmp_path, option):
+    # --stats on an input frame wrote the CSV over it (the frame lost); on an output, over that output
+    folder = tmp_path / "in"
+    folder.mkdir()
+    for k in range(2):
+        write_image(str(folder / f"f{k}.png"), np.full((12, 16, 3), 40 * k, np.uint8))
+    before = (folder / "f0.png").read_bytes()
+    for target in (folder / "f0.png", tmp_path / "out" / "f1.png", tmp_path / "o.mkv"):
+        r = run(folder, "-o", tmp_path / "out", *option, target)
+        assert r.exit_code == 2, stderr(r)
+        assert f"{option[-1]} {target}: names an image or video" in stderr(r)
+    assert (folder / "f0.png").read_bytes() == before and not (tmp_path / "out").exists()
+
 def test_a_progress_file_that_is_a_folder_is_refused(tmp_path):
     r = run(CLIP, "-o", tmp_path / "o.mp4", "--progress", tmp_path)
     assert r.exit_code == 1 and "is a folder" in stderr(r)

@@ -97,6 +97,36 @@ def test_single_image_is_spatial_only(tmp_path):
     assert "spatial antialiasing only" in res.output and (tmp_path / "b.png").exists()
 
 
+
+def test_single_image_warns_that_stats_and_history_are_not_made(tmp_path):
+    # --stats would write no file and --show history give no view: a warning without -v, not a silent no-op
+    from mlaa_stream.io.images import write_image
+    write_image(str(tmp_path / "a.png"), _pan_frames(1)[0])
+    res = CliRunner().invoke(main, [str(tmp_path / "a.png"), "-o", str(tmp_path / "b.png"),
+                                    "--stats", str(tmp_path / "s.csv"), "--show", "history"])
+    assert res.exit_code == 0, res.output
+    assert "warning: --stats, --show history have no effect here: a single image" in res.output
+    assert (tmp_path / "b.png").exists() and not (tmp_path / "s.csv").exists()
+
+
+def test_temporal_settings_that_do_nothing_are_named(tmp_path):
+    # --temporal-method and the like do not turn the stage on: given without it they did nothing, silently
+    folder = tmp_path / "in"
+    folder.mkdir()
+    from mlaa_stream.io.images import write_image
+    for k, f in enumerate(_pan_frames(3)):
+        write_image(str(folder / f"f{k}.png"), f)
+    res = CliRunner().invoke(main, [str(folder), "-o", str(tmp_path / "a"), "--temporal-method", "tss",
+                                    "--temporal-frames", "4"])
+    assert res.exit_code == 0, res.output
+    assert "--temporal-frames, --temporal-method have no effect here: the temporal stage is off" in res.output
+    res = CliRunner().invoke(main, [str(folder), "-o", str(tmp_path / "b"), "--temporal", "--temporal-method",
+                                    "blend", "--temporal-frames", "4"])
+    assert res.exit_code == 0, res.output
+    assert "--temporal-frames has no effect with --temporal-method blend" in res.output
+    res = CliRunner().invoke(main, [str(folder), "-o", str(tmp_path / "c"), "--temporal", "--temporal-frames", "4"])
+    assert res.exit_code == 0 and "no effect" not in res.output, res.output
+
 def _resume_after_losing(tmp_path, args: list[str], lost: list[Path], indices: list[str]) -> dict:
     """Run `args` whole, remove the outputs `lost`, run again with --resume: the stage must warm up on the 4 frames
     before them, and the written frames (stats `indices`) get the models and rings of the whole run (without the

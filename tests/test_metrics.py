@@ -218,3 +218,20 @@ def test_compare_command(tmp_path):
     assert r.exit_code == 1 and "expected 48x32" in r.output
     r = CliRunner().invoke(main, ["compare", str(tmp_path / "missing.png"), str(tmp_path / "truth.png")])
     assert r.exit_code == 1 and "missing.png" in r.output
+
+
+def test_compare_scores_linear_light_against_display_values_encoded_alike(tmp_path):
+    # an EXR and the same picture as an sRGB PNG scored ~38 levels apart: linear light read as display values
+    from mlaa_stream.device.colour import linear_to_srgb
+    from mlaa_stream.io.images import write_image
+    rng = np.random.default_rng(3)
+    lin = (rng.random((16, 24, 3)) * 0.8 + 0.05).astype(np.float32)
+    write_image(str(tmp_path / "a.exr"), lin.astype(np.float16))
+    _write(tmp_path / "a.png", np.rint(linear_to_srgb(lin.astype(np.float16)) * 255).astype(np.uint8))
+    r = CliRunner().invoke(main, ["compare", str(tmp_path / "a.png"), str(tmp_path / "a.exr"), "--no-flip"])
+    assert r.exit_code == 0, r.output
+    assert "a.exr: linear light, compared sRGB-encoded" in r.output
+    rmse = float(r.output.split("RMSE vs truth (8-bit levels): out ")[1].split()[0])
+    assert rmse < 0.6, r.output
+    r = CliRunner().invoke(main, ["compare", str(tmp_path / "a.exr"), str(tmp_path / "a.exr"), "--no-flip"])
+    assert r.exit_code == 0 and "linear light" not in r.output and "out 0.000" in r.output, r.output

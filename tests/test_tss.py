@@ -232,6 +232,22 @@ def test_index_jump_and_size_change_reset(filt):
     assert stage.stats[-1]["model"] == "reset"
 
 
+def test_sample_type_change_starts_a_new_ring(filt):
+    # the same pan as uint8, then as uint16: a new type is a new ring (it used to be taken for a repeated
+    # frame, returning the previous uint8 output, or to fail with a KeyError on the ring's slots)
+    sc = scene_pan(6, 96, 54)
+    stage = TSSStage(bgr=False)
+    for i, f in enumerate(sc.inputs[:3]):
+        stage(f, filt.process(f), i)
+    wide = [f.astype(np.uint16) * np.uint16(257) for f in sc.inputs[2:]]
+    for i, f in enumerate(wide, start=3):
+        sp = filt.process(f)
+        out = stage(f, sp, i)
+        assert out.dtype == np.uint16 and out.shape == f.shape
+        if i == 3:
+            assert stage.stats[-1]["model"] == "reset" and np.array_equal(out, sp)
+
+
 def test_numpy_backend_is_the_reference(filt):
     sc = scene_pan(5, 96, 54)
     spatial = [filt.process(f) for f in sc.inputs]

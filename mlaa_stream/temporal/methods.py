@@ -54,7 +54,7 @@ def make_stage(method: str, context, *, bgr: bool, frames: int | None = None, mo
         from mlaa_stream.temporal.stage import TemporalStage
         return TemporalStage(context=context, mode=mode, bgr=bgr, show=show, linear_input=linear_input, **kw)
     from mlaa_stream.temporal.tss import DEFAULT_FRAMES, TSSStage, TSSThenBlend
-    ring = int(frames or DEFAULT_FRAMES)
+    ring = DEFAULT_FRAMES if frames is None else int(frames)   # 0 is refused by the stage, not made the default
     if method == "tss":
         return TSSStage(context=context, frames=ring, mode=mode, bgr=bgr, show=show, lookahead=lookahead,
                         linear_input=linear_input, dense_samples=dense_samples)

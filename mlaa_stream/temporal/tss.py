@@ -1235,7 +1235,7 @@ class TSSStage:
         self._seen: dict[int, Ahead] = {}           # look-ahead frames measured already, by index
         self._vrows_sent: dict[int, np.ndarray] = {}   # ring slot -> the valid mask on the device
         self._prev_index: int | None = None
-        self._shape = None
+        self._shape = None   # (shape, dtype) of the previous frame: a change of either starts a new ring
         self._last: tuple[np.ndarray, np.ndarray] | None = None   # (grey, output) of the previous frame
         # the latest frame's grey pyramid and motion decision (None after a repeated frame): TSSThenBlend
         # hands them to the blend, which would measure the same frame pair again
@@ -1295,7 +1295,9 @@ class TSSStage:
         t0 = time.perf_counter()
         self.last_motion = None
         grey = grey8(frame_in, self.bgr, self.linear_input)
-        fresh = self._prev_index is None or index != self._prev_index + 1 or frame_in.shape != self._shape
+        # a new size or sample type starts a new ring: the ring's frames and the repeat test hold the old one
+        fmt_key = (frame_in.shape, frame_in.dtype)
+        fresh = self._prev_index is None or index != self._prev_index + 1 or fmt_key != self._shape
         if fresh:   # a new ring: nothing kept from before a jump back or forward is trusted
             self._seen, self._pending, self._resident = {}, {}, {}
         seen = self._seen.pop(index, None)   # this frame came as a look-ahead frame: measured already
@@ -1316,7 +1318,7 @@ class TSSStage:
         self._assign_slots(fm)
         future = future[:len(fm.future)]
         t1 = time.perf_counter()
-        self._prev_index, self._shape = index, frame_in.shape
+        self._prev_index, self._shape = index, fmt_key
         # Every sample in one cell (static shot, whole-pixel motion, a single frame): nothing to
         # resolve, the spatial output stands without a kernel.
         taps = fm.entries + fm.future
