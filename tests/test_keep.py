@@ -98,3 +98,14 @@ def test_command_line_keep_option(tmp_path):
     bad = CliRunner().invoke(main, ["filter", str(src), "-o", str(tmp_path / "b.png"), "--keep", "0,0,0,5"])
     assert bad.exit_code == 2 and "--keep: W of '0,0,0,5' must be positive" in bad.output
     assert not (tmp_path / "b.png").exists()
+
+
+def test_a_rectangle_outside_the_frame_is_said_once(caplog):
+    """A typo ('0,1800,...' on a 720-line video) would protect nothing: a warning names it, once per frame size."""
+    from mlaa_stream.spatial.keep import kept_patches
+    frame = np.zeros((48, 64, 3), np.uint8)
+    with caplog.at_level("WARNING", logger="mlaa_stream.spatial.keep"):
+        for _ in range(3):
+            assert kept_patches(frame, keep_rects(["0,100,64,10", "0,50%,100%,10%"]))[0][1].size == 0
+    said = [r.getMessage() for r in caplog.records]
+    assert said == ["keep rectangle 0,100,64,10 lies outside the 64x48 frame: it keeps nothing there"]

@@ -11,10 +11,14 @@ command line) or `keep=[...]` (Filter, Antialiaser) names them, in pixels or in 
 """
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 from typing import Iterable, Sequence
 
 import numpy as np
+
+_log = logging.getLogger(__name__)
+_warned: set = set()  # (rectangle, frame size) pairs already said to lie outside the frame
 
 
 @dataclass(frozen=True)
@@ -73,8 +77,16 @@ def kept_patches(frame: np.ndarray, rects: Sequence[KeepRect]) -> list[tuple[tup
     out = []
     for r in rects:
         sl = r.slices(h, w)
+        if (sl[0].start >= sl[0].stop or sl[1].start >= sl[1].stop) and (r, h, w) not in _warned:
+            _warned.add((r, h, w))  # a typo would otherwise protect nothing without a word, once per size
+            _log.warning("keep rectangle %s lies outside the %dx%d frame: it keeps nothing there", _text(r), w, h)
         out.append((sl, frame[sl].copy()))
     return out
+
+
+def _text(r: KeepRect) -> str:
+    """The rectangle as it was written: X,Y,W,H with % where relative."""
+    return ",".join(f"{v * 100:g}%" if rel else f"{v:g}" for v, rel in zip((r.x, r.y, r.w, r.h), r.relative))
 
 
 def restore_patches(out: np.ndarray, patches: Sequence[tuple[tuple[slice, slice], np.ndarray]]) -> np.ndarray:
