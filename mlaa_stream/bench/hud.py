@@ -22,6 +22,7 @@ import argparse
 import numpy as np
 
 from mlaa_stream.bench.accuracy import METHODS
+from mlaa_stream.spatial.keep import keep_rects, restore_kept
 from mlaa_stream.yardstick.scenes import coverage, generate_scenes, text_polygons
 
 OVERLAYS = ("subs", "subs_outline", "ui_aa", "ui_aliased")
@@ -122,6 +123,7 @@ def main(argv: list[str] | None = None) -> int:
                          "burned-in subtitles reaches the filter; FRAME|OVERLAY|crfN), scored against the clean truth")
     ap.add_argument("--device", default=None)
     args = ap.parse_args(argv)
+    from mlaa_stream.bench.rendered_views import _int_list
     from mlaa_stream.yardstick.rendered import egl_available
     ok, why = egl_available()
     if not ok:
@@ -133,25 +135,23 @@ def main(argv: list[str] | None = None) -> int:
     sizes = [tuple(int(v) for v in s.split("x")) for s in args.sizes.split(",")]
     ui = {sc.name: (sc.inputs[0], sc.truths[0]) for sc in generate_scenes(names=["text_ui", "antialiased"])}
     frames = {f"{name}|{ov}": composite(base, ov, ui) for name, base in bases(sizes).items() for ov in OVERLAYS}
-    crfs = [int(c) for c in args.crf.split(",") if c.strip()]
+    crfs = _int_list("--crf", args.crf, 0)
     if crfs:
         from mlaa_stream.bench.codec_check import through_h264
         for key, (inp, truth, mask, rects) in list(frames.items()):
             for crf in crfs:
                 frames[f"{key}|crf{crf}"] = (through_h264(np.stack([inp, inp]), crf)[0], truth, mask, rects)
-    from mlaa_stream.spatial.filter import Filter
-    procs = {m: (METHODS[m](args.device) if m != "mlaa+keep" else None) for m in methods}
+    # mlaa+keep: the default filter's output with the input put back in the rectangles, as Filter(keep=...) does
+    procs = {m: METHODS["mlaa" if m == "mlaa+keep" else m](args.device) for m in methods}
     print("RMSE inside the overlay (levels) / error removed outside it (%)")
     print("frame|overlay".ljust(34) + "".join(m.rjust(16) for m in methods))
     totals: dict[tuple[str, str], list[tuple[float, float]]] = {}
     for key, (inp, truth, mask, rects) in frames.items():
         row = key.ljust(34)
         for m in methods:
+            out = procs[m].process(inp)
             if m == "mlaa+keep":
-                with Filter(device=args.device, keep=rects) as f:
-                    out = f.process(inp)
-            else:
-                out = procs[m].process(inp)
+                out = restore_kept(inp, out, keep_rects(rects))
             inside, rest = scores(out, inp, truth, mask)
             totals.setdefault(("|".join(key.split("|")[1:]), m), []).append((inside, rest))
             row += f"{inside:7.2f} / {rest:5.1f}".rjust(16)

@@ -113,16 +113,17 @@ class FallbackPass:
         self._rows = context.kernel("fallback", "render_rows", defs)
         self._render_tiles = context.kernel("fallback", "render_tiles", defs)
         self._render_frame = context.kernel("fallback", "render_frame", defs)
-        overlay_defs = {**defs, **overlay_defines()}
-        self._overlay_counts = context.kernel("overlays", "overlay_counts", overlay_defs)
-        self._overlay_seeds = context.kernel("overlays", "overlay_seeds", overlay_defs)
-        self._overlay_tiles = context.kernel("overlays", "overlay_tiles", overlay_defs)
         n = self.tiles[0] * self.tiles[1]
+        if self.regions:  # text over a render leaves the regions (kernels/overlays.cl): its own program and buffers
+            overlay_defs = {**defs, **overlay_defines()}
+            self._overlay_counts = context.kernel("overlays", "overlay_counts", overlay_defs)
+            self._overlay_seeds = context.kernel("overlays", "overlay_seeds", overlay_defs)
+            self._overlay_tiles = context.kernel("overlays", "overlay_tiles", overlay_defs)
+            self._overlays = context.buffer(2 * n)  # overlay_counts' two per tile
+            self._seeds = context.buffer(n)  # overlay_seeds' flag per tile
         self._counts = context.buffer(COUNTS * n)  # count_changed's eight per tile
         self._row_sums = context.buffer(32 * n)  # render_rows' int8 per tile
         self._render = context.buffer(n)  # render_tiles' flag per tile
-        self._overlays = context.buffer(2 * n)  # overlay_counts' two per tile (kernels/overlays.cl)
-        self._seeds = context.buffer(n)  # overlay_seeds' flag per tile
         self._shares = context.buffer(32 * self.tiles[0])  # render_tiles' int8 per tile column
         self._table = context.buffer(4 * BUCKETS * WEIGHTS)  # the footprint table (unused without one)
         if table is not None:
@@ -138,8 +139,8 @@ class FallbackPass:
     def device_bytes(self) -> int:
         """Bytes of the per-frame buffers (the tables' 15 and 20 KB do not grow with the frame)."""
         mid = self._mid.size if self._refine is not None else 0
-        return (self._counts.size + self._row_sums.size + self._render.size + self._shares.size + self._overlays.size
-                + self._seeds.size + mid)
+        overlays = self._overlays.size + self._seeds.size if self.regions else 0
+        return self._counts.size + self._row_sums.size + self._render.size + self._shares.size + overlays + mid
 
     def read_regions(self, queue, wait_for: list) -> tuple[np.ndarray, cl.Event | None]:
         """The last frame's render-region flag per tile, (tiles_y, tiles_x) uint8, and the event of its copy to

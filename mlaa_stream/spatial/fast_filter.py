@@ -65,7 +65,7 @@ class FastFilter(Filter):
             self._held.append((done, (frame, out, src, dst)))
             self.queue.flush()
         return PendingFrame(out, done, frame.dtype, frame.shape, keep=(frame, src, dst),
-                            kept=kept_patches(frame, self.keep))
+                            patches=kept_patches(frame, self.keep))
 
     def close(self) -> None:
         try:

@@ -182,9 +182,9 @@ class PendingFrame:
 
     def __init__(self, host_out: np.ndarray, event, out_dtype: np.dtype, shape: tuple, keep=(),
                  non_finite: NonFinite | None = None, regions: tuple | None = None, dim: bool = False,
-                 owner: "Filter | None" = None, kept: list | None = None):
+                 owner: "Filter | None" = None, patches: list | None = None):
         self._out, self._event, self._dtype, self._shape = host_out, event, out_dtype, shape
-        self._kept = kept or []  # the input inside the filter's keep rectangles (spatial/keep.py)
+        self._patches = patches or []  # the input inside the filter's keep rectangles (spatial/keep.py)
         self._keep = keep  # host arrays that must outlive the non-blocking copies
         self._non_finite = non_finite
         self._regions = regions  # (per-tile flags or None, the event of their copy or None), or None
@@ -212,7 +212,7 @@ class PendingFrame:
                 from mlaa_stream.spatial.fallback import dim_outside_regions
                 out = dim_outside_regions(out, flags)
         out = out if out.dtype == self._dtype else out.astype(self._dtype)
-        return restore_patches(out, self._kept)
+        return restore_patches(out, self._patches)
 
 
 class _FrameBuffers:
@@ -397,7 +397,7 @@ class Filter:
             self.queue.flush()
         return PendingFrame(host_out, down, np.dtype(frame.dtype), frame.shape, keep=(staging,),
                             non_finite=non_finite, regions=regions, dim=self.show == "regions",
-                            owner=self.regions_owner, kept=kept_patches(frame, self.keep))
+                            owner=self.regions_owner, patches=kept_patches(frame, self.keep))
 
     def _enqueue_passes(self, bufs: _FrameBuffers, src, dst, after: list, queue=None,
                         events: dict | None = None):
