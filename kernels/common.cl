@@ -249,6 +249,31 @@ inline float3 lab_of_levels(__global const PIXEL_T *src, __global const float *l
         L = 116.0f * fy_ - 16.0f; A = 500.0f * (fx_ - fy_); Z = 200.0f * (fy_ - fz_); }
 #endif
 
+// Pixel i's colour as 8-bit levels in R, G, B order, into c[0 .. 2] (device/formats.py levels8): the overlay and
+// noise tests count in these, exact on every sample type.
+inline void levels8(__global const PIXEL_T *src, int i, int *c)
+{
+#if CHANNELS == 1
+    const PIXEL_T r = src[i], g = r, b = r;
+#else
+    __global const PIXEL_T *p = src + (size_t)i * CHANNELS;
+#if ORDER_BGR
+    const PIXEL_T r = p[2], g = p[1], b = p[0];
+#else
+    const PIXEL_T r = p[0], g = p[1], b = p[2];
+#endif
+#endif
+    const PIXEL_T v[3] = {r, g, b};
+    for (int k = 0; k < 3; ++k) {
+#ifdef PIXEL_IS_FLOAT
+        const float f = fmin(fmax(v[k], 0.0f), 1.0f) * 255.0f;
+        c[k] = (int)(f + 0.5f);  // truncation of a non-negative value: floor
+#else
+        c[k] = PIXEL_MAX > 255.0f ? ((int)v[k] * 255 + 32767) / 65535 : (int)v[k];
+#endif
+    }
+}
+
 // lin[v] = the linear value rgb_to_lab reads from the table for the stored level v (load_px's
 // scaling; LINEAR_INPUT frames are encoded first, as the passes do): integer frames decode a
 // sample with one load, the same number. Filled once per frame format (mlaa_stream.device).

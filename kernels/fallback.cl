@@ -862,17 +862,17 @@ RARELY_CALLED void refine_tile(__global const PIXEL_T *src, __global const float
 }
 
 // After fxaa_fallback: every pixel of a render region with strong local contrast takes the refine table, but for
-// those the chain changed on a straight edge run; `mid` is a copy of fxaa_fallback's output. One work item per
-// SEGMENT / FALLBACK_TILE tiles of a tile row, as fxaa_fallback.
+// those the chain changed on a straight edge run and quiet ones (noise.cl); `mid` is a copy of fxaa_fallback's
+// output. One work item per SEGMENT / FALLBACK_TILE tiles of a tile row, as fxaa_fallback.
 __kernel void refine_fallback(__global const PIXEL_T *src, __global const float *luts, __global const float *lin,
                               __global const uchar *edges, __global const ushort2 *hdist,
                               __global const ushort2 *vdist, __global const uchar *render,
-                              __global const float *table, __global const PIXEL_T *mid, __global PIXEL_T *dst,
-                              const int w, const int h, const int tiles_x, const int tiles_y)
+                              __global const float *table, __global const int *noise, __global const PIXEL_T *mid,
+                              __global PIXEL_T *dst, const int w, const int h, const int tiles_x, const int tiles_y)
 {
     const int t0 = get_global_id(0) * (SEGMENT / FALLBACK_TILE), ty = get_global_id(1);
     if (t0 >= tiles_x || ty >= tiles_y) return;
-    const int t1 = min(t0 + SEGMENT / FALLBACK_TILE, tiles_x);
+    const int t1 = min(t0 + SEGMENT / FALLBACK_TILE, tiles_x), level = noise[0];
     for (int tx = t0; tx < t1; ++tx) {
 #if FALLBACK_MIN_CHANGED > 0
         if (!(RENDER_REGIONS && render[ty * tiles_x + tx])) continue;
@@ -883,7 +883,8 @@ __kernel void refine_fallback(__global const PIXEL_T *src, __global const float 
         for (int y = y0; y < y1; ++y) {
             take[y - y0] = 0;
             for (int x = x0; x < x1; ++x)
-                if (!(ON_LONG_RUN(edges, hdist, vdist, x, y, w) && px_differs(src, mid, IDX(x, y, w))))
+                if (!(ON_LONG_RUN(edges, hdist, vdist, x, y, w) && px_differs(src, mid, IDX(x, y, w))) &&
+                    !noise_quiet(src, x, y, w, h, level))
                     take[y - y0] |= 1u << (x - x0);
             any |= take[y - y0];
         }
@@ -895,12 +896,13 @@ __kernel void refine_fallback(__global const PIXEL_T *src, __global const float 
 // Tile (tx, ty): nothing to do unless the 3x3 tiles around it show 1-spp aliasing (busy, or evidence and the
 // pixel's own window busy) or it lies in a render region; then each eligible pixel that FXAA would change moves
 // towards its colour (towards_fxaa), and in a render region every pixel then takes the footprint table, but for
-// those the chain changed on a straight edge run.
+// those the chain changed on a straight edge run. A quiet pixel (noise.cl: its window spans no more than the frame's
+// grain) is no render-region pixel.
 inline void fallback_tile(__global const PIXEL_T *src, __global const float *luts, __global const float *lin,
                           __global const uchar *edges,
                           __global const ushort2 *hdist, __global const ushort2 *vdist, __global const uchar *counts,
                           __global const uchar *render, __global const float *table, __global PIXEL_T *dst, int w,
-                          int h, int tiles_x, int tiles_y, int tx, int ty)
+                          int h, int tiles_x, int tiles_y, int tx, int ty, int noise)
 {
 #if FALLBACK_MIN_CHANGED > 0
     const int rendered = RENDER_REGIONS && render[ty * tiles_x + tx];
@@ -912,10 +914,11 @@ inline void fallback_tile(__global const PIXEL_T *src, __global const float *lut
             bordering += c[1];
             busy_changed += c[2];
         }
-    const int busy = rendered || (busy_changed >= FALLBACK_RICH_MIN && busy_changed * FALLBACK_RICH_DIV >= bordering);
-    if (!busy && changed < FALLBACK_MIN_CHANGED) return;
+    const int rich = busy_changed >= FALLBACK_RICH_MIN && busy_changed * FALLBACK_RICH_DIV >= bordering;
+    const int evidence = changed >= FALLBACK_MIN_CHANGED;
+    if (!rendered && !rich && !evidence) return;
 #else
-    const int rendered = 1, busy = 1;
+    const int rendered = 1, rich = 0, evidence = 0;
 #endif
     const int x0 = tx * FALLBACK_TILE, y0 = ty * FALLBACK_TILE;
     const int x1 = min(x0 + FALLBACK_TILE, w), y1 = min(y0 + FALLBACK_TILE, h);
@@ -925,11 +928,12 @@ inline void fallback_tile(__global const PIXEL_T *src, __global const float *lut
         take[y - y0] = 0;
         if (quiet && !(rendered && FOOTPRINT_TABLE)) continue;
         for (int x = x0; x < x1; ++x) {
+            const int region = rendered && !noise_quiet(src, x, y, w, h, noise);
             if (!quiet) {
                 const int changed_px = px_differs(src, dst, IDX(x, y, w));
                 int eligible = borders_edge(edges, x, y, w);
                 // outside busy regions only pixels MLAA left, and only in busy windows (flat-colour art stops here)
-                eligible = eligible && (busy || (!changed_px && WINDOW_BUSY(src, x, y, w, h)));
+                eligible = eligible && (region || rich || (evidence && !changed_px && WINDOW_BUSY(src, x, y, w, h)));
                 eligible = eligible && !fxaa_keeps(src, x, y, w, h);
                 eligible = eligible && !ON_LONG_RUN(edges, hdist, vdist, x, y, w);
                 if (eligible)
@@ -938,7 +942,7 @@ inline void fallback_tile(__global const PIXEL_T *src, __global const float *lut
             }
 #if FOOTPRINT_TABLE
             // the table too leaves a colour the chain gave a pixel on a straight edge run (FALLBACK_KEEP_RUN)
-            if (rendered && !(ON_LONG_RUN(edges, hdist, vdist, x, y, w) && px_differs(src, dst, IDX(x, y, w))))
+            if (region && !(ON_LONG_RUN(edges, hdist, vdist, x, y, w) && px_differs(src, dst, IDX(x, y, w))))
                 take[y - y0] |= 1u << (x - x0);
 #endif
         }
@@ -954,13 +958,14 @@ inline void fallback_tile(__global const PIXEL_T *src, __global const float *lut
 __kernel void fxaa_fallback(__global const PIXEL_T *src, __global const float *luts, __global const float *lin,
                             __global const uchar *edges, __global const ushort2 *hdist,
                             __global const ushort2 *vdist, __global const uchar *counts,
-                            __global const uchar *render, __global const float *table, __global PIXEL_T *dst,
-                            const int w, const int h, const int tiles_x, const int tiles_y)
+                            __global const uchar *render, __global const float *table,
+                            __global const int *noise, __global PIXEL_T *dst, const int w, const int h,
+                            const int tiles_x, const int tiles_y)
 {
     const int t0 = get_global_id(0) * (SEGMENT / FALLBACK_TILE), ty = get_global_id(1);
     if (t0 >= tiles_x || ty >= tiles_y) return;
-    const int t1 = min(t0 + SEGMENT / FALLBACK_TILE, tiles_x);
+    const int t1 = min(t0 + SEGMENT / FALLBACK_TILE, tiles_x), level = noise[0];
     for (int tx = t0; tx < t1; ++tx)
         fallback_tile(src, luts, lin, edges, hdist, vdist, counts, render, table, dst, w, h, tiles_x, tiles_y,
-                      tx, ty);
+                      tx, ty, level);
 }

@@ -59,30 +59,6 @@
 #define OV_R 2                               // the tile's window: 2 pixels around it (F's neighbours)
 #define OV_N (FALLBACK_TILE + 2 * OV_R)
 
-// Pixel i's colour as 8-bit levels in R, G, B order (overlays.py levels8), into c[0 .. 2].
-inline void levels8(__global const PIXEL_T *src, int i, int *c)
-{
-#if CHANNELS == 1
-    const PIXEL_T r = src[i], g = r, b = r;
-#else
-    __global const PIXEL_T *p = src + (size_t)i * CHANNELS;
-#if ORDER_BGR
-    const PIXEL_T r = p[2], g = p[1], b = p[0];
-#else
-    const PIXEL_T r = p[0], g = p[1], b = p[2];
-#endif
-#endif
-    const PIXEL_T v[3] = {r, g, b};
-    for (int k = 0; k < 3; ++k) {
-#ifdef PIXEL_IS_FLOAT
-        const float f = fmin(fmax(v[k], 0.0f), 1.0f) * 255.0f;
-        c[k] = (int)(f + 0.5f);  // truncation of a non-negative value: floor
-#else
-        c[k] = PIXEL_MAX > 255.0f ? ((int)v[k] * 255 + 32767) / 65535 : (int)v[k];
-#endif
-    }
-}
-
 // (boundary pixels, mixes) of the tile whose top-left pixel is (x0, y0). The window's levels in plain int arrays, one
 // per channel (private arrays of 3-vectors and all() of their comparisons came out wrong on Mesa's llvmpipe); most
 // pairs fail the contrast test, tested for a row's 8 pixels at once, and only the pairs that pass take the luma

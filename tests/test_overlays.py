@@ -7,7 +7,7 @@ import pytest
 
 from mlaa_stream.spatial import overlays as O
 from mlaa_stream.spatial.fallback import FALLBACK_TILE, SEGMENT, fallback_defines
-from mlaa_stream.device.formats import frame_format
+from mlaa_stream.device.formats import frame_format, levels8
 from mlaa_stream.yardstick.scenes import coverage, text_polygons
 
 T = FALLBACK_TILE
@@ -92,7 +92,7 @@ def test_kernel_matches_the_reference(device, kind):
         elif kind == "noisy":
             frame = codec_noise(frame, seed)
         counts, flags = run_kernels(device, frame, bgr=bgr)
-        nb, nm = O.overlay_counts(O.levels8(frame, bgr))
+        nb, nm = O.overlay_counts(levels8(frame, bgr))
         np.testing.assert_array_equal(counts[..., 0], nb)
         np.testing.assert_array_equal(counts[..., 1], nm)
         np.testing.assert_array_equal(flags, ~O.overlay_tiles(frame, bgr))

@@ -226,7 +226,7 @@ def select_device(spec: str | int | None = None):
 # Programs built from more than one file, in this order (after common.cl): the long passes are split
 # into readable parts; the compiler sees the same text as one file would give it.
 PROGRAM_PARTS = {"bridge": ("bridge_links", "bridge"), "reconstruct": ("reconstruct_rules", "reconstruct"),
-                 "fallback": ("fxaa", "fallback")}
+                 "fallback": ("fxaa", "noise", "fallback")}
 
 
 def kernel_source(name: str) -> str:

@@ -69,3 +69,21 @@ def defines_for(fmt: FrameFormat, **options: object) -> dict[str, object]:
         d["PIXEL_IS_FLOAT"] = 1
     d.update(options)
     return d
+
+
+LUMA256 = np.array([54, 183, 19], np.int64)  # Rec. 709 luma in 256ths, on 8-bit levels (common.cl levels8)
+
+
+def levels8(frame: np.ndarray, bgr: bool = False) -> np.ndarray:
+    """(h, w, 3) int64 8-bit levels in R, G, B order of a uint8 / uint16 / float frame (floats clipped to [0, 1])."""
+    fmt = frame_format(frame, bgr)
+    a = np.asarray(frame).reshape(fmt.height, fmt.width, fmt.channels)
+    a = np.repeat(a[..., :1], 3, -1) if fmt.channels == 1 else a[..., :3]
+    if fmt.bgr and fmt.channels >= 3:
+        a = a[..., ::-1]
+    if a.dtype == np.uint8:
+        return a.astype(np.int64)
+    if a.dtype == np.uint16:
+        return (a.astype(np.int64) * 255 + 32767) // 65535
+    f = np.clip(a.astype(np.float32), np.float32(0), np.float32(1)) * np.float32(255)
+    return np.floor(f + np.float32(0.5)).astype(np.int64)

@@ -13,6 +13,7 @@ from mlaa_stream.device.context import Context
 from mlaa_stream.device.formats import LUT_SIZE, FrameFormat, frame_format
 from mlaa_stream.spatial.footprint import BUCKETS, WEIGHTS, footprint_reference, table_of
 from mlaa_stream.spatial.fxaa import _MAX, fxaa_defines, fxaa_mix_reference, luma_reference
+from mlaa_stream.spatial.noise import NOISE_BINS, noise_defines, quiet_pixels
 from mlaa_stream.spatial.overlays import overlay_defines, overlay_tiles
 from mlaa_stream.spatial.refine import REFINE_GATE, REFINE_WEIGHTS, gate, refine_reference, refine_table_of
 
@@ -90,7 +91,7 @@ def fallback_defines(fmt: FrameFormat, linear: bool, linear_input: bool, everywh
             "RENDER_RANGE": float(RENDER_RANGE), "RENDER_REGIONS": int(regions),
             "FOOTPRINT_TABLE": int(table), "FOOTPRINT_BUCKETS": BUCKETS, "FOOTPRINT_WEIGHTS": WEIGHTS,
             "REFINE_TABLE": int(refine), "REFINE_WEIGHTS": REFINE_WEIGHTS, "REFINE_GATE": float(REFINE_GATE),
-            "REFINE_GATE_LEVELS": int(np.ceil(REFINE_GATE * _MAX[np.dtype(fmt.dtype)]))}
+            "REFINE_GATE_LEVELS": int(np.ceil(REFINE_GATE * _MAX[np.dtype(fmt.dtype)])), **noise_defines()}
 
 
 class FallbackPass:
@@ -114,6 +115,13 @@ class FallbackPass:
         self._render_tiles = context.kernel("fallback", "render_tiles", defs)
         self._render_frame = context.kernel("fallback", "render_frame", defs)
         n = self.tiles[0] * self.tiles[1]
+        # grain over a render leaves the regions (kernels/noise.cl): the frame's level, 0 (none) without regions
+        self._noise = context.buffer(4)
+        cl.enqueue_copy(context.queue, self._noise, np.zeros(1, np.int32), is_blocking=True)
+        if self.regions or everywhere:
+            self._noise_census = context.kernel("fallback", "noise_census", defs)
+            self._noise_level = context.kernel("fallback", "noise_level", defs)
+            self._census = context.buffer(4 * NOISE_BINS * self.tiles[1])
         if self.regions:  # text over a render leaves the regions (kernels/overlays.cl): its own program and buffers
             overlay_defs = {**defs, **overlay_defines()}
             self._overlay_counts = context.kernel("overlays", "overlay_counts", overlay_defs)
@@ -140,7 +148,9 @@ class FallbackPass:
         """Bytes of the per-frame buffers (the tables' 15 and 20 KB do not grow with the frame)."""
         mid = self._mid.size if self._refine is not None else 0
         overlays = self._overlays.size + self._seeds.size if self.regions else 0
-        return self._counts.size + self._row_sums.size + self._render.size + self._shares.size + overlays + mid
+        census = self._census.size if self.regions or self.everywhere else 0
+        return (self._counts.size + self._row_sums.size + self._render.size + self._shares.size + overlays + mid
+                + census)
 
     def read_regions(self, queue, wait_for: list) -> tuple[np.ndarray, cl.Event | None]:
         """The last frame's render-region flag per tile, (tiles_y, tiles_x) uint8, and the event of its copy to
@@ -157,6 +167,13 @@ class FallbackPass:
         result."""
         W, H = np.int32(self.fmt.width), np.int32(self.fmt.height)
         tx, ty = np.int32(self.tiles[0]), np.int32(self.tiles[1])
+        noise = []
+        if self.regions or self.everywhere:  # the frame's noise level (kernels/noise.cl), from the input alone
+            events["noise_census"] = self._noise_census(queue, (self.tiles[1],), None, src, self._census, W, H,
+                                                        wait_for=wait_for)
+            events["noise_level"] = self._noise_level(queue, (1,), None, self._census, self._noise, ty,
+                                                      wait_for=[events["noise_census"]])
+            noise = [events["noise_level"]]
         if not self.everywhere:  # "everywhere" reads no counts: every tile is a render region
             events["fallback_count"] = self._count(queue, (-(-self.fmt.width // SEGMENT), self.tiles[1]), None,
                                                    src, dst, edges, self._counts, W, H, tx, wait_for=wait_for)
@@ -181,13 +198,13 @@ class FallbackPass:
                 wait_for = [events["overlay_tiles"]]
         events["fallback"] = self._fxaa(queue, (-(-self.fmt.width // SEGMENT), self.tiles[1]), None,
                                         src, luts, lin, edges, hdist, vdist, self._counts, self._render,
-                                        self._table, dst, W, H, tx, ty, wait_for=wait_for)
+                                        self._table, self._noise, dst, W, H, tx, ty, wait_for=[*wait_for, *noise])
         if self._refine is None:
             return events["fallback"]
         events["refine_copy"] = cl.enqueue_copy(queue, self._mid, dst, wait_for=[events["fallback"]])
         events["refine"] = self._refine(queue, (-(-self.fmt.width // SEGMENT), self.tiles[1]), None,
                                         src, luts, lin, edges, hdist, vdist, self._render, self._refine_table,
-                                        self._mid, dst, W, H, tx, ty, wait_for=[events["refine_copy"]])
+                                        self._noise, self._mid, dst, W, H, tx, ty, wait_for=[events["refine_copy"]])
         return events["refine"]
 
 
@@ -327,9 +344,11 @@ def fallback_reference(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray,
     h, w = fmt.height, fmt.width
     out = mlaa.copy()
     e = np.asarray(edges)
+    # quiet pixels (grain over a render, spatial/noise.py) are no region pixels; the level is 0 without regions
+    quiet = quiet_pixels(src, bgr) if regions or everywhere else np.zeros((h, w), bool)
     if everywhere:
-        eligible = borders
-        rendered = np.ones((h, w), bool)
+        rendered = ~quiet
+        eligible = borders & rendered
         runs = np.zeros((h, w), bool)
     else:
         t = FALLBACK_TILE
@@ -345,7 +364,7 @@ def fallback_reference(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray,
         busy_px = _busy_pixels(changed, borders, rgb)
         busy_changed = region_sums(busy_px)
         frame_supersampled = regions and supersampled(borders, luma)  # render_frame then clears every tile's counts
-        rendered = (render_regions(busy_px, borders, luma, overlay_tiles(src, bgr)) if regions
+        rendered = (render_regions(busy_px, borders, luma, overlay_tiles(src, bgr)) & ~quiet if regions
                     else np.zeros((h, w), bool))
         busy = rendered | ((busy_changed >= FALLBACK_RICH_MIN)
                            & (busy_changed * FALLBACK_RICH_DIV >= region_sums(borders)))

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mlaa_stream.device.formats import frame_format
+from mlaa_stream.device.formats import LUMA256, levels8
 
 # (tuning: docs/spatial_tuning.md, "Text over a render")
 OVERLAY_CONTRAST = 64   # levels (8-bit, RGB distance) between a boundary pixel and the flat colour beside it
@@ -23,7 +23,6 @@ OVERLAY_GROW_STEPS = 2  # kernels/overlays.cl overlay_tiles: two steps (its coun
 # a video codec's test: white or black ink (luma within OVERLAY_INK levels), flat within OVERLAY_NOISY_FLAT levels per
 # channel, extreme within OVERLAY_NOISY_EXTREME, and the ramp ends at Q (the next step along <= 1/OVERLAY_RAMP_END)
 OVERLAY_INK, OVERLAY_NOISY_FLAT, OVERLAY_NOISY_EXTREME, OVERLAY_RAMP_END = 20, 4, 8, 10
-LUMA_WEIGHTS = np.array([54, 183, 19], np.int64)  # Rec. 709 luma in 256ths, on 8-bit levels
 TILE, RADIUS = 8, 2     # fallback.py FALLBACK_TILE; the tile's window reaches RADIUS pixels around it
 
 
@@ -35,26 +34,11 @@ def overlay_defines() -> dict:
             "OVERLAY_NOISY_EXTREME": OVERLAY_NOISY_EXTREME, "OVERLAY_RAMP_END": OVERLAY_RAMP_END}
 
 
-def levels8(frame: np.ndarray, bgr: bool = False) -> np.ndarray:
-    """(h, w, 3) int64 8-bit levels in R, G, B order of a uint8 / uint16 / float frame (floats clipped to [0, 1])."""
-    fmt = frame_format(frame, bgr)
-    a = np.asarray(frame).reshape(fmt.height, fmt.width, fmt.channels)
-    a = np.repeat(a[..., :1], 3, -1) if fmt.channels == 1 else a[..., :3]
-    if fmt.bgr and fmt.channels >= 3:
-        a = a[..., ::-1]
-    if a.dtype == np.uint8:
-        return a.astype(np.int64)
-    if a.dtype == np.uint16:
-        return (a.astype(np.int64) * 255 + 32767) // 65535
-    f = np.clip(a.astype(np.float32), np.float32(0), np.float32(1)) * np.float32(255)
-    return np.floor(f + np.float32(0.5)).astype(np.int64)
-
-
 def overlay_counts(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per tile (tiles_y, tiles_x): boundary pixels and mixes of the 8-bit levels `q` (h, w, 3)."""
     h, w = q.shape[:2]
     th, tw = -(-h // TILE), -(-w // TILE)
-    lum = q @ LUMA_WEIGHTS
+    lum = q @ LUMA256
     padded = np.pad(lum.astype(np.float64), ((RADIUS, th * TILE - h + RADIUS), (RADIUS, tw * TILE - w + RADIUS)),
                     constant_values=np.nan)
     win = np.lib.stride_tricks.sliding_window_view(padded, (TILE + 2 * RADIUS,) * 2)[::TILE, ::TILE]

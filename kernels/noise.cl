@@ -1,0 +1,93 @@
+// noise.cl -- grain over a render (film grain, sensor or path-tracing noise added after the point samples) is no
+// aliasing: the render regions' FXAA and footprint / refine tables (fallback.cl) would smooth it as if each grain
+// were a sub-pixel feature, which the truth keeps (spatial/noise.py is the reference; docs/spatial_tuning.md,
+// "Grain over a render").
+//
+// The frame's noise level is the median |Laplacian| of its luma (Immerkaer's 3x3 operator [1 -2 1; -2 4 -2;
+// 1 -2 1], whose response to white noise of deviation s has deviation 6 s; edges are a minority of the pixels, so
+// the median follows the grain, and a clean render's is 0). A render-region pixel whose 3x3 window of luma spans
+// under NOISE_SPAN_NUM / NOISE_SPAN_DEN times that level is quiet: the regions' passes leave it as the MLAA passes
+// left it. Luma is Rec. 709 in 256ths of 8-bit levels (common.cl levels8): exact on every sample type.
+#pragma OPENCL FP_CONTRACT OFF
+
+#ifndef NOISE_SPAN_NUM
+#define NOISE_SPAN_NUM 3
+#endif
+#ifndef NOISE_SPAN_DEN
+#define NOISE_SPAN_DEN 2
+#endif
+#define NOISE_BINS 64      // spatial/noise.py NOISE_BINS: |Laplacian| in whole levels, the last bin for 63 and more
+#define NOISE_ROW_STEP 4   // two sampled rows per band of FALLBACK_TILE rows, every other column: ~1/8 of the pixels
+
+inline int luma256(__global const PIXEL_T *src, int i)
+{
+    int c[3];
+    levels8(src, i, c);
+    return 54 * c[0] + 183 * c[1] + 19 * c[2];
+}
+
+// Column x's second difference down rows y - 1, y, y + 1 (the operator's separable half).
+inline int column_d2(__global const PIXEL_T *src, int x, int y, int w)
+{
+    return luma256(src, IDX(x, y - 1, w)) - 2 * luma256(src, IDX(x, y, w)) + luma256(src, IDX(x, y + 1, w));
+}
+
+// hist[band * NOISE_BINS + b] = the band's sampled pixels whose |Laplacian| of luma is b whole levels (the last bin:
+// NOISE_BINS - 1 or more): rows 1 and 1 + NOISE_ROW_STEP of the band of FALLBACK_TILE rows, odd columns, none on the
+// frame's border. One work item per band.
+__kernel void noise_census(__global const PIXEL_T *src, __global int *hist, const int w, const int h)
+{
+    const int band = get_global_id(0);
+    if (band * FALLBACK_TILE >= h) return;
+    int bins[NOISE_BINS];
+    for (int b = 0; b < NOISE_BINS; ++b) bins[b] = 0;
+    for (int r = 1; r < FALLBACK_TILE; r += NOISE_ROW_STEP) {
+        const int y = band * FALLBACK_TILE + r;
+        if (y >= h - 1) break;
+        int left = column_d2(src, 0, y, w);  // columns x - 1, x, x + 1; x steps by two
+        for (int x = 1; x < w - 1; x += 2) {
+            const int mid = column_d2(src, x, y, w), right = column_d2(src, x + 1, y, w);
+            const int lap = abs(left - 2 * mid + right) >> 8;  // whole levels: luma is in 256ths
+            ++bins[min(lap, NOISE_BINS - 1)];
+            left = right;
+        }
+    }
+    for (int b = 0; b < NOISE_BINS; ++b) hist[band * NOISE_BINS + b] = bins[b];
+}
+
+// level[0] = the lower median bin of the bands' histograms summed (0 where nothing was sampled). One work item.
+__kernel void noise_level(__global const int *hist, __global int *level, const int bands)
+{
+    if (get_global_id(0) != 0) return;
+    int total[NOISE_BINS], n = 0;
+    for (int b = 0; b < NOISE_BINS; ++b) total[b] = 0;
+    for (int band = 0; band < bands; ++band)
+        for (int b = 0; b < NOISE_BINS; ++b) total[b] += hist[band * NOISE_BINS + b];
+    for (int b = 0; b < NOISE_BINS; ++b) n += total[b];
+    int cum = 0, m = 0;
+    for (int b = 0; b < NOISE_BINS; ++b) {
+        cum += total[b];
+        if (2 * cum >= n) {
+            m = b;
+            break;
+        }
+    }
+    level[0] = n ? m : 0;
+}
+
+// Whether pixel (x, y) is quiet: its 3x3 window's luma (clamped to the frame) spans under NOISE_SPAN_NUM /
+// NOISE_SPAN_DEN times `level`, the frame's noise level in whole levels (0: no pixel is).
+inline int noise_quiet(__global const PIXEL_T *src, int x, int y, int w, int h, int level)
+{
+    if (level <= 0) return 0;
+    int lo = 1 << 30, hi = -1;
+    for (int j = -1; j <= 1; ++j) {
+        const int row = clamp_to(y + j, h - 1) * w;
+        for (int k = -1; k <= 1; ++k) {
+            const int l = luma256(src, row + clamp_to(x + k, w - 1));
+            lo = min(lo, l);
+            hi = max(hi, l);
+        }
+    }
+    return (hi - lo) * NOISE_SPAN_DEN < NOISE_SPAN_NUM * 256 * level;
+}
