@@ -77,6 +77,13 @@ VIEW_PAN_PX = 0.45     # the held-out pans' image motion per frame at the centre
 VIEW_DOLLY_M = 0.04    # the held-out dollies' step along the view direction per frame, metres (the bench's: 0.05)
 
 
+def with_grain(inp: np.ndarray, truth: np.ndarray, sigma: float, seed: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """(input, truth) with the same seeded Gaussian grain of `sigma` levels (one value for R, G and B) added to both,
+    as grain added after rendering (both 8-bit frames, rounded)."""
+    n = np.random.default_rng(seed).normal(0.0, sigma, inp.shape[:2] + (1,))
+    return tuple(np.clip(np.round(a + n), 0, 255).astype(np.uint8) for a in (inp, truth))
+
+
 def view_cameras(width: int, height: int, frames: int = 8, world: str = "plaza") -> dict[str, list[Camera]]:
     """The held-out shots' cameras, one per frame: from every view of `world` a yaw pan of VIEW_PAN_PX px per frame
     ("<view>_pan") and a dolly of VIEW_DOLLY_M per frame ("<view>_dolly")."""
@@ -159,6 +166,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--crf", default="",
                     help="also every 1-spp view through H.264 at these CRFs (comma-separated; libx264 through PyAV, "
                          "as mlaa_stream.bench.codec_check; view_WIDTH_crfN), scored against the clean truth")
+    ap.add_argument("--grain", default="",
+                    help="also every 1-spp view with film grain of these deviations in 8-bit levels (comma-separated;"
+                         " seeded Gaussian, one value for R, G and B, added to input and truth alike, as grain added "
+                         "after rendering; view_WIDTH_grainN)")
     ap.add_argument("--verdicts", action="store_true",
                     help="also print each view's frame evidence: ramps and hard stair ends among its steps, and "
                          "whether it is judged supersampled or 1-spp geometry (docs/spatial_tuning.md)")
@@ -176,6 +187,7 @@ def main(argv: list[str] | None = None) -> int:
     if not samples:
         raise SystemExit("--samples: expected positive integers, comma-separated, got ''")
     msaa, crfs = _int_list("--msaa", args.msaa, 2), _int_list("--crf", args.crf, 0)
+    grains = _int_list("--grain", args.grain, 1)
     try:
         frames = render_views(sizes, samples, args.world, args.textures, args.texture_repeat, msaa)
     except ValueError as e:
@@ -186,11 +198,15 @@ def main(argv: list[str] | None = None) -> int:
             if view.rsplit("_", 1)[-1].isdigit():  # a 1-spp view
                 for crf in crfs:
                     frames[f"{view}_crf{crf}"] = (through_h264(np.stack([inp, inp]), crf)[0], truth)
+    for view, (inp, truth) in list(frames.items()):
+        if view.rsplit("_", 1)[-1].isdigit():
+            for sigma in grains:
+                frames[f"{view}_grain{sigma}"] = with_grain(inp, truth, sigma)
     with_flip = M.flip_available()  # an optional part ([bench])
 
     def group(view: str) -> str:  # the mean's row: "mean" for 1-spp views, "mean NxN" / "mean msaaN" / "mean crfN"
         last = view.rsplit("_", 1)[-1]
-        return f"mean {last}" if "x" in last or last.startswith(("msaa", "crf")) else "mean"
+        return f"mean {last}" if "x" in last or last.startswith(("msaa", "crf", "grain")) else "mean"
 
     print("view".ljust(20) + "".join(m.rjust(24) for m in methods))
     removed = {(m, group(v)): [] for m in methods for v in frames}
