@@ -325,8 +325,9 @@ def test_buffers_allocated_once_per_frame_size(filt):
     # their shares (16, float4), bridging (17: found bits 1, links 8, their claims 4, the claim pass's
     # verdicts 4), the fallback's per-tile counts, region sums and flags (41/64), the refine table's copy of the
     # frame (3)
-    # (+ per-row-segment and per-tile-column buffers: a little more on small frames; this 30 x 20 one: 67.07)
-    assert filt.device_bytes_per_pixel() <= 67.5
+    # (+ per-row-segment and per-tile-column buffers and the noise census' 256 bytes per band of 8 rows: a little more on
+    # small frames; this 30 x 20 one: 68.41)
+    assert filt.device_bytes_per_pixel() <= 68.5
 
 
 def test_submit_overlaps_and_keeps_order(filt):
