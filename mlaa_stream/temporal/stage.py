@@ -28,6 +28,7 @@ from mlaa_stream.device.colour import device_luts, lut_read
 from mlaa_stream.device.context import Context, default_context
 from mlaa_stream.device.formats import LUT_SIZE, FrameFormat, defines_for, frame_format
 from mlaa_stream.spatial.fallback import FALLBACK_TILE
+from mlaa_stream.spatial.nonfinite import restore_out_of_range
 
 MODES = ("adaptive", "dense", "global", "static", "off")
 SHOWS = (None, "history")
@@ -432,7 +433,9 @@ class TemporalStage:
         if regions is None and self.regions_from is not None:
             regions = self.regions_from.last_regions
         with self._lock:
-            return self._step(frame_in, frame_filtered, int(index), fmt, regions, measured)
+            out = self._step(frame_in, frame_filtered, int(index), fmt, regions, measured)
+        # NaN, inf and samples beyond ±1e15 pass through as the spatial filter passes them (spatial/nonfinite.py)
+        return out if self.show is not None else restore_out_of_range(frame_in, out)
 
     def _step(self, frame_in, frame_filtered, index: int, fmt: FrameFormat, regions, measured) -> np.ndarray:
         t0 = time.perf_counter()

@@ -72,6 +72,7 @@ import numpy as np
 
 from mlaa_stream.device.colour import device_luts, lut_read
 from mlaa_stream.device.formats import LUT_SIZE, frame_format
+from mlaa_stream.spatial.nonfinite import restore_out_of_range
 from mlaa_stream.temporal.layers import (STILL_AGE, STILL_SHIFT, CompositionalPoints, ahead_fields, background_of,
                                          find_layers, inverse_compositional, layer_fields, layers_decision,
                                          sample_bilinear, still_background, translation_map)
@@ -1273,7 +1274,10 @@ class TSSStage:
             ahead = [f.astype(np.float32) for f in ahead]
         with self._lock:
             out = self._step(fin, fout, int(index), ahead)
-        return out.astype(frame_filtered.dtype) if wide and self.show is None else out
+        if self.show is not None:
+            return out
+        # NaN, inf and samples beyond ±1e15 pass through as the spatial filter passes them (spatial/nonfinite.py)
+        return restore_out_of_range(frame_in, out.astype(frame_filtered.dtype) if wide else out)
 
     def _look_ahead(self, pyr: Pyramid, index: int, future: list[np.ndarray]) -> list[Ahead]:
         """The look-ahead frames' pyramids and frame-to-frame decisions, each measured once (kept by index
