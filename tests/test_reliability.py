@@ -257,6 +257,25 @@ def test_an_animated_gif_is_refused_clearly(tmp_path):
     assert not (tmp_path / "out.gif").exists()
 
 
+def test_a_multi_part_exr_is_refused_naming_its_parts(tmp_path):
+    """A multi-part EXR (beauty + depth) was refused as 'an animated or multi-page file' with FFmpeg's advice,
+    which cannot split it: the message names the parts and how to take one out."""
+    import OpenImageIO as oiio
+    path = str(tmp_path / "multi.exr")
+    beauty, depth = oiio.ImageSpec(8, 6, 3, "half"), oiio.ImageSpec(8, 6, 1, "float")
+    beauty.attribute("name", "beauty")
+    depth.attribute("name", "depth")
+    depth.channelnames = ("Z",)
+    out = oiio.ImageOutput.create(path)
+    assert out.open(path, (beauty, depth)) and out.write_image(noise(6, 8, 3, dtype=np.float32)), oiio.geterror()
+    assert out.open(path, depth, "AppendSubimage") and out.write_image(noise(6, 8, 1, dtype=np.float32))
+    out.close()
+    r = run(path, "-o", tmp_path / "out.exr")
+    assert r.exit_code == 1
+    assert "multi.exr: expected a single-part EXR, got a multi-part file with 2 parts (beauty, depth)" in r.output
+    assert "ffmpeg" not in r.output and not (tmp_path / "out.exr").exists()
+
+
 def test_cmyk_and_palette_conversions_are_reported_with_v(tmp_path):
     from PIL import Image as PILImage
 

@@ -98,6 +98,16 @@ def read_image(path: str) -> Image:
             count = 2
             while count < 10_000 and inp.seek_subimage(count, 0):
                 count += 1
+            if inp.format_name() == "openexr":
+                # the parts of one frame (beauty, depth, AOVs), not frames: FFmpeg's advice does not apply
+                parts = []
+                for k in range(min(count, 8)):
+                    inp.seek_subimage(k, 0)
+                    parts.append(inp.spec().get_string_attribute("name", "") or f"part {k}")
+                more = ", ..." if count > len(parts) else ""
+                raise ImageReadError(f"{path}: expected a single-part EXR, got a multi-part file with {count} parts "
+                                     f"({', '.join(parts)}{more}); write the part to filter as its own file first "
+                                     f"(e.g. oiiotool {os.path.basename(path)} --subimage {parts[0]!r} -o part.exr)")
             raise ImageReadError(f"{path}: expected a single image, got {count} (an animated or multi-page "
                                  f"file); filter it as a video or split it into frames first "
                                  f"(e.g. ffmpeg -i {os.path.basename(path)} frames/%04d.png)")
