@@ -175,6 +175,22 @@ def test_bad_files_in_a_folder_are_named_and_the_others_processed(tmp_path):
     assert temp_files(tmp_path) == []
 
 
+def test_a_broken_link_in_a_folder_is_named_not_dropped(tmp_path):
+    """A folder of frames linked from a cache with one link gone lost that frame without a word (exit 0)."""
+    src = tmp_path / "in 1"
+    src.mkdir()
+    write_png(tmp_path / "cached.png", staircase())
+    os.symlink(tmp_path / "cached.png", src / "a_linked.png")
+    os.symlink(tmp_path / "gone.png", src / "b_broken.png")
+    out = tmp_path / "out"
+    r = run(src, "-o", out)
+    err = stderr(r)
+    assert r.exit_code == 1
+    assert f"{src / 'b_broken.png'}: cannot read: a link to {tmp_path / 'gone.png'}, which does not exist" in err
+    assert "1 failed, 1 written" in err
+    assert sorted(os.listdir(out)) == ["a_linked.png"]
+
+
 def test_a_non_image_file_given_directly_is_refused(tmp_path):
     bad = tmp_path / "photo.png"
     bad.write_text("hello")

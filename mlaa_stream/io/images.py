@@ -80,6 +80,8 @@ def read_image(path: str) -> Image:
     try:
         size = os.path.getsize(path)
     except OSError as exc:
+        if os.path.islink(path):  # a frame linked from a cache or another shot that is gone
+            raise ImageReadError(f"{path}: cannot read: a link to {os.readlink(path)}, which does not exist") from exc
         raise ImageReadError(f"{path}: cannot read ({exc.strerror})") from exc
     if size == 0:
         raise ImageReadError(f"{path}: expected an image, got an empty file")

@@ -189,12 +189,14 @@ def expand_pattern(pattern: str, frames: tuple[int, int] | None = None) -> tuple
 def list_folder(folder: str) -> tuple[list[str], list[str]]:
     """Image files of `folder` in name order, and the other files (not images by extension).
 
-    Hidden files, our own temporary files and sub-folders are left out.
+    Hidden files, our own temporary files and sub-folders are left out; a link to a file that is gone is listed
+    (its read fails naming it) rather than dropped without a word.
     """
     images, others = [], []
     for name in sorted(os.listdir(folder)):
         path = os.path.join(folder, name)
-        if name.startswith(".") or is_temp_path(name) or not os.path.isfile(path):
+        broken_link = os.path.islink(path) and not os.path.exists(path)
+        if name.startswith(".") or is_temp_path(name) or not (os.path.isfile(path) or broken_link):
             continue
         (images if is_image_path(name) else others).append(path)
     return images, others
