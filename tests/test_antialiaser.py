@@ -117,6 +117,15 @@ def test_a_bad_frame_names_its_index():
     assert pipeline_threads() == []
 
 
+@pytest.mark.parametrize("dtype", [np.int64, np.bool_])
+def test_a_frame_of_another_sample_type_is_refused_naming_every_type_taken(dtype):
+    """numpy arithmetic on uint8 frames makes int64: the message listed float16 and float32 but not float64,
+    which is taken too, and said nothing of how to convert."""
+    with Antialiaser() as aa:
+        with pytest.raises(ValueError, match=r"expected uint8, uint16, float16, float32 or float64 samples, got "
+                                             rf"{np.dtype(dtype).name} \(e\.g\. frame\.clip\(0, 255\)"):
+            aa(np.zeros((6, 8, 3), dtype))
+
 
 def test_a_failing_post_hook_is_named_by_the_index_it_was_given():
     # after two calls the stream's frames are 2, 3, ...: the error names the number the hook got, as index does
