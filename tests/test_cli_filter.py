@@ -129,6 +129,23 @@ def test_output_that_is_the_input_is_refused(tmp_path, how):
     assert src.read_bytes() == before
 
 
+def test_a_folder_numbered_into_a_pattern_in_itself_never_replaces_an_input(tmp_path):
+    """in/ with 0002.png, 0003.png, a.png -o 'in/%04d.png' -y: 0003.png's output is 0002.png, 0002.png's is
+    0001.png -- --overwrite replaced two inputs ('never an input'). Refused before anything is written, by the
+    command line and by the cluster's Python API."""
+    from mlaa_stream.cluster.frames import filter_on_cluster
+    for name in ("0002.png", "0003.png", "a.png"):
+        write_png(tmp_path / name, staircase())
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    r = run(tmp_path, "-o", tmp_path / "%04d.png", "--overwrite")
+    two, three = tmp_path / "0002.png", tmp_path / "0003.png"
+    msg = f"{two}: the output of {three} would replace the input {two}"
+    assert r.exit_code == 2 and msg in stderr(r)
+    with pytest.raises(ValueError, match="would replace the input"):
+        filter_on_cluster(None, str(tmp_path), str(tmp_path / "%04d.png"), overwrite=True)  # before any client use
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+
+
 def test_a_folder_into_itself_is_refused(tmp_path):
     write_png(tmp_path / "a.png", staircase())
     r = run(tmp_path, "-o", tmp_path, "--overwrite")

@@ -221,6 +221,28 @@ def same_file(a: str, b: str) -> bool:
         return False
 
 
+def output_over_input(plan: list[FrameFile]) -> str | None:
+    """A message naming the first output that is an input of the plan -- its own, or another frame's (a folder
+    numbered into a pattern in its own folder: 0003.png's output is 0002.png) -- else None. Checked before
+    anything is written: --overwrite replaces outputs, never an input."""
+    def key(path: str) -> tuple:
+        try:
+            st = os.stat(path)
+            return st.st_dev, st.st_ino   # hard links and links to links name the same file
+        except OSError:
+            return (os.path.realpath(path),)
+    inputs = {key(ff.src): ff for ff in plan}
+    for ff in plan:
+        other = inputs.get(key(ff.dst))
+        if other is None:
+            other = inputs.get((os.path.realpath(ff.dst),))   # an input that is gone (a broken link) by its name
+        if other is ff or (other is None and same_file(ff.src, ff.dst)):
+            return f"{ff.dst}: output is the input {ff.src}; choose another output"
+        if other is not None:
+            return f"{ff.dst}: the output of {ff.src} would replace the input {other.src}; choose another output"
+    return None
+
+
 def image_source(files: list[FrameFile], report: Report, *, strict: bool,
                  like: tuple | None = None) -> Iterator[Item]:
     """Read each file; Item.meta = (FrameFile, Image, merge). Folder mode (not strict) reports a bad
