@@ -412,6 +412,24 @@ def test_a_sequence_whose_frames_change_stops_naming_the_frame(tmp_path, change)
     assert sorted(os.listdir(tmp_path / "o")) == ["shot.0001.png", "shot.0002.png", "shot.0003.png"]
 
 
+def test_an_exr_sequence_whose_data_window_changes_says_so(tmp_path):
+    """Renders cropped to their bounding box change data window frame by frame while a viewer shows one display
+    size: 'expected 16x12, got 10x8' named no data window."""
+    import OpenImageIO as oiio
+    (tmp_path / "seq").mkdir()
+    for n, (x, y, w, h) in enumerate([(0, 0, 16, 12), (3, 2, 10, 8)], start=1):
+        spec = oiio.ImageSpec(w, h, 3, "half")
+        spec.x, spec.y, spec.full_width, spec.full_height = x, y, 16, 12
+        path = str(tmp_path / "seq" / f"r.{n:04d}.exr")
+        out = oiio.ImageOutput.create(path)
+        assert out.open(path, spec) and out.write_image(np.full((h, w, 3), 0.5, np.float32)), oiio.geterror()
+        out.close()
+    r = run(tmp_path / "seq" / "r.%04d.exr", "-o", tmp_path / "o" / "r.%04d.exr")
+    assert r.exit_code == 1
+    assert ("expected 16x12 with 3 channels of float16 like" in stderr(r) and "got 10x8 with 3 channels of float16 "
+            "(its data window, 10x8 at 3,2 of a 16x12 display window" in stderr(r)), stderr(r)
+
+
 def test_frames_option_needs_a_pattern_and_a_range(tmp_path):
     write_png(tmp_path / "a.png", staircase())
     r = run(tmp_path / "a.png", "--frames", "1-3", "-o", tmp_path / "o.png")

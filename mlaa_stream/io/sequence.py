@@ -268,8 +268,18 @@ def image_source(files: list[FrameFile], report: Report, *, strict: bool,
                 (s0, d0), (s1, d1) = first[0], shape
                 raise SequenceError(
                     f"{ff.label}: expected {s0[1]}x{s0[0]} with {s0[2]} channels of {d0} like "
-                    f"{first[1].src}, got {s1[1]}x{s1[0]} with {s1[2]} channels of {d1}")
+                    f"{first[1].src}, got {s1[1]}x{s1[0]} with {s1[2]} channels of {d1}{_data_window(image)}")
         yield Item(frame, (ff, image, merge))
+
+
+def _data_window(image: Image) -> str:
+    """Where an EXR's pixels (its data window, what is filtered) are not its whole display window: said, since a
+    viewer shows the display window's size (renders cropped to their bounding box change size frame by frame)."""
+    spec = image.spec
+    if (spec.x, spec.y, spec.width, spec.height) == (spec.full_x, spec.full_y, spec.full_width, spec.full_height):
+        return ""
+    return (f" (its data window, {spec.width}x{spec.height} at {spec.x},{spec.y} of a {spec.full_width}x"
+            f"{spec.full_height} display window; a sequence keeps one data window size)")
 
 
 def image_sink(report: Report, *, overwrite: bool, strict: bool) -> Callable[[Item], None]:
