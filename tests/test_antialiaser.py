@@ -264,3 +264,18 @@ def test_linear_input_frames_match_the_filter_and_stage_made_for_linear_light():
     assert all(np.array_equal(a, b) for a, b in zip(outs, want))
     assert max(float(o.max()) for o in outs) > 2.0 and all(np.isfinite(o).all() for o in outs)
     assert any(not np.array_equal(o, f) for o, f in zip(outs[2:], frames[2:]))
+
+
+@pytest.mark.parametrize("kwargs", [dict(temporal=True), dict(temporal="tss+blend"), dict(temporal="blend"),
+                                    dict(temporal="tss", dense_motion=True)])
+def test_temporal_methods_take_thin_and_tiny_frames(kwargs):
+    """OpenCV's DIS flow raises under 8 px across (or 12 both ways) and the dense tiles indexed a centre past a
+    frame under half a tile: a 3x4097 EXR strip or a 10x10 thumbnail stopped the run with cv2.error or
+    IndexError. They take the global translation (and one tile) instead."""
+    for h, w in [(3, 64), (10, 10), (16, 5)]:
+        y, x = np.mgrid[0:h, 0:w]
+        with Antialiaser(**kwargs) as aa:
+            for k in range(5):  # a pan, so the flow and the tiles run
+                frame = np.repeat(((x + k + 2 * y) % 9 < 4)[..., None], 3, 2).astype(np.uint8) * 255
+                out = aa(frame)
+                assert out.shape == frame.shape and out.dtype == np.uint8

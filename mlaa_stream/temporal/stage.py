@@ -122,6 +122,16 @@ def scale_for(width: int, target: int) -> int:
     return max(1, -(-int(width) // int(target)))
 
 
+# OpenCV's DIS flow (patches of 8 px) raises on images under 8 px in height or width, or under 12 in both: a thin
+# or tiny frame (3x4097, 5x7, 10x10) takes the global translation as its flow instead (_flow)
+DIS_MIN_SIDE, DIS_MIN_LONG_SIDE = 8, 12
+
+
+def dis_refuses(shape: tuple[int, ...]) -> bool:
+    """True where OpenCV's DIS flow raises on an image of this (height, width)."""
+    return min(shape[:2]) < DIS_MIN_SIDE or max(shape[:2]) < DIS_MIN_LONG_SIDE
+
+
 @dataclass
 class Pyramid:
     """One input frame's grey levels at the two resolutions the stage measures on."""
@@ -406,10 +416,12 @@ class TemporalStage:
         """DIS optical flow: flow[y, x] such that a(x) ~ b(x + flow), in a's pixels, started from the
         global translation `start` (a flow of a's size passed in is DIS's initial flow): without it
         DIS's coarse levels lock periodic textures onto the wrong period."""
-        if self._dis is None:
-            self._dis = cv2.DISOpticalFlow_create(self._dis_preset)
         init = np.empty(a.shape[:2] + (2,), np.float32)
         init[...] = start
+        if dis_refuses(a.shape):   # the global translation is all there is to go on
+            return init
+        if self._dis is None:
+            self._dis = cv2.DISOpticalFlow_create(self._dis_preset)
         return self._dis.calc(a, b, init)
 
     # -- per frame -------------------------------------------------------------------------------------
