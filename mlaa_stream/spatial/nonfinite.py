@@ -69,7 +69,7 @@ def restore_out_of_range(frame_in: np.ndarray, out: np.ndarray) -> np.ndarray:
     if fin.dtype.kind != "f" or out.dtype.kind != "f" or out.shape != fin.shape:
         return out
     with np.errstate(invalid="ignore"):
-        bad = ~(np.abs(fin) <= SAMPLE_LIMIT)
+        bad = ~(np.abs(fin) <= np.float64(SAMPLE_LIMIT))   # float64: 1e15 overflows a half frame's type
     if not bad.any():
         return out
     out = out if out.flags.writeable else out.copy()
