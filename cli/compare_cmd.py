@@ -22,6 +22,8 @@ def read_image_encoding(path: str) -> tuple[np.ndarray, bool]:
     space tagged linear/ACES, or untagged float such as EXR)."""
     import OpenImageIO as oiio
 
+    from mlaa_stream.io.images import filter_channel_indices
+
     inp = oiio.ImageInput.open(path)
     if inp is None:
         raise CommandError(f"{path}: cannot open ({oiio.geterror()})")
@@ -38,9 +40,11 @@ def read_image_encoding(path: str) -> tuple[np.ndarray, bool]:
     arr = np.asarray(arr, np.float32)
     if arr.ndim == 2:
         arr = arr[..., None]
-    if arr.shape[2] < 3:
-        arr = np.repeat(arr[..., :1], 3, axis=2)
-    return np.ascontiguousarray(arr[..., :3]), linear
+    # the colour channels the filter takes, by name: a multi-layer EXR's beauty, not a pass that sorts first
+    names = tuple(spec.channelnames) if len(spec.channelnames) == arr.shape[2] else ("",) * arr.shape[2]
+    colour = list(filter_channel_indices(names, spec.alpha_channel))
+    arr = arr[..., colour[:3]] if len(colour) >= 3 else np.repeat(arr[..., colour[:1]], 3, axis=2)
+    return np.ascontiguousarray(arr), linear
 
 
 def compare_numbers(out: np.ndarray, truth: np.ndarray, inp: np.ndarray | None,

@@ -708,7 +708,7 @@ class _ImageJob(_Job):
     def prepare(self) -> None:
         from mlaa_stream.io.images import is_image_path, remove_quietly, stale_temp_files
         from mlaa_stream.io.sequence import (Report, expand_pattern, format_ranges, is_pattern, list_folder,
-                                parse_frames, plan_images, same_file)
+                                output_over_input, parse_frames, plan_images, same_file)
 
         o, con = self.opts, self.con
         self.strict = self.kind == "pattern"
@@ -759,9 +759,9 @@ class _ImageJob(_Job):
         # each file's place in the whole plan: the post hooks' frame index (--overlay's frames), whatever
         # --resume skips, look-ahead reads add or an unreadable file of a folder leaves out
         self.positions = {id(ff): i for i, ff in enumerate(self.plan)}
-        for ff in self.plan:
-            if same_file(ff.src, ff.dst):
-                raise Usage(f"{ff.dst}: output is the input {ff.src}; choose another output")
+        clash = output_over_input(self.plan)
+        if clash is not None:
+            raise Usage(clash)
         dst_dirs = sorted({os.path.dirname(os.path.abspath(ff.dst)) for ff in self.plan})
         if self.kind != "image" or is_pattern(self.output):   # a pattern's folder is made, as for a video's frames
             for d in dst_dirs:

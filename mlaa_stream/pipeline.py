@@ -133,6 +133,7 @@ class _Reader(threading.Thread):
     def run(self) -> None:
         index = 0
         it = None
+        previous: np.ndarray | None = None  # the source's last array, as it gave it
         try:
             it = iter(self.source)
             while not self.stop.is_set():
@@ -141,6 +142,13 @@ class _Reader(threading.Thread):
                     obj = next(it)
                 except StopIteration:
                     break
+                if isinstance(obj, np.ndarray):
+                    # a source that reads every frame into one buffer (`ok, buf = cap.read(buf)` in a generator)
+                    # would overwrite the frames queued here before they are filtered: the first frame (the
+                    # next read may overwrite it) and each one in the previous one's memory are copied
+                    reused = previous is None or np.may_share_memory(obj, previous)
+                    previous = obj
+                    obj = obj.copy() if reused else obj
                 self.times.read += time.perf_counter() - t0
                 item = obj if isinstance(obj, Item) else Item(frame=obj)
                 item.index = index
@@ -168,7 +176,8 @@ def stream_items(source: Iterable, filt: FrameFilter, *, in_flight: int = 2, que
     A temporal stage with a `lookahead` attribute N > 0 is called as `temporal(frame_in, frame_filtered,
     index, future=[raw frames index + 1 .. index + N])` (fewer at the end of the stream): a frame waits,
     filtered, until the N frames after it are read.
-    Raises PipelineError after yielding every frame before the failing one.
+    Raises PipelineError after yielding every frame before the failing one. Frames are read ahead of the
+    filter: an array in the memory of the source's previous one (a reused buffer) is copied first.
     """
     if in_flight < 1:
         raise ValueError(f"expected in_flight >= 1, got {in_flight}")

@@ -117,6 +117,15 @@ def test_a_bad_frame_names_its_index():
     assert pipeline_threads() == []
 
 
+@pytest.mark.parametrize("dtype", [np.int64, np.bool_])
+def test_a_frame_of_another_sample_type_is_refused_naming_every_type_taken(dtype):
+    """numpy arithmetic on uint8 frames makes int64: the message listed float16 and float32 but not float64,
+    which is taken too, and said nothing of how to convert."""
+    with Antialiaser() as aa:
+        with pytest.raises(ValueError, match=r"expected uint8, uint16, float16, float32 or float64 samples, got "
+                                             rf"{np.dtype(dtype).name} \(e\.g\. frame\.clip\(0, 255\)"):
+            aa(np.zeros((6, 8, 3), dtype))
+
 
 def test_a_failing_post_hook_is_named_by_the_index_it_was_given():
     # after two calls the stream's frames are 2, 3, ...: the error names the number the hook got, as index does
@@ -255,3 +264,18 @@ def test_linear_input_frames_match_the_filter_and_stage_made_for_linear_light():
     assert all(np.array_equal(a, b) for a, b in zip(outs, want))
     assert max(float(o.max()) for o in outs) > 2.0 and all(np.isfinite(o).all() for o in outs)
     assert any(not np.array_equal(o, f) for o, f in zip(outs[2:], frames[2:]))
+
+
+@pytest.mark.parametrize("kwargs", [dict(temporal=True), dict(temporal="tss+blend"), dict(temporal="blend"),
+                                    dict(temporal="tss", dense_motion=True)])
+def test_temporal_methods_take_thin_and_tiny_frames(kwargs):
+    """OpenCV's DIS flow raises under 8 px across (or 12 both ways) and the dense tiles indexed a centre past a
+    frame under half a tile: a 3x4097 EXR strip or a 10x10 thumbnail stopped the run with cv2.error or
+    IndexError. They take the global translation (and one tile) instead."""
+    for h, w in [(3, 64), (10, 10), (16, 5)]:
+        y, x = np.mgrid[0:h, 0:w]
+        with Antialiaser(**kwargs) as aa:
+            for k in range(5):  # a pan, so the flow and the tiles run
+                frame = np.repeat(((x + k + 2 * y) % 9 < 4)[..., None], 3, 2).astype(np.uint8) * 255
+                out = aa(frame)
+                assert out.shape == frame.shape and out.dtype == np.uint8

@@ -129,6 +129,23 @@ def test_output_that_is_the_input_is_refused(tmp_path, how):
     assert src.read_bytes() == before
 
 
+def test_a_folder_numbered_into_a_pattern_in_itself_never_replaces_an_input(tmp_path):
+    """in/ with 0002.png, 0003.png, a.png -o 'in/%04d.png' -y: 0003.png's output is 0002.png, 0002.png's is
+    0001.png -- --overwrite replaced two inputs ('never an input'). Refused before anything is written, by the
+    command line and by the cluster's Python API."""
+    from mlaa_stream.cluster.frames import filter_on_cluster
+    for name in ("0002.png", "0003.png", "a.png"):
+        write_png(tmp_path / name, staircase())
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    r = run(tmp_path, "-o", tmp_path / "%04d.png", "--overwrite")
+    two, three = tmp_path / "0002.png", tmp_path / "0003.png"
+    msg = f"{two}: the output of {three} would replace the input {two}"
+    assert r.exit_code == 2 and msg in stderr(r)
+    with pytest.raises(ValueError, match="would replace the input"):
+        filter_on_cluster(None, str(tmp_path), str(tmp_path / "%04d.png"), overwrite=True)  # before any client use
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+
+
 def test_a_folder_into_itself_is_refused(tmp_path):
     write_png(tmp_path / "a.png", staircase())
     r = run(tmp_path, "-o", tmp_path, "--overwrite")
@@ -173,6 +190,22 @@ def test_bad_files_in_a_folder_are_named_and_the_others_processed(tmp_path):
     assert read_image(str(out / "e_one_wide.png")).pixels.shape == (24, 1, 3)
     np.testing.assert_array_equal(read_image(str(out / "j_alpha.png")).pixels[:, :, 3], 77)
     assert temp_files(tmp_path) == []
+
+
+def test_a_broken_link_in_a_folder_is_named_not_dropped(tmp_path):
+    """A folder of frames linked from a cache with one link gone lost that frame without a word (exit 0)."""
+    src = tmp_path / "in 1"
+    src.mkdir()
+    write_png(tmp_path / "cached.png", staircase())
+    os.symlink(tmp_path / "cached.png", src / "a_linked.png")
+    os.symlink(tmp_path / "gone.png", src / "b_broken.png")
+    out = tmp_path / "out"
+    r = run(src, "-o", out)
+    err = stderr(r)
+    assert r.exit_code == 1
+    assert f"{src / 'b_broken.png'}: cannot read: a link to {tmp_path / 'gone.png'}, which does not exist" in err
+    assert "1 failed, 1 written" in err
+    assert sorted(os.listdir(out)) == ["a_linked.png"]
 
 
 def test_a_non_image_file_given_directly_is_refused(tmp_path):
@@ -377,6 +410,24 @@ def test_a_sequence_whose_frames_change_stops_naming_the_frame(tmp_path, change)
     assert r.exit_code == 1
     assert f"frame 4 ({bad})" in stderr(r) and "expected 32x24 with 3 channels of uint8" in stderr(r)
     assert sorted(os.listdir(tmp_path / "o")) == ["shot.0001.png", "shot.0002.png", "shot.0003.png"]
+
+
+def test_an_exr_sequence_whose_data_window_changes_says_so(tmp_path):
+    """Renders cropped to their bounding box change data window frame by frame while a viewer shows one display
+    size: 'expected 16x12, got 10x8' named no data window."""
+    import OpenImageIO as oiio
+    (tmp_path / "seq").mkdir()
+    for n, (x, y, w, h) in enumerate([(0, 0, 16, 12), (3, 2, 10, 8)], start=1):
+        spec = oiio.ImageSpec(w, h, 3, "half")
+        spec.x, spec.y, spec.full_width, spec.full_height = x, y, 16, 12
+        path = str(tmp_path / "seq" / f"r.{n:04d}.exr")
+        out = oiio.ImageOutput.create(path)
+        assert out.open(path, spec) and out.write_image(np.full((h, w, 3), 0.5, np.float32)), oiio.geterror()
+        out.close()
+    r = run(tmp_path / "seq" / "r.%04d.exr", "-o", tmp_path / "o" / "r.%04d.exr")
+    assert r.exit_code == 1
+    assert ("expected 16x12 with 3 channels of float16 like" in stderr(r) and "got 10x8 with 3 channels of float16 "
+            "(its data window, 10x8 at 3,2 of a 16x12 display window" in stderr(r)), stderr(r)
 
 
 def test_frames_option_needs_a_pattern_and_a_range(tmp_path):

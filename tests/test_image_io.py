@@ -127,6 +127,35 @@ def test_split_for_filter_keeps_extra_channels_untouched(tmp_path):
     np.testing.assert_array_equal(merge(frame)[:, :, 1], grey_alpha[:, :, 1])
 
 
+@pytest.mark.parametrize("names,colour", [
+    # Blender's multilayer EXR with an AO pass: OpenImageIO lists AO (sorted first) before Combined
+    (("ViewLayer.Combined.R", "ViewLayer.Combined.G", "ViewLayer.Combined.B", "ViewLayer.Combined.A",
+      "ViewLayer.AO.R", "ViewLayer.AO.G", "ViewLayer.AO.B", "ViewLayer.Depth.Z"),
+     ("ViewLayer.Combined.R", "ViewLayer.Combined.G", "ViewLayer.Combined.B", "ViewLayer.Combined.A")),
+    # a plain Z sorts before a lower-case layer
+    (("diffuse.R", "diffuse.G", "diffuse.B", "Z"), ("diffuse.R", "diffuse.G", "diffuse.B")),
+    # RGB + Z without alpha: the depth is not the filter's fourth channel
+    (("R", "G", "B", "Z"), ("R", "G", "B")),
+])
+def test_the_colour_channels_of_an_exr_are_found_by_name(tmp_path, names, colour):
+    rng = np.random.default_rng(12)
+    arr = rng.random((4, 5, len(names))).astype(np.float32)
+    spec = oiio.ImageSpec(5, 4, len(names), "float")
+    spec.channelnames = names
+    path = str(tmp_path / "layers.exr")
+    out = oiio.ImageOutput.create(path)
+    assert out.open(path, spec) and out.write_image(arr) and out.close(), oiio.geterror()
+    image = read_image(path)
+    read_names = image.channel_names
+    frame, merge = split_for_filter(image)
+    want = [read_names.index(n) for n in colour]
+    np.testing.assert_array_equal(frame, image.pixels[:, :, want])
+    merged = merge(frame + 1)
+    others = [k for k in range(len(names)) if k not in want]
+    np.testing.assert_array_equal(merged[:, :, want], image.pixels[:, :, want] + 1)
+    np.testing.assert_array_equal(merged[:, :, others], image.pixels[:, :, others])
+
+
 def test_a_full_disk_leaves_neither_a_final_nor_a_temporary_file(tmp_path, monkeypatch):
     def full_disk(tmp, pixels, spec, final):
         with open(tmp, "wb") as fh:  # half a file on disk, then the disk is full

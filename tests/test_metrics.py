@@ -235,3 +235,24 @@ def test_compare_scores_linear_light_against_display_values_encoded_alike(tmp_pa
     assert rmse < 0.6, r.output
     r = CliRunner().invoke(main, ["compare", str(tmp_path / "a.exr"), str(tmp_path / "a.exr"), "--no-flip"])
     assert r.exit_code == 0 and "linear light" not in r.output and "out 0.000" in r.output, r.output
+
+
+def test_compare_scores_a_multi_layer_exr_by_its_beauty(tmp_path):
+    """Blender's multilayer EXR lists an AO pass (sorted first) before Combined: compare scored the AO pass. It
+    scores the channels the filter takes (mlaa_stream.io.images.filter_channel_indices)."""
+    import OpenImageIO as oiio
+    from mlaa_stream.device.colour import linear_to_srgb
+    rng = np.random.default_rng(5)
+    beauty = rng.random((8, 12, 3)).astype(np.float32)
+    names = ("View.Combined.R", "View.Combined.G", "View.Combined.B", "View.AO.R", "View.AO.G", "View.AO.B")
+    spec = oiio.ImageSpec(12, 8, 6, "float")
+    spec.channelnames = names
+    path = str(tmp_path / "layers.exr")
+    out = oiio.ImageOutput.create(path)
+    assert out.open(path, spec) and out.write_image(np.concatenate([beauty, np.full_like(beauty, 0.5)], 2))
+    out.close()
+    _write(tmp_path / "b.png", np.rint(linear_to_srgb(beauty) * 255).astype(np.uint8))
+    r = CliRunner().invoke(main, ["compare", str(tmp_path / "b.png"), path, "--no-flip"])
+    assert r.exit_code == 0, r.output
+    rmse = float(r.output.split("RMSE vs truth (8-bit levels): out ")[1].split()[0])
+    assert rmse < 0.6, r.output

@@ -70,6 +70,23 @@ def test_frames_come_out_in_order_and_filtered():
         np.testing.assert_array_equal(it.frame, 255 - a)
 
 
+def test_a_source_that_reuses_one_buffer_gets_each_frame_filtered():
+    """A generator that reads every frame into one array (`ok, buf = cap.read(buf)`) overwrote the frames the
+    reader had queued: each came out as a later one. The reader copies them."""
+    src = frames(6)
+
+    def one_buffer():
+        buf = np.empty_like(src[0])
+        for f in src:
+            buf[...] = f
+            yield buf
+
+    out = [item.frame for item in stream_items(one_buffer(), HostFilter(), in_flight=2)]
+    assert len(out) == len(src)
+    for got, f in zip(out, src):
+        np.testing.assert_array_equal(got, 255 - f)
+
+
 def test_slow_reader_and_writer_keep_order():
     rng = np.random.default_rng(3)
     delays = rng.uniform(0, 0.004, 40)

@@ -77,6 +77,43 @@ def test_non_finite_samples_pass_through_and_do_not_spread(bad, linear_input):
     assert (out != frame)[~bad_mask].any()  # and the frame was still antialiased
 
 
+def test_float64_samples_beyond_float32_pass_through_finite():
+    """A float64 sample beyond float32's range (1e300) became inf on upload and came back inf: finite inputs
+    gave non-finite outputs. It passes through as it was, like any sample beyond SAMPLE_LIMIT."""
+    frame = staircase().astype(np.float64)
+    frame[20, 30, 1] = 1e300
+    frame[5, 0] = -1e300
+    frame[7, 7, 2] = 1e20  # within float32's range, beyond SAMPLE_LIMIT: restored at float64 precision
+    filled = np.where(np.abs(frame) > SAMPLE_LIMIT, np.inf, frame).astype(np.float32)
+    replace_non_finite(filled)  # each out-of-range sample replaced by its row neighbour, as the filter does
+    with Filter() as f:
+        out = f.process(frame)
+        ref = f.process(filled)
+    big = np.abs(frame) > SAMPLE_LIMIT
+    assert out.dtype == np.float64 and np.isfinite(out).all()
+    assert np.array_equal(out[big], frame[big])
+    assert (out[~big] != frame[~big]).any()  # and the frame was still antialiased
+    assert np.array_equal(out[~big], ref[~big])  # nothing spread
+
+
+@pytest.mark.filterwarnings("error::RuntimeWarning")   # half frames: no overflow in the range test either
+@pytest.mark.parametrize("method,dtype", [("tss", np.float32), ("blend", np.float32), ("tss", np.float16)])
+def test_non_finite_samples_pass_the_temporal_stage(method, dtype):
+    """Antialiaser(temporal=...) on float frames (display-encoded, as OpenCV loops hold them): NaN, inf and
+    out-of-range samples came out as history (finite values) from the second frame on; they pass through."""
+    from mlaa_stream import Antialiaser
+    base = staircase().astype(dtype)
+    with Antialiaser(temporal=method) as aa:
+        for k in range(4):
+            frame = np.roll(base, k, axis=1)  # a pan: history to take from
+            frame[12, 20, 0], frame[30, 40] = np.nan, np.inf
+            frame[3, 50, 2], frame[35, 5, 1] = -np.inf, 1e30 if dtype == np.float32 else np.inf
+            out = aa(frame)
+            bad = ~(np.abs(frame) <= np.float64(SAMPLE_LIMIT))
+            assert np.array_equal(out[bad], frame[bad], equal_nan=True), k
+            assert np.isfinite(out[~bad]).all(), k
+
+
 def test_fuzzed_filter_never_crashes_and_keeps_finite_outputs():
     """tests/fuzz_filter.py: hypothesis, derandomized, 60 examples over 2 sizes, 21 format/option cases."""
     r = subprocess.run([sys.executable, os.path.join(HERE, "fuzz_filter.py"), "60"], capture_output=True,
@@ -219,6 +256,25 @@ def test_an_animated_gif_is_refused_clearly(tmp_path):
     assert r.exit_code == 1
     assert "anim.gif: expected a single image, got 3" in r.output
     assert not (tmp_path / "out.gif").exists()
+
+
+def test_a_multi_part_exr_is_refused_naming_its_parts(tmp_path):
+    """A multi-part EXR (beauty + depth) was refused as 'an animated or multi-page file' with FFmpeg's advice,
+    which cannot split it: the message names the parts and how to take one out."""
+    import OpenImageIO as oiio
+    path = str(tmp_path / "multi.exr")
+    beauty, depth = oiio.ImageSpec(8, 6, 3, "half"), oiio.ImageSpec(8, 6, 1, "float")
+    beauty.attribute("name", "beauty")
+    depth.attribute("name", "depth")
+    depth.channelnames = ("Z",)
+    out = oiio.ImageOutput.create(path)
+    assert out.open(path, (beauty, depth)) and out.write_image(noise(6, 8, 3, dtype=np.float32)), oiio.geterror()
+    assert out.open(path, depth, "AppendSubimage") and out.write_image(noise(6, 8, 1, dtype=np.float32))
+    out.close()
+    r = run(path, "-o", tmp_path / "out.exr")
+    assert r.exit_code == 1
+    assert "multi.exr: expected a single-part EXR, got a multi-part file with 2 parts (beauty, depth)" in r.output
+    assert "ffmpeg" not in r.output and not (tmp_path / "out.exr").exists()
 
 
 def test_cmyk_and_palette_conversions_are_reported_with_v(tmp_path):

@@ -236,7 +236,7 @@ def filter_on_cluster(client, input_path: str, output: str, *, preset: str | Non
     the cluster behind `client` (a dask.distributed.Client you made). `resume` skips complete outputs;
     without it or `overwrite`, an existing output is an error. `temporal`: a TemporalSpec
     (mlaa_stream.cluster.temporal) turns the temporal stage on, with a warm-up per chunk."""
-    from mlaa_stream.io.sequence import (expand_pattern, is_pattern, list_folder, plan_images)
+    from mlaa_stream.io.sequence import (expand_pattern, is_pattern, list_folder, output_over_input, plan_images)
     from mlaa_stream.spatial.filter import PRESETS
     from mlaa_stream.spatial.keep import keep_rects
 
@@ -254,6 +254,9 @@ def filter_on_cluster(client, input_path: str, output: str, *, preset: str | Non
         raise ValueError(f"{input_path}: expected images, found none")
     out = output if is_pattern(output) else os.path.join(output, "")
     plan = plan_images(srcs, out, numbers)
+    clash = output_over_input(plan)
+    if clash is not None:   # overwrite=True replaces outputs, never an input
+        raise ValueError(clash)
     for d in sorted({os.path.dirname(os.path.abspath(f.dst)) for f in plan}):
         os.makedirs(d, exist_ok=True)
     existing = [f for f in plan if os.path.exists(f.dst)]

@@ -47,7 +47,10 @@ def frame_format(frame: np.ndarray, bgr: bool = False, what: str = "frame") -> F
     if dtype == np.float16 or dtype == np.float64:
         dtype = np.dtype(np.float32)  # widened on upload; written back in the input's dtype
     if dtype not in _PIXEL_TYPES:
-        raise ValueError(f"{what}: expected uint8, uint16, float16 or float32 samples, got {frame.dtype}")
+        # float64 is taken too (as float32): name it, and how to convert the rest (numpy arithmetic makes int64)
+        hint = " (e.g. frame.clip(0, 255).astype(np.uint8))" if dtype.kind in "iub" else ""
+        raise ValueError(f"{what}: expected uint8, uint16, float16, float32 or float64 samples, got {frame.dtype}"
+                         f"{hint}")
     h, w = frame.shape[:2]
     if h < 1 or w < 1:
         raise ValueError(f"{what}: expected at least 1x1 pixels, got {w}x{h}")

@@ -80,6 +80,8 @@ def read_image(path: str) -> Image:
     try:
         size = os.path.getsize(path)
     except OSError as exc:
+        if os.path.islink(path):  # a frame linked from a cache or another shot that is gone
+            raise ImageReadError(f"{path}: cannot read: a link to {os.readlink(path)}, which does not exist") from exc
         raise ImageReadError(f"{path}: cannot read ({exc.strerror})") from exc
     if size == 0:
         raise ImageReadError(f"{path}: expected an image, got an empty file")
@@ -98,6 +100,16 @@ def read_image(path: str) -> Image:
             count = 2
             while count < 10_000 and inp.seek_subimage(count, 0):
                 count += 1
+            if inp.format_name() == "openexr":
+                # the parts of one frame (beauty, depth, AOVs), not frames: FFmpeg's advice does not apply
+                parts = []
+                for k in range(min(count, 8)):
+                    inp.seek_subimage(k, 0)
+                    parts.append(inp.spec().get_string_attribute("name", "") or f"part {k}")
+                more = ", ..." if count > len(parts) else ""
+                raise ImageReadError(f"{path}: expected a single-part EXR, got a multi-part file with {count} parts "
+                                     f"({', '.join(parts)}{more}); write the part to filter as its own file first "
+                                     f"(e.g. oiiotool {os.path.basename(path)} --subimage {parts[0]!r} -o part.exr)")
             raise ImageReadError(f"{path}: expected a single image, got {count} (an animated or multi-page "
                                  f"file); filter it as a video or split it into frames first "
                                  f"(e.g. ffmpeg -i {os.path.basename(path)} frames/%04d.png)")
@@ -143,15 +155,64 @@ def filtered_channels(nchannels: int, alpha_channel: int = -1) -> int:
     return 4 if alpha_channel == 3 else 3
 
 
+# Names of layers that hold the rendered image itself, preferred among several RGB layers of an EXR
+# (Blender's "ViewLayer.Combined", Arnold/RenderMan/Houdini's "beauty"/"rgba"/"C").
+_BEAUTY_LAYERS = ("combined", "beauty", "rgba", "c")
+
+
+def filter_channel_indices(names: tuple[str, ...], alpha_channel: int = -1) -> tuple[int, ...]:
+    """The channels that go through the filter, in the order it takes them (R, G, B[, A] or one grey).
+
+    By name where the names say which channels are colour: plain R, G, B (+ A), else plain Y, else the
+    R, G, B (+ A) of one layer of a multi-layer EXR ("ViewLayer.Combined.R" ...): the layer of the alpha
+    channel, else a beauty layer by name, else the first. OpenImageIO lists an EXR's channels by layer
+    name, so a pass that sorts first (Blender's "AO" before "Combined", a plain "Z" before "diffuse.R")
+    would otherwise be filtered in the beauty's place. Names that say nothing: filtered_channels.
+    """
+    where = {name: k for k, name in enumerate(names)}
+    if all(c in where for c in "RGB"):
+        return tuple(where[c] for c in "RGBA" if c in where)
+    if "Y" in where:
+        return (where["Y"],)
+    layers: dict[str, dict[str, int]] = {}
+    for k, name in enumerate(names):
+        layer, dot, last = name.rpartition(".")
+        if dot and last in ("R", "G", "B", "A"):
+            layers.setdefault(layer, {})[last] = k
+    rgb = [(layer, chans) for layer, chans in layers.items() if all(c in chans for c in "RGB")]
+    if rgb:
+        def rank(entry: tuple[str, dict[str, int]]) -> int:
+            layer, chans = entry
+            if alpha_channel >= 0 and chans.get("A") == alpha_channel:
+                return 0
+            return 1 if layer.rpartition(".")[2].lower() in _BEAUTY_LAYERS else 2
+        _, chans = min(rgb, key=rank)  # min keeps the first of equal rank: channel order
+        return tuple(chans[c] for c in "RGBA" if c in chans)
+    return tuple(range(filtered_channels(len(names), alpha_channel)))
+
+
 def split_for_filter(image: Image) -> tuple[np.ndarray, Callable[[np.ndarray], np.ndarray]]:
     """The frame the filter sees and a function that puts its result back among the other channels."""
     pixels = image.pixels
-    n = filtered_channels(pixels.shape[2], image.spec.alpha_channel)
-    if n == pixels.shape[2]:
+    nchannels = pixels.shape[2]
+    names = tuple(image.spec.channelnames)
+    if len(names) != nchannels:  # a spec that does not describe these pixels: by position
+        names = ("",) * nchannels
+    idx = filter_channel_indices(names, image.spec.alpha_channel)
+    if idx == tuple(range(nchannels)):
         return pixels, lambda out: out
-    rest = pixels[:, :, n:]
-    return np.ascontiguousarray(pixels[:, :, :n]), lambda out: np.concatenate(
-        [out.reshape(out.shape[0], out.shape[1], -1), rest], axis=2)
+    if idx == tuple(range(len(idx))):  # the leading channels: a cheaper split and concatenation
+        rest = pixels[:, :, len(idx):]
+        return np.ascontiguousarray(pixels[:, :, :len(idx)]), lambda out: np.concatenate(
+            [out.reshape(out.shape[0], out.shape[1], -1), rest], axis=2)
+    chosen = list(idx)
+
+    def merge(out: np.ndarray) -> np.ndarray:
+        full = pixels.copy()
+        full[:, :, chosen] = out.reshape(out.shape[0], out.shape[1], -1)
+        return full
+
+    return np.ascontiguousarray(pixels[:, :, chosen]), merge
 
 
 _TMP_NAME = re.compile(r"\A\..*" + re.escape(_TMP_MARK) + r"(\d+)-\d+(\.[^.]*)?\Z")

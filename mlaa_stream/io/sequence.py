@@ -189,12 +189,14 @@ def expand_pattern(pattern: str, frames: tuple[int, int] | None = None) -> tuple
 def list_folder(folder: str) -> tuple[list[str], list[str]]:
     """Image files of `folder` in name order, and the other files (not images by extension).
 
-    Hidden files, our own temporary files and sub-folders are left out.
+    Hidden files, our own temporary files and sub-folders are left out; a link to a file that is gone is listed
+    (its read fails naming it) rather than dropped without a word.
     """
     images, others = [], []
     for name in sorted(os.listdir(folder)):
         path = os.path.join(folder, name)
-        if name.startswith(".") or is_temp_path(name) or not os.path.isfile(path):
+        broken_link = os.path.islink(path) and not os.path.exists(path)
+        if name.startswith(".") or is_temp_path(name) or not (os.path.isfile(path) or broken_link):
             continue
         (images if is_image_path(name) else others).append(path)
     return images, others
@@ -217,6 +219,28 @@ def same_file(a: str, b: str) -> bool:
         return os.path.samefile(a, b)
     except OSError:
         return False
+
+
+def output_over_input(plan: list[FrameFile]) -> str | None:
+    """A message naming the first output that is an input of the plan -- its own, or another frame's (a folder
+    numbered into a pattern in its own folder: 0003.png's output is 0002.png) -- else None. Checked before
+    anything is written: --overwrite replaces outputs, never an input."""
+    def key(path: str) -> tuple:
+        try:
+            st = os.stat(path)
+            return st.st_dev, st.st_ino   # hard links and links to links name the same file
+        except OSError:
+            return (os.path.realpath(path),)
+    inputs = {key(ff.src): ff for ff in plan}
+    for ff in plan:
+        other = inputs.get(key(ff.dst))
+        if other is None:
+            other = inputs.get((os.path.realpath(ff.dst),))   # an input that is gone (a broken link) by its name
+        if other is ff or (other is None and same_file(ff.src, ff.dst)):
+            return f"{ff.dst}: output is the input {ff.src}; choose another output"
+        if other is not None:
+            return f"{ff.dst}: the output of {ff.src} would replace the input {other.src}; choose another output"
+    return None
 
 
 def image_source(files: list[FrameFile], report: Report, *, strict: bool,
@@ -244,8 +268,18 @@ def image_source(files: list[FrameFile], report: Report, *, strict: bool,
                 (s0, d0), (s1, d1) = first[0], shape
                 raise SequenceError(
                     f"{ff.label}: expected {s0[1]}x{s0[0]} with {s0[2]} channels of {d0} like "
-                    f"{first[1].src}, got {s1[1]}x{s1[0]} with {s1[2]} channels of {d1}")
+                    f"{first[1].src}, got {s1[1]}x{s1[0]} with {s1[2]} channels of {d1}{_data_window(image)}")
         yield Item(frame, (ff, image, merge))
+
+
+def _data_window(image: Image) -> str:
+    """Where an EXR's pixels (its data window, what is filtered) are not its whole display window: said, since a
+    viewer shows the display window's size (renders cropped to their bounding box change size frame by frame)."""
+    spec = image.spec
+    if (spec.x, spec.y, spec.width, spec.height) == (spec.full_x, spec.full_y, spec.full_width, spec.full_height):
+        return ""
+    return (f" (its data window, {spec.width}x{spec.height} at {spec.x},{spec.y} of a {spec.full_width}x"
+            f"{spec.full_height} display window; a sequence keeps one data window size)")
 
 
 def image_sink(report: Report, *, overwrite: bool, strict: bool) -> Callable[[Item], None]:

@@ -378,8 +378,9 @@ class Filter:
             if bufs.last_use[slot] is not None:
                 bufs.last_use[slot].wait()  # the frame that used this slot two frames ago is out
             staging = bufs.staging[slot]
-            np.copyto(staging.reshape(frame.shape), frame, casting="unsafe")
-            non_finite = replace_non_finite(staging.reshape(frame.shape))  # float frames only
+            with np.errstate(over="ignore"):  # float64 beyond float32's range: inf here, restored from `frame`
+                np.copyto(staging.reshape(frame.shape), frame, casting="unsafe")
+            non_finite = replace_non_finite(staging.reshape(frame.shape), frame)  # float frames only
             up = cl.enqueue_copy(self.queue, bufs.src[slot], staging, is_blocking=False)
             after = [up] + ([self._last_event] if self._last_event is not None else [])
             done = self._enqueue_passes(bufs, bufs.src[slot], bufs.dst[slot], after)

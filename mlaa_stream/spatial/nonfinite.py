@@ -31,9 +31,11 @@ class NonFinite:
         return out
 
 
-def replace_non_finite(frame: np.ndarray) -> NonFinite | None:
+def replace_non_finite(frame: np.ndarray, original: np.ndarray | None = None) -> NonFinite | None:
     """Replace the non-finite and out-of-range samples of a float `frame` in place (see the module's
-    note); None when there are none (the usual case: one vectorised test per frame)."""
+    note); None when there are none (the usual case: one vectorised test per frame). `original`: the
+    caller's frame that `frame` is a narrower copy of (float64 into float32, where 1e300 became inf): the
+    values to restore are taken from it, so a finite sample comes back finite and exact."""
     if frame.dtype.kind != "f":
         return None
     with np.errstate(invalid="ignore"):
@@ -41,7 +43,8 @@ def replace_non_finite(frame: np.ndarray) -> NonFinite | None:
     if finite.all():
         return None
     bad = ~finite
-    restore = NonFinite(bad.copy(), frame[bad].copy())
+    source = frame if original is None or original.shape != frame.shape else original
+    restore = NonFinite(bad.copy(), source[bad].copy())
     rows = frame.reshape(frame.shape[0], frame.shape[1], -1)  # (H, W, C) view
     good = finite.reshape(rows.shape)
     w = rows.shape[1]
@@ -53,3 +56,22 @@ def replace_non_finite(frame: np.ndarray) -> NonFinite | None:
     fill = np.where(src < w, fill, 0)  # a row of one channel with no finite sample at all
     rows[...] = np.where(good, rows, fill)
     return restore
+
+
+def restore_out_of_range(frame_in: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """`out` with the non-finite and out-of-range samples of a float `frame_in` put back as they were.
+
+    For stages after the spatial filter that mix frames (the temporal stage): they read such samples as
+    black, white or over range and would write history over them, where the module's rule says they pass
+    through unchanged. Integer frames, and outputs of another shape (a debug view), are returned as they are.
+    """
+    fin = np.asarray(frame_in)
+    if fin.dtype.kind != "f" or out.dtype.kind != "f" or out.shape != fin.shape:
+        return out
+    with np.errstate(invalid="ignore"):
+        bad = ~(np.abs(fin) <= np.float64(SAMPLE_LIMIT))   # float64: 1e15 overflows a half frame's type
+    if not bad.any():
+        return out
+    out = out if out.flags.writeable else out.copy()
+    out[bad] = fin[bad]
+    return out

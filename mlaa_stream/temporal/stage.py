@@ -28,6 +28,7 @@ from mlaa_stream.device.colour import device_luts, lut_read
 from mlaa_stream.device.context import Context, default_context
 from mlaa_stream.device.formats import LUT_SIZE, FrameFormat, defines_for, frame_format
 from mlaa_stream.spatial.fallback import FALLBACK_TILE
+from mlaa_stream.spatial.nonfinite import restore_out_of_range
 
 MODES = ("adaptive", "dense", "global", "static", "off")
 SHOWS = (None, "history")
@@ -119,6 +120,16 @@ def _downscale(img: np.ndarray, factor: int) -> np.ndarray:
 def scale_for(width: int, target: int) -> int:
     """The smallest integer factor that brings `width` to at most `target` pixels."""
     return max(1, -(-int(width) // int(target)))
+
+
+# OpenCV's DIS flow (patches of 8 px) raises on images under 8 px in height or width, or under 12 in both: a thin
+# or tiny frame (3x4097, 5x7, 10x10) takes the global translation as its flow instead (_flow)
+DIS_MIN_SIDE, DIS_MIN_LONG_SIDE = 8, 12
+
+
+def dis_refuses(shape: tuple[int, ...]) -> bool:
+    """True where OpenCV's DIS flow raises on an image of this (height, width)."""
+    return min(shape[:2]) < DIS_MIN_SIDE or max(shape[:2]) < DIS_MIN_LONG_SIDE
 
 
 @dataclass
@@ -405,10 +416,12 @@ class TemporalStage:
         """DIS optical flow: flow[y, x] such that a(x) ~ b(x + flow), in a's pixels, started from the
         global translation `start` (a flow of a's size passed in is DIS's initial flow): without it
         DIS's coarse levels lock periodic textures onto the wrong period."""
-        if self._dis is None:
-            self._dis = cv2.DISOpticalFlow_create(self._dis_preset)
         init = np.empty(a.shape[:2] + (2,), np.float32)
         init[...] = start
+        if dis_refuses(a.shape):   # the global translation is all there is to go on
+            return init
+        if self._dis is None:
+            self._dis = cv2.DISOpticalFlow_create(self._dis_preset)
         return self._dis.calc(a, b, init)
 
     # -- per frame -------------------------------------------------------------------------------------
@@ -432,7 +445,9 @@ class TemporalStage:
         if regions is None and self.regions_from is not None:
             regions = self.regions_from.last_regions
         with self._lock:
-            return self._step(frame_in, frame_filtered, int(index), fmt, regions, measured)
+            out = self._step(frame_in, frame_filtered, int(index), fmt, regions, measured)
+        # NaN, inf and samples beyond ±1e15 pass through as the spatial filter passes them (spatial/nonfinite.py)
+        return out if self.show is not None else restore_out_of_range(frame_in, out)
 
     def _step(self, frame_in, frame_filtered, index: int, fmt: FrameFormat, regions, measured) -> np.ndarray:
         t0 = time.perf_counter()

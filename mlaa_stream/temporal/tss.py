@@ -72,11 +72,12 @@ import numpy as np
 
 from mlaa_stream.device.colour import device_luts, lut_read
 from mlaa_stream.device.formats import LUT_SIZE, frame_format
+from mlaa_stream.spatial.nonfinite import restore_out_of_range
 from mlaa_stream.temporal.layers import (STILL_AGE, STILL_SHIFT, CompositionalPoints, ahead_fields, background_of,
                                          find_layers, inverse_compositional, layer_fields, layers_decision,
                                          sample_bilinear, still_background, translation_map)
 from mlaa_stream.temporal.stage import (LK_ROBUST, Decision, Pyramid, _PMAX, choose_model, sample_field,
-                                        decode_table, grey8)
+                                        decode_table, dis_refuses, grey8)
 
 DEFAULT_FRAMES = 16   # K: ring frames (the current one included)
 GRID = 4              # footprint cells per side (GRID^2 strata)
@@ -195,10 +196,12 @@ class MotionRing:
 
     def _flow(self, a: np.ndarray, b: np.ndarray, start: tuple[float, float]) -> np.ndarray:
         """DIS flow (FAST) with a(x) ~ b(x + flow), started from the global translation (stage.py)."""
-        if self._dis is None:
-            self._dis = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_FAST)
         init = np.empty(a.shape[:2] + (2,), np.float32)
         init[...] = start
+        if dis_refuses(a.shape):   # too small for DIS (stage.py): the global translation as the flow
+            return init
+        if self._dis is None:
+            self._dis = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_FAST)
         return self._dis.calc(a, b, init)
 
     def push(self, pyr: Pyramid, index: int, fresh: bool, decision: Decision | None = None,
@@ -575,6 +578,8 @@ def _tile_grid(fh: int, fw: int):
     (n, 1, 2), and each texel's position in the grid padded by one tile each side (cv2.remap maps)."""
     half = DENSE_TILE // 2
     gy, gx = np.mgrid[half:max(fh, half + 1):DENSE_TILE, half:max(fw, half + 1):DENSE_TILE].astype(np.float32)
+    # a frame under half a tile across (3x4097, 16x5) has its one centre on its last texel, not past it
+    gy, gx = np.minimum(gy, np.float32(fh - 1)), np.minimum(gx, np.float32(fw - 1))
     pts = np.stack([gx.ravel(), gy.ravel()], -1)[:, None, :]
     tx, ty = np.meshgrid((np.arange(fw, dtype=np.float32) - half) / DENSE_TILE,
                          (np.arange(fh, dtype=np.float32) - half) / DENSE_TILE)
@@ -1273,7 +1278,10 @@ class TSSStage:
             ahead = [f.astype(np.float32) for f in ahead]
         with self._lock:
             out = self._step(fin, fout, int(index), ahead)
-        return out.astype(frame_filtered.dtype) if wide and self.show is None else out
+        if self.show is not None:
+            return out
+        # NaN, inf and samples beyond ±1e15 pass through as the spatial filter passes them (spatial/nonfinite.py)
+        return restore_out_of_range(frame_in, out.astype(frame_filtered.dtype) if wide else out)
 
     def _look_ahead(self, pyr: Pyramid, index: int, future: list[np.ndarray]) -> list[Ahead]:
         """The look-ahead frames' pyramids and frame-to-frame decisions, each measured once (kept by index
