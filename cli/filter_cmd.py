@@ -35,7 +35,8 @@ Examples:
 Images and sequences go through OpenImageIO: bit depth (8/16-bit, half, float), channels, alpha
 (passed through unchanged) and metadata are kept; palette PNGs come out as RGB(A). EXRs tagged
 linear (and untagged float images) are taken as linear light, others as sRGB-encoded; linear light
-written to a format of display values (PNG, JPEG) is encoded to sRGB, clipped to 0-1. In a folder,
+written to a format of display values (PNG, JPEG) is encoded to sRGB, clipped to 0-1, and EXR's
+premultiplied alpha written to a format of straight alpha (PNG) is divided out. In a folder,
 files that are not images by their extension are skipped with a warning; a file that cannot be
 read or written is reported and the others are still processed. A sequence (%04d pattern) must keep
 one size, channel count and sample type; the first frame that differs stops it. Gaps in the
