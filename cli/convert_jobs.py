@@ -40,7 +40,7 @@ class SequenceToVideoJob(_Job):
 
     def prepare(self) -> None:
         from mlaa_stream.io.images import image_shape, read_image
-        from mlaa_stream.io.video import VideoError, VideoInfo, VideoWriter
+        from mlaa_stream.io.video import VideoError, VideoInfo, VideoWriter, container_format_for
 
         o = self.opts
         if os.path.exists(self.output) and not o["overwrite"]:
@@ -67,9 +67,11 @@ class SequenceToVideoJob(_Job):
         if c == 4 or c == 2:
             self.con.warn(f"{self.input}: alpha is not kept in the video")
         try:
+            # -f/--format as for a video in (_VideoJob); images have no audio to copy (--audio copy/aac: a warning)
             self.writer = VideoWriter(self.output, self.info, codec=o["codec"], crf=o["crf"],
-                                      preset=o["encoder_preset"], pix_fmt=o["pix_fmt"], copy_audio=False,
-                                      overwrite=o["overwrite"])
+                                      preset=o["encoder_preset"], pix_fmt=o["pix_fmt"], audio="none",
+                                      overwrite=o["overwrite"],
+                                      container_format=container_format_for(o.get("container"), self.output))
         except VideoError as exc:
             raise Failed(str(exc)) from exc
         self.con.info(f"{len(self.plan)} frames {w}x{h} at {rate} fps -> {self.output} "

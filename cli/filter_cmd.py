@@ -35,7 +35,8 @@ Examples:
 Images and sequences go through OpenImageIO: bit depth (8/16-bit, half, float), channels, alpha
 (passed through unchanged) and metadata are kept; palette PNGs come out as RGB(A). EXRs tagged
 linear (and untagged float images) are taken as linear light, others as sRGB-encoded; linear light
-written to a format of display values (PNG, JPEG) is encoded to sRGB, clipped to 0-1. In a folder,
+written to a format of display values (PNG, JPEG) is encoded to sRGB, clipped to 0-1, and EXR's
+premultiplied alpha written to a format of straight alpha (PNG) is divided out. In a folder,
 files that are not images by their extension are skipped with a warning; a file that cannot be
 read or written is reported and the others are still processed. A sequence (%04d pattern) must keep
 one size, channel count and sample type; the first frame that differs stops it. Gaps in the
@@ -213,7 +214,8 @@ def _kind_of(path: str) -> str:
 
 def _warn_unused_options(ctx: click.Context, con: Console, kind: str, job: type) -> None:
     """Options given on the command line (not defaults) that this job has no use for: a warning each, not an
-    error (--rate with a video input, the encoder's, container's and audio options with images out)."""
+    error (--rate with a video input, the encoder's, container's and audio options with images out, --audio
+    copy/aac with images in)."""
     from mlaa_stream.cli.convert_jobs import SequenceToVideoJob, VideoToImagesJob
 
     def given(name: str) -> bool:
@@ -222,6 +224,9 @@ def _warn_unused_options(ctx: click.Context, con: Console, kind: str, job: type)
     if given("rate") and job is not SequenceToVideoJob:
         why = "a video keeps its own frame rate" if job is _VideoJob else "images have no frame rate"
         con.warn(f"--rate has no effect here: it sets the frame rate of a video made from images; {why}")
+    if given("audio") and job is SequenceToVideoJob and ctx.params.get("audio") != "none":
+        con.warn(f"--audio {ctx.params['audio']} has no effect here: it sets what happens to a video's audio "
+                 f"tracks, and images have none (the video is made without audio)")
     if job is _ImageJob or job is VideoToImagesJob:   # images out: no video encoder, container or audio
         encoder = (("codec", "--codec"), ("crf", "--crf"), ("encoder_preset", "--encoder-preset"),
                    ("pix_fmt", "--pix-fmt"))

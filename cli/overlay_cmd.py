@@ -71,7 +71,8 @@ def _run(input_path: str, output: str, lines_path: str, frame: int, strength: fl
         return EXIT_USAGE
 
     from mlaa_stream.device.context import DeviceError, KernelBuildError
-    from mlaa_stream.io.images import ImageReadError, ImageWriteError, read_image, split_for_filter, write_image
+    from mlaa_stream.io.images import (ImageReadError, ImageWriteError, read_image, split_for_filter,
+                                       unpremultiplies, write_image)
     from mlaa_stream.overlay.grlaa import OverlayRenderer, read_overlay
     from mlaa_stream.io.sequence import is_linear
 
@@ -113,6 +114,9 @@ def _run(input_path: str, output: str, lines_path: str, frame: int, strength: fl
     except OSError as exc:
         _err(f"{output}: {exc.strerror or exc}")
         return EXIT_FAILED
+    if unpremultiplies(output, image.spec) and not quiet:  # as the filter command says
+        click.echo(f"mlaa-stream: warning: {input_path}: premultiplied alpha divided out for {output}, a format of "
+                   f"straight alpha (EXR and TIFF keep it premultiplied)", err=True)
     if encoded and not quiet:  # linear light in a format of display values, as the filter command says
         click.echo(f"mlaa-stream: warning: {input_path}: linear light encoded to sRGB for {output} (EXR and "
                    f"float TIFF keep it linear)", err=True)

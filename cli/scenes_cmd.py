@@ -11,6 +11,7 @@ from pathlib import Path
 import click
 
 from mlaa_stream.cli.options import CommandError, require_bench_extras
+from mlaa_stream.yardstick.scenes import SCENES  # the groups for --help (this module needs numpy only)
 import numpy as np
 
 
@@ -51,7 +52,8 @@ def scene_files(scene) -> dict[str, np.ndarray]:
 @click.argument("out_dir", type=click.Path(file_okay=False))
 @click.option("--small", is_flag=True, help="The small variants used by the tests and bench --quick.")
 @click.option("--seed", type=int, default=0, show_default=True, help="Random seed (same seed, same pixels).")
-@click.option("--only", default=None, metavar="A,B", help="Comma-separated scene groups (default: all).")
+@click.option("--only", default=None, metavar="A,B",
+              help=f"Comma-separated scene groups (default: all): {', '.join(SCENES)}.")
 @click.option("--overwrite", is_flag=True, help="Replace files that already exist.")
 def scenes_command(out_dir, small, seed, only, overwrite) -> None:
     """Render the test scenes (1-spp input and 8x8-spp truth) into OUT_DIR as PNG files."""

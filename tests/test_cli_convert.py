@@ -7,6 +7,7 @@ import os
 
 import av
 import numpy as np
+import pytest
 from click.testing import CliRunner
 
 from mlaa_stream.cli.main import main
@@ -68,6 +69,24 @@ def test_a_folder_becomes_a_video_with_the_temporal_stage(tmp_path):
     assert r.exit_code == 0, stderr(r)
     assert len(video_frames(tmp_path / "out.mkv")[0]) == 4
     assert len((tmp_path / "s.csv").read_text().splitlines()) == 5
+
+@pytest.mark.parametrize("source", ["folder", "pattern"])
+def test_a_video_made_from_images_takes_the_format_option_and_names_audio_it_cannot_copy(tmp_path, source):
+    # -f/--format and --audio were ignored without a word for a folder or pattern -> video: out.mp4 came out MP4
+    staircases(tmp_path / "seq", 3)
+    src = tmp_path / "seq" if source == "folder" else tmp_path / "seq" / "shot.%04d.png"
+    r = run(src, "-o", tmp_path / "out.mp4", "-f", "nut", "--audio", "aac")
+    assert r.exit_code == 0, stderr(r)
+    with av.open(str(tmp_path / "out.mp4")) as c:
+        assert c.format.name == "nut" and not c.streams.audio
+    assert len(video_frames(tmp_path / "out.mp4")[0]) == 3
+    assert stderr(r).count("--audio aac has no effect here") == 1 and "images have none" in stderr(r)
+    assert "-f/--format" not in stderr(r)
+    r = run(src, "-o", tmp_path / "out.y4m", "--audio", "none")   # honoured as asked: no audio, no warning
+    assert r.exit_code == 0 and "no effect" not in stderr(r), stderr(r)
+    with av.open(str(tmp_path / "out.y4m")) as c:
+        assert c.format.name == "yuv4mpegpipe" and not c.streams.audio
+
 
 def test_a_video_becomes_numbered_images_from_1(tmp_path):
     r = run(CLIP, "-o", tmp_path / "img" / "f_%04d.png")

@@ -211,13 +211,13 @@ def test_linear_exr_written_to_png_is_encoded_to_srgb_and_to_exr_or_float_tiff_k
     from mlaa_stream.io.sequence import is_linear
 
     arr = np.zeros((3, 4, 4), np.float16)
-    arr[..., :3], arr[..., 3] = 0.2, 0.5   # linear grey 0.2, alpha 0.5
+    arr[..., :3], arr[..., 3] = 0.2, 0.5   # linear grey 0.2 premultiplied by alpha 0.5 (EXR's associated alpha)
     write_raw(tmp_path / "in.exr", arr, "half", {"oiio:ColorSpace": "lin_rec709"})
     im = read_image(str(tmp_path / "in.exr"))
     assert is_linear(im)
-    lin = float(np.float16(0.2))
-    want = round((1.055 * lin ** (1 / 2.4) - 0.055) * 255)   # IEC 61966-2-1 encode: 124
-    assert want == 124
+    lin = float(np.float16(0.2)) / 0.5   # PNG's straight alpha: the colour divided by alpha first
+    want = round((1.055 * lin ** (1 / 2.4) - 0.055) * 255)   # IEC 61966-2-1 encode: 170
+    assert want == 170
     assert write_image(str(tmp_path / "out.png"), im.pixels, im.spec, linear=True) is True
     png = read_image(str(tmp_path / "out.png"))
     assert png.pixels.dtype == np.uint8
@@ -228,3 +228,104 @@ def test_linear_exr_written_to_png_is_encoded_to_srgb_and_to_exr_or_float_tiff_k
         back = read_image(str(tmp_path / f"out{ext}"))
         np.testing.assert_array_equal(back.pixels.astype(np.float16), arr)
     assert leftovers(tmp_path) == []
+
+
+def srgb8(linear: np.ndarray) -> np.ndarray:
+    """IEC 61966-2-1 encode of linear light clipped to [0, 1], as 8-bit levels (float, unrounded)."""
+    v = np.clip(linear, 0.0, 1.0)
+    return 255 * np.where(v <= 0.0031308, 12.92 * v, 1.055 * v ** (1 / 2.4) - 0.055)
+
+
+def premultiplied_rgba(rng) -> tuple[np.ndarray, np.ndarray]:
+    """(straight, premultiplied) float64 RGBA of 6x7 pixels: alpha 0.05-1, one column of alpha 0 (colour 0)."""
+    straight = rng.random((6, 7, 4))
+    straight[..., 3] = 0.05 + 0.95 * straight[..., 3]
+    straight[:, 0] = 0.0
+    pre = straight.copy()
+    pre[..., :3] *= pre[..., 3:]
+    return straight, pre
+
+
+@pytest.mark.parametrize("ext,fmt", [(".exr", "half"), (".tif", "float")])
+def test_premultiplied_alpha_is_divided_out_for_png_and_alpha_0_kept(tmp_path, ext, fmt):
+    # EXR (and a float TIFF tagged associated) stores colour premultiplied by alpha, PNG straight colour: the PNG
+    # got the premultiplied values, too dark wherever alpha < 1
+    straight, pre = premultiplied_rgba(np.random.default_rng(11))
+    stored = pre.astype(np.float16 if fmt == "half" else np.float32)
+    write_raw(tmp_path / f"in{ext}", stored, fmt)   # no oiio:UnassociatedAlpha: associated, as EXR always is
+    im = read_image(str(tmp_path / f"in{ext}"))
+    assert image_io.is_premultiplied(im.spec) and image_io.unpremultiplies("o.png", im.spec)
+    assert write_image(str(tmp_path / "out.png"), im.pixels, im.spec, linear=True) is True   # linear -> sRGB too
+    png = read_image(str(tmp_path / "out.png")).pixels.astype(np.float64)
+    s = stored.astype(np.float64)
+    want = srgb8(s[..., :3] / np.where(s[..., 3:] > 0, s[..., 3:], 1.0))
+    np.testing.assert_allclose(png[..., :3], want, atol=0.51)   # the rounding of 8 bits, no more
+    np.testing.assert_allclose(png[..., 3], np.rint(s[..., 3] * 255), atol=0.51)   # alpha as it is
+    assert (png[:, 0] == 0).all()   # alpha 0: nothing to divide, colour kept (no NaN)
+    assert np.abs(png[..., :3] - srgb8(straight[..., :3])).max() < 1.5   # the straight colour, not the stored one
+    assert np.abs(png[..., :3] - srgb8(pre[..., :3])).max() > 40
+
+
+def test_premultiplied_16_bit_tiff_is_divided_out_for_png_in_its_own_levels(tmp_path):
+    _, pre = premultiplied_rgba(np.random.default_rng(12))
+    stored = np.rint(pre * 65535).astype(np.uint16)
+    write_raw(tmp_path / "in.tif", stored, "uint16")   # tagged associated (no oiio:UnassociatedAlpha)
+    im = read_image(str(tmp_path / "in.tif"))
+    write_image(str(tmp_path / "out.png"), im.pixels, im.spec)
+    png = read_image(str(tmp_path / "out.png")).pixels
+    s = stored.astype(np.float64)
+    want = np.clip(np.rint(s[..., :3] * 65535 / np.where(s[..., 3:] > 0, s[..., 3:], 65535)), 0, 65535)
+    assert png.dtype == np.uint16
+    np.testing.assert_array_equal(png[..., :3], want)
+    np.testing.assert_array_equal(png[..., 3], stored[..., 3])
+
+
+@pytest.mark.parametrize("src", [".exr", ".tif"])
+def test_premultiplied_alpha_stays_premultiplied_and_bit_exact_in_exr_and_tiff(tmp_path, src):
+    _, pre = premultiplied_rgba(np.random.default_rng(13))
+    stored = pre.astype(np.float32)
+    write_raw(tmp_path / f"in{src}", stored, "float")
+    im = read_image(str(tmp_path / f"in{src}"))
+    for ext in (".exr", ".tif"):
+        assert not image_io.unpremultiplies(f"o{ext}", im.spec)
+        write_image(str(tmp_path / f"out{ext}"), im.pixels, im.spec, linear=True)
+        back = read_image(str(tmp_path / f"out{ext}"))
+        np.testing.assert_array_equal(back.pixels, stored)
+        assert image_io.is_premultiplied(back.spec)   # the TIFF is tagged associated, not straight
+        again = tmp_path / f"again{ext}"
+        write_image(str(again), back.pixels, back.spec)
+        np.testing.assert_array_equal(read_image(str(again)).pixels, stored)
+
+
+def test_straight_alpha_is_written_as_it_is(tmp_path):
+    # PNG, TGA and BMP store straight alpha (BMP's reader does not say so): nothing divided, to any format
+    rgba = np.random.default_rng(14).integers(0, 256, (5, 6, 4), dtype=np.uint8)
+    for ext in (".png", ".tga", ".bmp"):
+        write_raw(tmp_path / f"in{ext}", rgba, "uint8", {"oiio:UnassociatedAlpha": 1})
+        im = read_image(str(tmp_path / f"in{ext}"))
+        assert not image_io.is_premultiplied(im.spec)
+        write_image(str(tmp_path / f"out{ext}.png"), im.pixels, im.spec)
+        np.testing.assert_array_equal(read_image(str(tmp_path / f"out{ext}.png")).pixels, rgba)
+    write_image(str(tmp_path / "frame.png"), rgba)   # no spec (a decoded video frame): straight
+    np.testing.assert_array_equal(read_image(str(tmp_path / "frame.png")).pixels, rgba)
+
+
+def test_the_filter_says_once_that_premultiplied_alpha_is_divided_out(tmp_path):
+    from click.testing import CliRunner
+
+    from mlaa_stream.cli.main import main
+
+    frame = np.zeros((12, 16, 4), np.float16)
+    frame[..., :3], frame[..., 3] = 0.1, 0.25   # flat (nothing for the filter): straight linear 0.4
+    (tmp_path / "in").mkdir()
+    for n in (1, 2):
+        write_raw(tmp_path / "in" / f"a.{n:04d}.exr", frame, "half")
+    r = CliRunner().invoke(main, [str(tmp_path / "in" / "a.%04d.exr"), "-o", str(tmp_path / "out" / "a.%04d.png")])
+    assert r.exit_code == 0, r.output
+    assert r.output.count("premultiplied alpha of .exr frames is divided out for .png") == 1
+    png = read_image(str(tmp_path / "out" / "a.0002.png")).pixels
+    assert (png[..., :3] == round(float(srgb8(np.float64(np.float16(0.1)) / np.float16(0.25))))).all()
+    assert (png[..., 3] == 64).all()
+    r = CliRunner().invoke(main, [str(tmp_path / "in"), "-o", str(tmp_path / "exr")])   # EXR out: nothing said
+    assert r.exit_code == 0 and "premultiplied" not in r.output, r.output
+    np.testing.assert_array_equal(read_image(str(tmp_path / "exr" / "a.0001.exr")).pixels, frame)

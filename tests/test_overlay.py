@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 
 import numpy as np
 import pyopencl as cl
@@ -613,6 +614,39 @@ def test_overlay_file_not_json(tmp_path):
     p.write_text("{ nope")
     with pytest.raises(ValueError, match=r"bad.json: expected JSON, got an error at line 1"):
         load_overlay(str(p))
+
+
+@pytest.mark.parametrize("field,value,shown", [
+    ("width", 1e40, "1e+40"), ("width", math.inf, "inf"), ("width", math.nan, "nan"), ("width", -2.0, "-2"),
+    ("width", 65536.5, "65536.5"), ("outline_width", 1e40, "1e+40"), ("outline_width", -1.0, "-1")])
+def test_absurd_widths_are_refused_naming_file_feature_and_value(tmp_path, field, value, shown):
+    # a width of 1e40 passed the check (finite, > 0) and drew nothing: float32 made it infinite on the device
+    from click.testing import CliRunner
+    from mlaa_stream.cli.main import main
+
+    line = {"type": "LineString", "coordinates": [[1, 2], [30, 20]]}
+    doc = {"type": "FeatureCollection", "features": [
+        {"type": "Feature", "properties": {}, "geometry": line},
+        {"type": "Feature", "properties": {field: value}, "geometry": line}]}
+    path = _write(tmp_path, doc)
+    with pytest.raises(ValueError, match=rf"expected {field} .*<= 65536 pixels, got {re.escape(shown)}\Z") as info:
+        load_overlay(path)
+    assert f"{path}: feature 1: expected {field} " in str(info.value)
+    with pytest.raises(ValueError, match=rf"line 0: expected {field} .*got {re.escape(shown)}\Z"):
+        draw_polylines(np.zeros((8, 8, 3), np.uint8), [np.array([[0.0, 0.0], [3.0, 4.0]])], **{field: value})
+    out = tmp_path / "out"
+    r = CliRunner().invoke(main, [os.path.join(os.path.dirname(__file__), "..", "fixtures", "demo", "images"),
+                                  "-o", str(out), "--overlay", path])
+    assert r.exit_code == 2, r.output   # a usage error, as other bad --overlay files: nothing done
+    assert f"--overlay {path}" in r.output and f"feature 1: expected {field} " in r.output and shown in r.output
+    assert not out.exists()
+
+
+def test_the_widest_stroke_allowed_is_drawn(renderer):
+    from mlaa_stream.overlay.grlaa import MAX_WIDTH
+
+    out = renderer.draw(np.zeros((8, 8, 3), np.uint8), [np.array([[0.0, 0.0], [3.0, 4.0]])], width=MAX_WIDTH)
+    assert (out == 255).all()
 
 
 def test_parse_bare_geometry():

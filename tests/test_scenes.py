@@ -195,3 +195,11 @@ def test_scenes_command_writes_and_refuses_to_overwrite(tmp_path):
     assert r.exit_code == 0, r.output
     r = CliRunner().invoke(main, ["scenes", str(out), "--only", "bogus"])
     assert r.exit_code == 2 and "expected scene names" in r.output
+
+
+def test_scenes_help_lists_every_group_it_accepts():
+    # --only named "scene groups" without saying which: the names came only with an error
+    r = CliRunner().invoke(main, ["scenes", "--help"])
+    assert r.exit_code == 0, r.output
+    listed = " ".join(r.output.split("--only")[1].split("--overwrite")[0].split())
+    assert listed.endswith(f"(default: all): {', '.join(S.SCENES)}.")

@@ -24,6 +24,10 @@ import OpenImageIO as oiio
 # and converted back to the file's own type when written.
 _NATIVE = {"uint8": np.uint8, "uint16": np.uint16, "half": np.float16, "float": np.float32}
 
+# Formats whose alpha is associated (colour premultiplied by alpha): EXR always, TIFF where its file says so (read
+# with oiio:UnassociatedAlpha unset). Every other format (PNG, TGA, WebP, BMP ...) stores straight alpha.
+_PREMULTIPLIED_FORMATS = ("openexr", "tiff")
+
 _TMP_MARK = ".mlaa-tmp"
 _tmp_counter = itertools.count()
 
@@ -50,12 +54,19 @@ class Image:
         return tuple(self.spec.channelnames)
 
 
+@lru_cache(maxsize=None)
+def _format_extensions() -> dict[str, frozenset[str]]:
+    """OpenImageIO's format names -> their file extensions (lower case, with the dot)."""
+    formats = {}
+    for entry in oiio.get_string_attribute("extension_list").split(";"):
+        name, _, names = entry.partition(":")
+        formats[name] = frozenset("." + n.lower() for n in names.split(",") if n)
+    return formats
+
+
 def image_extensions() -> frozenset[str]:
     """File extensions OpenImageIO can read (lower case, with the dot)."""
-    exts = set()
-    for entry in oiio.get_string_attribute("extension_list").split(";"):
-        _, _, names = entry.partition(":")
-        exts.update("." + n.lower() for n in names.split(",") if n)
+    exts = set().union(*_format_extensions().values())
     exts.discard(".null")
     exts.discard(".nul")
     exts.discard(".term")
@@ -120,6 +131,8 @@ def read_image(path: str) -> Image:
         if pixels is None:
             raise ImageReadError(f"{path}: reading pixels failed: {inp.geterror() or 'unknown error'}")
         spec = oiio.ImageSpec(spec)  # a copy that outlives the ImageInput
+        if spec.alpha_channel >= 0 and inp.format_name() not in _PREMULTIPLIED_FORMATS:
+            spec.attribute("oiio:UnassociatedAlpha", 1)  # straight alpha, also where the reader does not say so (BMP)
     finally:
         inp.close()
     pixels = np.asarray(pixels)
@@ -339,16 +352,48 @@ def remove_quietly(path: str) -> None:
 
 
 def output_spec(spec: oiio.ImageSpec, pixels: np.ndarray) -> oiio.ImageSpec:
-    """The input's spec (metadata included) for writing `pixels` back; alpha stays unassociated."""
+    """The input's spec (metadata included) for writing `pixels` back; its alpha stays as it says (is_premultiplied)."""
     out = oiio.ImageSpec(spec)
     h, w = pixels.shape[:2]
     c = 1 if pixels.ndim == 2 else pixels.shape[2]
     if (out.width, out.height, out.nchannels) != (w, h, c):
         raise ValueError(f"expected pixels of {out.width}x{out.height}x{out.nchannels}, "
                          f"got {w}x{h}x{c}")
-    if out.alpha_channel >= 0:
-        out.attribute("oiio:UnassociatedAlpha", 1)
     return out
+
+
+def is_premultiplied(spec: oiio.ImageSpec) -> bool:
+    """True when the spec's alpha is associated (colour premultiplied by it): OpenImageIO's convention for a spec
+    with an alpha channel not marked oiio:UnassociatedAlpha; read_image marks every straight-alpha file."""
+    return spec.alpha_channel >= 0 and not spec.get_int_attribute("oiio:UnassociatedAlpha", 0)
+
+
+def unpremultiplies(path: str, spec: oiio.ImageSpec) -> bool:
+    """True when write_image divides the colour of `spec`'s pixels by alpha for `path`: premultiplied alpha (EXR, a
+    TIFF tagged so) into a format of straight alpha (PNG, TGA ...); EXR and TIFF keep it premultiplied."""
+    ext = os.path.splitext(path)[1].lower()
+    keeps = any(ext in _format_extensions().get(name, ()) for name in _PREMULTIPLIED_FORMATS)
+    return is_premultiplied(spec) and not keeps
+
+
+def unpremultiplied(pixels: np.ndarray, spec: oiio.ImageSpec) -> tuple[np.ndarray, oiio.ImageSpec]:
+    """Straight-alpha pixels from premultiplied ones: colour divided by alpha (float32; integers rounded back to
+    their type), alpha and depth as they are; where alpha is 0 (or less) the colour stays (nothing to recover).
+    The spec is marked unassociated."""
+    alpha = spec.alpha_channel
+    colour = [c for c in range(pixels.shape[2]) if c not in (alpha, spec.z_channel)]
+    top = 1.0 if pixels.dtype.kind == "f" else float(np.iinfo(pixels.dtype).max)
+    a = pixels[:, :, alpha:alpha + 1].astype(np.float64) / top
+    scale = np.divide(1.0, a, out=np.ones_like(a), where=a > 0)
+    straight = pixels[:, :, colour] * scale
+    if pixels.dtype.kind == "f":
+        out = pixels.astype(np.float32)  # float16 would overflow where alpha is tiny
+    else:
+        out, straight = pixels.copy(), np.clip(np.rint(straight), 0, top)
+    out[:, :, colour] = straight
+    spec = oiio.ImageSpec(spec)
+    spec.attribute("oiio:UnassociatedAlpha", 1)
+    return out, spec
 
 
 @lru_cache(maxsize=None)
@@ -398,10 +443,11 @@ def write_image(path: str, pixels: np.ndarray, spec: oiio.ImageSpec | None = Non
                 overwrite: bool = False, linear: bool = False) -> bool:
     """Write `pixels` to `path` atomically (temporary name, then rename), in the spec's sample type.
 
-    Without a spec the sample type is the array's. `linear`: float pixels are linear light (is_linear);
-    where the format stores integers they are encoded to sRGB (srgb_encoded), else written as they are.
-    True when they were encoded. A full disk raises OSError(ENOSPC); any other failure raises
-    ImageWriteError naming the file.
+    Without a spec the sample type is the array's and alpha is straight (as decoded video has it). Premultiplied
+    alpha (is_premultiplied: EXR) is divided out for a format of straight alpha (unpremultiplies: PNG). `linear`:
+    float pixels are linear light (is_linear); where the format stores integers they are encoded to sRGB
+    (srgb_encoded), else written as they are. True when they were encoded. A full disk raises OSError(ENOSPC);
+    any other failure raises ImageWriteError naming the file.
     """
     pixels = np.ascontiguousarray(pixels)
     if pixels.ndim == 2:
@@ -412,7 +458,10 @@ def write_image(path: str, pixels: np.ndarray, spec: oiio.ImageSpec | None = Non
             raise ImageWriteError(f"{path}: expected uint8, uint16, float16 or float32 pixels, "
                                   f"got {pixels.dtype}")
         spec = oiio.ImageSpec(pixels.shape[1], pixels.shape[0], pixels.shape[2], fmt)
+        spec.attribute("oiio:UnassociatedAlpha", 1)
     spec = output_spec(spec, pixels)
+    if unpremultiplies(path, spec):
+        pixels, spec = unpremultiplied(pixels, spec)
     encode = linear and pixels.dtype.kind == "f" and is_display_encoded(path, spec)
     if encode:
         pixels, spec = srgb_encoded(pixels, spec)

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from typing import Callable, Iterator
 
 from mlaa_stream.io.images import (Image, ImageReadError, ImageWriteError, is_image_path, is_temp_path,
-                       read_image, split_for_filter, write_image)
+                       read_image, split_for_filter, unpremultiplies, write_image)
 from mlaa_stream.io.item import Item
 
 _PRINTF = re.compile(r"%(0?)(\d*)d")
@@ -284,7 +284,8 @@ def _data_window(image: Image) -> str:
 
 def image_sink(report: Report, *, overwrite: bool, strict: bool) -> Callable[[Item], None]:
     """Write each filtered frame back in its source's format and metadata, atomically; linear-light frames
-    written to an integer format are encoded to sRGB (write_image), said once through report.caution.
+    written to an integer format are encoded to sRGB and premultiplied alpha written to a format of straight alpha
+    is divided out (write_image), each said once through report.caution.
 
     A full disk (or a read-only file system) always stops the run; other write failures stop a
     sequence (strict) but only skip the file in a folder.
@@ -304,11 +305,13 @@ def image_sink(report: Report, *, overwrite: bool, strict: bool) -> Callable[[It
             report.fail(f"{ff.dst}: cannot write: {exc.strerror or exc}")
             return
         report.written.append(ff.dst)
+        src_ext, ext = os.path.splitext(ff.src)[1].lower(), os.path.splitext(ff.dst)[1].lower() or ff.dst
+        if unpremultiplies(ff.dst, image.spec):   # EXR's associated alpha into PNG's straight alpha
+            report.caution_once(f"premultiplied alpha of {src_ext or 'the input'} frames is divided out for {ext}, a "
+                                f"format of straight alpha (EXR and TIFF keep it premultiplied)")
         if encoded:  # linear light in a format of display values (PNG, JPEG, 8/16-bit TIFF)
-            ext = os.path.splitext(ff.dst)[1].lower() or ff.dst
-            report.caution_once(f"linear-light frames ({os.path.splitext(ff.src)[1].lower() or 'float'}) are "
-                                f"encoded to sRGB for {ext}, a format of display values (EXR and float TIFF "
-                                f"keep them linear)")
+            report.caution_once(f"linear-light frames ({src_ext or 'float'}) are encoded to sRGB for {ext}, a format "
+                                f"of display values (EXR and float TIFF keep them linear)")
 
     return sink
 

@@ -24,6 +24,13 @@ ENC8_SIZE = 65536  # kernels/grlaa.cl: uint8 encode table
 BIN_LOCAL = 64     # work-group size of the binning kernel
 BIN_CAP = 64       # initial room for entries per tile (grows when a tile lists more)
 DEVICE_CLIP_MARGIN = 4096.0  # points this far off the frame: segment tables in float64 on the host
+# The widest stroke (and outline) drawn: kernels/grlaa.cl computes distances to the stroke's edge in float32, whose
+# spacing at 2^15 px (half this width) is 2^-8 px. Against the float64 reference an edge 65536 px wide is within 1
+# level of 8-bit coverage (measured: 3 levels at 2^20, the edge lost at 2^23, and nothing at all drawn from ~4.3e9
+# on, where the half width overflows the kernel's int tile bounds), and it is over 4x the widest frame in use (16K:
+# 15360 px): a wider stroke covers the same pixels, so a wider value is a mistake (a unit, an exponent), refused
+# rather than drawn as nothing.
+MAX_WIDTH = 65536.0
 _FOOTPRINT_HALF_DIAGONAL = math.sqrt(0.5)
 
 # --------------------------------------------------------------------------------------- styles
@@ -67,10 +74,11 @@ class LineStyle:
     cap: str = "round"
 
     def check(self, what: str) -> None:
-        if not (math.isfinite(self.width) and self.width > 0):
-            raise ValueError(f"{what}: expected width > 0 pixels, got {self.width}")
-        if not (math.isfinite(self.outline_width) and self.outline_width >= 0):
-            raise ValueError(f"{what}: expected outline_width >= 0 pixels, got {self.outline_width}")
+        if not (0 < self.width <= MAX_WIDTH):   # also NaN and infinity
+            raise ValueError(f"{what}: expected width > 0 and <= {MAX_WIDTH:g} pixels, got {self.width:g}")
+        if not (0 <= self.outline_width <= MAX_WIDTH):
+            raise ValueError(f"{what}: expected outline_width >= 0 and <= {MAX_WIDTH:g} pixels, "
+                             f"got {self.outline_width:g}")
         if not (0.0 <= self.opacity <= 1.0):
             raise ValueError(f"{what}: expected opacity in [0, 1], got {self.opacity}")
         if self.cap not in CAPS:
