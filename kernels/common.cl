@@ -249,29 +249,29 @@ inline float3 lab_of_levels(__global const PIXEL_T *src, __global const float *l
         L = 116.0f * fy_ - 16.0f; A = 500.0f * (fx_ - fy_); Z = 200.0f * (fy_ - fz_); }
 #endif
 
-// Pixel i's colour as 8-bit levels in R, G, B order, into c[0 .. 2] (device/formats.py levels8): the overlay and
-// noise tests count in these, exact on every sample type.
+// A stored sample as an 8-bit level (device/formats.py levels8): the overlay and noise tests count in these, exact on
+// every sample type.
+inline int level8(PIXEL_T v)
+{
+#ifdef PIXEL_IS_FLOAT
+    const float f = fmin(fmax((float)v, 0.0f), 1.0f) * 255.0f;
+    return (int)(f + 0.5f);  // truncation of a non-negative value: floor
+#else
+    return PIXEL_MAX > 255.0f ? ((int)v * 255 + 32767) / 65535 : (int)v;
+#endif
+}
+
+// Pixel i's colour as 8-bit levels in R, G, B order, into c[0 .. 2].
 inline void levels8(__global const PIXEL_T *src, int i, int *c)
 {
 #if CHANNELS == 1
-    const PIXEL_T r = src[i], g = r, b = r;
+    c[0] = c[1] = c[2] = level8(src[i]);
 #else
     __global const PIXEL_T *p = src + (size_t)i * CHANNELS;
-#if ORDER_BGR
-    const PIXEL_T r = p[2], g = p[1], b = p[0];
-#else
-    const PIXEL_T r = p[0], g = p[1], b = p[2];
+    c[0] = level8(p[ORDER_BGR ? 2 : 0]);
+    c[1] = level8(p[1]);
+    c[2] = level8(p[ORDER_BGR ? 0 : 2]);
 #endif
-#endif
-    const PIXEL_T v[3] = {r, g, b};
-    for (int k = 0; k < 3; ++k) {
-#ifdef PIXEL_IS_FLOAT
-        const float f = fmin(fmax(v[k], 0.0f), 1.0f) * 255.0f;
-        c[k] = (int)(f + 0.5f);  // truncation of a non-negative value: floor
-#else
-        c[k] = PIXEL_MAX > 255.0f ? ((int)v[k] * 255 + 32767) / 65535 : (int)v[k];
-#endif
-    }
 }
 
 // lin[v] = the linear value rgb_to_lab reads from the table for the stored level v (load_px's

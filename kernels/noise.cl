@@ -21,9 +21,12 @@
 
 inline int luma256(__global const PIXEL_T *src, int i)
 {
-    int c[3];
-    levels8(src, i, c);
-    return 54 * c[0] + 183 * c[1] + 19 * c[2];
+#if CHANNELS == 1
+    return 256 * level8(src[i]);
+#else
+    __global const PIXEL_T *p = src + (size_t)i * CHANNELS;
+    return 54 * level8(p[ORDER_BGR ? 2 : 0]) + 183 * level8(p[1]) + 19 * level8(p[ORDER_BGR ? 0 : 2]);
+#endif
 }
 
 // Column x's second difference down rows y - 1, y, y + 1 (the operator's separable half).
