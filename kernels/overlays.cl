@@ -71,11 +71,18 @@ inline int2 tile_overlay_counts(__global const PIXEL_T *src, int x0, int y0, int
         const int y = y0 + j - OV_R;
         for (int k = 0; k < OV_N; ++k) {
             const int x = x0 + k - OV_R;
-            int c[3] = {-1, -1, -1};
-            if (interior || (x >= 0 && y >= 0 && x < w && y < h)) levels8(src, IDX(x, y, w), c);
-            qr[j][k] = c[0];
-            qg[j][k] = c[1];
-            qb[j][k] = c[2];
+            if (interior || (x >= 0 && y >= 0 && x < w && y < h)) {  // common.cl levels8, written out: no array
+#if CHANNELS == 1
+                qr[j][k] = qg[j][k] = qb[j][k] = level8(src[IDX(x, y, w)]);
+#else
+                __global const PIXEL_T *p = src + (size_t)IDX(x, y, w) * CHANNELS;
+                qr[j][k] = level8(p[ORDER_BGR ? 2 : 0]);
+                qg[j][k] = level8(p[1]);
+                qb[j][k] = level8(p[ORDER_BGR ? 0 : 2]);
+#endif
+            } else {
+                qr[j][k] = qg[j][k] = qb[j][k] = -1;
+            }
         }
     }
 #define OV_IN(j, k) (qr[j][k] >= 0)

@@ -1,11 +1,13 @@
 """Per-pass timings of the spatial filter on 1920x1080 frames: `python -m mlaa_stream.bench.mlaa_profile`.
 
-Five frames (six with a rendered one): the yardstick's mixed timing frame (edges, UI text, checkerboard, photo,
+Five frames (seven with the rendered ones): the yardstick's mixed timing frame (edges, UI text, checkerboard, photo,
 wires); a photograph three ways -- upscaled to fill the frame (smooth), tiled at 1:1 (every pixel differs from
 its neighbours: a detailed shot) and upscaled with camera noise (Gaussian, sigma 2 levels: what video
 from a camera looks like to edge detection) --; a flat frame (the floor); and, where the
-rendered scenes can be drawn or are cached, a 1-spp render (the atrium still tiled 3x3). For each: the median of >= 20 frames after warm-up of
-`Filter.process` (host to host), and each pass's device time on a profiling queue. Writes
+rendered scenes can be drawn or are cached, a 1-spp render (the atrium still tiled 3x3), also with film grain
+(Gaussian, 4 levels, one value for R, G and B: its render regions' quiet pixels, kernels/noise.cl). For each: the
+median of >= 20 frames after warm-up of `Filter.process` (host to host), and each pass's device time on a
+profiling queue. Writes
 docs/performance.md. A benchmark, never a unit test; machines here are noisy.
 """
 from __future__ import annotations
@@ -41,7 +43,10 @@ def frames() -> dict[str, np.ndarray]:
     try:  # a 1-spp render (the yardstick's rendered atrium still, 640x360, tiled 3x3): needs EGL or the cache
         from mlaa_stream.yardstick.scenes import SceneUnavailable, generate_scenes
         atrium = next(s for s in generate_scenes(names=["rendered"]) if s.name == "rendered_atrium")
-        out["rendered (atrium still, tiled 3x3)"] = np.ascontiguousarray(np.tile(atrium.inputs[0], (3, 3, 1)))
+        render = np.ascontiguousarray(np.tile(atrium.inputs[0], (3, 3, 1)))
+        out["rendered (atrium still, tiled 3x3)"] = render
+        grain = rng.normal(0, 4, render.shape[:2] + (1,)).round().astype(np.int16)
+        out["rendered + film grain (4 levels)"] = np.clip(render.astype(np.int16) + grain, 0, 255).astype(np.uint8)
     except (SceneUnavailable, ImportError, StopIteration):
         pass
     return out
