@@ -36,6 +36,7 @@ removed in linear light (the temporal measures as for the other rows, FLIP and d
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import time
 
 import numpy as np
@@ -119,6 +120,14 @@ def homography_maps(inputs: np.ndarray) -> dict[tuple[int, int], np.ndarray]:
     return maps
 
 
+def with_grain(scene: Scene, sigma: float, seed: int = 1) -> Scene:
+    """`scene` with seeded Gaussian grain of `sigma` levels, new every frame (one value for R, G and B), added to
+    input and truth alike, as grain added after rendering; edges kept from the clean scene."""
+    n = np.random.default_rng(seed).normal(0.0, sigma, scene.inputs.shape[:3] + (1,))
+    inputs, truths = (np.clip(np.round(a + n), 0, 255).astype(np.uint8) for a in (scene.inputs, scene.truths))
+    return dataclasses.replace(scene, name=f"{scene.name}_grain{sigma:g}", inputs=inputs, truths=truths)
+
+
 def exact_tss(scene: Scene, spatial: np.ndarray, maps: dict) -> np.ndarray:
     """TSS's resolve with exact maps: each frame from its last DEFAULT_FRAMES - 1 inputs and itself."""
     outs = []
@@ -146,6 +155,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="oracle rows with the renderer's exact motion on the rendered shots (needs EGL)")
     ap.add_argument("--dense-samples", action="store_true",
                     help="TSS tracks per-tile motion on dense frames (dense_samples; slow)")
+    ap.add_argument("--grain", default="", metavar="SIGMA[,SIGMA...]",
+                    help="also every scene with film grain of these deviations in 8-bit levels: seeded Gaussian, new "
+                         "every frame, one value for R, G and B, added to input and truth alike (NAME_grainN)")
     ap.add_argument("--hdr", default="", metavar="SCALE[,SCALE...]",
                     help="also the pan as linear-light HDR frames times each SCALE (linear_input)")
     args = ap.parse_args(argv)
@@ -160,6 +172,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.views:
         from mlaa_stream.bench.rendered_views import view_shots
         scenes += view_shots(640, 360, args.view_frames, world=args.world)
+    scenes += [with_grain(s, float(g)) for g in args.grain.split(",") if g for s in scenes]
     worse = []
     with Filter(args.device, bgr=False, keep_regions=needs_regions(args.method)) as filt:
         print(f"device: {filt.device_name}; FLIP {'over all frames' if with_flip else 'not installed'}")

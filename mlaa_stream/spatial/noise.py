@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from fractions import Fraction
 
+import cv2
 import numpy as np
 
 from mlaa_stream.device.formats import LUMA256, levels8
@@ -29,8 +30,12 @@ def noise_defines() -> dict:
 
 
 def luma256(frame: np.ndarray, bgr: bool = False) -> np.ndarray:
-    """(h, w) int64 Rec. 709 luma in 256ths of 8-bit levels (kernels/noise.cl luma256)."""
-    return levels8(frame, bgr) @ LUMA256
+    """(h, w) int32 Rec. 709 luma in 256ths of 8-bit levels (kernels/noise.cl luma256)."""
+    a = np.asarray(frame)
+    if a.dtype == np.uint8 and a.ndim == 3 and a.shape[2] >= 3:  # the common case, in float32 (exact: < 2^24)
+        w = LUMA256[::-1] if bgr else LUMA256
+        return (a[..., :3].astype(np.float32) @ w.astype(np.float32)).astype(np.int32)
+    return (levels8(frame, bgr) @ LUMA256).astype(np.int32)
 
 
 def noise_census(lum: np.ndarray) -> np.ndarray:
@@ -39,35 +44,39 @@ def noise_census(lum: np.ndarray) -> np.ndarray:
     h, w = lum.shape
     bands = -(-h // TILE)
     hist = np.zeros((bands, NOISE_BINS), np.int64)
-    if w < 3:
+    ys = np.array([b * TILE + r for b in range(bands) for r in range(1, TILE, NOISE_ROW_STEP)], np.int64)
+    ys = ys[ys < h - 1]
+    if w < 3 or not len(ys):
         return hist
-    d2 = lum[:-2] - 2 * lum[1:-1] + lum[2:]            # row y's column second differences are d2[y - 1]
-    lap = np.abs(d2[:, :-2] - 2 * d2[:, 1:-1] + d2[:, 2:]) >> 8  # lap[y - 1, x - 1]
-    for band in range(bands):
-        for r in range(1, TILE, NOISE_ROW_STEP):
-            y = band * TILE + r
-            if y >= h - 1:
-                break
-            hist[band] += np.bincount(np.minimum(lap[y - 1, 0::2], NOISE_BINS - 1), minlength=NOISE_BINS)
+    lum = lum.astype(np.int64)
+    d2 = lum[ys - 1] - 2 * lum[ys] + lum[ys + 1]              # each sampled row's column second differences
+    lap = np.abs(d2[:, :-2] - 2 * d2[:, 1:-1] + d2[:, 2:])[:, 0::2] >> 8  # odd columns x = 1, 3, ...
+    bins = np.minimum(lap, NOISE_BINS - 1) + (ys // TILE)[:, None] * NOISE_BINS
+    hist.ravel()[:] = np.bincount(bins.ravel(), minlength=bands * NOISE_BINS)
     return hist
 
 
-def noise_level(frame: np.ndarray, bgr: bool = False) -> int:
-    """The frame's noise level (kernels/noise.cl noise_level): the lower median bin of the census, 0 if empty."""
-    total = noise_census(luma256(frame, bgr)).sum(0)
+def level_of(lum: np.ndarray) -> int:
+    """The noise level of luma `lum` (kernels/noise.cl noise_level): the lower median bin of the census, 0 if
+    nothing was sampled."""
+    total = noise_census(lum).sum(0)
     n = int(total.sum())
     return int(np.searchsorted(np.cumsum(total) * 2, n)) if n else 0
+
+
+def noise_level(frame: np.ndarray, bgr: bool = False) -> int:
+    """The frame's noise level in whole levels (level_of its luma256)."""
+    return level_of(luma256(frame, bgr))
 
 
 def quiet_pixels(frame: np.ndarray, bgr: bool = False, level: int | None = None) -> np.ndarray:
     """(h, w) bool: pixels whose 3x3 window of luma (clamped to the frame) spans under NOISE_SPAN x the frame's
     noise level (kernels/noise.cl noise_quiet; `level`: noise_level's, computed when None)."""
     lum = luma256(frame, bgr)
-    level = noise_level(frame, bgr) if level is None else level
+    level = level_of(lum) if level is None else level
     if level <= 0:
         return np.zeros(lum.shape, bool)
-    h, w = lum.shape
-    p = np.pad(lum, 1, mode="edge")
-    win = np.stack([p[dy:dy + h, dx:dx + w] for dy in range(3) for dx in range(3)])
-    span = win.max(0) - win.min(0)
+    k = np.ones((3, 3), np.uint8)
+    f = lum.astype(np.float32)  # exact: luma in 256ths stays under 2^24
+    span = cv2.dilate(f, k, borderType=cv2.BORDER_REPLICATE) - cv2.erode(f, k, borderType=cv2.BORDER_REPLICATE)
     return span * NOISE_SPAN.denominator < NOISE_SPAN.numerator * 256 * level

@@ -83,6 +83,7 @@ DEFAULT_FRAMES = 16   # K: ring frames (the current one included)
 GRID = 4              # footprint cells per side (GRID^2 strata)
 EPS = 0.03            # linear-light widening of the current 3x3 colour box (issue 16: 0.02-0.05)
 MIN_CELLS = 2         # fewer filled cells: the spatial output stands
+NOISE_EVERY = 8       # frames between measurements of the input's grain level (spatial/noise.py) in a shot
 FULL_CELLS = 9        # filled cells at which the samples alone resolve the pixel (below: n / 9 of it)
 FULL_CELLS_AHEAD = 1.25   # ... plus this many per look-ahead frame (rounded): more frames fill more cells with
                           # samples of sub-pixel detail that the spatial output renders better (docs/temporal.md,
@@ -1214,6 +1215,7 @@ class TSSStage:
         self.backend = backend
         self.motion = MotionRing(self.frames, mode, refine, fb_check, dense_samples)
         self.stats: list[dict] = []
+        self._noise: tuple | None = None   # (frame shape, index measured, level): _grain_stands
         self._lock = threading.Lock()
         self._buffers: _Buffers | None = None
         self.context = None
@@ -1280,8 +1282,27 @@ class TSSStage:
             out = self._step(fin, fout, int(index), ahead)
         if self.show is not None:
             return out
+        out = self._grain_stands(fin, fout, out, int(index))
         # NaN, inf and samples beyond ±1e15 pass through as the spatial filter passes them (spatial/nonfinite.py)
         return restore_out_of_range(frame_in, out.astype(frame_filtered.dtype) if wide else out)
+
+    def _grain_stands(self, fin: np.ndarray, fout: np.ndarray, out: np.ndarray, index: int) -> np.ndarray:
+        """`out` with the spatial pixel back where the input's 3x3 window spans no more than its grain (quiet
+        pixels, spatial/noise.py, as the spatial filter's render regions leave them): grain added after rendering
+        is new every frame and part of the truth, and the ring's samples of other frames would average it away
+        (docs/temporal.md, "Grain"). The frame's level is measured every NOISE_EVERY frames of a shot (grain keeps
+        its strength), and where it is 0 (a clean render) nothing is computed."""
+        from mlaa_stream.spatial.noise import luma256, level_of, quiet_pixels
+        if self._noise is None or self._noise[0] != fin.shape or index - self._noise[1] >= NOISE_EVERY \
+                or index < self._noise[1]:
+            self._noise = (fin.shape, index, level_of(luma256(fin, self.bgr)))
+        level = self._noise[2]
+        if self.stats:
+            self.stats[-1]["noise_level"] = level
+        if level <= 0:
+            return out
+        quiet = quiet_pixels(fin, self.bgr, level)
+        return np.where(quiet.reshape(quiet.shape + (1,) * (out.ndim - 2)), fout, out)
 
     def _look_ahead(self, pyr: Pyramid, index: int, future: list[np.ndarray]) -> list[Ahead]:
         """The look-ahead frames' pyramids and frame-to-frame decisions, each measured once (kept by index
