@@ -867,8 +867,9 @@ RARELY_CALLED void refine_tile(__global const PIXEL_T *src, __global const float
 __kernel void refine_fallback(__global const PIXEL_T *src, __global const float *luts, __global const float *lin,
                               __global const uchar *edges, __global const ushort2 *hdist,
                               __global const ushort2 *vdist, __global const uchar *render,
-                              __global const float *table, __global const int *noise, __global const PIXEL_T *mid,
-                              __global PIXEL_T *dst, const int w, const int h, const int tiles_x, const int tiles_y)
+                              __global const float *table, __global const int *noise,
+                              __global const uchar *quiet_px, __global const PIXEL_T *mid, __global PIXEL_T *dst,
+                              const int w, const int h, const int tiles_x, const int tiles_y)
 {
     const int t0 = get_global_id(0) * (SEGMENT / FALLBACK_TILE), ty = get_global_id(1);
     if (t0 >= tiles_x || ty >= tiles_y) return;
@@ -884,7 +885,7 @@ __kernel void refine_fallback(__global const PIXEL_T *src, __global const float 
             take[y - y0] = 0;
             for (int x = x0; x < x1; ++x)
                 if (!(ON_LONG_RUN(edges, hdist, vdist, x, y, w) && px_differs(src, mid, IDX(x, y, w))) &&
-                    !noise_quiet(src, x, y, w, h, level))
+                    !noise_quiet(quiet_px, IDX(x, y, w), level))
                     take[y - y0] |= 1u << (x - x0);
             any |= take[y - y0];
         }
@@ -901,8 +902,9 @@ __kernel void refine_fallback(__global const PIXEL_T *src, __global const float 
 inline void fallback_tile(__global const PIXEL_T *src, __global const float *luts, __global const float *lin,
                           __global const uchar *edges,
                           __global const ushort2 *hdist, __global const ushort2 *vdist, __global const uchar *counts,
-                          __global const uchar *render, __global const float *table, __global PIXEL_T *dst, int w,
-                          int h, int tiles_x, int tiles_y, int tx, int ty, int noise)
+                          __global const uchar *render, __global const float *table,
+                          __global const uchar *quiet_px, __global PIXEL_T *dst, int w, int h, int tiles_x,
+                          int tiles_y, int tx, int ty, int noise)
 {
 #if FALLBACK_MIN_CHANGED > 0
     const int rendered = RENDER_REGIONS && render[ty * tiles_x + tx];
@@ -928,7 +930,7 @@ inline void fallback_tile(__global const PIXEL_T *src, __global const float *lut
         take[y - y0] = 0;
         if (quiet && !(rendered && FOOTPRINT_TABLE)) continue;
         for (int x = x0; x < x1; ++x) {
-            const int region = rendered && !noise_quiet(src, x, y, w, h, noise);
+            const int region = rendered && !noise_quiet(quiet_px, IDX(x, y, w), noise);
             if (!quiet) {
                 const int changed_px = px_differs(src, dst, IDX(x, y, w));
                 int eligible = borders_edge(edges, x, y, w);
@@ -959,13 +961,13 @@ __kernel void fxaa_fallback(__global const PIXEL_T *src, __global const float *l
                             __global const uchar *edges, __global const ushort2 *hdist,
                             __global const ushort2 *vdist, __global const uchar *counts,
                             __global const uchar *render, __global const float *table,
-                            __global const int *noise, __global PIXEL_T *dst, const int w, const int h,
-                            const int tiles_x, const int tiles_y)
+                            __global const int *noise, __global const uchar *quiet_px, __global PIXEL_T *dst,
+                            const int w, const int h, const int tiles_x, const int tiles_y)
 {
     const int t0 = get_global_id(0) * (SEGMENT / FALLBACK_TILE), ty = get_global_id(1);
     if (t0 >= tiles_x || ty >= tiles_y) return;
     const int t1 = min(t0 + SEGMENT / FALLBACK_TILE, tiles_x), level = noise[0];
     for (int tx = t0; tx < t1; ++tx)
-        fallback_tile(src, luts, lin, edges, hdist, vdist, counts, render, table, dst, w, h, tiles_x, tiles_y,
-                      tx, ty, level);
+        fallback_tile(src, luts, lin, edges, hdist, vdist, counts, render, table, quiet_px, dst, w, h, tiles_x,
+                      tiles_y, tx, ty, level);
 }

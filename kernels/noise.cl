@@ -78,19 +78,37 @@ __kernel void noise_level(__global const int *hist, __global int *level, const i
     level[0] = n ? m : 0;
 }
 
-// Whether pixel (x, y) is quiet: its 3x3 window's luma (clamped to the frame) spans under NOISE_SPAN_NUM /
-// NOISE_SPAN_DEN times `level`, the frame's noise level in whole levels (0: no pixel is).
-inline int noise_quiet(__global const PIXEL_T *src, int x, int y, int w, int h, int level)
+// quiet[i] = 1 where pixel i's 3x3 window of luma (clamped to the frame) spans under NOISE_SPAN_NUM / NOISE_SPAN_DEN
+// times the frame's noise level (in whole levels), else 0; nothing is written where the level is 0 (no pixel is
+// quiet: readers test the level first, noise_quiet). One work item per SEGMENT pixels of a row; the window's
+// columns slide along it (three luma reads per pixel).
+__kernel void noise_mask(__global const PIXEL_T *src, __global const int *noise, __global uchar *quiet, const int w,
+                         const int h)
 {
-    if (level <= 0) return 0;
-    int lo = 1 << 30, hi = -1;
-    for (int j = -1; j <= 1; ++j) {
-        const int row = clamp_to(y + j, h - 1) * w;
-        for (int k = -1; k <= 1; ++k) {
-            const int l = luma256(src, row + clamp_to(x + k, w - 1));
-            lo = min(lo, l);
-            hi = max(hi, l);
-        }
+    const int x0 = get_global_id(0) * SEGMENT, y = get_global_id(1), level = noise[0];
+    if (level <= 0 || x0 >= w || y >= h) return;
+    const int x1 = min(x0 + SEGMENT, w), above = max(y - 1, 0) * w, here = y * w, below = min(y + 1, h - 1) * w;
+    const int limit = NOISE_SPAN_NUM * 256 * level;
+    int lo[3], hi[3];  // columns x - 1, x, x + 1: their min and max over the three rows
+    for (int k = 0; k < 3; ++k) {
+        const int x = clamp_to(x0 - 1 + k, w - 1);
+        const int a = luma256(src, above + x), b = luma256(src, here + x), c = luma256(src, below + x);
+        lo[k] = min(a, min(b, c));
+        hi[k] = max(a, max(b, c));
     }
-    return (hi - lo) * NOISE_SPAN_DEN < NOISE_SPAN_NUM * 256 * level;
+    for (int x = x0; x < x1; ++x) {
+        const int span = max(hi[0], max(hi[1], hi[2])) - min(lo[0], min(lo[1], lo[2]));
+        quiet[here + x] = (uchar)(span * NOISE_SPAN_DEN < limit);
+        const int n = clamp_to(x + 2, w - 1);
+        const int a = luma256(src, above + n), b = luma256(src, here + n), c = luma256(src, below + n);
+        lo[0] = lo[1];
+        hi[0] = hi[1];
+        lo[1] = lo[2];
+        hi[1] = hi[2];
+        lo[2] = min(a, min(b, c));
+        hi[2] = max(a, max(b, c));
+    }
 }
+
+// Whether pixel i is quiet (noise_mask's flag, read only where the frame's level is over 0).
+#define noise_quiet(quiet, i, level) ((level) > 0 && (quiet)[i])

@@ -8,7 +8,8 @@ import pytest
 
 from mlaa_stream.device.formats import frame_format
 from mlaa_stream.spatial import noise as N
-from mlaa_stream.spatial.fallback import FALLBACK_TILE, fallback_defines, fallback_reference, render_regions_of
+from mlaa_stream.spatial.fallback import (FALLBACK_TILE, SEGMENT, fallback_defines, fallback_reference,
+                                         render_regions_of)
 from mlaa_stream.spatial.filter import Filter
 
 from test_fallback import _as, cables_on_sky, shaded_polygons
@@ -27,8 +28,9 @@ def render_frame8(seed: int) -> np.ndarray:
     return np.concatenate([shaded_polygons(seed, 144, 192), gap, cables_on_sky(seed, 144, 192)], 1)
 
 
-def run_census(device, frame: np.ndarray, bgr: bool = False) -> tuple[np.ndarray, int]:
-    """noise_census and noise_level on `frame`: the bands' histograms and the level."""
+def run_census(device, frame: np.ndarray, bgr: bool = False) -> tuple[np.ndarray, int, np.ndarray]:
+    """noise_census, noise_level and noise_mask on `frame`: the bands' histograms, the level and the quiet flags
+    (h, w) bool (all False where the level is 0: the mask is not written then)."""
     fmt = frame_format(frame, bgr)
     defs = fallback_defines(fmt, True, False)
     bands = -(-fmt.height // FALLBACK_TILE)
@@ -36,27 +38,34 @@ def run_census(device, frame: np.ndarray, bgr: bool = False) -> tuple[np.ndarray
     src = cl.Buffer(device.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(frame))
     hist = cl.Buffer(device.ctx, mf.READ_WRITE, 4 * N.NOISE_BINS * bands)
     level = cl.Buffer(device.ctx, mf.READ_WRITE, 4)
+    flags = np.zeros((fmt.height, fmt.width), np.uint8)
+    quiet = cl.Buffer(device.ctx, mf.READ_WRITE | mf.COPY_HOST_PTR, hostbuf=flags)
     W, H = np.int32(fmt.width), np.int32(fmt.height)
     device.kernel("fallback", "noise_census", defs)(device.queue, (bands,), None, src, hist, W, H)
     device.kernel("fallback", "noise_level", defs)(device.queue, (1,), None, hist, level, np.int32(bands))
+    device.kernel("fallback", "noise_mask", defs)(device.queue, (-(-fmt.width // SEGMENT), fmt.height), None, src,
+                                                  level, quiet, W, H)
     h, lv = np.empty((bands, N.NOISE_BINS), np.int32), np.empty(1, np.int32)
     cl.enqueue_copy(device.queue, h, hist)
     cl.enqueue_copy(device.queue, lv, level)
-    return h, int(lv[0])
+    cl.enqueue_copy(device.queue, flags, quiet)
+    return h, int(lv[0]), flags.astype(bool)
 
 
 @pytest.mark.parametrize("dtype,channels,bgr", [(np.uint8, 3, False), (np.uint8, 3, True), (np.uint8, 4, False),
                                                 (np.uint8, 1, False), (np.uint16, 3, False), (np.float32, 3, False)])
 def test_census_and_level_match_the_reference(device, dtype, channels, bgr):
-    """Exact (integers on 8-bit levels), at sizes that are not multiples of the band, clean and with grain."""
-    for seed, (h, w), sigma in ((1, (61, 83), 5.0), (2, (48, 97), 0.0), (3, (3, 2), 9.0)):
+    """Exact (integers on 8-bit levels), at sizes that are not multiples of the band or of SEGMENT, clean and with
+    grain: the histograms, the level and the quiet mask."""
+    for seed, (h, w), sigma in ((1, (61, 83), 5.0), (2, (48, 97), 0.0), (3, (3, 2), 9.0), (4, (20, 150), 6.0)):
         frame8 = with_grain(shaded_polygons(seed, max(h, 8), max(w, 8))[:h, :w], sigma, seed, mono=seed != 3)
         frame = _as(frame8[..., ::-1] if bgr else frame8, dtype, channels)
-        hist, level = run_census(device, frame, bgr)
+        hist, level, quiet = run_census(device, frame, bgr)
         np.testing.assert_array_equal(hist, N.noise_census(N.luma256(frame, bgr)))
         assert level == N.noise_level(frame, bgr)
+        np.testing.assert_array_equal(quiet, N.quiet_pixels(frame, bgr))
         if h > 8 and sigma:
-            assert level > 0
+            assert level > 0 and 0.1 < quiet.mean() < 1
 
 
 @pytest.mark.parametrize("sigma", [2.0, 4.0, 8.0])

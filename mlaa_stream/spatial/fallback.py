@@ -121,7 +121,9 @@ class FallbackPass:
         if self.regions or everywhere:
             self._noise_census = context.kernel("fallback", "noise_census", defs)
             self._noise_level = context.kernel("fallback", "noise_level", defs)
+            self._noise_mask = context.kernel("fallback", "noise_mask", defs)
             self._census = context.buffer(4 * NOISE_BINS * self.tiles[1])
+        self._quiet = context.buffer(fmt.width * fmt.height if self.regions or everywhere else 1)  # noise_mask's
         if self.regions:  # text over a render leaves the regions (kernels/overlays.cl): its own program and buffers
             overlay_defs = {**defs, **overlay_defines()}
             self._overlay_counts = context.kernel("overlays", "overlay_counts", overlay_defs)
@@ -148,7 +150,7 @@ class FallbackPass:
         """Bytes of the per-frame buffers (the tables' 15 and 20 KB do not grow with the frame)."""
         mid = self._mid.size if self._refine is not None else 0
         overlays = self._overlays.size + self._seeds.size if self.regions else 0
-        census = self._census.size if self.regions or self.everywhere else 0
+        census = self._census.size + self._quiet.size if self.regions or self.everywhere else 0
         return (self._counts.size + self._row_sums.size + self._render.size + self._shares.size + overlays + mid
                 + census)
 
@@ -173,7 +175,10 @@ class FallbackPass:
                                                         wait_for=wait_for)
             events["noise_level"] = self._noise_level(queue, (1,), None, self._census, self._noise, ty,
                                                       wait_for=[events["noise_census"]])
-            noise = [events["noise_level"]]
+            events["noise_mask"] = self._noise_mask(queue, (-(-self.fmt.width // SEGMENT), self.fmt.height), None,
+                                                    src, self._noise, self._quiet, W, H,
+                                                    wait_for=[events["noise_level"]])
+            noise = [events["noise_mask"]]
         if not self.everywhere:  # "everywhere" reads no counts: every tile is a render region
             events["fallback_count"] = self._count(queue, (-(-self.fmt.width // SEGMENT), self.tiles[1]), None,
                                                    src, dst, edges, self._counts, W, H, tx, wait_for=wait_for)
@@ -198,13 +203,15 @@ class FallbackPass:
                 wait_for = [events["overlay_tiles"]]
         events["fallback"] = self._fxaa(queue, (-(-self.fmt.width // SEGMENT), self.tiles[1]), None,
                                         src, luts, lin, edges, hdist, vdist, self._counts, self._render,
-                                        self._table, self._noise, dst, W, H, tx, ty, wait_for=[*wait_for, *noise])
+                                        self._table, self._noise, self._quiet, dst, W, H, tx, ty,
+                                        wait_for=[*wait_for, *noise])
         if self._refine is None:
             return events["fallback"]
         events["refine_copy"] = cl.enqueue_copy(queue, self._mid, dst, wait_for=[events["fallback"]])
         events["refine"] = self._refine(queue, (-(-self.fmt.width // SEGMENT), self.tiles[1]), None,
                                         src, luts, lin, edges, hdist, vdist, self._render, self._refine_table,
-                                        self._noise, self._mid, dst, W, H, tx, ty, wait_for=[events["refine_copy"]])
+                                        self._noise, self._quiet, self._mid, dst, W, H, tx, ty,
+                                        wait_for=[events["refine_copy"]])
         return events["refine"]
 
 
