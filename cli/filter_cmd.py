@@ -375,7 +375,9 @@ def _job_for(kind: str, output: str) -> type:
               help="Velocity-difference strength K of seed 002 in pixel units (larger rejects "
                    "history sooner; 0 keeps it regardless of speed).")
 @click.option("--stats", "stats_path", type=click.Path(dir_okay=False), default=None,
-              help="Write per-frame temporal statistics (motion model used, ms) to this CSV.")
+              help="Write per-frame temporal statistics to this CSV (implies --temporal): one row per frame written, "
+                   "its motion model (reset, static, global, layers, dense), samples taken, ms; columns in "
+                   "docs/temporal.md, \"--stats FILE\".")
 @click.option("--keep", "keep", multiple=True, metavar="X,Y,W,H",
               help="Leave this rectangle of every frame exactly as it is (burned-in subtitles, a HUD or a slate "
                    "over a render, which the filter would soften); pixels or % of the frame, e.g. "
