@@ -16,7 +16,9 @@ from mlaa_stream.device.context import DeviceError
 from mlaa_stream.cli.options import device_option, require_bench_extras
 
 
-@click.command("bench")
+@click.command("bench", epilog="Exit codes: 0 done (methods that failed are listed in the outputs); "
+               "1 every method failed; "
+               "2 usage error; 3 no OpenCL device.")
 @click.option("--quick", is_flag=True, help="CI-sized: small scenes, 5 timed frames, no FLIP (< 1 minute).")
 @click.option("--out", "out_dir", default=None, type=click.Path(file_okay=False),
               help="Folder for results.csv, README.md and speed_vs_accuracy.png (replaced on each run); "

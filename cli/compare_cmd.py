@@ -68,7 +68,7 @@ def _f(v: float, fmt: str) -> str:
     return "n/a" if v is None or math.isnan(v) else format(v, fmt)
 
 
-@click.command("compare")
+@click.command("compare", epilog="Exit codes: 0 compared; 1 an image could not be read or sizes differ; 2 usage error.")
 @click.argument("out_path", metavar="OUT")
 @click.argument("truth_path", metavar="TRUTH")
 @click.option("--input", "input_path", default=None, metavar="IN",

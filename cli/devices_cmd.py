@@ -11,7 +11,7 @@ from mlaa_stream.device.context import (DEVICE_ENV, DeviceError, _all_devices, d
 from mlaa_stream.device.drivers import unregistered_gpu_drivers, unregistered_pip_runtimes
 
 
-@click.command("devices")
+@click.command("devices", epilog="Exit codes: 0 listed; 3 no OpenCL device (the message says why and what to install).")
 def devices_command() -> None:
     """List OpenCL devices; the one marked * is used by default."""
     try:

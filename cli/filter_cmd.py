@@ -375,7 +375,9 @@ def _job_for(kind: str, output: str) -> type:
               help="Velocity-difference strength K of seed 002 in pixel units (larger rejects "
                    "history sooner; 0 keeps it regardless of speed).")
 @click.option("--stats", "stats_path", type=click.Path(dir_okay=False), default=None,
-              help="Write per-frame temporal statistics (motion model used, ms) to this CSV.")
+              help="Write per-frame temporal statistics to this CSV (implies --temporal): one row per frame written, "
+                   "its motion model (reset, static, global, layers, dense), samples taken, ms; columns in "
+                   "docs/temporal.md, \"--stats FILE\".")
 @click.option("--keep", "keep", multiple=True, metavar="X,Y,W,H",
               help="Leave this rectangle of every frame exactly as it is (burned-in subtitles, a HUD or a slate "
                    "over a render, which the filter would soften); pixels or % of the frame, e.g. "
@@ -569,9 +571,11 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
     finally:
         runner.abort()  # no-op after a commit; removes a video in progress on errors and Ctrl-C
         runner.close_progress()
-    if con.verbose and not con.quiet:
+    on_workers = cluster is not None  # the stages ran on the cluster's workers: this process timed none of them
+    if con.verbose and not con.quiet and not on_workers:
         click.echo(times.report(), err=True)
-    elif not con.quiet and not sys.stderr.isatty() and code == EXIT_OK:  # logs and pipes: one line, no bar
+    elif not con.quiet and (not sys.stderr.isatty() or con.verbose) and code == EXIT_OK:
+        # logs and pipes: one line, no bar; with -v on a cluster this line instead of a table of zeros
         wall = time.perf_counter() - times.started
         click.echo(f"mlaa-stream: {runner.written} frames in {wall:.1f} s "
                    f"({runner.written / wall if wall > 0 else 0:.1f} fps) -> {runner.output}", err=True)
@@ -799,6 +803,7 @@ class _ImageJob(_Job):
                     warm.insert(0, ff)
             self.warm_up = warm
             whole, self.plan = self.plan, [ff for ff in self.plan if id(ff) not in skipped]
+            self.whole_plan = whole   # --cluster --temporal: the chunks of the first run (_run_on_cluster)
             self._read_ahead_of(whole, skipped)
         elif existing and not o["overwrite"]:
             more = f" (and {len(existing) - 1} more)" if len(existing) > 1 else ""
@@ -936,13 +941,19 @@ class _ImageJob(_Job):
         from mlaa_stream.cluster.frames import ClusterJobError, run_chunks
 
         progress = self._progress(len(self.plan))
+        temporal = self.opts.get("temporal_spec")
+        files, done = self.plan, frozenset()
+        if temporal is not None and getattr(self, "whole_plan", None):
+            # --resume: the whole job with the complete outputs marked done, so that each chunk still reads its
+            # warm-up (and look-ahead) frames, as one machine warms up from the skipped frames before it
+            files, done = self.whole_plan, frozenset(self.report.skipped)
         try:
             with connect(self.opts["cluster"]) as client:
                 self.con.info(f"cluster: {len(client.scheduler_info()['workers'])} workers")
-                report = run_chunks(client, self.plan, self.opts["filter_kwargs"],
+                report = run_chunks(client, files, self.opts["filter_kwargs"],
                                     overwrite=self.opts["overwrite"], strict=self.strict,
                                     chunk_frames=self.opts["chunk_frames"], on_frames=progress.update,
-                                    temporal=self.opts.get("temporal_spec"),
+                                    temporal=temporal, done=done,
                                     say=lambda msg: (progress.clear(), self.con.error(msg)))
         except ClusterAddressError as exc:
             progress.close()
@@ -957,6 +968,7 @@ class _ImageJob(_Job):
         if report.failed:
             self.con.error(f"{len(report.failed)} failed, {self.written} written")
             return EXIT_FAILED
+        self.con.info(f"{self.written} written, {len(self.report.skipped)} skipped")   # as one machine says it
         return EXIT_OK
 
     def abort(self) -> None:
@@ -1092,6 +1104,7 @@ class _VideoJob(_Job):
             return EXIT_FAILED
         finally:
             progress.close()
+        self.con.info(f"{self.output}: {self.written} frames")   # as one machine says it
         return EXIT_OK
 
     def run(self, filt, post_hooks, in_flight, times, temporal=None) -> int:

@@ -48,7 +48,9 @@ def scene_files(scene) -> dict[str, np.ndarray]:
     return files
 
 
-@click.command("scenes")
+@click.command("scenes", epilog="Exit codes: 0 written; 1 a file could not be written; "
+               "2 usage error (also: files exist and "
+               "--overwrite was not given).")
 @click.argument("out_dir", type=click.Path(file_okay=False))
 @click.option("--small", is_flag=True, help="The small variants used by the tests and bench --quick.")
 @click.option("--seed", type=int, default=0, show_default=True, help="Random seed (same seed, same pixels).")

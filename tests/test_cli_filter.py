@@ -707,3 +707,11 @@ def test_a_gpu_driver_the_loader_cannot_see_is_named_when_the_filter_runs_on_the
     assert ("warning: running on the CPU: NVIDIA's OpenCL driver is at" in stderr(r)) == on_cpu
     r = run(src, "-o", tmp_path / "out2.png", "--device", "0")
     assert r.exit_code == 0 and "running on the CPU" not in stderr(r)
+
+
+def test_every_command_help_states_its_exit_codes():
+    """devices, compare, scenes and bench said their exit codes only in their source's docstring."""
+    from mlaa_stream.cli.main import main as cli_main
+    for name in ("filter", "devices", "compare", "overlay", "scenes", "bench"):
+        res = CliRunner().invoke(cli_main, [name, "--help"])
+        assert res.exit_code == 0 and "Exit codes: 0 " in res.output, name

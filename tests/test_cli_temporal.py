@@ -318,3 +318,27 @@ def test_temporal_on_exr_frames_with_nan_and_inf(tmp_path):
         out, sp = (read_image(str(tmp_path / d / f"f{i:02d}.exr")).pixels for d in ("t", "sp"))
         assert np.array_equal(np.isnan(out), np.isnan(sp)) and np.isnan(out).any()
         assert np.array_equal(np.isinf(out), np.isinf(sp))
+
+
+@pytest.mark.parametrize("method", ["tss+blend", "blend"])
+def test_every_stats_column_is_documented(tmp_path, method):
+    """--stats wrote some twenty columns that no page explained (--help said "motion model used, ms"): each one
+    is now in docs/temporal.md's "--stats FILE" table, and the help points there."""
+    from mlaa_stream.io.images import write_image
+    src = tmp_path / "in"
+    src.mkdir()
+    for i, f in enumerate(_pan_frames(4)):
+        write_image(str(src / f"f{i}.png"), f)
+    write_image(str(src / "f4.png"), _pan_frames(4)[3])   # a repeated frame: the "repeat" column
+    stats = tmp_path / "s.csv"
+    res = CliRunner().invoke(main, [str(src), "-o", str(tmp_path / "out"), "--temporal-method", method,
+                                    "--stats", str(stats), "-q"])
+    assert res.exit_code == 0, res.output
+    columns = set(next(csv.reader(stats.open())))
+    doc = (Path(__file__).resolve().parent.parent / "docs" / "temporal.md").read_text()
+    section = doc.split("## `--stats FILE`", 1)[1].split("\n## ", 1)[0]
+    named = {c for line in section.splitlines() if line.startswith("| `") for c in
+             line.split("|")[1].replace("`", "").replace(" ", "").split(",")}
+    assert columns and columns <= named, sorted(columns - named)
+    help_text = CliRunner().invoke(main, ["filter", "--help"], terminal_width=200).output
+    assert 'docs/temporal.md, "--stats FILE"' in help_text

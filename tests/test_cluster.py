@@ -170,3 +170,84 @@ def test_keep_rectangles_travel_to_the_workers(client, reference, tmp_path):
         np.testing.assert_array_equal(out[:20], ref[:20])
         changed.append(np.any(ref[20:] != src[20:]))
     assert any(changed)  # the filter would change the kept half
+
+
+def _vfr_clip(path: str, times_ms: list[int]) -> None:
+    """An MKV whose frames sit at `times_ms` (a variable frame rate: 25 fps declared), FFV1, 64x40."""
+    import av
+    from fractions import Fraction
+
+    rng = np.random.default_rng(5)
+    with av.open(path, "w") as out:
+        vs = out.add_stream("ffv1", rate=25)
+        vs.width, vs.height, vs.pix_fmt = 64, 40, "bgr0"
+        vs.codec_context.time_base = Fraction(1, 1000)
+        for t in times_ms:
+            img = np.where(rng.random((40, 64, 1)) > 0.5, [200, 40, 30], [20, 30, 220]).astype(np.uint8)
+            f = av.VideoFrame.from_ndarray(img, format="rgb24")
+            f.pts, f.time_base = t, Fraction(1, 1000)
+            for p in vs.encode(f):
+                out.mux(p)
+        for p in vs.encode():
+            out.mux(p)
+
+
+def frame_times(path) -> list[float]:
+    import av
+    with av.open(str(path)) as c:
+        return [round(float(f.time), 3) for f in c.decode(video=0)]
+
+
+def test_a_variable_rate_video_keeps_its_timestamps_in_segments(client, tmp_path):
+    """Segments of 3 frames (0.12 s at 25 fps) over frames at irregular times: the frame at 0.11 s belongs to the
+    second segment (by half a frame) but lies before its nominal start. Segments used to be written shifted by
+    that start: its time came out negative, the muxer moved it to 0 and the segment's later frames with it
+    (0.11 -> 0.12, 0.13 -> 0.14 ...). Now every frame keeps the source's time, as one machine keeps it."""
+    from mlaa_stream.cluster.video import filter_video_on_cluster
+
+    times = [0, 40, 60, 110, 130, 200, 260, 270]
+    _vfr_clip(str(tmp_path / "vfr.mkv"), times)
+    n = filter_video_on_cluster(client, str(tmp_path / "vfr.mkv"), str(tmp_path / "cl.mkv"), codec="ffv1",
+                                segment_seconds=0.12)
+    assert n == len(times)
+    assert frame_times(tmp_path / "cl.mkv") == [t / 1000 for t in times]
+
+
+def test_failing_chunks_are_each_reported_once(client, tmp_path):
+    """Two chunks that fail: the first is raised, the second said, each naming its chunk once (the second's
+    message used to carry its chunk twice, and the first was said and raised: printed twice)."""
+    from mlaa_stream.cluster.frames import ClusterJobError, filter_on_cluster, run_chunks
+    from mlaa_stream.io.sequence import expand_pattern, plan_images
+
+    sequence(tmp_path / "in", n=12)
+    for k in (1002, 1010):
+        (tmp_path / "in" / f"shot.{k}.png").write_bytes(b"\x89PNG\r\n\x1a\n broken")
+    found, _ = expand_pattern(str(tmp_path / "in" / "shot.%04d.png"))
+    plan = plan_images([p for _, p in found], str(tmp_path / "out" / "c.%04d.png"), [n for n, _ in found])
+    (tmp_path / "out").mkdir()
+    said: list[str] = []
+    with pytest.raises(ClusterJobError) as info:
+        run_chunks(client, plan, {}, overwrite=False, strict=True, chunk_frames=4, say=said.append)
+    messages = said + [str(info.value)]
+    assert len(messages) == 2, messages
+    assert sorted(m.split(":")[0] for m in messages) == ["chunk 0 (frames 1001-1004)", "chunk 2 (frames 1009-1012)"]
+    assert all(m.count("chunk ") == 1 for m in messages), messages
+
+
+def test_the_command_line_on_a_cluster_says_what_it_wrote(reference, tmp_path):
+    """-v on a cluster: the summary one machine gives, not a table of stage times that the workers spent (zeros,
+    "0 frames"); the local cluster's workers keep their logs of failed tasks to themselves (the job reports it)."""
+    import logging
+
+    from mlaa_stream.cluster.connect import connect
+
+    r = CliRunner().invoke(main, [str(reference / "in"), "-o", str(tmp_path / "o"), "--cluster", "local:2",
+                                  "--chunk-frames", "30", "-v"])
+    assert r.exit_code == 0, r.output
+    assert "60 written, 0 skipped" in r.output and "(0 frames)" not in r.output and "ms/frame" not in r.output
+    def handler_levels() -> list[int]:   # what LocalCluster(silence_logs=...) sets in each worker process
+        return [h.level for h in logging.getLogger("distributed").handlers if isinstance(h, logging.StreamHandler)]
+
+    with connect("local:1") as client:
+        levels = list(client.run(handler_levels).values())
+    assert len(levels) == 1 and levels[0] and set(levels[0]) == {logging.CRITICAL}

@@ -2,6 +2,7 @@
 (tests, one big machine); anything else is a scheduler address (tcp://host:8786) of a running cluster."""
 from __future__ import annotations
 
+import logging
 import re
 from contextlib import contextmanager
 from typing import Iterator
@@ -37,8 +38,11 @@ def connect(address: str) -> Iterator[object]:
     kind, where = parse_address(address)
     if kind == "local":
         n = int(where)
-        # one thread per worker: each worker's OpenCL device already uses the machine's cores
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0")
+        # one thread per worker: each worker's OpenCL device already uses the machine's cores. Workers log only
+        # what is critical: a failing chunk is reported by the job (naming its chunk and frame), and the workers'
+        # "Compute Failed" records with their tracebacks (ERROR) repeated it on this terminal, once per try
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
+                               silence_logs=logging.CRITICAL)
         client = Client(cluster)
         try:
             yield client

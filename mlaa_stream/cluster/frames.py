@@ -179,10 +179,14 @@ def _with_temporal(stage, files: list[FrameFile], warm: set, report: Report, str
 
 def run_chunks(client, files: list[FrameFile], filter_kwargs: dict, *, overwrite: bool, strict: bool,
                chunk_frames: int = CHUNK_FRAMES, on_frames: Callable[[int], None] | None = None,
-               say: Callable[[str], None] | None = None, temporal=None) -> Report:
+               say: Callable[[str], None] | None = None, temporal=None,
+               done: frozenset[str] = frozenset()) -> Report:
     """Filter `files` on the cluster behind `client`; returns what happened to each file. Progress:
     `on_frames(done)` after each chunk. Raises ClusterJobError naming the chunk that failed twice.
-    `temporal`: a TemporalSpec (mlaa_stream/cluster/temporal.py), or None for the spatial filter only."""
+    `temporal`: a TemporalSpec (mlaa_stream/cluster/temporal.py), or None for the spatial filter only.
+    `done`: outputs known complete (--resume with the temporal stage: `files` is then the whole job, so that the
+    chunks are those of the first run, each with its warm-up and look-ahead frames; a chunk whose outputs are all
+    done is not run, and the others write only what is missing, as a chunk rerun after its worker died does)."""
     from dask.distributed import as_completed
 
     say = say or (lambda msg: None)
@@ -190,6 +194,7 @@ def run_chunks(client, files: list[FrameFile], filter_kwargs: dict, *, overwrite
     from mlaa_stream.cluster.temporal import MAX_WARMUP_FACTOR
     chunks = plan_chunks(files, chunk_frames, MAX_WARMUP_FACTOR * temporal.warmup if temporal is not None else 0,
                          temporal.lookahead if temporal is not None else 0)
+    chunks = [c for c in chunks if any(ff.dst not in done for ff in c.files)]
     like = None
     if strict and files:
         from mlaa_stream.io.images import read_image
@@ -197,27 +202,31 @@ def run_chunks(client, files: list[FrameFile], filter_kwargs: dict, *, overwrite
         like = ((first.pixels.shape, first.pixels.dtype), files[0])
     futures = {client.submit(filter_chunk, c, filter_kwargs, overwrite, strict, like, temporal, retries=1, pure=False,
                              key=f"mlaa-chunk-{c.index}-{os.getpid()}-{id(files)}"): c for c in chunks}
-    done = 0
+    frames = 0
     failure: BaseException | None = None
     try:
         for fut in as_completed(futures):
             chunk = futures[fut]
             if fut.status != "finished":
                 exc = fut.exception()
-                failure = failure or (exc if isinstance(exc, ClusterJobError) else
-                                      ClusterJobError(f"{chunk.label}: failed on the cluster: {exc}"))
-                say(str(failure if failure is exc else ClusterJobError(f"{chunk.label}: {exc}")))
+                # a ClusterJobError from filter_chunk names its chunk already: prefixing it again doubled it
+                err = exc if isinstance(exc, ClusterJobError) else \
+                    ClusterJobError(f"{chunk.label}: failed on the cluster: {exc}")
+                if failure is None:
+                    failure = err   # raised at the end, where the caller reports it: said here too, it came twice
+                else:
+                    say(str(err))   # every further failing chunk, once
                 continue
             r = fut.result()
             report.written += r.written
-            report.skipped += r.skipped
+            report.skipped += [dst for dst in r.skipped if dst not in done]   # complete from this job's own runs
             for msg in r.failed:
                 report.fail(msg)
             for msg in r.warnings:
                 report.warn(msg)
-            done += len(chunk.files)
+            frames += sum(ff.dst not in done for ff in chunk.files)
             if on_frames is not None:
-                on_frames(done)
+                on_frames(frames)
     finally:
         for fut in futures:
             fut.cancel()
@@ -260,9 +269,12 @@ def filter_on_cluster(client, input_path: str, output: str, *, preset: str | Non
     for d in sorted({os.path.dirname(os.path.abspath(f.dst)) for f in plan}):
         os.makedirs(d, exist_ok=True)
     existing = [f for f in plan if os.path.exists(f.dst)]
+    done: frozenset[str] = frozenset()
     if existing and resume:
-        plan = [f for f in plan if f not in existing or check_complete(f.dst, *image_shape(f.src), decode=False)]
+        done = frozenset(f.dst for f in existing if check_complete(f.dst, *image_shape(f.src), decode=False) is None)
+        if temporal is None:  # the temporal stage reads the complete ones too (run_chunks' `done`)
+            plan, done = [f for f in plan if f.dst not in done], frozenset()
     elif existing and not overwrite:
         raise FileExistsError(f"{existing[0].dst}: exists; pass overwrite=True or resume=True")
     return run_chunks(client, plan, kwargs, overwrite=overwrite, strict=strict, chunk_frames=chunk_frames,
-                      temporal=temporal)
+                      temporal=temporal, done=done)

@@ -58,7 +58,7 @@ def plan_segments(duration: float, fps: Fraction | None, output: str,
 def encode_segment(source: str, segment: Segment, filter_kwargs: dict, codec: str | None, crf: int,
                    encoder_preset: str, pix_fmt: str | None, temporal=None) -> int:
     """Run on a worker: decode the segment's frames, filter them, encode them into segment.path (video only,
-    timestamps from 0 at segment.start). Returns the frames written. `temporal` (a TemporalSpec): a new
+    at the source's timestamps). Returns the frames written. `temporal` (a TemporalSpec): a new
     stage runs over the `temporal.warmup` frames before the segment (decoded, filtered, not written; more
     where frames are held: WarmedStage) and then over the segment's."""
     from mlaa_stream.cluster.frames import _worker_filter
@@ -76,8 +76,11 @@ def encode_segment(source: str, segment: Segment, filter_kwargs: dict, codec: st
         if temporal is not None:
             stage = WarmedStage(temporal.stage(filt), temporal.warmup, from_start=start < frame / 2,
                                 can_extend=start >= frame / 2 and w < MAX_WARMUP_FACTOR * temporal.warmup)
+        # the source's own timestamps (offset 0): shifted by segment.start, a variable-rate frame just before the
+        # range's nominal start (it belongs here by half a frame) got a negative time, which the muxer moved to 0
+        # and every later frame of the segment with it; join_segments copies them unshifted
         writer = VideoWriter(segment.path, info, codec=codec, crf=crf, preset=encoder_preset, pix_fmt=pix_fmt,
-                             audio="none", overwrite=True, offset=segment.start, container_format="matroska",
+                             audio="none", overwrite=True, container_format="matroska",
                              extra_options={"bf": "0"}, copy_extras=False)
         try:
             n = _run_segment(info, segment, start if start >= frame / 2 else None, filt, writer, stage)
@@ -144,7 +147,7 @@ def _run_segment(info, segment: Segment, start: float | None, filt, writer, stag
 
 
 def join_segments(segments: list[Segment], info, output: str, *, overwrite: bool, audio: bool = True) -> list[str]:
-    """Concatenate the segments' video packets in order (shifted by each segment's start) into `output`,
+    """Concatenate the segments' video packets in order (at their source timestamps) into `output`,
     with the source's audio and subtitle streams (unless `audio` is False), tags, rotation, chapters and
     attachments; written under a temporary name. Returns warnings naming what was not kept."""
     import av
@@ -177,13 +180,9 @@ def join_segments(segments: list[Segment], info, output: str, *, overwrite: bool
         def video_packets():
             for seg in segments:
                 with av.open(seg.path) as c:
-                    s = c.streams.video[0]
-                    shift = int(round(seg.start / s.time_base))
-                    for pkt in c.demux(s):
+                    for pkt in c.demux(c.streams.video[0]):   # in source time already (encode_segment)
                         if pkt.dts is None:
                             continue
-                        pkt.pts = None if pkt.pts is None else pkt.pts + shift
-                        pkt.dts += shift
                         yield float(pkt.dts * pkt.time_base), pkt
 
         def copied_packets():
