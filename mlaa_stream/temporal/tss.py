@@ -72,6 +72,7 @@ import numpy as np
 
 from mlaa_stream.device.colour import device_luts, lut_read
 from mlaa_stream.device.formats import LUT_SIZE, frame_format
+from mlaa_stream.spatial.noise import level_of, luma256, quiet_pixels
 from mlaa_stream.spatial.nonfinite import restore_out_of_range
 from mlaa_stream.temporal.layers import (STILL_AGE, STILL_SHIFT, CompositionalPoints, ahead_fields, background_of,
                                          find_layers, inverse_compositional, layer_fields, layers_decision,
@@ -1292,7 +1293,6 @@ class TSSStage:
         is new every frame and part of the truth, and the ring's samples of other frames would average it away
         (docs/temporal.md, "Grain"). The frame's level is measured every NOISE_EVERY frames of a shot (grain keeps
         its strength), and where it is 0 (a clean render) nothing is computed."""
-        from mlaa_stream.spatial.noise import luma256, level_of, quiet_pixels
         if self._noise is None or self._noise[0] != fin.shape or index - self._noise[1] >= NOISE_EVERY \
                 or index < self._noise[1]:
             self._noise = (fin.shape, index, level_of(luma256(fin, self.bgr)))
