@@ -88,5 +88,7 @@ def levels8(frame: np.ndarray, bgr: bool = False) -> np.ndarray:
         return a.astype(np.int64)
     if a.dtype == np.uint16:
         return (a.astype(np.int64) * 255 + 32767) // 65535
-    f = np.clip(a.astype(np.float32), np.float32(0), np.float32(1)) * np.float32(255)
+    # NaN -> 0 and +-inf -> 1 / 0, as OpenCL's fmin / fmax clamp them in level8 (no cast of a NaN)
+    f = np.clip(np.nan_to_num(a.astype(np.float32), nan=0.0, posinf=1.0, neginf=0.0), np.float32(0),
+                np.float32(1)) * np.float32(255)
     return np.floor(f + np.float32(0.5)).astype(np.int64)
