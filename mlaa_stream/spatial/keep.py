@@ -52,11 +52,12 @@ def parse_keep(text: str) -> KeepRect:
             v = float(part[:-1]) / 100.0 if rel else float(part)
         except ValueError:
             raise ValueError(f"keep: {name} of {text!r} is not a number: {part!r}") from None
-        if not rel and v != int(v):
-            raise ValueError(f"keep: {name} of {text!r} must be whole pixels or a percentage, got {part!r}")
+        # finite first: int() of an infinity ('1e400' parses as one) raises OverflowError, not a message
         if not (v >= 0 and np.isfinite(v)) or (name in "WH" and v == 0):
             raise ValueError(f"keep: {name} of {text!r} must be {'positive' if name in 'WH' else '>= 0'}, "
                              f"got {part!r}")
+        if not rel and v != int(v):
+            raise ValueError(f"keep: {name} of {text!r} must be whole pixels or a percentage, got {part!r}")
         values.append(v)
         relative.append(rel)
     return KeepRect(*values, relative=tuple(relative))
