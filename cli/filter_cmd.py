@@ -530,6 +530,12 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
                      video_backend=video_backend, filter_kwargs=kwargs)
         runner.prepare()
         _warn_unused_options(ctx, con, kind, job)
+        info = getattr(runner, "info", None)
+        if keep and info is not None and getattr(info, "rotation", 0):
+            # a phone's video: players turn it, but the filter (and --keep) sees the frames as stored, so
+            # rectangles measured on the turned picture would keep the wrong place without a word
+            con.warn(f"--keep: {input_path} is displayed rotated by {info.rotation} degrees; the rectangles are "
+                     f"taken in its frames as stored ({info.width}x{info.height}, before that rotation)")
     except Usage as exc:
         con.error(str(exc))
         return EXIT_USAGE
