@@ -116,3 +116,10 @@ def test_an_infinite_value_is_refused_by_name_not_a_traceback(text, name):
     """'1e400' parses as infinity; int() of it raised OverflowError before the finiteness check."""
     with pytest.raises(ValueError, match=f"keep: {name} of "):
         parse_keep(text)
+
+
+@pytest.mark.parametrize("keep", [[(0, 0, 10, 10)], (0, 0, 10, 10), [[1, 2, 3, 4]]])
+def test_a_rectangle_of_another_type_is_refused_by_its_type(keep):
+    """keep=[(0, 0, 10, 10)] was turned into text and refused as "X of (0, 0, 10, 10) is not a number: '(0'"."""
+    with pytest.raises(ValueError, match=r"keep: expected KeepRect\(x, y, w, h\) or an 'X,Y,W,H' string .* got "):
+        keep_rects(keep)

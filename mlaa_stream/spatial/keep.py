@@ -69,7 +69,18 @@ def keep_rects(keep: Iterable[KeepRect | str] | str | None) -> tuple[KeepRect, .
         return ()
     if isinstance(keep, (str, KeepRect)):
         keep = [keep]
-    return tuple(k if isinstance(k, KeepRect) else parse_keep(k) for k in keep)
+    return tuple(_keep_rect(k) for k in keep)
+
+
+def _keep_rect(k: object) -> KeepRect:
+    """One item of a `keep` option. Anything but a KeepRect or a string is refused by type: a tuple of numbers was
+    turned into its text and refused as: X of (0, 0, 10, 10) is not a number: '(0'."""
+    if isinstance(k, KeepRect):
+        return k
+    if isinstance(k, str):
+        return parse_keep(k)
+    raise ValueError(f"keep: expected KeepRect(x, y, w, h) or an 'X,Y,W,H' string (pixels or %) for each "
+                     f"rectangle, got {type(k).__name__} {k!r}")
 
 
 def kept_patches(frame: np.ndarray, rects: Sequence[KeepRect]) -> list[tuple[tuple[slice, slice], np.ndarray]]:
