@@ -45,6 +45,10 @@ def bench_command(quick, out_dir, methods, frames, flip, seed, scene_names, list
     if out_dir is None:
         out_dir = os.path.join(tempfile.gettempdir(), "mlaa-stream-bench")
     names, groups = comma_names("--methods", methods), comma_names("--scenes", scene_names)
+    try:  # now, not after the whole run: bench.write_outputs made it only once every method had been measured
+        os.makedirs(out_dir, exist_ok=True)
+    except OSError as exc:
+        raise click.BadParameter(f"{out_dir}: cannot create the folder ({exc.strerror})", param_hint="--out") from exc
     command = "mlaa-stream " + " ".join(shlex.quote(a) for a in ["bench", *sys.argv[2:]]) \
         if len(sys.argv) > 1 and sys.argv[1] == "bench" else "mlaa-stream bench" + (" --quick" if quick else "")
     try:

@@ -78,7 +78,11 @@ def scenes_command(out_dir, small, seed, only, overwrite) -> None:
     if existing and not overwrite:
         raise click.UsageError(f"{out / existing[0]} exists ({len(existing)} files would be replaced); "
                                "pass --overwrite to replace them")
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:  # a file in the way, a folder that cannot be made: said, not a traceback
+        click.echo(f"mlaa-stream: error: {out}: cannot create the folder ({exc.strerror})", err=True)
+        raise SystemExit(1) from exc
     try:
         for name, img in plan.items():
             write_png(out / name, img)

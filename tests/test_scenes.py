@@ -228,3 +228,14 @@ def test_bench_options_that_name_nothing_or_a_bad_seed_are_refused(tmp_path, arg
     r = CliRunner().invoke(main, ["bench", "--quick", "--out", str(tmp_path / "b"), *args])
     assert r.exit_code == 2 and message in r.output
     assert not (tmp_path / "b").exists()
+
+
+def test_an_output_folder_that_cannot_be_made_is_named_not_a_traceback(tmp_path):
+    """A file where the folder should go ended scenes in a NotADirectoryError traceback, and bench likewise, but
+    only after measuring every method."""
+    (tmp_path / "f").write_text("")
+    r = CliRunner().invoke(main, ["scenes", str(tmp_path / "f" / "s"), "--small", "--only", "diagonals"])
+    assert r.exit_code == 1 and f"{tmp_path / 'f' / 's'}: cannot create the folder (Not a directory)" in r.output
+    r = CliRunner().invoke(main, ["bench", "--quick", "--methods", "none", "--scenes", "diagonals", "--frames", "1",
+                                  "--out", str(tmp_path / "f" / "b")])
+    assert r.exit_code == 2 and "--out: " in r.output and "cannot create the folder (Not a directory)" in r.output
