@@ -13,7 +13,7 @@ import tempfile
 import click
 
 from mlaa_stream.device.context import DeviceError
-from mlaa_stream.cli.options import device_option, require_bench_extras
+from mlaa_stream.cli.options import comma_names, device_option, require_bench_extras
 
 
 @click.command("bench", epilog="Exit codes: 0 done (methods that failed are listed in the outputs); "
@@ -28,7 +28,7 @@ from mlaa_stream.cli.options import device_option, require_bench_extras
 @click.option("--frames", type=click.IntRange(1, 10000), default=None,
               help="Timed 1080p frames per method (default 20, quick 5).")
 @click.option("--flip/--no-flip", default=None, help="Score FLIP (default: on for full runs when installed).")
-@click.option("--seed", type=int, default=0, show_default=True, help="Scene seed.")
+@click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True, help="Scene seed.")
 @click.option("--scenes", "scene_names", default=None, metavar="A,B",
               help="Comma-separated scene groups (default: all; see 'mlaa-stream scenes --help').")
 @click.option("--list", "list_methods", is_flag=True, help="List the methods and exit.")
@@ -44,8 +44,11 @@ def bench_command(quick, out_dir, methods, frames, flip, seed, scene_names, list
         return
     if out_dir is None:
         out_dir = os.path.join(tempfile.gettempdir(), "mlaa-stream-bench")
-    names = None if methods is None else [m.strip() for m in methods.split(",") if m.strip()]
-    groups = None if scene_names is None else [m.strip() for m in scene_names.split(",") if m.strip()]
+    names, groups = comma_names("--methods", methods), comma_names("--scenes", scene_names)
+    try:  # now, not after the whole run: bench.write_outputs made it only once every method had been measured
+        os.makedirs(out_dir, exist_ok=True)
+    except OSError as exc:
+        raise click.BadParameter(f"{out_dir}: cannot create the folder ({exc.strerror})", param_hint="--out") from exc
     command = "mlaa-stream " + " ".join(shlex.quote(a) for a in ["bench", *sys.argv[2:]]) \
         if len(sys.argv) > 1 and sys.argv[1] == "bench" else "mlaa-stream bench" + (" --quick" if quick else "")
     try:

@@ -5,6 +5,7 @@ Exit codes: 0 compared; 1 an image could not be read or sizes differ; 2 usage er
 from __future__ import annotations
 
 import math
+import os
 
 import click
 import numpy as np
@@ -24,7 +25,13 @@ def read_image_encoding(path: str) -> tuple[np.ndarray, bool]:
 
     from mlaa_stream.io.images import filter_channel_indices
 
-    inp = oiio.ImageInput.open(path)
+    if os.path.isdir(path):  # OpenImageIO would answer that it has no reader for the format named like the folder
+        raise CommandError(f"{path}: expected an image file, got a folder (compare scores one image at a time)")
+    config = oiio.ImageSpec()
+    # straight alpha (PNG, TIFF) read as stored, as the filter reads and writes it: OpenImageIO would otherwise
+    # premultiply the colour, and an RGBA output scored against an RGB truth would count alpha as colour error
+    config.attribute("oiio:UnassociatedAlpha", 1)
+    inp = oiio.ImageInput.open(path, config)
     if inp is None:
         raise CommandError(f"{path}: cannot open ({oiio.geterror()})")
     try:

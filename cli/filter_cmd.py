@@ -12,7 +12,7 @@ from typing import Iterator
 
 import click
 
-from mlaa_stream.spatial.filter import PRESET_USES, PRESETS
+from mlaa_stream.spatial.filter import DEFAULT_THRESHOLDS, PRESET_USES, PRESETS
 from mlaa_stream.spatial.fast_filter import FastFilter
 from mlaa_stream.cli.options import configure_logging, device_option, verbosity_options
 
@@ -444,6 +444,12 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
         con.error("--overwrite and --resume contradict each other: choose one")
         return EXIT_USAGE
     kwargs = _filter_kwargs(ctx, preset, threshold, metric, display_space, reconstruct, bridge)
+    if threshold is not None and threshold >= 1 and kwargs.get("metric", "lab") in ("luma", "rgb"):
+        # luma and rgb thresholds are fractions of full scale: no two colours of an image in 0-1 differ by 1 or more,
+        # so a ΔE-sized value (8, --metric lab's default) finds no edge and writes the input back without a word
+        con.warn(f"--threshold {threshold:g} with --metric {kwargs['metric']}: a fraction of full scale (default "
+                 f"{DEFAULT_THRESHOLDS[kwargs['metric']]:g}); colours in 0-1 never differ that much, so no edges "
+                 f"are found (a ΔE such as 8 is --metric lab's scale)")
     if keep:
         from mlaa_stream.spatial.keep import keep_rects
         try:
@@ -530,6 +536,12 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
                      video_backend=video_backend, filter_kwargs=kwargs)
         runner.prepare()
         _warn_unused_options(ctx, con, kind, job)
+        info = getattr(runner, "info", None)
+        if keep and info is not None and getattr(info, "rotation", 0):
+            # a phone's video: players turn it, but the filter (and --keep) sees the frames as stored, so
+            # rectangles measured on the turned picture would keep the wrong place without a word
+            con.warn(f"--keep: {input_path} is displayed rotated by {info.rotation} degrees; the rectangles are "
+                     f"taken in its frames as stored ({info.width}x{info.height}, before that rotation)")
     except Usage as exc:
         con.error(str(exc))
         return EXIT_USAGE

@@ -44,3 +44,15 @@ def require_bench_extras() -> None:
     except ImportError as exc:
         raise CommandError("this command needs the benchmark extras: pip install 'mlaa-stream[bench]' "
                            f"({exc})") from exc
+
+
+def comma_names(option: str, text: str | None) -> list[str] | None:
+    """The names of a comma-separated option (--only A,B): None when not given; each name once, in the order given
+    (a name repeated would run or write its scene twice). Raises click.BadParameter when it names nothing (',' or
+    ''), which would otherwise run nothing and exit 0."""
+    if text is None:
+        return None
+    names = list(dict.fromkeys(n.strip() for n in text.split(",") if n.strip()))
+    if not names:
+        raise click.BadParameter(f"expected comma-separated names, got {text!r}", param_hint=option)
+    return names

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import click
 
-from mlaa_stream.cli.options import CommandError, require_bench_extras
+from mlaa_stream.cli.options import CommandError, comma_names, require_bench_extras
 from mlaa_stream.yardstick.scenes import SCENES  # the groups for --help (this module needs numpy only)
 import numpy as np
 
@@ -53,7 +53,8 @@ def scene_files(scene) -> dict[str, np.ndarray]:
                "--overwrite was not given).")
 @click.argument("out_dir", type=click.Path(file_okay=False))
 @click.option("--small", is_flag=True, help="The small variants used by the tests and bench --quick.")
-@click.option("--seed", type=int, default=0, show_default=True, help="Random seed (same seed, same pixels).")
+@click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True,
+              help="Random seed (same seed, same pixels).")
 @click.option("--only", default=None, metavar="A,B",
               help=f"Comma-separated scene groups (default: all): {', '.join(SCENES)}.")
 @click.option("--overwrite", is_flag=True, help="Replace files that already exist.")
@@ -62,7 +63,7 @@ def scenes_command(out_dir, small, seed, only, overwrite) -> None:
     require_bench_extras()
     from mlaa_stream.yardstick.scenes import SceneUnavailable, generate_scenes
 
-    names = None if only is None else [n.strip() for n in only.split(",") if n.strip()]
+    names = comma_names("--only", only)
     try:
         scenes = generate_scenes(small=small, seed=seed, names=names,
                                  warn=lambda msg: click.echo(f"mlaa-stream: warning: {msg}", err=True))
@@ -77,7 +78,11 @@ def scenes_command(out_dir, small, seed, only, overwrite) -> None:
     if existing and not overwrite:
         raise click.UsageError(f"{out / existing[0]} exists ({len(existing)} files would be replaced); "
                                "pass --overwrite to replace them")
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:  # a file in the way, a folder that cannot be made: said, not a traceback
+        click.echo(f"mlaa-stream: error: {out}: cannot create the folder ({exc.strerror})", err=True)
+        raise SystemExit(1) from exc
     try:
         for name, img in plan.items():
             write_png(out / name, img)

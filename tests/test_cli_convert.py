@@ -242,3 +242,32 @@ def test_machine_readable_progress(tmp_path):
     assert all(b["progress"] == "continue" for b in blocks[:-1])
     last = blocks[-1]
     assert last["frame"] == "10" and last["total_frames"] == "10" and float(last["fps"]) > 0
+
+
+def _write_straight(path, pixels: np.ndarray) -> None:
+    """An 8-bit image written as given (straight alpha: OpenImageIO does not divide the colour by alpha)."""
+    import OpenImageIO as oiio
+    spec = oiio.ImageSpec(pixels.shape[1], pixels.shape[0], pixels.shape[2], oiio.UINT8)
+    spec.attribute("oiio:UnassociatedAlpha", 1)
+    out = oiio.ImageOutput.create(str(path))
+    assert out.open(str(path), spec) and out.write_image(pixels)
+    out.close()
+
+
+def test_compare_scores_the_colour_of_an_rgba_png_as_stored(tmp_path):
+    """The filter keeps a PNG's straight alpha and filters the colour as stored; compare read it premultiplied, so an
+    RGBA output with the truth's very colours scored tens of levels of error against an RGB truth."""
+    rgb = np.random.default_rng(4).integers(0, 256, (24, 32, 3), dtype=np.uint8)
+    _write_straight(tmp_path / "out.png", np.concatenate([rgb, np.full((24, 32, 1), 128, np.uint8)], -1))
+    _write_straight(tmp_path / "truth.png", rgb)
+    r = run("compare", tmp_path / "out.png", tmp_path / "truth.png", "--no-flip")
+    assert r.exit_code == 0, stderr(r)
+    assert "RMSE vs truth (8-bit levels): out 0.000" in r.output
+
+
+def test_compare_names_a_folder_given_for_an_image(tmp_path):
+    _write_straight(tmp_path / "a.png", np.zeros((8, 8, 3), np.uint8))
+    (tmp_path / "shots").mkdir()
+    for args in (("shots", "a.png"), ("a.png", "a.png", "--input", "shots")):
+        r = run("compare", *(tmp_path / a if not a.startswith("--") else a for a in args), "--no-flip")
+        assert r.exit_code == 1 and f"{tmp_path / 'shots'}: expected an image file, got a folder" in stderr(r)

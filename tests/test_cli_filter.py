@@ -715,3 +715,18 @@ def test_every_command_help_states_its_exit_codes():
     for name in ("filter", "devices", "compare", "overlay", "scenes", "bench"):
         res = CliRunner().invoke(cli_main, [name, "--help"])
         assert res.exit_code == 0 and "Exit codes: 0 " in res.output, name
+
+
+@pytest.mark.parametrize("args, warned", [(["--preset", "luma", "--threshold", "8"], True),
+                                          (["--metric", "rgb", "--threshold", "1"], True),
+                                          (["--metric", "luma", "--threshold", "0.5"], False),
+                                          (["--threshold", "8"], False)])
+def test_a_lab_sized_threshold_with_luma_or_rgb_is_warned(tmp_path, args, warned):
+    """--threshold is ΔE for lab but a fraction of full scale for luma/rgb: 8 with luma found no edge and wrote the
+    input back unchanged without a word."""
+    write_png(tmp_path / "in.png", staircase())
+    r = run(tmp_path / "in.png", "-o", tmp_path / "out.png", *args)
+    assert r.exit_code == 0, stderr(r)
+    assert ("no edges are found" in stderr(r)) == warned
+    if warned:
+        assert f"--threshold {args[-1]} with --metric " in stderr(r)

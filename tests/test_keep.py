@@ -109,3 +109,17 @@ def test_a_rectangle_outside_the_frame_is_said_once(caplog):
             assert kept_patches(frame, keep_rects(["0,100,64,10", "0,50%,100%,10%"]))[0][1].size == 0
     said = [r.getMessage() for r in caplog.records]
     assert said == ["keep rectangle 0,100,64,10 lies outside the 64x48 frame: it keeps nothing there"]
+
+
+@pytest.mark.parametrize("text, name", [("1e400,0,5,5", "X"), ("0,0,1e400%,5", "W"), ("0,0,5,-inf", "H")])
+def test_an_infinite_value_is_refused_by_name_not_a_traceback(text, name):
+    """'1e400' parses as infinity; int() of it raised OverflowError before the finiteness check."""
+    with pytest.raises(ValueError, match=f"keep: {name} of "):
+        parse_keep(text)
+
+
+@pytest.mark.parametrize("keep", [[(0, 0, 10, 10)], (0, 0, 10, 10), [[1, 2, 3, 4]]])
+def test_a_rectangle_of_another_type_is_refused_by_its_type(keep):
+    """keep=[(0, 0, 10, 10)] was turned into text and refused as "X of (0, 0, 10, 10) is not a number: '(0'"."""
+    with pytest.raises(ValueError, match=r"keep: expected KeepRect\(x, y, w, h\) or an 'X,Y,W,H' string .* got "):
+        keep_rects(keep)

@@ -690,3 +690,18 @@ def test_cli_overlay(renderer, tmp_path):
     assert r.exit_code == 1 and "bad.json" in r.output
     assert not os.path.exists(tmp_path / "o2.png")
     assert not [p for p in os.listdir(tmp_path) if "tmp" in p]
+
+
+@pytest.mark.parametrize("zero_copy", [True, False])
+def test_lines_wholly_far_off_the_frame_leave_it_unchanged(zero_copy):
+    """Points over DEVICE_CLIP_MARGIN px off the frame are cut on the host; when every segment is cut away the
+    tables are empty, which once made a zero-size OpenCL buffer (INVALID_BUFFER_SIZE) instead of drawing nothing."""
+    rng = np.random.default_rng(3)
+    frame = rng.integers(0, 256, (48, 64, 3)).astype(np.uint8)
+    far = [np.array([[-500.0, -500.0], [1e6, 3000.0]]), np.array([[-9000.0, 10.0], [-8000.0, 40.0]])]
+    r = OverlayRenderer(zero_copy=zero_copy)
+    assert np.array_equal(r.draw(frame, far, width=3.0), frame)
+    # the same renderer then draws a line on the frame as a new one does
+    near = far + [np.array([[5.0, 5.0], [50.0, 40.0]])]
+    assert np.array_equal(r.draw(frame, near, width=3.0),
+                          OverlayRenderer(zero_copy=zero_copy).draw(frame, near, width=3.0))

@@ -203,3 +203,39 @@ def test_scenes_help_lists_every_group_it_accepts():
     assert r.exit_code == 0, r.output
     listed = " ".join(r.output.split("--only")[1].split("--overwrite")[0].split())
     assert listed.endswith(f"(default: all): {', '.join(S.SCENES)}.")
+
+
+@pytest.mark.parametrize("args, message", [(["--only", ","], "--only: expected comma-separated names"),
+                                           (["--seed", "-1"], "'--seed': -1 is not in the range x>=0")])
+def test_scenes_options_that_name_nothing_or_a_bad_seed_are_refused(tmp_path, args, message):
+    """--only ',' wrote nothing and exited 0; --seed -1 failed with numpy's message, not naming the option."""
+    r = CliRunner().invoke(main, ["scenes", str(tmp_path / "s"), "--small", *args])
+    assert r.exit_code == 2 and message in r.output
+    assert not (tmp_path / "s").exists()
+
+
+def test_a_scene_named_twice_is_written_once(tmp_path):
+    r = CliRunner().invoke(main, ["scenes", str(tmp_path), "--small", "--only", "diagonals, diagonals"])
+    assert r.exit_code == 0, r.output
+    index = json.loads((tmp_path / "scenes.json").read_text())["scenes"]
+    assert [s["name"] for s in index].count("diagonals") == 1 and len(index) == 1
+
+
+@pytest.mark.parametrize("args, message", [(["--methods", " , "], "--methods: expected comma-separated names"),
+                                           (["--scenes", ","], "--scenes: expected comma-separated names"),
+                                           (["--seed", "-2"], "'--seed': -2 is not in the range x>=0")])
+def test_bench_options_that_name_nothing_or_a_bad_seed_are_refused(tmp_path, args, message):
+    r = CliRunner().invoke(main, ["bench", "--quick", "--out", str(tmp_path / "b"), *args])
+    assert r.exit_code == 2 and message in r.output
+    assert not (tmp_path / "b").exists()
+
+
+def test_an_output_folder_that_cannot_be_made_is_named_not_a_traceback(tmp_path):
+    """A file where the folder should go ended scenes in a NotADirectoryError traceback, and bench likewise, but
+    only after measuring every method."""
+    (tmp_path / "f").write_text("")
+    r = CliRunner().invoke(main, ["scenes", str(tmp_path / "f" / "s"), "--small", "--only", "diagonals"])
+    assert r.exit_code == 1 and f"{tmp_path / 'f' / 's'}: cannot create the folder (Not a directory)" in r.output
+    r = CliRunner().invoke(main, ["bench", "--quick", "--methods", "none", "--scenes", "diagonals", "--frames", "1",
+                                  "--out", str(tmp_path / "f" / "b")])
+    assert r.exit_code == 2 and "--out: " in r.output and "cannot create the folder (Not a directory)" in r.output

@@ -39,3 +39,15 @@ def test_an_unrotated_video_says_nothing_of_rotation(tmp_path):
     rotated_clip(tmp_path / "r.mp4", 0)
     r = CliRunner().invoke(main, [str(tmp_path / "r.mp4"), "-o", str(tmp_path / "img" / "%02d.png")])
     assert r.exit_code == 0 and "displayed rotated" not in stderr(r)
+
+
+def test_keep_on_a_rotated_video_says_the_rectangles_are_in_stored_frames(tmp_path):
+    """--keep is applied to the frames as stored; on a video displayed rotated, a rectangle measured on the turned
+    picture kept another place without a word."""
+    rotated_clip(tmp_path / "r.mp4", 90)
+    r = CliRunner().invoke(main, [str(tmp_path / "r.mp4"), "-o", str(tmp_path / "o.mp4"), "--keep", "0,0,50%,50%"])
+    assert r.exit_code == 0, stderr(r)
+    assert "--keep: " in stderr(r) and "rotated by 90 degrees" in stderr(r) and "as stored (64x48" in stderr(r)
+    rotated_clip(tmp_path / "u.mp4", 0)
+    r = CliRunner().invoke(main, [str(tmp_path / "u.mp4"), "-o", str(tmp_path / "p.mp4"), "--keep", "0,0,50%,50%"])
+    assert r.exit_code == 0 and "--keep: " not in stderr(r)

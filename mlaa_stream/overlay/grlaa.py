@@ -499,6 +499,10 @@ class OverlayRenderer:
         if not self.zero_copy:
             return self._grow(name, host)
         host = np.ascontiguousarray(host)
+        if host.size == 0:
+            # OpenCL has no zero-size buffers (INVALID_BUFFER_SIZE): lines lying wholly far off the frame leave empty
+            # segment tables; the kernels read none of a 0-segment table, so one zeroed element stands in for it
+            host = np.zeros((1,) + host.shape[1:], host.dtype)
         buf = self._cl.Buffer(self._ctx.ctx, self._cl.mem_flags.READ_ONLY |
                               self._cl.mem_flags.USE_HOST_PTR, hostbuf=host)
         self._inputs.append((host, buf))  # both kept until the frame is drawn

@@ -52,11 +52,12 @@ def parse_keep(text: str) -> KeepRect:
             v = float(part[:-1]) / 100.0 if rel else float(part)
         except ValueError:
             raise ValueError(f"keep: {name} of {text!r} is not a number: {part!r}") from None
-        if not rel and v != int(v):
-            raise ValueError(f"keep: {name} of {text!r} must be whole pixels or a percentage, got {part!r}")
+        # finite first: int() of an infinity ('1e400' parses as one) raises OverflowError, not a message
         if not (v >= 0 and np.isfinite(v)) or (name in "WH" and v == 0):
             raise ValueError(f"keep: {name} of {text!r} must be {'positive' if name in 'WH' else '>= 0'}, "
                              f"got {part!r}")
+        if not rel and v != int(v):
+            raise ValueError(f"keep: {name} of {text!r} must be whole pixels or a percentage, got {part!r}")
         values.append(v)
         relative.append(rel)
     return KeepRect(*values, relative=tuple(relative))
@@ -68,7 +69,18 @@ def keep_rects(keep: Iterable[KeepRect | str] | str | None) -> tuple[KeepRect, .
         return ()
     if isinstance(keep, (str, KeepRect)):
         keep = [keep]
-    return tuple(k if isinstance(k, KeepRect) else parse_keep(k) for k in keep)
+    return tuple(_keep_rect(k) for k in keep)
+
+
+def _keep_rect(k: object) -> KeepRect:
+    """One item of a `keep` option. Anything but a KeepRect or a string is refused by type: a tuple of numbers was
+    turned into its text and refused as: X of (0, 0, 10, 10) is not a number: '(0'."""
+    if isinstance(k, KeepRect):
+        return k
+    if isinstance(k, str):
+        return parse_keep(k)
+    raise ValueError(f"keep: expected KeepRect(x, y, w, h) or an 'X,Y,W,H' string (pixels or %) for each "
+                     f"rectangle, got {type(k).__name__} {k!r}")
 
 
 def kept_patches(frame: np.ndarray, rects: Sequence[KeepRect]) -> list[tuple[tuple[slice, slice], np.ndarray]]:
