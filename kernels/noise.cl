@@ -80,13 +80,20 @@ __kernel void noise_level(__global const int *hist, __global int *level, const i
 
 // quiet[i] = 1 where pixel i's 3x3 window of luma (clamped to the frame) spans under NOISE_SPAN_NUM / NOISE_SPAN_DEN
 // times the frame's noise level (in whole levels), else 0; nothing is written where the level is 0 (no pixel is
-// quiet: readers test the level first, noise_quiet). One work item per SEGMENT pixels of a row; the window's
-// columns slide along it (three luma reads per pixel).
-__kernel void noise_mask(__global const PIXEL_T *src, __global const int *noise, __global uchar *quiet, const int w,
-                         const int h)
+// quiet: readers test the level first, noise_quiet), nor in a row segment whose tiles hold no render region (only
+// region pixels read the flags; a noisy photograph has none). One work item per SEGMENT pixels of a row; the
+// window's columns slide along it (three luma reads per pixel).
+__kernel void noise_mask(__global const PIXEL_T *src, __global const int *noise, __global const uchar *render,
+                         __global uchar *quiet, const int w, const int h, const int tiles_x)
 {
     const int x0 = get_global_id(0) * SEGMENT, y = get_global_id(1), level = noise[0];
     if (level <= 0 || x0 >= w || y >= h) return;
+#if FALLBACK_MIN_CHANGED > 0   // render regions found per tile (else every tile is one: "everywhere")
+    int regions = 0;
+    for (int t = x0 / FALLBACK_TILE; t <= (min(x0 + SEGMENT, w) - 1) / FALLBACK_TILE; ++t)
+        regions |= render[(y / FALLBACK_TILE) * tiles_x + t];
+    if (!regions) return;
+#endif
     const int x1 = min(x0 + SEGMENT, w), above = max(y - 1, 0) * w, here = y * w, below = min(y + 1, h - 1) * w;
     const int limit = NOISE_SPAN_NUM * 256 * level;
     int lo[3], hi[3];  // columns x - 1, x, x + 1: their min and max over the three rows

@@ -43,8 +43,10 @@ def run_census(device, frame: np.ndarray, bgr: bool = False) -> tuple[np.ndarray
     W, H = np.int32(fmt.width), np.int32(fmt.height)
     device.kernel("fallback", "noise_census", defs)(device.queue, (bands,), None, src, hist, W, H)
     device.kernel("fallback", "noise_level", defs)(device.queue, (1,), None, hist, level, np.int32(bands))
+    render = cl.Buffer(device.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR,  # every tile a region: the whole mask
+                       hostbuf=np.ones(bands * -(-fmt.width // FALLBACK_TILE), np.uint8))
     device.kernel("fallback", "noise_mask", defs)(device.queue, (-(-fmt.width // SEGMENT), fmt.height), None, src,
-                                                  level, quiet, W, H)
+                                                  level, render, quiet, W, H, np.int32(-(-fmt.width // FALLBACK_TILE)))
     h, lv = np.empty((bands, N.NOISE_BINS), np.int32), np.empty(1, np.int32)
     cl.enqueue_copy(device.queue, h, hist)
     cl.enqueue_copy(device.queue, lv, level)

@@ -175,10 +175,7 @@ class FallbackPass:
                                                         wait_for=wait_for)
             events["noise_level"] = self._noise_level(queue, (1,), None, self._census, self._noise, ty,
                                                       wait_for=[events["noise_census"]])
-            events["noise_mask"] = self._noise_mask(queue, (-(-self.fmt.width // SEGMENT), self.fmt.height), None,
-                                                    src, self._noise, self._quiet, W, H,
-                                                    wait_for=[events["noise_level"]])
-            noise = [events["noise_mask"]]
+            noise = [events["noise_level"]]
         if not self.everywhere:  # "everywhere" reads no counts: every tile is a render region
             events["fallback_count"] = self._count(queue, (-(-self.fmt.width // SEGMENT), self.tiles[1]), None,
                                                    src, dst, edges, self._counts, W, H, tx, wait_for=wait_for)
@@ -201,6 +198,11 @@ class FallbackPass:
                                                               self._seeds, self._render, tx, ty,
                                                               wait_for=[events["overlay_seeds"]])
                 wait_for = [events["overlay_tiles"]]
+        if noise:  # the quiet flags, where the final render regions are
+            events["noise_mask"] = self._noise_mask(queue, (-(-self.fmt.width // SEGMENT), self.fmt.height), None,
+                                                    src, self._noise, self._render, self._quiet, W, H, tx,
+                                                    wait_for=[*wait_for, *noise])
+            noise = [events["noise_mask"]]
         events["fallback"] = self._fxaa(queue, (-(-self.fmt.width // SEGMENT), self.tiles[1]), None,
                                         src, luts, lin, edges, hdist, vdist, self._counts, self._render,
                                         self._table, self._noise, self._quiet, dst, W, H, tx, ty,
