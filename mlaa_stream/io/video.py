@@ -219,6 +219,8 @@ def _rotation(path: str) -> int:
     """The display rotation in degrees (0, 90, 180, -90), from the first frame's display matrix."""
     try:
         with av.open(path) as c:
+            if not c.streams.video:
+                return 0  # no video stream: _describe says so
             for frame in c.decode(video=0):
                 return int(round(frame.rotation or 0))
     except (av.error.FFmpegError, OSError, EOFError, AttributeError):
