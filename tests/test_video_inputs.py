@@ -45,3 +45,19 @@ def test_an_audio_only_file_is_refused_naming_it(tmp_path):
     assert r.exit_code == 1 and isinstance(r.exception, SystemExit), r.output  # no traceback
     assert "expected a video stream, found none" in r.output
     assert os.listdir(tmp_path) == ["song.mp4"]
+
+
+@pytest.mark.parametrize("w,h", [(1, 17), (16, 1)])
+def test_a_one_pixel_wide_or_tall_video_is_encoded(tmp_path, w, h):
+    # A 1-pixel dimension has chroma as wide as the frame in every format: 4:2:x looked unsubsampled there
+    # and libx264 refused yuv422p / yuv420p ('Generic error in an external library').
+    assert choose_pix_fmt("libx264", "rgb24", 1, 17) == "yuv444p"
+    assert choose_pix_fmt("libx264", "yuv420p", 16, 1) != "yuv420p"
+    assert choose_pix_fmt("libx264", "yuv420p", 64, 48) == "yuv420p"
+    src = str(tmp_path / "thin.nut")
+    make_demo.write_clip(src, frames=3, w=w, h=h, codec="rawvideo", pix_fmt="rgb24", audio=False)
+    out = tmp_path / "thin.mp4"
+    r = run(src, "-o", out, "-q")
+    assert r.exit_code == 0, r.output
+    info = probe_video(str(out))
+    assert (info.width, info.height) == (w, h) and info.frames == 3

@@ -400,14 +400,15 @@ def choose_pix_fmt(codec: str, src_pix_fmt: str, width: int, height: int) -> str
         return None
     sbits, salpha = _format_bits_alpha(src_pix_fmt)
     src = av.VideoFormat(src_pix_fmt)
-    src_sub = src.chroma_width(width) < width or src.chroma_height(height) < height
+    # subsampled or not by the format, not the size: a 1-pixel-wide frame's chroma is 1 wide in every format
+    src_sub = src.chroma_width(2) < 2 or src.chroma_height(2) < 2
     lossless = codec in LOSSLESS_RGB_CODECS
 
     def key(name: str) -> tuple:
         f = av.VideoFormat(name)
         bits, alpha = _format_bits_alpha(name)
-        sub_w = f.chroma_width(width) < width
-        sub_h = f.chroma_height(height) < height
+        sub_w = f.chroma_width(2) < 2
+        sub_h = f.chroma_height(2) < 2
         fits = (not sub_w or width % 2 == 0) and (not sub_h or height % 2 == 0)
         return (not fits, salpha and not alpha, bits < sbits, name.startswith(("nv", "yuvj", "bayer")),
                 lossless and not f.is_rgb, name != src_pix_fmt,
