@@ -47,8 +47,8 @@ just before the first one to write through the temporal stage (its history, outp
 NaN and infinite samples pass through unchanged.
 
 \b
-Video goes through PyAV (FFmpeg): frame rate, timestamps, resolution, colour tags and audio are
-kept; a source with more than 8 bits per sample stays 10/12/16-bit where the codec allows it. If
+Video goes through PyAV (FFmpeg): frame rate, timestamps, resolution, pixel aspect ratio, colour
+tags and audio are kept; a source with more than 8 bits per sample stays 10/12/16-bit where the codec allows it. If
 the input is truncated or corrupt, the frames that decode are filtered and the output is kept as a
 valid shorter file; the exit code is 1 and the message says at which frame decoding stopped.
 

@@ -61,3 +61,37 @@ def test_a_one_pixel_wide_or_tall_video_is_encoded(tmp_path, w, h):
     assert r.exit_code == 0, r.output
     info = probe_video(str(out))
     assert (info.width, info.height) == (w, h) and info.frames == 3
+
+
+def write_anamorphic(path: str, sar: Fraction, frames: int = 3) -> None:
+    """64x48 stored, shown 4:3 wider (DV, DVD and HDV store 720 or 1440 columns for a wider picture)."""
+    with av.open(path, "w") as out:
+        s = out.add_stream("libx264", rate=24)
+        s.width, s.height, s.pix_fmt = 64, 48, "yuv420p"
+        s.codec_context.sample_aspect_ratio = sar
+        for i in range(frames):
+            f = av.VideoFrame.from_ndarray(np.full((48, 64, 3), 40 * i, np.uint8), format="rgb24")
+            f.pts = i
+            for p in s.encode(f):
+                out.mux(p)
+        for p in s.encode():
+            out.mux(p)
+
+
+@pytest.mark.parametrize("ext,codec", [("mp4", None), ("mkv", None), ("mov", "prores_ks")])
+def test_an_anamorphic_video_keeps_its_pixel_aspect_ratio(tmp_path, ext, codec):
+    src = str(tmp_path / "dv.mp4")
+    write_anamorphic(src, Fraction(4, 3))
+    assert probe_video(src).sar == Fraction(4, 3)
+    out = tmp_path / f"out.{ext}"
+    r = run(src, "-o", out, *(("--codec", codec) if codec else ()))
+    assert r.exit_code == 0, r.output
+    assert probe_video(str(out)).sar == Fraction(4, 3)  # was square: the picture shown 3/4 as wide
+
+
+def test_a_pixel_aspect_ratio_matroska_cannot_take_is_named(tmp_path):
+    src = str(tmp_path / "dv.mp4")
+    write_anamorphic(src, Fraction(4, 3))
+    r = run(src, "-o", tmp_path / "out.mkv", "--codec", "ffv1")
+    assert r.exit_code == 0, r.output
+    assert "pixel aspect ratio 4/3 of" in r.output and "not kept" in r.output

@@ -1,8 +1,8 @@
 """Video through PyAV: decode to RGB frames and encode them back, keeping what the source had.
 
-Kept: frame rate and timestamps (time base and pts are copied), resolution, bit depth (a source
-with more than 8 bits per sample decodes to rgb48le/uint16 and is encoded to a >8-bit pixel format
-where the codec has one), alpha where the codec can store it, colour tags (matrix, range,
+Kept: frame rate and timestamps (time base and pts are copied), resolution and pixel aspect ratio, bit
+depth (a source with more than 8 bits per sample decodes to rgb48le/uint16 and is encoded to a >8-bit
+pixel format where the codec has one), alpha where the codec can store it, colour tags (matrix, range,
 primaries, transfer) and every audio stream (copied packet by packet, not re-encoded).
 OpenCV's VideoCapture/VideoWriter serve only as a fallback (8-bit, no audio, mp4v).
 
@@ -46,6 +46,8 @@ _FPS_TIME_BASE_CODECS = frozenset({"mpeg4", "mpeg2video", "mpeg1video", "h263", 
 # Containers that store one index entry per tick of the time base (AVI): a finer time base than the frame
 # rate declares that rate (an MP4 source's 1/12288 -> 600 fps) and fills the gaps with empty frames.
 _FPS_TIME_BASE_FORMATS = frozenset({"avi"})
+# Encoders that store the pixel aspect ratio in their bitstream (H.264/HEVC VUI): kept in any container.
+_SAR_IN_BITSTREAM = frozenset({"libx264", "libx264rgb", "libx265"})
 _UNSPECIFIED = {"colorspace": 2, "color_primaries": 2, "color_trc": 2, "color_range": 0}
 
 
@@ -91,6 +93,7 @@ class VideoInfo:
     rotation: int = 0  # degrees of the display matrix (phones film sideways and say so there)
     subtitle_streams: int = 0
     other_streams: tuple[str, ...] = ()  # streams neither video, audio nor subtitle (data, attachments)
+    sar: Fraction | None = None  # sample (pixel) aspect ratio of an anamorphic source; None: square or unknown
 
     @property
     def sample_format(self) -> str:
@@ -204,6 +207,7 @@ def _describe(container, path: str, rotation: int) -> VideoInfo:
     if frames is None and fps and duration:
         frames = int(round(duration * fps))  # an estimate (progress bar): wrong for variable rates
     colour = {k: int(getattr(cc, k) or 0) for k in _UNSPECIFIED}
+    sar = s.sample_aspect_ratio or cc.sample_aspect_ratio  # the container's (MP4 pasp, MKV) or the bitstream's
     others = tuple(f"{st.type} stream {st.index}" for st in container.streams
                    if st.type not in ("video", "audio", "subtitle"))
     return VideoInfo(path=path, width=cc.width, height=cc.height,
@@ -212,7 +216,8 @@ def _describe(container, path: str, rotation: int) -> VideoInfo:
                      frames=frames, pix_fmt=pix, bits=bits, has_alpha=alpha, codec=cc.name,
                      colour=colour, audio_streams=len(container.streams.audio),
                      frames_declared=declared, duration=duration, rotation=rotation,
-                     subtitle_streams=len(container.streams.subtitles), other_streams=others)
+                     subtitle_streams=len(container.streams.subtitles), other_streams=others,
+                     sar=Fraction(sar) if sar and sar != 1 else None)
 
 
 def _rotation(path: str) -> int:
@@ -520,6 +525,13 @@ class VideoWriter:
         self._copy_metadata(stream)
         stream.width, stream.height = info.width, info.height
         stream.pix_fmt = self.pix_fmt
+        if info.sar:  # anamorphic: shown at width x sar (DV, DVD, HDV); square pixels otherwise
+            stream.codec_context.sample_aspect_ratio = info.sar
+            if self._out.format.name in ("matroska", "webm") and self.codec not in _SAR_IN_BITSTREAM:
+                # Matroska takes it from the stream, which PyAV cannot set; MP4/MOV from the codec's parameters
+                self.warnings.append(f"{self.path}: pixel aspect ratio {info.sar} of {info.path} not kept: "
+                                     f"{self.codec} in {self._out.format.name} does not store it (MP4/MOV do with "
+                                     f"any codec, MKV with libx264 / libx265)")
         if self.codec in _FPS_TIME_BASE_CODECS or info.time_base is None or \
                 self.container_format in _RAW_FORMATS or \
                 self._out.format.name in _FPS_TIME_BASE_FORMATS:  # y4m reads its frame rate from the time base
