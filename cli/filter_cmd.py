@@ -1121,7 +1121,7 @@ class _VideoJob(_Job):
 
     def run(self, filt, post_hooks, in_flight, times, temporal=None) -> int:
         from mlaa_stream.pipeline import PipelineError
-        from mlaa_stream.io.video import VideoReadError, read_video_cv
+        from mlaa_stream.io.video import VideoError, VideoReadError, read_video_cv
 
         if self.opts.get("cluster"):
             return self._run_on_cluster()
@@ -1148,6 +1148,10 @@ class _VideoJob(_Job):
         except PipelineError as exc:
             stopped = exc
             self._finished = True  # filter_video kept the shorter file or removed it
+        except VideoError as exc:  # finishing the output failed: filter_video removed it
+            self._finished = True
+            self.con.error(str(exc))
+            return EXIT_FAILED
         finally:
             progress.close()
             self.written = self.writer.frames_written

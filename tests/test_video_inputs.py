@@ -12,7 +12,7 @@ import pytest
 from click.testing import CliRunner
 
 from mlaa_stream.cli.main import main
-from mlaa_stream.io.video import VideoError, choose_pix_fmt, probe_video
+from mlaa_stream.io.video import VideoError, VideoWriter, choose_pix_fmt, probe_video
 
 ROOT = os.path.join(os.path.dirname(__file__), "..")
 _spec = importlib.util.spec_from_file_location("make_demo", os.path.join(ROOT, "fixtures", "make_demo.py"))
@@ -95,3 +95,58 @@ def test_a_pixel_aspect_ratio_matroska_cannot_take_is_named(tmp_path):
     r = run(src, "-o", tmp_path / "out.mkv", "--codec", "ffv1")
     assert r.exit_code == 0, r.output
     assert "pixel aspect ratio 4/3 of" in r.output and "not kept" in r.output
+
+
+def write_damaged_timestamps(path: str, tmp, shift: int) -> list[int]:
+    """An FFV1 MKV (intra only: no reordering) whose 6th frame's timestamp is damaged by `shift` ticks
+    (dts kept, as a corrupt block leaves them); returns the decoded timestamps."""
+    clean = os.path.join(tmp, "clean.mkv")
+    make_demo.write_clip(clean, frames=12, codec="ffv1", pix_fmt="yuv444p", audio=False)
+    with av.open(clean) as src, av.open(path, "w") as out:
+        s = out.add_stream_from_template(src.streams.video[0])
+        for i, pkt in enumerate(p for p in src.demux(src.streams.video[0]) if p.dts is not None):
+            if i == 5:
+                pkt.pts += shift
+            pkt.stream = s
+            out.mux(pkt)
+    with av.open(path) as c:
+        return [f.pts for f in c.decode(video=0)]
+
+
+@pytest.mark.parametrize("ext", ["mkv", "mp4"])
+def test_a_damaged_timestamp_keeps_every_frame(tmp_path, ext):
+    pts = write_damaged_timestamps(str(tmp_path / "glitch.mkv"), str(tmp_path), shift=60)
+    assert pts[6] < pts[5]  # the 7th frame goes back: the muxer refused it (EINVAL), the output was lost
+    out = tmp_path / f"out.{ext}"
+    r = run(tmp_path / "glitch.mkv", "-o", out)
+    assert r.exit_code == 0, r.output
+    assert "frame 6 (and any later like it): timestamp not after the previous frame's" in r.output
+    with av.open(str(out)) as c:
+        times = [f.time for f in c.decode(video=0)]
+    assert len(times) == 12 and all(b > a for a, b in zip(times, times[1:]))
+
+
+def test_a_damaged_timestamp_ahead_keeps_the_frames_decoded(tmp_path):
+    pts = write_damaged_timestamps(str(tmp_path / "glitch.mkv"), str(tmp_path), shift=2000)
+    assert pts[5] > pts[6]
+    out = tmp_path / "out.mp4"
+    r = run(tmp_path / "glitch.mkv", "-o", out)
+    assert r.exit_code == 1 and "kept as a valid shorter video" in r.output, r.output  # ends before its duration
+    with av.open(str(out)) as c:
+        assert sum(1 for _ in c.decode(video=0)) == 12
+
+
+def test_an_output_that_cannot_be_finished_is_named_not_a_traceback(tmp_path, monkeypatch):
+    src = str(tmp_path / "in.mkv")
+    make_demo.write_clip(src, frames=3, audio=False)
+    info = probe_video(src)
+    w = VideoWriter(str(tmp_path / "out.mkv"), info)
+    w.write(np.zeros((48, 64, 3), np.uint8))
+
+    def refuse(packet):
+        raise av.error.ArgumentError(22, "Invalid argument")
+
+    monkeypatch.setattr(w, "_out", type("Out", (), {"mux": staticmethod(refuse), "close": lambda self: None})())
+    with pytest.raises(VideoError, match=r"out\.mkv: cannot finish writing \(.*Invalid argument.*\); not written"):
+        w.commit()
+    assert sorted(os.listdir(tmp_path)) == ["in.mkv"]

@@ -486,6 +486,8 @@ class VideoWriter:
         self.pix_fmt = pix_fmt or choose_pix_fmt(codec, info.pix_fmt, info.width, info.height) or "yuv420p"
         self.frames_written = 0
         self.last_time: float | None = None  # seconds, end of the last frame written
+        self._last_pts: int | None = None  # the last frame's, in the stream's time base: each next one is later
+        self._retimed = 0  # frames whose source timestamp was not after the one before
         self.warnings: list[str] = dropped
         self._tmp = None if path == PIPE else temp_path_for(path)  # standard output: written as it comes
         self._options = {**encoder_options(codec, crf, preset), **(extra_options or {})}
@@ -628,7 +630,18 @@ class VideoWriter:
             t = when.pts * Fraction(when.time_base) - Fraction(self.offset).limit_denominator(1_000_000)
         else:
             t = self.frames_written / (self.info.fps or Fraction(25))
-        vf.pts = int(round(t / tb))
+        pts = int(round(t / tb))
+        if self._last_pts is not None and pts <= self._last_pts:
+            # a damaged timestamp (a corrupt block's, or one far ahead before it): the muxer refuses a frame
+            # that is not after the one before; it goes one frame after that one instead
+            t = (self._last_pts + 1) * tb + (1 / (self.info.fps or Fraction(25)) - tb)
+            pts = int(round(t / tb))
+            if not self._retimed:
+                self.warnings.append(f"{self.path}: frame {self.frames_written} (and any later like it): timestamp "
+                                     f"not after the previous frame's (damaged input?): written one frame after "
+                                     f"it, later than in the source")
+            self._retimed += 1
+        vf.pts = self._last_pts = pts
         vf.time_base = tb
         if self._yuv:
             vf = vf.reformat(format=self.pix_fmt, dst_colorspace=self._colorspace(),
@@ -706,6 +719,9 @@ class VideoWriter:
                 self._audio_in.close()
             if self._tmp is not None:
                 publish(self._tmp, self.path, self.overwrite)
+        except av.error.FFmpegError as exc:  # the encoder's or muxer's last packets
+            self.abort()
+            raise VideoError(f"{self.path}: cannot finish writing ({exc}); not written") from exc
         except BaseException:
             self.abort()
             raise
