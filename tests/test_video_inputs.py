@@ -150,3 +150,24 @@ def test_an_output_that_cannot_be_finished_is_named_not_a_traceback(tmp_path, mo
     with pytest.raises(VideoError, match=r"out\.mkv: cannot finish writing \(.*Invalid argument.*\); not written"):
         w.commit()
     assert sorted(os.listdir(tmp_path)) == ["in.mkv"]
+
+
+def test_a_second_video_stream_left_out_is_named(tmp_path):
+    src = str(tmp_path / "two.mkv")
+    with av.open(src, "w") as out:
+        streams = [out.add_stream("libx264", rate=24) for _ in range(2)]
+        for s, (w, h) in zip(streams, ((64, 48), (32, 24))):
+            s.width, s.height, s.pix_fmt = w, h, "yuv420p"
+        for i in range(3):
+            for s in streams:
+                f = av.VideoFrame.from_ndarray(np.full((s.height, s.width, 3), 50 * i, np.uint8), format="rgb24")
+                f.pts = i
+                for p in s.encode(f):
+                    out.mux(p)
+        for s in streams:
+            for p in s.encode():
+                out.mux(p)
+    assert probe_video(src).other_streams == ("video stream 1",)
+    r = run(src, "-o", tmp_path / "out.mkv")
+    assert r.exit_code == 0, r.output
+    assert "video stream 1 of" in r.output and "not kept" in r.output  # was dropped without a word

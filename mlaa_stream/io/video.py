@@ -92,7 +92,7 @@ class VideoInfo:
     duration: float | None = None  # seconds, the stream's (or the container's) when known
     rotation: int = 0  # degrees of the display matrix (phones film sideways and say so there)
     subtitle_streams: int = 0
-    other_streams: tuple[str, ...] = ()  # streams neither video, audio nor subtitle (data, attachments)
+    other_streams: tuple[str, ...] = ()  # streams not copied as audio or subtitle: data, attachments, more video
     sar: Fraction | None = None  # sample (pixel) aspect ratio of an anamorphic source; None: square or unknown
 
     @property
@@ -208,8 +208,8 @@ def _describe(container, path: str, rotation: int) -> VideoInfo:
         frames = int(round(duration * fps))  # an estimate (progress bar): wrong for variable rates
     colour = {k: int(getattr(cc, k) or 0) for k in _UNSPECIFIED}
     sar = s.sample_aspect_ratio or cc.sample_aspect_ratio  # the container's (MP4 pasp, MKV) or the bitstream's
-    others = tuple(f"{st.type} stream {st.index}" for st in container.streams
-                   if st.type not in ("video", "audio", "subtitle"))
+    others = tuple(f"{st.type} stream {st.index}" for st in container.streams  # a second video stream too
+                   if st.type not in ("video", "audio", "subtitle") or (st.type == "video" and st is not s))
     return VideoInfo(path=path, width=cc.width, height=cc.height,
                      fps=Fraction(fps) if fps else None,
                      time_base=Fraction(s.time_base) if s.time_base else None,
