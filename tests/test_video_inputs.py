@@ -171,3 +171,18 @@ def test_a_second_video_stream_left_out_is_named(tmp_path):
     r = run(src, "-o", tmp_path / "out.mkv")
     assert r.exit_code == 0, r.output
     assert "video stream 1 of" in r.output and "not kept" in r.output  # was dropped without a word
+
+
+def test_an_rgb_source_through_a_yuv_codec_keeps_its_colours(tmp_path):
+    # The source's matrix tag "RGB" (0) went onto the YUV output: decoders showed Y, U, V as G, B, R.
+    src = str(tmp_path / "rgb.mkv")
+    make_demo.write_clip(src, frames=2, codec="libx264rgb", pix_fmt="rgb24", audio=False, options={"crf": "0"})
+    assert probe_video(src).colour["colorspace"] == 0
+    out = tmp_path / "out.mkv"
+    r = run(src, "-o", out, "--codec", "libx264", "--crf", "0")
+    assert r.exit_code == 0, r.output
+    with av.open(src) as a, av.open(str(out)) as b:
+        x = next(a.decode(video=0)).to_ndarray(format="rgb24").astype(int)
+        y = next(b.decode(video=0)).to_ndarray(format="rgb24").astype(int)
+    assert np.abs(x - y).mean() < 8  # the filter's changes at edges; was ~50 levels everywhere
+

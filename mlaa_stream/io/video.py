@@ -546,7 +546,11 @@ class VideoWriter:
         self._yuv = not out_fmt.is_rgb and not self.pix_fmt.startswith("gray")
         for key, unspecified in _UNSPECIFIED.items():
             value = info.colour.get(key, unspecified)
-            if value != unspecified and (self._yuv or key != "colorspace"):
+            # the matrix only onto YUV planes, and never an RGB source's "RGB" (0): players showed the YUV
+            # planes as G, B, R (an RGB H.264 / PNG source through libx264: colours off by ~50 levels; VP9 refused)
+            if key == "colorspace" and (not self._yuv or value == 0):
+                continue
+            if value != unspecified:
                 setattr(stream.codec_context, key, value)
         if self._yuv and info.colour.get("color_range", 0) == 0:
             stream.codec_context.color_range = 1  # tag what swscale writes: limited (MPEG) range
