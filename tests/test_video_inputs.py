@@ -186,3 +186,14 @@ def test_an_rgb_source_through_a_yuv_codec_keeps_its_colours(tmp_path):
         y = next(b.decode(video=0)).to_ndarray(format="rgb24").astype(int)
     assert np.abs(x - y).mean() < 8  # the filter's changes at edges; was ~50 levels everywhere
 
+
+def test_a_container_that_cannot_hold_the_sources_codec_takes_its_own(tmp_path):
+    src = str(tmp_path / "in.mp4")
+    make_demo.write_clip(src, frames=3, audio=False)
+    out = tmp_path / "out.webm"
+    r = run(src, "-o", out)  # H.264 source: libx264 by default, which WebM cannot hold
+    assert r.exit_code == 0, r.output
+    assert "webm cannot hold libx264; encoded with libvpx-vp9" in r.output
+    assert probe_video(str(out)).codec == "vp9"
+    r = run(src, "-o", tmp_path / "asked.webm", "--codec", "libx264")  # asked for: refused, not replaced
+    assert r.exit_code == 1 and "'webm' format does not support 'libx264'" in r.output

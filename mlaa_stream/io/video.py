@@ -10,6 +10,7 @@ The output is encoded under a temporary name in its directory and renamed when c
 """
 from __future__ import annotations
 
+import io
 import math
 import os
 import sys
@@ -249,6 +250,17 @@ def codec_for(info: VideoInfo) -> str:
     return name if name and name in av.codecs_available else DEFAULT_CODEC
 
 
+def _container_holds(format_name: str, codec: str) -> bool:
+    """False where FFmpeg knows the muxer cannot store the codec (H.264 in WebM); True where it can or does not
+    say (MPEG-TS answers no query)."""
+    with av.open(io.BytesIO(), "w", format=format_name) as probe:
+        try:
+            probe.add_stream(codec)
+        except ValueError:
+            return False
+    return True
+
+
 def _copy_tags(src: dict, dst) -> None:
     for key, value in src.items():
         if key.lower() not in _NOT_COPIED_TAGS and not key.upper().startswith("DURATION"):
@@ -458,6 +470,8 @@ class VideoWriter:
         if path == PIPE and not container_format:
             raise VideoError("standard output: expected a container format (-f y4m, nut, matroska or mpegts)")
         raw = container_format in _RAW_FORMATS
+        # the source's family may not go in the output's container: _open then takes the container's own
+        self._codec_chosen = None if codec else (crf, preset, pix_fmt, extra_options)
         codec = codec or ("rawvideo" if raw or (path == PIPE and container_format == "nut") else codec_for(info))
         if raw and not pix_fmt:
             pix_fmt = _raw_pix_fmt(container_format, info)
@@ -521,6 +535,8 @@ class VideoWriter:
         except (av.error.FFmpegError, OSError, ValueError) as exc:
             raise VideoError(f"{self.path}: cannot create the output: {exc}") from exc
         rate = info.fps or Fraction(25)
+        if self._codec_chosen is not None and not _container_holds(self._out.format.name, self.codec):
+            self._take_containers_codec()
         stream = self._out.add_stream(self.codec, rate=rate, options=dict(self._options))
         if info.rotation:
             stream.set_display_rotation(info.rotation)
@@ -581,6 +597,19 @@ class VideoWriter:
         for what in self.info.other_streams:
             if what not in kept:  # data streams, or attachments of a source this could not open
                 self.warnings.append(f"{self.path}: {what} of {self.info.path} not kept")
+
+    def _take_containers_codec(self) -> None:
+        """No --codec and the source's family cannot go in the output's container (H.264 in WebM, ProRes in
+        MP4): the container's own encoder (WebM: VP9), said in a warning."""
+        crf, preset, pix_fmt, extra = self._codec_chosen
+        default = av.Codec(self._out.default_video_codec, "w").name
+        self.warnings.append(f"{self.path}: {self._out.format.name} cannot hold {self.codec}; encoded with "
+                             f"{default} (--codec picks another)")
+        self.codec = default
+        self.pix_fmt = pix_fmt or choose_pix_fmt(default, self.info.pix_fmt, self.info.width,
+                                                 self.info.height) or "yuv420p"
+        self._options = {**encoder_options(default, crf, preset), **(extra or {})}
+        self._codec_chosen = None
 
     def _copy_extras(self) -> set[str]:
         """The source's chapters and attachments (copy_chapters_and_attachments); returns the streams
