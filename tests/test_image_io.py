@@ -99,6 +99,28 @@ def test_unreadable_files_are_refused_naming_the_file(tmp_path, content, message
     assert str(path) in str(ei.value)
 
 
+def test_a_truncated_jpeg_is_refused_not_filtered_with_grey_rows(tmp_path):
+    # libjpeg fills the missing rows with grey and OpenImageIO returns them, reporting only an error
+    arr = np.random.default_rng(3).integers(0, 255, (64, 48, 3), dtype=np.uint8)
+    whole = tmp_path / "whole.jpg"
+    write_raw(whole, arr, "uint8")
+    cut = tmp_path / "cut.jpg"
+    cut.write_bytes(whole.read_bytes()[:whole.stat().st_size // 2])
+    with pytest.raises(ImageReadError, match="cut.jpg: reading pixels failed: .*Premature end of JPEG"):
+        read_image(str(cut))
+
+
+def test_a_truncated_tiff_names_its_own_read_error_not_the_subimage_probe(tmp_path):
+    arr = np.random.default_rng(4).integers(0, 255, (64, 48, 3), dtype=np.uint8)
+    whole = tmp_path / "whole.tif"
+    write_raw(whole, arr, "uint8", {"compression": "none"})
+    cut = tmp_path / "cut.tif"
+    cut.write_bytes(whole.read_bytes()[:whole.stat().st_size // 2])
+    with pytest.raises(ImageReadError, match="cut.tif: reading pixels failed") as ei:
+        read_image(str(cut))
+    assert "subimage" not in str(ei.value)
+
+
 def test_a_missing_file_is_refused_naming_it(tmp_path):
     with pytest.raises(ImageReadError, match="nope.png: cannot read"):
         read_image(str(tmp_path / "nope.png"))

@@ -124,12 +124,15 @@ def read_image(path: str) -> Image:
             raise ImageReadError(f"{path}: expected a single image, got {count} (an animated or multi-page "
                                  f"file); filter it as a video or split it into frames first "
                                  f"(e.g. ffmpeg -i {os.path.basename(path)} frames/%04d.png)")
+        inp.geterror()  # clear the probe's 'could not seek to subimage 1': a failed read must report its own error
         conversions = _conversions(path, spec)
         fmt = str(spec.format)
         read_fmt = fmt if fmt in _NATIVE else "float"
         pixels = inp.read_image(0, 0, 0, spec.nchannels, read_fmt)
-        if pixels is None:
-            raise ImageReadError(f"{path}: reading pixels failed: {inp.geterror() or 'unknown error'}")
+        # a truncated JPEG decodes with its missing rows grey and only an error ("Premature end of JPEG file")
+        err = inp.geterror() if pixels is None or inp.has_error else ""
+        if pixels is None or err:
+            raise ImageReadError(f"{path}: reading pixels failed: {err or 'unknown error'}")
         spec = oiio.ImageSpec(spec)  # a copy that outlives the ImageInput
         if spec.alpha_channel >= 0 and inp.format_name() not in _PREMULTIPLIED_FORMATS:
             spec.attribute("oiio:UnassociatedAlpha", 1)  # straight alpha, also where the reader does not say so (BMP)
