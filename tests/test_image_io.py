@@ -79,6 +79,20 @@ def test_sample_types_the_filter_lacks_come_back_in_the_files_type(tmp_path):
     inp.close()
 
 
+def test_a_1_bit_tiff_comes_back_8_bit_keeping_the_filtered_levels(tmp_path):
+    arr = (np.random.default_rng(6).random((8, 16, 1)) > 0.5).astype(np.uint8) * 255
+    src = tmp_path / "lineart.tif"
+    write_raw(src, arr, "uint8", {"oiio:BitsPerSample": 1})
+    im = read_image(str(src))
+    assert im.spec.get_int_attribute("oiio:BitsPerSample") == 1
+    assert any("1-bit samples written back as 8-bit" in note for note in im.conversions)
+    blended = im.pixels.copy()
+    blended[0, :, 0] = np.arange(16) * 17   # levels between black and white, as at an antialiased edge
+    write_image(str(tmp_path / "out.tif"), blended, im.spec)
+    back = read_image(str(tmp_path / "out.tif"))
+    np.testing.assert_array_equal(back.pixels, blended)   # was cut back to 0 / 255
+
+
 def test_palette_png_reads_as_the_colours_it_shows():
     from PIL import Image
 

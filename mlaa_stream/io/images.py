@@ -150,6 +150,9 @@ def _conversions(path: str, spec: oiio.ImageSpec) -> tuple[str, ...]:
     model = spec.get_string_attribute("jpeg:ColorSpace", "")
     if model.upper() in ("CMYK", "YCCK"):
         notes.append(f"{model} converted to RGB (written back as RGB)")
+    bits = spec.get_int_attribute("oiio:BitsPerSample", 0)
+    if 0 < bits < 8:
+        notes.append(f"{bits}-bit samples written back as 8-bit (the blended edges need the levels between)")
     if os.path.splitext(path)[1].lower() == ".png":
         with open(path, "rb") as fh:
             header = fh.read(26)
@@ -362,6 +365,9 @@ def output_spec(spec: oiio.ImageSpec, pixels: np.ndarray) -> oiio.ImageSpec:
     if (out.width, out.height, out.nchannels) != (w, h, c):
         raise ValueError(f"expected pixels of {out.width}x{out.height}x{out.nchannels}, "
                          f"got {w}x{h}x{c}")
+    if 0 < out.get_int_attribute("oiio:BitsPerSample", 0) < 8:
+        # a 1/2/4-bit file (line art, a fax scan): TIFF's writer would pack the filtered levels back into 2/4/16
+        out.erase_attribute("oiio:BitsPerSample")
     return out
 
 
