@@ -93,6 +93,29 @@ def test_a_1_bit_tiff_comes_back_8_bit_keeping_the_filtered_levels(tmp_path):
     np.testing.assert_array_equal(back.pixels, blended)   # was cut back to 0 / 255
 
 
+@pytest.mark.parametrize("ext", [".exr", ".tif"])
+def test_a_mip_mapped_texture_is_written_with_its_levels_remade_from_level_0(tmp_path, ext):
+    arr = np.random.default_rng(7).random((24, 40, 3)).astype(np.float32)
+    flat = oiio.ImageBuf(oiio.ImageSpec(40, 24, 3, oiio.FLOAT))
+    flat.set_pixels(oiio.ROI.All, arr)
+    src = str(tmp_path / f"tex{ext}")
+    assert oiio.ImageBufAlgo.make_texture(oiio.MakeTxTexture, flat, src, oiio.ImageSpec()), oiio.geterror()
+    im = read_image(src)
+    dst = str(tmp_path / f"out{ext}")
+    write_image(dst, im.pixels, im.spec)   # the EXR was refused: 'the written file is incomplete: empty file'
+    inp = oiio.ImageInput.open(dst)
+    sizes = []
+    while inp.seek_subimage(0, len(sizes)):
+        sizes.append((inp.spec().width, inp.spec().height))
+    level1 = inp.read_image(0, 1, 0, 3, "float")
+    inp.close()
+    assert sizes == [(40, 24), (20, 12), (10, 6), (5, 3), (2, 1), (1, 1)]   # the TIFF kept level 0 alone
+    np.testing.assert_array_equal(read_image(dst).pixels, im.pixels)
+    np.testing.assert_allclose(level1, im.pixels.astype(np.float32).reshape(12, 2, 20, 2, 3).mean(axis=(1, 3)),
+                               atol=2e-3 if ext == ".exr" else 3e-3)   # half floats, 8-bit
+    assert leftovers(tmp_path) == []
+
+
 def test_palette_png_reads_as_the_colours_it_shows():
     from PIL import Image
 

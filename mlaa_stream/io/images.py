@@ -495,25 +495,54 @@ def _write_file(tmp: str, pixels: np.ndarray, spec: oiio.ImageSpec, final: str) 
     if out is None:
         raise ImageWriteError(f"{final}: no OpenImageIO writer for this extension "
                               f"({oiio.geterror() or 'unknown format'})")
-    ok = out.open(tmp, spec) and out.write_image(pixels)
+    ok = out.open(tmp, spec) and out.write_image(pixels) and _write_mip_levels(out, tmp, spec, pixels)
     err = "" if ok else out.geterror()
     ok = out.close() and ok
+    err = err or ("" if ok else out.geterror())
+    format_name = out.format_name() if ok else ""   # named only where the write went through
+    del out   # OpenEXR's writer ends a MIP-mapped file when the ImageOutput goes, not on close(): before the check
     if ok:
         written = image_shape(tmp)
         if written is not None and written[:2] == (spec.width, spec.height) and written[2] != spec.nchannels:
             # JPEG drops alpha and GIF adds it without an error: a format limit, not a failed write
-            ok, err = False, (f"{out.format_name()} does not support {spec.nchannels}-channel images "
+            ok, err = False, (f"{format_name} does not support {spec.nchannels}-channel images "
                               f"(it wrote {written[2]}); PNG, TIFF and EXR keep them")
         else:
             problem = check_complete(tmp, spec.width, spec.height, spec.nchannels)
             if problem is not None:
                 ok, err = False, f"the written file is incomplete: {problem}"
     if not ok:
-        err = err or out.geterror() or oiio.geterror() or "unknown error"
+        err = err or oiio.geterror() or "unknown error"
         if (os.strerror(errno.ENOSPC) in err or os.strerror(errno.EDQUOT) in err
                 or _free_bytes(tmp) < _LOW_SPACE):
             raise OSError(errno.ENOSPC, f"{os.strerror(errno.ENOSPC)}: {err}", final)
         raise ImageWriteError(f"{final}: writing failed: {err}")
+
+
+def _write_mip_levels(out: oiio.ImageOutput, tmp: str, spec: oiio.ImageSpec, pixels: np.ndarray) -> bool:
+    """A texture's MIP levels (an input read with several, as maketx writes .tx and .exr), remade from the filtered
+    level 0 down to 1x1, each its box-filtered average: an EXR opened as a texture is incomplete -- empty -- without
+    them, and a TIFF tagged a texture would lose them. True where nothing failed; a format without levels (PNG) gets
+    level 0 alone."""
+    if spec.get_int_attribute("oiio:miplevels", 1) < 2 or not spec.get_string_attribute("textureformat"):
+        return True
+    mode = "AppendMIPLevel" if out.supports("mipmap") else "AppendSubimage" if out.supports("multiimage") else None
+    if mode is None:
+        return True
+    buf = oiio.ImageBuf(oiio.ImageSpec(spec.width, spec.height, spec.nchannels, oiio.FLOAT))
+    buf.set_pixels(oiio.ROI.All, pixels.astype(np.float32) / (1.0 if pixels.dtype.kind == "f"
+                                                              else float(np.iinfo(pixels.dtype).max)))
+    round_up = spec.get_int_attribute("openexr:roundingmode", 0) == 1   # OpenEXR's ROUND_UP level sizes
+    w, h = spec.width, spec.height
+    while w > 1 or h > 1:
+        w, h = max(1, (w + round_up) // 2), max(1, (h + round_up) // 2)
+        level = oiio.ImageSpec(spec)
+        level.x = level.y = level.full_x = level.full_y = 0
+        level.width, level.height, level.full_width, level.full_height = w, h, w, h
+        small = oiio.ImageBufAlgo.resize(buf, filtername="box", roi=oiio.ROI(0, w, 0, h, 0, 1, 0, spec.nchannels))
+        if not (out.open(tmp, level, mode) and out.write_image(small.get_pixels(oiio.FLOAT))):
+            return False
+    return True
 
 
 def _free_bytes(path: str) -> int:
