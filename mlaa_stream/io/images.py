@@ -287,7 +287,8 @@ def check_complete(path: str, width: int | None = None, height: int | None = Non
                    nchannels: int | None = None, *, decode: bool = True) -> str | None:
     """Why `path` is not a complete image (of the expected size, when given), or None when it is:
     it opens, has that size, for PNG and JPEG ends with its trailer and, with `decode`, decodes to
-    the end without an error (without: the header only, for --resume over many files)."""
+    the end without an error (without, for --resume over many files: the header, and for formats without a trailer
+    -- EXR, TIFF -- the chunks of the first and last rows, which a file cut short lacks)."""
     try:
         size = os.path.getsize(path)
     except OSError as exc:
@@ -310,13 +311,34 @@ def check_complete(path: str, width: int | None = None, height: int | None = Non
         if got != want:
             return f"expected {want[0]}x{want[1]} with {want[2]} channels, got {got[0]}x{got[1]} with {got[2]}"
         if not decode:
-            return None
+            return None if trailer is not None else _ends_decode(inp, spec)
         pixels = inp.read_image(0, 0, 0, spec.nchannels, "float")
         err = inp.geterror()
         if pixels is None or err:
             return f"does not decode to the end ({err or 'unknown error'})"
     finally:
         inp.close()
+    return None
+
+
+def _ends_decode(inp: oiio.ImageInput, spec: oiio.ImageSpec) -> str | None:
+    """Why the first or last rows of an open image (a texture's: and its last MIP level) do not decode, or None: the
+    chunks a file cut short (a copy interrupted, a writer killed) lacks, whichever order it stores its rows in; whole
+    tile rows for a tiled file."""
+    top, bottom = spec.y, spec.y + spec.height
+    step = spec.tile_height if spec.tile_width else 1
+    for y in (top, top + (spec.height - 1) // step * step):
+        end = min(y + step, bottom)
+        if spec.tile_width:
+            rows = inp.read_tiles(0, 0, spec.x, spec.x + spec.width, y, end, spec.z, spec.z + max(spec.depth, 1),
+                                  0, spec.nchannels, "float")
+        else:
+            rows = inp.read_scanlines(0, 0, y, end, spec.z, 0, spec.nchannels, "float")
+        if rows is None or inp.has_error:
+            return f"does not decode to the end ({inp.geterror() or 'unknown error'})"
+    last = spec.get_int_attribute("oiio:miplevels", 1) - 1   # a texture's levels follow level 0: its smallest
+    if last > 0 and (inp.read_image(0, last, 0, spec.nchannels, "float") is None or inp.has_error):
+        return f"does not decode to the end ({inp.geterror() or 'unknown error'})"
     return None
 
 
