@@ -850,7 +850,8 @@ class _ImageJob(_Job):
 
     def _keep_complete(self, existing: list) -> list:
         """--resume: the existing outputs that are complete (header of the input's size, PNG/JPEG end
-        marker); an incomplete one (e.g. from a version that did not check writes) is removed and redone."""
+        marker, EXR/TIFF first and last rows decode); an incomplete one (e.g. from a version that did not check
+        writes, a copy cut short) is removed and redone."""
         from mlaa_stream.io.images import check_complete, image_shape
 
         complete = []

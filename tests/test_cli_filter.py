@@ -349,6 +349,21 @@ def test_a_folder_or_sequence_to_one_image_name_is_refused_naming_a_pattern(tmp_
     assert r.exit_code == 0 and sorted(os.listdir(tmp_path / "dir.png")) == ["shot.0001.png", "shot.0002.png"]
 
 
+def test_a_pattern_finds_the_names_it_writes_as_frames_does_not_a_second_padding(tmp_path):
+    from mlaa_stream.io.sequence import expand_pattern
+
+    folder = tmp_path / "seq"
+    folder.mkdir()
+    for name in ("f1.png", "f01.png", "f2.png", "f10.png", "g0012.png", "g12345.png", "g00013.png"):
+        (folder / name).write_bytes(b"")
+    # f01.png is another file of frame 1: which one was taken followed the folder's listing order
+    for frames in (None, (1, 10)):
+        assert expand_pattern(str(folder / "f%d.png"), frames)[0] == [
+            (1, str(folder / "f1.png")), (2, str(folder / "f2.png")), (10, str(folder / "f10.png"))]
+    assert expand_pattern(str(folder / "g%04d.png"))[0] == [(12, str(folder / "g0012.png")),
+                                                            (12345, str(folder / "g12345.png"))]
+
+
 def test_sequence_gaps_are_reported(tmp_path):
     make_sequence(tmp_path / "seq", [1, 2, 5, 6, 9])
     r = run(tmp_path / "seq" / "shot.%04d.png", "-o", tmp_path / "o")

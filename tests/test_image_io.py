@@ -79,6 +79,43 @@ def test_sample_types_the_filter_lacks_come_back_in_the_files_type(tmp_path):
     inp.close()
 
 
+def test_a_1_bit_tiff_comes_back_8_bit_keeping_the_filtered_levels(tmp_path):
+    arr = (np.random.default_rng(6).random((8, 16, 1)) > 0.5).astype(np.uint8) * 255
+    src = tmp_path / "lineart.tif"
+    write_raw(src, arr, "uint8", {"oiio:BitsPerSample": 1})
+    im = read_image(str(src))
+    assert im.spec.get_int_attribute("oiio:BitsPerSample") == 1
+    assert any("1-bit samples written back as 8-bit" in note for note in im.conversions)
+    blended = im.pixels.copy()
+    blended[0, :, 0] = np.arange(16) * 17   # levels between black and white, as at an antialiased edge
+    write_image(str(tmp_path / "out.tif"), blended, im.spec)
+    back = read_image(str(tmp_path / "out.tif"))
+    np.testing.assert_array_equal(back.pixels, blended)   # was cut back to 0 / 255
+
+
+@pytest.mark.parametrize("ext", [".exr", ".tif"])
+def test_a_mip_mapped_texture_is_written_with_its_levels_remade_from_level_0(tmp_path, ext):
+    arr = np.random.default_rng(7).random((24, 40, 3)).astype(np.float32)
+    flat = oiio.ImageBuf(oiio.ImageSpec(40, 24, 3, oiio.FLOAT))
+    flat.set_pixels(oiio.ROI.All, arr)
+    src = str(tmp_path / f"tex{ext}")
+    assert oiio.ImageBufAlgo.make_texture(oiio.MakeTxTexture, flat, src, oiio.ImageSpec()), oiio.geterror()
+    im = read_image(src)
+    dst = str(tmp_path / f"out{ext}")
+    write_image(dst, im.pixels, im.spec)   # the EXR was refused: 'the written file is incomplete: empty file'
+    inp = oiio.ImageInput.open(dst)
+    sizes = []
+    while inp.seek_subimage(0, len(sizes)):
+        sizes.append((inp.spec().width, inp.spec().height))
+    level1 = inp.read_image(0, 1, 0, 3, "float")
+    inp.close()
+    assert sizes == [(40, 24), (20, 12), (10, 6), (5, 3), (2, 1), (1, 1)]   # the TIFF kept level 0 alone
+    np.testing.assert_array_equal(read_image(dst).pixels, im.pixels)
+    np.testing.assert_allclose(level1, im.pixels.astype(np.float32).reshape(12, 2, 20, 2, 3).mean(axis=(1, 3)),
+                               atol=2e-3 if ext == ".exr" else 3e-3)   # half floats, 8-bit
+    assert leftovers(tmp_path) == []
+
+
 def test_palette_png_reads_as_the_colours_it_shows():
     from PIL import Image
 
@@ -97,6 +134,28 @@ def test_unreadable_files_are_refused_naming_the_file(tmp_path, content, message
     with pytest.raises(ImageReadError, match=message) as ei:
         read_image(str(path))
     assert str(path) in str(ei.value)
+
+
+def test_a_truncated_jpeg_is_refused_not_filtered_with_grey_rows(tmp_path):
+    # libjpeg fills the missing rows with grey and OpenImageIO returns them, reporting only an error
+    arr = np.random.default_rng(3).integers(0, 255, (64, 48, 3), dtype=np.uint8)
+    whole = tmp_path / "whole.jpg"
+    write_raw(whole, arr, "uint8")
+    cut = tmp_path / "cut.jpg"
+    cut.write_bytes(whole.read_bytes()[:whole.stat().st_size // 2])
+    with pytest.raises(ImageReadError, match="cut.jpg: reading pixels failed: .*Premature end of JPEG"):
+        read_image(str(cut))
+
+
+def test_a_truncated_tiff_names_its_own_read_error_not_the_subimage_probe(tmp_path):
+    arr = np.random.default_rng(4).integers(0, 255, (64, 48, 3), dtype=np.uint8)
+    whole = tmp_path / "whole.tif"
+    write_raw(whole, arr, "uint8", {"compression": "none"})
+    cut = tmp_path / "cut.tif"
+    cut.write_bytes(whole.read_bytes()[:whole.stat().st_size // 2])
+    with pytest.raises(ImageReadError, match="cut.tif: reading pixels failed") as ei:
+        read_image(str(cut))
+    assert "subimage" not in str(ei.value)
 
 
 def test_a_missing_file_is_refused_naming_it(tmp_path):

@@ -206,6 +206,26 @@ def test_check_complete_catches_cut_png_and_jpeg(tmp_path):
             assert check_complete(str(path), decode=False) is not None
 
 
+@pytest.mark.parametrize("ext,tile", [(".exr", 0), (".exr", 16), (".tif", 0), (".tif", 16)])
+def test_check_complete_without_decoding_catches_a_cut_exr_or_tiff(tmp_path, ext, tile):
+    # no trailer to look for: --resume's header check took a copy cut short for a complete output
+    import OpenImageIO as oiio
+
+    path = str(tmp_path / f"a{ext}")
+    spec = oiio.ImageSpec(40, 64, 3, "half" if ext == ".exr" else "uint8")
+    spec.attribute("compression", "none")
+    spec.tile_width = spec.tile_height = tile
+    out = oiio.ImageOutput.create(path)
+    assert out.open(path, spec) and out.write_image(noise(64, 40, seed=3)) and out.close()
+    del out
+    assert check_complete(path, 40, 64, 3, decode=False) is None
+    data = open(path, "rb").read()
+    for cut in (len(data) * 3 // 4, len(data) - 64):
+        with open(path, "wb") as fh:
+            fh.write(data[:cut])
+        assert check_complete(path, 40, 64, 3, decode=False) is not None, cut
+
+
 # -- SIGTERM and SIGHUP ---------------------------------------------------------------------------
 @pytest.mark.parametrize("sig,code", [(signal.SIGTERM, 143), (signal.SIGHUP, 129)])
 def test_sigterm_stops_cleanly_and_resume_goes_on(tmp_path, sig, code):

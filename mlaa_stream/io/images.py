@@ -124,12 +124,15 @@ def read_image(path: str) -> Image:
             raise ImageReadError(f"{path}: expected a single image, got {count} (an animated or multi-page "
                                  f"file); filter it as a video or split it into frames first "
                                  f"(e.g. ffmpeg -i {os.path.basename(path)} frames/%04d.png)")
+        inp.geterror()  # clear the probe's 'could not seek to subimage 1': a failed read must report its own error
         conversions = _conversions(path, spec)
         fmt = str(spec.format)
         read_fmt = fmt if fmt in _NATIVE else "float"
         pixels = inp.read_image(0, 0, 0, spec.nchannels, read_fmt)
-        if pixels is None:
-            raise ImageReadError(f"{path}: reading pixels failed: {inp.geterror() or 'unknown error'}")
+        # a truncated JPEG decodes with its missing rows grey and only an error ("Premature end of JPEG file")
+        err = inp.geterror() if pixels is None or inp.has_error else ""
+        if pixels is None or err:
+            raise ImageReadError(f"{path}: reading pixels failed: {err or 'unknown error'}")
         spec = oiio.ImageSpec(spec)  # a copy that outlives the ImageInput
         if spec.alpha_channel >= 0 and inp.format_name() not in _PREMULTIPLIED_FORMATS:
             spec.attribute("oiio:UnassociatedAlpha", 1)  # straight alpha, also where the reader does not say so (BMP)
@@ -147,6 +150,9 @@ def _conversions(path: str, spec: oiio.ImageSpec) -> tuple[str, ...]:
     model = spec.get_string_attribute("jpeg:ColorSpace", "")
     if model.upper() in ("CMYK", "YCCK"):
         notes.append(f"{model} converted to RGB (written back as RGB)")
+    bits = spec.get_int_attribute("oiio:BitsPerSample", 0)
+    if 0 < bits < 8:
+        notes.append(f"{bits}-bit samples written back as 8-bit (the blended edges need the levels between)")
     if os.path.splitext(path)[1].lower() == ".png":
         with open(path, "rb") as fh:
             header = fh.read(26)
@@ -281,7 +287,8 @@ def check_complete(path: str, width: int | None = None, height: int | None = Non
                    nchannels: int | None = None, *, decode: bool = True) -> str | None:
     """Why `path` is not a complete image (of the expected size, when given), or None when it is:
     it opens, has that size, for PNG and JPEG ends with its trailer and, with `decode`, decodes to
-    the end without an error (without: the header only, for --resume over many files)."""
+    the end without an error (without, for --resume over many files: the header, and for formats without a trailer
+    -- EXR, TIFF -- the chunks of the first and last rows, which a file cut short lacks)."""
     try:
         size = os.path.getsize(path)
     except OSError as exc:
@@ -304,13 +311,34 @@ def check_complete(path: str, width: int | None = None, height: int | None = Non
         if got != want:
             return f"expected {want[0]}x{want[1]} with {want[2]} channels, got {got[0]}x{got[1]} with {got[2]}"
         if not decode:
-            return None
+            return None if trailer is not None else _ends_decode(inp, spec)
         pixels = inp.read_image(0, 0, 0, spec.nchannels, "float")
         err = inp.geterror()
         if pixels is None or err:
             return f"does not decode to the end ({err or 'unknown error'})"
     finally:
         inp.close()
+    return None
+
+
+def _ends_decode(inp: oiio.ImageInput, spec: oiio.ImageSpec) -> str | None:
+    """Why the first or last rows of an open image (a texture's: and its last MIP level) do not decode, or None: the
+    chunks a file cut short (a copy interrupted, a writer killed) lacks, whichever order it stores its rows in; whole
+    tile rows for a tiled file."""
+    top, bottom = spec.y, spec.y + spec.height
+    step = spec.tile_height if spec.tile_width else 1
+    for y in (top, top + (spec.height - 1) // step * step):
+        end = min(y + step, bottom)
+        if spec.tile_width:
+            rows = inp.read_tiles(0, 0, spec.x, spec.x + spec.width, y, end, spec.z, spec.z + max(spec.depth, 1),
+                                  0, spec.nchannels, "float")
+        else:
+            rows = inp.read_scanlines(0, 0, y, end, spec.z, 0, spec.nchannels, "float")
+        if rows is None or inp.has_error:
+            return f"does not decode to the end ({inp.geterror() or 'unknown error'})"
+    last = spec.get_int_attribute("oiio:miplevels", 1) - 1   # a texture's levels follow level 0: its smallest
+    if last > 0 and (inp.read_image(0, last, 0, spec.nchannels, "float") is None or inp.has_error):
+        return f"does not decode to the end ({inp.geterror() or 'unknown error'})"
     return None
 
 
@@ -359,6 +387,9 @@ def output_spec(spec: oiio.ImageSpec, pixels: np.ndarray) -> oiio.ImageSpec:
     if (out.width, out.height, out.nchannels) != (w, h, c):
         raise ValueError(f"expected pixels of {out.width}x{out.height}x{out.nchannels}, "
                          f"got {w}x{h}x{c}")
+    if 0 < out.get_int_attribute("oiio:BitsPerSample", 0) < 8:
+        # a 1/2/4-bit file (line art, a fax scan): TIFF's writer would pack the filtered levels back into 2/4/16
+        out.erase_attribute("oiio:BitsPerSample")
     return out
 
 
@@ -486,25 +517,54 @@ def _write_file(tmp: str, pixels: np.ndarray, spec: oiio.ImageSpec, final: str) 
     if out is None:
         raise ImageWriteError(f"{final}: no OpenImageIO writer for this extension "
                               f"({oiio.geterror() or 'unknown format'})")
-    ok = out.open(tmp, spec) and out.write_image(pixels)
+    ok = out.open(tmp, spec) and out.write_image(pixels) and _write_mip_levels(out, tmp, spec, pixels)
     err = "" if ok else out.geterror()
     ok = out.close() and ok
+    err = err or ("" if ok else out.geterror())
+    format_name = out.format_name() if ok else ""   # named only where the write went through
+    del out   # OpenEXR's writer ends a MIP-mapped file when the ImageOutput goes, not on close(): before the check
     if ok:
         written = image_shape(tmp)
         if written is not None and written[:2] == (spec.width, spec.height) and written[2] != spec.nchannels:
             # JPEG drops alpha and GIF adds it without an error: a format limit, not a failed write
-            ok, err = False, (f"{out.format_name()} does not support {spec.nchannels}-channel images "
+            ok, err = False, (f"{format_name} does not support {spec.nchannels}-channel images "
                               f"(it wrote {written[2]}); PNG, TIFF and EXR keep them")
         else:
             problem = check_complete(tmp, spec.width, spec.height, spec.nchannels)
             if problem is not None:
                 ok, err = False, f"the written file is incomplete: {problem}"
     if not ok:
-        err = err or out.geterror() or oiio.geterror() or "unknown error"
+        err = err or oiio.geterror() or "unknown error"
         if (os.strerror(errno.ENOSPC) in err or os.strerror(errno.EDQUOT) in err
                 or _free_bytes(tmp) < _LOW_SPACE):
             raise OSError(errno.ENOSPC, f"{os.strerror(errno.ENOSPC)}: {err}", final)
         raise ImageWriteError(f"{final}: writing failed: {err}")
+
+
+def _write_mip_levels(out: oiio.ImageOutput, tmp: str, spec: oiio.ImageSpec, pixels: np.ndarray) -> bool:
+    """A texture's MIP levels (an input read with several, as maketx writes .tx and .exr), remade from the filtered
+    level 0 down to 1x1, each its box-filtered average: an EXR opened as a texture is incomplete -- empty -- without
+    them, and a TIFF tagged a texture would lose them. True where nothing failed; a format without levels (PNG) gets
+    level 0 alone."""
+    if spec.get_int_attribute("oiio:miplevels", 1) < 2 or not spec.get_string_attribute("textureformat"):
+        return True
+    mode = "AppendMIPLevel" if out.supports("mipmap") else "AppendSubimage" if out.supports("multiimage") else None
+    if mode is None:
+        return True
+    buf = oiio.ImageBuf(oiio.ImageSpec(spec.width, spec.height, spec.nchannels, oiio.FLOAT))
+    buf.set_pixels(oiio.ROI.All, pixels.astype(np.float32) / (1.0 if pixels.dtype.kind == "f"
+                                                              else float(np.iinfo(pixels.dtype).max)))
+    round_up = spec.get_int_attribute("openexr:roundingmode", 0) == 1   # OpenEXR's ROUND_UP level sizes
+    w, h = spec.width, spec.height
+    while w > 1 or h > 1:
+        w, h = max(1, (w + round_up) // 2), max(1, (h + round_up) // 2)
+        level = oiio.ImageSpec(spec)
+        level.x = level.y = level.full_x = level.full_y = 0
+        level.width, level.height, level.full_width, level.full_height = w, h, w, h
+        small = oiio.ImageBufAlgo.resize(buf, filtername="box", roi=oiio.ROI(0, w, 0, h, 0, 1, 0, spec.nchannels))
+        if not (out.open(tmp, level, mode) and out.write_image(small.get_pixels(oiio.FLOAT))):
+            return False
+    return True
 
 
 def _free_bytes(path: str) -> int:

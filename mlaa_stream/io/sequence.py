@@ -139,7 +139,9 @@ def parse_frames(text: str) -> tuple[int, int]:
 def _pattern_regex(basename: str) -> re.Pattern:
     m = _PRINTF.search(basename)
     width = int(m.group(2)) if m.group(2) else 1
-    digits = rf"(\d{{{width},}})" if m.group(1) == "0" else r"(\d+)"
+    # only the names frame_path gives: %04d is 4 digits, or more without a leading zero (0012, 12345, not 00012), %d
+    # has none (9, not 09: a second file of frame 9 was taken or not by the folder's listing order, unlike --frames)
+    digits = rf"(\d{{{width}}}|[1-9]\d{{{width},}})" if m.group(1) == "0" else r"(0|[1-9]\d*)"
     return re.compile(re.escape(basename[:m.start()]) + digits + re.escape(basename[m.end():]) + r"\Z")
 
 
