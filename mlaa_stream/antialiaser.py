@@ -20,6 +20,10 @@ from mlaa_stream.spatial.keep import KeepRect, keep_rects, restore_kept
 from mlaa_stream.pipeline import PipelineError, PostHook, Temporal, stream_items
 from mlaa_stream.temporal.methods import METHODS, make_stage, needs_regions
 
+# Rows of the temporal stage's per-frame `stats` kept (the last ones): the stages append one a frame, for the
+# command line's --stats CSV of a file, and a live capture loop runs for hours (about 2.5 KB a frame).
+STATS_KEPT = 1000
+
 
 def _capture_frames(cap: Any) -> Iterator[np.ndarray]:
     """Frames of a cv2.VideoCapture until it has no more (the capture is not released here)."""
@@ -28,6 +32,14 @@ def _capture_frames(cap: Any) -> Iterator[np.ndarray]:
         if not ok or frame is None:
             return
         yield frame
+
+
+def _trim_stats(stage: Any) -> None:
+    """Keep the last STATS_KEPT rows of a temporal stage's per-frame stats (TSSThenBlend: of both its stages)."""
+    for obj in (stage, getattr(stage, "tss", None), getattr(stage, "blend", None)):
+        rows = getattr(obj, "stats", None)
+        if isinstance(rows, list) and len(rows) > STATS_KEPT:
+            del rows[:-STATS_KEPT]
 
 
 class Antialiaser:
@@ -44,6 +56,7 @@ class Antialiaser:
     `post_hooks` is a list of `(frame, index) -> frame` callables (overlays), applied after it.
     `dense_motion=True`: temporal supersampling tracks motion tile by tile where one camera motion does not
     explain a frame (dollies, orbits; TSSStage's dense_samples: more error removed there, several times slower).
+    The stage made here is `temporal`; its `stats` holds one row per frame, the last STATS_KEPT (1000) frames'.
     `linear_input=True`: the frames hold linear light (EXR renders, float, highlights may exceed 1): the filter
     and the temporal stage take them as they are instead of sRGB-decoding them.
     `keep`: rectangles every output frame takes unchanged from its input (subtitles, a HUD over a render:
@@ -87,6 +100,7 @@ class Antialiaser:
             raise ValueError("lookahead, dense_motion, temporal_frames: need temporal=True or one of the temporal "
                              "methods with TSS")
         self.temporal = temporal or None
+        self._own_stage = isinstance(method, str)   # its stats are trimmed (_trim_stats); a callable's are the caller's
         self.post_hooks = list(post_hooks)
         self.in_flight = in_flight
         self.index = 0  # frames processed so far, across calls and streams
@@ -98,6 +112,8 @@ class Antialiaser:
         out = self._filter.process(frame)
         if self.temporal is not None:
             out = restore_kept(frame, self.temporal(frame, out, self.index), self._filter.keep)
+            if self._own_stage:
+                _trim_stats(self.temporal)
         for hook in self.post_hooks:
             out = hook(out, self.index)
         self.index += 1
@@ -119,10 +135,13 @@ class Antialiaser:
         base = self.index
         temporal = None
         if self.temporal is not None:
-            user_temporal = self.temporal
+            user_temporal, own = self.temporal, self._own_stage
 
             def temporal(a, b, i, **future):
-                return user_temporal(a, b, base + i, **future)
+                out = user_temporal(a, b, base + i, **future)
+                if own:
+                    _trim_stats(user_temporal)
+                return out
             temporal.lookahead = getattr(user_temporal, "lookahead", 0)   # the pipeline reads it
         hooks = [(lambda h: (lambda f, i: h(f, base + i)))(h) for h in self.post_hooks]
         items = stream_items(frames, self._filter, in_flight=self.in_flight, temporal=temporal, post_hooks=hooks)

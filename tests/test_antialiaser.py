@@ -313,3 +313,18 @@ def test_antialiasers_in_threads_each_get_their_own_frames(preset):
     finally:
         sys.setswitchinterval(interval)
     assert errors == [] and wrong == []
+
+
+@pytest.mark.parametrize("method", [True, "tss", "blend"])
+def test_the_temporal_stages_stats_keep_the_last_frames_only(monkeypatch, method):
+    """A stage appends a row of stats per frame: a live capture loop with temporal=True grew by about 2.5 KB a
+    frame for as long as it ran. The Antialiaser keeps the last STATS_KEPT rows, in __call__ and in stream."""
+    import mlaa_stream.antialiaser as api
+    monkeypatch.setattr(api, "STATS_KEPT", 3, raising=False)   # (the name is new with the fix)
+    frames = captured_frames()[:6]
+    with Antialiaser(temporal=method) as aa:
+        for f in frames:
+            aa(f)
+        assert [r["index"] for r in aa.temporal.stats] == [3, 4, 5]
+        list(aa.stream(frames))
+        assert [r["index"] for r in aa.temporal.stats] == [9, 10, 11]
