@@ -120,7 +120,8 @@ class Antialiaser:
         return out
 
     def stream(self, source: Any | Iterable[np.ndarray]) -> Iterator[np.ndarray]:
-        """Yield the antialiased frames of a cv2.VideoCapture (read until it ends) or an iterable.
+        """Yield the antialiased frames of a cv2.VideoCapture (read until it ends) or an iterable (an array of
+        frames along its first axis too; one frame is refused: aa(frame) filters it).
 
         Decoding runs in a reader thread and frames overlap on the device; leaving the loop early
         (break) stops the reader. Errors are raised as PipelineError naming the frame index (counted as
@@ -131,6 +132,11 @@ class Antialiaser:
         if capture and not source.isOpened():
             # a capture that could not open its file or camera reads nothing: say so instead of ending at once
             raise ValueError("the capture is not open (cv2.VideoCapture could not open its file or camera)")
+        if isinstance(source, np.ndarray) and (source.ndim < 3 or (source.ndim == 3 and source.shape[2] in (1, 3, 4))):
+            # iterating one frame gives its rows: each came out as a frame of one row's pixels, without an error
+            raise ValueError(f"stream: expected frames (a capture, an iterable, or an array of frames along its first "
+                             f"axis), got one {source.shape} array; aa(frame) filters one frame (a stack of grey "
+                             f"frames this narrow: pass list(stack))")
         frames = _capture_frames(source) if capture else source
         base = self.index
         temporal = None

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import re
 import threading
 
 import cv2
@@ -328,3 +329,19 @@ def test_the_temporal_stages_stats_keep_the_last_frames_only(monkeypatch, method
         assert [r["index"] for r in aa.temporal.stats] == [3, 4, 5]
         list(aa.stream(frames))
         assert [r["index"] for r in aa.temporal.stats] == [9, 10, 11]
+
+
+def test_stream_of_one_frame_is_refused_and_a_stack_of_frames_is_taken():
+    """aa.stream(frame) iterated the frame's rows: 48 'frames' of one row's pixels each came out, no error."""
+    frames = captured_frames()[:3]
+    with Antialiaser() as aa:
+        expected = [aa(f) for f in frames]
+        for one in (frames[0], frames[0][..., 0], frames[0][..., :1], frames[0][0]):
+            with pytest.raises(ValueError, match=rf"stream: expected frames .* got one {re.escape(str(one.shape))} array"):
+                list(aa.stream(one))
+        assert aa.index == 3
+        got = list(aa.stream(np.stack(frames)))   # (N, H, W, 3): its frames
+        assert all(np.array_equal(g, e) for g, e in zip(got, expected)) and len(got) == 3
+        grey = np.stack([f[..., 1] for f in frames])   # (N, H, W) grey frames
+        assert [g.shape for g in aa.stream(grey)] == [(48, 64)] * 3
+    assert pipeline_threads() == []
