@@ -189,7 +189,8 @@ def stream_items(source: Iterable, filt: FrameFilter, *, in_flight: int = 2, que
     stop = threading.Event()
     q: queue.Queue = queue.Queue(maxsize=max(1, queue_size))
     pending: deque = deque()   # (item, pending result): submitted to the filter
-    ready: deque = deque()     # (item, filtered frame): collected, waiting for the frames after it (look-ahead)
+    ready: deque = deque()     # (item, filtered frame, pending result): collected, waiting for the frames after
+    # it (look-ahead)
     ahead = max(0, int(getattr(temporal, "lookahead", 0) or 0)) if temporal is not None else 0
     # the source's arrays held while the next is read: queued, the reader's and the one being submitted, in
     # flight, read ahead, and the one being finished
@@ -262,7 +263,7 @@ def _collect(entry: tuple, ready: deque, times: StageTimes) -> _Failure | None:
         times.wait += time.perf_counter() - t0
     except Exception as exc:
         return _Failure("filter", item.index, exc, item.meta)
-    ready.append((item, out))
+    ready.append((item, out, pending))
     return None
 
 
@@ -270,12 +271,16 @@ def _finish(ready: deque, pending: deque, ahead: int, temporal: Temporal | None,
             times: StageTimes, kept: Sequence = ()) -> tuple[Item, _Failure | None]:
     """Run the temporal stage (with the raw frames of the next `ahead` items read; then the input put back in
     the `kept` rectangles) and the post hooks on the oldest collected frame."""
-    item, out = ready.popleft()
+    item, out, result = ready.popleft()
     stage = "temporal"
     try:
         t1 = time.perf_counter()
+        if temporal is not None and hasattr(result, "publish_regions"):
+            # the frames after it were collected since: the filter's last_regions (a stage with where="render"
+            # reads them) are theirs until this frame's are put back
+            result.publish_regions()
         if temporal is not None and ahead:
-            later = [it.frame for it, _ in ready] + [it.frame for it, _ in pending]
+            later = [it.frame for it, _, _ in ready] + [it.frame for it, _ in pending]
             out = temporal(item.frame, out, item.index, future=later[:ahead])
             t2 = time.perf_counter()
             times.temporal += t2 - t1

@@ -345,3 +345,27 @@ def test_stream_of_one_frame_is_refused_and_a_stack_of_frames_is_taken():
         grey = np.stack([f[..., 1] for f in frames])   # (N, H, W) grey frames
         assert [g.shape for g in aa.stream(grey)] == [(48, 64)] * 3
     assert pipeline_threads() == []
+
+
+def test_with_lookahead_the_blend_reads_each_frames_own_render_regions(monkeypatch):
+    """temporal=True (the blend on render regions) with lookahead=2: the stage read the filter's last_regions,
+    and the pipeline had collected the next frame by then: each frame's blend took the next frame's regions (a
+    render after flat art: none; flat art after a render: all). Each frame's own regions now, as in aa(frame)."""
+    from test_fallback import shaded_polygons
+    from mlaa_stream.temporal import stage as blend_stage
+    render = np.ascontiguousarray(shaded_polygons(1, 96, 128)[..., ::-1])
+    flat = np.full_like(render, 90)
+    flat[20:60, 30:90] = (200, 40, 40)
+    frames = [render, flat, render, render, flat, flat, render]
+    seen = []
+    call = blend_stage.TemporalStage.__call__
+
+    def spy(self, frame_in, frame_filtered, index, regions=None, measured=None):
+        flags = regions if regions is not None else self.regions_from.last_regions
+        seen.append(None if flags is None else bool(flags.any()))
+        return call(self, frame_in, frame_filtered, index, regions=regions, measured=measured)
+
+    monkeypatch.setattr(blend_stage.TemporalStage, "__call__", spy)
+    with Antialiaser(temporal=True, lookahead=2) as aa:
+        list(aa.stream(frames))
+    assert seen == [f is render for f in frames]
