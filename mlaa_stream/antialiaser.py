@@ -178,6 +178,11 @@ class Antialiaser:
             if hasattr(self.temporal, "close"):
                 self.temporal.close()
 
+    def __getstate__(self) -> None:
+        # pickle named pyopencl's Device ("cannot pickle 'Device' object"): say what cannot travel and what to do
+        raise TypeError("an Antialiaser holds OpenCL device state and cannot be pickled or copied; make one in each "
+                        "process or thread that filters (Antialiaser(...) with the same options)")
+
     def __enter__(self) -> "Antialiaser":
         return self
 

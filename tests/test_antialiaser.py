@@ -369,3 +369,18 @@ def test_with_lookahead_the_blend_reads_each_frames_own_render_regions(monkeypat
     with Antialiaser(temporal=True, lookahead=2) as aa:
         list(aa.stream(frames))
     assert seen == [f is render for f in frames]
+
+
+def test_pickling_names_the_object_and_what_to_do():
+    """pickle (multiprocessing's arguments) failed with "cannot pickle 'Device' object", pyopencl's, naming neither
+    the object nor a way out."""
+    import copy
+    import pickle
+    from mlaa_stream.spatial.fast_filter import FastFilter
+    for obj in (Antialiaser(), Antialiaser(temporal="tss"), Filter(), FastFilter()):
+        with obj:
+            name = type(obj).__name__
+            with pytest.raises(TypeError, match=rf"an? {name} holds OpenCL device state and cannot be pickled"):
+                pickle.dumps(obj)
+            with pytest.raises(TypeError, match="cannot be pickled or copied"):
+                copy.copy(obj)

@@ -508,6 +508,11 @@ class Filter:
             self._fallback = None
             self._fast = None
 
+    def __getstate__(self) -> None:
+        # pickle named pyopencl's Device ("cannot pickle 'Device' object"): say what cannot travel and what to do
+        raise TypeError(f"a {type(self).__name__} holds OpenCL device state and cannot be pickled or copied; make one "
+                        f"in each process that filters (the cluster's workers do: mlaa_stream.cluster)")
+
     def __enter__(self) -> "Filter":
         return self
 
