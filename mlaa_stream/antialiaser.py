@@ -81,9 +81,17 @@ class Antialiaser:
         if keep is not None:
             kwargs["keep"] = keep_rects(keep)
         method = "auto" if temporal is True else temporal
-        if isinstance(method, str) and method not in METHODS:
+        # a stage that is no method's name nor callable (temporal=1), hooks that are not callables and in_flight
+        # < 1 failed only at the first frame ("'int' object is not callable") or the first stream: named here
+        if (isinstance(method, str) and method not in METHODS) or not (
+                method is None or method is False or isinstance(method, str) or callable(method)):
             raise ValueError(f"temporal: expected True, {', '.join(map(repr, METHODS))} or a callable, "
                              f"got {temporal!r}")
+        hooks = [] if callable(post_hooks) else list(post_hooks)   # a generator is read once
+        if callable(post_hooks) or not all(callable(h) for h in hooks):
+            raise TypeError(f"post_hooks: expected a list of (frame, index) -> frame callables, got {post_hooks!r}")
+        if not in_flight >= 1:
+            raise ValueError(f"in_flight: expected 1 or more frames on the device at once, got {in_flight!r}")
         if method == "blend" and temporal_frames is not None:   # make_stage leaves it to the CLI's warning
             raise ValueError("temporal_frames: the ring of temporal supersampling, which the blend method does not "
                              "use; use a method with TSS")
@@ -101,7 +109,7 @@ class Antialiaser:
                              "methods with TSS")
         self.temporal = temporal or None
         self._own_stage = isinstance(method, str)   # its stats are trimmed (_trim_stats); a callable's are the caller's
-        self.post_hooks = list(post_hooks)
+        self.post_hooks = hooks
         self.in_flight = in_flight
         self.index = 0  # frames processed so far, across calls and streams
         self._closed = False

@@ -384,3 +384,17 @@ def test_pickling_names_the_object_and_what_to_do():
                 pickle.dumps(obj)
             with pytest.raises(TypeError, match="cannot be pickled or copied"):
                 copy.copy(obj)
+
+
+def test_a_stage_or_hook_that_cannot_be_called_is_refused_when_made():
+    """temporal=1 and post_hooks=[1] were taken and failed at the first frame ("'int' object is not callable"),
+    in_flight=0 at the first stream; one hook not in a list failed as "'function' object is not iterable"."""
+    for kwargs, error, words in [(dict(temporal=1), ValueError, "temporal: expected True"),
+                                 (dict(post_hooks=[1]), TypeError, "post_hooks: expected a list of"),
+                                 (dict(post_hooks=lambda f, i: f), TypeError, "post_hooks: expected a list of"),
+                                 (dict(in_flight=0), ValueError, "in_flight: expected 1 or more")]:
+        with pytest.raises(error, match=words):
+            Antialiaser(**kwargs)
+    for temporal in (None, False, lambda a, b, i: b):
+        with Antialiaser(temporal=temporal, post_hooks=(lambda f, i: f,), in_flight=1) as aa:
+            assert aa(captured_frames()[0]).shape == (48, 64, 3)
