@@ -43,14 +43,16 @@ def _trim_stats(stage: Any) -> None:
 
 
 class Antialiaser:
-    """Antialias BGR(A) frames (uint8 as OpenCV delivers them; uint16/float also work).
+    """Antialias BGR(A) or grey frames (uint8 as OpenCV delivers them; uint16/float also work).
 
-    Options are the Filter's (`preset` first, explicit keywords override it). `temporal=True` (or
-    "auto") adds temporal supersampling (mlaa_stream.temporal.tss.TSSStage: the input's samples of the
-    last `temporal_frames` frames (default 16; a TSS setting, refused without TSS) accumulated along the motion;
-    its ring is kept between calls) and the
-    reprojection blend on moving edges of render regions; "tss", "blend" and "tss+blend" are the other
-    methods of mlaa_stream.temporal.methods; or pass any `(frame_in, frame_filtered, index) -> frame` stage.
+    `device`: an index or a name substring as `mlaa-stream devices` lists them (None: $MLAA_STREAM_DEVICE, else a
+    GPU, else PoCL's CPU device). Other options are the Filter's (`preset` first, explicit keywords override it).
+    Frames of one object are one sequence (the frame index, the temporal history): a thread that filters makes its
+    own. `temporal=True` (or "auto") adds temporal supersampling (mlaa_stream.temporal.tss.TSSStage: the input's
+    samples of the last `temporal_frames` frames (default 16; a TSS setting, refused without TSS) accumulated along
+    the motion; its ring is kept between calls) and the reprojection blend on moving edges of render regions;
+    "tss", "blend" and "tss+blend" are the other methods of mlaa_stream.temporal.methods; or pass any
+    `(frame_in, frame_filtered, index) -> frame` stage.
     `lookahead=N` (files, not live capture): in `stream`, temporal supersampling also reads the N frames after
     each one (each output then waits for N more frames to be read); `aa(frame)` reads the past only.
     `post_hooks` is a list of `(frame, index) -> frame` callables (overlays), applied after it.

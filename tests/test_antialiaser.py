@@ -337,7 +337,8 @@ def test_stream_of_one_frame_is_refused_and_a_stack_of_frames_is_taken():
     with Antialiaser() as aa:
         expected = [aa(f) for f in frames]
         for one in (frames[0], frames[0][..., 0], frames[0][..., :1], frames[0][0]):
-            with pytest.raises(ValueError, match=rf"stream: expected frames .* got one {re.escape(str(one.shape))} array"):
+            words = rf"stream: expected frames .* got one {re.escape(str(one.shape))} array"
+            with pytest.raises(ValueError, match=words):
                 list(aa.stream(one))
         assert aa.index == 3
         got = list(aa.stream(np.stack(frames)))   # (N, H, W, 3): its frames
