@@ -20,6 +20,10 @@ from mlaa_stream.spatial.keep import KeepRect, keep_rects, restore_kept
 from mlaa_stream.pipeline import PipelineError, PostHook, Temporal, stream_items
 from mlaa_stream.temporal.methods import METHODS, make_stage, needs_regions
 
+# Rows of the temporal stage's per-frame `stats` kept (the last ones): the stages append one a frame, for the
+# command line's --stats CSV of a file, and a live capture loop runs for hours (about 2.5 KB a frame).
+STATS_KEPT = 1000
+
 
 def _capture_frames(cap: Any) -> Iterator[np.ndarray]:
     """Frames of a cv2.VideoCapture until it has no more (the capture is not released here)."""
@@ -30,20 +34,31 @@ def _capture_frames(cap: Any) -> Iterator[np.ndarray]:
         yield frame
 
 
-class Antialiaser:
-    """Antialias BGR(A) frames (uint8 as OpenCV delivers them; uint16/float also work).
+def _trim_stats(stage: Any) -> None:
+    """Keep the last STATS_KEPT rows of a temporal stage's per-frame stats (TSSThenBlend: of both its stages)."""
+    for obj in (stage, getattr(stage, "tss", None), getattr(stage, "blend", None)):
+        rows = getattr(obj, "stats", None)
+        if isinstance(rows, list) and len(rows) > STATS_KEPT:
+            del rows[:-STATS_KEPT]
 
-    Options are the Filter's (`preset` first, explicit keywords override it). `temporal=True` (or
-    "auto") adds temporal supersampling (mlaa_stream.temporal.tss.TSSStage: the input's samples of the
-    last `temporal_frames` frames (default 16; a TSS setting, refused without TSS) accumulated along the motion;
-    its ring is kept between calls) and the
-    reprojection blend on moving edges of render regions; "tss", "blend" and "tss+blend" are the other
-    methods of mlaa_stream.temporal.methods; or pass any `(frame_in, frame_filtered, index) -> frame` stage.
+
+class Antialiaser:
+    """Antialias BGR(A) or grey frames (uint8 as OpenCV delivers them; uint16/float also work).
+
+    `device`: an index or a name substring as `mlaa-stream devices` lists them (None: $MLAA_STREAM_DEVICE, else a
+    GPU, else PoCL's CPU device). Other options are the Filter's (`preset` first, explicit keywords override it).
+    Frames of one object are one sequence (the frame index, the temporal history): a thread that filters makes its
+    own. `temporal=True` (or "auto") adds temporal supersampling (mlaa_stream.temporal.tss.TSSStage: the input's
+    samples of the last `temporal_frames` frames (default 16; a TSS setting, refused without TSS) accumulated along
+    the motion; its ring is kept between calls) and the reprojection blend on moving edges of render regions;
+    "tss", "blend" and "tss+blend" are the other methods of mlaa_stream.temporal.methods; or pass any
+    `(frame_in, frame_filtered, index) -> frame` stage.
     `lookahead=N` (files, not live capture): in `stream`, temporal supersampling also reads the N frames after
     each one (each output then waits for N more frames to be read); `aa(frame)` reads the past only.
     `post_hooks` is a list of `(frame, index) -> frame` callables (overlays), applied after it.
     `dense_motion=True`: temporal supersampling tracks motion tile by tile where one camera motion does not
     explain a frame (dollies, orbits; TSSStage's dense_samples: more error removed there, several times slower).
+    The stage made here is `temporal`; its `stats` holds one row per frame, the last STATS_KEPT (1000) frames'.
     `linear_input=True`: the frames hold linear light (EXR renders, float, highlights may exceed 1): the filter
     and the temporal stage take them as they are instead of sRGB-decoding them.
     `keep`: rectangles every output frame takes unchanged from its input (subtitles, a HUD over a render:
@@ -68,9 +83,17 @@ class Antialiaser:
         if keep is not None:
             kwargs["keep"] = keep_rects(keep)
         method = "auto" if temporal is True else temporal
-        if isinstance(method, str) and method not in METHODS:
+        # a stage that is no method's name nor callable (temporal=1), hooks that are not callables and in_flight
+        # < 1 failed only at the first frame ("'int' object is not callable") or the first stream: named here
+        if (isinstance(method, str) and method not in METHODS) or not (
+                method is None or method is False or isinstance(method, str) or callable(method)):
             raise ValueError(f"temporal: expected True, {', '.join(map(repr, METHODS))} or a callable, "
                              f"got {temporal!r}")
+        hooks = [] if callable(post_hooks) else list(post_hooks)   # a generator is read once
+        if callable(post_hooks) or not all(callable(h) for h in hooks):
+            raise TypeError(f"post_hooks: expected a list of (frame, index) -> frame callables, got {post_hooks!r}")
+        if not in_flight >= 1:
+            raise ValueError(f"in_flight: expected 1 or more frames on the device at once, got {in_flight!r}")
         if method == "blend" and temporal_frames is not None:   # make_stage leaves it to the CLI's warning
             raise ValueError("temporal_frames: the ring of temporal supersampling, which the blend method does not "
                              "use; use a method with TSS")
@@ -87,7 +110,8 @@ class Antialiaser:
             raise ValueError("lookahead, dense_motion, temporal_frames: need temporal=True or one of the temporal "
                              "methods with TSS")
         self.temporal = temporal or None
-        self.post_hooks = list(post_hooks)
+        self._own_stage = isinstance(method, str)   # its stats are trimmed (_trim_stats); a callable's are the caller's
+        self.post_hooks = hooks
         self.in_flight = in_flight
         self.index = 0  # frames processed so far, across calls and streams
         self._closed = False
@@ -98,13 +122,16 @@ class Antialiaser:
         out = self._filter.process(frame)
         if self.temporal is not None:
             out = restore_kept(frame, self.temporal(frame, out, self.index), self._filter.keep)
+            if self._own_stage:
+                _trim_stats(self.temporal)
         for hook in self.post_hooks:
             out = hook(out, self.index)
         self.index += 1
         return out
 
     def stream(self, source: Any | Iterable[np.ndarray]) -> Iterator[np.ndarray]:
-        """Yield the antialiased frames of a cv2.VideoCapture (read until it ends) or an iterable.
+        """Yield the antialiased frames of a cv2.VideoCapture (read until it ends) or an iterable (an array of
+        frames along its first axis too; one frame is refused: aa(frame) filters it).
 
         Decoding runs in a reader thread and frames overlap on the device; leaving the loop early
         (break) stops the reader. Errors are raised as PipelineError naming the frame index (counted as
@@ -115,14 +142,22 @@ class Antialiaser:
         if capture and not source.isOpened():
             # a capture that could not open its file or camera reads nothing: say so instead of ending at once
             raise ValueError("the capture is not open (cv2.VideoCapture could not open its file or camera)")
+        if isinstance(source, np.ndarray) and (source.ndim < 3 or (source.ndim == 3 and source.shape[2] in (1, 3, 4))):
+            # iterating one frame gives its rows: each came out as a frame of one row's pixels, without an error
+            raise ValueError(f"stream: expected frames (a capture, an iterable, or an array of frames along its first "
+                             f"axis), got one {source.shape} array; aa(frame) filters one frame (a stack of grey "
+                             f"frames this narrow: pass list(stack))")
         frames = _capture_frames(source) if capture else source
         base = self.index
         temporal = None
         if self.temporal is not None:
-            user_temporal = self.temporal
+            user_temporal, own = self.temporal, self._own_stage
 
             def temporal(a, b, i, **future):
-                return user_temporal(a, b, base + i, **future)
+                out = user_temporal(a, b, base + i, **future)
+                if own:
+                    _trim_stats(user_temporal)
+                return out
             temporal.lookahead = getattr(user_temporal, "lookahead", 0)   # the pipeline reads it
         hooks = [(lambda h: (lambda f, i: h(f, base + i)))(h) for h in self.post_hooks]
         items = stream_items(frames, self._filter, in_flight=self.in_flight, temporal=temporal, post_hooks=hooks)
@@ -152,6 +187,11 @@ class Antialiaser:
             self._filter.close()
             if hasattr(self.temporal, "close"):
                 self.temporal.close()
+
+    def __getstate__(self) -> None:
+        # pickle named pyopencl's Device ("cannot pickle 'Device' object"): say what cannot travel and what to do
+        raise TypeError("an Antialiaser holds OpenCL device state and cannot be pickled or copied; make one in each "
+                        "process or thread that filters (Antialiaser(...) with the same options)")
 
     def __enter__(self) -> "Antialiaser":
         return self

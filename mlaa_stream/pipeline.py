@@ -124,16 +124,18 @@ def _drain(q: queue.Queue) -> None:
 
 
 class _Reader(threading.Thread):
-    """Pulls frames from the source iterable (in this thread) into a bounded queue."""
+    """Pulls frames from the source iterable (in this thread) into a bounded queue. `depth`: how many of the
+    source's arrays the pipeline may still hold when the next one is read (queued, in flight, read ahead)."""
 
-    def __init__(self, source: Iterable, q: queue.Queue, stop: threading.Event, times: StageTimes):
+    def __init__(self, source: Iterable, q: queue.Queue, stop: threading.Event, times: StageTimes, depth: int = 1):
         super().__init__(name="mlaa-stream-reader", daemon=True)
         self.source, self.q, self.stop, self.times = source, q, stop, times
+        self.depth = max(1, depth)
 
     def run(self) -> None:
         index = 0
         it = None
-        previous: np.ndarray | None = None  # the source's last array, as it gave it
+        recent: deque = deque(maxlen=self.depth)  # the source's last arrays, as it gave them
         try:
             it = iter(self.source)
             while not self.stop.is_set():
@@ -143,11 +145,12 @@ class _Reader(threading.Thread):
                 except StopIteration:
                     break
                 if isinstance(obj, np.ndarray):
-                    # a source that reads every frame into one buffer (`ok, buf = cap.read(buf)` in a generator)
-                    # would overwrite the frames queued here before they are filtered: the first frame (the
-                    # next read may overwrite it) and each one in the previous one's memory are copied
-                    reused = previous is None or np.may_share_memory(obj, previous)
-                    previous = obj
+                    # a source that reads every frame into one buffer (`ok, buf = cap.read(buf)` in a generator),
+                    # or cycles through a pool of them (double buffering, a camera's ring), would overwrite the
+                    # frames queued here before they are filtered: the first `depth` frames (a pool may come round
+                    # while they are held) and each one in the memory of one of the last `depth` are copied
+                    reused = index < self.depth or any(np.may_share_memory(obj, r) for r in recent)
+                    recent.append(obj)
                     obj = obj.copy() if reused else obj
                 self.times.read += time.perf_counter() - t0
                 item = obj if isinstance(obj, Item) else Item(frame=obj)
@@ -177,17 +180,21 @@ def stream_items(source: Iterable, filt: FrameFilter, *, in_flight: int = 2, que
     index, future=[raw frames index + 1 .. index + N])` (fewer at the end of the stream): a frame waits,
     filtered, until the N frames after it are read.
     Raises PipelineError after yielding every frame before the failing one. Frames are read ahead of the
-    filter: an array in the memory of the source's previous one (a reused buffer) is copied first.
+    filter: an array in the memory of one of the source's recent ones (a reused buffer or a pool of them) is
+    copied first, and so are the first frames, which such a pool may overwrite before it comes round.
     """
     if in_flight < 1:
         raise ValueError(f"expected in_flight >= 1, got {in_flight}")
     times = times if times is not None else StageTimes()
     stop = threading.Event()
     q: queue.Queue = queue.Queue(maxsize=max(1, queue_size))
-    reader = _Reader(source, q, stop, times)
     pending: deque = deque()   # (item, pending result): submitted to the filter
-    ready: deque = deque()     # (item, filtered frame): collected, waiting for the frames after it (look-ahead)
+    ready: deque = deque()     # (item, filtered frame, pending result): collected, waiting for the frames after
+    # it (look-ahead)
     ahead = max(0, int(getattr(temporal, "lookahead", 0) or 0)) if temporal is not None else 0
+    # the source's arrays held while the next is read: queued, the reader's and the one being submitted, in
+    # flight, read ahead, and the one being finished
+    reader = _Reader(source, q, stop, times, depth=q.maxsize + in_flight + ahead + 3)
     # a temporal stage mixes frames: the filter's keep rectangles (spatial/keep.py) are restored after it too
     kept = getattr(getattr(filt, "encoded", filt), "keep", ()) if temporal is not None else ()
     upstream: _Failure | None = None  # read or submit failure: frames before it still come out
@@ -256,7 +263,7 @@ def _collect(entry: tuple, ready: deque, times: StageTimes) -> _Failure | None:
         times.wait += time.perf_counter() - t0
     except Exception as exc:
         return _Failure("filter", item.index, exc, item.meta)
-    ready.append((item, out))
+    ready.append((item, out, pending))
     return None
 
 
@@ -264,12 +271,16 @@ def _finish(ready: deque, pending: deque, ahead: int, temporal: Temporal | None,
             times: StageTimes, kept: Sequence = ()) -> tuple[Item, _Failure | None]:
     """Run the temporal stage (with the raw frames of the next `ahead` items read; then the input put back in
     the `kept` rectangles) and the post hooks on the oldest collected frame."""
-    item, out = ready.popleft()
+    item, out, result = ready.popleft()
     stage = "temporal"
     try:
         t1 = time.perf_counter()
+        if temporal is not None and hasattr(result, "publish_regions"):
+            # the frames after it were collected since: the filter's last_regions (a stage with where="render"
+            # reads them) are theirs until this frame's are put back
+            result.publish_regions()
         if temporal is not None and ahead:
-            later = [it.frame for it, _ in ready] + [it.frame for it, _ in pending]
+            later = [it.frame for it, _, _ in ready] + [it.frame for it, _ in pending]
             out = temporal(item.frame, out, item.index, future=later[:ahead])
             t2 = time.perf_counter()
             times.temporal += t2 - t1

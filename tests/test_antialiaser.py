@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import re
 import threading
 
 import cv2
@@ -279,3 +280,122 @@ def test_temporal_methods_take_thin_and_tiny_frames(kwargs):
                 frame = np.repeat(((x + k + 2 * y) % 9 < 4)[..., None], 3, 2).astype(np.uint8) * 255
                 out = aa(frame)
                 assert out.shape == frame.shape and out.dtype == np.uint8
+
+
+@pytest.mark.parametrize("preset", ["default", "fast"])
+def test_antialiasers_in_threads_each_get_their_own_frames(preset):
+    """Filters share the context's kernel objects, and a launch sets the arguments before it enqueues: four
+    Antialiasers, one per thread, filtered frames with another thread's buffers (1 in 10 wrong, 4 in 10 with fast)."""
+    import sys
+    rng = np.random.default_rng(7)
+    frames = [(rng.random((24, 32, 3)) < 0.3).astype(np.uint8) * 255 for _ in range(4)]
+    with Antialiaser(preset=preset) as aa:
+        expected = [aa(f) for f in frames]
+    wrong, errors = [], []
+
+    def work(k: int) -> None:
+        try:
+            with Antialiaser(preset=preset) as own:
+                for j in range(60):
+                    i = (k + j) % 4
+                    if not np.array_equal(own(frames[i]), expected[i]):
+                        wrong.append((k, j))
+        except Exception as exc:   # noqa: BLE001 - reported below
+            errors.append(exc)
+
+    interval = sys.getswitchinterval()
+    sys.setswitchinterval(1e-6)   # threads switch between any two bytecodes: the race shows within a few frames
+    try:
+        threads = [threading.Thread(target=work, args=(k,)) for k in range(4)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+    finally:
+        sys.setswitchinterval(interval)
+    assert errors == [] and wrong == []
+
+
+@pytest.mark.parametrize("method", [True, "tss", "blend"])
+def test_the_temporal_stages_stats_keep_the_last_frames_only(monkeypatch, method):
+    """A stage appends a row of stats per frame: a live capture loop with temporal=True grew by about 2.5 KB a
+    frame for as long as it ran. The Antialiaser keeps the last STATS_KEPT rows, in __call__ and in stream."""
+    import mlaa_stream.antialiaser as api
+    monkeypatch.setattr(api, "STATS_KEPT", 3, raising=False)   # (the name is new with the fix)
+    frames = captured_frames()[:6]
+    with Antialiaser(temporal=method) as aa:
+        for f in frames:
+            aa(f)
+        assert [r["index"] for r in aa.temporal.stats] == [3, 4, 5]
+        list(aa.stream(frames))
+        assert [r["index"] for r in aa.temporal.stats] == [9, 10, 11]
+
+
+def test_stream_of_one_frame_is_refused_and_a_stack_of_frames_is_taken():
+    """aa.stream(frame) iterated the frame's rows: 48 'frames' of one row's pixels each came out, no error."""
+    frames = captured_frames()[:3]
+    with Antialiaser() as aa:
+        expected = [aa(f) for f in frames]
+        for one in (frames[0], frames[0][..., 0], frames[0][..., :1], frames[0][0]):
+            words = rf"stream: expected frames .* got one {re.escape(str(one.shape))} array"
+            with pytest.raises(ValueError, match=words):
+                list(aa.stream(one))
+        assert aa.index == 3
+        got = list(aa.stream(np.stack(frames)))   # (N, H, W, 3): its frames
+        assert all(np.array_equal(g, e) for g, e in zip(got, expected)) and len(got) == 3
+        grey = np.stack([f[..., 1] for f in frames])   # (N, H, W) grey frames
+        assert [g.shape for g in aa.stream(grey)] == [(48, 64)] * 3
+    assert pipeline_threads() == []
+
+
+def test_with_lookahead_the_blend_reads_each_frames_own_render_regions(monkeypatch):
+    """temporal=True (the blend on render regions) with lookahead=2: the stage read the filter's last_regions,
+    and the pipeline had collected the next frame by then: each frame's blend took the next frame's regions (a
+    render after flat art: none; flat art after a render: all). Each frame's own regions now, as in aa(frame)."""
+    from test_fallback import shaded_polygons
+    from mlaa_stream.temporal import stage as blend_stage
+    render = np.ascontiguousarray(shaded_polygons(1, 96, 128)[..., ::-1])
+    flat = np.full_like(render, 90)
+    flat[20:60, 30:90] = (200, 40, 40)
+    frames = [render, flat, render, render, flat, flat, render]
+    seen = []
+    call = blend_stage.TemporalStage.__call__
+
+    def spy(self, frame_in, frame_filtered, index, regions=None, measured=None):
+        flags = regions if regions is not None else self.regions_from.last_regions
+        seen.append(None if flags is None else bool(flags.any()))
+        return call(self, frame_in, frame_filtered, index, regions=regions, measured=measured)
+
+    monkeypatch.setattr(blend_stage.TemporalStage, "__call__", spy)
+    with Antialiaser(temporal=True, lookahead=2) as aa:
+        list(aa.stream(frames))
+    assert seen == [f is render for f in frames]
+
+
+def test_pickling_names_the_object_and_what_to_do():
+    """pickle (multiprocessing's arguments) failed with "cannot pickle 'Device' object", pyopencl's, naming neither
+    the object nor a way out."""
+    import copy
+    import pickle
+    from mlaa_stream.spatial.fast_filter import FastFilter
+    for obj in (Antialiaser(), Antialiaser(temporal="tss"), Filter(), FastFilter()):
+        with obj:
+            name = type(obj).__name__
+            with pytest.raises(TypeError, match=rf"an? {name} holds OpenCL device state and cannot be pickled"):
+                pickle.dumps(obj)
+            with pytest.raises(TypeError, match="cannot be pickled or copied"):
+                copy.copy(obj)
+
+
+def test_a_stage_or_hook_that_cannot_be_called_is_refused_when_made():
+    """temporal=1 and post_hooks=[1] were taken and failed at the first frame ("'int' object is not callable"),
+    in_flight=0 at the first stream; one hook not in a list failed as "'function' object is not iterable"."""
+    for kwargs, error, words in [(dict(temporal=1), ValueError, "temporal: expected True"),
+                                 (dict(post_hooks=[1]), TypeError, "post_hooks: expected a list of"),
+                                 (dict(post_hooks=lambda f, i: f), TypeError, "post_hooks: expected a list of"),
+                                 (dict(in_flight=0), ValueError, "in_flight: expected 1 or more")]:
+        with pytest.raises(error, match=words):
+            Antialiaser(**kwargs)
+    for temporal in (None, False, lambda a, b, i: b):
+        with Antialiaser(temporal=temporal, post_hooks=(lambda f, i: f,), in_flight=1) as aa:
+            assert aa(captured_frames()[0]).shape == (48, 64, 3)

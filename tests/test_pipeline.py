@@ -87,6 +87,28 @@ def test_a_source_that_reuses_one_buffer_gets_each_frame_filtered():
         np.testing.assert_array_equal(got, 255 - f)
 
 
+
+@pytest.mark.parametrize("pool", [2, 3, 12])
+def test_a_source_that_cycles_through_a_pool_of_buffers_gets_each_frame_filtered(pool):
+    """Double buffering, a camera's ring of buffers: the reader copied only a frame in the memory of the one just
+    before it, so with two buffers or more every frame after the first was queued as the source's own array
+    and came out as a later one."""
+    src = frames(30)
+
+    def buffers():
+        ring = [np.empty_like(src[0]) for _ in range(pool)]
+        for i, f in enumerate(src):
+            ring[i % pool][...] = f
+            yield ring[i % pool]
+
+    out = []
+    for item in stream_items(buffers(), HostFilter(), in_flight=2):
+        time.sleep(0.002)   # a slow loop body: the reader fills its queue ahead
+        out.append(item.frame)
+    assert len(out) == len(src)
+    for got, f in zip(out, src):
+        np.testing.assert_array_equal(got, 255 - f)
+
 def test_slow_reader_and_writer_keep_order():
     rng = np.random.default_rng(3)
     delays = rng.uniform(0, 0.004, 40)

@@ -333,15 +333,21 @@ def launch_size(global_size: tuple[int, ...], cpu: bool) -> tuple[tuple[int, ...
 
 
 class SizedKernel:
-    """A pyopencl kernel whose launches without a local size get `launch_size`'s (see CPU_LOCAL)."""
+    """A pyopencl kernel whose launches without a local size get `launch_size`'s (see CPU_LOCAL).
+
+    One object serves every filter and stage on its context (Context.kernel), and a launch sets the kernel's
+    arguments and then enqueues it: two threads launching at once (two Antialiasers, one per thread) could
+    enqueue one with the other's buffers. The lock makes each launch's set-and-enqueue one step."""
 
     def __init__(self, kernel, cpu: bool):
         self.kernel, self.cpu = kernel, cpu
+        self._lock = threading.Lock()
 
     def __call__(self, queue, global_size, local_size, *args, **kwargs):
         if local_size is None:
             global_size, local_size = launch_size(global_size, self.cpu)
-        return self.kernel(queue, global_size, local_size, *args, **kwargs)
+        with self._lock:
+            return self.kernel(queue, global_size, local_size, *args, **kwargs)
 
     def __getattr__(self, name: str):
         return getattr(self.kernel, name)

@@ -206,13 +206,18 @@ class PendingFrame:
             if copied is not None:
                 copied.wait()
             self.regions = flags
-            if self._owner is not None:
-                self._owner.last_regions = flags
+            self.publish_regions()
             if self._dim:
                 from mlaa_stream.spatial.fallback import dim_outside_regions
                 out = dim_outside_regions(out, flags)
         out = out if out.dtype == self._dtype else out.astype(self._dtype)
         return restore_patches(out, self._patches)
+
+    def publish_regions(self) -> None:
+        """Make this frame's region flags (after result()) its filter's `last_regions` again: a pipeline that
+        collects the frames after it before its temporal stage runs (look-ahead) calls this first."""
+        if self._owner is not None and self._regions is not None:
+            self._owner.last_regions = self.regions
 
 
 class _FrameBuffers:
@@ -502,6 +507,11 @@ class Filter:
             self._bridger = None
             self._fallback = None
             self._fast = None
+
+    def __getstate__(self) -> None:
+        # pickle named pyopencl's Device ("cannot pickle 'Device' object"): say what cannot travel and what to do
+        raise TypeError(f"a {type(self).__name__} holds OpenCL device state and cannot be pickled or copied; make one "
+                        f"in each process that filters (the cluster's workers do: mlaa_stream.cluster)")
 
     def __enter__(self) -> "Filter":
         return self
