@@ -253,9 +253,17 @@ def _warn_unused_temporal_options(ctx: click.Context, con: Console, temporal: "T
              ("temporal_mode", "--temporal-mode"), ("temporal_k", "--temporal-k"))
     if temporal.spec() is None:
         unused = [flag for name, flag in flags if given(name)]
+        if temporal.enabled is False:
+            # --no-temporal outranks the options that otherwise imply the stage: no CSV, no view, no frames read ahead
+            implied = (("--stats", temporal.stats_path), ("--show history", temporal.show == "history"),
+                       ("--lookahead", given("lookahead")), ("--dense-motion", temporal.dense_motion))
+            unused += [flag for flag, on in implied if on]
+        elif given("lookahead"):   # --lookahead 0 alone does not turn the stage on
+            unused.append("--lookahead")
         if unused:
+            off = "--no-temporal turns it off" if temporal.enabled is False else "--temporal turns it on"
             con.warn(f"{', '.join(unused)} {'has' if len(unused) == 1 else 'have'} no effect here: the temporal "
-                     f"stage is off (--temporal turns it on)")
+                     f"stage is off ({off})")
         return
     if temporal.method == "blend" and given("temporal_frames"):
         con.warn("--temporal-frames has no effect with --temporal-method blend: it sets the ring of temporal "
