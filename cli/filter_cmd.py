@@ -587,7 +587,7 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
                 code = runner.run(filt, post_hooks, in_flight, times, stage)
         finally:
             if stage is not None:
-                temporal.finish(getattr(stage, "stage", stage), con, skip=getattr(runner, "read_ahead_numbers", set()))
+                temporal.finish(getattr(stage, "stage", stage), con, skip=runner.unwritten_indices())
     finally:
         runner.abort()  # no-op after a commit; removes a video in progress on errors and Ctrl-C
         runner.close_progress()
@@ -725,6 +725,10 @@ class _Job:
         return Progress(total, label=os.path.basename(self.input.rstrip("/")) or self.input,
                         enabled=None if not self.con.quiet else False, machine=getattr(self, "_machine", None))
 
+    def unwritten_indices(self) -> set:
+        """The temporal stage's indices of frames it ran on but that are not written (--resume): left out of --stats."""
+        return set()
+
     def close_progress(self) -> None:
         machine = getattr(self, "_machine", None)
         if machine is not None and machine is not sys.stdout:
@@ -855,6 +859,9 @@ class _ImageJob(_Job):
 
     def _warm_up(self, filt, temporal) -> None:
         _warm_up_images(self, filt, temporal)
+
+    def unwritten_indices(self) -> set:
+        return getattr(self, "read_ahead_numbers", set())   # warm-up frames' rows are dropped by _warm_up_images
 
     def _keep_complete(self, existing: list) -> list:
         """--resume: the existing outputs that are complete (header of the input's size, PNG/JPEG end
