@@ -392,8 +392,9 @@ def _job_for(kind: str, output: str) -> type:
                    "0,85%,100%,15% for the bottom 15 %. Repeat for several.")
 @click.option("--show", type=click.Choice(["history", "regions"]), default=None,
               help="Debug view instead of the image: history = the temporal stage's samples per pixel "
-                   "(implies --temporal); regions = the output with everything outside render regions "
-                   "dimmed (where the filter treats the frame as a 1-spp 3D render).")
+                   "(implies --temporal; the blend's weights with --temporal-method blend or tss+blend); regions = "
+                   "the output with everything outside render regions dimmed (where the filter treats the frame as "
+                   "a 1-spp 3D render).")
 @device_option
 @verbosity_options
 @click.pass_context
