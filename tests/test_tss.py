@@ -203,6 +203,16 @@ def test_history_view_on_repeated_frames_and_with_auto(filt):
             np.testing.assert_array_equal(auto(f, s, i), tss(f, s, i))
     assert any(r["samples_share"] > 0 for r in tss.stats)
 
+
+def test_a_ring_larger_than_the_device_allows_is_named(filt):
+    # Antialiaser(temporal_frames=...) has no upper bound: a ring past the device's largest buffer was OpenCL's
+    # INVALID_BUFFER_SIZE at frame 0, naming neither the frames nor the size
+    f = np.zeros((512, 512, 3), np.uint8)   # 1.5 TiB of ring: past any device's largest buffer
+    with TSSStage(context=filt.context, bgr=False, frames=10**6, lookahead=2) as stage:
+        with pytest.raises(ValueError, match=r"a ring of 1000002 frames \(K and the look-ahead\) of 512x512 takes .* "
+                                             r"more than the device allows"):
+            stage(f, f, 0)
+
 def test_subpixel_pan_converges_toward_the_truth(filt):
     sc = scene_pan(12, 320, 180)
     spatial = [filt.process(f) for f in sc.inputs]

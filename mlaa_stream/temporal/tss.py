@@ -1159,6 +1159,11 @@ class _Buffers:
         fh, fw = flow_shape
         self.planes = 1 if fmt.channels == 1 else 3
         self.slot_bytes = 2 * self.planes * fmt.pixels       # one ring slot: 16-bit linear planes
+        limit = context.device.max_mem_alloc_size
+        if frames * self.slot_bytes > limit:   # else OpenCL's INVALID_BUFFER_SIZE (or an out-of-memory) at frame 0
+            raise ValueError(f"frames: a ring of {frames} frames (K and the look-ahead) of {fmt.width}x{fmt.height} "
+                             f"takes {frames * self.slot_bytes / 2**20:.0f} MiB in one buffer, more than the device "
+                             f"allows ({limit / 2**20:.0f} MiB); keep fewer frames")
         self.ring = context.buffer(frames * self.slot_bytes)
         self.src = context.buffer(fmt.nbytes)                # the current input, before tss_ingest
         self.spatial = context.buffer(fmt.nbytes)
