@@ -191,6 +191,11 @@ class VideoToImagesJob(_Job):
     def nothing_to_do(self) -> bool:
         return False
 
+    def unwritten_indices(self) -> set:
+        """--resume with the temporal stage: the frames done run through it (its history) but are not written; the
+        stage counts a video's frames from 0, the outputs are numbered from FIRST_NUMBER."""
+        return {n - self.FIRST_NUMBER for n in self.done}
+
     def run(self, filt, post_hooks, in_flight, times, temporal=None) -> int:
         from mlaa_stream.io.images import ImageWriteError, write_image
         from mlaa_stream.io.item import Item

@@ -253,9 +253,17 @@ def _warn_unused_temporal_options(ctx: click.Context, con: Console, temporal: "T
              ("temporal_mode", "--temporal-mode"), ("temporal_k", "--temporal-k"))
     if temporal.spec() is None:
         unused = [flag for name, flag in flags if given(name)]
+        if temporal.enabled is False:
+            # --no-temporal outranks the options that otherwise imply the stage: no CSV, no view, no frames read ahead
+            implied = (("--stats", temporal.stats_path), ("--show history", temporal.show == "history"),
+                       ("--lookahead", given("lookahead")), ("--dense-motion", temporal.dense_motion))
+            unused += [flag for flag, on in implied if on]
+        elif given("lookahead"):   # --lookahead 0 alone does not turn the stage on
+            unused.append("--lookahead")
         if unused:
+            off = "--no-temporal turns it off" if temporal.enabled is False else "--temporal turns it on"
             con.warn(f"{', '.join(unused)} {'has' if len(unused) == 1 else 'have'} no effect here: the temporal "
-                     f"stage is off (--temporal turns it on)")
+                     f"stage is off ({off})")
         return
     if temporal.method == "blend" and given("temporal_frames"):
         con.warn("--temporal-frames has no effect with --temporal-method blend: it sets the ring of temporal "
@@ -384,8 +392,9 @@ def _job_for(kind: str, output: str) -> type:
                    "0,85%,100%,15% for the bottom 15 %. Repeat for several.")
 @click.option("--show", type=click.Choice(["history", "regions"]), default=None,
               help="Debug view instead of the image: history = the temporal stage's samples per pixel "
-                   "(implies --temporal); regions = the output with everything outside render regions "
-                   "dimmed (where the filter treats the frame as a 1-spp 3D render).")
+                   "(implies --temporal; the blend's weights with --temporal-method blend or tss+blend); regions = "
+                   "the output with everything outside render regions dimmed (where the filter treats the frame as "
+                   "a 1-spp 3D render).")
 @device_option
 @verbosity_options
 @click.pass_context
@@ -579,7 +588,7 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
                 code = runner.run(filt, post_hooks, in_flight, times, stage)
         finally:
             if stage is not None:
-                temporal.finish(getattr(stage, "stage", stage), con, skip=getattr(runner, "read_ahead_numbers", set()))
+                temporal.finish(getattr(stage, "stage", stage), con, skip=runner.unwritten_indices())
     finally:
         runner.abort()  # no-op after a commit; removes a video in progress on errors and Ctrl-C
         runner.close_progress()
@@ -717,6 +726,10 @@ class _Job:
         return Progress(total, label=os.path.basename(self.input.rstrip("/")) or self.input,
                         enabled=None if not self.con.quiet else False, machine=getattr(self, "_machine", None))
 
+    def unwritten_indices(self) -> set:
+        """The temporal stage's indices of frames it ran on but that are not written (--resume): left out of --stats."""
+        return set()
+
     def close_progress(self) -> None:
         machine = getattr(self, "_machine", None)
         if machine is not None and machine is not sys.stdout:
@@ -847,6 +860,9 @@ class _ImageJob(_Job):
 
     def _warm_up(self, filt, temporal) -> None:
         _warm_up_images(self, filt, temporal)
+
+    def unwritten_indices(self) -> set:
+        return getattr(self, "read_ahead_numbers", set())   # warm-up frames' rows are dropped by _warm_up_images
 
     def _keep_complete(self, existing: list) -> list:
         """--resume: the existing outputs that are complete (header of the input's size, PNG/JPEG end

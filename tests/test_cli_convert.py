@@ -3,6 +3,7 @@ video, a video written as numbered images, -y, the one-line summary when stderr 
 error format for every command, and the bench's results folder."""
 from __future__ import annotations
 
+import csv
 import os
 
 import av
@@ -120,10 +121,13 @@ def test_a_video_to_images_resumes_skipping_complete_outputs(tmp_path):
     whole = {n: read_image(str(tem / n)).pixels for n in os.listdir(tem)}
     for n in range(6, 11):
         (tem / f"f_{n:04d}.png").unlink()
-    r = run(CLIP, "-o", tem / "f_%04d.png", "--temporal", "--resume")
+    stats = tmp_path / "stats.csv"
+    r = run(CLIP, "-o", tem / "f_%04d.png", "--temporal", "--resume", "--stats", stats)
     assert r.exit_code == 0, stderr(r)
     for name, pixels in whole.items():
         np.testing.assert_array_equal(read_image(str(tem / name)).pixels, pixels)
+    # --stats: a row per frame written (f_0006 .. f_0010: the video's frames 5-9), not the done ones run through
+    assert [row["index"] for row in csv.DictReader(stats.open())] == [str(i) for i in range(5, 10)]
 
 
 def test_options_given_for_another_kind_of_output_are_named_once_as_having_no_effect(tmp_path):

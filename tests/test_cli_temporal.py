@@ -127,6 +127,28 @@ def test_temporal_settings_that_do_nothing_are_named(tmp_path):
     res = CliRunner().invoke(main, [str(folder), "-o", str(tmp_path / "c"), "--temporal", "--temporal-frames", "4"])
     assert res.exit_code == 0 and "no effect" not in res.output, res.output
 
+
+def test_no_temporal_names_the_options_it_overrides(tmp_path):
+    # --no-temporal outranks --stats, --show history, --lookahead and --dense-motion, which otherwise imply the stage:
+    # no CSV, no view, spatial frames -- said in a warning, not dropped without a word
+    folder = tmp_path / "in"
+    folder.mkdir()
+    from mlaa_stream.io.images import write_image
+    for k, f in enumerate(_pan_frames(2)):
+        write_image(str(folder / f"f{k}.png"), f)
+    stats = tmp_path / "s.csv"
+    res = CliRunner().invoke(main, [str(folder), "-o", str(tmp_path / "a"), "--no-temporal", "--stats", str(stats),
+                                    "--show", "history", "--lookahead", "3", "--dense-motion"])
+    assert res.exit_code == 0, res.output
+    assert ("--stats, --show history, --lookahead, --dense-motion have no effect here: the temporal stage is off "
+            "(--no-temporal turns it off)") in res.output
+    assert not stats.exists()
+    res = CliRunner().invoke(main, [str(folder), "-o", str(tmp_path / "b"), "--lookahead", "0"])
+    assert res.exit_code == 0 and "--lookahead has no effect here: the temporal stage is off" in res.output
+    res = CliRunner().invoke(main, [str(folder), "-o", str(tmp_path / "c"), "--no-temporal"])
+    assert res.exit_code == 0 and "no effect" not in res.output, res.output
+
+
 def _resume_after_losing(tmp_path, args: list[str], lost: list[Path], indices: list[str]) -> dict:
     """Run `args` whole, remove the outputs `lost`, run again with --resume: the stage must warm up on the 4 frames
     before them, and the written frames (stats `indices`) get the models and rings of the whole run (without the

@@ -183,6 +183,36 @@ def test_static_scene_returns_the_spatial_output(filt):
     assert {r["model"] for r in stage.stats[1:]} == {"static"}
 
 
+
+def test_history_view_on_repeated_frames_and_with_auto(filt):
+    """--show history: a repeated frame (a still shot) shows the view of the frame it repeats, not the image; "auto"
+    shows TSS's samples per pixel (its blend, only in render regions, would show rejection everywhere else)."""
+    from mlaa_stream.temporal.methods import make_stage
+    still = scene_pan(1, 120, 68).inputs[0]
+    sp = filt.process(still)
+    with TSSStage(bgr=False, show="history") as stage:
+        views = [stage(still, sp, i) for i in range(3)]
+    assert [r["model"] for r in stage.stats] == ["reset", "static", "static"]
+    assert not np.array_equal(views[0], sp)
+    assert all(np.array_equal(v, views[0]) for v in views[1:])
+    sc = scene_pan(5, 160, 96)
+    spatial = [filt.process(f) for f in sc.inputs]
+    with TSSStage(context=filt.context, bgr=False, show="history") as tss, \
+            make_stage("auto", filt.context, bgr=False, show="history") as auto:
+        for i, (f, s) in enumerate(zip(sc.inputs, spatial)):
+            np.testing.assert_array_equal(auto(f, s, i), tss(f, s, i))
+    assert any(r["samples_share"] > 0 for r in tss.stats)
+
+
+def test_a_ring_larger_than_the_device_allows_is_named(filt):
+    # Antialiaser(temporal_frames=...) has no upper bound: a ring past the device's largest buffer was OpenCL's
+    # INVALID_BUFFER_SIZE at frame 0, naming neither the frames nor the size
+    f = np.zeros((512, 512, 3), np.uint8)   # 1.5 TiB of ring: past any device's largest buffer
+    with TSSStage(context=filt.context, bgr=False, frames=10**6, lookahead=2) as stage:
+        with pytest.raises(ValueError, match=r"a ring of 1000002 frames \(K and the look-ahead\) of 512x512 takes .* "
+                                             r"more than the device allows"):
+            stage(f, f, 0)
+
 def test_subpixel_pan_converges_toward_the_truth(filt):
     sc = scene_pan(12, 320, 180)
     spatial = [filt.process(f) for f in sc.inputs]

@@ -1159,6 +1159,11 @@ class _Buffers:
         fh, fw = flow_shape
         self.planes = 1 if fmt.channels == 1 else 3
         self.slot_bytes = 2 * self.planes * fmt.pixels       # one ring slot: 16-bit linear planes
+        limit = context.device.max_mem_alloc_size
+        if frames * self.slot_bytes > limit:   # else OpenCL's INVALID_BUFFER_SIZE (or an out-of-memory) at frame 0
+            raise ValueError(f"frames: a ring of {frames} frames (K and the look-ahead) of {fmt.width}x{fmt.height} "
+                             f"takes {frames * self.slot_bytes / 2**20:.0f} MiB in one buffer, more than the device "
+                             f"allows ({limit / 2**20:.0f} MiB); keep fewer frames")
         self.ring = context.buffer(frames * self.slot_bytes)
         self.src = context.buffer(fmt.nbytes)                # the current input, before tss_ingest
         self.spatial = context.buffer(fmt.nbytes)
@@ -1245,6 +1250,7 @@ class TSSStage:
         self._prev_index: int | None = None
         self._shape = None   # (shape, dtype) of the previous frame: a change of either starts a new ring
         self._last: tuple[np.ndarray, np.ndarray] | None = None   # (grey, output) of the previous frame
+        self._cells: np.ndarray | None = None   # the latest resolve's filled cells per pixel (None: none ran)
         # the latest frame's grey pyramid and motion decision (None after a repeated frame): TSSThenBlend
         # hands them to the blend, which would measure the same frame pair again
         self.last_motion: tuple[Pyramid, Decision] | None = None
@@ -1339,7 +1345,7 @@ class TSSStage:
             self.stats.append({"index": index, "model": "static", "repeat": True, "ring": len(self.motion.entries),
                                "flow_ms": (time.perf_counter() - t0) * 1e3, "resolve_ms": 0.0,
                                "cells_mean": self.stats[-1]["cells_mean"] if self.stats else 0.0})
-            return self._last[1].copy()
+            return self.history_view(self._last[1]) if self.show == "history" else self._last[1].copy()
         pyr = seen.pyr if seen is not None else Pyramid.of(frame_in, self.bgr, grey)
         fm = self.motion.push(pyr, index, fresh, seen.decision if seen is not None else None,
                               self._look_ahead(pyr, index, future) if future else [])
@@ -1392,10 +1398,16 @@ class TSSStage:
                            "samples_share": 0.0 if cells is None else float(np.count_nonzero(cells >= self.min_cells)) / cells.size,
                            "translation": fm.decision.translation,
                            "projective": any(e.projective for e in taps), **fm.decision.measures})
+        self._cells = cells
         if self.show == "history":
-            c = np.ones(grey.shape, np.uint8) if cells is None else cells
-            return cells_view(c, out, self.grid, self.bgr)
+            return self.history_view(out)
         return out
+
+    def history_view(self, out: np.ndarray) -> np.ndarray:
+        """The debug view (--show history) of the latest frame resolved (a repeated frame: the one it repeats): its
+        samples per pixel (cells_view) over `out`'s grey."""
+        c = np.ones(out.shape[:2], np.uint8) if self._cells is None else self._cells
+        return cells_view(c, out, self.grid, self.bgr)
 
     def _assign_slots(self, fm: FrameMotion) -> None:
         """Ring slots for the current and the look-ahead frames: a frame keeps its slot from when it first came
@@ -1625,12 +1637,15 @@ class TSSThenBlend:
                  mode: str = "adaptive", show: str | None = None, context=None, blend_mode: str | None = None,
                  lookahead: int = 0, linear_input: bool = False, dense_samples: bool = False, **blend_kwargs):
         """`blend_mode`: the blend's motion model when not `mode` ("auto": "dense"); `lookahead`, `dense_samples`:
-        TSS's (the blend reads the past only); `linear_input`: both stages' (linear-light frames)."""
+        TSS's (the blend reads the past only); `linear_input`: both stages' (linear-light frames). `show="history"`:
+        the blend's weights where it runs everywhere ("tss+blend"); with the blend only in render regions ("auto")
+        TSS's samples per pixel, as the blend's view would be rejection everywhere else."""
         from mlaa_stream.temporal.stage import TemporalStage
         self.tss = TSSStage(device, frames=frames, bgr=bgr, mode=mode, context=context, lookahead=lookahead,
                             linear_input=linear_input, dense_samples=dense_samples)
-        self.blend = TemporalStage(device, bgr=bgr, mode=blend_mode or mode, show=show, context=self.tss.context,
-                                   linear_input=linear_input, **blend_kwargs)
+        self._tss_view = show == "history" and blend_kwargs.get("where") == "render"
+        self.blend = TemporalStage(device, bgr=bgr, mode=blend_mode or mode, show=None if self._tss_view else show,
+                                   context=self.tss.context, linear_input=linear_input, **blend_kwargs)
 
     @property
     def stats(self) -> list[dict]:
@@ -1650,7 +1665,8 @@ class TSSThenBlend:
     def __call__(self, frame_in: np.ndarray, frame_filtered: np.ndarray, index: int,
                  regions: np.ndarray | None = None, future: list[np.ndarray] = ()) -> np.ndarray:
         out = self.tss(frame_in, frame_filtered, index, future=future)
-        return self.blend(frame_in, out, index, regions=regions, measured=self._measured())
+        out = self.blend(frame_in, out, index, regions=regions, measured=self._measured())
+        return self.tss.history_view(out) if self._tss_view else out
 
     def _measured(self) -> tuple[Pyramid, Decision | None] | None:
         """TSS's pyramid of this frame and, where the blend's model choice would reach the same, its decision:
