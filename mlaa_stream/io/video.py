@@ -401,6 +401,9 @@ def _check_length(info: VideoInfo, n: int, last_time: float | None) -> None:
     """VideoReadError when a stream that decoded without an error still ended early: fewer frames
     than the container declares, or (no declared count: MKV, WebM, variable frame rates) its last
     frame well before the declared duration. Durations are not frame counts when the rate varies."""
+    if not n:  # a y4m header and no FRAME (vspipe failing before its first frame): no video to write
+        raise VideoReadError(f"{'standard input' if info.path == PIPE else info.path}: expected video frames, "
+                             f"the stream holds none", 0)
     expected = info.frames
     if info.frames_declared and expected and n + max(2, expected // 50) < expected:
         raise VideoReadError(f"{info.path}: the stream ended at frame {n}, expected {expected} "
