@@ -146,3 +146,53 @@ def test_a_pip_installed_intel_cpu_runtime_without_an_icd_file_is_named_with_the
     (vendors / "intel.icd").write_text(f"{lib}\n")
     assert drivers.unregistered_pip_runtimes(str(tmp_path), env) == []
     assert drivers.unregistered_pip_runtimes(str(tmp_path / "none"), env) == []
+
+
+def test_a_device_variable_that_names_nothing_is_named_and_devices_still_lists(monkeypatch):
+    """MLAA_STREAM_DEVICE=garbage: the error says the variable chose it (the user typed no --device), and
+    `mlaa-stream devices`, where one goes to find a valid name, lists the devices before saying so (exit 3)."""
+    monkeypatch.setenv(dev.DEVICE_ENV, "no-such-device-xyz")
+    with pytest.raises(dev.DeviceError, match=r"^\$MLAA_STREAM_DEVICE: no OpenCL device matches"):
+        dev.select_device(None)
+    monkeypatch.setenv(dev.DEVICE_ENV, "99")
+    with pytest.raises(dev.DeviceError, match=r"^\$MLAA_STREAM_DEVICE: expected a device index below"):
+        dev.select_device(None)
+    with pytest.raises(dev.DeviceError, match=r"^expected a device index below"):  # --device 99: no variable named
+        dev.select_device("99")
+    res = CliRunner().invoke(main, ["devices"])
+    assert res.exit_code == 3
+    assert "0: " + dev.list_devices()[0].name in res.output and "$MLAA_STREAM_DEVICE: expected" in res.output
+    assert "* " not in res.output
+
+
+def test_devices_marks_the_chosen_device_not_every_device_of_its_name(monkeypatch):
+    """Two devices of one name (two GPUs of a kind, one runtime registered twice): only the chosen one gets *."""
+    class Twin:  # another device that reports the same name, platform and kind
+        def __init__(self, device):
+            self._device = device
+
+        def __getattr__(self, name):
+            return getattr(self._device, name)
+
+    first = dev._all_devices()[0]
+    monkeypatch.setattr(dev, "_all_devices", lambda devices=[first, Twin(first)]: devices)
+    monkeypatch.setattr("mlaa_stream.cli.devices_cmd._all_devices", dev._all_devices)
+    monkeypatch.setenv(dev.DEVICE_ENV, "1")
+    res = CliRunner().invoke(main, ["devices"])
+    assert res.exit_code == 0, res.output
+    assert [ln[:3] for ln in res.output.splitlines()[:2]] == ["  0", "* 1"]
+
+
+def test_no_platform_with_the_loader_variable_set_names_the_variable(monkeypatch):
+    """OCL_ICD_VENDORS=/nonexistent: the loader finds no platform with PoCL installed; 'install PoCL' alone
+    would mislead, so the message names the variable first."""
+    def boom():
+        raise cl.LogicError("clGetPlatformIDs failed: PLATFORM_NOT_FOUND_KHR")
+    monkeypatch.setattr(dev.cl, "get_platforms", boom)
+    monkeypatch.setenv("OCL_ICD_VENDORS", "/nonexistent")
+    with pytest.raises(dev.DeviceError, match="where OCL_ICD_VENDORS='/nonexistent' points .* unset it"):
+        dev.list_devices()
+    res = CliRunner().invoke(main, ["devices"])
+    assert res.exit_code == 3 and "OCL_ICD_VENDORS='/nonexistent'" in res.output
+    monkeypatch.delenv("OCL_ICD_VENDORS")
+    assert dev.no_platform_message() == dev.NO_PLATFORM_HINT

@@ -104,3 +104,15 @@ def test_chained_with_a_real_ffmpeg(tmp_path):
     assert a.returncode == 0 and b.returncode == 0, b.stderr.decode()
     with av.open(str(tmp_path / "o.mkv")) as c:
         assert sum(1 for _ in c.decode(video=0)) == 10
+
+
+def test_a_y4m_with_a_header_and_no_frame_is_an_error(tmp_path):
+    """vspipe failing before its first frame leaves a header alone: exit 1 and nothing written, as for an empty
+    stdin (it wrote a video of no frames and exited 0)."""
+    header = b"YUV4MPEG2 W64 H48 F25:1 C420jpeg\n"
+    r = subprocess.run([*CLI, "-", "-o", "-", "-f", "y4m"], input=header, capture_output=True, timeout=120)
+    assert r.returncode == 1 and b"standard input: expected video frames, the stream holds none" in r.stderr
+    (tmp_path / "h.y4m").write_bytes(header)
+    r = subprocess.run([*CLI, str(tmp_path / "h.y4m"), "-o", str(tmp_path / "o.mkv")], capture_output=True,
+                       timeout=120)
+    assert r.returncode == 1 and not (tmp_path / "o.mkv").exists(), r.stderr.decode()

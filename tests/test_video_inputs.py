@@ -97,6 +97,35 @@ def test_a_pixel_aspect_ratio_matroska_cannot_take_is_named(tmp_path):
     assert "pixel aspect ratio 4/3 of" in r.output and "not kept" in r.output
 
 
+def write_y4m(path, header_tags: str = "", frames: int = 3, size: tuple[int, int] = (64, 48)) -> int:
+    """A y4m written by hand (as vspipe writes one): 4:2:0, 8-bit, a diagonal edge; `header_tags` added to the
+    stream header ("A16:11", "It"). Returns the bytes of one frame's picture (FRAME line excluded)."""
+    w, h = size
+    cw, ch = (w + 1) // 2, (h + 1) // 2
+    y, x = np.mgrid[0:h, 0:w]
+    with open(path, "wb") as f:
+        f.write(f"YUV4MPEG2 W{w} H{h} F25:1 C420jpeg {header_tags}".rstrip().encode() + b"\n")
+        for i in range(frames):
+            f.write(b"FRAME\n" + np.where(y * 2 + i > x, 50, 200).astype(np.uint8).tobytes()
+                    + np.full(2 * cw * ch, 128, np.uint8).tobytes())
+    return w * h + 2 * cw * ch
+
+
+@pytest.mark.parametrize("ext,codec", [("y4m", None), ("nut", "ffv1"), ("avi", "ffv1")])
+def test_a_pixel_aspect_ratio_other_containers_cannot_take_is_named(tmp_path, ext, codec):
+    """y4m's A tag (an anamorphic vspipe output), written back as y4m (the pipe's usual format) or in NUT / AVI
+    with an encoder that does not store it in its bitstream: lost (A0:0), so said, as for Matroska."""
+    src = tmp_path / "dv.y4m"
+    write_y4m(src, "A16:11")
+    assert probe_video(str(src)).sar == Fraction(16, 11)
+    r = run(src, "-o", tmp_path / f"out.{ext}", *(("--codec", codec) if codec else ()))
+    assert r.exit_code == 0, r.output
+    assert "pixel aspect ratio 16/11 of" in r.output and "not kept" in r.output
+    r = run(src, "-o", tmp_path / "kept.mkv", "--codec", "mpeg4")  # MPEG-4 Part 2 stores it itself: no warning
+    assert r.exit_code == 0 and "not kept" not in r.output, r.output
+    assert probe_video(str(tmp_path / "kept.mkv")).sar == Fraction(16, 11)
+
+
 def write_damaged_timestamps(path: str, tmp, shift: int) -> list[int]:
     """An FFV1 MKV (intra only: no reordering) whose 6th frame's timestamp is damaged by `shift` ticks
     (dts kept, as a corrupt block leaves them); returns the decoded timestamps."""

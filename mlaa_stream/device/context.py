@@ -54,6 +54,19 @@ NO_PLATFORM_HINT = (
     "no OpenCL platform found: install the CPU runtime with "
     "'pip install pocl-binary-distribution' (or a GPU vendor's OpenCL driver)"
 )
+# The OpenCL loader (ocl-icd) looks for drivers only where this names when it is set, not in /etc/OpenCL/vendors:
+# set wrong (OCL_ICD_VENDORS=/nonexistent) it lists no platform at all, with every runtime installed.
+LOADER_VENDORS_ENV = "OCL_ICD_VENDORS"
+
+
+def no_platform_message(environ=os.environ) -> str:
+    """NO_PLATFORM_HINT, or where $OCL_ICD_VENDORS is set, that first: then the likelier cause."""
+    where = environ.get(LOADER_VENDORS_ENV)
+    if where is None:
+        return NO_PLATFORM_HINT
+    return (f"no OpenCL platform found where {LOADER_VENDORS_ENV}={where!r} points (the OpenCL loader then looks "
+            f"for drivers only there): unset it to use those registered in /etc/OpenCL/vendors, or "
+            + NO_PLATFORM_HINT.split(": ", 1)[1])
 
 
 class DeviceError(RuntimeError):
@@ -94,7 +107,7 @@ def _all_devices() -> list:
     try:
         platforms = cl.get_platforms()
     except cl.Error as exc:  # PLATFORM_NOT_FOUND_KHR and friends
-        raise DeviceError(NO_PLATFORM_HINT) from exc
+        raise DeviceError(no_platform_message()) from exc
     devices = []
     for p in platforms:
         try:
@@ -102,7 +115,7 @@ def _all_devices() -> list:
         except cl.Error:  # a platform with no devices: skip it, others may serve
             continue
     if not devices:
-        raise DeviceError(NO_PLATFORM_HINT)
+        raise DeviceError(no_platform_message())
     return devices
 
 
@@ -204,22 +217,24 @@ def select_device(spec: str | int | None = None):
     """Pick a device: `spec` (index or name substring), else $MLAA_STREAM_DEVICE, else
     `default_choice` (a real GPU, else PoCL's CPU device, else the first)."""
     devices = _all_devices()
+    source = ""  # where the spec came from, in errors: a user who typed no --device must learn it was the variable
     if spec is None or spec == "":
         spec = os.environ.get(DEVICE_ENV) or None
+        source = f"${DEVICE_ENV}: " if spec is not None else ""
     if spec is None:
         return default_choice(devices)[0]
     s = str(spec).strip()
     if s.isdigit():
         i = int(s)
         if i >= len(devices):
-            raise DeviceError(f"expected a device index below {len(devices)}, got {i} "
+            raise DeviceError(f"{source}expected a device index below {len(devices)}, got {i} "
                               f"(see 'mlaa-stream devices')")
         return devices[i]
     matches = [d for d in devices if s.lower() in f"{d.platform.name} {d.name}".lower()
                or s.upper() == _kind(d)]
     if not matches:
         names = ", ".join(d.name.strip() for d in devices)
-        raise DeviceError(f"no OpenCL device matches {s!r}; available: {names}")
+        raise DeviceError(f"{source}no OpenCL device matches {s!r}; available: {names}")
     return matches[0]
 
 

@@ -47,8 +47,12 @@ _FPS_TIME_BASE_CODECS = frozenset({"mpeg4", "mpeg2video", "mpeg1video", "h263", 
 # Containers that store one index entry per tick of the time base (AVI): a finer time base than the frame
 # rate declares that rate (an MP4 source's 1/12288 -> 600 fps) and fills the gaps with empty frames.
 _FPS_TIME_BASE_FORMATS = frozenset({"avi"})
-# Encoders that store the pixel aspect ratio in their bitstream (H.264/HEVC VUI): kept in any container.
-_SAR_IN_BITSTREAM = frozenset({"libx264", "libx264rgb", "libx265"})
+# Encoders that store the pixel aspect ratio in their bitstream (H.264/HEVC VUI, MPEG-4 Part 2's VOL): kept in any
+# container.
+_SAR_IN_BITSTREAM = frozenset({"libx264", "libx264rgb", "libx265", "mpeg4"})
+# Containers that store it from the stream, which PyAV cannot set (MP4/MOV take the codec's parameters): with any
+# other encoder it is lost -- y4m's A tag written 0:0, measured with PyAV 18 / FFmpeg 8 for each of these.
+_SAR_FROM_STREAM_FORMATS = frozenset({"matroska", "webm", "yuv4mpegpipe", "nut", "avi"})
 _UNSPECIFIED = {"colorspace": 2, "color_primaries": 2, "color_trc": 2, "color_range": 0}
 
 
@@ -397,6 +401,9 @@ def _check_length(info: VideoInfo, n: int, last_time: float | None) -> None:
     """VideoReadError when a stream that decoded without an error still ended early: fewer frames
     than the container declares, or (no declared count: MKV, WebM, variable frame rates) its last
     frame well before the declared duration. Durations are not frame counts when the rate varies."""
+    if not n:  # a y4m header and no FRAME (vspipe failing before its first frame): no video to write
+        raise VideoReadError(f"{'standard input' if info.path == PIPE else info.path}: expected video frames, "
+                             f"the stream holds none", 0)
     expected = info.frames
     if info.frames_declared and expected and n + max(2, expected // 50) < expected:
         raise VideoReadError(f"{info.path}: the stream ended at frame {n}, expected {expected} "
@@ -545,11 +552,10 @@ class VideoWriter:
         stream.pix_fmt = self.pix_fmt
         if info.sar:  # anamorphic: shown at width x sar (DV, DVD, HDV); square pixels otherwise
             stream.codec_context.sample_aspect_ratio = info.sar
-            if self._out.format.name in ("matroska", "webm") and self.codec not in _SAR_IN_BITSTREAM:
-                # Matroska takes it from the stream, which PyAV cannot set; MP4/MOV from the codec's parameters
+            if self._out.format.name in _SAR_FROM_STREAM_FORMATS and self.codec not in _SAR_IN_BITSTREAM:
                 self.warnings.append(f"{self.path}: pixel aspect ratio {info.sar} of {info.path} not kept: "
                                      f"{self.codec} in {self._out.format.name} does not store it (MP4/MOV do with "
-                                     f"any codec, MKV with libx264 / libx265)")
+                                     f"any codec, MKV and NUT with libx264 / libx265)")
         if self.codec in _FPS_TIME_BASE_CODECS or info.time_base is None or \
                 self.container_format in _RAW_FORMATS or \
                 self._out.format.name in _FPS_TIME_BASE_FORMATS:  # y4m reads its frame rate from the time base
