@@ -377,16 +377,19 @@ RARELY_CALLED int4 tile_ramps(__global const PIXEL_T *src, int x0, int x1, int y
 
 // Eight counts per tile (tx, ty), at counts[COUNTS * (ty * tiles_x + tx) + k]: k = 0 its pixels that border an
 // edge and that the MLAA passes changed (dst != src), k = 1 its pixels that border an edge, k = 2 the changed ones
-// whose 3x3 window holds FALLBACK_COLOURS bit-identical colours ("busy"), k = 3 tile_near_extremes where k = 2 is
-// not 0 and there are render regions (else NOT_MEASURED), k = 4 .. 7 tile_ramps where k = 1 is not 0, tx and ty
-// are even and there are render regions (else 0; at most 128 each). One work item per SEGMENT pixels (a multiple of
-// FALLBACK_TILE) of a band of FALLBACK_TILE rows.
+// whose 3x3 window holds FALLBACK_COLOURS bit-identical colours and is no quiet one ("busy"; noise.cl pixel_quiet:
+// a window within the frame's grain -- a noisy photograph's colour noise, which the MLAA passes also blend -- is
+// no evidence of 1-spp aliasing; docs/spatial_tuning.md, "Busy pixels within the grain"), k = 3
+// tile_near_extremes where k = 2 is not 0 and there are render regions (else NOT_MEASURED), k = 4 .. 7 tile_ramps
+// where k = 1 is not 0, tx and ty are even and there are render regions (else 0; at most 128 each). One work item
+// per SEGMENT pixels (a multiple of FALLBACK_TILE) of a band of FALLBACK_TILE rows.
 __kernel void count_changed(__global const PIXEL_T *src, __global const PIXEL_T *dst,
-                            __global const uchar *edges, __global uchar *counts,
+                            __global const uchar *edges, __global const int *noise, __global uchar *counts,
                             const int w, const int h, const int tiles_x)
 {
     const int x0 = get_global_id(0) * SEGMENT, ty = get_global_id(1), y0 = ty * FALLBACK_TILE;
     if (x0 >= w || y0 >= h) return;
+    const int level = noise[0];
     const int x1 = min(x0 + SEGMENT, w), y1 = min(y0 + FALLBACK_TILE, h);
     for (int t0 = x0; t0 < x1; t0 += FALLBACK_TILE) {
         const int t1 = min(t0 + FALLBACK_TILE, x1);
@@ -398,7 +401,7 @@ __kernel void count_changed(__global const PIXEL_T *src, __global const PIXEL_T 
                     ++bordering;
                     if (!px_differs(src, dst, IDX(x, y, w))) continue;
                     ++changed;
-                    busy += WINDOW_BUSY_EXACT(src, x, y, w, h);
+                    busy += WINDOW_BUSY_EXACT(src, x, y, w, h) && !pixel_quiet(src, x, y, w, h, level);
                 }
         __global uchar *c = counts + COUNTS * (ty * tiles_x + t0 / FALLBACK_TILE);
         c[0] = (uchar)changed;

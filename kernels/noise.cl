@@ -119,3 +119,20 @@ __kernel void noise_mask(__global const PIXEL_T *src, __global const int *noise,
 
 // Whether pixel i is quiet (noise_mask's flag, read only where the frame's level is over 0).
 #define noise_quiet(quiet, i, level) ((level) > 0 && (quiet)[i])
+
+// Whether pixel (x, y) is quiet, computed here (noise_mask's rule for one pixel; 0 where the level is 0): for the
+// few pixels read before the mask is made (count_changed's busy pixels).
+inline int pixel_quiet(__global const PIXEL_T *src, int x, int y, int w, int h, int level)
+{
+    if (level <= 0) return 0;
+    int lo = 1 << 30, hi = -1;
+    for (int dy = -1; dy <= 1; ++dy) {
+        const int row = clamp_to(y + dy, h - 1) * w;
+        for (int dx = -1; dx <= 1; ++dx) {
+            const int l = luma256(src, row + clamp_to(x + dx, w - 1));
+            lo = min(lo, l);
+            hi = max(hi, l);
+        }
+    }
+    return (hi - lo) * NOISE_SPAN_DEN < NOISE_SPAN_NUM * 256 * level;
+}

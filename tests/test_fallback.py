@@ -372,6 +372,39 @@ def test_hard_stair_ends_keep_a_frame_with_smooth_texture_a_render(dtype, channe
         np.testing.assert_array_equal(got, want)
 
 
+def noisy_photograph(seed: int, rows: int, cols: int) -> np.ndarray:
+    """A photograph (matplotlib's portrait sample, rows x cols from its top left) magnified 2x (bicubic: soft edges,
+    smooth areas) with colour noise of 3 levels per channel."""
+    import cv2
+    import matplotlib.cbook
+    import matplotlib.image
+    photo = matplotlib.image.imread(matplotlib.cbook.get_sample_data("grace_hopper.jpg", asfileobj=False))[..., :3]
+    big = cv2.resize(np.ascontiguousarray(photo[:rows, :cols]), None, fx=2, fy=2, interpolation=cv2.INTER_CUBIC)
+    noise = np.random.default_rng(seed).normal(0, 3, big.shape)
+    return np.clip(np.rint(big + noise), 0, 255).astype(np.uint8)
+
+
+@pytest.mark.parametrize("rows,cols", [(200, 160), (150, 128)])
+def test_a_noisy_photograph_has_no_render_region(rows, cols):
+    """Known answer (busy pixels within the grain, noise.cl pixel_quiet): a magnified photograph with colour noise --
+    judged supersampled at 400 x 320, not at 300 x 256 -- has pixels the MLAA passes blend (dark colour noise passes
+    the CIELAB edge threshold) in windows of 4+ exact colours, which counted as a render's busy pixels: most of its
+    tiles became render regions, whose tables moved it by over a level RMS. Their windows lie within the frame's
+    grain: they count no more, no tile is a region and the output stays within half a level of the input (RMS). The
+    kernel's regions equal the reference's."""
+    from mlaa_stream.spatial.fallback import _busy_pixels, overlay_tiles, render_regions
+    frame = noisy_photograph(0, rows, cols)
+    with Filter(keep_regions=True) as f, Filter(fallback="off") as g:
+        got, passes = f.process(frame), g.intermediates(frame)
+        tiles = f.last_regions.astype(bool)
+    regions = render_regions_of(frame, passes["out"], passes["edges"])
+    assert not tiles.any() and not regions.any()
+    assert np.sqrt(np.mean((got.astype(float) - frame) ** 2)) < 0.5
+    _, _, _, borders, changed, rgb = _frame_masks(frame, passes["out"], passes["edges"], False)
+    counted = _busy_pixels(changed, borders, rgb, np.zeros(borders.shape, bool))  # the rule before: no grain test
+    assert render_regions(counted, borders, luma_reference(rgb, False), overlay_tiles(frame)).mean() > 0.5
+
+
 @pytest.mark.parametrize("rows,periods", [(96, 12), (32, 6)])
 def test_clean_ramps_alone_make_a_frame_supersampled(rows, periods):
     """Known answer (SUPERSAMPLED_CLEAN_PCT): bars whose every edge is one pixel halfway between two plateaus (steps

@@ -178,7 +178,8 @@ class FallbackPass:
             noise = [events["noise_level"]]
         if not self.everywhere:  # "everywhere" reads no counts: every tile is a render region
             events["fallback_count"] = self._count(queue, (-(-self.fmt.width // SEGMENT), self.tiles[1]), None,
-                                                   src, dst, edges, self._counts, W, H, tx, wait_for=wait_for)
+                                                   src, dst, edges, self._noise, self._counts, W, H, tx,
+                                                   wait_for=[*wait_for, *noise])
             wait_for = [events["fallback_count"]]
             if self.regions:
                 events["render_rows"] = self._rows(queue, (self.tiles[1],), None, self._counts, self._row_sums,
@@ -301,14 +302,15 @@ def render_regions_of(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray, 
     """The render regions kernels/fallback.cl finds in `src` (per pixel, (h, w) bool), given the MLAA passes'
     output and edge buffer (Filter.intermediates: "out", "edges")."""
     _, _, _, borders, changed, rgb = _frame_masks(src, mlaa_out, edges, bgr)
-    return render_regions(_busy_pixels(changed, borders, rgb), borders, luma_reference(rgb, linear_input),
-                          overlay_tiles(src, bgr))
+    return render_regions(_busy_pixels(changed, borders, rgb, quiet_pixels(src, bgr)), borders,
+                          luma_reference(rgb, linear_input), overlay_tiles(src, bgr))
 
 
-def _busy_pixels(changed: np.ndarray, borders: np.ndarray, rgb: np.ndarray) -> np.ndarray:
+def _busy_pixels(changed: np.ndarray, borders: np.ndarray, rgb: np.ndarray, quiet: np.ndarray) -> np.ndarray:
     """count_changed's k = 2 per pixel: edge-bordering pixels the MLAA passes changed whose 3x3 window holds
-    FALLBACK_COLOURS bit-identical colours or more."""
-    return changed & borders & (_window_colours(rgb, 0.0) >= FALLBACK_COLOURS)
+    FALLBACK_COLOURS bit-identical colours or more and is not `quiet` (spatial/noise.py quiet_pixels: within the
+    frame's grain)."""
+    return changed & borders & (_window_colours(rgb, 0.0) >= FALLBACK_COLOURS) & ~quiet
 
 
 def to_mix_space(px: np.ndarray, fmt: FrameFormat, decode: bool) -> np.ndarray:
@@ -370,7 +372,7 @@ def fallback_reference(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray,
 
         busy_window = _window_colours(rgb) >= FALLBACK_COLOURS
         luma = luma_reference(rgb, linear_input)
-        busy_px = _busy_pixels(changed, borders, rgb)
+        busy_px = _busy_pixels(changed, borders, rgb, quiet)
         busy_changed = region_sums(busy_px)
         frame_supersampled = regions and supersampled(borders, luma)  # render_frame then clears every tile's counts
         rendered = (render_regions(busy_px, borders, luma, overlay_tiles(src, bgr)) & ~quiet if regions
