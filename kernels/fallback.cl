@@ -142,7 +142,7 @@
 #ifndef REFINE_TABLE
 #define REFINE_TABLE 0
 #endif
-#define COUNTS 8          // bytes per tile in `counts`
+#define COUNTS 9          // bytes per tile in `counts`
 #define NOT_MEASURED 255  // counts[3] of a tile with no busy pixel or a luma range under RENDER_RANGE
 
 // Any stored channel (alpha included) of pixel i differs between a and b.
@@ -375,14 +375,13 @@ RARELY_CALLED int4 tile_ramps(__global const PIXEL_T *src, int x0, int x1, int y
     return n;
 }
 
-// Eight counts per tile (tx, ty), at counts[COUNTS * (ty * tiles_x + tx) + k]: k = 0 its pixels that border an
+// Nine counts per tile (tx, ty), at counts[COUNTS * (ty * tiles_x + tx) + k]: k = 0 its pixels that border an
 // edge and that the MLAA passes changed (dst != src), k = 1 its pixels that border an edge, k = 2 the changed ones
-// whose 3x3 window holds FALLBACK_COLOURS bit-identical colours and is no quiet one ("busy"; noise.cl pixel_quiet:
-// a window within the frame's grain -- a noisy photograph's colour noise, which the MLAA passes also blend -- is
-// no evidence of 1-spp aliasing; docs/spatial_tuning.md, "Busy pixels within the grain"), k = 3
-// tile_near_extremes where k = 2 is not 0 and there are render regions (else NOT_MEASURED), k = 4 .. 7 tile_ramps
-// where k = 1 is not 0, tx and ty are even and there are render regions (else 0; at most 128 each). One work item
-// per SEGMENT pixels (a multiple of FALLBACK_TILE) of a band of FALLBACK_TILE rows.
+// whose 3x3 window holds FALLBACK_COLOURS bit-identical colours ("busy"), k = 3 tile_near_extremes where k = 2 is
+// not 0 and there are render regions (else NOT_MEASURED), k = 4 .. 7 tile_ramps where k = 1 is not 0, tx and ty
+// are even and there are render regions (else 0; at most 128 each), k = 8 the busy ones whose 3x3 window of luma
+// lies within the frame's grain (noise.cl pixel_quiet; 0 where its level is 0: grain_verdict says whether they
+// count). One work item per SEGMENT pixels (a multiple of FALLBACK_TILE) of a band of FALLBACK_TILE rows.
 __kernel void count_changed(__global const PIXEL_T *src, __global const PIXEL_T *dst,
                             __global const uchar *edges, __global const int *noise, __global uchar *counts,
                             const int w, const int h, const int tiles_x)
@@ -393,7 +392,7 @@ __kernel void count_changed(__global const PIXEL_T *src, __global const PIXEL_T 
     const int x1 = min(x0 + SEGMENT, w), y1 = min(y0 + FALLBACK_TILE, h);
     for (int t0 = x0; t0 < x1; t0 += FALLBACK_TILE) {
         const int t1 = min(t0 + FALLBACK_TILE, x1);
-        int changed = 0, bordering = 0, busy = 0;
+        int changed = 0, bordering = 0, busy = 0, grainy = 0;
         for (int y = y0; y < y1; ++y)
             if (!(t1 - t0 == 8 && group_is_quiet(edges, t0, y, w)))
                 for (int x = t0; x < t1; ++x) {
@@ -401,7 +400,10 @@ __kernel void count_changed(__global const PIXEL_T *src, __global const PIXEL_T 
                     ++bordering;
                     if (!px_differs(src, dst, IDX(x, y, w))) continue;
                     ++changed;
-                    busy += WINDOW_BUSY_EXACT(src, x, y, w, h) && !pixel_quiet(src, x, y, w, h, level);
+                    if (WINDOW_BUSY_EXACT(src, x, y, w, h)) {
+                        ++busy;
+                        grainy += pixel_quiet(src, x, y, w, h, level);
+                    }
                 }
         __global uchar *c = counts + COUNTS * (ty * tiles_x + t0 / FALLBACK_TILE);
         c[0] = (uchar)changed;
@@ -415,31 +417,63 @@ __kernel void count_changed(__global const PIXEL_T *src, __global const PIXEL_T 
         c[5] = (uchar)ramps.y;
         c[6] = (uchar)ramps.z;
         c[7] = (uchar)ramps.w;
+        c[8] = (uchar)grainy;
     }
+}
+
+// noise[1] = 1 where busy pixels within the grain (count_changed's k = 8) are no evidence of a render: the frame has
+// grain (noise[0], its level, over 0) and no 1-spp geometry -- hard stair ends (clean transitions that are no ramps)
+// under SUPERSAMPLED_HARD_PCT % of its strong steps, tile_ramps' counts summed. A photograph with colour noise: the
+// MLAA passes blend some of the noise (dark colour noise passes the CIELAB threshold) in windows of many exact
+// colours, which made most of it render regions; a grainy render keeps its stair ends and its busy pixels
+// (docs/spatial_tuning.md, "Busy pixels within the grain"). One work item.
+__kernel void grain_verdict(__global const uchar *counts, __global int *noise, const int tiles)
+{
+    if (get_global_id(0) != 0) return;
+    if (noise[0] <= 0) {
+        noise[1] = 0;
+        return;
+    }
+    int strong = 0, clean = 0, clean_ramps = 0;
+    for (int t = 0; t < tiles; ++t) {
+        __global const uchar *c = counts + COUNTS * t;
+        strong += c[4];
+        clean += c[6];
+        clean_ramps += c[7];
+    }
+    noise[1] = !(strong > 0 && (clean - clean_ramps) * 100 >= SUPERSAMPLED_HARD_PCT * strong);
+}
+
+// A tile's busy pixels (count_changed's k = 2), less those within the grain where they do not count (grain_verdict).
+inline int tile_busy(__global const uchar *c, int grain_free)
+{
+    return c[2] - (grain_free ? c[8] : 0);
 }
 
 // A tile's six terms of the render-region sums: busy pixels, edge-bordering pixels, busy pixels of a measured
 // tile, those weighted by its near count, clean transitions and clean ramps (two lanes unused).
-inline int8 region_terms(__global const uchar *counts, int tile)
+inline int8 region_terms(__global const uchar *counts, int tile, int grain_free)
 {
     __global const uchar *c = counts + COUNTS * tile;
-    const int busy = c[2], measured = c[3] != NOT_MEASURED;
+    const int busy = tile_busy(c, grain_free), measured = c[3] != NOT_MEASURED;
     return (int8)(busy, c[1], measured ? busy : 0, measured ? busy * c[3] : 0, c[6], c[7], 0, 0);
 }
 
 // rows[tile] = region_terms summed over the tiles tx - RENDER_RADIUS .. tx + RENDER_RADIUS of its row, clamped to
 // the frame (the first of the two separable passes of render regions). One work item per tile row, a running sum.
-__kernel void render_rows(__global const uchar *counts, __global int8 *rows, const int tiles_x, const int tiles_y)
+__kernel void render_rows(__global const uchar *counts, __global const int *noise, __global int8 *rows,
+                          const int tiles_x, const int tiles_y)
 {
     const int ty = get_global_id(0);
     if (ty >= tiles_y) return;
+    const int grain_free = noise[1];
     const int row = ty * tiles_x;
     int8 sum = (int8)(0);
-    for (int k = 0; k < RENDER_RADIUS && k < tiles_x; ++k) sum += region_terms(counts, row + k);
+    for (int k = 0; k < RENDER_RADIUS && k < tiles_x; ++k) sum += region_terms(counts, row + k, grain_free);
     for (int tx = 0; tx < tiles_x; ++tx) {
-        if (tx + RENDER_RADIUS < tiles_x) sum += region_terms(counts, row + tx + RENDER_RADIUS);
+        if (tx + RENDER_RADIUS < tiles_x) sum += region_terms(counts, row + tx + RENDER_RADIUS, grain_free);
         rows[row + tx] = sum;
-        if (tx >= RENDER_RADIUS) sum -= region_terms(counts, row + tx - RENDER_RADIUS);
+        if (tx >= RENDER_RADIUS) sum -= region_terms(counts, row + tx - RENDER_RADIUS, grain_free);
     }
 }
 
@@ -504,7 +538,7 @@ __kernel void render_frame(__global uchar *render, __global uchar *counts, __glo
         render[tile] = (uchar)((render[tile] & bit) != 0 && (!supersampled || (render[tile] & 4) != 0));
         if (supersampled) {
             __global uchar *c = counts + COUNTS * tile;
-            c[0] = c[1] = c[2] = 0;
+            c[0] = c[1] = c[2] = c[8] = 0;
         }
     }
 }
@@ -907,7 +941,7 @@ inline void fallback_tile(__global const PIXEL_T *src, __global const float *lut
                           __global const ushort2 *hdist, __global const ushort2 *vdist, __global const uchar *counts,
                           __global const uchar *render, __global const float *table,
                           __global const uchar *quiet_px, __global PIXEL_T *dst, int w, int h, int tiles_x,
-                          int tiles_y, int tx, int ty, int noise)
+                          int tiles_y, int tx, int ty, int noise, int grain_free)
 {
 #if FALLBACK_MIN_CHANGED > 0
     const int rendered = RENDER_REGIONS && render[ty * tiles_x + tx];
@@ -917,7 +951,7 @@ inline void fallback_tile(__global const PIXEL_T *src, __global const float *lut
             __global const uchar *c = counts + COUNTS * (j * tiles_x + k);
             changed += c[0];
             bordering += c[1];
-            busy_changed += c[2];
+            busy_changed += tile_busy(c, grain_free);
         }
     const int rich = busy_changed >= FALLBACK_RICH_MIN && busy_changed * FALLBACK_RICH_DIV >= bordering;
     const int evidence = changed >= FALLBACK_MIN_CHANGED;
@@ -969,8 +1003,8 @@ __kernel void fxaa_fallback(__global const PIXEL_T *src, __global const float *l
 {
     const int t0 = get_global_id(0) * (SEGMENT / FALLBACK_TILE), ty = get_global_id(1);
     if (t0 >= tiles_x || ty >= tiles_y) return;
-    const int t1 = min(t0 + SEGMENT / FALLBACK_TILE, tiles_x), level = noise[0];
+    const int t1 = min(t0 + SEGMENT / FALLBACK_TILE, tiles_x), level = noise[0], grain_free = noise[1];
     for (int tx = t0; tx < t1; ++tx)
         fallback_tile(src, luts, lin, edges, hdist, vdist, counts, render, table, quiet_px, dst, w, h, tiles_x,
-                      tiles_y, tx, ty, level);
+                      tiles_y, tx, ty, level, grain_free);
 }

@@ -386,12 +386,12 @@ def noisy_photograph(seed: int, rows: int, cols: int) -> np.ndarray:
 
 @pytest.mark.parametrize("rows,cols", [(200, 160), (150, 128)])
 def test_a_noisy_photograph_has_no_render_region(rows, cols):
-    """Known answer (busy pixels within the grain, noise.cl pixel_quiet): a magnified photograph with colour noise --
-    judged supersampled at 400 x 320, not at 300 x 256 -- has pixels the MLAA passes blend (dark colour noise passes
-    the CIELAB edge threshold) in windows of 4+ exact colours, which counted as a render's busy pixels: most of its
-    tiles became render regions, whose tables moved it by over a level RMS. Their windows lie within the frame's
-    grain: they count no more, no tile is a region and the output stays within half a level of the input (RMS). The
-    kernel's regions equal the reference's."""
+    """Known answer (busy pixels within the grain: noise.cl pixel_quiet, fallback.cl grain_verdict): a magnified
+    photograph with colour noise -- judged supersampled at 400 x 320, not at 300 x 256; no 1-spp geometry in either --
+    has pixels the MLAA passes blend (dark colour noise passes the CIELAB edge threshold) in windows of 4+ exact
+    colours, which counted as a render's busy pixels: most of its tiles became render regions, whose tables moved it
+    by over a level RMS. Their windows lie within the frame's grain: they count no more, no tile is a region and the
+    output stays within half a level of the input (RMS). The kernel's regions equal the reference's."""
     from mlaa_stream.spatial.fallback import _busy_pixels, overlay_tiles, render_regions
     frame = noisy_photograph(0, rows, cols)
     with Filter(keep_regions=True) as f, Filter(fallback="off") as g:
@@ -401,8 +401,9 @@ def test_a_noisy_photograph_has_no_render_region(rows, cols):
     assert not tiles.any() and not regions.any()
     assert np.sqrt(np.mean((got.astype(float) - frame) ** 2)) < 0.5
     _, _, _, borders, changed, rgb = _frame_masks(frame, passes["out"], passes["edges"], False)
-    counted = _busy_pixels(changed, borders, rgb, np.zeros(borders.shape, bool))  # the rule before: no grain test
-    assert render_regions(counted, borders, luma_reference(rgb, False), overlay_tiles(frame)).mean() > 0.5
+    luma = luma_reference(rgb, False)
+    counted = _busy_pixels(changed, borders, rgb, np.zeros(borders.shape, bool), luma)  # the rule before: no grain test
+    assert render_regions(counted, borders, luma, overlay_tiles(frame)).mean() > 0.5
 
 
 @pytest.mark.parametrize("rows,periods", [(96, 12), (32, 6)])

@@ -136,3 +136,29 @@ def test_grain_is_kept_over_a_render():
     moved = np.abs(got.astype(int) - chain).max(-1)
     assert (moved[quiet] > 0).mean() < 0.05, "quiet pixels must keep the chain's colour (but FXAA's busy tiles)"
     assert moved[~quiet].max() > 0
+
+
+@pytest.mark.parametrize("sigma,mono", [(4.0, True), (8.0, True), (4.0, False)])
+def test_a_grainy_render_keeps_its_busy_pixels_within_the_grain(sigma, mono):
+    """Known answer (fallback.cl grain_verdict): a render with grain shows 1-spp geometry (hard stair ends), so its
+    busy pixels within the grain still count: its render regions are those of the rule without the grain test, and
+    the kernel's equal the reference's. (A noisy photograph, with no stair ends, loses them: test_fallback.)"""
+    from mlaa_stream.spatial.fallback import (_busy_pixels, _frame_masks, one_spp_geometry, overlay_tiles,
+                                              region_pixels, render_regions, step_counts)
+    from mlaa_stream.spatial.fxaa import luma_reference
+    frame = with_grain(render_frame8(2), sigma, 3, mono)
+    with Filter(keep_regions=True) as f, Filter(fallback="off") as g:
+        f.process(frame)
+        tiles, passes = f.last_regions, g.intermediates(frame)
+    _, _, _, borders, changed, rgb = _frame_masks(frame, passes["out"], passes["edges"], False)
+    luma = luma_reference(rgb, False)
+    strong, _, clean, clean_ramps = (int(a.sum()) for a in step_counts(borders, luma))
+    assert one_spp_geometry(strong, clean, clean_ramps)
+    quiet = N.quiet_pixels(frame)
+    busy = _busy_pixels(changed, borders, rgb, quiet, luma)
+    assert (busy & quiet).any()
+    ungated = render_regions(_busy_pixels(changed, borders, rgb, np.zeros_like(quiet), luma), borders, luma,
+                             overlay_tiles(frame))
+    np.testing.assert_array_equal(render_regions(busy, borders, luma, overlay_tiles(frame)), ungated)
+    np.testing.assert_array_equal(region_pixels(tiles, *quiet.shape), ungated)
+    assert ungated.mean() > 0.5

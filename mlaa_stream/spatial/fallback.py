@@ -66,7 +66,7 @@ SUPERSAMPLED_CLEAN_PCT = 75
 # photographic textures' ramps took for supersampled 10.0-22.8 %, 3x3-sampled frames 1.0-9.5 %, 2x2-sampled
 # 3.6-14.6 %; docs/spatial_tuning.md, "SUPERSAMPLED_HARD_PCT").
 SUPERSAMPLED_HARD_PCT = 12
-COUNTS, NOT_MEASURED = 8, 255  # bytes per tile of count_changed's output; k = 3 of a tile not measured
+COUNTS, NOT_MEASURED = 9, 255  # bytes per tile of count_changed's output; k = 3 of a tile not measured
 SHOW_DIM = 0.35  # Filter(show="regions"): pixels outside render regions keep this share of their colour
 
 def fallback_defines(fmt: FrameFormat, linear: bool, linear_input: bool, everywhere: bool = False,
@@ -115,9 +115,12 @@ class FallbackPass:
         self._render_tiles = context.kernel("fallback", "render_tiles", defs)
         self._render_frame = context.kernel("fallback", "render_frame", defs)
         n = self.tiles[0] * self.tiles[1]
-        # grain over a render leaves the regions (kernels/noise.cl): the frame's level, 0 (none) without regions
-        self._noise = context.buffer(4)
-        cl.enqueue_copy(context.queue, self._noise, np.zeros(1, np.int32), is_blocking=True)
+        # grain over a render leaves the regions (kernels/noise.cl): the frame's level, 0 (none) without regions, and
+        # grain_verdict's flag (busy pixels within the grain do not count)
+        self._noise = context.buffer(8)
+        cl.enqueue_copy(context.queue, self._noise, np.zeros(2, np.int32), is_blocking=True)
+        if self.regions:
+            self._grain_verdict = context.kernel("fallback", "grain_verdict", defs)
         if self.regions or everywhere:
             self._noise_census = context.kernel("fallback", "noise_census", defs)
             self._noise_level = context.kernel("fallback", "noise_level", defs)
@@ -131,7 +134,7 @@ class FallbackPass:
             self._overlay_tiles = context.kernel("overlays", "overlay_tiles", overlay_defs)
             self._overlays = context.buffer(2 * n)  # overlay_counts' two per tile
             self._seeds = context.buffer(n)  # overlay_seeds' flag per tile
-        self._counts = context.buffer(COUNTS * n)  # count_changed's eight per tile
+        self._counts = context.buffer(COUNTS * n)  # count_changed's nine per tile
         self._row_sums = context.buffer(32 * n)  # render_rows' int8 per tile
         self._render = context.buffer(n)  # render_tiles' flag per tile
         self._shares = context.buffer(32 * self.tiles[0])  # render_tiles' int8 per tile column
@@ -182,8 +185,11 @@ class FallbackPass:
                                                    wait_for=[*wait_for, *noise])
             wait_for = [events["fallback_count"]]
             if self.regions:
-                events["render_rows"] = self._rows(queue, (self.tiles[1],), None, self._counts, self._row_sums,
-                                                   tx, ty, wait_for=wait_for)
+                events["grain_verdict"] = self._grain_verdict(queue, (1,), None, self._counts, self._noise,
+                                                              np.int32(self.tiles[0] * self.tiles[1]),
+                                                              wait_for=wait_for)
+                events["render_rows"] = self._rows(queue, (self.tiles[1],), None, self._counts, self._noise,
+                                                   self._row_sums, tx, ty, wait_for=[events["grain_verdict"]])
                 events["render_tiles"] = self._render_tiles(queue, (self.tiles[0],), None, self._row_sums,
                                                             self._counts, self._render, self._shares, tx, ty,
                                                             wait_for=[events["render_rows"]])
@@ -302,15 +308,22 @@ def render_regions_of(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray, 
     """The render regions kernels/fallback.cl finds in `src` (per pixel, (h, w) bool), given the MLAA passes'
     output and edge buffer (Filter.intermediates: "out", "edges")."""
     _, _, _, borders, changed, rgb = _frame_masks(src, mlaa_out, edges, bgr)
-    return render_regions(_busy_pixels(changed, borders, rgb, quiet_pixels(src, bgr)), borders,
-                          luma_reference(rgb, linear_input), overlay_tiles(src, bgr))
+    luma = luma_reference(rgb, linear_input)
+    return render_regions(_busy_pixels(changed, borders, rgb, quiet_pixels(src, bgr), luma), borders, luma,
+                          overlay_tiles(src, bgr))
 
 
-def _busy_pixels(changed: np.ndarray, borders: np.ndarray, rgb: np.ndarray, quiet: np.ndarray) -> np.ndarray:
-    """count_changed's k = 2 per pixel: edge-bordering pixels the MLAA passes changed whose 3x3 window holds
-    FALLBACK_COLOURS bit-identical colours or more and is not `quiet` (spatial/noise.py quiet_pixels: within the
-    frame's grain)."""
-    return changed & borders & (_window_colours(rgb, 0.0) >= FALLBACK_COLOURS) & ~quiet
+def _busy_pixels(changed: np.ndarray, borders: np.ndarray, rgb: np.ndarray, quiet: np.ndarray,
+                 luma: np.ndarray) -> np.ndarray:
+    """count_changed's k = 2 per pixel as the regions count it: edge-bordering pixels the MLAA passes changed whose
+    3x3 window holds FALLBACK_COLOURS bit-identical colours or more -- but for those `quiet` (spatial/noise.py
+    quiet_pixels: within the frame's grain) in a frame without 1-spp geometry (grain_verdict; `luma` px_luma)."""
+    busy = changed & borders & (_window_colours(rgb, 0.0) >= FALLBACK_COLOURS)
+    if quiet.any():
+        strong, _, clean, clean_ramps = (int(a.sum()) for a in step_counts(borders, luma))
+        if not one_spp_geometry(strong, clean, clean_ramps):
+            busy &= ~quiet
+    return busy
 
 
 def to_mix_space(px: np.ndarray, fmt: FrameFormat, decode: bool) -> np.ndarray:
@@ -372,7 +385,7 @@ def fallback_reference(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray,
 
         busy_window = _window_colours(rgb) >= FALLBACK_COLOURS
         luma = luma_reference(rgb, linear_input)
-        busy_px = _busy_pixels(changed, borders, rgb, quiet)
+        busy_px = _busy_pixels(changed, borders, rgb, quiet, luma)
         busy_changed = region_sums(busy_px)
         frame_supersampled = regions and supersampled(borders, luma)  # render_frame then clears every tile's counts
         rendered = (render_regions(busy_px, borders, luma, overlay_tiles(src, bgr)) & ~quiet if regions
