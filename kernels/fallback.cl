@@ -142,7 +142,7 @@
 #ifndef REFINE_TABLE
 #define REFINE_TABLE 0
 #endif
-#define COUNTS 9          // bytes per tile in `counts`
+#define COUNTS 16         // bytes per tile in `counts` (9 used; 16 keeps each tile's first 8 aligned)
 #define NOT_MEASURED 255  // counts[3] of a tile with no busy pixel or a luma range under RENDER_RANGE
 
 // Any stored channel (alpha included) of pixel i differs between a and b.

@@ -66,7 +66,7 @@ SUPERSAMPLED_CLEAN_PCT = 75
 # photographic textures' ramps took for supersampled 10.0-22.8 %, 3x3-sampled frames 1.0-9.5 %, 2x2-sampled
 # 3.6-14.6 %; docs/spatial_tuning.md, "SUPERSAMPLED_HARD_PCT").
 SUPERSAMPLED_HARD_PCT = 12
-COUNTS, NOT_MEASURED = 9, 255  # bytes per tile of count_changed's output; k = 3 of a tile not measured
+COUNTS, NOT_MEASURED = 16, 255  # bytes per tile of count_changed's output (9 used); k = 3 of a tile not measured
 SHOW_DIM = 0.35  # Filter(show="regions"): pixels outside render regions keep this share of their colour
 
 def fallback_defines(fmt: FrameFormat, linear: bool, linear_input: bool, everywhere: bool = False,
