@@ -15,6 +15,7 @@ import click
 from mlaa_stream.spatial.filter import DEFAULT_THRESHOLDS, PRESET_USES, PRESETS
 from mlaa_stream.spatial.fast_filter import FastFilter
 from mlaa_stream.cli.options import configure_logging, device_option, verbosity_options
+from mlaa_stream.cli.stats_spool import StatsSpool
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_NO_DEVICE, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
 
@@ -581,14 +582,15 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
         _warn_unseen_gpu(filt, device, con)
         times = StageTimes()
         stage = temporal.stage(filt) if kind != "image" and cluster is None else None  # workers: their own
+        spool = stage = StatsSpool(stage) if stage is not None else None  # rows on disk as the run goes
         if stage is not None and kind != "video":
             stage = _SequenceTemporal(stage, runner, con)
         try:
             with filt:
                 code = runner.run(filt, post_hooks, in_flight, times, stage)
         finally:
-            if stage is not None:
-                temporal.finish(getattr(stage, "stage", stage), con, skip=runner.unwritten_indices())
+            if spool is not None:
+                temporal.finish(spool, con, skip=runner.unwritten_indices())
     finally:
         runner.abort()  # no-op after a commit; removes a video in progress on errors and Ctrl-C
         runner.close_progress()
@@ -644,24 +646,27 @@ class TemporalOptions:
             return self.lookahead
         return 0 if self.method == "blend" else DEFAULT_LOOKAHEAD
 
-    def finish(self, stage, con: "Console", skip: set = frozenset()) -> None:
-        """Write --stats and say which motion models were used; `skip`: frame numbers read only as look-ahead
-        frames (--resume), not written."""
-        stats = [row for row in stage.stats if row.get("index") not in skip]
-        stage.close()
-        if not stats:
-            return
-        counts: dict[str, int] = {}
-        for row in stats:
-            counts[row.get("model", "?")] = counts.get(row.get("model", "?"), 0) + 1
-        con.info("temporal models: " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())))
-        if self.stats_path:
-            import csv
-            keys = sorted({k for row in stats for k in row})
-            with open(self.stats_path, "w", newline="") as fh:
-                w = csv.DictWriter(fh, fieldnames=keys)
-                w.writeheader()
-                w.writerows(stats)
+    def finish(self, stage: StatsSpool, con: "Console", skip: set = frozenset()) -> None:
+        """Write --stats and say which motion models were used, then close the stage; `skip`: frame numbers read
+        only as look-ahead frames (--resume), not written."""
+        try:
+            counts: dict[str, int] = {}
+            keys: set[str] = set()  # the CSV's columns: every row's, known before its first row is written
+            for row in stage.rows():
+                if row.get("index") not in skip:
+                    counts[row.get("model", "?")] = counts.get(row.get("model", "?"), 0) + 1
+                    keys.update(row)
+            if not counts:
+                return
+            con.info("temporal models: " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())))
+            if self.stats_path:
+                import csv
+                with open(self.stats_path, "w", newline="") as fh:
+                    w = csv.DictWriter(fh, fieldnames=sorted(keys))
+                    w.writeheader()
+                    w.writerows(row for row in stage.rows() if row.get("index") not in skip)
+        finally:
+            stage.close()
 
 
 class _SequenceTemporal:

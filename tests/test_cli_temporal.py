@@ -364,3 +364,32 @@ def test_every_stats_column_is_documented(tmp_path, method):
     assert columns and columns <= named, sorted(columns - named)
     help_text = CliRunner().invoke(main, ["filter", "--help"], terminal_width=200).output
     assert 'docs/temporal.md, "--stats FILE"' in help_text
+
+
+@pytest.mark.parametrize("method", ["auto", "tss", "blend"])
+def test_stats_rows_spooled_to_disk_come_back_whole(tmp_path, monkeypatch, method):
+    """--stats over a run whose rows move to the spool every 2 frames (cli/stats_spool.py; a long video's rows no
+    longer stay in memory) is the same CSV as a run that keeps them all, but for the timings; and the stage never
+    holds more than SPOOL_EVERY + KEEP rows."""
+    from mlaa_stream.cli import stats_spool
+
+    def run(name: str) -> list[dict]:
+        stats = tmp_path / f"{name}.csv"
+        res = CliRunner().invoke(main, [str(DEMO / "clip.mp4"), "-o", str(tmp_path / f"{name}.mp4"), "--temporal",
+                                        "--temporal-method", method, "--stats", str(stats), "-q"])
+        assert res.exit_code == 0, res.output
+        return [{k: v for k, v in row.items() if not k.endswith("_ms")} for row in csv.DictReader(stats.open())]
+
+    whole = run("whole")
+    held = []
+    drain = stats_spool.StatsSpool.drain
+
+    def watched(self, keep=None):
+        drain(self, keep)
+        held.append(len(self.stage.stats))
+
+    monkeypatch.setattr(stats_spool, "SPOOL_EVERY", 2)
+    monkeypatch.setattr(stats_spool, "KEEP", 1)
+    monkeypatch.setattr(stats_spool.StatsSpool, "drain", watched)
+    assert run("spooled") == whole and len(whole) == 10
+    assert max(held) <= 3 and held[-1] < len(whole)
