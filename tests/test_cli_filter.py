@@ -3,7 +3,6 @@ folders, sequences and videos, for good input and for every kind of bad input.""
 from __future__ import annotations
 
 import errno
-import importlib.util
 import os
 import re
 import shutil
@@ -22,12 +21,9 @@ from click.testing import CliRunner
 from mlaa_stream.io import images as image_io
 from mlaa_stream.cli.main import main
 from mlaa_stream.io.images import read_image
+from demo_maker import ROOT, make_demo
 
-ROOT = os.path.join(os.path.dirname(__file__), "..")
 DEMO = os.path.join(ROOT, "fixtures", "demo")
-_spec = importlib.util.spec_from_file_location("make_demo", os.path.join(ROOT, "fixtures", "make_demo.py"))
-make_demo = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(make_demo)
 
 
 def run(*args: str):

@@ -102,13 +102,9 @@ def test_the_command_line_on_a_local_cluster(reference, tmp_path):
 # -- video ----------------------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def clip60(tmp_path_factory):
-    import importlib.util
-    root = os.path.join(os.path.dirname(__file__), "..")
-    spec = importlib.util.spec_from_file_location("make_demo", os.path.join(root, "fixtures", "make_demo.py"))
-    md = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(md)
+    from demo_maker import make_demo
     path = str(tmp_path_factory.mktemp("clip") / "c60.mkv")
-    md.write_clip(path, frames=60, audio=True)
+    make_demo.write_clip(path, frames=60, audio=True)
     return path
 
 

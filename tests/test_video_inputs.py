@@ -2,7 +2,6 @@
 several video streams, damaged timestamps, containers the source's codec cannot go in."""
 from __future__ import annotations
 
-import importlib.util
 import os
 from fractions import Fraction
 
@@ -13,11 +12,8 @@ from click.testing import CliRunner
 
 from mlaa_stream.cli.main import main
 from mlaa_stream.io.video import VideoError, VideoWriter, choose_pix_fmt, probe_video
+from demo_maker import make_demo
 
-ROOT = os.path.join(os.path.dirname(__file__), "..")
-_spec = importlib.util.spec_from_file_location("make_demo", os.path.join(ROOT, "fixtures", "make_demo.py"))
-make_demo = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(make_demo)
 
 
 def run(*args):

@@ -2,7 +2,6 @@
 non-video inputs reported with the frame where decoding stopped; the OpenCV fallback works."""
 from __future__ import annotations
 
-import importlib.util
 import os
 from fractions import Fraction
 
@@ -13,12 +12,9 @@ import pytest
 from mlaa_stream.io.video import (CvVideoWriter, VideoError, VideoReadError, VideoWriter,
                                   choose_pix_fmt, probe_video, probe_video_cv, read_video,
                                   read_video_cv)
+from demo_maker import ROOT, make_demo
 
-ROOT = os.path.join(os.path.dirname(__file__), "..")
 CLIP = os.path.join(ROOT, "fixtures", "demo", "clip.mp4")
-_spec = importlib.util.spec_from_file_location("make_demo", os.path.join(ROOT, "fixtures", "make_demo.py"))
-make_demo = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(make_demo)
 
 
 def decoded(path: str, fmt: str = "rgb24") -> tuple[list[np.ndarray], list[float]]:
