@@ -547,6 +547,11 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
         runner.prepare()
         _warn_unused_options(ctx, con, kind, job)
         info = getattr(runner, "info", None)
+        if info is not None and getattr(info, "interlaced", None):
+            # two fields a field-time apart in one frame: their combing on anything that moves looks like jaggies
+            con.warn(f"{'standard input' if input_path == '-' else input_path} is interlaced ({info.interlaced}): it "
+                     f"is filtered and written as progressive frames, and the combing of moving edges is taken for "
+                     f"jaggies; deinterlace it first (e.g. ffmpeg -vf bwdif)")
         if keep and info is not None and getattr(info, "rotation", 0):
             # a phone's video: players turn it, but the filter (and --keep) sees the frames as stored, so
             # rectangles measured on the turned picture would keep the wrong place without a word

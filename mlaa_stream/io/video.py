@@ -53,6 +53,9 @@ _SAR_IN_BITSTREAM = frozenset({"libx264", "libx264rgb", "libx265", "mpeg4"})
 # Containers that store it from the stream, which PyAV cannot set (MP4/MOV take the codec's parameters): with any
 # other encoder it is lost -- y4m's A tag written 0:0, measured with PyAV 18 / FFmpeg 8 for each of these.
 _SAR_FROM_STREAM_FORMATS = frozenset({"matroska", "webm", "yuv4mpegpipe", "nut", "avi"})
+# FFmpeg's AVFieldOrder (PyAV gives the number; older versions a name): the field shown first, where interlaced
+_FIELD_FIRST = {2: "top field first", 3: "bottom field first", 4: "bottom field first", 5: "top field first",
+                "tt": "top field first", "bb": "bottom field first", "tb": "bottom field first", "bt": "top field first"}
 _UNSPECIFIED = {"colorspace": 2, "color_primaries": 2, "color_trc": 2, "color_range": 0}
 
 
@@ -99,6 +102,7 @@ class VideoInfo:
     subtitle_streams: int = 0
     other_streams: tuple[str, ...] = ()  # streams not copied as audio or subtitle: data, attachments, more video
     sar: Fraction | None = None  # sample (pixel) aspect ratio of an anamorphic source; None: square or unknown
+    interlaced: str | None = None  # "top field first" / "bottom field first" (shown first); None: progressive, unknown
 
     @property
     def sample_format(self) -> str:
@@ -222,7 +226,8 @@ def _describe(container, path: str, rotation: int) -> VideoInfo:
                      colour=colour, audio_streams=len(container.streams.audio),
                      frames_declared=declared, duration=duration, rotation=rotation,
                      subtitle_streams=len(container.streams.subtitles), other_streams=others,
-                     sar=Fraction(sar) if sar and sar != 1 else None)
+                     sar=Fraction(sar) if sar and sar != 1 else None,
+                     interlaced=_FIELD_FIRST.get(getattr(cc, "field_order", None)))
 
 
 def _rotation(path: str) -> int:
