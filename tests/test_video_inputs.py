@@ -238,3 +238,32 @@ def test_an_interlaced_input_is_named_as_filtered_progressive(tmp_path, tag, war
         assert f"is interlaced ({warned})" in res.output and "bwdif" in res.output
     else:
         assert "is interlaced" not in res.output
+
+
+def write_y4m_planes(path, colourspace: str, w: int = 63, h: int = 47, frames: int = 4) -> None:
+    """A y4m file of `frames` frames written by hand, seeded noise: C420jpeg (8-bit 4:2:0), C420p10 (10-bit, 16-bit
+    little-endian samples), C444p16 or Cmono."""
+    rng = np.random.default_rng(7)
+    sub, bits = {"420jpeg": (2, 8), "420p10": (2, 10), "444p16": (1, 16), "mono": (0, 8)}[colourspace]
+    planes = [(h, w)] + ([(-(-h // sub), -(-w // sub))] * 2 if sub else [])
+    dtype = np.uint8 if bits == 8 else np.dtype("<u2")
+    with open(path, "wb") as f:
+        f.write(f"YUV4MPEG2 W{w} H{h} F25:1 Ip A1:1 C{colourspace}\n".encode())
+        for _ in range(frames):
+            samples = [rng.integers(16 << (bits - 8), 235 << (bits - 8), shape).astype(dtype) for shape in planes]
+            f.write(b"FRAME\n" + b"".join(p.tobytes() for p in samples))
+
+
+@pytest.mark.parametrize("colourspace", ["420jpeg", "420p10", "444p16", "mono"])
+def test_a_y4m_file_cut_mid_frame_is_named_truncated(tmp_path, colourspace):
+    """FFmpeg's y4m reader ends at the last whole frame of a file cut short, without an error: the bytes of a frame
+    after it are counted, and the run says so (exit 1, the frames before it kept), as for other truncated inputs;
+    the whole file runs clean."""
+    src, cut = tmp_path / "whole.y4m", tmp_path / "cut.y4m"
+    write_y4m_planes(src, colourspace)
+    cut.write_bytes(src.read_bytes()[:-100])
+    res = run(src, "-o", tmp_path / "whole.mkv")
+    assert res.exit_code == 0 and "truncated" not in res.output, res.output
+    res = run(cut, "-o", tmp_path / "cut.mkv")
+    assert res.exit_code == 1 and "ended at frame 3" in res.output and "bytes of a frame after it" in res.output
+    assert probe_video(str(tmp_path / "cut.mkv")).frames == 3

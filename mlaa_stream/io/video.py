@@ -54,8 +54,8 @@ _SAR_IN_BITSTREAM = frozenset({"libx264", "libx264rgb", "libx265", "mpeg4"})
 # other encoder it is lost -- y4m's A tag written 0:0, measured with PyAV 18 / FFmpeg 8 for each of these.
 _SAR_FROM_STREAM_FORMATS = frozenset({"matroska", "webm", "yuv4mpegpipe", "nut", "avi"})
 # FFmpeg's AVFieldOrder (PyAV gives the number; older versions a name): the field shown first, where interlaced
-_FIELD_FIRST = {2: "top field first", 3: "bottom field first", 4: "bottom field first", 5: "top field first",
-                "tt": "top field first", "bb": "bottom field first", "tb": "bottom field first", "bt": "top field first"}
+_TOP, _BOTTOM = "top field first", "bottom field first"
+_FIELD_FIRST = {2: _TOP, 3: _BOTTOM, 4: _BOTTOM, 5: _TOP, "tt": _TOP, "bb": _BOTTOM, "tb": _BOTTOM, "bt": _TOP}
 _UNSPECIFIED = {"colorspace": 2, "color_primaries": 2, "color_trc": 2, "color_range": 0}
 
 
@@ -402,6 +402,29 @@ def _nothing_between(path: str, start: float | None, end: float | None, info: Vi
                           f"{'the end' if end is None else f'{end:g} s'}{length}", 0)
 
 
+_Y4M_MAGIC = b"YUV4MPEG2 "
+_Y4M_FRAME = b"FRAME\n"
+
+
+def _y4m_leftover(path: str, n: int, info: VideoInfo) -> int:
+    """Bytes after the n-th whole frame of a y4m file (0 where it ends there, or where the file is no y4m whose frames
+    carry no parameters): FFmpeg's reader ends at the last whole frame of a file cut short without an error."""
+    try:
+        with open(path, "rb") as fh:
+            header = fh.readline(4096)
+            if not header.startswith(_Y4M_MAGIC) or not header.endswith(b"\n"):
+                return 0
+            fmt = av.VideoFormat(info.pix_fmt, info.width, info.height)   # y4m's formats are planar
+            record = len(_Y4M_FRAME) + sum(c.width * c.height * ((c.bits + 7) // 8) for c in fmt.components)
+            fh.seek(len(header) + (n - 1) * record)
+            if fh.read(len(_Y4M_FRAME)) != _Y4M_FRAME:   # frame parameters, another layout: not judged here
+                return 0
+            size = os.fstat(fh.fileno()).st_size
+    except (OSError, ValueError):
+        return 0
+    return max(0, size - len(header) - n * record)
+
+
 def _check_length(info: VideoInfo, n: int, last_time: float | None) -> None:
     """VideoReadError when a stream that decoded without an error still ended early: fewer frames
     than the container declares, or (no declared count: MKV, WebM, variable frame rates) its last
@@ -409,6 +432,10 @@ def _check_length(info: VideoInfo, n: int, last_time: float | None) -> None:
     if not n:  # a y4m header and no FRAME (vspipe failing before its first frame): no video to write
         raise VideoReadError(f"{'standard input' if info.path == PIPE else info.path}: expected video frames, "
                              f"the stream holds none", 0)
+    left = _y4m_leftover(info.path, n, info) if info.path != PIPE else 0
+    if left:
+        raise VideoReadError(f"{info.path}: the stream ended at frame {n}, {left} bytes of a frame after it (truncated "
+                             f"file?)", n)
     expected = info.frames
     if info.frames_declared and expected and n + max(2, expected // 50) < expected:
         raise VideoReadError(f"{info.path}: the stream ended at frame {n}, expected {expected} "
