@@ -49,9 +49,11 @@ NaN and infinite samples pass through unchanged.
 
 \b
 Video goes through PyAV (FFmpeg): frame rate, timestamps, resolution, pixel aspect ratio, colour
-tags and audio are kept; a source with more than 8 bits per sample stays 10/12/16-bit where the codec allows it. If
-the input is truncated or corrupt, the frames that decode are filtered and the output is kept as a
-valid shorter file; the exit code is 1 and the message says at which frame decoding stopped.
+tags, HDR10 mastering display and light levels (with libx265) and audio are kept; a source with more
+than 8 bits per sample stays 10/12/16-bit where the codec allows it. An interlaced source is named:
+it is filtered as progressive frames. If the input is truncated or corrupt, the frames that decode
+are filtered and the output is kept as a valid shorter file; the exit code is 1 and the message says
+at which frame decoding stopped.
 
 \b
 Exit codes: 0 all done; 1 some inputs failed (the others were processed); 2 usage error

@@ -267,3 +267,32 @@ def test_a_y4m_file_cut_mid_frame_is_named_truncated(tmp_path, colourspace):
     res = run(cut, "-o", tmp_path / "cut.mkv")
     assert res.exit_code == 1 and "ended at frame 3" in res.output and "bytes of a frame after it" in res.output
     assert probe_video(str(tmp_path / "cut.mkv")).frames == 3
+
+
+HDR10 = ("master-display=G(13250,34500)B(7500,3000)R(34000,16000)WP(15635,16450)L(10000000,1)", "max-cll=1000,400")
+
+
+@pytest.mark.skipif("libx265" not in av.codecs_available, reason="this FFmpeg has no libx265 to write an HDR10 source")
+def test_hdr10_static_metadata_is_kept_or_named(tmp_path):
+    """An HDR10 master (HEVC 10-bit, BT.2020 / PQ, with a mastering display and content light levels): the colour tags
+    were kept but the static metadata was lost (frames are rebuilt from arrays); now it goes to libx265 exactly, and
+    an encoder that cannot write it (ffv1) is named."""
+    src = tmp_path / "hdr.mkv"
+    rng = np.random.default_rng(3)
+    with av.open(str(src), "w") as out:
+        s = out.add_stream("libx265", rate=25, options={"x265-params": "log-level=error:" + ":".join(HDR10)})
+        s.width, s.height, s.pix_fmt = 64, 48, "yuv420p10le"
+        s.codec_context.color_primaries, s.codec_context.color_trc, s.codec_context.colorspace = 9, 16, 9
+        for _ in range(3):
+            rgb = rng.integers(0, 256, (48, 64, 3), dtype=np.uint8)
+            for p in s.encode(av.VideoFrame.from_ndarray(rgb, format="rgb24").reformat(format="yuv420p10le")):
+                out.mux(p)
+        for p in s.encode():
+            out.mux(p)
+    assert probe_video(str(src)).hdr10 == HDR10
+    res = run(src, "-o", tmp_path / "out.mkv")
+    assert res.exit_code == 0, res.output
+    kept = probe_video(str(tmp_path / "out.mkv"))
+    assert kept.hdr10 == HDR10 and kept.bits == 10 and kept.colour["color_trc"] == 16
+    res = run(src, "-o", tmp_path / "lossless.mkv", "--codec", "ffv1")
+    assert res.exit_code == 0 and "HDR10 mastering display / light level metadata" in res.output

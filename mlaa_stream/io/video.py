@@ -3,7 +3,8 @@
 Kept: frame rate and timestamps (time base and pts are copied), resolution and pixel aspect ratio, bit
 depth (a source with more than 8 bits per sample decodes to rgb48le/uint16 and is encoded to a >8-bit
 pixel format where the codec has one), alpha where the codec can store it, colour tags (matrix, range,
-primaries, transfer) and every audio stream (copied packet by packet, not re-encoded).
+primaries, transfer), HDR10 static metadata (mastering display, content light level: with libx265) and every audio
+stream (copied packet by packet, not re-encoded).
 OpenCV's VideoCapture/VideoWriter serve only as a fallback (8-bit, no audio, mp4v).
 
 The output is encoded under a temporary name in its directory and renamed when complete.
@@ -13,6 +14,7 @@ from __future__ import annotations
 import io
 import math
 import os
+import struct
 import sys
 from dataclasses import dataclass
 from fractions import Fraction
@@ -103,6 +105,7 @@ class VideoInfo:
     other_streams: tuple[str, ...] = ()  # streams not copied as audio or subtitle: data, attachments, more video
     sar: Fraction | None = None  # sample (pixel) aspect ratio of an anamorphic source; None: square or unknown
     interlaced: str | None = None  # "top field first" / "bottom field first" (shown first); None: progressive, unknown
+    hdr10: tuple[str, ...] = ()  # HDR10 static metadata on the first frame, as x265 parameters (_hdr10_params)
 
     @property
     def sample_format(self) -> str:
@@ -147,7 +150,7 @@ def probe_video(path: str) -> VideoInfo:
     except (av.error.FFmpegError, OSError) as exc:
         raise VideoError(f"{path}: expected a video FFmpeg can read, got: {exc}") from exc
     try:
-        return _describe(container, path, _rotation(path))
+        return _describe(container, path, *_first_frame_facts(path))
     finally:
         container.close()
 
@@ -197,7 +200,7 @@ def open_pipe(fmt: str | None = None, stream=None) -> tuple[VideoInfo, object]:
         raise
 
 
-def _describe(container, path: str, rotation: int) -> VideoInfo:
+def _describe(container, path: str, rotation: int, hdr10: tuple[str, ...] = ()) -> VideoInfo:
     """What we keep from the first video stream of an open container."""
     if not container.streams.video:
         raise VideoError(f"{path}: expected a video stream, found none")
@@ -227,20 +230,45 @@ def _describe(container, path: str, rotation: int) -> VideoInfo:
                      frames_declared=declared, duration=duration, rotation=rotation,
                      subtitle_streams=len(container.streams.subtitles), other_streams=others,
                      sar=Fraction(sar) if sar and sar != 1 else None,
-                     interlaced=_FIELD_FIRST.get(getattr(cc, "field_order", None)))
+                     interlaced=_FIELD_FIRST.get(getattr(cc, "field_order", None)), hdr10=hdr10)
 
 
-def _rotation(path: str) -> int:
-    """The display rotation in degrees (0, 90, 180, -90), from the first frame's display matrix."""
+def _first_frame_facts(path: str) -> tuple[int, tuple[str, ...]]:
+    """From the first frame: the display rotation in degrees (0, 90, 180, -90; its display matrix) and its HDR10
+    static metadata as x265 parameters (_hdr10_params)."""
     try:
         with av.open(path) as c:
             if not c.streams.video:
-                return 0  # no video stream: _describe says so
+                return 0, ()  # no video stream: _describe says so
             for frame in c.decode(video=0):
-                return int(round(frame.rotation or 0))
+                return int(round(frame.rotation or 0)), _hdr10_params(frame)
     except (av.error.FFmpegError, OSError, EOFError, AttributeError):
         pass
-    return 0
+    return 0, ()
+
+
+def _hdr10_params(frame) -> tuple[str, ...]:
+    """x265's parameters for a decoded frame's HDR10 static metadata: the mastering display (SMPTE ST 2086: FFmpeg's
+    AVMasteringDisplayMetadata, primaries R, G, B and the white point as rationals, then the least and most
+    luminance) as master-display=G(x,y)B(x,y)R(x,y)WP(x,y)L(max,min) in x265's units (1/50000, 1/10000 cd/m2), and
+    the content light level (CTA-861.3: MaxCLL, MaxFALL) as max-cll; () where the frame carries neither. Frames are
+    rebuilt from arrays, so what the source's frames carried is passed to the encoder here."""
+    out = []
+    for sd in getattr(frame, "side_data", ()):
+        kind, raw = getattr(sd.type, "name", str(sd.type)), bytes(sd)
+        if kind == "MASTERING_DISPLAY_METADATA" and len(raw) >= 88:
+            v = struct.unpack_from("<22i", raw)
+            if not (v[20] and v[21]) or 0 in v[1:20:2]:   # primaries and luminance both given, no zero denominator
+                continue
+            q = [Fraction(v[2 * i], v[2 * i + 1]) for i in range(10)]
+
+            def xy(i: int) -> str:
+                return f"({round(q[i] * 50000)},{round(q[i + 1] * 50000)})"
+            out.append(f"master-display=G{xy(2)}B{xy(4)}R{xy(0)}WP{xy(6)}"
+                       f"L({round(q[9] * 10000)},{round(q[8] * 10000)})")
+        elif kind == "CONTENT_LIGHT_LEVEL" and len(raw) >= 8:
+            out.append("max-cll={},{}".format(*struct.unpack_from("<2I", raw)))
+    return tuple(out)
 
 
 # The encoder that keeps a source's codec family when no --codec is given (None: DEFAULT_CODEC).
@@ -576,6 +604,7 @@ class VideoWriter:
         rate = info.fps or Fraction(25)
         if self._codec_chosen is not None and not _container_holds(self._out.format.name, self.codec):
             self._take_containers_codec()
+        self._keep_hdr10()
         stream = self._out.add_stream(self.codec, rate=rate, options=dict(self._options))
         if info.rotation:
             stream.set_display_rotation(info.rotation)
@@ -635,6 +664,18 @@ class VideoWriter:
         for what in self.info.other_streams:
             if what not in kept:  # data streams, or attachments of a source this could not open
                 self.warnings.append(f"{self.path}: {what} of {self.info.path} not kept")
+
+    def _keep_hdr10(self) -> None:
+        """The source's HDR10 static metadata (VideoInfo.hdr10) into libx265's parameters (its SEI); named where the
+        encoder cannot write it (the colour tags are kept apart, by every encoder)."""
+        if not self.info.hdr10:
+            return
+        if self.codec == "libx265":
+            params = [p for p in self._options.get("x265-params", "").split(":") if p]
+            self._options["x265-params"] = ":".join(params + list(self.info.hdr10))
+        else:
+            self.warnings.append(f"{self.path}: the HDR10 mastering display / light level metadata of {self.info.path} "
+                                 f"not kept: only libx265 writes it here (--codec libx265)")
 
     def _take_containers_codec(self) -> None:
         """No --codec and the source's family cannot go in the output's container (H.264 in WebM, ProRes in
