@@ -296,3 +296,29 @@ def test_hdr10_static_metadata_is_kept_or_named(tmp_path):
     assert kept.hdr10 == HDR10 and kept.bits == 10 and kept.colour["color_trc"] == 16
     res = run(src, "-o", tmp_path / "lossless.mkv", "--codec", "ffv1")
     assert res.exit_code == 0 and "HDR10 mastering display / light level metadata" in res.output
+
+
+@pytest.mark.skipif("qtrle" not in av.codecs_available, reason="this FFmpeg has no QuickTime Animation encoder")
+def test_a_quicktime_animation_source_keeps_its_codec_and_alpha(tmp_path):
+    """A QuickTime Animation (qtrle) clip with alpha, as motion graphics are handed over: it stays qtrle (lossless)
+    and keeps its alpha exactly (it was re-encoded to H.264, alpha dropped with a warning)."""
+    src, out = tmp_path / "anim.mov", tmp_path / "out.mov"
+    rng = np.random.default_rng(4)
+    alphas = []
+    with av.open(str(src), "w") as c:
+        s = c.add_stream("qtrle", rate=25)
+        s.width, s.height, s.pix_fmt = 48, 32, "argb"
+        for _ in range(3):
+            rgba = rng.integers(0, 256, (32, 48, 4), dtype=np.uint8)
+            alphas.append(rgba[..., 3].copy())
+            for p in s.encode(av.VideoFrame.from_ndarray(rgba, format="rgba").reformat(format="argb")):
+                c.mux(p)
+        for p in s.encode():
+            c.mux(p)
+    res = run(src, "-o", out)
+    assert res.exit_code == 0 and "not kept" not in res.output, res.output
+    info = probe_video(str(out))
+    assert info.codec == "qtrle" and info.has_alpha
+    with av.open(str(out)) as c:
+        got = [f.to_ndarray(format="rgba")[..., 3] for f in c.decode(video=0)]
+    assert len(got) == 3 and all(np.array_equal(a, b) for a, b in zip(got, alphas))

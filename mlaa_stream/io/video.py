@@ -273,7 +273,8 @@ def _hdr10_params(frame) -> tuple[str, ...]:
 
 # The encoder that keeps a source's codec family when no --codec is given (None: DEFAULT_CODEC).
 CODEC_FAMILY = {"hevc": "libx265", "prores": "prores_ks", "ffv1": "ffv1", "vp9": "libvpx-vp9",
-                "av1": "libaom-av1", "dnxhd": "dnxhd", "mjpeg": "mjpeg", "png": "png", "utvideo": "utvideo"}
+                "av1": "libaom-av1", "dnxhd": "dnxhd", "mjpeg": "mjpeg", "png": "png", "utvideo": "utvideo",
+                "qtrle": "qtrle"}   # QuickTime Animation: lossless, with alpha (argb)
 # Container and stream tags that describe the file written, not the content: not copied.
 _NOT_COPIED_TAGS = {"encoder", "major_brand", "minor_version", "compatible_brands", "duration",
                     "number_of_frames", "number_of_bytes", "_statistics_tags", "_statistics_writing_app",
