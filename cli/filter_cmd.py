@@ -554,6 +554,10 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
             con.warn(f"{'standard input' if input_path == '-' else input_path} is interlaced ({info.interlaced}): it "
                      f"is filtered and written as progressive frames, and the combing of moving edges is taken for "
                      f"jaggies; deinterlace it first (e.g. ffmpeg -vf bwdif)")
+        if info is not None and getattr(info, "alpha_unread", False):
+            # WebM VP9 keeps alpha in a side stream that FFmpeg's own VP9 decoder does not read
+            con.warn(f"{'standard input' if input_path == '-' else input_path}: its alpha (WebM VP9 alpha_mode) is not "
+                     f"read by this FFmpeg's VP9 decoder: the output has none")
         if keep and info is not None and getattr(info, "rotation", 0):
             # a phone's video: players turn it, but the filter (and --keep) sees the frames as stored, so
             # rectangles measured on the turned picture would keep the wrong place without a word

@@ -322,3 +322,25 @@ def test_a_quicktime_animation_source_keeps_its_codec_and_alpha(tmp_path):
     with av.open(str(out)) as c:
         got = [f.to_ndarray(format="rgba")[..., 3] for f in c.decode(video=0)]
     assert len(got) == 3 and all(np.array_equal(a, b) for a, b in zip(got, alphas))
+
+
+@pytest.mark.skipif("libvpx-vp9" not in av.codecs_available, reason="this FFmpeg has no VP9 encoder")
+def test_a_webm_whose_vp9_alpha_is_not_read_is_named(tmp_path):
+    """WebM VP9 keeps alpha in a side stream (alpha_mode 1) that FFmpeg's own VP9 decoder does not read: the output
+    has no alpha, and the run says so (it was silent)."""
+    src = tmp_path / "alpha.webm"
+    with av.open(str(src), "w") as c:
+        s = c.add_stream("libvpx-vp9", rate=25)
+        s.width, s.height, s.pix_fmt = 32, 32, "yuv420p"
+        s.metadata["alpha_mode"] = "1"
+        for _ in range(2):
+            grey = np.full((32, 32, 3), 90, np.uint8)
+            for p in s.encode(av.VideoFrame.from_ndarray(grey, format="rgb24").reformat(format="yuv420p")):
+                c.mux(p)
+        for p in s.encode():
+            c.mux(p)
+    assert probe_video(str(src)).alpha_unread
+    res = run(src, "-o", tmp_path / "out.webm")
+    assert res.exit_code == 0 and "alpha (WebM VP9 alpha_mode) is not read" in res.output, res.output
+    clip = os.path.join(os.path.dirname(__file__), "..", "fixtures", "demo", "clip.mp4")
+    assert not probe_video(clip).alpha_unread

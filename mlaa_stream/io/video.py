@@ -106,6 +106,7 @@ class VideoInfo:
     sar: Fraction | None = None  # sample (pixel) aspect ratio of an anamorphic source; None: square or unknown
     interlaced: str | None = None  # "top field first" / "bottom field first" (shown first); None: progressive, unknown
     hdr10: tuple[str, ...] = ()  # HDR10 static metadata on the first frame, as x265 parameters (_hdr10_params)
+    alpha_unread: bool = False  # the stream says it has alpha that the decoder does not give (WebM VP9's side stream)
 
     @property
     def sample_format(self) -> str:
@@ -230,7 +231,13 @@ def _describe(container, path: str, rotation: int, hdr10: tuple[str, ...] = ()) 
                      frames_declared=declared, duration=duration, rotation=rotation,
                      subtitle_streams=len(container.streams.subtitles), other_streams=others,
                      sar=Fraction(sar) if sar and sar != 1 else None,
-                     interlaced=_FIELD_FIRST.get(getattr(cc, "field_order", None)), hdr10=hdr10)
+                     interlaced=_FIELD_FIRST.get(getattr(cc, "field_order", None)), hdr10=hdr10,
+                     alpha_unread=not alpha and str(_tag(s.metadata, "alpha_mode")) == "1")
+
+
+def _tag(tags, name: str):
+    """A tag by name, in any case (Matroska's are upper case as read back), or None."""
+    return next((v for k, v in dict(tags or {}).items() if k.lower() == name), None)
 
 
 def _first_frame_facts(path: str) -> tuple[int, tuple[str, ...]]:
