@@ -1031,10 +1031,10 @@ def _warm_up_images(job: "_ImageJob", filt, temporal: "_SequenceTemporal") -> No
     write go through the spatial filter and the stage (outputs discarded, not in --stats), so the
     first written frame has the history it would have had in an uninterrupted run."""
     from mlaa_stream.io.sequence import image_source, is_linear
+    from mlaa_stream.temporal.methods import stats_lists
     warm = job.warm_up[-_ring_frames(temporal.stage):]
     stage = temporal.stage
-    keep = [(o, len(o.stats)) for o in (stage, getattr(stage, "tss", None), getattr(stage, "blend", None))
-            if o is not None and isinstance(getattr(o, "stats", None), list)]
+    keep = [(rows, len(rows)) for rows in stats_lists(stage)]
     done = 0
     try:
         for item in image_source(warm, job.report, strict=job.strict):
@@ -1042,8 +1042,8 @@ def _warm_up_images(job: "_ImageJob", filt, temporal: "_SequenceTemporal") -> No
             temporal.warm(item.frame, f.process(item.frame), item.meta[0], is_linear(item.meta[1]))
             done += 1
     finally:
-        for o, n in keep:
-            del o.stats[n:]
+        for rows, n in keep:
+            del rows[n:]
     if done:
         job.con.info(f"--resume: temporal history warmed up from {done} frames before "
                      f"{job.plan[0].label if job.plan else 'the end'}")

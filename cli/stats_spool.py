@@ -10,16 +10,10 @@ import pickle
 import tempfile
 from typing import Any, Iterator
 
+from mlaa_stream.temporal.methods import stats_lists
+
 SPOOL_EVERY = 256  # rows with the stage before the older ones move to the file
 KEEP = 8           # the newest rows left with the stage
-
-
-def _row_lists(stage: Any) -> list[list]:
-    """The lists a stage's `stats` is made of: its own, or (TSSThenBlend, whose `stats` zips them) its stages'."""
-    lists = [getattr(obj, "stats", None) for obj in (getattr(stage, "tss", None), getattr(stage, "blend", None))]
-    if all(isinstance(rows, list) for rows in lists):
-        return lists
-    return [stage.stats] if isinstance(getattr(stage, "stats", None), list) else []
 
 
 class StatsSpool:
@@ -42,7 +36,7 @@ class StatsSpool:
     def drain(self, keep: int | None = None) -> None:
         """Move all but the newest `keep` (KEEP) rows to the file once SPOOL_EVERY have gathered."""
         keep = KEEP if keep is None else keep
-        lists = _row_lists(self.stage)
+        lists = stats_lists(self.stage)
         rows = self.stage.stats if lists else []
         n = len(rows) - keep
         if n < SPOOL_EVERY:

@@ -78,6 +78,9 @@ __kernel void noise_level(__global const int *hist, __global int *level, const i
     level[0] = n ? m : 0;
 }
 
+// A 3x3 window whose luma (in 256ths of levels) spans `span` lies within the grain of `level` whole levels.
+#define SPAN_QUIET(span, level) ((span) * NOISE_SPAN_DEN < NOISE_SPAN_NUM * 256 * (level))
+
 // quiet[i] = 1 where pixel i's 3x3 window of luma (clamped to the frame) spans under NOISE_SPAN_NUM / NOISE_SPAN_DEN
 // times the frame's noise level (in whole levels), else 0; nothing is written where the level is 0 (no pixel is
 // quiet: readers test the level first, noise_quiet), nor in a row segment whose tiles hold no render region (only
@@ -95,7 +98,6 @@ __kernel void noise_mask(__global const PIXEL_T *src, __global const int *noise,
     if (!regions) return;
 #endif
     const int x1 = min(x0 + SEGMENT, w), above = max(y - 1, 0) * w, here = y * w, below = min(y + 1, h - 1) * w;
-    const int limit = NOISE_SPAN_NUM * 256 * level;
     int lo[3], hi[3];  // columns x - 1, x, x + 1: their min and max over the three rows
     for (int k = 0; k < 3; ++k) {
         const int x = clamp_to(x0 - 1 + k, w - 1);
@@ -105,7 +107,7 @@ __kernel void noise_mask(__global const PIXEL_T *src, __global const int *noise,
     }
     for (int x = x0; x < x1; ++x) {
         const int span = max(hi[0], max(hi[1], hi[2])) - min(lo[0], min(lo[1], lo[2]));
-        quiet[here + x] = (uchar)(span * NOISE_SPAN_DEN < limit);
+        quiet[here + x] = (uchar)SPAN_QUIET(span, level);
         const int n = clamp_to(x + 2, w - 1);
         const int a = luma256(src, above + n), b = luma256(src, here + n), c = luma256(src, below + n);
         lo[0] = lo[1];
@@ -134,5 +136,5 @@ inline int pixel_quiet(__global const PIXEL_T *src, int x, int y, int w, int h, 
             hi = max(hi, l);
         }
     }
-    return (hi - lo) * NOISE_SPAN_DEN < NOISE_SPAN_NUM * 256 * level;
+    return SPAN_QUIET(hi - lo, level);
 }

@@ -18,7 +18,7 @@ from mlaa_stream.spatial.filter import PRESETS, Filter
 from mlaa_stream.spatial.fast_filter import FastFilter
 from mlaa_stream.spatial.keep import KeepRect, keep_rects, restore_kept
 from mlaa_stream.pipeline import PipelineError, PostHook, Temporal, stream_items
-from mlaa_stream.temporal.methods import METHODS, make_stage, needs_regions
+from mlaa_stream.temporal.methods import METHODS, make_stage, needs_regions, stats_lists
 
 # Rows of the temporal stage's per-frame `stats` kept (the last ones): the stages append one a frame, for the
 # command line's --stats CSV of a file, and a live capture loop runs for hours (about 2.5 KB a frame).
@@ -36,9 +36,8 @@ def _capture_frames(cap: Any) -> Iterator[np.ndarray]:
 
 def _trim_stats(stage: Any) -> None:
     """Keep the last STATS_KEPT rows of a temporal stage's per-frame stats (TSSThenBlend: of both its stages)."""
-    for obj in (stage, getattr(stage, "tss", None), getattr(stage, "blend", None)):
-        rows = getattr(obj, "stats", None)
-        if isinstance(rows, list) and len(rows) > STATS_KEPT:
+    for rows in stats_lists(stage):
+        if len(rows) > STATS_KEPT:
             del rows[:-STATS_KEPT]
 
 

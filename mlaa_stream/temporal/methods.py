@@ -64,3 +64,13 @@ def make_stage(method: str, context, *, bgr: bool, frames: int | None = None, mo
                   blend_mode="dense" if mode == "adaptive" else mode)
     return TSSThenBlend(context=context, frames=ring, mode=mode, bgr=bgr, show=show, lookahead=lookahead,
                         linear_input=linear_input, dense_samples=dense_samples, **kw)
+
+
+def stats_lists(stage) -> list[list]:
+    """The lists a temporal stage appends its per-frame rows to: its own `stats`, or (TSSThenBlend, whose `stats`
+    zips them into new rows) its two stages'. Trimming them trims the stage's rows; [] for a stage without any."""
+    parts = [getattr(getattr(stage, name, None), "stats", None) for name in ("tss", "blend")]
+    if all(isinstance(rows, list) for rows in parts):
+        return parts
+    rows = getattr(stage, "stats", None)
+    return [rows] if isinstance(rows, list) else []
