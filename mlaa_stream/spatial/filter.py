@@ -21,6 +21,7 @@ import pyopencl as cl
 from mlaa_stream.device.colour import device_luts
 from mlaa_stream.device.context import Context, default_context, linear_levels
 from mlaa_stream.device.formats import FrameFormat, defines_for, frame_format
+from mlaa_stream.spatial.exposure import exposure_scale, scale_colour
 from mlaa_stream.spatial.keep import KeepRect, kept_patches, keep_rects, restore_patches
 from mlaa_stream.spatial.nonfinite import NonFinite, replace_non_finite
 
@@ -177,12 +178,16 @@ class FilterOptions:
         }
 
 
+HALF_MAX = float(np.finfo(np.float16).max)
+
+
 class PendingFrame:
     """A frame in flight; `result()` waits for its download and returns it in the input's dtype."""
 
     def __init__(self, host_out: np.ndarray, event, out_dtype: np.dtype, shape: tuple, keep=(),
                  non_finite: NonFinite | None = None, regions: tuple | None = None, dim: bool = False,
-                 owner: "Filter | None" = None, patches: list | None = None):
+                 owner: "Filter | None" = None, patches: list | None = None, scale: float = 1.0):
+        self._scale = scale  # the exposure the frame was filtered at (spatial/exposure.py): divided out here
         self._out, self._event, self._dtype, self._shape = host_out, event, out_dtype, shape
         self._patches = patches or []  # the input inside the filter's keep rectangles (spatial/keep.py)
         self._keep = keep  # host arrays that must outlive the non-blocking copies
@@ -199,6 +204,10 @@ class PendingFrame:
         self._event.wait()
         self._keep = ()
         out = self._out.reshape(self._shape)
+        if self._scale != 1.0:
+            scale_colour(out, 1.0 / self._scale)
+            if self._dtype == np.float16:  # a blend near half's largest value must not round to infinity
+                np.clip(out, -HALF_MAX, HALF_MAX, out=out)
         if self._non_finite is not None:
             out = self._non_finite.restore(out)
         if self._regions is not None:
@@ -256,7 +265,7 @@ class Filter:
                  preset: str | None = None, context: Context | None = None, show: str | None = None,
                  keep_regions: bool = False, footprint_table: np.ndarray | None | str = "default",
                  refine_table: np.ndarray | None | str = "default", moire: bool = True,
-                 keep: Sequence[KeepRect | str] | str | None = None):
+                 keep: Sequence[KeepRect | str] | str | None = None, auto_exposure: bool = True):
         """`preset`: one of PRESETS; its options replace the keywords of the same names. `fallback`: FXAA
         for the pixels MLAA leaves (spatial/fallback.py): "auto" where the neighbourhood shows 1-spp
         aliasing and is no flat-colour art, with the footprint table in render regions; "edges" the same
@@ -269,7 +278,9 @@ class Filter:
         (spatial/refine.py): "default", None or a (BUCKETS, REFINE_WEIGHTS) array; only with a footprint table.
         `moire`: the last pass, point-sampled moire in two-colour art low-passed (a 3 x 3 binomial)
         (spatial/moire.py). `keep`: rectangles left exactly as they are in every frame (subtitles, a HUD over a
-        render; spatial/keep.py): KeepRect or 'X,Y,W,H' strings in pixels or % of the frame."""
+        render; spatial/keep.py): KeepRect or 'X,Y,W,H' strings in pixels or % of the frame. `auto_exposure`: a
+        float frame with `linear_input` is filtered at the power of two of exposure that puts its key near display
+        white and multiplied back (spatial/exposure.py); False filters it as its samples are."""
         if show not in SHOWS:
             raise ValueError(f"show: expected None or 'regions', got {show!r}")
         self.show = show
@@ -297,6 +308,7 @@ class Filter:
                                      float(rounding), bool(blend_u), float(ramp), float(short_corner),
                                      bool(aa_guard), bool(grain_guard), float(subpixel))
         self.bgr = bool(bgr)
+        self.auto_exposure = bool(auto_exposure)
         self.fast = bool(fast)  # spatial/fast.py: seed 004's passes instead of the default chain
         self.reconstruct = bool(reconstruct) and not self.fast
         self.bridge = bool(bridge) and not self.fast
@@ -386,6 +398,10 @@ class Filter:
             with np.errstate(over="ignore"):  # float64 beyond float32's range: inf here, restored from `frame`
                 np.copyto(staging.reshape(frame.shape), frame, casting="unsafe")
             non_finite = replace_non_finite(staging.reshape(frame.shape), frame)  # float frames only
+            scale = 1.0
+            if self.auto_exposure and self.options.linear_input and fmt.dtype.kind == "f":
+                scale = exposure_scale(staging.reshape(frame.shape))
+                scale_colour(staging.reshape(frame.shape), scale)
             up = cl.enqueue_copy(self.queue, bufs.src[slot], staging, is_blocking=False)
             after = [up] + ([self._last_event] if self._last_event is not None else [])
             done = self._enqueue_passes(bufs, bufs.src[slot], bufs.dst[slot], after)
@@ -402,7 +418,7 @@ class Filter:
                     self._last_event = regions[1]
             self.queue.flush()
         return PendingFrame(host_out, down, np.dtype(frame.dtype), frame.shape, keep=(staging,),
-                            non_finite=non_finite, regions=regions, dim=self.show == "regions",
+                            non_finite=non_finite, regions=regions, dim=self.show == "regions", scale=scale,
                             owner=self.regions_owner, patches=kept_patches(frame, self.keep))
 
     def _enqueue_passes(self, bufs: _FrameBuffers, src, dst, after: list, queue=None,

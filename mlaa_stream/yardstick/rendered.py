@@ -508,14 +508,16 @@ void main() {
 """
 
 # Shading in linear light; clamped to [0, 1] (the display range) before either output, so the
-# truth averages exactly the values the 1-spp input encodes.
+# truth averages exactly the values the 1-spp input encodes -- but for the HDR renders' linear output
+# (Renderer(hdr=True)), which keeps highlights over 1 as a scene-referred EXR holds them.
 COMMON_GLSL = """
 uniform bool u_encode;  // true: sRGB-encode for the 8-bit input target; false: linear for the truth
+uniform bool u_hdr;     // linear output unclamped above (highlights over 1)
 vec3 encode_srgb(vec3 c) {
     return mix(c * 12.92, 1.055 * pow(c, vec3(1.0 / 2.4)) - 0.055, step(vec3(0.0031308), c));
 }
 vec4 finish(vec3 c) {
-    c = clamp(c, 0.0, 1.0);
+    c = (u_hdr && !u_encode) ? max(c, 0.0) : clamp(c, 0.0, 1.0);
     return vec4(u_encode ? encode_srgb(c) : c, 1.0);
 }
 """
@@ -597,9 +599,11 @@ class Renderer:
     and a float32 target for the truth passes (sharing one depth buffer)."""
 
     def __init__(self, ctx, width: int, height: int, world: str = "plaza", textures: str = "procedural",
-                 texture_repeat: float = 1.0):
+                 texture_repeat: float = 1.0, hdr: bool = False, sky_gain: float = 1.0):
         """`textures`: the world's own procedural textures, or a set of photographs (yardstick/photo_textures.py),
-        repeated `texture_repeat` times as often across their surfaces."""
+        repeated `texture_repeat` times as often across their surfaces. `hdr`: the linear outputs (truth_linear,
+        input_linear) keep values over 1 (specular highlights); `sky_gain`: the sky's radiance times this."""
+        self.hdr, self.sky_gain = bool(hdr), float(sky_gain)
         import moderngl
         self.mgl = moderngl
         self.ctx, self.width, self.height = ctx, width, height
@@ -646,7 +650,8 @@ class Renderer:
         p["u_sun"].value, p["u_fog"].value = light.sun, light.sky_horizon
         p["u_fog_density"].value = light.fog_density
         p["u_amb_sky"].value, p["u_amb_ground"].value = light.ambient_sky, light.ambient_ground
-        self.sky["u_zenith"].value, self.sky["u_horizon"].value = light.sky_zenith, light.sky_horizon
+        self.sky["u_zenith"].value = tuple(self.sky_gain * np.asarray(light.sky_zenith, float))
+        self.sky["u_horizon"].value = tuple(self.sky_gain * np.asarray(light.sky_horizon, float))
         self.sky["u_size"].value = (float(self.width), float(self.height))
 
     def draw(self, cam: Camera, dx: float, dy: float, encode: bool) -> None:
@@ -659,7 +664,7 @@ class Renderer:
         p = self.prog
         p["u_vp"].write(_mat_bytes(vp))
         p["u_eye"].value = tuple(map(float, cam.eye))
-        p["u_encode"].value = encode
+        p["u_encode"].value, p["u_hdr"].value = encode, self.hdr
         for mat, vao, _ in self.draws:
             self.textures[mat.texture].use(0)
             p["u_tex"].value = 0
@@ -670,7 +675,7 @@ class Renderer:
             vao.render()
         self.sky["u_inv_vp"].write(_mat_bytes(np.linalg.inv(vp)))
         self.sky["u_eye"].value = tuple(map(float, cam.eye))
-        self.sky["u_encode"].value = encode
+        self.sky["u_encode"].value, self.sky["u_hdr"].value = encode, self.hdr
         self.sky_vao.render(mgl.TRIANGLES, vertices=3)
 
     def input_frame(self, cam: Camera) -> np.ndarray:
@@ -687,6 +692,14 @@ class Renderer:
         self.input_frame(cam)
         depth = np.frombuffer(self.fbo8.read(components=1, attachment=-1, dtype="f4"), np.float32)
         return np.flipud(depth.reshape(self.height, self.width)).copy()
+
+    def input_linear(self, cam: Camera) -> np.ndarray:
+        """One sample per pixel at the pixel centres in linear light, as a renderer writes an EXR: (H, W, 3)
+        float32 (over 1 in highlights with hdr=True)."""
+        self.fbo32.use()
+        self.fbo32.clear(0, 0, 0, 1, depth=1.0)
+        self.draw(cam, 0.0, 0.0, encode=False)
+        return np.flipud(self._linear_rows()).copy()
 
     def truth_linear(self, cam: Camera, spp: int = TRUTH_SPP) -> np.ndarray:
         """The mean of spp x spp jittered passes in linear light: (H, W, 3) float64."""

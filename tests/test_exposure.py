@@ -1,0 +1,108 @@
+"""Linear-light float frames are filtered at the power of two of exposure that puts their key near 1
+(spatial/exposure.py): the output no longer depends on the exposure a renderer wrote, exactly."""
+import numpy as np
+import pytest
+
+from mlaa_stream.spatial.exposure import KEY_PERCENTILE, exposure_scale
+from mlaa_stream.spatial.filter import Filter
+
+
+def aliased_linear_scene(h: int = 48, w: int = 64, seed: int = 5) -> tuple[np.ndarray, np.ndarray]:
+    """1-spp samples at pixel centres of a rotated bright square, a dark wedge and a thin bright line over a
+    seeded mid-grey texture, in linear light (0.02-0.9), with its 8x8 supersampled truth: (input, truth)."""
+    rng = np.random.default_rng(seed)
+    tex = 0.18 + 0.04 * rng.random((h, w, 1)).astype(np.float32)
+
+    def shade(y, x):
+        c = np.broadcast_to(tex[np.clip(y.astype(int), 0, h - 1), np.clip(x.astype(int), 0, w - 1)],
+                            y.shape + (3,)).copy()
+        u, v = (x - 20) * 0.92 + (y - 22) * 0.39, -(x - 20) * 0.39 + (y - 22) * 0.92
+        c[(np.abs(u) < 11) & (np.abs(v) < 11)] = (0.9, 0.7, 0.3)
+        c[(y > 0.35 * (x - 36) + 26) & (x > 36)] = (0.02, 0.03, 0.05)
+        c[np.abs(y - (0.12 * x + 4)) < 0.35] = (0.85, 0.85, 0.9)
+        return c
+
+    y, x = np.mgrid[0:h, 0:w].astype(np.float32) + 0.5
+    inp = shade(y, x).astype(np.float32)
+    o = (np.arange(8) + 0.5) / 8 - 0.5
+    truth = np.mean([shade(y + dy, x + dx) for dy in o for dx in o], axis=0)
+    return inp, truth.astype(np.float32)
+
+
+def test_exposure_scale_known_answers():
+    """The key (KEY_PERCENTILE-th percentile of max(R, G, B)) goes to the power of two nearest 1 in stops; alpha
+    does not count; a black frame keeps its scale; a huge sample caps the brightening."""
+    assert KEY_PERCENTILE == 90
+    frame = np.full((20, 20, 3), 0.25, np.float32)
+    assert exposure_scale(frame) == 4.0
+    assert exposure_scale(frame * 12) == 0.25          # key 3: 1.58 stops over -> 2 stops down
+    assert exposure_scale(frame * 3.5) == 1.0          # key 0.875: within half a stop of 1
+    assert exposure_scale(np.zeros((8, 8, 3), np.float32)) == 1.0
+    rgba = np.concatenate([np.full((8, 8, 3), 0.01, np.float32), np.ones((8, 8, 1), np.float32)], -1)
+    assert exposure_scale(rgba) == 128.0               # log2(100) = 6.64 stops: alpha's 1 is no light
+    assert exposure_scale(np.full((8, 8), 2.0 ** -30, np.float32)) == 2.0 ** 24   # at most 24 stops
+    huge = np.full((8, 8, 3), 1e-3, np.float32)
+    huge[0, 0] = 1e14
+    assert 1e14 * exposure_scale(huge) <= 1e15 and exposure_scale(huge) > 1.0
+    big = np.full((1024, 1024, 3), 0.5, np.float32)    # read on every 4th row and column: rows between not read
+    big[1::4] = 8.0
+    assert exposure_scale(big) == 2.0
+
+
+@pytest.mark.parametrize("stops", [-9, -4, 3, 6])
+def test_output_does_not_depend_on_the_frames_exposure(stops):
+    """The same linear frame at 2^stops gives 2^stops times the output, bit for bit (float32); without
+    auto_exposure the filter's work changes with the exposure (at 2^-9 and 2^6 it leaves most edges)."""
+    inp, _ = aliased_linear_scene()
+    s = np.float32(2.0 ** stops)
+    with Filter(linear_input=True) as auto, Filter(linear_input=True, auto_exposure=False) as plain:
+        base = auto.process(inp)
+        assert np.array_equal(auto.process(inp * s), base * s)
+        changed = np.any(base != inp, axis=-1).sum()
+        assert changed > 100
+        if abs(stops) >= 6:
+            changed_plain = np.any(plain.process(inp * s) != inp * s, axis=-1).sum()
+            assert changed_plain < 0.5 * changed, (changed_plain, changed)
+
+
+def test_a_dark_render_is_antialiased_as_the_bright_one():
+    """Known answer against the 8x8 truth: at 2^-8 or 16 times its exposure the scene loses none of the error
+    removed (without auto_exposure the filter leaves it all: 0.57 -> 0.0 / 0.006 here)."""
+    inp, truth = aliased_linear_scene()
+
+    def removed(out):
+        return 1 - np.mean((out - truth) ** 2) / np.mean((inp - truth) ** 2)
+
+    with Filter(linear_input=True) as auto, Filter(linear_input=True, auto_exposure=False) as plain:
+        bright = removed(auto.process(inp))
+        assert bright > 0.3
+        for e in (np.float32(2.0 ** -8), np.float32(16)):
+            assert removed(auto.process(inp * e) / e) == pytest.approx(bright, abs=1e-6)
+            assert removed(plain.process(inp * e) / e) < 0.1
+
+
+@pytest.mark.parametrize("dtype", [np.float16, np.float32])
+def test_pixels_left_alone_come_back_bit_for_bit_with_their_alpha(dtype):
+    """A smooth dark frame (nothing to antialias) brightened for filtering comes back exactly, alpha untouched;
+    a non-finite sample too."""
+    y, x = np.mgrid[0:32, 0:40].astype(np.float32)
+    rng = np.random.default_rng(3)
+    colour = (0.002 + 0.0004 * (x[..., None] + y[..., None] * np.float32([1, 0.5, 0.25])) / 40)
+    frame = np.concatenate([colour, rng.random((32, 40, 1), dtype=np.float32)], -1).astype(dtype)
+    frame[5, 7, 1] = np.nan
+    assert exposure_scale(np.nan_to_num(frame).astype(np.float32)) > 64
+    with Filter(linear_input=True) as auto:
+        out = auto.process(frame)
+    assert out.dtype == frame.dtype
+    np.testing.assert_array_equal(out, frame)
+
+
+def test_frames_that_are_not_linear_light_are_never_scaled():
+    """Integer frames and display-encoded float frames are filtered as they are: auto_exposure changes nothing."""
+    inp, _ = aliased_linear_scene()
+    dark_float = inp * np.float32(0.05)
+    dark_u16 = np.round(dark_float * 65535).astype(np.uint16)
+    with Filter(linear_input=True) as auto, Filter(linear_input=True, auto_exposure=False) as plain:
+        assert np.array_equal(auto.process(dark_u16), plain.process(dark_u16))
+    with Filter() as auto, Filter(auto_exposure=False) as plain:
+        assert np.array_equal(auto.process(dark_float), plain.process(dark_float))
