@@ -18,7 +18,7 @@ from mlaa_stream.spatial.filter import PRESETS, Filter
 from mlaa_stream.spatial.fast_filter import FastFilter
 from mlaa_stream.spatial.keep import KeepRect, keep_rects, restore_kept
 from mlaa_stream.pipeline import PipelineError, PostHook, Temporal, stream_items
-from mlaa_stream.temporal.methods import METHODS, make_stage, needs_regions, stats_lists
+from mlaa_stream.temporal.methods import METHODS, check_frames, make_stage, needs_regions, stats_lists
 
 # Rows of the temporal stage's per-frame `stats` kept (the last ones): the stages append one a frame, for the
 # command line's --stats CSV of a file, and a live capture loop runs for hours (about 2.5 KB a frame).
@@ -48,8 +48,9 @@ class Antialiaser:
     GPU, else PoCL's CPU device). Other options are the Filter's (`preset` first, explicit keywords override it).
     Frames of one object are one sequence (the frame index, the temporal history): a thread that filters makes its
     own. `temporal=True` (or "auto") adds temporal supersampling (mlaa_stream.temporal.tss.TSSStage: the input's
-    samples of the last `temporal_frames` frames (default 16; a TSS setting, refused without TSS) accumulated along
-    the motion; its ring is kept between calls) and the reprojection blend on moving edges of render regions;
+    samples of the last `temporal_frames` frames (default 16, 2 to 64; a TSS setting, refused without TSS)
+    accumulated along the motion; its ring is kept between calls) and the reprojection blend on moving edges of
+    render regions;
     "tss", "blend" and "tss+blend" are the other methods of mlaa_stream.temporal.methods; or pass any
     `(frame_in, frame_filtered, index) -> frame` stage.
     `lookahead=N` (files, not live capture): in `stream`, temporal supersampling also reads the N frames after
@@ -96,6 +97,8 @@ class Antialiaser:
         if method == "blend" and temporal_frames is not None:   # make_stage leaves it to the CLI's warning
             raise ValueError("temporal_frames: the ring of temporal supersampling, which the blend method does not "
                              "use; use a method with TSS")
+        if isinstance(method, str) and method != "blend" and temporal_frames is not None:
+            check_frames(temporal_frames)   # before the filter is made: a ring of one frame holds no history
         if isinstance(method, str) and needs_regions(method) and not kwargs.get("fast"):
             kwargs["keep_regions"] = True  # the stage reads the filter's render regions
         # the fast preset without host copies on CPU devices (spatial/fast_filter.py)

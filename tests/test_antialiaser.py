@@ -177,10 +177,24 @@ def test_temporal_frames_where_no_ring_takes_them_is_refused():
     for kwargs in ({}, {"temporal": "blend"}, {"temporal": lambda a, b, i: b}):
         with pytest.raises(ValueError, match="temporal_frames"):
             Antialiaser(temporal_frames=4, **kwargs)
-    with pytest.raises(ValueError, match="frames: expected K >= 1, got 0"):
+    with pytest.raises(ValueError, match="temporal_frames: expected an integer from 2 to 64, got 0"):
         Antialiaser(temporal="tss", temporal_frames=0)
     with Antialiaser(temporal="tss", temporal_frames=3) as aa:
         assert aa.temporal.frames == 3
+
+
+@pytest.mark.parametrize("method", [True, "tss", "tss+blend"])
+def test_a_ring_of_one_frame_or_past_the_command_lines_range_is_refused_when_made(method):
+    """A ring of one frame holds no history (the current frame only: TSS then returns the spatial output every frame)
+    and was taken; the command line's --temporal-frames takes 2 to 64, and so does the API now, at construction."""
+    for frames in (1, -3, 65, 2.5, "4", True):
+        with pytest.raises(ValueError, match=re.escape(f"temporal_frames: expected an integer from 2 to 64, "
+                                                       f"got {frames!r}")):
+            Antialiaser(temporal=method, temporal_frames=frames)
+    for k in (2, np.int64(64)):
+        with Antialiaser(temporal=method, temporal_frames=k) as aa:
+            assert (aa.temporal.tss if method != "tss" else aa.temporal).frames == k
+
 
 def test_temporal_true_keeps_history_between_calls():
     """Antialiaser(temporal=True): the second frame of a static shot uses the history (model 'static')."""
