@@ -10,6 +10,7 @@ also overlaps decoding (a reader thread) and device transfers (frames in flight)
 """
 from __future__ import annotations
 
+import threading
 from typing import Any, Iterable, Iterator, Sequence
 
 import numpy as np
@@ -46,8 +47,9 @@ class Antialiaser:
 
     `device`: an index or a name substring as `mlaa-stream devices` lists them (None: $MLAA_STREAM_DEVICE, else a
     GPU, else PoCL's CPU device). Other options are the Filter's (`preset` first, explicit keywords override it).
-    Frames of one object are one sequence (the frame index, the temporal history): a thread that filters makes its
-    own. `temporal=True` (or "auto") adds temporal supersampling (mlaa_stream.temporal.tss.TSSStage: the input's
+    Frames of one object are one sequence (the frame index, the temporal history): threads may share it (each frame
+    gets the next index; with a temporal stage the calls take turns), but a thread with a sequence of its own makes
+    its own. `temporal=True` (or "auto") adds temporal supersampling (mlaa_stream.temporal.tss.TSSStage: the input's
     samples of the last `temporal_frames` frames (default 16, 2 to 64; a TSS setting, refused without TSS)
     accumulated along the motion; its ring is kept between calls) and the reprojection blend on moving edges of
     render regions;
@@ -117,18 +119,34 @@ class Antialiaser:
         self.in_flight = in_flight
         self.index = 0  # frames processed so far, across calls and streams
         self._closed = False
+        # index claims, and with a temporal stage each call's filter + stage step: threads sharing this object
+        # each got the same index (the stage restarted its ring at the repeat, its stats had rows twice)
+        self._lock = threading.Lock()
+        # the streams of a temporal stage begun and not ended -> the thread that drives each (last resumed it)
+        self._streams: dict[object, int] = {}
 
     def __call__(self, frame: np.ndarray) -> np.ndarray:
-        """Antialias one frame (blocking); returns a new array of the same shape and dtype."""
+        """Antialias one frame (blocking); returns a new array of the same shape and dtype.
+
+        Threads may share one object: each frame gets the next index. With a temporal stage the calls take
+        turns (the stage is one sequence, and "auto" reads the render regions of the frame just filtered);
+        a call while another thread's `stream` of it runs is refused."""
         self._check_open()
-        out = self._filter.process(frame)
-        if self.temporal is not None:
-            out = restore_kept(frame, self.temporal(frame, out, self.index), self._filter.keep)
-            if self._own_stage:
-                _trim_stats(self.temporal)
+        if self.temporal is None:
+            out = self._filter.process(frame)   # concurrent calls overlap here (the filter has its own locks)
+            with self._lock:
+                index, self.index = self.index, self.index + 1
+        else:
+            with self._lock:
+                self._check_idle()
+                out = self._filter.process(frame)
+                index = self.index
+                out = restore_kept(frame, self.temporal(frame, out, index), self._filter.keep)
+                if self._own_stage:
+                    _trim_stats(self.temporal)
+                self.index = index + 1   # the stage took it: a failing hook below must not hand it the index again
         for hook in self.post_hooks:
-            out = hook(out, self.index)
-        self.index += 1
+            out = hook(out, index)
         return out
 
     def stream(self, source: Any | Iterable[np.ndarray]) -> Iterator[np.ndarray]:
@@ -150,6 +168,22 @@ class Antialiaser:
                              f"axis), got one {source.shape} array; aa(frame) filters one frame (a stack of grey "
                              f"frames this narrow: pass list(stack))")
         frames = _capture_frames(source) if capture else source
+        token = object()
+        if self.temporal is not None:
+            with self._lock:   # after a call in another thread: its frame comes before this stream's
+                self._check_idle()
+                self._streams[token] = threading.get_ident()
+        inner = self._stream(frames)
+        try:
+            for out in inner:
+                yield out
+                if token in self._streams:   # the loop may go on in another thread: it drives the stream now
+                    self._streams[token] = threading.get_ident()
+        finally:
+            inner.close()   # stops the reader thread now, whatever ends the loop
+            self._streams.pop(token, None)
+
+    def _stream(self, frames: Any) -> Iterator[np.ndarray]:
         base = self.index
         temporal = None
         if self.temporal is not None:
@@ -181,6 +215,16 @@ class Antialiaser:
     def _check_open(self) -> None:
         if self._closed:
             raise RuntimeError("this Antialiaser is closed")
+
+    def _check_idle(self) -> None:
+        """Refuse a temporal stage's frame from this thread while another thread's stream feeds it: the two
+        sequences would mix in its history. (The thread that drives a stream may call between its frames, or after
+        leaving the loop, as before: its own sequence.)"""
+        me = threading.get_ident()
+        if any(thread != me for thread in list(self._streams.values())):
+            raise RuntimeError("a stream of this Antialiaser is running in another thread, and its temporal stage "
+                               "takes one sequence of frames: finish or close that stream first (`frames.close()`), "
+                               "or make another Antialiaser for this thread")
 
     def close(self) -> None:
         """Free the device buffers; the object cannot be used afterwards."""
