@@ -11,6 +11,7 @@ also overlaps decoding (a reader thread) and device transfers (frames in flight)
 from __future__ import annotations
 
 import threading
+from numbers import Integral
 from typing import Any, Iterable, Iterator, Sequence
 
 import numpy as np
@@ -33,6 +34,11 @@ def _capture_frames(cap: Any) -> Iterator[np.ndarray]:
         if not ok or frame is None:
             return
         yield frame
+
+
+def _whole(value: object, least: int) -> bool:
+    """Whether `value` is an integer (a numpy one too; not a bool) of at least `least`."""
+    return isinstance(value, Integral) and not isinstance(value, bool) and value >= least
 
 
 def _trim_stats(stage: Any) -> None:
@@ -70,7 +76,7 @@ class Antialiaser:
     def __init__(self, device: str | int | None = None, *, preset: str | None = None,
                  threshold: float | None = None, metric: str | None = None, linear: bool | None = None,
                  reconstruct: bool | None = None, temporal: Temporal | bool | str | None = None,
-                 temporal_frames: int | None = None, post_hooks: Sequence[PostHook] = (), in_flight: int = 2,
+                 temporal_frames: int | None = None, post_hooks: Sequence[PostHook] | None = (), in_flight: int = 2,
                  lookahead: int = 0, linear_input: bool = False, dense_motion: bool = False,
                  keep: Sequence[KeepRect | str] | str | None = None):
         if preset is not None and preset not in PRESETS:
@@ -91,11 +97,16 @@ class Antialiaser:
                 method is None or method is False or isinstance(method, str) or callable(method)):
             raise ValueError(f"temporal: expected True, {', '.join(map(repr, METHODS))} or a callable, "
                              f"got {temporal!r}")
-        hooks = [] if callable(post_hooks) else list(post_hooks)   # a generator is read once
+        # None: no hooks, as for `temporal` (it failed as "'NoneType' object is not iterable")
+        hooks = [] if callable(post_hooks) or post_hooks is None else list(post_hooks)   # a generator is read once
         if callable(post_hooks) or not all(callable(h) for h in hooks):
             raise TypeError(f"post_hooks: expected a list of (frame, index) -> frame callables, got {post_hooks!r}")
-        if not in_flight >= 1:
-            raise ValueError(f"in_flight: expected 1 or more frames on the device at once, got {in_flight!r}")
+        # whole numbers of frames: 2.5 in flight was taken, and a look-ahead of 1.5 or "2" became int() of it
+        if not _whole(in_flight, 1):
+            raise ValueError(f"in_flight: expected 1 or more frames on the device at once (an integer), "
+                             f"got {in_flight!r}")
+        if not _whole(lookahead, 0):
+            raise ValueError(f"lookahead: expected 0 or more frames (an integer), got {lookahead!r}")
         if method == "blend" and temporal_frames is not None:   # make_stage leaves it to the CLI's warning
             raise ValueError("temporal_frames: the ring of temporal supersampling, which the blend method does not "
                              "use; use a method with TSS")
@@ -116,7 +127,7 @@ class Antialiaser:
         self.temporal = temporal or None
         self._own_stage = isinstance(method, str)   # its stats are trimmed (_trim_stats); a callable's are the caller's
         self.post_hooks = hooks
-        self.in_flight = in_flight
+        self.in_flight = int(in_flight)
         self.index = 0  # frames processed so far, across calls and streams
         self._closed = False
         # index claims, and with a temporal stage each call's filter + stage step: threads sharing this object

@@ -513,3 +513,20 @@ def test_a_stage_or_hook_that_cannot_be_called_is_refused_when_made():
     for temporal in (None, False, lambda a, b, i: b):
         with Antialiaser(temporal=temporal, post_hooks=(lambda f, i: f,), in_flight=1) as aa:
             assert aa(captured_frames()[0]).shape == (48, 64, 3)
+
+
+def test_no_hooks_as_none_and_whole_frames_for_in_flight_and_lookahead():
+    """post_hooks=None (the usual "none" of an optional argument) failed as "'NoneType' object is not iterable";
+    in_flight=2.5 and lookahead=1.5 or "2" were taken (the look-ahead cut to 1 without a word): refused, named."""
+    with Antialiaser(post_hooks=None) as aa:
+        assert aa.post_hooks == [] and aa(captured_frames()[0]).shape == (48, 64, 3)
+    for value in (2.5, "2", True, 0):
+        with pytest.raises(ValueError, match=re.escape(f"in_flight: expected 1 or more frames on the device at once "
+                                                       f"(an integer), got {value!r}")):
+            Antialiaser(in_flight=value)
+    for value in (1.5, "2", True, -1):
+        with pytest.raises(ValueError, match=re.escape(f"lookahead: expected 0 or more frames (an integer), "
+                                                       f"got {value!r}")):
+            Antialiaser(temporal="tss", lookahead=value)
+    with Antialiaser(temporal="tss", lookahead=np.int64(1), in_flight=np.int64(3)) as aa:
+        assert aa.temporal.lookahead == 1 and aa.in_flight == 3
