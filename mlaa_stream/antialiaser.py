@@ -10,6 +10,8 @@ also overlaps decoding (a reader thread) and device transfers (frames in flight)
 """
 from __future__ import annotations
 
+import threading
+from numbers import Integral
 from typing import Any, Iterable, Iterator, Sequence
 
 import numpy as np
@@ -18,7 +20,7 @@ from mlaa_stream.spatial.filter import PRESETS, Filter
 from mlaa_stream.spatial.fast_filter import FastFilter
 from mlaa_stream.spatial.keep import KeepRect, keep_rects, restore_kept
 from mlaa_stream.pipeline import PipelineError, PostHook, Temporal, stream_items
-from mlaa_stream.temporal.methods import METHODS, make_stage, needs_regions, stats_lists
+from mlaa_stream.temporal.methods import METHODS, check_frames, make_stage, needs_regions, stats_lists
 
 # Rows of the temporal stage's per-frame `stats` kept (the last ones): the stages append one a frame, for the
 # command line's --stats CSV of a file, and a live capture loop runs for hours (about 2.5 KB a frame).
@@ -34,6 +36,11 @@ def _capture_frames(cap: Any) -> Iterator[np.ndarray]:
         yield frame
 
 
+def _whole(value: object, least: int) -> bool:
+    """Whether `value` is an integer (a numpy one too; not a bool) of at least `least`."""
+    return isinstance(value, Integral) and not isinstance(value, bool) and value >= least
+
+
 def _trim_stats(stage: Any) -> None:
     """Keep the last STATS_KEPT rows of a temporal stage's per-frame stats (TSSThenBlend: of both its stages)."""
     for rows in stats_lists(stage):
@@ -46,10 +53,12 @@ class Antialiaser:
 
     `device`: an index or a name substring as `mlaa-stream devices` lists them (None: $MLAA_STREAM_DEVICE, else a
     GPU, else PoCL's CPU device). Other options are the Filter's (`preset` first, explicit keywords override it).
-    Frames of one object are one sequence (the frame index, the temporal history): a thread that filters makes its
-    own. `temporal=True` (or "auto") adds temporal supersampling (mlaa_stream.temporal.tss.TSSStage: the input's
-    samples of the last `temporal_frames` frames (default 16; a TSS setting, refused without TSS) accumulated along
-    the motion; its ring is kept between calls) and the reprojection blend on moving edges of render regions;
+    Frames of one object are one sequence (the frame index, the temporal history): threads may share it (each frame
+    gets the next index; with a temporal stage the calls take turns), but a thread with a sequence of its own makes
+    its own. `temporal=True` (or "auto") adds temporal supersampling (mlaa_stream.temporal.tss.TSSStage: the input's
+    samples of the last `temporal_frames` frames (default 16, 2 to 64; a TSS setting, refused without TSS)
+    accumulated along the motion; its ring is kept between calls) and the reprojection blend on moving edges of
+    render regions;
     "tss", "blend" and "tss+blend" are the other methods of mlaa_stream.temporal.methods; or pass any
     `(frame_in, frame_filtered, index) -> frame` stage.
     `lookahead=N` (files, not live capture): in `stream`, temporal supersampling also reads the N frames after
@@ -67,7 +76,7 @@ class Antialiaser:
     def __init__(self, device: str | int | None = None, *, preset: str | None = None,
                  threshold: float | None = None, metric: str | None = None, linear: bool | None = None,
                  reconstruct: bool | None = None, temporal: Temporal | bool | str | None = None,
-                 temporal_frames: int | None = None, post_hooks: Sequence[PostHook] = (), in_flight: int = 2,
+                 temporal_frames: int | None = None, post_hooks: Sequence[PostHook] | None = (), in_flight: int = 2,
                  lookahead: int = 0, linear_input: bool = False, dense_motion: bool = False,
                  keep: Sequence[KeepRect | str] | str | None = None):
         if preset is not None and preset not in PRESETS:
@@ -88,14 +97,21 @@ class Antialiaser:
                 method is None or method is False or isinstance(method, str) or callable(method)):
             raise ValueError(f"temporal: expected True, {', '.join(map(repr, METHODS))} or a callable, "
                              f"got {temporal!r}")
-        hooks = [] if callable(post_hooks) else list(post_hooks)   # a generator is read once
+        # None: no hooks, as for `temporal` (it failed as "'NoneType' object is not iterable")
+        hooks = [] if callable(post_hooks) or post_hooks is None else list(post_hooks)   # a generator is read once
         if callable(post_hooks) or not all(callable(h) for h in hooks):
             raise TypeError(f"post_hooks: expected a list of (frame, index) -> frame callables, got {post_hooks!r}")
-        if not in_flight >= 1:
-            raise ValueError(f"in_flight: expected 1 or more frames on the device at once, got {in_flight!r}")
+        # whole numbers of frames: 2.5 in flight was taken, and a look-ahead of 1.5 or "2" became int() of it
+        if not _whole(in_flight, 1):
+            raise ValueError(f"in_flight: expected 1 or more frames on the device at once (an integer), "
+                             f"got {in_flight!r}")
+        if not _whole(lookahead, 0):
+            raise ValueError(f"lookahead: expected 0 or more frames (an integer), got {lookahead!r}")
         if method == "blend" and temporal_frames is not None:   # make_stage leaves it to the CLI's warning
             raise ValueError("temporal_frames: the ring of temporal supersampling, which the blend method does not "
                              "use; use a method with TSS")
+        if isinstance(method, str) and method != "blend" and temporal_frames is not None:
+            check_frames(temporal_frames)   # before the filter is made: a ring of one frame holds no history
         if isinstance(method, str) and needs_regions(method) and not kwargs.get("fast"):
             kwargs["keep_regions"] = True  # the stage reads the filter's render regions
         # the fast preset without host copies on CPU devices (spatial/fast_filter.py)
@@ -111,21 +127,37 @@ class Antialiaser:
         self.temporal = temporal or None
         self._own_stage = isinstance(method, str)   # its stats are trimmed (_trim_stats); a callable's are the caller's
         self.post_hooks = hooks
-        self.in_flight = in_flight
+        self.in_flight = int(in_flight)
         self.index = 0  # frames processed so far, across calls and streams
         self._closed = False
+        # index claims, and with a temporal stage each call's filter + stage step: threads sharing this object
+        # each got the same index (the stage restarted its ring at the repeat, its stats had rows twice)
+        self._lock = threading.Lock()
+        # the streams of a temporal stage begun and not ended -> the thread that drives each (last resumed it)
+        self._streams: dict[object, int] = {}
 
     def __call__(self, frame: np.ndarray) -> np.ndarray:
-        """Antialias one frame (blocking); returns a new array of the same shape and dtype."""
+        """Antialias one frame (blocking); returns a new array of the same shape and dtype.
+
+        Threads may share one object: each frame gets the next index. With a temporal stage the calls take
+        turns (the stage is one sequence, and "auto" reads the render regions of the frame just filtered);
+        a call while another thread's `stream` of it runs is refused."""
         self._check_open()
-        out = self._filter.process(frame)
-        if self.temporal is not None:
-            out = restore_kept(frame, self.temporal(frame, out, self.index), self._filter.keep)
-            if self._own_stage:
-                _trim_stats(self.temporal)
+        if self.temporal is None:
+            out = self._filter.process(frame)   # concurrent calls overlap here (the filter has its own locks)
+            with self._lock:
+                index, self.index = self.index, self.index + 1
+        else:
+            with self._lock:
+                self._check_idle()
+                out = self._filter.process(frame)
+                index = self.index
+                out = restore_kept(frame, self.temporal(frame, out, index), self._filter.keep)
+                if self._own_stage:
+                    _trim_stats(self.temporal)
+                self.index = index + 1   # the stage took it: a failing hook below must not hand it the index again
         for hook in self.post_hooks:
-            out = hook(out, self.index)
-        self.index += 1
+            out = hook(out, index)
         return out
 
     def stream(self, source: Any | Iterable[np.ndarray]) -> Iterator[np.ndarray]:
@@ -147,6 +179,22 @@ class Antialiaser:
                              f"axis), got one {source.shape} array; aa(frame) filters one frame (a stack of grey "
                              f"frames this narrow: pass list(stack))")
         frames = _capture_frames(source) if capture else source
+        token = object()
+        if self.temporal is not None:
+            with self._lock:   # after a call in another thread: its frame comes before this stream's
+                self._check_idle()
+                self._streams[token] = threading.get_ident()
+        inner = self._stream(frames)
+        try:
+            for out in inner:
+                yield out
+                if token in self._streams:   # the loop may go on in another thread: it drives the stream now
+                    self._streams[token] = threading.get_ident()
+        finally:
+            inner.close()   # stops the reader thread now, whatever ends the loop
+            self._streams.pop(token, None)
+
+    def _stream(self, frames: Any) -> Iterator[np.ndarray]:
         base = self.index
         temporal = None
         if self.temporal is not None:
@@ -178,6 +226,16 @@ class Antialiaser:
     def _check_open(self) -> None:
         if self._closed:
             raise RuntimeError("this Antialiaser is closed")
+
+    def _check_idle(self) -> None:
+        """Refuse a temporal stage's frame from this thread while another thread's stream feeds it: the two
+        sequences would mix in its history. (The thread that drives a stream may call between its frames, or after
+        leaving the loop, as before: its own sequence.)"""
+        me = threading.get_ident()
+        if any(thread != me for thread in list(self._streams.values())):
+            raise RuntimeError("a stream of this Antialiaser is running in another thread, and its temporal stage "
+                               "takes one sequence of frames: finish or close that stream first (`frames.close()`), "
+                               "or make another Antialiaser for this thread")
 
     def close(self) -> None:
         """Free the device buffers; the object cannot be used afterwards."""

@@ -177,10 +177,24 @@ def test_temporal_frames_where_no_ring_takes_them_is_refused():
     for kwargs in ({}, {"temporal": "blend"}, {"temporal": lambda a, b, i: b}):
         with pytest.raises(ValueError, match="temporal_frames"):
             Antialiaser(temporal_frames=4, **kwargs)
-    with pytest.raises(ValueError, match="frames: expected K >= 1, got 0"):
+    with pytest.raises(ValueError, match="temporal_frames: expected an integer from 2 to 64, got 0"):
         Antialiaser(temporal="tss", temporal_frames=0)
     with Antialiaser(temporal="tss", temporal_frames=3) as aa:
         assert aa.temporal.frames == 3
+
+
+@pytest.mark.parametrize("method", [True, "tss", "tss+blend"])
+def test_a_ring_of_one_frame_or_past_the_command_lines_range_is_refused_when_made(method):
+    """A ring of one frame holds no history (the current frame only: TSS then returns the spatial output every frame)
+    and was taken; the command line's --temporal-frames takes 2 to 64, and so does the API now, at construction."""
+    for frames in (1, -3, 65, 2.5, "4", True):
+        with pytest.raises(ValueError, match=re.escape(f"temporal_frames: expected an integer from 2 to 64, "
+                                                       f"got {frames!r}")):
+            Antialiaser(temporal=method, temporal_frames=frames)
+    for k in (2, np.int64(64)):
+        with Antialiaser(temporal=method, temporal_frames=k) as aa:
+            assert (aa.temporal.tss if method != "tss" else aa.temporal).frames == k
+
 
 def test_temporal_true_keeps_history_between_calls():
     """Antialiaser(temporal=True): the second frame of a static shot uses the history (model 'static')."""
@@ -316,6 +330,106 @@ def test_antialiasers_in_threads_each_get_their_own_frames(preset):
     assert errors == [] and wrong == []
 
 
+@pytest.mark.parametrize("temporal", ["tss", "recording", None])
+def test_one_temporal_antialiaser_shared_by_threads_gives_every_frame_its_own_index(temporal):
+    """aa(frame) read `index` before the stage and counted it after: threads sharing one temporal Antialiaser handed
+    the stage (and the hooks) one index twice, so TSS restarted its ring and its stats repeated rows. A call is now
+    one step of the sequence: every frame gets the next index, and the stage sees them in order. Without a stage
+    the calls still overlap, and the hooks get every index once."""
+    import sys
+    import time
+    frame = (np.random.default_rng(5).random((24, 32, 3)) < 0.3).astype(np.uint8) * 255   # a still shot
+    seen, hooked, errors = [], [], []
+
+    def recording(frame_in, frame_filtered, index):
+        seen.append(index)
+        time.sleep(0.001)   # the stage's own work: another thread's call comes in meanwhile
+        return frame_filtered
+
+    def hook(frame, index):
+        hooked.append(index)
+        return frame
+
+    aa = Antialiaser(temporal=recording if temporal == "recording" else temporal, post_hooks=[hook])
+    want = aa(frame)
+    aa.index, hooked[:], seen[:] = 0, [], []
+    if temporal == "tss":
+        aa.temporal.reset()
+        aa.temporal.stats.clear()
+
+    def work(k: int) -> None:
+        try:
+            for _ in range(8):
+                aa(frame)
+        except Exception as exc:   # noqa: BLE001 - reported below
+            errors.append(exc)
+
+    interval = sys.getswitchinterval()
+    sys.setswitchinterval(1e-6)
+    try:
+        threads = [threading.Thread(target=work, args=(k,)) for k in range(4)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+    finally:
+        sys.setswitchinterval(interval)
+    with aa:
+        assert errors == []
+        assert aa.index == 32 and sorted(hooked) == list(range(32))
+        if temporal == "recording":
+            assert seen == list(range(32))
+        elif temporal == "tss":
+            assert [row["index"] for row in aa.temporal.stats] == list(range(32))
+            assert sum(row["model"] == "reset" for row in aa.temporal.stats) == 1   # one ring, never restarted
+        else:
+            assert np.array_equal(aa(frame), want)
+
+
+def test_a_temporal_stage_takes_no_call_from_another_thread_while_a_stream_feeds_it():
+    """A call, or a second stream, from another thread while a stream feeds the temporal stage would mix two
+    sequences in its history (and give frames the stream's indices): refused, naming what to do. The thread that
+    drives the stream may still call (between its frames, after leaving its loop): its own sequence, as before.
+    Once the stream ends or is closed, other threads' calls go on from its last index. Without a temporal stage
+    calls from other threads are taken."""
+    frames = captured_frames()[:4]
+
+    def in_thread(fn):
+        box = []
+        t = threading.Thread(target=lambda: box.append(_outcome(fn)))
+        t.start()
+        t.join()
+        return box[0]
+
+    with Antialiaser(temporal="tss") as aa:
+        running = aa.stream(frames)
+        next(running)
+        refused = "a stream of this Antialiaser is running in another thread"
+        assert refused in in_thread(lambda: aa(frames[0]))
+        assert refused in in_thread(lambda: next(aa.stream(frames)))
+        assert len(list(running)) == 3 and aa.index == 4
+        assert in_thread(lambda: aa(frames[0])) == "ok" and aa.index == 5
+        running = aa.stream(frames)
+        next(running)
+        aa(frames[1])   # this thread's own frames: taken, as before
+        running.close()
+        assert in_thread(lambda: aa(frames[2])) == "ok" and aa.index == 8
+        assert [r["index"] for r in aa.temporal.stats][-3:] == [5, 6, 7]
+    with Antialiaser() as aa:
+        running = aa.stream(frames)
+        next(running)
+        assert in_thread(lambda: aa(frames[0])) == "ok"
+        running.close()
+
+
+def _outcome(fn) -> str:
+    try:
+        fn()
+        return "ok"
+    except Exception as exc:   # noqa: BLE001 - compared by the caller
+        return f"{type(exc).__name__}: {exc}"
+
+
 @pytest.mark.parametrize("method", [True, "tss", "blend"])
 def test_the_temporal_stages_stats_keep_the_last_frames_only(monkeypatch, method):
     """A stage appends a row of stats per frame: a live capture loop with temporal=True grew by about 2.5 KB a
@@ -399,3 +513,20 @@ def test_a_stage_or_hook_that_cannot_be_called_is_refused_when_made():
     for temporal in (None, False, lambda a, b, i: b):
         with Antialiaser(temporal=temporal, post_hooks=(lambda f, i: f,), in_flight=1) as aa:
             assert aa(captured_frames()[0]).shape == (48, 64, 3)
+
+
+def test_no_hooks_as_none_and_whole_frames_for_in_flight_and_lookahead():
+    """post_hooks=None (the usual "none" of an optional argument) failed as "'NoneType' object is not iterable";
+    in_flight=2.5 and lookahead=1.5 or "2" were taken (the look-ahead cut to 1 without a word): refused, named."""
+    with Antialiaser(post_hooks=None) as aa:
+        assert aa.post_hooks == [] and aa(captured_frames()[0]).shape == (48, 64, 3)
+    for value in (2.5, "2", True, 0):
+        with pytest.raises(ValueError, match=re.escape(f"in_flight: expected 1 or more frames on the device at once "
+                                                       f"(an integer), got {value!r}")):
+            Antialiaser(in_flight=value)
+    for value in (1.5, "2", True, -1):
+        with pytest.raises(ValueError, match=re.escape(f"lookahead: expected 0 or more frames (an integer), "
+                                                       f"got {value!r}")):
+            Antialiaser(temporal="tss", lookahead=value)
+    with Antialiaser(temporal="tss", lookahead=np.int64(1), in_flight=np.int64(3)) as aa:
+        assert aa.temporal.lookahead == 1 and aa.in_flight == 3

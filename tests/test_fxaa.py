@@ -150,3 +150,14 @@ def test_submit_overlaps_and_keeps_order(fxaa):
     pending = [fxaa.submit(f) for f in frames]
     for f, p in zip(frames, pending):
         assert np.array_equal(p.result(), fxaa.process(f))
+
+
+def test_each_result_call_returns_an_array_of_its_own(fxaa):
+    """result() twice gave two views of one download buffer (as the Filter's PendingFrame did)."""
+    frame = blocky(np.random.default_rng(13), 32, 40)
+    pending = fxaa.submit(frame)
+    first, second = pending.result(), pending.result()
+    assert not np.shares_memory(first, second) and np.array_equal(first, second)
+    want = second.copy()
+    first[...] = 0
+    assert np.array_equal(second, want)

@@ -343,6 +343,30 @@ def test_submit_overlaps_and_keeps_order(filt):
         np.testing.assert_array_equal(g, w)
 
 
+@pytest.mark.parametrize("kind", ["default", "fast", "float with NaN", "show regions", "keep"])
+def test_each_result_call_returns_an_array_of_its_own(kind):
+    """PendingFrame.result() called twice gave two views of one download buffer: a caller who drew on the first
+    (cv2.putText) saw it in the second. Each call now returns an array of its own (the first the download itself,
+    no copy: FastFilter's frames would pay one; later ones a copy)."""
+    from mlaa_stream.spatial.fast_filter import FastFilter
+    frame = blocky(9, dtype=np.float32 if kind == "float with NaN" else np.uint8)
+    if kind == "float with NaN":
+        frame[3, 5] = np.nan
+    opts = {"show regions": dict(show="regions"), "keep": dict(keep="0,0,8,8")}.get(kind, {})
+    with (FastFilter() if kind == "fast" else Filter(**opts)) as f:
+        want = f.process(frame)
+        pending = f.submit(frame)
+        first = pending.result()
+        second = pending.result()
+        assert not np.shares_memory(first, second)
+        np.testing.assert_array_equal(first, want)
+        np.testing.assert_array_equal(second, want)
+        first[...] = 0
+        np.testing.assert_array_equal(second, want)
+        third = pending.result()
+        assert not np.shares_memory(third, first) and not np.shares_memory(third, second)
+
+
 @pytest.mark.parametrize("bad,msg", [(np.zeros((4, 4, 2), np.uint8), "expected shape"),
                                      (np.zeros((4, 4, 3), np.int32), "expected uint8"),
                                      (np.zeros((0, 4, 3), np.uint8), "at least 1x1")])

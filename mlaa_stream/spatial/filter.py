@@ -182,7 +182,8 @@ HALF_MAX = float(np.finfo(np.float16).max)
 
 
 class PendingFrame:
-    """A frame in flight; `result()` waits for its download and returns it in the input's dtype."""
+    """A frame in flight; `result()` waits for its download and returns it in the input's dtype, as an array the
+    caller owns: the first call the download itself, each later call a new copy of what the first returned."""
 
     def __init__(self, host_out: np.ndarray, event, out_dtype: np.dtype, shape: tuple, keep=(),
                  non_finite: NonFinite | None = None, regions: tuple | None = None, dim: bool = False,
@@ -196,11 +197,18 @@ class PendingFrame:
         self._dim = dim          # show="regions": dim everything outside the regions
         self._owner = owner      # its last_regions is set on result()
         self.regions: np.ndarray | None = None
+        self._result: np.ndarray | None = None   # what the first result() returned
 
     def result(self) -> np.ndarray:
         """The filtered frame; afterwards `regions` holds its render-region flag per tile when the filter
         was made with keep_regions=True or show="regions" (None where it has no render regions), and so
-        does the filter's `last_regions`: a temporal stage called right after result() reads its frame's."""
+        does the filter's `last_regions`: a temporal stage called right after result() reads its frame's.
+        Each call returns an array of its own: the first the downloaded frame (no copy), a later one a copy of
+        the first call's array as it is then (changes the caller made to it included)."""
+        if self._result is not None:
+            # two calls returned views of one buffer: drawing on one frame changed the other
+            self.publish_regions()
+            return self._result.copy()
         self._event.wait()
         self._keep = ()
         out = self._out.reshape(self._shape)
@@ -220,7 +228,9 @@ class PendingFrame:
                 from mlaa_stream.spatial.fallback import dim_outside_regions
                 out = dim_outside_regions(out, flags)
         out = out if out.dtype == self._dtype else out.astype(self._dtype)
-        return restore_patches(out, self._patches)
+        self._result = restore_patches(out, self._patches)
+        self._out = None   # the download buffer is the result now (or was copied into it)
+        return self._result
 
     def publish_regions(self) -> None:
         """Make this frame's region flags (after result()) its filter's `last_regions` again: a pipeline that

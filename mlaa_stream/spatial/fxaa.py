@@ -56,16 +56,21 @@ def fxaa_defines(fmt: FrameFormat, edge_threshold: float = EDGE_THRESHOLD,
 
 
 class _Pending:
-    """A frame in flight; `result()` waits for the download and returns the input's dtype."""
+    """A frame in flight; `result()` waits for the download and returns the input's dtype, as an array the caller
+    owns (as the Filter's PendingFrame: the first call the download itself, later calls a copy of it)."""
 
     def __init__(self, host_out: np.ndarray, event, dtype: np.dtype, shape: tuple, keep=()):
         self._out, self._event, self._dtype, self._shape, self._keep = host_out, event, dtype, shape, keep
+        self._result: np.ndarray | None = None
 
     def result(self) -> np.ndarray:
+        if self._result is not None:   # a second view of one buffer would change with the first
+            return self._result.copy()
         self._event.wait()
         self._keep = ()
         out = self._out.reshape(self._shape)
-        return out if out.dtype == self._dtype else out.astype(self._dtype)
+        self._result = out if out.dtype == self._dtype else out.astype(self._dtype)
+        return self._result
 
 
 class FXAA:

@@ -12,11 +12,16 @@
 """
 from __future__ import annotations
 
+from numbers import Integral
+
 METHODS = ("auto", "tss", "blend", "tss+blend")
 DEFAULT_METHOD = "auto"
 # frames after the current one that TSS reads where the output may wait (the command line: files and pipes);
 # the API's default is 0 (frames may come live). docs/temporal.md, "Look-ahead"
 DEFAULT_LOOKAHEAD = 2
+# K, the frames in TSS's ring (the current one included), as the command line's --temporal-frames takes it: a ring of
+# one frame holds no history (TSS then returns the spatial output every frame); 64 bounds its device memory
+RING_FRAMES = (2, 64)
 
 
 def needs_regions(method: str) -> bool:
@@ -28,6 +33,14 @@ def check(method: str) -> str:
     if method not in METHODS:
         raise ValueError(f"temporal method: expected one of {', '.join(METHODS)}, got {method!r}")
     return method
+
+
+def check_frames(frames: object, name: str = "temporal_frames") -> int:
+    """`frames` (K, TSS's ring) as an int in RING_FRAMES; a ValueError naming `name` and the range otherwise."""
+    lo, hi = RING_FRAMES
+    if isinstance(frames, bool) or not isinstance(frames, Integral) or not lo <= frames <= hi:
+        raise ValueError(f"{name}: expected an integer from {lo} to {hi}, got {frames!r}")
+    return int(frames)
 
 
 def make_stage(method: str, context, *, bgr: bool, frames: int | None = None, mode: str = "adaptive",
@@ -54,7 +67,7 @@ def make_stage(method: str, context, *, bgr: bool, frames: int | None = None, mo
         from mlaa_stream.temporal.stage import TemporalStage
         return TemporalStage(context=context, mode=mode, bgr=bgr, show=show, linear_input=linear_input, **kw)
     from mlaa_stream.temporal.tss import DEFAULT_FRAMES, TSSStage, TSSThenBlend
-    ring = DEFAULT_FRAMES if frames is None else int(frames)   # 0 is refused by the stage, not made the default
+    ring = DEFAULT_FRAMES if frames is None else check_frames(frames, "frames")   # 0 is refused, not made the default
     if method == "tss":
         return TSSStage(context=context, frames=ring, mode=mode, bgr=bgr, show=show, lookahead=lookahead,
                         linear_input=linear_input, dense_samples=dense_samples)
