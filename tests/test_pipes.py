@@ -68,6 +68,24 @@ def test_standard_output_in_the_format_asked(fmt, expect):
     assert b.stdout.decode().strip() == expect
 
 
+@pytest.mark.parametrize("marker", [b"FRAME\n", b"FRAME Ip\n"])
+def test_a_y4m_stream_cut_mid_frame_on_a_pipe_is_named_truncated(tmp_path, marker):
+    """`cat cut.y4m | mlaa-stream - ...`: FFmpeg's y4m reader ends at the last whole frame without an error, and a pipe
+    cannot be measured afterwards as a file is; it exited 0 with the frames before it. Now the bytes read are counted
+    against where the demuxer's last frame ends: exit 1 naming it, the whole frames kept. A whole stream, also one
+    whose frames carry parameters (FRAME Ip), runs clean."""
+    whole = subprocess.run([sys.executable, "-c", Y4M_WRITER, "yuv420p"], capture_output=True, check=True,
+                           timeout=120).stdout.replace(b"FRAME\n", marker)
+    r = subprocess.run([*CLI, "-", "-o", str(tmp_path / "cut.mkv")], input=whole[:-100], capture_output=True,
+                       timeout=300)
+    assert r.returncode == 1, r.stderr.decode()
+    assert b"standard input: the stream ended at frame 11, " in r.stderr and b"bytes of a frame after it" in r.stderr
+    with av.open(str(tmp_path / "cut.mkv")) as c:
+        assert sum(1 for _ in c.decode(video=0)) == 11
+    r = subprocess.run([*CLI, "-", "-o", str(tmp_path / "whole.mkv")], input=whole, capture_output=True, timeout=300)
+    assert r.returncode == 0 and b"truncated" not in r.stderr, r.stderr.decode()
+
+
 def test_pipe_through_pipe_keeps_ten_bits():
     writer = subprocess.Popen([sys.executable, "-c", Y4M_WRITER, "yuv420p10le"], stdout=subprocess.PIPE)
     filt = subprocess.Popen([*CLI, "-", "-o", "-", "-f", "y4m"], stdin=writer.stdout, stdout=subprocess.PIPE,
