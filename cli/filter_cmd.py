@@ -1,6 +1,7 @@
 """`mlaa-stream INPUT -o OUTPUT`: filter an image, a folder of images, a frame sequence or a video."""
 from __future__ import annotations
 
+import errno
 import os
 import signal
 import sys
@@ -18,6 +19,9 @@ from mlaa_stream.cli.options import configure_logging, device_option, verbosity_
 from mlaa_stream.cli.stats_spool import StatsSpool
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_NO_DEVICE, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
+# The reader of standard output went away (`-o - | head`): the status a shell reports for a process SIGPIPE ended,
+# as for Unix tools (Python ignores SIGPIPE, so the write fails with EPIPE instead of ending the process)
+EXIT_BROKEN_PIPE = 128 + getattr(signal, "SIGPIPE", 13)
 
 EPILOG = """\b
 Examples:
@@ -59,7 +63,8 @@ at which frame decoding stopped.
 Exit codes: 0 all done; 1 some inputs failed (the others were processed); 2 usage error
 (nothing done: bad option, missing input, output would overwrite); 3 no OpenCL device;
 130 interrupted (Ctrl-C), 143 terminated (SIGTERM), 129 hung up (SIGHUP): outputs in progress
-are removed, complete ones kept; --resume goes on from there.
+are removed, complete ones kept; --resume goes on from there. 141: standard output's reader
+went away (-o - | head), stopped without a message, as Unix tools do.
 """
 
 
@@ -92,6 +97,32 @@ def _warn_unseen_gpu(filt, device: str | None, con: Console) -> None:
         return
     for driver in unregistered_gpu_drivers():
         con.warn(f"running on the CPU: {driver.hint()}")
+
+
+def is_broken_pipe(exc: BaseException | None) -> bool:
+    """True when `exc` is, or was caused by, a write to a pipe whose reader has gone (EPIPE): Python's
+    BrokenPipeError, PyAV's (an FFmpegError that is one too), or either inside a PipelineError or VideoError."""
+    seen: set[int] = set()
+    while exc is not None and id(exc) not in seen:
+        seen.add(id(exc))
+        if isinstance(exc, OSError) and exc.errno == errno.EPIPE:
+            return True
+        exc = getattr(exc, "cause", None) or exc.__cause__ or exc.__context__   # PipelineError keeps it in .cause
+    return False
+
+
+def _stdout_gone() -> int:
+    """Standard output's reader went away: nothing more can reach it, and Python's last flush of it at exit would
+    print 'Exception ignored ... BrokenPipeError'; it is pointed at /dev/null instead. Returns EXIT_BROKEN_PIPE."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        try:
+            os.dup2(devnull, sys.stdout.fileno())
+        finally:
+            os.close(devnull)
+    except (OSError, ValueError, AttributeError):  # no file descriptor (a test runner's stdout): nothing to flush
+        pass
+    return EXIT_BROKEN_PIPE
 
 
 class Terminated(KeyboardInterrupt):
@@ -438,6 +469,10 @@ def filter_command(ctx: click.Context, input_path: str, output: str, overwrite: 
     except KeyboardInterrupt:
         con.error("interrupted; complete outputs are kept, the one in progress was removed")
         code = EXIT_INTERRUPTED
+    except BrokenPipeError:  # standard output's reader went away outside the video writer (--progress -): quietly
+        code = EXIT_BROKEN_PIPE
+    if code == EXIT_BROKEN_PIPE:
+        code = _stdout_gone()
     sys.exit(code)
 
 
@@ -567,6 +602,8 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
         con.error(str(exc))
         return EXIT_USAGE
     except Failed as exc:
+        if output == "-" and is_broken_pipe(exc):  # the reader went away before the first frame (-o - | true)
+            return EXIT_BROKEN_PIPE
         con.error(str(exc))
         return EXIT_FAILED
     except OSError as exc:
@@ -1090,6 +1127,11 @@ class _VideoJob(_Job):
         self.con.info(f"encoding {getattr(self.writer, 'codec', 'mp4v')} "
                       f"{getattr(self.writer, 'pix_fmt', 'bgr24')} to {out}")
 
+    def _stdout_gone(self) -> int:
+        """Standard output's reader went away: no error (head, a player closed), said only with -v."""
+        self.con.info(f"standard output closed by its reader after {self.writer.frames_written} frames; stopped")
+        return EXIT_BROKEN_PIPE
+
     def _check_output_file(self, out: str) -> None:
         """A video file out: not the input, not there already (without -y), in a writable folder;
         temporary files of killed runs there are removed."""
@@ -1183,13 +1225,20 @@ class _VideoJob(_Job):
             self._finished = True  # filter_video kept the shorter file or removed it
         except VideoError as exc:  # finishing the output failed: filter_video removed it
             self._finished = True
+            if self.output == "-" and is_broken_pipe(exc):   # the reader went away before the stream's end
+                return self._stdout_gone()
             self.con.error(str(exc))
             return EXIT_FAILED
+        except BrokenPipeError:   # the muxer's last bytes (its trailer) to a reader that went away
+            self._finished = True
+            return self._stdout_gone()
         finally:
             progress.close()
             self.written = self.writer.frames_written
             for w in dict.fromkeys(self.writer.warnings):
                 self.con.warn(w)
+        if stopped is not None and self.output == "-" and is_broken_pipe(stopped):
+            return self._stdout_gone()   # `-o - | head`: the reader has what it wanted; Unix tools stop quietly
         if stopped is None:
             self.con.info(f"{self.output}: {self.written} frames")
             return EXIT_OK
