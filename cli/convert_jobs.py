@@ -225,7 +225,8 @@ class VideoToImagesJob(_Job):
         def sink(item) -> None:
             if item.meta in self.done:
                 return
-            write_image(frame_path(self.output, item.meta), item.frame, overwrite=self.overwrite)
+            write_image(frame_path(self.output, item.meta), item.frame, overwrite=self.overwrite,
+                        quality=self.opts.get("jpeg_quality"))
             self.written += 1
 
         try:

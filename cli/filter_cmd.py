@@ -38,7 +38,7 @@ Examples:
 
 \b
 Images and sequences go through OpenImageIO: bit depth (8/16-bit, half, float), channels, alpha
-(passed through unchanged) and metadata are kept; palette PNGs come out as RGB(A). EXRs tagged
+(passed through unchanged), metadata and a JPEG's quality are kept; palette PNGs come out as RGB(A). EXRs tagged
 linear (and untagged float images) are taken as linear light, others as sRGB-encoded; linear light
 written to a format of display values (PNG, JPEG) is encoded to sRGB, clipped to 0-1, and EXR's
 premultiplied alpha written to a format of straight alpha (PNG) is divided out. In a folder,
@@ -258,6 +258,9 @@ def _warn_unused_options(ctx: click.Context, con: Console, kind: str, job: type)
     if given("rate") and job is not SequenceToVideoJob:
         why = "a video keeps its own frame rate" if job is _VideoJob else "images have no frame rate"
         con.warn(f"--rate has no effect here: it sets the frame rate of a video made from images; {why}")
+    if given("jpeg_quality") and job in (_VideoJob, SequenceToVideoJob):
+        con.warn("--jpeg-quality has no effect here: it sets the quality of JPEG images written, and the output is "
+                 "a video (--crf sets its encoder's)")
     if given("audio") and job is SequenceToVideoJob and ctx.params.get("audio") != "none":
         con.warn(f"--audio {ctx.params['audio']} has no effect here: it sets what happens to a video's audio "
                  f"tracks, and images have none (the video is made without audio)")
@@ -364,6 +367,9 @@ def _job_for(kind: str, output: str) -> type:
               help="The video encoder's speed preset for x264/x265 (ultrafast ... veryslow); not the "
                    "filter's --preset.")
 @click.option("--pix-fmt", default=None, help="Encoder pixel format (default: the closest to the source).")
+@click.option("--jpeg-quality", type=click.IntRange(1, 100), default=None, metavar="1-100",
+              help="Quality of JPEG outputs (images, frames of a video). Default: a JPEG source's own, estimated "
+                   "from its quantisation table; 98 (OpenImageIO's) for other sources.")
 @click.option("--start", "start", default=None, metavar="TIME",
               help="Video: begin here (seconds 12.5, 1:02.5, 0:01:02.5, or a frame 300f); the output "
                    "starts at 0, audio and subtitles cut to match.")
@@ -436,7 +442,8 @@ def filter_command(ctx: click.Context, input_path: str, output: str, overwrite: 
                    frames: str | None, preset: str | None, threshold: float | None,
                    metric: str | None, display_space: bool, reconstruct: bool | None,
                    bridge: bool | None, codec: str | None, container: str | None, audio: str,
-                   crf: int, encoder_preset: str, pix_fmt: str | None, start: str | None, end: str | None,
+                   crf: int, encoder_preset: str, pix_fmt: str | None, jpeg_quality: int | None,
+                   start: str | None, end: str | None,
                    rate: float, video_backend: str,
                    overlay: str | None, cluster: str | None, chunk_frames: int, progress_path: str | None,
                    in_flight: int, temporal: bool | None,
@@ -457,7 +464,7 @@ def filter_command(ctx: click.Context, input_path: str, output: str, overwrite: 
                            frames=frames, preset=preset, threshold=threshold, metric=metric,
                            display_space=display_space, reconstruct=reconstruct, bridge=bridge,
                            codec=codec, container=container, audio=audio, crf=crf,
-                           encoder_preset=encoder_preset, pix_fmt=pix_fmt, rate=rate,
+                           encoder_preset=encoder_preset, pix_fmt=pix_fmt, rate=rate, jpeg_quality=jpeg_quality,
                            video_backend=video_backend, start=start, end=end,
                            overlay=overlay, in_flight=in_flight, device=device, progress_path=progress_path,
                            cluster=cluster, chunk_frames=chunk_frames, keep=keep,
@@ -483,7 +490,7 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
             temporal: "TemporalOptions | None" = None, bridge: bool | None = None, rate: float = 24.0,
             audio: str = "copy", progress_path: str | None = None, start: str | None = None,
             end: str | None = None, container: str | None = None, cluster: str | None = None,
-            chunk_frames: int = 16, keep: tuple[str, ...] = ()) -> int:
+            chunk_frames: int = 16, keep: tuple[str, ...] = (), jpeg_quality: int | None = None) -> int:
     """Check everything that can be checked without a device, then build the filter and run."""
     temporal = temporal or TemporalOptions()
     show_regions = temporal.show == "regions"
@@ -579,7 +586,7 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
                      progress_path=progress_path, crf=crf, start=start, end=end, cluster=cluster,
                      chunk_frames=chunk_frames, temporal_spec=temporal.spec() if cluster else None,
                      lookahead=temporal.frames_ahead if temporal.spec() is not None else 0,
-                     encoder_preset=encoder_preset, pix_fmt=pix_fmt, rate=rate,
+                     encoder_preset=encoder_preset, pix_fmt=pix_fmt, rate=rate, jpeg_quality=jpeg_quality,
                      video_backend=video_backend, filter_kwargs=kwargs)
         runner.prepare()
         _warn_unused_options(ctx, con, kind, job)
@@ -966,7 +973,8 @@ class _ImageJob(_Job):
         self.report.say = lambda msg: (progress.clear(), say(msg))
         caution = self.report.caution
         self.report.caution = lambda msg: (progress.clear(), caution(msg))
-        write = image_sink(self.report, overwrite=self.opts["overwrite"], strict=self.strict)
+        write = image_sink(self.report, overwrite=self.opts["overwrite"], strict=self.strict,
+                           jpeg_quality=self.opts.get("jpeg_quality"))
 
         def sink(item) -> None:
             if id(item.meta[0]) not in read_ahead:   # a look-ahead frame of --resume: read, not written
@@ -1035,7 +1043,7 @@ class _ImageJob(_Job):
                 report = run_chunks(client, files, self.opts["filter_kwargs"],
                                     overwrite=self.opts["overwrite"], strict=self.strict,
                                     chunk_frames=self.opts["chunk_frames"], on_frames=progress.update,
-                                    temporal=temporal, done=done,
+                                    temporal=temporal, done=done, jpeg_quality=self.opts.get("jpeg_quality"),
                                     say=lambda msg: (progress.clear(), self.con.error(msg)))
         except ClusterAddressError as exc:
             progress.close()
