@@ -519,11 +519,20 @@ def _check_length(info: VideoInfo, n: int, last_time: float | None, pipe_leftove
                                  f"expected {info.duration:.2f} s (truncated file?)", n)
 
 
+# Encoders that list alpha formats they cannot open: libvpx-vp9 encodes alpha only as a second 4:2:0 VP9 stream
+# (WebM's alpha_mode 1), at any frame size, odd ones too; with yuva422p, yuva444p or gbrap avcodec_open2 fails (EINVAL,
+# measured with FFmpeg 8.1: an RGBA source into WebM failed to start encoding).
+_ALPHA_FORMATS_OPENED = {"libvpx-vp9": ("yuva420p",)}
+
+
 def choose_pix_fmt(codec: str, src_pix_fmt: str, width: int, height: int) -> str | None:
     """The codec's pixel format closest to the source: same bits (or more), alpha kept if possible,
     chroma subsampling only where the size allows it; RGB first for lossless intermediates."""
     _require_av()
     formats = [f.name for f in (av.Codec(codec, "w").video_formats or ())]
+    opened = _ALPHA_FORMATS_OPENED.get(codec)
+    if opened is not None:  # the alpha formats the encoder lists but refuses
+        formats = [n for n in formats if n in opened or not _format_bits_alpha(n)[1]]
     if not formats:
         return None
     sbits, salpha = _format_bits_alpha(src_pix_fmt)
@@ -538,6 +547,7 @@ def choose_pix_fmt(codec: str, src_pix_fmt: str, width: int, height: int) -> str
         sub_w = f.chroma_width(2) < 2
         sub_h = f.chroma_height(2) < 2
         fits = (not sub_w or width % 2 == 0) and (not sub_h or height % 2 == 0)
+        fits = fits or (salpha and name in (opened or ()))   # libvpx-vp9's yuva420p: any size
         return (not fits, salpha and not alpha, bits < sbits, name.startswith(("nv", "yuvj", "bayer")),
                 lossless and not f.is_rgb, name != src_pix_fmt,
                 f.is_rgb != src.is_rgb, (sub_w or sub_h) != src_sub, abs(bits - sbits), alpha != salpha,
@@ -631,7 +641,7 @@ class VideoWriter:
             raise
         except Exception as exc:
             self._close_quietly()
-            raise VideoError(f"{path}: cannot start encoding with {codec} ({self.pix_fmt}): {exc}") from exc
+            raise VideoError(f"{path}: cannot start encoding with {self.codec} ({self.pix_fmt}): {exc}") from exc
 
     # -- setup ---------------------------------------------------------------------------------
     def _open(self, keep: tuple[str, ...]) -> None:
