@@ -59,12 +59,16 @@ class SequenceToVideoJob(_Job):
         w, h, c = image_shape(self.plan[0].src)
         bits = 16 if first.pixels.dtype.itemsize == 2 else 8
         rate = Fraction(o["rate"]).limit_denominator(1001)
+        # RGBA or grey + alpha, alpha last: kept where the encoder stores it (VP9 in WebM, qtrle, ffv1, png ...), named
+        # by the writer where it does not (libx264)
+        self.alpha = c in (2, 4) and first.spec.alpha_channel == c - 1
         self.info = VideoInfo(path=self.input, width=w, height=h, fps=rate, time_base=1 / rate,
                               # as a player expects (4:2:0; 10-bit from 16-bit frames): the encoder's
                               # closest format to it, 4:4:4 only where the size is odd
-                              frames=len(self.plan), pix_fmt="yuv420p10le" if bits > 8 else "yuv420p", bits=bits,
-                              has_alpha=False, codec="images", colour={}, audio_streams=0)
-        if c == 4 or c == 2:
+                              frames=len(self.plan), bits=bits, has_alpha=self.alpha,
+                              pix_fmt=("yuva420p" if self.alpha else "yuv420p") + ("10le" if bits > 8 else ""),
+                              codec="images", colour={}, audio_streams=0)
+        if c in (2, 4) and not self.alpha:
             self.con.warn(f"{self.input}: alpha is not kept in the video")
         try:
             # -f/--format as for a video in (_VideoJob); images have no audio to copy (--audio copy/aac: a warning)
@@ -74,6 +78,10 @@ class SequenceToVideoJob(_Job):
                                       container_format=container_format_for(o.get("container"), self.output))
         except VideoError as exc:
             raise Failed(str(exc)) from exc
+        import av
+        if self.alpha and not any(comp.is_alpha for comp in av.VideoFormat(self.writer.pix_fmt).components):
+            self.con.warn(f"{self.input}: alpha is not kept in the video: {self.writer.codec} ({self.writer.pix_fmt}) "
+                          f"has none (WebM's VP9, --codec ffv1, png or qtrle keep it)")
         self.con.info(f"{len(self.plan)} frames {w}x{h} at {rate} fps -> {self.output} "
                       f"({self.writer.codec} {self.writer.pix_fmt})")
 
@@ -92,7 +100,13 @@ class SequenceToVideoJob(_Job):
 
         def sink(item) -> None:
             frame = item.frame if item.frame.ndim == 3 else item.frame[..., None]
-            frame = np.repeat(frame, 3, axis=2) if frame.shape[2] < 3 else frame[..., rgb]
+            if self.alpha:  # the channels the filter left out (grey's alpha) put back: RGB(A) with alpha last
+                full = item.meta[2](frame)
+                colour, alpha = full[..., :-1], full[..., -1:]
+                colour = np.repeat(colour, 3, axis=2) if colour.shape[2] < 3 else colour[..., rgb]
+                frame = np.concatenate([colour, alpha], axis=2)
+            else:
+                frame = np.repeat(frame, 3, axis=2) if frame.shape[2] < 3 else frame[..., rgb]
             self.writer.write(np.ascontiguousarray(frame))
 
         self.read_order: dict = {}  # position -> FrameFile, for the temporal stage (_SequenceTemporal)
@@ -225,7 +239,8 @@ class VideoToImagesJob(_Job):
         def sink(item) -> None:
             if item.meta in self.done:
                 return
-            write_image(frame_path(self.output, item.meta), item.frame, overwrite=self.overwrite)
+            write_image(frame_path(self.output, item.meta), item.frame, overwrite=self.overwrite,
+                        quality=self.opts.get("jpeg_quality"))
             self.written += 1
 
         try:

@@ -1,6 +1,7 @@
 """`mlaa-stream INPUT -o OUTPUT`: filter an image, a folder of images, a frame sequence or a video."""
 from __future__ import annotations
 
+import errno
 import os
 import signal
 import sys
@@ -18,6 +19,9 @@ from mlaa_stream.cli.options import configure_logging, device_option, verbosity_
 from mlaa_stream.cli.stats_spool import StatsSpool
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_NO_DEVICE, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
+# The reader of standard output went away (`-o - | head`): the status a shell reports for a process SIGPIPE ended,
+# as for Unix tools (Python ignores SIGPIPE, so the write fails with EPIPE instead of ending the process)
+EXIT_BROKEN_PIPE = 128 + getattr(signal, "SIGPIPE", 13)
 
 EPILOG = """\b
 Examples:
@@ -34,7 +38,7 @@ Examples:
 
 \b
 Images and sequences go through OpenImageIO: bit depth (8/16-bit, half, float), channels, alpha
-(passed through unchanged) and metadata are kept; palette PNGs come out as RGB(A). EXRs tagged
+(passed through unchanged), metadata and a JPEG's quality are kept; palette PNGs come out as RGB(A). EXRs tagged
 linear (and untagged float images) are taken as linear light, others as sRGB-encoded; linear light
 written to a format of display values (PNG, JPEG) is encoded to sRGB, clipped to 0-1, and EXR's
 premultiplied alpha written to a format of straight alpha (PNG) is divided out. In a folder,
@@ -59,7 +63,8 @@ at which frame decoding stopped.
 Exit codes: 0 all done; 1 some inputs failed (the others were processed); 2 usage error
 (nothing done: bad option, missing input, output would overwrite); 3 no OpenCL device;
 130 interrupted (Ctrl-C), 143 terminated (SIGTERM), 129 hung up (SIGHUP): outputs in progress
-are removed, complete ones kept; --resume goes on from there.
+are removed, complete ones kept; --resume goes on from there. 141: standard output's reader
+went away (-o - | head), stopped without a message, as Unix tools do.
 """
 
 
@@ -92,6 +97,32 @@ def _warn_unseen_gpu(filt, device: str | None, con: Console) -> None:
         return
     for driver in unregistered_gpu_drivers():
         con.warn(f"running on the CPU: {driver.hint()}")
+
+
+def is_broken_pipe(exc: BaseException | None) -> bool:
+    """True when `exc` is, or was caused by, a write to a pipe whose reader has gone (EPIPE): Python's
+    BrokenPipeError, PyAV's (an FFmpegError that is one too), or either inside a PipelineError or VideoError."""
+    seen: set[int] = set()
+    while exc is not None and id(exc) not in seen:
+        seen.add(id(exc))
+        if isinstance(exc, OSError) and exc.errno == errno.EPIPE:
+            return True
+        exc = getattr(exc, "cause", None) or exc.__cause__ or exc.__context__   # PipelineError keeps it in .cause
+    return False
+
+
+def _stdout_gone() -> int:
+    """Standard output's reader went away: nothing more can reach it, and Python's last flush of it at exit would
+    print 'Exception ignored ... BrokenPipeError'; it is pointed at /dev/null instead. Returns EXIT_BROKEN_PIPE."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        try:
+            os.dup2(devnull, sys.stdout.fileno())
+        finally:
+            os.close(devnull)
+    except (OSError, ValueError, AttributeError):  # no file descriptor (a test runner's stdout): nothing to flush
+        pass
+    return EXIT_BROKEN_PIPE
 
 
 class Terminated(KeyboardInterrupt):
@@ -227,6 +258,9 @@ def _warn_unused_options(ctx: click.Context, con: Console, kind: str, job: type)
     if given("rate") and job is not SequenceToVideoJob:
         why = "a video keeps its own frame rate" if job is _VideoJob else "images have no frame rate"
         con.warn(f"--rate has no effect here: it sets the frame rate of a video made from images; {why}")
+    if given("jpeg_quality") and job in (_VideoJob, SequenceToVideoJob):
+        con.warn("--jpeg-quality has no effect here: it sets the quality of JPEG images written, and the output is "
+                 "a video (--crf sets its encoder's)")
     if given("audio") and job is SequenceToVideoJob and ctx.params.get("audio") != "none":
         con.warn(f"--audio {ctx.params['audio']} has no effect here: it sets what happens to a video's audio "
                  f"tracks, and images have none (the video is made without audio)")
@@ -333,6 +367,9 @@ def _job_for(kind: str, output: str) -> type:
               help="The video encoder's speed preset for x264/x265 (ultrafast ... veryslow); not the "
                    "filter's --preset.")
 @click.option("--pix-fmt", default=None, help="Encoder pixel format (default: the closest to the source).")
+@click.option("--jpeg-quality", type=click.IntRange(1, 100), default=None, metavar="1-100",
+              help="Quality of JPEG outputs (images, frames of a video). Default: a JPEG source's own, estimated "
+                   "from its quantisation table; 98 (OpenImageIO's) for other sources.")
 @click.option("--start", "start", default=None, metavar="TIME",
               help="Video: begin here (seconds 12.5, 1:02.5, 0:01:02.5, or a frame 300f); the output "
                    "starts at 0, audio and subtitles cut to match.")
@@ -405,7 +442,8 @@ def filter_command(ctx: click.Context, input_path: str, output: str, overwrite: 
                    frames: str | None, preset: str | None, threshold: float | None,
                    metric: str | None, display_space: bool, reconstruct: bool | None,
                    bridge: bool | None, codec: str | None, container: str | None, audio: str,
-                   crf: int, encoder_preset: str, pix_fmt: str | None, start: str | None, end: str | None,
+                   crf: int, encoder_preset: str, pix_fmt: str | None, jpeg_quality: int | None,
+                   start: str | None, end: str | None,
                    rate: float, video_backend: str,
                    overlay: str | None, cluster: str | None, chunk_frames: int, progress_path: str | None,
                    in_flight: int, temporal: bool | None,
@@ -426,7 +464,7 @@ def filter_command(ctx: click.Context, input_path: str, output: str, overwrite: 
                            frames=frames, preset=preset, threshold=threshold, metric=metric,
                            display_space=display_space, reconstruct=reconstruct, bridge=bridge,
                            codec=codec, container=container, audio=audio, crf=crf,
-                           encoder_preset=encoder_preset, pix_fmt=pix_fmt, rate=rate,
+                           encoder_preset=encoder_preset, pix_fmt=pix_fmt, rate=rate, jpeg_quality=jpeg_quality,
                            video_backend=video_backend, start=start, end=end,
                            overlay=overlay, in_flight=in_flight, device=device, progress_path=progress_path,
                            cluster=cluster, chunk_frames=chunk_frames, keep=keep,
@@ -438,6 +476,10 @@ def filter_command(ctx: click.Context, input_path: str, output: str, overwrite: 
     except KeyboardInterrupt:
         con.error("interrupted; complete outputs are kept, the one in progress was removed")
         code = EXIT_INTERRUPTED
+    except BrokenPipeError:  # standard output's reader went away outside the video writer (--progress -): quietly
+        code = EXIT_BROKEN_PIPE
+    if code == EXIT_BROKEN_PIPE:
+        code = _stdout_gone()
     sys.exit(code)
 
 
@@ -448,7 +490,7 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
             temporal: "TemporalOptions | None" = None, bridge: bool | None = None, rate: float = 24.0,
             audio: str = "copy", progress_path: str | None = None, start: str | None = None,
             end: str | None = None, container: str | None = None, cluster: str | None = None,
-            chunk_frames: int = 16, keep: tuple[str, ...] = ()) -> int:
+            chunk_frames: int = 16, keep: tuple[str, ...] = (), jpeg_quality: int | None = None) -> int:
     """Check everything that can be checked without a device, then build the filter and run."""
     temporal = temporal or TemporalOptions()
     show_regions = temporal.show == "regions"
@@ -544,7 +586,7 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
                      progress_path=progress_path, crf=crf, start=start, end=end, cluster=cluster,
                      chunk_frames=chunk_frames, temporal_spec=temporal.spec() if cluster else None,
                      lookahead=temporal.frames_ahead if temporal.spec() is not None else 0,
-                     encoder_preset=encoder_preset, pix_fmt=pix_fmt, rate=rate,
+                     encoder_preset=encoder_preset, pix_fmt=pix_fmt, rate=rate, jpeg_quality=jpeg_quality,
                      video_backend=video_backend, filter_kwargs=kwargs)
         runner.prepare()
         _warn_unused_options(ctx, con, kind, job)
@@ -567,6 +609,8 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
         con.error(str(exc))
         return EXIT_USAGE
     except Failed as exc:
+        if output == "-" and is_broken_pipe(exc):  # the reader went away before the first frame (-o - | true)
+            return EXIT_BROKEN_PIPE
         con.error(str(exc))
         return EXIT_FAILED
     except OSError as exc:
@@ -929,7 +973,8 @@ class _ImageJob(_Job):
         self.report.say = lambda msg: (progress.clear(), say(msg))
         caution = self.report.caution
         self.report.caution = lambda msg: (progress.clear(), caution(msg))
-        write = image_sink(self.report, overwrite=self.opts["overwrite"], strict=self.strict)
+        write = image_sink(self.report, overwrite=self.opts["overwrite"], strict=self.strict,
+                           jpeg_quality=self.opts.get("jpeg_quality"))
 
         def sink(item) -> None:
             if id(item.meta[0]) not in read_ahead:   # a look-ahead frame of --resume: read, not written
@@ -998,7 +1043,7 @@ class _ImageJob(_Job):
                 report = run_chunks(client, files, self.opts["filter_kwargs"],
                                     overwrite=self.opts["overwrite"], strict=self.strict,
                                     chunk_frames=self.opts["chunk_frames"], on_frames=progress.update,
-                                    temporal=temporal, done=done,
+                                    temporal=temporal, done=done, jpeg_quality=self.opts.get("jpeg_quality"),
                                     say=lambda msg: (progress.clear(), self.con.error(msg)))
         except ClusterAddressError as exc:
             progress.close()
@@ -1089,6 +1134,11 @@ class _VideoJob(_Job):
             raise Failed(str(exc)) from exc
         self.con.info(f"encoding {getattr(self.writer, 'codec', 'mp4v')} "
                       f"{getattr(self.writer, 'pix_fmt', 'bgr24')} to {out}")
+
+    def _stdout_gone(self) -> int:
+        """Standard output's reader went away: no error (head, a player closed), said only with -v."""
+        self.con.info(f"standard output closed by its reader after {self.writer.frames_written} frames; stopped")
+        return EXIT_BROKEN_PIPE
 
     def _check_output_file(self, out: str) -> None:
         """A video file out: not the input, not there already (without -y), in a writable folder;
@@ -1183,13 +1233,20 @@ class _VideoJob(_Job):
             self._finished = True  # filter_video kept the shorter file or removed it
         except VideoError as exc:  # finishing the output failed: filter_video removed it
             self._finished = True
+            if self.output == "-" and is_broken_pipe(exc):   # the reader went away before the stream's end
+                return self._stdout_gone()
             self.con.error(str(exc))
             return EXIT_FAILED
+        except BrokenPipeError:   # the muxer's last bytes (its trailer) to a reader that went away
+            self._finished = True
+            return self._stdout_gone()
         finally:
             progress.close()
             self.written = self.writer.frames_written
             for w in dict.fromkeys(self.writer.warnings):
                 self.con.warn(w)
+        if stopped is not None and self.output == "-" and is_broken_pipe(stopped):
+            return self._stdout_gone()   # `-o - | head`: the reader has what it wanted; Unix tools stop quietly
         if stopped is None:
             self.con.info(f"{self.output}: {self.written} frames")
             return EXIT_OK

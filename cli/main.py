@@ -1,7 +1,7 @@
 """The `mlaa-stream` command: a group whose default command is the filter itself.
 
 Exit codes: 0 success; 1 some inputs failed (others were processed); 2 usage error;
-3 no OpenCL device; 130 interrupted.
+3 no OpenCL device; 130 interrupted; 141 standard output closed by its reader (-o - | head).
 """
 from __future__ import annotations
 

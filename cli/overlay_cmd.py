@@ -107,7 +107,8 @@ def _run(input_path: str, output: str, lines_path: str, frame: int, strength: fl
         _err(str(exc))
         return EXIT_FAILED
     try:
-        encoded = write_image(output, put_back(out), image.spec, overwrite=overwrite, linear=is_linear(image))
+        encoded = write_image(output, put_back(out), image.spec, overwrite=overwrite, linear=is_linear(image),
+                              quality=image.quality)  # a JPEG source's quality kept
     except ImageWriteError as exc:
         _err(str(exc))
         return EXIT_USAGE if "exists" in str(exc) else EXIT_FAILED

@@ -1,6 +1,8 @@
 """Device selection, the program cache and the messages users see when OpenCL is missing or broken."""
 from __future__ import annotations
 
+import os
+
 import pyopencl as cl
 import numpy as np
 import pytest
@@ -20,7 +22,9 @@ def test_environment_variable_and_option_pick_the_device(monkeypatch):
     first = dev.list_devices()[0]
     monkeypatch.setenv(dev.DEVICE_ENV, "0")
     assert dev.select_device(None).name.strip() == first.name
-    assert dev.select_device(first.name[:4]).name.strip() == first.name
+    # the whole name (a part of it may match several devices: an error, test_a_device_name_matching_several_...)
+    if sum(first.name.lower() in f"{d.platform} {d.name}".lower() for d in dev.list_devices()) == 1:
+        assert dev.select_device(first.name).name.strip() == first.name
 
 
 @pytest.mark.parametrize("spec,msg", [("99", "expected a device index below"),
@@ -196,3 +200,59 @@ def test_no_platform_with_the_loader_variable_set_names_the_variable(monkeypatch
     assert res.exit_code == 3 and "OCL_ICD_VENDORS='/nonexistent'" in res.output
     monkeypatch.delenv("OCL_ICD_VENDORS")
     assert dev.no_platform_message() == dev.NO_PLATFORM_HINT
+
+
+class StubPlatform:
+    def __init__(self, name: str, version: str, ptr: int):
+        self.name, self.version, self.int_ptr = name, version, ptr
+
+
+class StubDevice:
+    """An OpenCL device as select_device and `mlaa-stream devices` read it, where the machine has no second one."""
+
+    def __init__(self, name: str, platform: StubPlatform, ptr: int, kind=cl.device_type.GPU):
+        self.name, self.platform, self.int_ptr, self.type = name, platform, ptr, kind
+        self.version, self.driver_version, self.vendor_id = "OpenCL 3.0 CUDA", "570.86", 0x10DE
+        self.global_mem_size, self.max_compute_units = 141 << 30, 132
+
+
+def test_a_device_name_matching_several_devices_is_an_error_naming_them(monkeypatch, tmp_path):
+    """`--device H200` on a machine with two H200s (or `--device pocl` with two PoCLs) took the first without a word.
+    Now it is an error listing the matches with their indices and saying how to pick one; the same device listed
+    twice (one driver registered by two ICD files) is still taken."""
+    nvidia = StubPlatform("NVIDIA CUDA", "OpenCL 3.0 CUDA 12.8", 1)
+    gpus = [StubDevice("NVIDIA H200", nvidia, 10), StubDevice("NVIDIA H200", nvidia, 11)]
+    monkeypatch.setattr(dev, "_all_devices", lambda: gpus)
+    monkeypatch.delenv(dev.DEVICE_ENV, raising=False)
+    with pytest.raises(dev.DeviceError, match=r"^'H200' matches 2 OpenCL devices \(0: NVIDIA H200 \(GPU, NVIDIA "
+                                              r"CUDA\); 1: NVIDIA H200 \(GPU, NVIDIA CUDA\)\); pick one by its "
+                                              r"index, e\.g\. --device 0"):
+        dev.select_device("H200")
+    with pytest.raises(dev.DeviceError, match="'gpu' matches 2"):   # a kind word too
+        dev.select_device("gpu")
+    assert dev.select_device("1") is gpus[1]
+    monkeypatch.setenv(dev.DEVICE_ENV, "nvidia")
+    with pytest.raises(dev.DeviceError, match=r"^\$MLAA_STREAM_DEVICE: 'nvidia' matches 2 .* MLAA_STREAM_DEVICE=0"):
+        dev.select_device(None)
+    monkeypatch.setattr("mlaa_stream.cli.devices_cmd._all_devices", dev._all_devices)
+    res = CliRunner().invoke(main, ["devices"])   # still lists them, then says why none is marked
+    assert res.exit_code == 3 and "'nvidia' matches 2 OpenCL devices" in res.output
+    assert res.output.splitlines()[:2] == ["  0: NVIDIA H200  [GPU, NVIDIA CUDA, 132 compute units, 144384 MiB]",
+                                           "  1: NVIDIA H200  [GPU, NVIDIA CUDA, 132 compute units, 144384 MiB]"]
+    png = os.path.join(os.path.dirname(__file__), "..", "fixtures", "demo", "images", "rgb8.png")
+    res = CliRunner().invoke(main, [png, "-o", str(tmp_path / "out.png"), "--device", "H200"])
+    assert res.exit_code == 3 and "'H200' matches 2 OpenCL devices" in res.output, res.output
+    # one driver registered twice: its device under two platforms that say the same of themselves
+    twice = [gpus[0], StubDevice("NVIDIA H200", StubPlatform("NVIDIA CUDA", "OpenCL 3.0 CUDA 12.8", 2), 20)]
+    monkeypatch.setattr(dev, "_all_devices", lambda: twice)
+    monkeypatch.delenv(dev.DEVICE_ENV)
+    assert dev.select_device("H200") is twice[0]
+    # the same device object listed twice
+    monkeypatch.setattr(dev, "_all_devices", lambda: [gpus[0], gpus[0]])
+    assert dev.select_device("H200") is gpus[0]
+    # two runtimes on one CPU are two devices (one may build where the other cannot)
+    pocl = [StubDevice("pthread-AMD EPYC", StubPlatform("Portable Computing Language", v, p), p * 10,
+                       cl.device_type.CPU) for v, p in (("OpenCL 3.0 PoCL 3.1", 3), ("OpenCL 3.0 PoCL 3.0", 4))]
+    monkeypatch.setattr(dev, "_all_devices", lambda: pocl)
+    with pytest.raises(dev.DeviceError, match="'EPYC' matches 2"):
+        dev.select_device("EPYC")

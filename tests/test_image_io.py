@@ -388,3 +388,40 @@ def test_the_filter_says_once_that_premultiplied_alpha_is_divided_out(tmp_path):
     r = CliRunner().invoke(main, [str(tmp_path / "in"), "-o", str(tmp_path / "exr")])   # EXR out: nothing said
     assert r.exit_code == 0 and "premultiplied" not in r.output, r.output
     np.testing.assert_array_equal(read_image(str(tmp_path / "exr" / "a.0001.exr")).pixels, frame)
+
+
+def test_jpeg_outputs_keep_their_source_quality(tmp_path):
+    """A folder of JPEGs saved at 100 (4:4:4) and 75: their outputs were all written at OpenImageIO's default (98),
+    losing detail of the first and inflating the second. Each output now gets its source's quality, estimated from
+    its luma quantisation table (libjpeg's own tables: tolerance 0, the table matches exactly); a PNG source gets 98,
+    and --jpeg-quality sets it for all, also for a video's frames."""
+    from click.testing import CliRunner
+
+    from mlaa_stream.cli.main import main
+    from mlaa_stream.io.images import DEFAULT_JPEG_QUALITY, jpeg_quality
+
+    y, x = np.mgrid[0:48, 0:64]
+    img = np.where(((y * 2) > x)[..., None], [30, 40, 200], [230, 220, 200]).astype(np.uint8)
+    (tmp_path / "in").mkdir()
+    for q, sub in ((100, "4:4:4"), (75, "4:2:0"), (40, "4:2:0")):
+        write_raw(tmp_path / "in" / f"q{q}.jpg", img, "uint8", {"Compression": f"jpeg:{q}", "jpeg:subsampling": sub})
+        assert jpeg_quality(str(tmp_path / "in" / f"q{q}.jpg")) == q
+    assert jpeg_quality(os.path.join(DEMO, "rgb8.png")) is None
+    r = CliRunner().invoke(main, [str(tmp_path / "in"), "-o", str(tmp_path / "out")])
+    assert r.exit_code == 0, r.output
+    for q in (100, 75, 40):
+        assert jpeg_quality(str(tmp_path / "out" / f"q{q}.jpg")) == q
+    inp = oiio.ImageInput.open(str(tmp_path / "out" / "q100.jpg"))
+    assert inp.spec().get_string_attribute("jpeg:subsampling") == "4:4:4"
+    inp.close()
+    r = CliRunner().invoke(main, [str(tmp_path / "in"), "-o", str(tmp_path / "q90"), "--jpeg-quality", "90"])
+    assert r.exit_code == 0 and "no effect" not in r.output, r.output
+    assert {jpeg_quality(str(tmp_path / "q90" / f"q{q}.jpg")) for q in (100, 75, 40)} == {90}
+    r = CliRunner().invoke(main, [os.path.join(DEMO, "rgb8.png"), "-o", str(tmp_path / "from_png.jpg")])
+    assert r.exit_code == 0 and jpeg_quality(str(tmp_path / "from_png.jpg")) == DEFAULT_JPEG_QUALITY, r.output
+    clip = os.path.join(DEMO, "..", "clip.mp4")
+    r = CliRunner().invoke(main, [clip, "-o", str(tmp_path / "frames" / "%04d.jpg"), "--jpeg-quality", "85"])
+    assert r.exit_code == 0, r.output
+    assert jpeg_quality(str(tmp_path / "frames" / "0001.jpg")) == 85
+    r = CliRunner().invoke(main, [clip, "-o", str(tmp_path / "c.mp4"), "--jpeg-quality", "85"])
+    assert r.exit_code == 0 and "--jpeg-quality has no effect here" in r.output, r.output

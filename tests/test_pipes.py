@@ -12,6 +12,8 @@ import av
 import numpy as np
 import pytest
 
+from demo_maker import make_demo
+
 DEMO_CLIP = os.path.join(os.path.dirname(__file__), "..", "fixtures", "demo", "clip.mp4")
 CLI = [sys.executable, "-c", "from mlaa_stream.cli.main import main; main()"]
 
@@ -68,6 +70,24 @@ def test_standard_output_in_the_format_asked(fmt, expect):
     assert b.stdout.decode().strip() == expect
 
 
+@pytest.mark.parametrize("marker", [b"FRAME\n", b"FRAME Ip\n"])
+def test_a_y4m_stream_cut_mid_frame_on_a_pipe_is_named_truncated(tmp_path, marker):
+    """`cat cut.y4m | mlaa-stream - ...`: FFmpeg's y4m reader ends at the last whole frame without an error, and a pipe
+    cannot be measured afterwards as a file is; it exited 0 with the frames before it. Now the bytes read are counted
+    against where the demuxer's last frame ends: exit 1 naming it, the whole frames kept. A whole stream, also one
+    whose frames carry parameters (FRAME Ip), runs clean."""
+    whole = subprocess.run([sys.executable, "-c", Y4M_WRITER, "yuv420p"], capture_output=True, check=True,
+                           timeout=120).stdout.replace(b"FRAME\n", marker)
+    r = subprocess.run([*CLI, "-", "-o", str(tmp_path / "cut.mkv")], input=whole[:-100], capture_output=True,
+                       timeout=300)
+    assert r.returncode == 1, r.stderr.decode()
+    assert b"standard input: the stream ended at frame 11, " in r.stderr and b"bytes of a frame after it" in r.stderr
+    with av.open(str(tmp_path / "cut.mkv")) as c:
+        assert sum(1 for _ in c.decode(video=0)) == 11
+    r = subprocess.run([*CLI, "-", "-o", str(tmp_path / "whole.mkv")], input=whole, capture_output=True, timeout=300)
+    assert r.returncode == 0 and b"truncated" not in r.stderr, r.stderr.decode()
+
+
 def test_pipe_through_pipe_keeps_ten_bits():
     writer = subprocess.Popen([sys.executable, "-c", Y4M_WRITER, "yuv420p10le"], stdout=subprocess.PIPE)
     filt = subprocess.Popen([*CLI, "-", "-o", "-", "-f", "y4m"], stdin=writer.stdout, stdout=subprocess.PIPE,
@@ -77,6 +97,21 @@ def test_pipe_through_pipe_keeps_ten_bits():
     filt.stdout.close()
     assert filt.wait(timeout=60) == 0 and writer.wait(timeout=60) == 0
     assert r.stdout.decode().split()[2:] == ["yuv420p10le", "25", "12"]
+
+
+@pytest.mark.parametrize("fmt", ["y4m", "nut"])
+def test_a_reader_that_goes_away_stops_the_run_quietly(tmp_path, fmt):
+    """`mlaa-stream in.mkv -o - -f y4m | head -c 1000`: the reader has what it wanted and closes its end. The run
+    exited 1 with 'write failed at frame N: [Errno 32] Broken pipe'; Unix tools stop without a word, with the status
+    a shell reports for SIGPIPE (141), and no 'Exception ignored' from Python's last flush of standard output."""
+    src = tmp_path / "big.mkv"   # ~115 kB a frame out: far more than the pipe's buffer
+    make_demo.write_clip(str(src), frames=8, w=320, h=240, codec="ffv1", audio=False)
+    p = subprocess.Popen([*CLI, str(src), "-o", "-", "-f", fmt], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    first = p.stdout.read(1000)
+    p.stdout.close()
+    err = p.stderr.read().decode()
+    assert p.wait(timeout=300) == 141, err
+    assert len(first) == 1000 and "error" not in err and "Traceback" not in err and "Exception" not in err, err
 
 
 def test_pipe_misuse_is_refused_clearly(tmp_path):

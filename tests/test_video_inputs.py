@@ -324,6 +324,55 @@ def test_a_quicktime_animation_source_keeps_its_codec_and_alpha(tmp_path):
     assert len(got) == 3 and all(np.array_equal(a, b) for a, b in zip(got, alphas))
 
 
+def vp9_alphas(path) -> list[np.ndarray]:
+    """The alpha planes of a WebM VP9 file, through libvpx's decoder (FFmpeg's own VP9 decoder does not read them)."""
+    with av.open(str(path)) as c:
+        s = c.streams.video[0]
+        assert s.codec_context.name == "vp9" and str(s.metadata.get("alpha_mode")) == "1", dict(s.metadata)
+        dec = av.CodecContext.create("libvpx-vp9", "r")
+        frames = [f for p in c.demux(s) if p.size for f in dec.decode(p)]
+    return [f.to_ndarray(format="rgba")[..., 3] for f in frames]
+
+
+@pytest.mark.skipif("libvpx-vp9" not in av.codecs_available or "qtrle" not in av.codecs_available,
+                    reason="this FFmpeg has no VP9 encoder (libvpx-vp9) or no qtrle to write the source with alpha")
+@pytest.mark.parametrize("source,w,h", [("qtrle", 64, 48), ("png", 63, 47)])
+def test_a_source_with_alpha_into_webm_keeps_it_in_vp9(tmp_path, source, w, h):
+    """RGBA into WebM: a qtrle source failed to start encoding (libvpx-vp9 was given gbrap, which it lists but does
+    not open), and PNG frames with alpha lost it with a warning. Both are written as VP9 with alpha (yuva420p, WebM's
+    alpha_mode 1), odd sizes too; the alpha read back through libvpx is the source's within VP9's loss."""
+    y, x = np.mgrid[0:h, 0:w]
+    alpha = np.where(x > w // 3, 255, 60).astype(np.uint8)
+    frames = []
+    for i in range(3):
+        rgba = np.zeros((h, w, 4), np.uint8)
+        rgba[..., :3] = np.where(((y * 2 + i) > x)[..., None], [30, 40, 200], [230, 220, 200])
+        rgba[..., 3] = alpha
+        frames.append(rgba)
+    if source == "qtrle":
+        src = tmp_path / "anim.mov"
+        with av.open(str(src), "w") as c:
+            s = c.add_stream("qtrle", rate=25)
+            s.width, s.height, s.pix_fmt = w, h, "argb"
+            for rgba in frames:
+                for p in s.encode(av.VideoFrame.from_ndarray(rgba, format="rgba").reformat(format="argb")):
+                    c.mux(p)
+            for p in s.encode():
+                c.mux(p)
+    else:
+        src = tmp_path / "frames"
+        src.mkdir()
+        for i, rgba in enumerate(frames):
+            make_demo.write_oiio(str(src / f"f{i:04d}.png"), rgba, "uint8")
+    res = run(src, "-o", tmp_path / "out.webm")
+    assert res.exit_code == 0 and "alpha is not kept" not in res.output and "alpha dropped" not in res.output, \
+        res.output
+    got = vp9_alphas(tmp_path / "out.webm")
+    assert len(got) == 3
+    for a in got:
+        assert a.shape == (h, w) and np.abs(a.astype(int) - alpha).mean() < 2, np.abs(a.astype(int) - alpha).mean()
+
+
 @pytest.mark.skipif("libvpx-vp9" not in av.codecs_available, reason="this FFmpeg has no VP9 encoder")
 def test_a_webm_whose_vp9_alpha_is_not_read_is_named(tmp_path):
     """WebM VP9 keeps alpha in a side stream (alpha_mode 1) that FFmpeg's own VP9 decoder does not read: the output

@@ -87,7 +87,7 @@ def _worker_filter(kwargs: dict):
 
 
 def filter_chunk(chunk: Chunk, filter_kwargs: dict, overwrite: bool, strict: bool,
-                 like: tuple | None = None, temporal=None) -> ChunkResult:
+                 like: tuple | None = None, temporal=None, jpeg_quality: int | None = None) -> ChunkResult:
     """Run on a worker: read, filter and write the chunk's frames. Outputs a previous run of this chunk
     completed are kept (a rerun after a worker died). Raises (and the task is retried) where a sequence
     would stop on one machine. `temporal` (a TemporalSpec): a new stage runs over the chunk's warm-up
@@ -109,7 +109,7 @@ def filter_chunk(chunk: Chunk, filter_kwargs: dict, overwrite: bool, strict: boo
     while True:
         report = Report()
         warmup = chunk.warmup[max(0, len(chunk.warmup) - w):] if w else ()
-        sink = image_sink(report, overwrite=True, strict=strict)
+        sink = image_sink(report, overwrite=True, strict=strict, jpeg_quality=jpeg_quality)
         stage = hook = None
         read = todo
         if temporal is not None:
@@ -180,7 +180,7 @@ def _with_temporal(stage, files: list[FrameFile], warm: set, report: Report, str
 def run_chunks(client, files: list[FrameFile], filter_kwargs: dict, *, overwrite: bool, strict: bool,
                chunk_frames: int = CHUNK_FRAMES, on_frames: Callable[[int], None] | None = None,
                say: Callable[[str], None] | None = None, temporal=None,
-               done: frozenset[str] = frozenset()) -> Report:
+               done: frozenset[str] = frozenset(), jpeg_quality: int | None = None) -> Report:
     """Filter `files` on the cluster behind `client`; returns what happened to each file. Progress:
     `on_frames(done)` after each chunk. Raises ClusterJobError naming the chunk that failed twice.
     `temporal`: a TemporalSpec (mlaa_stream/cluster/temporal.py), or None for the spatial filter only.
@@ -200,7 +200,8 @@ def run_chunks(client, files: list[FrameFile], filter_kwargs: dict, *, overwrite
         from mlaa_stream.io.images import read_image
         first = read_image(files[0].src)
         like = ((first.pixels.shape, first.pixels.dtype), files[0])
-    futures = {client.submit(filter_chunk, c, filter_kwargs, overwrite, strict, like, temporal, retries=1, pure=False,
+    futures = {client.submit(filter_chunk, c, filter_kwargs, overwrite, strict, like, temporal, jpeg_quality,
+                             retries=1, pure=False,
                              key=f"mlaa-chunk-{c.index}-{os.getpid()}-{id(files)}"): c for c in chunks}
     frames = 0
     failure: BaseException | None = None

@@ -213,9 +213,26 @@ def default_choice(devices: list, problem=compile_problem) -> tuple[object, str]
     return devices[0], "no GPU or CPU device; the first device (a simulator or accelerator)"
 
 
+def _identity(dev) -> tuple:
+    """What a device says of itself and its runtime: equal for one driver registered twice (two ICD files)."""
+    return (dev.platform.name, dev.platform.version, dev.name, dev.version, dev.driver_version, dev.vendor_id,
+            dev.global_mem_size, dev.max_compute_units)
+
+
+def same_device(a, b) -> bool:
+    """True when two listed devices are one: the same OpenCL device listed twice, or one driver registered twice (its
+    devices then come under two platforms that say the same of themselves). Two GPUs of one model on one platform
+    are two devices, whatever their names."""
+    if a.int_ptr == b.int_ptr:
+        return True
+    return a.platform.int_ptr != b.platform.int_ptr and _identity(a) == _identity(b)
+
+
 def select_device(spec: str | int | None = None):
     """Pick a device: `spec` (index or name substring), else $MLAA_STREAM_DEVICE, else
-    `default_choice` (a real GPU, else PoCL's CPU device, else the first)."""
+    `default_choice` (a real GPU, else PoCL's CPU device, else the first). A name that matches several
+    devices (that are not one listed twice, same_device) is a DeviceError listing them: the first of them is not
+    necessarily the one meant (two GPUs of a kind, two CPU runtimes)."""
     devices = _all_devices()
     source = ""  # where the spec came from, in errors: a user who typed no --device must learn it was the variable
     if spec is None or spec == "":
@@ -230,12 +247,18 @@ def select_device(spec: str | int | None = None):
             raise DeviceError(f"{source}expected a device index below {len(devices)}, got {i} "
                               f"(see 'mlaa-stream devices')")
         return devices[i]
-    matches = [d for d in devices if s.lower() in f"{d.platform.name} {d.name}".lower()
+    matches = [(i, d) for i, d in enumerate(devices) if s.lower() in f"{d.platform.name} {d.name}".lower()
                or s.upper() == _kind(d)]
     if not matches:
         names = ", ".join(d.name.strip() for d in devices)
         raise DeviceError(f"{source}no OpenCL device matches {s!r}; available: {names}")
-    return matches[0]
+    distinct = [(i, d) for k, (i, d) in enumerate(matches) if not any(same_device(d, e) for _, e in matches[:k])]
+    if len(distinct) > 1:
+        listed = "; ".join(f"{i}: {d.name.strip()} ({_kind(d)}, {_runtime(d)})" for i, d in distinct)
+        pick = f"{DEVICE_ENV}={distinct[0][0]}" if source else f"--device {distinct[0][0]}"
+        raise DeviceError(f"{source}{s!r} matches {len(distinct)} OpenCL devices ({listed}); pick one by its index, "
+                          f"e.g. {pick}, or by more of its name ('mlaa-stream devices' lists them)")
+    return matches[0][1]
 
 
 # Programs built from more than one file, in this order (after common.cl): the long passes are split

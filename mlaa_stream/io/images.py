@@ -12,6 +12,7 @@ import itertools
 import os
 import re
 import shutil
+import struct
 import tempfile
 from dataclasses import dataclass
 from functools import lru_cache
@@ -48,6 +49,7 @@ class Image:
     spec: oiio.ImageSpec
     path: str
     conversions: tuple[str, ...] = ()  # colour-model changes made on reading (CMYK, palette), to report
+    quality: int | None = None  # a JPEG's quality, estimated from its quantisation table (jpeg_quality): kept
 
     @property
     def channel_names(self) -> tuple[str, ...]:
@@ -136,12 +138,79 @@ def read_image(path: str) -> Image:
         spec = oiio.ImageSpec(spec)  # a copy that outlives the ImageInput
         if spec.alpha_channel >= 0 and inp.format_name() not in _PREMULTIPLIED_FORMATS:
             spec.attribute("oiio:UnassociatedAlpha", 1)  # straight alpha, also where the reader does not say so (BMP)
+        quality = jpeg_quality(path) if inp.format_name() == "jpeg" else None
     finally:
         inp.close()
     pixels = np.asarray(pixels)
     if pixels.ndim == 2:
         pixels = pixels[:, :, None]
-    return Image(pixels=pixels, spec=spec, path=path, conversions=conversions)
+    return Image(pixels=pixels, spec=spec, path=path, conversions=conversions, quality=quality)
+
+
+# JPEG outputs whose source had no quality to keep (not a JPEG): OpenImageIO's own default (measured: its
+# quantisation tables are libjpeg's at 98), what they were written at before.
+DEFAULT_JPEG_QUALITY = 98
+_JPEG_EXTENSIONS = frozenset({".jpg", ".jpeg", ".jpe", ".jfif"})
+# libjpeg's (IJG's) base luminance quantisation table (ITU T.81 Annex K), in natural order, and the zigzag order
+# a DQT segment stores tables in (position k of the segment holds entry _ZIGZAG[k])
+_IJG_LUMINANCE = (16, 11, 10, 16, 24, 40, 51, 61, 12, 12, 14, 19, 26, 58, 60, 55, 14, 13, 16, 24, 40, 57, 69, 56,
+                  14, 17, 22, 29, 51, 87, 80, 62, 18, 22, 37, 56, 68, 109, 103, 77, 24, 35, 55, 64, 81, 104, 113, 92,
+                  49, 64, 78, 87, 103, 121, 120, 101, 72, 92, 95, 98, 112, 100, 103, 99)
+_ZIGZAG = (0, 1, 8, 16, 9, 2, 3, 10, 17, 24, 32, 25, 18, 11, 4, 5, 12, 19, 26, 33, 40, 48, 41, 34, 27, 20, 13, 6, 7, 14,
+           21, 28, 35, 42, 49, 56, 57, 50, 43, 36, 29, 22, 15, 23, 30, 37, 44, 51, 58, 59, 52, 45, 38, 31, 39, 46, 53,
+           60, 61, 54, 47, 55, 62, 63)
+
+
+def _ijg_table(quality: int) -> tuple[int, ...]:
+    """The luminance table libjpeg's jpeg_set_quality(quality, force_baseline=TRUE) writes, in zigzag order."""
+    scale = 5000 // quality if quality < 50 else 200 - 2 * quality
+    return tuple(min(max((_IJG_LUMINANCE[n] * scale + 50) // 100, 1), 255) for n in _ZIGZAG)
+
+
+def _luminance_table(path: str) -> tuple[int, ...] | None:
+    """A JPEG's quantisation table 0 (luma's, in zigzag order) from its DQT segment, or None (no JPEG, no table)."""
+    try:
+        with open(path, "rb") as fh:
+            if fh.read(2) != b"\xff\xd8":
+                return None
+            while True:
+                if fh.read(1) != b"\xff":
+                    return None   # segments follow each other: anything else is a damaged file
+                marker = fh.read(1)
+                while marker == b"\xff":  # fill bytes
+                    marker = fh.read(1)
+                if not marker or marker in (b"\xda", b"\xd9"):  # the scan (or the end) before any table 0
+                    return None
+                if 0xd0 <= marker[0] <= 0xd7 or marker == b"\x01":  # markers without a length
+                    continue
+                head = fh.read(2)
+                if len(head) < 2:
+                    return None
+                data = fh.read(struct.unpack(">H", head)[0] - 2)
+                if marker != b"\xdb":
+                    continue
+                i = 0
+                while i < len(data):  # a DQT segment may hold several tables: Pq (precision) Tq (id), 64 values
+                    wide, table = data[i] >> 4, data[i] & 15
+                    size = 128 if wide else 64
+                    values = data[i + 1:i + 1 + size]
+                    if len(values) < size:
+                        return None
+                    if table == 0:
+                        return tuple(struct.unpack(">64H", values)) if wide else tuple(values)
+                    i += 1 + size
+    except OSError:
+        return None
+
+
+def jpeg_quality(path: str) -> int | None:
+    """The quality (1-100) a JPEG was saved at, estimated from its luma quantisation table: the libjpeg quality
+    whose table is nearest (sum of absolute differences; exact for libjpeg's own -- OpenImageIO, Pillow, ImageMagick,
+    GIMP, ffmpeg -- other encoders' tables, a camera's, get the nearest). None where the file has no table."""
+    table = _luminance_table(path)
+    if table is None:
+        return None
+    return min(range(1, 101), key=lambda q: sum(abs(a - b) for a, b in zip(_ijg_table(q), table)))
 
 
 def _conversions(path: str, spec: oiio.ImageSpec) -> tuple[str, ...]:
@@ -471,13 +540,14 @@ def srgb_encoded(pixels: np.ndarray, spec: oiio.ImageSpec) -> tuple[np.ndarray, 
 
 
 def write_image(path: str, pixels: np.ndarray, spec: oiio.ImageSpec | None = None, *,
-                overwrite: bool = False, linear: bool = False) -> bool:
+                overwrite: bool = False, linear: bool = False, quality: int | None = None) -> bool:
     """Write `pixels` to `path` atomically (temporary name, then rename), in the spec's sample type.
 
     Without a spec the sample type is the array's and alpha is straight (as decoded video has it). Premultiplied
     alpha (is_premultiplied: EXR) is divided out for a format of straight alpha (unpremultiplies: PNG). `linear`:
     float pixels are linear light (is_linear); where the format stores integers they are encoded to sRGB
-    (srgb_encoded), else written as they are. True when they were encoded. A full disk raises OSError(ENOSPC);
+    (srgb_encoded), else written as they are. True when they were encoded. `quality`: a JPEG output's, 1-100 (the
+    source JPEG's, Image.quality, or --jpeg-quality); None: DEFAULT_JPEG_QUALITY. A full disk raises OSError(ENOSPC);
     any other failure raises ImageWriteError naming the file.
     """
     pixels = np.ascontiguousarray(pixels)
@@ -496,6 +566,9 @@ def write_image(path: str, pixels: np.ndarray, spec: oiio.ImageSpec | None = Non
     encode = linear and pixels.dtype.kind == "f" and is_display_encoded(path, spec)
     if encode:
         pixels, spec = srgb_encoded(pixels, spec)
+    if os.path.splitext(path)[1].lower() in _JPEG_EXTENSIONS:
+        # OpenImageIO's writer takes the quality from "Compression" (jpeg:N); a JPEG source's spec carries none
+        spec.attribute("Compression", f"jpeg:{min(max(int(quality or DEFAULT_JPEG_QUALITY), 1), 100)}")
     tmp = temp_path_for(path)
     try:
         _write_file(tmp, pixels, spec, path)

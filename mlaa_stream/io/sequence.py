@@ -284,10 +284,12 @@ def _data_window(image: Image) -> str:
             f"{spec.full_height} display window; a sequence keeps one data window size)")
 
 
-def image_sink(report: Report, *, overwrite: bool, strict: bool) -> Callable[[Item], None]:
+def image_sink(report: Report, *, overwrite: bool, strict: bool,
+               jpeg_quality: int | None = None) -> Callable[[Item], None]:
     """Write each filtered frame back in its source's format and metadata, atomically; linear-light frames
     written to an integer format are encoded to sRGB and premultiplied alpha written to a format of straight alpha
-    is divided out (write_image), each said once through report.caution.
+    is divided out (write_image), each said once through report.caution. JPEG outputs get `jpeg_quality` (1-100,
+    --jpeg-quality), else their JPEG source's quality, else write_image's default.
 
     A full disk (or a read-only file system) always stops the run; other write failures stop a
     sequence (strict) but only skip the file in a folder.
@@ -295,7 +297,8 @@ def image_sink(report: Report, *, overwrite: bool, strict: bool) -> Callable[[It
     def sink(item: Item) -> None:
         ff, image, merge = item.meta
         try:
-            encoded = write_image(ff.dst, merge(item.frame), image.spec, overwrite=overwrite, linear=is_linear(image))
+            encoded = write_image(ff.dst, merge(item.frame), image.spec, overwrite=overwrite, linear=is_linear(image),
+                                  quality=jpeg_quality or image.quality)
         except ImageWriteError as exc:
             if strict:
                 raise

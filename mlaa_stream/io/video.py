@@ -189,7 +189,7 @@ def open_pipe(fmt: str | None = None, stream=None) -> tuple[VideoInfo, object]:
     """Open standard input (or `stream`) as a video container (y4m, NUT, Matroska, MPEG-TS: formats that
     need no seeking) and describe it; the container is returned for read_video, as a pipe opens once."""
     _require_av()
-    src = stream if stream is not None else sys.stdin.buffer
+    src = _CountedInput(stream if stream is not None else sys.stdin.buffer)
     try:
         container = av.open(src, format=container_format_for(fmt, "") if fmt else None)
     except (av.error.FFmpegError, OSError, ValueError) as exc:
@@ -199,6 +199,23 @@ def open_pipe(fmt: str | None = None, stream=None) -> tuple[VideoInfo, object]:
     except BaseException:
         container.close()
         raise
+
+
+class _CountedInput:
+    """A pipe as PyAV reads it, counting the bytes read: FFmpeg's y4m reader ends at the last whole frame of a stream
+    cut short without an error, and a pipe cannot be measured afterwards as a file is (_y4m_leftover). Only read():
+    without seek and tell PyAV takes it as unseekable, as it took standard input itself."""
+
+    def __init__(self, raw):
+        self._raw = raw
+        self.consumed = 0  # bytes read so far
+        self.ended = False  # an empty read: the writer closed its end
+
+    def read(self, size: int = -1) -> bytes:
+        data = self._raw.read(size)
+        self.consumed += len(data)
+        self.ended = self.ended or not data
+        return data
 
 
 def _describe(container, path: str, rotation: int, hdr10: tuple[str, ...] = ()) -> VideoInfo:
@@ -392,6 +409,7 @@ def read_video(info: VideoInfo, *, check_length: bool = True, start: float | Non
         except (av.error.FFmpegError, OSError) as exc:
             raise VideoReadError(f"{path}: cannot open: {exc}", 0) from exc
     n, last_time = 0, None
+    data_end = None  # the stream offset where the last packet's data ends (y4m on a pipe: _y4m_pipe_leftover)
     half = 0.5 / float(info.fps or 25)  # a frame counts as inside [start, end) by its timestamp
     try:
         stream = container.streams.video[0]
@@ -401,6 +419,8 @@ def read_video(info: VideoInfo, *, check_length: bool = True, start: float | Non
             container.seek(int(start / stream.time_base), stream=stream, backward=True, any_frame=False)
         try:
             for packet in container.demux(stream):
+                if packet.size and packet.pos is not None and packet.pos >= 0:
+                    data_end = packet.pos + packet.size
                 for frame in packet.decode():
                     ft = float(frame.pts * frame.time_base) if frame.pts is not None and frame.time_base else None
                     if start and ft is not None and ft < start - half:
@@ -426,7 +446,7 @@ def read_video(info: VideoInfo, *, check_length: bool = True, start: float | Non
         if not n and require_frames and (start or end is not None):
             raise _nothing_between(path, start, end, info)
         if check_length and not start and end is None:
-            _check_length(info, n, last_time)
+            _check_length(info, n, last_time, _y4m_pipe_leftover(container, data_end))
     finally:
         container.close()
 
@@ -461,10 +481,23 @@ def _y4m_leftover(path: str, n: int, info: VideoInfo) -> int:
     return max(0, size - len(header) - n * record)
 
 
-def _check_length(info: VideoInfo, n: int, last_time: float | None) -> None:
+def _y4m_pipe_leftover(container, data_end: int | None) -> int:
+    """Bytes of a y4m stream on a pipe (open_pipe) after its last whole frame: 0 where it ends there, or where it is
+    no y4m, was not read to its end or is not a pipe. The demuxer's packets say where their data lies in the stream
+    (frame parameters and all), _CountedInput how many bytes the pipe held."""
+    src = getattr(container, "file", None)
+    src = src if isinstance(src, _CountedInput) else getattr(src, "file", None)  # PyAV 18: its wrapper, PyIOFile
+    if not isinstance(src, _CountedInput) or not src.ended or data_end is None \
+            or "yuv4mpegpipe" not in container.format.name.split(","):
+        return 0
+    return max(0, src.consumed - data_end)
+
+
+def _check_length(info: VideoInfo, n: int, last_time: float | None, pipe_leftover: int = 0) -> None:
     """VideoReadError when a stream that decoded without an error still ended early: fewer frames
     than the container declares, or (no declared count: MKV, WebM, variable frame rates) its last
-    frame well before the declared duration. Durations are not frame counts when the rate varies."""
+    frame well before the declared duration, or a y4m file or pipe (`pipe_leftover`: _y4m_pipe_leftover) holds
+    bytes of a frame after its last whole one. Durations are not frame counts when the rate varies."""
     if not n:  # a y4m header and no FRAME (vspipe failing before its first frame): no video to write
         raise VideoReadError(f"{'standard input' if info.path == PIPE else info.path}: expected video frames, "
                              f"the stream holds none", 0)
@@ -472,6 +505,9 @@ def _check_length(info: VideoInfo, n: int, last_time: float | None) -> None:
     if left:
         raise VideoReadError(f"{info.path}: the stream ended at frame {n}, {left} bytes of a frame after it (truncated "
                              f"file?)", n)
+    if pipe_leftover:  # the program writing the pipe stopped mid-frame (killed, out of disk, a crash)
+        raise VideoReadError(f"standard input: the stream ended at frame {n}, {pipe_leftover} bytes of a frame after "
+                             f"it (truncated stream: did the program writing it stop early?)", n)
     expected = info.frames
     if info.frames_declared and expected and n + max(2, expected // 50) < expected:
         raise VideoReadError(f"{info.path}: the stream ended at frame {n}, expected {expected} "
@@ -483,11 +519,20 @@ def _check_length(info: VideoInfo, n: int, last_time: float | None) -> None:
                                  f"expected {info.duration:.2f} s (truncated file?)", n)
 
 
+# Encoders that list alpha formats they cannot open: libvpx-vp9 encodes alpha only as a second 4:2:0 VP9 stream
+# (WebM's alpha_mode 1), at any frame size, odd ones too; with yuva422p, yuva444p or gbrap avcodec_open2 fails (EINVAL,
+# measured with FFmpeg 8.1: an RGBA source into WebM failed to start encoding).
+_ALPHA_FORMATS_OPENED = {"libvpx-vp9": ("yuva420p",)}
+
+
 def choose_pix_fmt(codec: str, src_pix_fmt: str, width: int, height: int) -> str | None:
     """The codec's pixel format closest to the source: same bits (or more), alpha kept if possible,
     chroma subsampling only where the size allows it; RGB first for lossless intermediates."""
     _require_av()
     formats = [f.name for f in (av.Codec(codec, "w").video_formats or ())]
+    opened = _ALPHA_FORMATS_OPENED.get(codec)
+    if opened is not None:  # the alpha formats the encoder lists but refuses
+        formats = [n for n in formats if n in opened or not _format_bits_alpha(n)[1]]
     if not formats:
         return None
     sbits, salpha = _format_bits_alpha(src_pix_fmt)
@@ -502,6 +547,7 @@ def choose_pix_fmt(codec: str, src_pix_fmt: str, width: int, height: int) -> str
         sub_w = f.chroma_width(2) < 2
         sub_h = f.chroma_height(2) < 2
         fits = (not sub_w or width % 2 == 0) and (not sub_h or height % 2 == 0)
+        fits = fits or (salpha and name in (opened or ()))   # libvpx-vp9's yuva420p: any size
         return (not fits, salpha and not alpha, bits < sbits, name.startswith(("nv", "yuvj", "bayer")),
                 lossless and not f.is_rgb, name != src_pix_fmt,
                 f.is_rgb != src.is_rgb, (sub_w or sub_h) != src_sub, abs(bits - sbits), alpha != salpha,
@@ -595,7 +641,7 @@ class VideoWriter:
             raise
         except Exception as exc:
             self._close_quietly()
-            raise VideoError(f"{path}: cannot start encoding with {codec} ({self.pix_fmt}): {exc}") from exc
+            raise VideoError(f"{path}: cannot start encoding with {self.codec} ({self.pix_fmt}): {exc}") from exc
 
     # -- setup ---------------------------------------------------------------------------------
     def _open(self, keep: tuple[str, ...]) -> None:
