@@ -9,7 +9,8 @@ import click
 device_option = click.option(
     "--device", "device", default=None, metavar="N|NAME",
     help="OpenCL device: index or name part from 'mlaa-stream devices' (a part that names several devices is an "
-         "error listing them: give the index) (default: $MLAA_STREAM_DEVICE, else a GPU, else the CPU).")
+         "error listing them: give the index), or gpu / cpu: the one of that kind the default would pick "
+         "(default: $MLAA_STREAM_DEVICE, else a GPU, else the CPU).")
 
 
 def verbosity_options(f):

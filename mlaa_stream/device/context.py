@@ -230,9 +230,10 @@ def same_device(a, b) -> bool:
 
 def select_device(spec: str | int | None = None):
     """Pick a device: `spec` (index or name substring), else $MLAA_STREAM_DEVICE, else
-    `default_choice` (a real GPU, else PoCL's CPU device, else the first). A name that matches several
-    devices (that are not one listed twice, same_device) is a DeviceError listing them: the first of them is not
-    necessarily the one meant (two GPUs of a kind, two CPU runtimes)."""
+    `default_choice` (a real GPU, else PoCL's CPU device, else the first). "gpu" / "cpu" pick the device of that
+    kind that `default_choice` would pick among them. A name that matches several devices (that are not one listed
+    twice, same_device) is a DeviceError listing them: the first of them is not necessarily the one meant (two GPUs
+    of a kind, two CPU runtimes)."""
     devices = _all_devices()
     source = ""  # where the spec came from, in errors: a user who typed no --device must learn it was the variable
     if spec is None or spec == "":
@@ -247,6 +248,9 @@ def select_device(spec: str | int | None = None):
             raise DeviceError(f"{source}expected a device index below {len(devices)}, got {i} "
                               f"(see 'mlaa-stream devices')")
         return devices[i]
+    of_kind = [d for d in devices if s.upper() in ("GPU", "CPU") and _kind(d) == s.upper()]
+    if of_kind:   # a kind word: that kind's device the default would pick (two CPU runtimes are no error here)
+        return default_choice(of_kind, problem=compile_problem)[0]
     matches = [(i, d) for i, d in enumerate(devices) if s.lower() in f"{d.platform.name} {d.name}".lower()
                or s.upper() == _kind(d)]
     if not matches:
