@@ -106,3 +106,42 @@ def test_frames_that_are_not_linear_light_are_never_scaled():
         assert np.array_equal(auto.process(dark_u16), plain.process(dark_u16))
     with Filter() as auto, Filter(auto_exposure=False) as plain:
         assert np.array_equal(auto.process(dark_float), plain.process(dark_float))
+
+
+def test_held_exposure_keeps_its_scale_within_a_stop_and_changes_past_it():
+    """A sequence's key wobbling around a half-stop boundary keeps one scale; a jump of 2+ stops changes it."""
+    from mlaa_stream.spatial.exposure import HeldExposure
+    held = HeldExposure()
+    frame = np.full((8, 8, 3), 1.0, np.float32)
+    assert held.update(frame * 0.72) is False and held.scale == 1.0      # the first frame: no change to report
+    for k in (0.70, 0.68, 0.4, 1.9, 0.72):                               # own scales 2, 2, 2, 0.5, 1: held
+        assert held.update(frame * k) is False and held.scale == 1.0
+    assert held.update(frame * 0.2) is True and held.scale == 4.0        # 2 stops: taken, the ring restarts
+    assert held.update(frame * 0.3) is False and held.scale == 4.0
+
+
+def test_temporal_supersampling_of_linear_frames_does_not_depend_on_their_exposure():
+    """TSS on a sub-pixel pan in linear light: at 2^-6 and 2^5 of its exposure the outputs are that exposure times
+    the outputs at 1, bit for bit, and TSS takes samples there (it differs from the spatial output); without
+    auto_exposure the dark pan's resolve is another (its motion measured on a near-black grey)."""
+    from mlaa_stream.bench.temporal import scene_pan
+    from mlaa_stream.temporal.tss import TSSStage
+    from mlaa_stream.yardstick.scenes import srgb8_to_linear
+    pan = [srgb8_to_linear(f).astype(np.float32) for f in scene_pan(6, 160, 96).inputs]
+
+    def run(scale: float, auto: bool) -> tuple[np.ndarray, np.ndarray]:
+        s = np.float32(scale)
+        with Filter(None, bgr=False, linear_input=True) as filt, \
+                TSSStage(context=filt.context, bgr=False, linear_input=True, auto_exposure=auto) as stage:
+            spatial = [filt.process(f * s) for f in pan]
+            outs = [stage(f * s, sp, i) for i, (f, sp) in enumerate(zip(pan, spatial))]
+        return np.stack(outs), np.stack(spatial)
+
+    base, spatial = run(1.0, True)
+    assert np.any(base[2:] != spatial[2:], axis=-1).sum() > 200
+    for stops in (-6, 5):
+        s = np.float32(2.0 ** stops)
+        outs, _ = run(float(s), True)
+        np.testing.assert_array_equal(outs, base * s)
+    plain, _ = run(2.0 ** -6, False)
+    assert not np.array_equal(plain, base * np.float32(2.0 ** -6))

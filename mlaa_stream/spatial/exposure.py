@@ -26,8 +26,8 @@ def colour_view(frame: np.ndarray) -> np.ndarray:
 
 
 def exposure_scale(frame: np.ndarray) -> float:
-    """The power of two by which to multiply the colour of the linear-light float `frame` (finite samples) so that
-    its key lands nearest to 1 on a logarithmic scale; 1.0 where the key is not positive (a black frame)."""
+    """The power of two by which to multiply the colour of the linear-light float `frame` so that its key lands
+    nearest to 1 on a logarithmic scale; 1.0 where the key is not positive (a black frame) or not finite."""
     colour = colour_view(frame)
     stride = max(1, int(np.sqrt(colour.shape[0] * colour.shape[1] / KEY_SAMPLES)))
     colour = colour[::stride, ::stride]
@@ -40,7 +40,7 @@ def exposure_scale(frame: np.ndarray) -> float:
     peak = peak.ravel()
     k = min(peak.size - 1, int(peak.size * KEY_PERCENTILE / 100))
     key = float(np.partition(peak, k)[k])
-    if not key > 0.0:
+    if not (key > 0.0 and np.isfinite(key)):   # black, or mostly NaN / inf (a caller that did not replace them)
         return 1.0
     stops = int(np.clip(np.round(-np.log2(key)), -MAX_STOPS, MAX_STOPS))
     if stops > 0:   # brightening: the frame's largest sample must stay in range
@@ -55,3 +55,32 @@ def scale_colour(frame: np.ndarray, scale: float) -> None:
     if scale != 1.0:
         colour = colour_view(frame)
         np.multiply(colour, frame.dtype.type(scale), out=colour)
+
+
+def exposed(frame: np.ndarray, scale: float) -> np.ndarray:
+    """A copy of the float `frame` with its colour channels multiplied by `scale` (a power of two: exact)."""
+    out = np.array(frame, copy=True)
+    scale_colour(out, scale)
+    return out
+
+
+class HeldExposure:
+    """The scale of a sequence whose frames share state (the temporal stage's ring): a frame's own scale
+    (exposure_scale) replaces the held one only when the two differ by more than HOLD_STOPS stops (the frame's key
+    then lies over 1.5 stops from 1 at the held scale), so a key near a half-stop boundary does not switch scales,
+    and restart the ring, frame after frame."""
+
+    HOLD_STOPS = 1
+
+    def __init__(self) -> None:
+        self.scale: float | None = None
+
+    def update(self, frame: np.ndarray) -> bool:
+        """Take `frame`'s own scale where it must change; True when it changed (what was held at the old scale is
+        another exposure's)."""
+        own = exposure_scale(frame)
+        if self.scale is not None and abs(np.log2(own / self.scale)) <= self.HOLD_STOPS:
+            return False
+        changed = self.scale is not None
+        self.scale = own
+        return changed

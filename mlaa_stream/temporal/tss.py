@@ -72,6 +72,7 @@ import numpy as np
 
 from mlaa_stream.device.colour import device_luts, lut_read
 from mlaa_stream.device.formats import LUT_SIZE, frame_format
+from mlaa_stream.spatial.exposure import HeldExposure, exposed
 from mlaa_stream.spatial.noise import level_of, luma256, quiet_pixels
 from mlaa_stream.spatial.nonfinite import restore_out_of_range
 from mlaa_stream.temporal.layers import (STILL_AGE, STILL_SHIFT, CompositionalPoints, ahead_fields, background_of,
@@ -1198,7 +1199,7 @@ class TSSStage:
                  mode: str = "adaptive", grid: int = GRID, eps: float = EPS, min_cells: int = MIN_CELLS,
                  full_cells: int | None = None, refine: bool = True, fb_check: bool = True, show: str | None = None,
                  context=None, backend: str = "device", dense_samples: bool = False, lookahead: int = 0,
-                 linear_input: bool = False):
+                 linear_input: bool = False, auto_exposure: bool = True):
         if int(frames) < 1:
             raise ValueError(f"frames: expected K >= 1, got {frames!r}")
         if int(lookahead) < 0:
@@ -1213,6 +1214,9 @@ class TSSStage:
             raise ValueError(f"mode: expected adaptive, dense, global or static, got {mode!r}")
         self.frames, self.bgr, self.mode, self.show = int(frames), bool(bgr), mode, show
         self.linear_input = bool(linear_input)   # frames are linear light (EXR): no sRGB decode, grey encoded
+        # linear-light float frames are resolved at the power of two of exposure that puts their key near 1, as the
+        # spatial filter sees them (spatial/exposure.py), held over the shot; False: at the exposure they come in
+        self.exposure = HeldExposure() if auto_exposure else None
         self.lookahead = int(lookahead)   # N: frames after the current one the caller hands in (`future`)
         self.grid, self.eps, self.min_cells = int(grid), float(eps), int(min_cells)
         ahead = int(FULL_CELLS_AHEAD * self.lookahead + 0.5)
@@ -1286,12 +1290,26 @@ class TSSStage:
             fin, fout = fin.astype(np.float32), fout.astype(np.float32)
             ahead = [f.astype(np.float32) for f in ahead]
         with self._lock:
+            scale = self._exposure(fin)
+            if scale != 1.0:   # copies: the caller's frames stay as they are
+                fin, fout, ahead = exposed(fin, scale), exposed(fout, scale), [exposed(f, scale) for f in ahead]
             out = self._step(fin, fout, int(index), ahead)
         if self.show is not None:
             return out
         out = self._grain_stands(fin, fout, out, int(index))
+        if scale != 1.0:
+            out = exposed(out, 1.0 / scale)
         # NaN, inf and samples beyond ±1e15 pass through as the spatial filter passes them (spatial/nonfinite.py)
         return restore_out_of_range(frame_in, out.astype(frame_filtered.dtype) if wide else out)
+
+    def _exposure(self, fin: np.ndarray) -> float:
+        """The scale the frame is resolved at: 1 but for linear-light float frames (auto_exposure); a change of
+        the held scale starts a new ring (its samples are another exposure's)."""
+        if self.exposure is None or not self.linear_input or fin.dtype.kind != "f":
+            return 1.0
+        if self.exposure.update(fin):
+            self.reset()
+        return self.exposure.scale
 
     def _grain_stands(self, fin: np.ndarray, fout: np.ndarray, out: np.ndarray, index: int) -> np.ndarray:
         """`out` with the spatial pixel back where the input's 3x3 window spans no more than its grain (quiet
