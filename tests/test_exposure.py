@@ -145,3 +145,26 @@ def test_temporal_supersampling_of_linear_frames_does_not_depend_on_their_exposu
         np.testing.assert_array_equal(outs, base * s)
     plain, _ = run(2.0 ** -6, False)
     assert not np.array_equal(plain, base * np.float32(2.0 ** -6))
+
+
+def test_the_blend_after_temporal_supersampling_sees_the_same_exposure():
+    """Method tss+blend (the blend everywhere) on linear frames: at 2^-5 of the exposure the outputs are 2^-5 times
+    the outputs at 1, bit for bit (the blend's history is held at TSS's scale)."""
+    from mlaa_stream.bench.temporal import scene_pan
+    from mlaa_stream.temporal.methods import make_stage
+    from mlaa_stream.yardstick.scenes import srgb8_to_linear
+    pan = [srgb8_to_linear(f).astype(np.float32) for f in scene_pan(5, 160, 96).inputs]
+
+    def run(scale: float) -> np.ndarray:
+        s = np.float32(scale)
+        with Filter(None, bgr=False, linear_input=True) as filt, \
+                make_stage("tss+blend", filt.context, bgr=False, linear_input=True) as stage:
+            return np.stack([stage(f * s, filt.process(f * s), i) for i, f in enumerate(pan)])
+
+    base = run(1.0)
+    assert stage_changed(base, pan) and np.isfinite(base).all()
+    np.testing.assert_array_equal(run(2.0 ** -5), base * np.float32(2.0 ** -5))
+
+
+def stage_changed(outs: np.ndarray, inputs: list[np.ndarray]) -> bool:
+    return bool(np.any(outs[1:] != np.stack(inputs)[1:]))

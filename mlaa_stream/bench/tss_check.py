@@ -29,9 +29,10 @@ homography_maps: slow, a measurement of the model, not of a fast estimator), and
 with the blend's dense flow replaced by the exact one (TSS as usual). How much better motion could buy.
 --dense-samples: the rows run TSS with dense_samples (per-tile tracked motion on dense frames; named
 "<method>+N:dense"). The "ms" column: the stage's wall time per frame, mean over the frames after the first.
---hdr SCALE[,SCALE...]: rows for linear-light HDR frames (what an EXR sequence gives): the bench's pan, its input
-and truth sRGB-decoded and multiplied by SCALE, float32, the filter and the stage with linear_input; error
-removed in linear light (the temporal measures as for the other rows, FLIP and damage not scored).
+--hdr SCALE[,SCALE...]: rows for linear-light HDR frames (what an EXR sequence gives): the bench's pan (or the
+animated scene --hdr-scene names, e.g. rendered_pan), its input and truth sRGB-decoded and multiplied by SCALE,
+float32, the filter and the stage with linear_input; error removed in linear light (the temporal measures as for the
+other rows, FLIP and damage not scored).
 """
 from __future__ import annotations
 
@@ -45,7 +46,7 @@ from mlaa_stream.spatial.filter import Filter
 from mlaa_stream.temporal import tss as T
 from mlaa_stream.temporal.methods import DEFAULT_LOOKAHEAD, METHODS, make_stage, needs_regions
 from mlaa_stream.yardstick import metrics as M
-from mlaa_stream.yardstick.scenes import Scene, edge_mask, generate_scenes
+from mlaa_stream.yardstick.scenes import SCENES, Scene, edge_mask, generate_scenes
 
 
 EXACT_SHOTS = ("rendered_pan", "rendered_dolly", "rendered_orbit")   # --exact-motion: the bench's shots (and --views')
@@ -160,6 +161,9 @@ def main(argv: list[str] | None = None) -> int:
                          "every frame, one value for R, G and B, added to input and truth alike (NAME_grainN)")
     ap.add_argument("--hdr", default="", metavar="SCALE[,SCALE...]",
                     help="also the pan as linear-light HDR frames times each SCALE (linear_input)")
+    ap.add_argument("--hdr-scene", default="pan", metavar="NAME",
+                    help="the animated bench scene of the --hdr rows (default pan; e.g. rendered_pan, whose render "
+                         "regions the blend of method auto acts in)")
     args = ap.parse_args(argv)
     lookaheads = [0] if args.method == "blend" else [int(v) for v in args.lookahead.split(",")]   # blend: the past
     for item in args.tss_set:
@@ -231,10 +235,17 @@ def linear_light(frames: np.ndarray, scale: float) -> np.ndarray:
 
 
 def hdr_rows(args, scale: float, lookaheads: list[int]) -> list[str]:
-    """--hdr: the pan as linear-light frames times `scale`, spatial only against the method (linear_input)."""
-    pan = next(s for s in generate_scenes(names=["pan"]) if s.animated)
+    """--hdr: the scene --hdr-scene (the pan) as linear-light frames times `scale`, spatial only against the method
+    (linear_input)."""
+    group = args.hdr_scene if args.hdr_scene in SCENES else args.hdr_scene.split("_")[0]   # rendered_pan: rendered
+    found = [s for s in generate_scenes(names=[group]) if s.animated and s.name == args.hdr_scene] \
+        if group in SCENES else []
+    if not found:
+        raise SystemExit(f"--hdr-scene: expected an animated bench scene such as pan or rendered_pan, "
+                         f"got {args.hdr_scene!r}")
+    pan = found[0]
     inputs, truths = linear_light(pan.inputs, scale), linear_light(pan.truths, scale)
-    name, worse = f"pan x{scale:g} lin", []
+    name, worse = f"{pan.name} x{scale:g} lin", []
     with Filter(args.device, bgr=False, linear_input=True, keep_regions=needs_regions(args.method)) as filt:
         spatial, regions = [], []
         for f in inputs:

@@ -1217,6 +1217,7 @@ class TSSStage:
         # linear-light float frames are resolved at the power of two of exposure that puts their key near 1, as the
         # spatial filter sees them (spatial/exposure.py), held over the shot; False: at the exposure they come in
         self.exposure = HeldExposure() if auto_exposure else None
+        self.last_scale = 1.0   # the scale the latest frame was resolved at
         self.lookahead = int(lookahead)   # N: frames after the current one the caller hands in (`future`)
         self.grid, self.eps, self.min_cells = int(grid), float(eps), int(min_cells)
         ahead = int(FULL_CELLS_AHEAD * self.lookahead + 0.5)
@@ -1290,7 +1291,7 @@ class TSSStage:
             fin, fout = fin.astype(np.float32), fout.astype(np.float32)
             ahead = [f.astype(np.float32) for f in ahead]
         with self._lock:
-            scale = self._exposure(fin)
+            scale = self.last_scale = self._exposure(fin)
             if scale != 1.0:   # copies: the caller's frames stay as they are
                 fin, fout, ahead = exposed(fin, scale), exposed(fout, scale), [exposed(f, scale) for f in ahead]
             out = self._step(fin, fout, int(index), ahead)
@@ -1664,6 +1665,7 @@ class TSSThenBlend:
         self._tss_view = show == "history" and blend_kwargs.get("where") == "render"
         self.blend = TemporalStage(device, bgr=bgr, mode=blend_mode or mode, show=None if self._tss_view else show,
                                    context=self.tss.context, linear_input=linear_input, **blend_kwargs)
+        self._scale = 1.0   # the exposure the blend's history is at (TSS's, spatial/exposure.py)
 
     @property
     def stats(self) -> list[dict]:
@@ -1683,7 +1685,17 @@ class TSSThenBlend:
     def __call__(self, frame_in: np.ndarray, frame_filtered: np.ndarray, index: int,
                  regions: np.ndarray | None = None, future: list[np.ndarray] = ()) -> np.ndarray:
         out = self.tss(frame_in, frame_filtered, index, future=future)
-        out = self.blend(frame_in, out, index, regions=regions, measured=self._measured())
+        scale = self.tss.last_scale
+        if scale != self._scale:   # the blend's history is another exposure's
+            self.blend.reset()
+            self._scale = scale
+        if scale == 1.0 or self.blend.show is not None:   # (a debug view is no frame to scale back)
+            out = self.blend(frame_in, out, index, regions=regions, measured=self._measured())
+        else:   # at TSS's exposure, whose pyramid it reads (float32: half would overflow)
+            f32 = np.float32
+            blended = self.blend(exposed(np.asarray(frame_in, f32), scale), exposed(np.asarray(out, f32), scale), index,
+                                 regions=regions, measured=self._measured())
+            out = restore_out_of_range(frame_in, exposed(blended, 1.0 / scale).astype(np.asarray(out).dtype))
         return self.tss.history_view(out) if self._tss_view else out
 
     def _measured(self) -> tuple[Pyramid, Decision | None] | None:
