@@ -44,6 +44,8 @@ def test_exposure_scale_known_answers():
     huge = np.full((8, 8, 3), 1e-3, np.float32)
     huge[0, 0] = 1e14
     assert 1e14 * exposure_scale(huge) <= 1e15 and exposure_scale(huge) > 1.0
+    huge[0, 0], huge[1, 1] = np.inf, np.nan                            # passed through unscaled: no limit
+    assert exposure_scale(huge) == 1024.0
     big = np.full((1024, 1024, 3), 0.5, np.float32)    # read on every 4th row and column: rows between not read
     big[1::4] = 8.0
     assert exposure_scale(big) == 2.0
@@ -168,3 +170,24 @@ def test_the_blend_after_temporal_supersampling_sees_the_same_exposure():
 
 def stage_changed(outs: np.ndarray, inputs: list[np.ndarray]) -> bool:
     return bool(np.any(outs[1:] != np.stack(inputs)[1:]))
+
+
+def test_exposure_bench_scores_hdr_renders_alike_at_every_exposure():
+    """`python -m mlaa_stream.bench.exposure` at a small size, one world, two exposures four stops apart: with
+    auto_exposure every view scores the same at both, and the renders hold highlights over 1."""
+    from mlaa_stream.yardstick import rendered as R
+    ok, why = R.egl_available()
+    if not ok:
+        pytest.skip(why)
+    from mlaa_stream.bench.exposure import run
+    from mlaa_stream.bench.rendered_views import VIEWS
+    lines: list[str] = []
+    res = run([(192, 108)], [1.0], [1.0, 16.0], ["plaza"], log=lines.append)
+    assert res[(1.0, 1.0, True)] == res[(1.0, 16.0, True)]
+    assert res[(1.0, 1.0, False)] != res[(1.0, 16.0, False)]
+    assert len(res[(1.0, 1.0, True)]) == 4 and any("mean" in line for line in lines)
+    renderer = R.Renderer(R._context(), 64, 36, "plaza", hdr=True)
+    try:
+        assert renderer.input_linear(R.Camera(*VIEWS["side_road"])).max() > 1.0
+    finally:
+        renderer.release()

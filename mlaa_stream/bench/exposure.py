@@ -42,7 +42,8 @@ def run(sizes: list[tuple[int, int]], skies: list[float], exposures: list[float]
                         for name, view in WORLD_VIEWS[world].items():
                             cam = Camera(*view)
                             lin = renderer.input_linear(cam)
-                            seen, truth = encode8(np.clip(lin, 0, 1)), encode8(np.clip(renderer.truth_linear(cam), 0, 1))
+                            seen = encode8(np.clip(lin, 0, 1))
+                            truth = encode8(np.clip(renderer.truth_linear(cam), 0, 1))
                             cells = []
                             for e in exposures:
                                 for on, filt in ((False, plain), (True, auto)):

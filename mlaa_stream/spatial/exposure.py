@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-KEY_PERCENTILE = 90      # the key: this percentile of max(R, G, B) (docs/spatial_tuning.md: 90 and 95 tie, 99 follows bright skies)
+KEY_PERCENTILE = 90      # the key: this percentile of max(R, G, B) (docs/spatial_tuning.md, "Exposure of ...")
 MAX_STOPS = 24           # at most 2^24 either way: beyond that a frame is black or holds no light to speak of
 KEY_SAMPLES = 65536      # the key is read from a regular grid of about this many pixels (a stride per axis)
 SCALED_LIMIT = 1e15      # no scaled sample may exceed this (nonfinite.SAMPLE_LIMIT: float32 sums stay finite)
@@ -43,8 +43,9 @@ def exposure_scale(frame: np.ndarray) -> float:
     if not (key > 0.0 and np.isfinite(key)):   # black, or mostly NaN / inf (a caller that did not replace them)
         return 1.0
     stops = int(np.clip(np.round(-np.log2(key)), -MAX_STOPS, MAX_STOPS))
-    if stops > 0:   # brightening: the frame's largest sample must stay in range
-        largest = float(np.abs(colour_view(frame)).max())
+    if stops > 0:   # brightening: the frame's largest sample must stay in range (NaN, inf and samples already
+        mag = np.abs(colour_view(frame))   # out of it pass through unchanged: spatial/nonfinite.py)
+        largest = float(np.max(mag, where=mag <= SCALED_LIMIT, initial=0.0))
         while stops > 0 and largest * 2.0 ** stops > SCALED_LIMIT:
             stops -= 1
     return float(2.0 ** stops)
