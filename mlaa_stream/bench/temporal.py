@@ -27,8 +27,8 @@ import numpy as np
 from mlaa_stream.yardstick import metrics as M
 from mlaa_stream.device.colour import linear_to_srgb, srgb_to_linear
 from mlaa_stream.spatial.filter import Filter
-from mlaa_stream.yardstick.scenes import (Layer, Scene, build_scene, ellipse, rect, rotated_rect, text_polygons, timing_frame,
-                     translate)
+from mlaa_stream.yardstick.scenes import (Layer, Scene, build_scene, edge_mask, ellipse, rect, rotated_rect,
+                                           text_polygons, timing_frame, translate)
 from mlaa_stream.temporal.stage import TemporalStage
 from mlaa_stream.temporal.tss import DEFAULT_FRAMES, TSSStage, TSSThenBlend
 
@@ -60,6 +60,29 @@ def _pan_layers(w: int, h: int, dx: float, dy: float) -> list[Layer]:
 def scene_pan(n: int, w: int, h: int) -> Scene:
     frames = [_pan_layers(w, h, 0.35 * t, 0.15 * t) for t in range(n)]
     return build_scene("pan", "pan", frames, w, h, notes="whole frame pans (0.35, 0.15) px per frame")
+
+
+def scene_stripes(n: int, w: int, h: int, speed: float) -> Scene:
+    """The end-to-end benchmark's clip (bench/pipeline.py synthetic_clip: hard-edged bars at slope 1/3, 40 px apart
+    across x 0.3 + y 0.9) panning `speed` px per frame to the left: 1 spp at pixel centres, truth 8x8 in linear light.
+    One edge direction only: the motion along the bars cannot be measured (docs/temporal.md, "Stripes")."""
+    cols = (np.uint8([230, 180, 40]), np.uint8([30, 50, 120]))
+    lin = [srgb_to_linear(c.astype(np.float64) / 255.0) for c in cols]
+    y, x = np.mgrid[0:h, 0:w].astype(np.float64) + 0.5
+
+    def shot(t: float, ss: int) -> np.ndarray:
+        offsets = (np.arange(ss) + 0.5) / ss - 0.5
+        acc = np.zeros((h, w, 3))
+        for dy in offsets:
+            for dx in offsets:
+                band = (np.floor(((x + dx + speed * t) * 0.3 + (y + dy) * 0.9) / 40) % 2).astype(bool)
+                acc += np.where(band[..., None], lin[0], lin[1])
+        return np.round(linear_to_srgb(acc / ss ** 2) * 255).astype(np.uint8)
+
+    inputs = np.stack([shot(t, 1) for t in range(n)])
+    truth = np.stack([shot(t, 8) for t in range(n)])
+    return Scene(f"stripes_{speed:g}", "pan", inputs, truth, edge_mask(inputs, truth),
+                 notes=f"bars at slope 1/3 panning {speed:g} px per frame")
 
 
 def scene_rotation(n: int, w: int, h: int) -> Scene:

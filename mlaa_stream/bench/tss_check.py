@@ -29,6 +29,8 @@ homography_maps: slow, a measurement of the model, not of a fast estimator), and
 with the blend's dense flow replaced by the exact one (TSS as usual). How much better motion could buy.
 --dense-samples: the rows run TSS with dense_samples (per-tile tracked motion on dense frames; named
 "<method>+N:dense"). The "ms" column: the stage's wall time per frame, mean over the frames after the first.
+--stripes SPEED[,SPEED...]: also the end-to-end benchmark's bars (one edge direction: the motion along them is not
+measured) panning SPEED px per frame, 480x270, 12 frames (bench/temporal.py scene_stripes).
 --hdr SCALE[,SCALE...]: rows for linear-light HDR frames (what an EXR sequence gives): the bench's pan (or the
 animated scene --hdr-scene names, e.g. rendered_pan), its input and truth sRGB-decoded and multiplied by SCALE,
 float32, the filter and the stage with linear_input; error removed in linear light (the temporal measures as for the
@@ -41,6 +43,7 @@ import dataclasses
 import time
 
 import numpy as np
+from mlaa_stream.bench.temporal import scene_stripes
 
 from mlaa_stream.spatial.filter import Filter
 from mlaa_stream.temporal import tss as T
@@ -159,6 +162,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--grain", default="", metavar="SIGMA[,SIGMA...]",
                     help="also every scene with film grain of these deviations in 8-bit levels: seeded Gaussian, new "
                          "every frame, one value for R, G and B, added to input and truth alike (NAME_grainN)")
+    ap.add_argument("--stripes", default="", metavar="SPEED[,SPEED...]",
+                    help="also the end-to-end benchmark's bars (one edge direction) panning SPEED px per frame "
+                         "(stripes_SPEED: 480x270, 12 frames)")
     ap.add_argument("--hdr", default="", metavar="SCALE[,SCALE...]",
                     help="also the pan as linear-light HDR frames times each SCALE (linear_input)")
     ap.add_argument("--hdr-scene", default="pan", metavar="NAME",
@@ -177,6 +183,7 @@ def main(argv: list[str] | None = None) -> int:
         from mlaa_stream.bench.rendered_views import view_shots
         scenes += view_shots(640, 360, args.view_frames, world=args.world)
     scenes += [with_grain(s, float(g)) for g in args.grain.split(",") if g for s in scenes]
+    scenes += [scene_stripes(12, 480, 270, float(v)) for v in args.stripes.split(",") if v]
     worse = []
     with Filter(args.device, bgr=False, keep_regions=needs_regions(args.method)) as filt:
         print(f"device: {filt.device_name}; FLIP {'over all frames' if with_flip else 'not installed'}")

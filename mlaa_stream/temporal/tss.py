@@ -119,6 +119,10 @@ PROJECTIVE_MIN = 0.25 # px (full size): a global frame uses projective maps wher
                       # from its translation by this much at a corner of the frame (MotionRing._projective)
 HOMOGRAPHY_STEPS = 3  # inverse-compositional Gauss-Newton steps for the newest ring frame's homography
 PROJECTIVE_RATIO = 1.0  # ... and no ring frame departs by more than this times its translation (plus PROJECTIVE_MIN)
+APERTURE_RATIO = 0.02  # a frame whose refinement points' structure tensor has eigenvalues further apart than this
+                      # ratio (every gradient of one direction: straight stripes) keeps the spatial output: the motion
+                      # along the stripes is a guess, the samples placed by it line up in the footprint and pull
+                      # MLAA's blend back towards the aliased steps (docs/temporal.md, "Stripes")
 TILE, TILE_TOL, TILE_TEXTURE = 48, 0.4, 1.0   # _Refiner's tile check: flow px, px, mean squared gradient
 BAND, BAND_TOL, BAND_TEXTURE = 32, 0.25, 0.05   # _Refiner._band_deviations: flow px, px, mean squared gradient
 STATIC_TOL = 0.05     # px (flow): a band whose own motion is under this while the frame's is over twice it is
@@ -271,6 +275,10 @@ class MotionRing:
                 self._tracked_tiles(pyr, ahead)
             elif ahead and dec.model == "global" and self.refine and TRAJECTORY_AHEAD:
                 self._fit_trajectory(index, ahead)
+        if self.refine and (dec.model == "global" or any(e.translated for e in ahead)):
+            aperture = self._refiner(pyr).aperture
+            if aperture < APERTURE_RATIO:   # the samples' places along the stripes are guesses: TSSStage keeps
+                dec = Decision(dec.model, dec.translation, {**dec.measures, "aperture": aperture})   # the spatial
         for e in self.entries + ahead:
             # translations are checked per tile (global branch above); dense and projective maps per region
             if not e.translated or e.projective:
@@ -665,6 +673,12 @@ class _Refiner:
         np.multiply(self.gx, self.gx, out=self.gxx)
         np.multiply(self.gx, self.gy, out=self.gxy)
         np.multiply(self.gy, self.gy, out=self.gyy)
+        # the points' structure tensor (the Gauss-Newton matrix but for the robust weights): its smaller eigenvalue
+        # over its larger is ~0 where every gradient has one direction (straight stripes: the motion along them is
+        # not measured; APERTURE_RATIO)
+        a, b, e = (float(v) for v in self.products.sum(axis=1))
+        half, root = (a + e) / 2, float(np.hypot((a - e) / 2, b))
+        self.aperture = (half - root) / (half + root) if half + root > 0 else 1.0
         # the bands' indices and texture (the same for every step), and homography()'s steepest-descent matrix
         self.nr, self.nc = -(-h // BAND), -(-w // BAND)
         self.ry, self.cx = ys // BAND, xs // BAND
@@ -1377,7 +1391,7 @@ class TSSStage:
         # resolve, the spatial output stands without a kernel.
         taps = fm.entries + fm.future
         trivial = all(e.translated and not e.projective and e.valid is None for e in taps) and len(
-            {self._cell_of(e.shift) for e in taps}) < self.min_cells
+            {self._cell_of(e.shift) for e in taps}) < self.min_cells or "aperture" in fm.decision.measures
         cells = None
         if self.backend == "numpy":
             self._frames = {e.slot: self._frames[e.slot] for e in fm.entries[:-1]}
