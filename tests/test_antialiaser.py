@@ -296,11 +296,26 @@ def test_temporal_methods_take_thin_and_tiny_frames(kwargs):
                 assert out.shape == frame.shape and out.dtype == np.uint8
 
 
+def run_in_threads(work, threads: int = 4) -> None:
+    """work(k) in `threads` threads at once, switching between any two bytecodes (the races show within a few
+    frames)."""
+    import sys
+    interval = sys.getswitchinterval()
+    sys.setswitchinterval(1e-6)
+    try:
+        running = [threading.Thread(target=work, args=(k,)) for k in range(threads)]
+        for t in running:
+            t.start()
+        for t in running:
+            t.join()
+    finally:
+        sys.setswitchinterval(interval)
+
+
 @pytest.mark.parametrize("preset", ["default", "fast"])
 def test_antialiasers_in_threads_each_get_their_own_frames(preset):
     """Filters share the context's kernel objects, and a launch sets the arguments before it enqueues: four
     Antialiasers, one per thread, filtered frames with another thread's buffers (1 in 10 wrong, 4 in 10 with fast)."""
-    import sys
     rng = np.random.default_rng(7)
     frames = [(rng.random((24, 32, 3)) < 0.3).astype(np.uint8) * 255 for _ in range(4)]
     with Antialiaser(preset=preset) as aa:
@@ -317,16 +332,7 @@ def test_antialiasers_in_threads_each_get_their_own_frames(preset):
         except Exception as exc:   # noqa: BLE001 - reported below
             errors.append(exc)
 
-    interval = sys.getswitchinterval()
-    sys.setswitchinterval(1e-6)   # threads switch between any two bytecodes: the race shows within a few frames
-    try:
-        threads = [threading.Thread(target=work, args=(k,)) for k in range(4)]
-        for t in threads:
-            t.start()
-        for t in threads:
-            t.join()
-    finally:
-        sys.setswitchinterval(interval)
+    run_in_threads(work)
     assert errors == [] and wrong == []
 
 
@@ -336,7 +342,6 @@ def test_one_temporal_antialiaser_shared_by_threads_gives_every_frame_its_own_in
     the stage (and the hooks) one index twice, so TSS restarted its ring and its stats repeated rows. A call is now
     one step of the sequence: every frame gets the next index, and the stage sees them in order. Without a stage
     the calls still overlap, and the hooks get every index once."""
-    import sys
     import time
     frame = (np.random.default_rng(5).random((24, 32, 3)) < 0.3).astype(np.uint8) * 255   # a still shot
     seen, hooked, errors = [], [], []
@@ -364,16 +369,7 @@ def test_one_temporal_antialiaser_shared_by_threads_gives_every_frame_its_own_in
         except Exception as exc:   # noqa: BLE001 - reported below
             errors.append(exc)
 
-    interval = sys.getswitchinterval()
-    sys.setswitchinterval(1e-6)
-    try:
-        threads = [threading.Thread(target=work, args=(k,)) for k in range(4)]
-        for t in threads:
-            t.start()
-        for t in threads:
-            t.join()
-    finally:
-        sys.setswitchinterval(interval)
+    run_in_threads(work)
     with aa:
         assert errors == []
         assert aa.index == 32 and sorted(hooked) == list(range(32))

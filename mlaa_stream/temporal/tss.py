@@ -231,6 +231,11 @@ class MotionRing:
                 dec = Decision("dense", dec.translation, {**dec.measures, "still_background": True})
         if dec.model == "reset":
             self.entries = []
+        elif dec.model == "global" and self.refine and self._refiner(pyr).aperture < APERTURE_RATIO:
+            # one edge direction: the motion along it is a guess (the samples would line up in every footprint),
+            # so no samples and nothing to refine; the ring starts anew
+            self.entries = []
+            dec = Decision("global", dec.translation, {**dec.measures, "aperture": self._refiner(pyr).aperture})
         elif dec.model == "global":
             d = dec.translation
             for e in self.entries:
@@ -262,7 +267,7 @@ class MotionRing:
         # static: every map stays as it is (nothing moved)
         future = list(future)
         first = self._first_layers(pyr, index, future) if future and dec.model == "reset" else None
-        if not future:
+        if not future or "aperture" in dec.measures:
             ahead = []
         elif dec.model == "layers" or first is not None:
             ahead = ahead_fields(pyr, index, future, *(first or self.frame_layers),
@@ -275,10 +280,9 @@ class MotionRing:
                 self._tracked_tiles(pyr, ahead)
             elif ahead and dec.model == "global" and self.refine and TRAJECTORY_AHEAD:
                 self._fit_trajectory(index, ahead)
-        if self.refine and (dec.model == "global" or any(e.translated for e in ahead)):
-            aperture = self._refiner(pyr).aperture
-            if aperture < APERTURE_RATIO:   # the samples' places along the stripes are guesses: TSSStage keeps
-                dec = Decision(dec.model, dec.translation, {**dec.measures, "aperture": aperture})   # the spatial
+        if self.refine and "aperture" not in dec.measures and any(e.translated for e in ahead) and \
+                self._refiner(pyr).aperture < APERTURE_RATIO:   # a shot's first frame reading frames ahead
+            dec = Decision(dec.model, dec.translation, {**dec.measures, "aperture": self._refiner(pyr).aperture})
         for e in self.entries + ahead:
             # translations are checked per tile (global branch above); dense and projective maps per region
             if not e.translated or e.projective:
