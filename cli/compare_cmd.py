@@ -23,7 +23,7 @@ def read_image_encoding(path: str) -> tuple[np.ndarray, bool]:
     space tagged linear/ACES, or untagged float such as EXR)."""
     import OpenImageIO as oiio
 
-    from mlaa_stream.io.images import filter_channel_indices
+    from mlaa_stream.io.images import cryptomatte_channels, filter_channel_indices
 
     if os.path.isdir(path):  # OpenImageIO would answer that it has no reader for the format named like the folder
         raise CommandError(f"{path}: expected an image file, got a folder (compare scores one image at a time)")
@@ -49,7 +49,9 @@ def read_image_encoding(path: str) -> tuple[np.ndarray, bool]:
         arr = arr[..., None]
     # the colour channels the filter takes, by name: a multi-layer EXR's beauty, not a pass that sorts first
     names = tuple(spec.channelnames) if len(spec.channelnames) == arr.shape[2] else ("",) * arr.shape[2]
-    colour = list(filter_channel_indices(names, spec.alpha_channel))
+    colour = list(filter_channel_indices(names, spec.alpha_channel, cryptomatte_channels(names, spec)))
+    if not colour:
+        raise CommandError(f"{path}: expected colour channels, got only cryptomatte channels")
     arr = arr[..., colour[:3]] if len(colour) >= 3 else np.repeat(arr[..., colour[:1]], 3, axis=2)
     return np.ascontiguousarray(arr), linear
 

@@ -248,7 +248,32 @@ def filtered_channels(nchannels: int, alpha_channel: int = -1) -> int:
 _BEAUTY_LAYERS = ("combined", "beauty", "rgba", "c")
 
 
-def filter_channel_indices(names: tuple[str, ...], alpha_channel: int = -1) -> tuple[int, ...]:
+def cryptomatte_channels(names: tuple[str, ...], spec: oiio.ImageSpec | None = None) -> frozenset[int]:
+    """The channels of `names` that hold cryptomatte ids and coverages (float ids that any blend corrupts).
+
+    Cryptomatte stores each type as layers "<name>00", "<name>01" ... (R, B: ids; G, A: coverage) and names
+    them in the header ("cryptomatte/<key>/name": "CryptoObject", Blender's "ViewLayer.CryptoObject"); Arnold
+    adds a preview layer "<name>" itself. Those layers, and any layer whose last part starts with "crypto" (a
+    file whose header was dropped on the way), are data, never colour.
+    """
+    types = set()
+    if spec is not None:
+        for attr in spec.extra_attribs:
+            if re.fullmatch(r"cryptomatte/[^/]+/name", attr.name) and isinstance(attr.value, str) and attr.value:
+                types.add(attr.value)
+    found = set()
+    for k, name in enumerate(names):
+        layer, dot, _ = name.rpartition(".")
+        if not dot:
+            continue
+        if layer.rpartition(".")[2].lower().startswith("crypto") or any(
+                layer == t or re.fullmatch(re.escape(t) + r"\d+", layer) for t in types):
+            found.add(k)
+    return frozenset(found)
+
+
+def filter_channel_indices(names: tuple[str, ...], alpha_channel: int = -1,
+                           data: frozenset[int] = frozenset()) -> tuple[int, ...]:
     """The channels that go through the filter, in the order it takes them (R, G, B[, A] or one grey).
 
     By name where the names say which channels are colour: plain R, G, B (+ A), else plain Y, else the
@@ -256,8 +281,9 @@ def filter_channel_indices(names: tuple[str, ...], alpha_channel: int = -1) -> t
     channel, else a beauty layer by name, else the first. OpenImageIO lists an EXR's channels by layer
     name, so a pass that sorts first (Blender's "AO" before "Combined", a plain "Z" before "diffuse.R")
     would otherwise be filtered in the beauty's place. Names that say nothing: filtered_channels.
+    `data`: channels that are never filtered (cryptomatte_channels: ids); () where no other channel is left.
     """
-    where = {name: k for k, name in enumerate(names)}
+    where = {name: k for k, name in enumerate(names) if k not in data}
     if all(c in where for c in "RGB"):
         return tuple(where[c] for c in "RGBA" if c in where)
     if "Y" in where:
@@ -265,7 +291,7 @@ def filter_channel_indices(names: tuple[str, ...], alpha_channel: int = -1) -> t
     layers: dict[str, dict[str, int]] = {}
     for k, name in enumerate(names):
         layer, dot, last = name.rpartition(".")
-        if dot and last in ("R", "G", "B", "A"):
+        if dot and last in ("R", "G", "B", "A") and k not in data:
             layers.setdefault(layer, {})[last] = k
     rgb = [(layer, chans) for layer, chans in layers.items() if all(c in chans for c in "RGB")]
     if rgb:
@@ -276,17 +302,27 @@ def filter_channel_indices(names: tuple[str, ...], alpha_channel: int = -1) -> t
             return 1 if layer.rpartition(".")[2].lower() in _BEAUTY_LAYERS else 2
         _, chans = min(rgb, key=rank)  # min keeps the first of equal rank: channel order
         return tuple(chans[c] for c in "RGBA" if c in chans)
-    return tuple(range(filtered_channels(len(names), alpha_channel)))
+    # by position among the channels that may be filtered (OpenImageIO may have taken a cryptomatte A for alpha)
+    rest = [k for k in range(len(names)) if k not in data]
+    alpha = rest.index(alpha_channel) if alpha_channel in rest else -1
+    return tuple(rest[:filtered_channels(len(rest), alpha)]) if rest else ()
 
 
 def split_for_filter(image: Image) -> tuple[np.ndarray, Callable[[np.ndarray], np.ndarray]]:
-    """The frame the filter sees and a function that puts its result back among the other channels."""
+    """The frame the filter sees and a function that puts its result back among the other channels.
+
+    Cryptomatte channels (ids) are never in the frame; an image with no other channel is refused (ImageReadError).
+    """
     pixels = image.pixels
     nchannels = pixels.shape[2]
     names = tuple(image.spec.channelnames)
     if len(names) != nchannels:  # a spec that does not describe these pixels: by position
         names = ("",) * nchannels
-    idx = filter_channel_indices(names, image.spec.alpha_channel)
+    data = cryptomatte_channels(names, image.spec)
+    idx = filter_channel_indices(names, image.spec.alpha_channel, data)
+    if not idx:  # blending ids would corrupt them, and there is nothing else to filter: refuse, write nothing
+        raise ImageReadError(f"{image.path}: expected colour channels to filter, got only cryptomatte channels "
+                             f"({', '.join(names[k] for k in sorted(data))}); ids must not be blended")
     if idx == tuple(range(nchannels)):
         return pixels, lambda out: out
     if idx == tuple(range(len(idx))):  # the leading channels: a cheaper split and concatenation
