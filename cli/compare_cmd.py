@@ -20,10 +20,11 @@ def read_image(path: str) -> np.ndarray:
 
 def read_image_encoding(path: str) -> tuple[np.ndarray, bool]:
     """read_image's pixels and whether they are linear light (as mlaa_stream.io.sequence.is_linear: a colour
-    space tagged linear/ACES, or untagged float such as EXR)."""
+    space tagged linear/ACES -- not ACEScc/ACEScct --, or untagged float such as EXR)."""
     import OpenImageIO as oiio
 
     from mlaa_stream.io.images import cryptomatte_channels, filter_channel_indices
+    from mlaa_stream.io.sequence import is_linear_colour_space
 
     if os.path.isdir(path):  # OpenImageIO would answer that it has no reader for the format named like the folder
         raise CommandError(f"{path}: expected an image file, got a folder (compare scores one image at a time)")
@@ -38,7 +39,8 @@ def read_image_encoding(path: str) -> tuple[np.ndarray, bool]:
         spec = inp.spec()
         cs = spec.get_string_attribute("oiio:ColorSpace", "").lower()
         floating = spec.format.basetype in (oiio.FLOAT, oiio.HALF, oiio.DOUBLE)
-        linear = any(k in cs for k in ("lin", "aces", "scene_linear", "raw")) or (not cs and floating)
+        tagged = is_linear_colour_space(cs)
+        linear = floating if tagged is None else tagged
         arr = inp.read_image(format="float")
         if arr is None:
             raise CommandError(f"{path}: cannot read pixels ({inp.geterror()})")

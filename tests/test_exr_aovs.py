@@ -91,3 +91,23 @@ def test_an_exr_of_cryptomatte_channels_only_is_refused(tmp_path):
     result = run(src, "-o", tmp_path / "out.exr")
     assert result.exit_code != 0 and "only cryptomatte channels" in result.output
     assert not os.path.exists(tmp_path / "out.exr")
+
+
+@pytest.mark.parametrize("space, linear", [("ACEScct", False), ("acescct_ap1", False), ("ACES - ACEScc", False),
+                                           ("ACEScg", True), ("lin_ap1_scene", True), ("ACES2065-1", True)])
+def test_aces_log_encodings_are_not_taken_for_linear_light(tmp_path, space, linear):
+    from mlaa_stream.io.sequence import is_linear
+
+    rgb, _ = staircase()
+    src = tmp_path / "graded.exr"
+    write_exr(src, rgb, ("R", "G", "B"), **{"oiio:ColorSpace": space})
+    assert is_linear(read_image(str(src))) is linear
+    # written to PNG: linear light is encoded to sRGB; ACEScct's log values are written as they are
+    result = run(src, "-o", tmp_path / "out.png")
+    assert result.exit_code == 0, result.output
+    assert ("encoded to sRGB" in result.output) is linear
+    inp = oiio.ImageInput.open(str(tmp_path / "out.png"))
+    corner = np.asarray(inp.read_image(0, 0, 0, 3, "float"))[0, 0]   # far from the edge: unfiltered
+    inp.close()
+    if not linear:
+        np.testing.assert_allclose(corner, rgb[0, 0], atol=0.5 / 255)

@@ -74,14 +74,27 @@ class Report:
         self.say(msg)
 
 
-def is_linear(image: Image) -> bool:
-    """True when the pixels are linear light: a colour space tagged linear/ACES, or untagged float."""
-    cs = image.spec.get_string_attribute("oiio:ColorSpace", "").lower()
-    if any(k in cs for k in ("lin", "aces", "scene_linear", "raw")):
-        return True
-    if cs:
+# Colour-space names (lower case) of log encodings, which a linear keyword ("aces") must not make linear: ACEScc and
+# ACEScct ("ACEScct", "acescct_ap1", "ACES - ACEScct"), and log curves (LogC, ADX "Log film scan", "Cineon log")
+_LOG_MARKS = ("acescc", "log")
+
+
+def is_linear_colour_space(name: str) -> bool | None:
+    """Whether an oiio:ColorSpace tag names linear light (linear, scene_linear, ACES2065-1, ACEScg, raw data):
+    True / False, None where there is no tag. ACEScc and ACEScct are log encodings, not linear light."""
+    cs = name.lower()
+    if not cs:
+        return None
+    if any(k in cs for k in _LOG_MARKS):
         return False
-    return image.pixels.dtype.kind == "f"
+    return any(k in cs for k in ("lin", "aces", "scene_linear", "raw"))
+
+
+def is_linear(image: Image) -> bool:
+    """True when the pixels are linear light: a colour space tagged linear/ACES (not ACEScc/ACEScct, which are
+    log), or untagged float."""
+    tagged = is_linear_colour_space(image.spec.get_string_attribute("oiio:ColorSpace", ""))
+    return image.pixels.dtype.kind == "f" if tagged is None else tagged
 
 
 class FilterSet:
