@@ -111,3 +111,15 @@ def test_aces_log_encodings_are_not_taken_for_linear_light(tmp_path, space, line
     inp.close()
     if not linear:
         np.testing.assert_allclose(corner, rgb[0, 0], atol=0.5 / 255)
+
+
+@pytest.mark.parametrize("compression, level", [("dwaa", 200.0), ("dwab", 300.0), ("dwaa", 15.0)])
+def test_an_exr_keeps_its_dwa_compression_level(tmp_path, compression, level):
+    rgb, _ = staircase()
+    src = tmp_path / "dwa.exr"
+    write_exr(src, rgb, ("R", "G", "B"), compression=f"{compression}:{level:g}")
+    result = run(src, "-o", tmp_path / "out.exr")
+    assert result.exit_code == 0, result.output
+    spec = oiio.ImageInput.open(str(tmp_path / "out.exr")).spec()
+    assert spec.get_string_attribute("compression") == compression
+    assert spec.getattribute("openexr:dwaCompressionLevel") == level

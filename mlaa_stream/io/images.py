@@ -492,6 +492,11 @@ def output_spec(spec: oiio.ImageSpec, pixels: np.ndarray) -> oiio.ImageSpec:
     if (out.width, out.height, out.nchannels) != (w, h, c):
         raise ValueError(f"expected pixels of {out.width}x{out.height}x{out.nchannels}, "
                          f"got {w}x{h}x{c}")
+    compression, level = out.get_string_attribute("compression", ""), out.getattribute("openexr:dwaCompressionLevel")
+    if compression in ("dwaa", "dwab") and isinstance(level, (int, float)):
+        # OpenEXR's reader gives a DWA file's level apart from "compression", and its writer takes it only inside it
+        # ("dwaa:200"): else every frame would be written at the default 45, a different size and loss than the input's
+        out.attribute("compression", f"{compression}:{level:g}")
     if 0 < out.get_int_attribute("oiio:BitsPerSample", 0) < 8:
         # a 1/2/4-bit file (line art, a fax scan): TIFF's writer would pack the filtered levels back into 2/4/16
         out.erase_attribute("oiio:BitsPerSample")
