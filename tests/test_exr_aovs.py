@@ -123,3 +123,20 @@ def test_an_exr_keeps_its_dwa_compression_level(tmp_path, compression, level):
     spec = oiio.ImageInput.open(str(tmp_path / "out.exr")).spec()
     assert spec.get_string_attribute("compression") == compression
     assert spec.getattribute("openexr:dwaCompressionLevel") == level
+
+
+def test_a_hash_pattern_is_a_frame_pattern_in_and_out(tmp_path):
+    from mlaa_stream.io.sequence import printf_pattern
+
+    rgb, _ = staircase()
+    (tmp_path / "shot").mkdir()
+    for n in (1001, 1002):
+        write_exr(tmp_path / "shot" / f"shot.{n}.exr", rgb, ("R", "G", "B"))
+    result = run(tmp_path / "shot" / "shot.####.exr", "-o", tmp_path / "clean" / "shot_####.exr")
+    assert result.exit_code == 0, result.output
+    assert sorted(os.listdir(tmp_path / "clean")) == ["shot_1001.exr", "shot_1002.exr"]
+    assert printf_pattern("a/b.######.dpx") == "a/b.%06d.dpx"
+    assert printf_pattern("take#1.png") == "take#1.png" and printf_pattern("x.%04d.exr") == "x.%04d.exr"
+    literal = tmp_path / "odd##name.exr"   # a file named so is that file
+    write_exr(literal, rgb, ("R", "G", "B"))
+    assert printf_pattern(str(literal)) == str(literal)

@@ -127,6 +127,20 @@ def is_pattern(path: str) -> bool:
     return bool(_PRINTF.search(os.path.basename(path)))
 
 
+_HASHES = re.compile(r"#{2,}")
+
+
+def printf_pattern(path: str) -> str:
+    """A pattern written with hashes, as Nuke and RV write them ("shot.####.exr": one # a digit, from ##), as the
+    printf pattern it means ("shot.%04d.exr"); other paths, and a file or folder that exists under that very name,
+    as they are. Only the file name's first run counts, as for %04d."""
+    folder, base = os.path.split(path)
+    m = _HASHES.search(base)
+    if m is None or _PRINTF.search(base) or os.path.exists(path):
+        return path
+    return os.path.join(folder, f"{base[:m.start()]}%0{len(m.group())}d{base[m.end():]}")
+
+
 def frame_path(pattern: str, number: int) -> str:
     """The file name of frame `number`: the first %d / %0Nd of the file name replaced."""
     folder, base = os.path.split(pattern)
