@@ -140,3 +140,25 @@ def test_a_hash_pattern_is_a_frame_pattern_in_and_out(tmp_path):
     literal = tmp_path / "odd##name.exr"   # a file named so is that file
     write_exr(literal, rgb, ("R", "G", "B"))
     assert printf_pattern(str(literal)) == str(literal)
+
+
+@pytest.mark.parametrize("big", [True, False])
+def test_a_32_bit_integer_id_channel_that_cannot_come_back_exactly_is_named(tmp_path, big):
+    rgb, mask = staircase()
+    ids = np.where(mask, 0xDEADBEEF if big else 1000, 123456789 if big else 7).astype(np.uint32)
+    spec = oiio.ImageSpec(rgb.shape[1], rgb.shape[0], 4, "float")
+    spec.channelnames = ("R", "G", "B", "objectId")
+    spec.channelformats = (oiio.TypeDesc("half"),) * 3 + (oiio.TypeDesc("uint"),)
+    pixels = np.zeros(rgb.shape[:2] + (4,), np.uint32)   # one buffer type for all: uint32 keeps the ids exact
+    pixels[:, :, :3] = np.rint(rgb * 4294967295.0).astype(np.uint32)
+    pixels[:, :, 3] = ids
+    src = tmp_path / "ids.exr"
+    out = oiio.ImageOutput.create(str(src))
+    assert out.open(str(src), spec) and out.write_image(pixels) and out.close(), oiio.geterror()
+    result = run(src, "-o", tmp_path / "out.exr")
+    assert result.exit_code == 0, result.output
+    assert ("objectId: 32-bit integer channel with values over 2^24" in result.output) is big
+    if not big:   # ids float32 holds come back bit for bit
+        inp = oiio.ImageInput.open(str(tmp_path / "out.exr"))
+        np.testing.assert_array_equal(np.asarray(inp.read_image(0, 0, 3, 4, "uint")).reshape(ids.shape), ids)
+        inp.close()

@@ -50,6 +50,7 @@ class Image:
     path: str
     conversions: tuple[str, ...] = ()  # colour-model changes made on reading (CMYK, palette), to report
     quality: int | None = None  # a JPEG's quality, estimated from its quantisation table (jpeg_quality): kept
+    lossy: tuple[str, ...] = ()  # what writing back cannot keep bit for bit (inexact_channels), to warn about
 
     @property
     def channel_names(self) -> tuple[str, ...]:
@@ -139,12 +140,32 @@ def read_image(path: str) -> Image:
         if spec.alpha_channel >= 0 and inp.format_name() not in _PREMULTIPLIED_FORMATS:
             spec.attribute("oiio:UnassociatedAlpha", 1)  # straight alpha, also where the reader does not say so (BMP)
         quality = jpeg_quality(path) if inp.format_name() == "jpeg" else None
+        lossy = inexact_channels(inp, spec)
     finally:
         inp.close()
     pixels = np.asarray(pixels)
     if pixels.ndim == 2:
         pixels = pixels[:, :, None]
-    return Image(pixels=pixels, spec=spec, path=path, conversions=conversions, quality=quality)
+    return Image(pixels=pixels, spec=spec, path=path, conversions=conversions, quality=quality, lossy=lossy)
+
+
+def inexact_channels(inp: oiio.ImageInput, spec: oiio.ImageSpec) -> tuple[str, ...]:
+    """A warning naming the 32-bit integer channels of an open image (an EXR's UINT object-id pass) that hold values
+    float32 cannot (over 2^24), or (): OpenImageIO reads them into, and writes them from, one sample type for every
+    channel, float32 here, so such ids -- hashes -- come back rounded though no filter touched them."""
+    formats = spec.channelformats or (spec.format,) * spec.nchannels
+    names = tuple(spec.channelnames)
+    wide = []
+    for c, fmt in enumerate(formats):
+        if str(fmt) in ("uint", "int"):
+            native = inp.read_image(0, 0, c, c + 1, str(fmt))
+            if native is not None and np.abs(np.asarray(native, np.int64)).max(initial=0) > 1 << 24:
+                wide.append(names[c] if c < len(names) else f"channel {c}")
+    if not wide:
+        return ()
+    return (f"{', '.join(wide)}: 32-bit integer channel{'s' if len(wide) > 1 else ''} with values over 2^24 "
+            f"(ids); OpenImageIO reads and writes {'them' if len(wide) > 1 else 'it'} through float32, so "
+            f"{'they come' if len(wide) > 1 else 'it comes'} back rounded to 24 significant bits, not bit for bit",)
 
 
 # JPEG outputs whose source had no quality to keep (not a JPEG): OpenImageIO's own default (measured: its

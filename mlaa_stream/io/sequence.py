@@ -289,6 +289,8 @@ def image_source(files: list[FrameFile], report: Report, *, strict: bool,
             continue
         for note in image.conversions:
             report.inform(f"{ff.src}: {note}")
+        for note in image.lossy:   # the same for every frame of a sequence: said once
+            report.caution_once(note)
         if strict:
             shape = (image.pixels.shape, image.pixels.dtype)
             if first is None:
