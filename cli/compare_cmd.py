@@ -20,10 +20,11 @@ def read_image(path: str) -> np.ndarray:
 
 def read_image_encoding(path: str) -> tuple[np.ndarray, bool]:
     """read_image's pixels and whether they are linear light (as mlaa_stream.io.sequence.is_linear: a colour
-    space tagged linear/ACES, or untagged float such as EXR)."""
+    space tagged linear/ACES -- not ACEScc/ACEScct --, or untagged float such as EXR)."""
     import OpenImageIO as oiio
 
-    from mlaa_stream.io.images import filter_channel_indices
+    from mlaa_stream.io.images import cryptomatte_channels, filter_channel_indices
+    from mlaa_stream.io.sequence import is_linear_colour_space
 
     if os.path.isdir(path):  # OpenImageIO would answer that it has no reader for the format named like the folder
         raise CommandError(f"{path}: expected an image file, got a folder (compare scores one image at a time)")
@@ -38,7 +39,8 @@ def read_image_encoding(path: str) -> tuple[np.ndarray, bool]:
         spec = inp.spec()
         cs = spec.get_string_attribute("oiio:ColorSpace", "").lower()
         floating = spec.format.basetype in (oiio.FLOAT, oiio.HALF, oiio.DOUBLE)
-        linear = any(k in cs for k in ("lin", "aces", "scene_linear", "raw")) or (not cs and floating)
+        tagged = is_linear_colour_space(cs)
+        linear = floating if tagged is None else tagged
         arr = inp.read_image(format="float")
         if arr is None:
             raise CommandError(f"{path}: cannot read pixels ({inp.geterror()})")
@@ -49,7 +51,9 @@ def read_image_encoding(path: str) -> tuple[np.ndarray, bool]:
         arr = arr[..., None]
     # the colour channels the filter takes, by name: a multi-layer EXR's beauty, not a pass that sorts first
     names = tuple(spec.channelnames) if len(spec.channelnames) == arr.shape[2] else ("",) * arr.shape[2]
-    colour = list(filter_channel_indices(names, spec.alpha_channel))
+    colour = list(filter_channel_indices(names, spec.alpha_channel, cryptomatte_channels(names, spec)))
+    if not colour:
+        raise CommandError(f"{path}: expected colour channels, got only cryptomatte channels")
     arr = arr[..., colour[:3]] if len(colour) >= 3 else np.repeat(arr[..., colour[:1]], 3, axis=2)
     return np.ascontiguousarray(arr), linear
 

@@ -454,7 +454,7 @@ def filter_command(ctx: click.Context, input_path: str, output: str, overwrite: 
     """Remove jaggies from an image, a folder of images, a frame sequence or a video.
 
     INPUT is an image, a folder (its images in name order), a printf frame pattern such as
-    'shot/%04d.exr', or a video. OUTPUT gets the same file names and formats.
+    'shot/%04d.exr' (or 'shot/####.exr'), or a video. OUTPUT gets the same file names and formats.
     """
     configure_logging(verbose, quiet)
     con = Console(verbose, quiet)
@@ -492,6 +492,10 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
             end: str | None = None, container: str | None = None, cluster: str | None = None,
             chunk_frames: int = 16, keep: tuple[str, ...] = (), jpeg_quality: int | None = None) -> int:
     """Check everything that can be checked without a device, then build the filter and run."""
+    from mlaa_stream.io.sequence import printf_pattern
+
+    # shot.####.exr (Nuke, RV) is shot.%04d.exr: else "no such file" for an input, "names one image" for an output
+    input_path, output = printf_pattern(input_path), printf_pattern(output)
     temporal = temporal or TemporalOptions()
     show_regions = temporal.show == "regions"
     if overwrite and resume:

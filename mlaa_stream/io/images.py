@@ -50,6 +50,7 @@ class Image:
     path: str
     conversions: tuple[str, ...] = ()  # colour-model changes made on reading (CMYK, palette), to report
     quality: int | None = None  # a JPEG's quality, estimated from its quantisation table (jpeg_quality): kept
+    lossy: tuple[str, ...] = ()  # what writing back cannot keep bit for bit (inexact_channels), to warn about
 
     @property
     def channel_names(self) -> tuple[str, ...]:
@@ -139,12 +140,32 @@ def read_image(path: str) -> Image:
         if spec.alpha_channel >= 0 and inp.format_name() not in _PREMULTIPLIED_FORMATS:
             spec.attribute("oiio:UnassociatedAlpha", 1)  # straight alpha, also where the reader does not say so (BMP)
         quality = jpeg_quality(path) if inp.format_name() == "jpeg" else None
+        lossy = inexact_channels(inp, spec)
     finally:
         inp.close()
     pixels = np.asarray(pixels)
     if pixels.ndim == 2:
         pixels = pixels[:, :, None]
-    return Image(pixels=pixels, spec=spec, path=path, conversions=conversions, quality=quality)
+    return Image(pixels=pixels, spec=spec, path=path, conversions=conversions, quality=quality, lossy=lossy)
+
+
+def inexact_channels(inp: oiio.ImageInput, spec: oiio.ImageSpec) -> tuple[str, ...]:
+    """A warning naming the 32-bit integer channels of an open image (an EXR's UINT object-id pass) that hold values
+    float32 cannot (over 2^24), or (): OpenImageIO reads them into, and writes them from, one sample type for every
+    channel, float32 here, so such ids -- hashes -- come back rounded though no filter touched them."""
+    formats = spec.channelformats or (spec.format,) * spec.nchannels
+    names = tuple(spec.channelnames)
+    wide = []
+    for c, fmt in enumerate(formats):
+        if str(fmt) in ("uint", "int"):
+            native = inp.read_image(0, 0, c, c + 1, str(fmt))
+            if native is not None and np.abs(np.asarray(native, np.int64)).max(initial=0) > 1 << 24:
+                wide.append(names[c] if c < len(names) else f"channel {c}")
+    if not wide:
+        return ()
+    return (f"{', '.join(wide)}: 32-bit integer channel{'s' if len(wide) > 1 else ''} with values over 2^24 "
+            f"(ids); OpenImageIO reads and writes {'them' if len(wide) > 1 else 'it'} through float32, so "
+            f"{'they come' if len(wide) > 1 else 'it comes'} back rounded to 24 significant bits, not bit for bit",)
 
 
 # JPEG outputs whose source had no quality to keep (not a JPEG): OpenImageIO's own default (measured: its
@@ -248,7 +269,32 @@ def filtered_channels(nchannels: int, alpha_channel: int = -1) -> int:
 _BEAUTY_LAYERS = ("combined", "beauty", "rgba", "c")
 
 
-def filter_channel_indices(names: tuple[str, ...], alpha_channel: int = -1) -> tuple[int, ...]:
+def cryptomatte_channels(names: tuple[str, ...], spec: oiio.ImageSpec | None = None) -> frozenset[int]:
+    """The channels of `names` that hold cryptomatte ids and coverages (float ids that any blend corrupts).
+
+    Cryptomatte stores each type as layers "<name>00", "<name>01" ... (R, B: ids; G, A: coverage) and names
+    them in the header ("cryptomatte/<key>/name": "CryptoObject", Blender's "ViewLayer.CryptoObject"); Arnold
+    adds a preview layer "<name>" itself. Those layers, and any layer whose last part starts with "crypto" (a
+    file whose header was dropped on the way), are data, never colour.
+    """
+    types = set()
+    if spec is not None:
+        for attr in spec.extra_attribs:
+            if re.fullmatch(r"cryptomatte/[^/]+/name", attr.name) and isinstance(attr.value, str) and attr.value:
+                types.add(attr.value)
+    found = set()
+    for k, name in enumerate(names):
+        layer, dot, _ = name.rpartition(".")
+        if not dot:
+            continue
+        if layer.rpartition(".")[2].lower().startswith("crypto") or any(
+                layer == t or re.fullmatch(re.escape(t) + r"\d+", layer) for t in types):
+            found.add(k)
+    return frozenset(found)
+
+
+def filter_channel_indices(names: tuple[str, ...], alpha_channel: int = -1,
+                           data: frozenset[int] = frozenset()) -> tuple[int, ...]:
     """The channels that go through the filter, in the order it takes them (R, G, B[, A] or one grey).
 
     By name where the names say which channels are colour: plain R, G, B (+ A), else plain Y, else the
@@ -256,8 +302,9 @@ def filter_channel_indices(names: tuple[str, ...], alpha_channel: int = -1) -> t
     channel, else a beauty layer by name, else the first. OpenImageIO lists an EXR's channels by layer
     name, so a pass that sorts first (Blender's "AO" before "Combined", a plain "Z" before "diffuse.R")
     would otherwise be filtered in the beauty's place. Names that say nothing: filtered_channels.
+    `data`: channels that are never filtered (cryptomatte_channels: ids); () where no other channel is left.
     """
-    where = {name: k for k, name in enumerate(names)}
+    where = {name: k for k, name in enumerate(names) if k not in data}
     if all(c in where for c in "RGB"):
         return tuple(where[c] for c in "RGBA" if c in where)
     if "Y" in where:
@@ -265,7 +312,7 @@ def filter_channel_indices(names: tuple[str, ...], alpha_channel: int = -1) -> t
     layers: dict[str, dict[str, int]] = {}
     for k, name in enumerate(names):
         layer, dot, last = name.rpartition(".")
-        if dot and last in ("R", "G", "B", "A"):
+        if dot and last in ("R", "G", "B", "A") and k not in data:
             layers.setdefault(layer, {})[last] = k
     rgb = [(layer, chans) for layer, chans in layers.items() if all(c in chans for c in "RGB")]
     if rgb:
@@ -276,17 +323,27 @@ def filter_channel_indices(names: tuple[str, ...], alpha_channel: int = -1) -> t
             return 1 if layer.rpartition(".")[2].lower() in _BEAUTY_LAYERS else 2
         _, chans = min(rgb, key=rank)  # min keeps the first of equal rank: channel order
         return tuple(chans[c] for c in "RGBA" if c in chans)
-    return tuple(range(filtered_channels(len(names), alpha_channel)))
+    # by position among the channels that may be filtered (OpenImageIO may have taken a cryptomatte A for alpha)
+    rest = [k for k in range(len(names)) if k not in data]
+    alpha = rest.index(alpha_channel) if alpha_channel in rest else -1
+    return tuple(rest[:filtered_channels(len(rest), alpha)]) if rest else ()
 
 
 def split_for_filter(image: Image) -> tuple[np.ndarray, Callable[[np.ndarray], np.ndarray]]:
-    """The frame the filter sees and a function that puts its result back among the other channels."""
+    """The frame the filter sees and a function that puts its result back among the other channels.
+
+    Cryptomatte channels (ids) are never in the frame; an image with no other channel is refused (ImageReadError).
+    """
     pixels = image.pixels
     nchannels = pixels.shape[2]
     names = tuple(image.spec.channelnames)
     if len(names) != nchannels:  # a spec that does not describe these pixels: by position
         names = ("",) * nchannels
-    idx = filter_channel_indices(names, image.spec.alpha_channel)
+    data = cryptomatte_channels(names, image.spec)
+    idx = filter_channel_indices(names, image.spec.alpha_channel, data)
+    if not idx:  # blending ids would corrupt them, and there is nothing else to filter: refuse, write nothing
+        raise ImageReadError(f"{image.path}: expected colour channels to filter, got only cryptomatte channels "
+                             f"({', '.join(names[k] for k in sorted(data))}); ids must not be blended")
     if idx == tuple(range(nchannels)):
         return pixels, lambda out: out
     if idx == tuple(range(len(idx))):  # the leading channels: a cheaper split and concatenation
@@ -456,6 +513,11 @@ def output_spec(spec: oiio.ImageSpec, pixels: np.ndarray) -> oiio.ImageSpec:
     if (out.width, out.height, out.nchannels) != (w, h, c):
         raise ValueError(f"expected pixels of {out.width}x{out.height}x{out.nchannels}, "
                          f"got {w}x{h}x{c}")
+    compression, level = out.get_string_attribute("compression", ""), out.getattribute("openexr:dwaCompressionLevel")
+    if compression in ("dwaa", "dwab") and isinstance(level, (int, float)):
+        # OpenEXR's reader gives a DWA file's level apart from "compression", and its writer takes it only inside it
+        # ("dwaa:200"): else every frame would be written at the default 45, a different size and loss than the input's
+        out.attribute("compression", f"{compression}:{level:g}")
     if 0 < out.get_int_attribute("oiio:BitsPerSample", 0) < 8:
         # a 1/2/4-bit file (line art, a fax scan): TIFF's writer would pack the filtered levels back into 2/4/16
         out.erase_attribute("oiio:BitsPerSample")

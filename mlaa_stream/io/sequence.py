@@ -74,14 +74,27 @@ class Report:
         self.say(msg)
 
 
-def is_linear(image: Image) -> bool:
-    """True when the pixels are linear light: a colour space tagged linear/ACES, or untagged float."""
-    cs = image.spec.get_string_attribute("oiio:ColorSpace", "").lower()
-    if any(k in cs for k in ("lin", "aces", "scene_linear", "raw")):
-        return True
-    if cs:
+# Colour-space names (lower case) of log encodings, which a linear keyword ("aces") must not make linear: ACEScc and
+# ACEScct ("ACEScct", "acescct_ap1", "ACES - ACEScct"), and log curves (LogC, ADX "Log film scan", "Cineon log")
+_LOG_MARKS = ("acescc", "log")
+
+
+def is_linear_colour_space(name: str) -> bool | None:
+    """Whether an oiio:ColorSpace tag names linear light (linear, scene_linear, ACES2065-1, ACEScg, raw data):
+    True / False, None where there is no tag. ACEScc and ACEScct are log encodings, not linear light."""
+    cs = name.lower()
+    if not cs:
+        return None
+    if any(k in cs for k in _LOG_MARKS):
         return False
-    return image.pixels.dtype.kind == "f"
+    return any(k in cs for k in ("lin", "aces", "scene_linear", "raw"))
+
+
+def is_linear(image: Image) -> bool:
+    """True when the pixels are linear light: a colour space tagged linear/ACES (not ACEScc/ACEScct, which are
+    log), or untagged float."""
+    tagged = is_linear_colour_space(image.spec.get_string_attribute("oiio:ColorSpace", ""))
+    return image.pixels.dtype.kind == "f" if tagged is None else tagged
 
 
 class FilterSet:
@@ -112,6 +125,20 @@ class SequenceError(ValueError):
 def is_pattern(path: str) -> bool:
     """True when the file name holds a printf frame number like %04d."""
     return bool(_PRINTF.search(os.path.basename(path)))
+
+
+_HASHES = re.compile(r"#{2,}")
+
+
+def printf_pattern(path: str) -> str:
+    """A pattern written with hashes, as Nuke and RV write them ("shot.####.exr": one # a digit, from ##), as the
+    printf pattern it means ("shot.%04d.exr"); other paths, and a file or folder that exists under that very name,
+    as they are. Only the file name's first run counts, as for %04d."""
+    folder, base = os.path.split(path)
+    m = _HASHES.search(base)
+    if m is None or _PRINTF.search(base) or os.path.exists(path):
+        return path
+    return os.path.join(folder, f"{base[:m.start()]}%0{len(m.group())}d{base[m.end():]}")
 
 
 def frame_path(pattern: str, number: int) -> str:
@@ -262,6 +289,8 @@ def image_source(files: list[FrameFile], report: Report, *, strict: bool,
             continue
         for note in image.conversions:
             report.inform(f"{ff.src}: {note}")
+        for note in image.lossy:   # the same for every frame of a sequence: said once
+            report.caution_once(note)
         if strict:
             shape = (image.pixels.shape, image.pixels.dtype)
             if first is None:
