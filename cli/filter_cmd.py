@@ -39,7 +39,9 @@ Examples:
 \b
 Images and sequences go through OpenImageIO: bit depth (8/16-bit, half, float), channels, alpha
 (passed through unchanged), metadata and a JPEG's quality are kept; palette PNGs come out as RGB(A). EXRs tagged
-linear (and untagged float images) are taken as linear light, others as sRGB-encoded; linear light
+linear (and untagged float images) are taken as linear light, others as sRGB-encoded. Linear light is
+judged at the power of two of exposure that puts its 90th percentile near white, whatever exposure or
+units the renderer wrote (the output keeps the input's; TSS too). Linear light
 written to a format of display values (PNG, JPEG) is encoded to sRGB, clipped to 0-1, and EXR's
 premultiplied alpha written to a format of straight alpha (PNG) is divided out. In a folder,
 files that are not images by their extension are skipped with a warning; a file that cannot be
