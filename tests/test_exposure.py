@@ -149,9 +149,10 @@ def test_temporal_supersampling_of_linear_frames_does_not_depend_on_their_exposu
     assert not np.array_equal(plain, base * np.float32(2.0 ** -6))
 
 
-def test_the_blend_after_temporal_supersampling_sees_the_same_exposure():
-    """Method tss+blend (the blend everywhere) on linear frames: at 2^-5 of the exposure the outputs are 2^-5 times
-    the outputs at 1, bit for bit (the blend's history is held at TSS's scale)."""
+@pytest.mark.parametrize("method", ["tss+blend", "blend"])
+def test_the_blend_sees_linear_frames_at_one_exposure(method):
+    """Methods tss+blend (the blend everywhere after TSS) and blend on linear frames: at 2^-5 of the exposure the
+    outputs are 2^-5 times the outputs at 1, bit for bit (the blend's history held at TSS's scale, or its own)."""
     from mlaa_stream.bench.temporal import scene_pan
     from mlaa_stream.temporal.methods import make_stage
     from mlaa_stream.yardstick.scenes import srgb8_to_linear
@@ -160,7 +161,7 @@ def test_the_blend_after_temporal_supersampling_sees_the_same_exposure():
     def run(scale: float) -> np.ndarray:
         s = np.float32(scale)
         with Filter(None, bgr=False, linear_input=True) as filt, \
-                make_stage("tss+blend", filt.context, bgr=False, linear_input=True) as stage:
+                make_stage(method, filt.context, bgr=False, linear_input=True) as stage:
             return np.stack([stage(f * s, filt.process(f * s), i) for i, f in enumerate(pan)])
 
     base = run(1.0)

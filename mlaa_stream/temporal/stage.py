@@ -28,6 +28,7 @@ from mlaa_stream.device.colour import device_luts, lut_read
 from mlaa_stream.device.context import Context, default_context
 from mlaa_stream.device.formats import LUT_SIZE, FrameFormat, defines_for, frame_format
 from mlaa_stream.spatial.fallback import FALLBACK_TILE
+from mlaa_stream.spatial.exposure import HeldExposure, exposed
 from mlaa_stream.spatial.nonfinite import restore_out_of_range
 
 MODES = ("adaptive", "dense", "global", "static", "off")
@@ -337,14 +338,16 @@ class TemporalStage:
                  context: Context | None = None, k: float = DEFAULT_K, gamma: float = GAMMA,
                  fb_check: bool = True, linear_input: bool = False, preset: str = "fast",
                  where: str = "everywhere", regions_from=None,
-                 motion: Callable[[int], np.ndarray | None] | None = None):
+                 motion: Callable[[int], np.ndarray | None] | None = None, auto_exposure: bool = True):
         """where="render": history only on moving pixels of render regions (WHERE); the regions are the
         `regions` argument of each call, or else `regions_from.last_regions` (a Filter(keep_regions=True)
         whose frame was collected just before the call).
         `motion`: known motion instead of DIS on dense frames: motion(index) gives frame `index`'s (H, W, 2)
         offsets to the previous frame in full-size pixels (previous position = pixel + offset: a renderer's
         motion vectors; tss_check's exact-motion oracle), or None for DIS; a known field gets no
-        forward-backward check."""
+        forward-backward check. `auto_exposure`: linear-light float frames are blended at the power of two of
+        exposure that puts their key near 1 (spatial/exposure.py), held over the shot, as the spatial filter sees
+        them; False: at the exposure they come in (TSSThenBlend hands its blend frames at TSS's scale)."""
         if mode not in MODES:
             raise ValueError(f"mode: expected one of {', '.join(MODES)}, got {mode!r}")
         if show not in SHOWS:
@@ -361,6 +364,7 @@ class TemporalStage:
         self.strength, self.k, self.gamma = float(strength_k), float(k), float(gamma)
         self.mode, self.bgr, self.show = mode, bool(bgr), show
         self.fb_check, self.linear_input = bool(fb_check), bool(linear_input)
+        self.exposure = HeldExposure() if auto_exposure else None
         self.stats: list[dict] = []
         self._off = mode == "off" or self.strength == 0.0
         self.context = None if self._off else (context or default_context(device))
@@ -444,10 +448,24 @@ class TemporalStage:
                              f"got {fin.width}x{fin.height} and {fmt.width}x{fmt.height}")
         if regions is None and self.regions_from is not None:
             regions = self.regions_from.last_regions
+        scale = 1.0
         with self._lock:
-            out = self._step(frame_in, frame_filtered, int(index), fmt, regions, measured)
+            fi, ff = frame_in, frame_filtered
+            if self.exposure is not None and self.linear_input and np.asarray(frame_in).dtype.kind == "f":
+                if self.exposure.update(np.asarray(frame_in)):
+                    self.reset()   # the history is another exposure's
+                scale = self.exposure.scale
+            if scale != 1.0:   # copies in float32 (half would overflow): the caller's frames stay as they are
+                fi = exposed(np.asarray(frame_in, np.float32), scale)
+                ff = exposed(np.asarray(frame_filtered, np.float32), scale)
+                fmt = frame_format(ff, self.bgr, what=f"{what} (filtered)")
+            out = self._step(fi, ff, int(index), fmt, regions, measured)
+        if self.show is not None:
+            return out
+        if scale != 1.0:
+            out = exposed(out, 1.0 / scale).astype(np.asarray(frame_filtered).dtype)
         # NaN, inf and samples beyond ±1e15 pass through as the spatial filter passes them (spatial/nonfinite.py)
-        return out if self.show is not None else restore_out_of_range(frame_in, out)
+        return restore_out_of_range(frame_in, out)
 
     def _step(self, frame_in, frame_filtered, index: int, fmt: FrameFormat, regions, measured) -> np.ndarray:
         t0 = time.perf_counter()

@@ -1682,7 +1682,8 @@ class TSSThenBlend:
                             linear_input=linear_input, dense_samples=dense_samples)
         self._tss_view = show == "history" and blend_kwargs.get("where") == "render"
         self.blend = TemporalStage(device, bgr=bgr, mode=blend_mode or mode, show=None if self._tss_view else show,
-                                   context=self.tss.context, linear_input=linear_input, **blend_kwargs)
+                                   context=self.tss.context, linear_input=linear_input, auto_exposure=False,
+                                   **blend_kwargs)
         self._scale = 1.0   # the exposure the blend's history is at (TSS's, spatial/exposure.py)
 
     @property
