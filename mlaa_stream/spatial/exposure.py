@@ -85,3 +85,11 @@ class HeldExposure:
         changed = self.scale is not None
         self.scale = own
         return changed
+
+    def scale_for(self, frame: np.ndarray, linear: bool) -> tuple[float, bool]:
+        """The scale `frame` is worked at -- the held one for a linear-light float frame, else 1 -- and whether the
+        held scale changed with it (the caller's history is then another exposure's)."""
+        if not linear or np.asarray(frame).dtype.kind != "f":
+            return 1.0, False
+        changed = self.update(np.asarray(frame))
+        return self.scale, changed

@@ -451,10 +451,10 @@ class TemporalStage:
         scale = 1.0
         with self._lock:
             fi, ff = frame_in, frame_filtered
-            if self.exposure is not None and self.linear_input and np.asarray(frame_in).dtype.kind == "f":
-                if self.exposure.update(np.asarray(frame_in)):
+            if self.exposure is not None:
+                scale, changed = self.exposure.scale_for(frame_in, self.linear_input)
+                if changed:
                     self.reset()   # the history is another exposure's
-                scale = self.exposure.scale
             if scale != 1.0:   # copies in float32 (half would overflow): the caller's frames stay as they are
                 fi = exposed(np.asarray(frame_in, np.float32), scale)
                 ff = exposed(np.asarray(frame_filtered, np.float32), scale)

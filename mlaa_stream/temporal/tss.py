@@ -231,11 +231,11 @@ class MotionRing:
                 dec = Decision("dense", dec.translation, {**dec.measures, "still_background": True})
         if dec.model == "reset":
             self.entries = []
-        elif dec.model == "global" and self.refine and self._refiner(pyr).aperture < APERTURE_RATIO:
+        elif dec.model == "global" and (aperture := self._aperture(pyr)) is not None:
             # one edge direction: the motion along it is a guess (the samples would line up in every footprint),
             # so no samples and nothing to refine; the ring starts anew
             self.entries = []
-            dec = Decision("global", dec.translation, {**dec.measures, "aperture": self._refiner(pyr).aperture})
+            dec = Decision("global", dec.translation, {**dec.measures, "aperture": aperture})
         elif dec.model == "global":
             d = dec.translation
             for e in self.entries:
@@ -280,9 +280,9 @@ class MotionRing:
                 self._tracked_tiles(pyr, ahead)
             elif ahead and dec.model == "global" and self.refine and TRAJECTORY_AHEAD:
                 self._fit_trajectory(index, ahead)
-        if self.refine and "aperture" not in dec.measures and any(e.translated for e in ahead) and \
-                self._refiner(pyr).aperture < APERTURE_RATIO:   # a shot's first frame reading frames ahead
-            dec = Decision(dec.model, dec.translation, {**dec.measures, "aperture": self._refiner(pyr).aperture})
+        if "aperture" not in dec.measures and any(e.translated for e in ahead) and \
+                (aperture := self._aperture(pyr)) is not None:   # a shot's first frame reading frames ahead
+            dec = Decision(dec.model, dec.translation, {**dec.measures, "aperture": aperture})
         for e in self.entries + ahead:
             # translations are checked per tile (global branch above); dense and projective maps per region
             if not e.translated or e.projective:
@@ -331,6 +331,14 @@ class MotionRing:
         # of the baseline (after a still background was found, the ring's background is still)
         moved = (far.shift[0] + d[0], far.shift[1] + d[1]) if far.shift is not None else (d[0] * age, d[1] * age)
         return still_background(far.pyr, pyr, moved)
+
+    def _aperture(self, pyr: Pyramid) -> float | None:
+        """The current frame's structure-tensor ratio (_Refiner.aperture) where it is under APERTURE_RATIO -- one edge
+        direction, whose motion along it is not measured -- else None (or without refinement)."""
+        if not self.refine:
+            return None
+        ratio = self._refiner(pyr).aperture
+        return ratio if ratio < APERTURE_RATIO else None
 
     def _refiner(self, pyr: Pyramid) -> _Refiner:
         """The direct refiner of the current frame (made once per frame)."""
@@ -1309,7 +1317,10 @@ class TSSStage:
             fin, fout = fin.astype(np.float32), fout.astype(np.float32)
             ahead = [f.astype(np.float32) for f in ahead]
         with self._lock:
-            scale = self.last_scale = self._exposure(fin)
+            scale, changed = self.exposure.scale_for(fin, self.linear_input) if self.exposure else (1.0, False)
+            if changed:
+                self.reset()   # the ring's samples are another exposure's
+            self.last_scale = scale
             if scale != 1.0:   # copies: the caller's frames stay as they are
                 fin, fout, ahead = exposed(fin, scale), exposed(fout, scale), [exposed(f, scale) for f in ahead]
             out = self._step(fin, fout, int(index), ahead)
@@ -1320,15 +1331,6 @@ class TSSStage:
             out = exposed(out, 1.0 / scale)
         # NaN, inf and samples beyond ±1e15 pass through as the spatial filter passes them (spatial/nonfinite.py)
         return restore_out_of_range(frame_in, out.astype(frame_filtered.dtype) if wide else out)
-
-    def _exposure(self, fin: np.ndarray) -> float:
-        """The scale the frame is resolved at: 1 but for linear-light float frames (auto_exposure); a change of
-        the held scale starts a new ring (its samples are another exposure's)."""
-        if self.exposure is None or not self.linear_input or fin.dtype.kind != "f":
-            return 1.0
-        if self.exposure.update(fin):
-            self.reset()
-        return self.exposure.scale
 
     def _grain_stands(self, fin: np.ndarray, fout: np.ndarray, out: np.ndarray, index: int) -> np.ndarray:
         """`out` with the spatial pixel back where the input's 3x3 window spans no more than its grain (quiet

@@ -697,9 +697,7 @@ class Renderer:
         """One sample per pixel at the pixel centres in linear light, as a renderer writes an EXR: (H, W, 3)
         float32 (over 1 in highlights with hdr=True)."""
         self.fbo32.use()
-        self.fbo32.clear(0, 0, 0, 1, depth=1.0)
-        self.draw(cam, 0.0, 0.0, encode=False)
-        return np.flipud(self._linear_rows()).copy()
+        return np.flipud(self._linear_pass(cam, 0.0, 0.0)).copy()
 
     def truth_linear(self, cam: Camera, spp: int = TRUTH_SPP) -> np.ndarray:
         """The mean of spp x spp jittered passes in linear light: (H, W, 3) float64."""
@@ -708,10 +706,14 @@ class Renderer:
         offsets = (np.arange(spp) + 0.5) / spp - 0.5
         for dy in offsets:
             for dx in offsets:
-                self.fbo32.clear(0, 0, 0, 1, depth=1.0)
-                self.draw(cam, dx, dy, encode=False)
-                acc += self._linear_rows()
+                acc += self._linear_pass(cam, dx, dy)
         return np.flipud(acc / (spp * spp))
+
+    def _linear_pass(self, cam: Camera, dx: float, dy: float) -> np.ndarray:
+        """One linear pass into the bound float target, the image shifted by (dx, dy) px: _linear_rows."""
+        self.fbo32.clear(0, 0, 0, 1, depth=1.0)
+        self.draw(cam, dx, dy, encode=False)
+        return self._linear_rows()
 
     def _linear_rows(self) -> np.ndarray:
         """The float target's RGB as GL stores it, bottom row first: (H, W, 3) float32."""
