@@ -428,6 +428,10 @@ def _job_for(kind: str, output: str) -> type:
               help="Write per-frame temporal statistics to this CSV (implies --temporal): one row per frame written, "
                    "its motion model (reset, static, global, layers, dense), samples taken, ms; columns in "
                    "docs/temporal.md, \"--stats FILE\".")
+@click.option("--alpha", "alpha", type=click.Choice(["coverage", "keep"]), default="coverage", show_default=True,
+              help="An RGBA frame's alpha: coverage antialiases a silhouette against transparency in the alpha too "
+                   "(an element rendered over transparency: the colour of the rim stays the element's, no dark "
+                   "fringe once composited); keep leaves the alpha as it is and filters the colour alone.")
 @click.option("--keep", "keep", multiple=True, metavar="X,Y,W,H",
               help="Leave this rectangle of every frame exactly as it is (burned-in subtitles, a HUD or a slate "
                    "over a render, which the filter would soften); pixels or % of the frame, e.g. "
@@ -451,8 +455,8 @@ def filter_command(ctx: click.Context, input_path: str, output: str, overwrite: 
                    in_flight: int, temporal: bool | None,
                    temporal_frames: int | None, temporal_method: str, lookahead: int | None, dense_motion: bool,
                    temporal_mode: str,
-                   temporal_k: float | None, stats_path: str | None, keep: tuple[str, ...], show: str | None,
-                   device: str | None, verbose: int, quiet: bool) -> None:
+                   temporal_k: float | None, stats_path: str | None, alpha: str, keep: tuple[str, ...],
+                   show: str | None, device: str | None, verbose: int, quiet: bool) -> None:
     """Remove jaggies from an image, a folder of images, a frame sequence or a video.
 
     INPUT is an image, a folder (its images in name order), a printf frame pattern such as
@@ -469,7 +473,7 @@ def filter_command(ctx: click.Context, input_path: str, output: str, overwrite: 
                            encoder_preset=encoder_preset, pix_fmt=pix_fmt, rate=rate, jpeg_quality=jpeg_quality,
                            video_backend=video_backend, start=start, end=end,
                            overlay=overlay, in_flight=in_flight, device=device, progress_path=progress_path,
-                           cluster=cluster, chunk_frames=chunk_frames, keep=keep,
+                           cluster=cluster, chunk_frames=chunk_frames, keep=keep, alpha=alpha,
                            temporal=TemporalOptions(temporal, temporal_mode, temporal_k, stats_path, show,
                                                     temporal_frames, temporal_method, lookahead, dense_motion))
     except Terminated as exc:
@@ -492,7 +496,8 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
             temporal: "TemporalOptions | None" = None, bridge: bool | None = None, rate: float = 24.0,
             audio: str = "copy", progress_path: str | None = None, start: str | None = None,
             end: str | None = None, container: str | None = None, cluster: str | None = None,
-            chunk_frames: int = 16, keep: tuple[str, ...] = (), jpeg_quality: int | None = None) -> int:
+            chunk_frames: int = 16, keep: tuple[str, ...] = (), jpeg_quality: int | None = None,
+            alpha: str = "coverage") -> int:
     """Check everything that can be checked without a device, then build the filter and run."""
     from mlaa_stream.io.sequence import printf_pattern
 
@@ -504,6 +509,8 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
         con.error("--overwrite and --resume contradict each other: choose one")
         return EXIT_USAGE
     kwargs = _filter_kwargs(ctx, preset, threshold, metric, display_space, reconstruct, bridge)
+    if alpha != "coverage":
+        kwargs["alpha"] = alpha
     if threshold is not None and threshold >= 1 and kwargs.get("metric", "lab") in ("luma", "rgb"):
         # luma and rgb thresholds are fractions of full scale: no two colours of an image in 0-1 differ by 1 or more,
         # so a ΔE-sized value (8, --metric lab's default) finds no edge and writes the input back without a word

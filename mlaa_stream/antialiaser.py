@@ -16,6 +16,7 @@ from typing import Any, Iterable, Iterator, Sequence
 
 import numpy as np
 
+from mlaa_stream.spatial.alpha import spatial_at_rims
 from mlaa_stream.spatial.filter import PRESETS, Filter
 from mlaa_stream.spatial.fast_filter import FastFilter
 from mlaa_stream.spatial.keep import KeepRect, keep_rects, restore_kept
@@ -152,7 +153,7 @@ class Antialiaser:
                 self._check_idle()
                 out = self._filter.process(frame)
                 index = self.index
-                out = restore_kept(frame, self.temporal(frame, out, index), self._filter.keep)
+                out = restore_kept(frame, spatial_at_rims(out, self.temporal(frame, out, index)), self._filter.keep)
                 if self._own_stage:
                     _trim_stats(self.temporal)
                 self.index = index + 1   # the stage took it: a failing hook below must not hand it the index again

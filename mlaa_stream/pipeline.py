@@ -22,6 +22,7 @@ from typing import Any, Callable, Iterable, Iterator, Protocol, Sequence
 import numpy as np
 
 from mlaa_stream.io.item import Item
+from mlaa_stream.spatial.alpha import spatial_at_rims
 from mlaa_stream.spatial.keep import restore_kept
 
 Temporal = Callable[[np.ndarray, np.ndarray, int], np.ndarray]
@@ -212,7 +213,8 @@ def stream_items(source: Iterable, filt: FrameFilter, *, in_flight: int = 2, que
             t0 = time.perf_counter()
             try:
                 f = filt.for_item(obj) if hasattr(filt, "for_item") else filt
-                pending.append((obj, f.submit(obj.frame)))
+                pending.append((obj, f.submit(obj.frame, premultiplied=True) if obj.premultiplied else
+                                   f.submit(obj.frame)))
             except Exception as exc:
                 upstream = _Failure("filter", obj.index, exc, obj.meta)
                 break
@@ -279,6 +281,7 @@ def _finish(ready: deque, pending: deque, ahead: int, temporal: Temporal | None,
             # the frames after it were collected since: the filter's last_regions (a stage with where="render"
             # reads them) are theirs until this frame's are put back
             result.publish_regions()
+        spatial = out
         if temporal is not None and ahead:
             later = [it.frame for it, _, _ in ready] + [it.frame for it, _ in pending]
             out = temporal(item.frame, out, item.index, future=later[:ahead])
@@ -290,6 +293,8 @@ def _finish(ready: deque, pending: deque, ahead: int, temporal: Temporal | None,
             t2 = time.perf_counter()
             times.temporal += t2 - t1
             t1 = t2
+        if temporal is not None:
+            out = spatial_at_rims(spatial, out)
         if kept:
             out = restore_kept(item.frame, out, kept)
         stage = "post"
@@ -298,7 +303,7 @@ def _finish(ready: deque, pending: deque, ahead: int, temporal: Temporal | None,
         times.post += time.perf_counter() - t1
     except Exception as exc:
         return item, _Failure(stage, item.index, exc, item.meta)
-    return Item(frame=out, meta=item.meta, index=item.index), None
+    return Item(frame=out, meta=item.meta, index=item.index, premultiplied=item.premultiplied), None
 
 
 class _Writer(threading.Thread):

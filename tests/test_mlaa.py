@@ -183,7 +183,7 @@ def test_filter_matches_reference(dtype, channels, bgr):
     img = blocky(11, dtype=dtype, channels=channels)
     if channels == 1:
         img = img[..., 0]
-    with Filter(bgr=bgr, fallback="off") as f:
+    with Filter(bgr=bgr, fallback="off", alpha="keep") as f:  # the kernels' alpha kept (tests/test_alpha.py)
         got = f.process(img)
     want = mlaa_reference(img, bgr=bgr)
     assert got.shape == img.shape and got.dtype == img.dtype
@@ -476,7 +476,7 @@ def test_grain_guard_matches_reference(dtype, channels):
     img = grainy(21, dtype, channels)
     if channels == 1:
         img = img[..., 0]
-    with Filter(bridge=False, fallback="off") as f:
+    with Filter(bridge=False, fallback="off", alpha="keep") as f:
         got = f.process(img)
     want = mlaa_reference(img)
     scale = {np.uint8: 1.0, np.uint16: 1 / 257.0, np.float32: 255.0}[dtype]

@@ -9,8 +9,10 @@ import numpy as np
 
 @dataclass
 class Item:
-    """One frame on its way through the pipeline; `meta` is the source's (file name, pts, spec...)."""
+    """One frame on its way through the pipeline; `meta` is the source's (file name, pts, spec...);
+    `premultiplied`: its colour is premultiplied by its alpha (EXR), for the filter's alpha as coverage."""
 
     frame: np.ndarray
     meta: Any = None
     index: int = -1
+    premultiplied: bool = False

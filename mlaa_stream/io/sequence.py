@@ -15,8 +15,8 @@ import re
 from dataclasses import dataclass, field
 from typing import Callable, Iterator
 
-from mlaa_stream.io.images import (Image, ImageReadError, ImageWriteError, is_image_path, is_temp_path,
-                       read_image, split_for_filter, unpremultiplies, write_image)
+from mlaa_stream.io.images import (Image, ImageReadError, ImageWriteError, is_image_path, is_premultiplied,
+                       is_temp_path, read_image, split_for_filter, unpremultiplies, write_image)
 from mlaa_stream.io.item import Item
 
 _PRINTF = re.compile(r"%(0?)(\d*)d")
@@ -300,7 +300,7 @@ def image_source(files: list[FrameFile], report: Report, *, strict: bool,
                 raise SequenceError(
                     f"{ff.label}: expected {s0[1]}x{s0[0]} with {s0[2]} channels of {d0} like "
                     f"{first[1].src}, got {s1[1]}x{s1[0]} with {s1[2]} channels of {d1}{_data_window(image)}")
-        yield Item(frame, (ff, image, merge))
+        yield Item(frame, (ff, image, merge), premultiplied=is_premultiplied(image.spec))
 
 
 def _data_window(image: Image) -> str:

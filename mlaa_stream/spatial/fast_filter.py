@@ -36,16 +36,19 @@ class FastFilter(Filter):
 
     def _direct_ok(self, frame: np.ndarray) -> bool:
         fmt = frame_format(frame, self.bgr)
-        return self.direct and frame.dtype.kind in "ui" and frame.dtype == fmt.dtype and frame.flags.c_contiguous
+        return (self.direct and frame.dtype.kind in "ui" and frame.dtype == fmt.dtype and frame.flags.c_contiguous
+                and not self._wants_alpha(frame))
 
-    def process(self, frame: np.ndarray) -> np.ndarray:
+    def process(self, frame: np.ndarray, premultiplied: bool = False) -> np.ndarray:
         """Filter one frame: the kernels read `frame` itself (nothing else runs on it until this returns)."""
-        return self._enqueue_direct(frame).result() if self._direct_ok(frame) else super().process(frame)
+        return (self._enqueue_direct(frame).result() if self._direct_ok(frame) else
+                super().process(frame, premultiplied))
 
-    def submit(self, frame: np.ndarray) -> PendingFrame:
+    def submit(self, frame: np.ndarray, premultiplied: bool = False) -> PendingFrame:
         """As Filter.submit: the caller may change `frame` as soon as this returns, so the kernels read a copy
         (one copy instead of Filter's staging copy, upload and download)."""
-        return self._enqueue_direct(frame.copy()) if self._direct_ok(frame) else super().submit(frame)
+        return (self._enqueue_direct(frame.copy()) if self._direct_ok(frame) else
+                super().submit(frame, premultiplied))
 
     def _enqueue_direct(self, frame: np.ndarray) -> PendingFrame:
         """Enqueue the passes on `frame` and a new output array, both wrapped as device buffers."""

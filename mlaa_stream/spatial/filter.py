@@ -21,6 +21,7 @@ import pyopencl as cl
 from mlaa_stream.device.colour import device_luts
 from mlaa_stream.device.context import Context, default_context, linear_levels
 from mlaa_stream.device.formats import FrameFormat, defines_for, frame_format
+from mlaa_stream.spatial.alpha import AlphaSplit, has_coverage, varied_tiles
 from mlaa_stream.spatial.exposure import exposure_scale, scale_colour
 from mlaa_stream.spatial.keep import KeepRect, kept_patches, keep_rects, restore_patches
 from mlaa_stream.spatial.nonfinite import NonFinite, replace_non_finite
@@ -63,6 +64,7 @@ SUBPIXEL_END = 0.25
 # ... and the neighbours across its edges take SUBPIXEL_SHARE of its move, negated, split among them (ink kept).
 SUBPIXEL_SHARE = 1.0
 FALLBACK_MODES = ("auto", "edges", "everywhere", "off")  # Filter(fallback=...): spatial/fallback.py
+ALPHA_MODES = ("coverage", "keep")  # Filter(alpha=...): spatial/alpha.py
 SHOWS = (None, "regions")  # Filter(show=...): debug views
 # A U shape (a bump) of STEM_MIN_L or more pixels on a 1-px line is a 1-px stroke -- small text's stems, rules --
 # with square ends, not a curve's bump: its areas are scaled by STEM_K (kernels/weights.cl, docs/spatial_tuning.md).
@@ -239,6 +241,34 @@ class PendingFrame:
             self._owner.last_regions = self.regions
 
 
+class AlphaPendingFrame:
+    """A frame in flight whose alpha is filtered as coverage (spatial/alpha.py): its premultiplied colour is on the
+    device; `result()` waits for it, filters the alpha plane inside the colour's render regions as a render and
+    merges the two. The same interface as PendingFrame."""
+
+    def __init__(self, owner: "Filter", split: AlphaSplit, colour: PendingFrame, patches: list):
+        self._owner, self._split, self._colour, self._patches = owner, split, colour, patches
+        self._result: np.ndarray | None = None
+
+    @property
+    def regions(self) -> np.ndarray | None:
+        return self._colour.regions
+
+    def publish_regions(self) -> None:
+        self._colour.publish_regions()
+
+    def result(self) -> np.ndarray:
+        """The filtered frame (see PendingFrame.result: each call returns an array of its own)."""
+        if self._result is not None:
+            self.publish_regions()
+            return self._result.copy()
+        colour = self._colour.result()
+        alpha = self._owner.filter_alpha(self._split.alpha, self._colour.regions)
+        self._result = restore_patches(self._split.merge(colour, alpha), self._patches)
+        self._split = None
+        return self._result
+
+
 class _FrameBuffers:
     """All device memory for one frame format: allocated once, reused for every frame."""
 
@@ -275,7 +305,8 @@ class Filter:
                  preset: str | None = None, context: Context | None = None, show: str | None = None,
                  keep_regions: bool = False, footprint_table: np.ndarray | None | str = "default",
                  refine_table: np.ndarray | None | str = "default", moire: bool = True,
-                 keep: Sequence[KeepRect | str] | str | None = None, auto_exposure: bool = True):
+                 keep: Sequence[KeepRect | str] | str | None = None, auto_exposure: bool = True,
+                 alpha: str = "coverage"):
         """`preset`: one of PRESETS; its options replace the keywords of the same names. `fallback`: FXAA
         for the pixels MLAA leaves (spatial/fallback.py): "auto" where the neighbourhood shows 1-spp
         aliasing and is no flat-colour art, with the footprint table in render regions; "edges" the same
@@ -290,7 +321,9 @@ class Filter:
         (spatial/moire.py). `keep`: rectangles left exactly as they are in every frame (subtitles, a HUD over a
         render; spatial/keep.py): KeepRect or 'X,Y,W,H' strings in pixels or % of the frame. `auto_exposure`: a
         float frame with `linear_input` is filtered at the power of two of exposure that puts its key near display
-        white and multiplied back (spatial/exposure.py); False filters it as its samples are."""
+        white and multiplied back (spatial/exposure.py); False filters it as its samples are. `alpha`: "coverage"
+        antialiases the alpha of an RGBA frame with its colour where the alpha is not one value (an element over
+        transparency; spatial/alpha.py), "keep" leaves it as it is and filters the colour alone."""
         if show not in SHOWS:
             raise ValueError(f"show: expected None or 'regions', got {show!r}")
         self.show = show
@@ -319,6 +352,11 @@ class Filter:
                                      bool(aa_guard), bool(grain_guard), float(subpixel))
         self.bgr = bool(bgr)
         self.auto_exposure = bool(auto_exposure)
+        if alpha not in ALPHA_MODES:
+            raise ValueError(f"alpha: expected one of {', '.join(ALPHA_MODES)}, got {alpha!r}")
+        self.alpha = alpha
+        self._alpha_filters: dict[str, "Filter"] = {}  # fallback mode -> the filter of alpha planes (_alpha_filter)
+        self._alpha_lock = threading.Lock()
         self.fast = bool(fast)  # spatial/fast.py: seed 004's passes instead of the default chain
         self.reconstruct = bool(reconstruct) and not self.fast
         self.bridge = bool(bridge) and not self.fast
@@ -395,8 +433,23 @@ class Filter:
         return bufs
 
     # -- per frame ---------------------------------------------------------------------------
-    def submit(self, frame: np.ndarray) -> PendingFrame:
-        """Enqueue upload, passes and download of `frame` without waiting; see PendingFrame."""
+    def submit(self, frame: np.ndarray, premultiplied: bool = False) -> "PendingFrame | AlphaPendingFrame":
+        """Enqueue upload, passes and download of `frame` without waiting; see PendingFrame. `premultiplied`: the
+        colour of an RGBA frame is premultiplied by its alpha (EXR's convention), for alpha="coverage"."""
+        if self._wants_alpha(frame):
+            split = AlphaSplit(frame, premultiplied, decode=self.options.linear and not self.options.linear_input)
+            colour = self._submit(split.colour, want_regions=self.fallback == "auto")
+            return AlphaPendingFrame(self, split, colour, kept_patches(frame, self.keep))
+        return self._submit(frame)
+
+    def _wants_alpha(self, frame: np.ndarray) -> bool:
+        """True when `frame`'s alpha is filtered as coverage (alpha="coverage" and an alpha that varies)."""
+        frame_format(frame, self.bgr)  # a frame the filter cannot take is named as such first
+        return self.alpha == "coverage" and has_coverage(frame)
+
+    def _submit(self, frame: np.ndarray, want_regions: bool = False) -> PendingFrame:
+        """submit without the alpha split; `want_regions`: read the frame's render-region flags back (PendingFrame.regions)
+        even without keep_regions."""
         fmt = frame_format(frame, self.bgr)
         with self._lock:
             bufs = self._prepare(fmt)
@@ -421,7 +474,7 @@ class Filter:
             bufs.last_use[slot] = down
             self._last_event = done
             regions = None
-            if self.keep_regions:  # without the fallback pass: no regions
+            if self.keep_regions or want_regions:  # without the fallback pass: no regions
                 regions = (self._fallback.read_regions(self.queue, [done]) if self._fallback is not None else
                            (None, None))
                 if regions[1] is not None:  # the next frame's passes rewrite the flags after the copy
@@ -492,9 +545,9 @@ class Filter:
                     times.setdefault(name, []).append((e.profile.end - e.profile.start) * 1e-6)
         return {name: float(np.median(v)) for name, v in times.items()}
 
-    def process(self, frame: np.ndarray) -> np.ndarray:
-        """Filter one frame and return it (same shape and dtype)."""
-        return self.submit(frame).result()
+    def process(self, frame: np.ndarray, premultiplied: bool = False) -> np.ndarray:
+        """Filter one frame and return it (same shape and dtype); `premultiplied` as for submit."""
+        return self.submit(frame, premultiplied).result()
 
     # -- inspection, for tests and the benchmark ---------------------------------------------
     def intermediates(self, frame: np.ndarray) -> dict[str, np.ndarray]:
@@ -522,6 +575,37 @@ class Filter:
     def finish(self) -> None:
         self.queue.finish()
 
+    # -- alpha as coverage (spatial/alpha.py) ------------------------------------------------------
+    def _alpha_filter(self, fallback: str) -> "Filter":
+        """The filter of alpha planes: this one's options, samples taken as linear (coverage), `fallback`."""
+        with self._alpha_lock:
+            if fallback not in self._alpha_filters:
+                o = self.options
+                self._alpha_filters[fallback] = Filter(
+                    context=self.context, threshold=o.threshold, metric=o.metric, linear=o.linear, linear_input=True,
+                    rounding=o.rounding, blend_u=o.blend_u, ramp=o.ramp, short_corner=o.short_corner,
+                    aa_guard=o.aa_guard, bridge=self.bridge, grain_guard=o.grain_guard, subpixel=o.subpixel,
+                    fallback=fallback, fast=self.fast, reconstruct=self.reconstruct,
+                    footprint_table=self.footprint_table, refine_table=self.refine_table, moire=self.moire,
+                    auto_exposure=False, alpha="keep")
+            return self._alpha_filters[fallback]
+
+    def filter_alpha(self, plane: np.ndarray, regions: np.ndarray | None) -> np.ndarray:
+        """An alpha plane (H, W) filtered as coverage: with this filter's fallback, and inside the colour's render
+        regions (`regions`: its flags per tile, or None) with the fallback on every pixel, as in a 1-spp render."""
+        if regions is None or self.fallback != "auto" or not np.any(regions):
+            return self._alpha_filter(self.fallback).process(plane)
+        from mlaa_stream.spatial.fallback import FALLBACK_TILE, region_pixels
+        inside = np.asarray(regions) > 0
+        varied = varied_tiles(plane, FALLBACK_TILE)  # tiles neither filter changes need neither
+        if not (varied & ~inside).any():
+            return self._alpha_filter("everywhere").process(plane)
+        if not (varied & inside).any():
+            return self._alpha_filter(self.fallback).process(plane)
+        out = self._alpha_filter(self.fallback).process(plane)
+        rendered = self._alpha_filter("everywhere").process(plane)
+        return np.where(region_pixels(regions, *plane.shape[:2]), rendered, out)
+
     def close(self) -> None:
         """Wait for work in flight and free the device buffers."""
         try:
@@ -533,6 +617,9 @@ class Filter:
             self._bridger = None
             self._fallback = None
             self._fast = None
+            children, self._alpha_filters = list(self._alpha_filters.values()), {}
+            for child in children:
+                child.close()
 
     def __getstate__(self) -> None:
         # pickle named pyopencl's Device ("cannot pickle 'Device' object"): say what cannot travel and what to do

@@ -1,0 +1,165 @@
+"""Alpha as coverage: the alpha of a frame antialiased together with its colour.
+
+A renderer that writes an element over transparency (RGBA PNG, EXR) at one sample per pixel writes a binary alpha:
+the silhouette against transparency is as jagged as any edge. Filtering the colour alone blends the element's rim
+towards the colour stored in the transparent pixels (black, mostly) while the alpha stays 1 there: the silhouette
+stays jagged and a dark fringe appears once the frame is composited (docs/spatial_tuning.md "Alpha").
+
+Here (AlphaSplit):
+- the colour is filtered premultiplied by alpha in the filter's mix space (linear light for sRGB frames): the
+  transparent pixels hold 0, as a supersampled render's do, and a blend across the silhouette is a coverage mix;
+- the alpha is filtered as a grey image of linear samples (coverage), by a filter with the colour filter's options;
+  where the colour's filter found render regions, by one whose fallback runs everywhere (preset `rendered`), chosen
+  per tile by those regions;
+- the straight colour is the filtered premultiplied colour divided by the filtered alpha, clamped per channel to
+  the range of the input's straight colours with alpha > 0 in the 5x5 window around the pixel (so that a rim pixel
+  keeps a colour of the element, never the transparent pixels' own), and premultiplied again for premultiplied
+  frames.
+A pixel whose colour and alpha the filters both left comes back bit for bit; so do non-finite samples. A frame whose
+alpha is one value everywhere (an opaque render) is filtered as before, alpha kept.
+"""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from mlaa_stream.device.colour import linear_to_srgb, srgb_to_linear
+
+RANGE_RADIUS = 2  # the window of input colours a rim pixel's straight colour is clamped to: 5x5
+
+
+def has_coverage(frame: np.ndarray) -> bool:
+    """True when `frame` has an alpha channel (a fourth one) that is not one value everywhere."""
+    if frame.ndim != 3 or frame.shape[2] != 4:
+        return False
+    alpha = frame[..., 3]
+    if alpha.dtype.kind == "f":
+        alpha = alpha[np.isfinite(alpha)]
+    return alpha.size > 0 and bool(alpha.min() != alpha.max())
+
+
+def varied_tiles(plane: np.ndarray, tile: int) -> np.ndarray:
+    """Per tile x tile block of the (H, W) `plane`, whether a pixel of it lies within 2 px of a change of value
+    (the reach of the widest pass, the footprint table's 5 x 5 window): (tiles_y, tiles_x) bool. A block without
+    one is left as it is by every filter."""
+    kernel = np.ones((5, 5), np.uint8)
+    work = plane if plane.dtype != np.float16 else plane.astype(np.float32)
+    varied = cv2.dilate(work, kernel) != cv2.erode(work, kernel)
+    h, w = varied.shape
+    ty, tx = -(-h // tile), -(-w // tile)
+    padded = np.zeros((ty * tile, tx * tile), bool)
+    padded[:h, :w] = varied
+    return padded.reshape(ty, tile, tx, tile).any(axis=(1, 3))
+
+
+class AlphaSplit:
+    """One RGBA frame split into the premultiplied colour and the alpha that the filters see (`colour`, `alpha`),
+    and merged back (`merge`). `premultiplied`: the frame's colour is premultiplied by its alpha already (EXR);
+    `decode`: the filter mixes in linear light and the samples are sRGB-encoded (integer or float). Work on the host
+    is per pixel only where alpha is fractional (splitting) or where a filter changed something (merging)."""
+
+    def __init__(self, frame: np.ndarray, premultiplied: bool, decode: bool):
+        self.frame, self.premultiplied, self.decode = frame, bool(premultiplied), bool(decode)
+        self.dtype = frame.dtype
+        self.integer = frame.dtype.kind in "ui"
+        self.top = float(np.iinfo(frame.dtype).max) if self.integer else 1.0
+        self._lut = (srgb_to_linear(np.arange(int(self.top) + 1) / self.top).astype(np.float32)
+                     if self.integer and self.decode else None)
+        self.alpha = np.ascontiguousarray(frame[..., 3])
+        self.finite = np.isfinite(frame).all(axis=2) if not self.integer else None
+        a = np.asarray(self.alpha, np.float32) / np.float32(self.top)
+        self.cover = np.where(np.isfinite(a), a, 0.0).astype(np.float32) if self.finite is not None else a
+        if self.premultiplied:
+            self.colour = np.ascontiguousarray(frame[..., :3])
+            return
+        # straight colour premultiplied in mix space: 0 where alpha is 0, as it is where alpha is 1
+        self.colour = np.ascontiguousarray(frame[..., :3]).copy()
+        self.colour[self.cover <= 0] = 0
+        part = (self.cover > 0) & (self.cover < 1)
+        if self.finite is not None:
+            part &= self.finite
+        if part.any():
+            self.colour[part] = self._from_mix(self._to_mix(frame[..., :3][part]) * self.cover[part][:, None])
+
+    def _to_mix(self, stored: np.ndarray) -> np.ndarray:
+        """Stored samples -> mix space, float32."""
+        if self._lut is not None:
+            return self._lut[stored]
+        v = stored.astype(np.float32) / np.float32(self.top)
+        return srgb_to_linear(v).astype(np.float32) if self.decode else v
+
+    def _from_mix(self, mix: np.ndarray) -> np.ndarray:
+        v = linear_to_srgb(mix) if self.decode else mix
+        if self.integer:
+            return np.clip(np.rint(v * self.top), 0, self.top).astype(self.dtype)
+        return np.asarray(v).astype(self.dtype)
+
+    def _colour_range(self, rest: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """At the pixels `rest` (flat indices), per channel, the smallest and largest straight colour (mix space)
+        with alpha > 0 in the pixel's (2 RANGE_RADIUS + 1)^2 window; lo > hi where the window has none. Straight
+        samples are compared as stored (the decode is monotonic), premultiplied ones divided by alpha first."""
+        k = 2 * RANGE_RADIUS + 1
+        kernel = np.ones((k, k), np.uint8)
+        covered = self.cover > 0
+        if self.finite is not None:
+            covered &= self.finite
+        if self.premultiplied:  # straight = premultiplied / alpha, in mix space
+            with np.errstate(divide="ignore", invalid="ignore"):
+                straight = (self._to_mix(self.frame[..., :3]) / self.cover[..., None]).astype(np.float32)
+            covered &= np.isfinite(straight).all(axis=2)
+        else:
+            straight = np.ascontiguousarray(self.frame[..., :3], np.float32 if not self.integer else None)
+        if straight.dtype.kind == "f":
+            low, high = float(np.finfo(np.float32).max), float(-np.finfo(np.float32).max)
+        else:
+            low, high = self.top, 0.0
+        uncovered = ~covered
+        lo_in, hi_in = straight.copy(), straight.copy()
+        lo_in[uncovered], hi_in[uncovered] = low, high
+        lo = cv2.erode(lo_in, kernel, borderType=cv2.BORDER_CONSTANT, borderValue=low).reshape(-1, 3)[rest]
+        hi = cv2.dilate(hi_in, kernel, borderType=cv2.BORDER_CONSTANT, borderValue=high).reshape(-1, 3)[rest]
+        none = cv2.dilate(covered.astype(np.uint8), kernel).reshape(-1)[rest] == 0
+        if not self.premultiplied:
+            lo, hi = self._to_mix(lo), self._to_mix(hi)
+        lo[none], hi[none] = 1.0, 0.0
+        return lo, hi
+
+    def merge(self, colour_out: np.ndarray, alpha_out: np.ndarray) -> np.ndarray:
+        """The output frame from the filtered premultiplied colour (`colour_out`, as `colour`) and the filtered
+        alpha (`alpha_out`, as `alpha`)."""
+        out = self.frame.copy()
+        same_alpha = alpha_out == self.alpha
+        moved = ~same_alpha | (colour_out != self.colour).any(axis=2)
+        if self.finite is not None:
+            moved &= self.finite & np.isfinite(alpha_out)
+        # where the alpha filter left the pixel, the colour filter's result as it is: premultiplied frames (emission
+        # with alpha 0 included) and straight ones inside the element (alpha 1: the colour filter alone, bit for bit)
+        direct = moved & (same_alpha if self.premultiplied else same_alpha & (self.cover >= 1))
+        np.copyto(out[..., :3], colour_out, where=direct[..., None])
+        np.copyto(out[..., 3], alpha_out, where=moved)
+        rest = np.flatnonzero(moved & ~direct)
+        if rest.size == 0:
+            return out
+        cover = (np.asarray(alpha_out.reshape(-1)[rest], np.float32) / np.float32(self.top))[:, None]
+        lo, hi = self._colour_range(rest)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            straight = self._to_mix(colour_out.reshape(-1, 3)[rest]) / cover
+        straight = np.where(lo <= hi, np.clip(straight, lo, hi), straight)  # windows with covered pixels
+        flat = out.reshape(-1, 4)
+        straight = np.where(cover > 0, straight, self._to_mix(flat[rest, :3]))  # alpha 0: as it was
+        flat[rest, :3] = self._from_mix(straight * cover if self.premultiplied else straight)
+        return out
+
+
+def spatial_at_rims(spatial: np.ndarray, temporal: np.ndarray) -> np.ndarray:
+    """After a temporal stage: the spatial output wherever its alpha, or a neighbour's, is below full coverage. The
+    temporal stages resolve colour from the input frames' straight samples, which hold the transparent pixels'
+    colour (black) where the element's rim was: their mean there is a dark fringe under the spatial alpha."""
+    if not has_coverage(spatial):
+        return temporal
+    alpha = spatial[..., 3]
+    full = np.iinfo(alpha.dtype).max if alpha.dtype.kind in "ui" else 1.0
+    rim = cv2.dilate((alpha < full).astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+    out = temporal.copy()
+    out[rim] = spatial[rim]
+    return out

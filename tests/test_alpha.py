@@ -1,0 +1,188 @@
+"""Alpha as coverage (spatial/alpha.py, Filter(alpha=...)): an element over transparency, one sample per pixel,
+against its 8x8 supersampled truth; opaque frames and untouched pixels bit for bit."""
+import numpy as np
+import pytest
+
+from mlaa_stream.device.colour import linear_to_srgb, srgb_to_linear
+from mlaa_stream.spatial.alpha import AlphaSplit, has_coverage, varied_tiles
+from mlaa_stream.spatial.filter import Filter
+
+SPP = 8
+
+
+def element(seed: int, h: int = 72, w: int = 96, samples: int = 1):
+    """Discs and triangles of random flat colours over transparency, sampled on a samples x samples grid per pixel:
+    (premultiplied linear colour (h, w, 3), coverage (h, w)), both averages of the samples."""
+    rng = np.random.default_rng(seed)
+    shapes = []
+    for _ in range(5):
+        colour = rng.uniform(0.05, 0.95, 3)
+        if rng.random() < 0.5:
+            cx, cy, r = rng.uniform(10, w - 10), rng.uniform(10, h - 10), rng.uniform(5, 16)
+            shapes.append((colour, lambda x, y, cx=cx, cy=cy, r=r: (x - cx) ** 2 + (y - cy) ** 2 < r * r))
+        else:
+            p = rng.uniform([0, 0], [w, h], (3, 2))
+
+            def tri(x, y, p=p):
+                s = [(p[(k + 1) % 3, 0] - p[k, 0]) * (y - p[k, 1]) - (p[(k + 1) % 3, 1] - p[k, 1]) * (x - p[k, 0])
+                     for k in range(3)]
+                return ((s[0] > 0) & (s[1] > 0) & (s[2] > 0)) | ((s[0] < 0) & (s[1] < 0) & (s[2] < 0))
+            shapes.append((colour, tri))
+    colour, cover = np.zeros((h, w, 3)), np.zeros((h, w))
+    offsets = (np.arange(samples) + 0.5) / samples
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
+    for oy in offsets:
+        for ox in offsets:
+            c, a = np.zeros((h, w, 3)), np.zeros((h, w), bool)
+            for rgb, inside in shapes:  # later shapes in front
+                hit = inside(xx + ox, yy + oy)
+                c[hit], a[hit] = rgb, True
+            colour += c * a[..., None]
+            cover += a
+    n = samples * samples
+    return colour / n, cover / n
+
+
+def straight8(premul: np.ndarray, cover: np.ndarray) -> np.ndarray:
+    """A straight-alpha 8-bit sRGB frame (as a PNG holds it; 0 where transparent)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        straight = np.where(cover[..., None] > 0, premul / cover[..., None], 0.0)
+    return np.dstack([np.rint(linear_to_srgb(straight) * 255), np.rint(cover * 255)]).astype(np.uint8)
+
+
+def composite(frame8: np.ndarray, plate: np.ndarray) -> np.ndarray:
+    """A straight 8-bit RGBA frame over a linear plate, in linear light."""
+    a = frame8[..., 3:].astype(np.float64) / 255
+    return srgb_to_linear(frame8[..., :3] / 255.0) * a + (1 - a) * plate
+
+
+def removed(out: np.ndarray, inp: np.ndarray, truth: np.ndarray) -> float:
+    return 1 - float(np.mean((out - truth) ** 2) / np.mean((inp - truth) ** 2))
+
+
+@pytest.fixture(scope="module")
+def filters():
+    with Filter() as cover, Filter(alpha="keep") as keep:
+        yield cover, keep
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_silhouette_against_transparency_is_antialiased_in_alpha(filters, seed):
+    """The alpha removes most of its error against the 8x8 coverage, and the composite over a plate follows; with
+    alpha='keep' (the colour alone) the alpha stays binary and the composite over a bright plate gets worse."""
+    coverage, keep = filters
+    inp = straight8(*element(seed))
+    truth_p, truth_a = element(seed, samples=SPP)
+    plate = np.full(truth_p.shape, 0.8)
+    truth = truth_p + (1 - truth_a[..., None]) * plate
+    base = composite(inp, plate)
+    out, old = coverage.process(inp), keep.process(inp)
+    a_in, a_out = inp[..., 3] / 255.0, out[..., 3] / 255.0
+    assert removed(a_out, a_in, truth_a) > 0.6                       # measured 0.64-0.70
+    assert removed(composite(out, plate), base, truth) > 0.55        # 0.59-0.71
+    assert np.array_equal(old[..., 3], inp[..., 3])
+    assert removed(composite(old, plate), base, truth) < 0            # -0.47 .. -1.71: a dark rim
+
+
+def test_rim_pixels_keep_the_element_colour(filters):
+    """A flat orange disc over transparent black: every pixel the filter gives alpha keeps the disc's colour
+    (straight alpha: no dark fringe), and the transparent pixels it leaves keep theirs."""
+    coverage, _ = filters
+    yy, xx = np.mgrid[0:64, 0:64] + 0.5
+    inside = (xx - 30.3) ** 2 + (yy - 33.7) ** 2 < 20.2 ** 2
+    frame = np.zeros((64, 64, 4), np.uint8)
+    frame[inside] = (230, 120, 40, 255)
+    out = coverage.process(frame)
+    rim = (out[..., 3] != frame[..., 3])
+    assert rim.sum() > 60
+    seen = out[..., 3] > 0
+    assert np.abs(out[seen][:, :3].astype(int) - (230, 120, 40)).max() <= 1
+    assert np.array_equal(out[~seen], frame[~seen])
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+def test_opaque_rgba_is_filtered_as_before(filters, dtype):
+    """Alpha one value everywhere: the colour filter alone, bit for bit, alpha kept."""
+    coverage, keep = filters
+    rng = np.random.default_rng(3)
+    top = np.iinfo(dtype).max
+    frame = np.zeros((48, 64, 4), dtype)
+    frame[..., :3] = (rng.random((48, 64, 1)) > 0.5) * rng.integers(0, top, 3)  # two-tone noise blocks
+    frame[..., 3] = top
+    assert not has_coverage(frame)
+    out = coverage.process(frame)
+    assert np.array_equal(out, keep.process(frame))
+    assert not np.array_equal(out, frame)
+
+
+def test_untouched_pixels_and_semi_transparent_areas_bit_for_bit(filters):
+    """Pixels no filter changes come back exactly, fractional alpha included (a 50 % glass pane, away from the
+    silhouettes)."""
+    coverage, _ = filters
+    inp = straight8(*element(4))
+    inp[5:20, 5:30] = (90, 150, 210, 128)
+    out = coverage.process(inp)
+    changed = (out != inp).any(axis=2)
+    assert 0 < changed.sum() < 0.2 * changed.size
+    assert np.array_equal(out[8:17, 8:27], inp[8:17, 8:27])
+
+
+def test_premultiplied_float_frame():
+    """EXR's convention: where the alpha stays, the colour is the colour filter's alone (what alpha='keep' gives,
+    emission with alpha 0 included); the colour stays premultiplied (never over its alpha's share of the element's
+    brightest colour) and the alpha is antialiased."""
+    premul, cover = element(5)
+    truth_p, truth_a = element(5, samples=SPP)
+    frame = np.dstack([premul, cover]).astype(np.float32)
+    frame[1:5, 1:5, :3], frame[1:5, 1:5, 3] = (3.0, 2.0, 1.0), 0.0  # light with no coverage
+    with Filter(linear_input=True) as f, Filter(linear_input=True, alpha="keep") as k:
+        out, old = f.process(frame, premultiplied=True), k.process(frame, premultiplied=True)
+    stay = out[..., 3] == frame[..., 3]
+    assert np.array_equal(out[stay], old[stay]) and stay[1:5, 1:5].all()
+    assert removed(out[..., 3], cover, truth_a) > 0.6    # measured 0.69
+    away = np.ones(cover.shape, bool)
+    away[:7, :7] = False  # the light patch is in neither the element nor its truth
+    assert removed(out[away][:, :3], premul[away], truth_p[away]) > 0.6   # 0.70
+    assert np.all(out[~stay][:, :3] <= out[~stay][:, 3:] * premul.max() + 1e-6)
+
+
+def test_non_finite_samples_pass_through():
+    premul, cover = element(6)
+    frame = np.dstack([premul, cover]).astype(np.float32)
+    frame[10, 10, 0], frame[11, 40, 3] = np.nan, np.inf
+    with Filter(linear_input=True) as f:
+        out = f.process(frame, premultiplied=True)
+    assert np.isnan(out[10, 10, 0]) and np.isinf(out[11, 40, 3])
+    assert np.isfinite(np.delete(out.reshape(-1, 4), [10 * 96 + 10, 11 * 96 + 40], axis=0)).all()
+
+
+def test_keep_rectangles_keep_alpha_too():
+    inp = straight8(*element(0))
+    with Filter(keep=["0,0,48,36"]) as f:
+        out = f.process(inp)
+    assert np.array_equal(out[:36, :48], inp[:36, :48])
+    assert not np.array_equal(out, inp)
+
+
+def test_split_merge_known_answers():
+    """The split premultiplies in linear light (0 where transparent, the colour where opaque) and a merge of the
+    unchanged planes gives the frame back."""
+    frame = np.array([[[200, 100, 50, 0], [200, 100, 50, 255], [200, 100, 50, 128]]], np.uint8)
+    split = AlphaSplit(frame, premultiplied=False, decode=True)
+    assert split.colour[0, 0].tolist() == [0, 0, 0] and split.colour[0, 1].tolist() == [200, 100, 50]
+    half = np.rint(linear_to_srgb(srgb_to_linear(np.array([200, 100, 50]) / 255) * 128 / 255) * 255)
+    assert split.colour[0, 2].tolist() == half.tolist()
+    assert np.array_equal(split.merge(split.colour, split.alpha), frame)
+
+
+def test_varied_tiles():
+    plane = np.zeros((32, 40), np.uint8)
+    plane[10, 30] = 255
+    tiles = varied_tiles(plane, 8)
+    assert tiles.shape == (4, 5)
+    assert tiles.sum() == 2 and tiles[1, 3] and tiles[1, 4]  # x 28-32 reaches tile 3, y 8-12 stays in row 1
+
+
+def test_alpha_mode_is_checked():
+    with pytest.raises(ValueError, match="alpha: expected one of coverage, keep"):
+        Filter(alpha="straight")
