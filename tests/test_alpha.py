@@ -177,10 +177,14 @@ def test_split_merge_known_answers():
 
 def test_varied_tiles():
     plane = np.zeros((32, 40), np.uint8)
-    plane[10, 30] = 255
+    plane[12, 20] = 255
     tiles = varied_tiles(plane, 8)
     assert tiles.shape == (4, 5)
-    assert tiles.sum() == 2 and tiles[1, 3] and tiles[1, 4]  # x 28-32 reaches tile 3, y 8-12 stays in row 1
+    assert tiles.sum() == 1 and tiles[1, 2]  # the pixels of its steps (x and y 11-13 / 19-21) and 2 px around
+    plane[12, 21] = 255
+    assert varied_tiles(plane, 8)[1, 3]      # x 24 now
+    plane[20:, :] = np.arange(40) * 2   # a ramp: varied, but no step over HARD_STEP
+    assert varied_tiles(plane, 8)[3].all() and not varied_tiles(plane, 8, 0.125)[3].any()
 
 
 def test_alpha_mode_is_checked():

@@ -9,8 +9,9 @@ Here (AlphaSplit):
 - the colour is filtered premultiplied by alpha in the filter's mix space (linear light for sRGB frames): the
   transparent pixels hold 0, as a supersampled render's do, and a blend across the silhouette is a coverage mix;
 - the alpha is filtered as a grey image of linear samples (coverage), by a filter with the colour filter's options;
-  where the colour's filter found render regions, by one whose fallback runs everywhere (preset `rendered`), chosen
-  per tile by those regions;
+  where the colour's filter found render regions and the alpha steps by more than HARD_STEP (a 1-spp render's
+  coverage is 0 or 1: soft mattes and ramps are no such thing), by one whose fallback runs everywhere (preset
+  `rendered`), chosen per tile;
 - the straight colour is the filtered premultiplied colour divided by the filtered alpha, clamped per channel to
   the range of the input's straight colours with alpha > 0 in the 5x5 window around the pixel (so that a rim pixel
   keeps a colour of the element, never the transparent pixels' own), and premultiplied again for premultiplied
@@ -26,6 +27,7 @@ import numpy as np
 from mlaa_stream.device.colour import linear_to_srgb, srgb_to_linear
 
 RANGE_RADIUS = 2  # the window of input colours a rim pixel's straight colour is clamped to: 5x5
+HARD_STEP = 0.125  # an alpha step (of full scale) between neighbours that marks 1-spp coverage, for render regions
 
 
 def has_coverage(frame: np.ndarray) -> bool:
@@ -38,17 +40,23 @@ def has_coverage(frame: np.ndarray) -> bool:
     return alpha.size > 0 and bool(alpha.min() != alpha.max())
 
 
-def varied_tiles(plane: np.ndarray, tile: int) -> np.ndarray:
-    """Per tile x tile block of the (H, W) `plane`, whether a pixel of it lies within 2 px of a change of value
-    (the reach of the widest pass, the footprint table's 5 x 5 window): (tiles_y, tiles_x) bool. A block without
-    one is left as it is by every filter."""
-    kernel = np.ones((5, 5), np.uint8)
-    work = plane if plane.dtype != np.float16 else plane.astype(np.float32)
-    varied = cv2.dilate(work, kernel) != cv2.erode(work, kernel)
-    h, w = varied.shape
+def varied_tiles(plane: np.ndarray, tile: int, step: float = 0.0) -> np.ndarray:
+    """Per tile x tile block of the (H, W) `plane`, whether a pixel of it lies within 2 px (the reach of the widest
+    pass, the footprint table's 5 x 5 window) of two 4-neighbours differing by more than `step` of full scale:
+    (tiles_y, tiles_x) bool. A block without one (step 0) is left as it is by every filter."""
+    top = float(np.iinfo(plane.dtype).max) if plane.dtype.kind in "ui" else 1.0
+    v = plane.astype(np.float32) / np.float32(top)
+    jump = np.zeros(v.shape, bool)
+    dx, dy = np.abs(np.diff(v, axis=1)) > step, np.abs(np.diff(v, axis=0)) > step
+    jump[:, 1:] |= dx
+    jump[:, :-1] |= dx
+    jump[1:] |= dy
+    jump[:-1] |= dy
+    near = cv2.dilate(jump.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
+    h, w = near.shape
     ty, tx = -(-h // tile), -(-w // tile)
     padded = np.zeros((ty * tile, tx * tile), bool)
-    padded[:h, :w] = varied
+    padded[:h, :w] = near
     return padded.reshape(ty, tile, tx, tile).any(axis=(1, 3))
 
 

@@ -21,7 +21,7 @@ import pyopencl as cl
 from mlaa_stream.device.colour import device_luts
 from mlaa_stream.device.context import Context, default_context, linear_levels
 from mlaa_stream.device.formats import FrameFormat, defines_for, frame_format
-from mlaa_stream.spatial.alpha import AlphaSplit, has_coverage, varied_tiles
+from mlaa_stream.spatial.alpha import HARD_STEP, AlphaSplit, has_coverage, varied_tiles
 from mlaa_stream.spatial.exposure import exposure_scale, scale_colour
 from mlaa_stream.spatial.keep import KeepRect, kept_patches, keep_rects, restore_patches
 from mlaa_stream.spatial.nonfinite import NonFinite, replace_non_finite
@@ -592,19 +592,21 @@ class Filter:
 
     def filter_alpha(self, plane: np.ndarray, regions: np.ndarray | None) -> np.ndarray:
         """An alpha plane (H, W) filtered as coverage: with this filter's fallback, and inside the colour's render
-        regions (`regions`: its flags per tile, or None) with the fallback on every pixel, as in a 1-spp render."""
+        regions (`regions`: its flags per tile, or None), where the alpha steps by HARD_STEP or more, with the
+        fallback on every pixel, as a 1-spp render's coverage."""
         if regions is None or self.fallback != "auto" or not np.any(regions):
             return self._alpha_filter(self.fallback).process(plane)
         from mlaa_stream.spatial.fallback import FALLBACK_TILE, region_pixels
-        inside = np.asarray(regions) > 0
+        # as a render: tiles of the colour's regions where the alpha steps as 1-spp coverage does
+        render = (np.asarray(regions) > 0) & varied_tiles(plane, FALLBACK_TILE, HARD_STEP)
         varied = varied_tiles(plane, FALLBACK_TILE)  # tiles neither filter changes need neither
-        if not (varied & ~inside).any():
-            return self._alpha_filter("everywhere").process(plane)
-        if not (varied & inside).any():
+        if not render.any():
             return self._alpha_filter(self.fallback).process(plane)
-        out = self._alpha_filter(self.fallback).process(plane)
         rendered = self._alpha_filter("everywhere").process(plane)
-        return np.where(region_pixels(regions, *plane.shape[:2]), rendered, out)
+        if not (varied & ~render).any():
+            return rendered
+        out = self._alpha_filter(self.fallback).process(plane)
+        return np.where(region_pixels(render, *plane.shape[:2]), rendered, out)
 
     def close(self) -> None:
         """Wait for work in flight and free the device buffers."""
