@@ -112,7 +112,7 @@ def test_output_matches_the_reference(dtype, channels):
         frame = np.ascontiguousarray(frame[..., 1])
     elif channels == 4:
         frame = np.dstack([frame, frame[..., :1]])
-    out = Filter(fast=True).process(frame)
+    out = Filter(fast=True, alpha="keep").process(frame)  # the kernels keep alpha (tests/test_alpha.py)
     ref = F.fast_reference(frame)
     if dtype == np.float32:
         np.testing.assert_allclose(out, ref, atol=2e-4)  # the kernels' colour tables vs the exact curve
@@ -228,7 +228,7 @@ def test_a_sparse_frame_skips_blocks_without_edges_and_matches_the_reference():
     flat = np.full((20, 200, 3), 60, np.uint8)
     flat[8:, 30:] = 190
     assert_shapes_exact(flat)
-    out = Filter(fast=True).process(frame)
+    out = Filter(fast=True, alpha="keep").process(frame)  # the kernels keep alpha (tests/test_alpha.py)
     ref = F.fast_reference(frame)
     diff = np.abs(out.astype(np.int64) - ref.astype(np.int64))
     assert diff.max() <= 1 and (diff == 0).mean() > 0.999 and (out != frame).any()

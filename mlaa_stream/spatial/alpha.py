@@ -25,6 +25,7 @@ import cv2
 import numpy as np
 
 from mlaa_stream.device.colour import linear_to_srgb, srgb_to_linear
+from mlaa_stream.spatial.nonfinite import SAMPLE_LIMIT
 
 RANGE_RADIUS = 2  # the window of input colours a rim pixel's straight colour is clamped to: 5x5
 HARD_STEP = 0.125  # an alpha step (of full scale) between neighbours that marks 1-spp coverage, for render regions
@@ -47,7 +48,8 @@ def varied_tiles(plane: np.ndarray, tile: int, step: float = 0.0) -> np.ndarray:
     top = float(np.iinfo(plane.dtype).max) if plane.dtype.kind in "ui" else 1.0
     v = plane.astype(np.float32) / np.float32(top)
     jump = np.zeros(v.shape, bool)
-    dx, dy = np.abs(np.diff(v, axis=1)) > step, np.abs(np.diff(v, axis=0)) > step
+    with np.errstate(invalid="ignore"):  # inf - inf: no step
+        dx, dy = np.abs(np.diff(v, axis=1)) > step, np.abs(np.diff(v, axis=0)) > step
     jump[:, 1:] |= dx
     jump[:, :-1] |= dx
     jump[1:] |= dy
@@ -74,18 +76,23 @@ class AlphaSplit:
         self._lut = (srgb_to_linear(np.arange(int(self.top) + 1) / self.top).astype(np.float32)
                      if self.integer and self.decode else None)
         self.alpha = np.ascontiguousarray(frame[..., 3])
-        self.finite = np.isfinite(frame).all(axis=2) if not self.integer else None
+        # samples the filter passes through (non-finite, out of range: spatial/nonfinite.py) pass through here too
+        self.finite = ((np.abs(frame.astype(np.float64)) <= SAMPLE_LIMIT).all(axis=2) if not self.integer else None)
         a = np.asarray(self.alpha, np.float32) / np.float32(self.top)
-        self.cover = np.where(np.isfinite(a), a, 0.0).astype(np.float32) if self.finite is not None else a
+        if self.finite is not None:
+            a = np.clip(np.where(self.finite, a, 0.0), 0.0, 1.0).astype(np.float32)
+        self.cover = a
         if self.premultiplied:
             self.colour = np.ascontiguousarray(frame[..., :3])
             return
         # straight colour premultiplied in mix space: 0 where alpha is 0, as it is where alpha is 1
         self.colour = np.ascontiguousarray(frame[..., :3]).copy()
-        self.colour[self.cover <= 0] = 0
+        clear = self.cover <= 0
         part = (self.cover > 0) & (self.cover < 1)
-        if self.finite is not None:
+        if self.finite is not None:  # samples passed through stay as they are, for the filter to pass them
+            clear &= self.finite
             part &= self.finite
+        self.colour[clear] = 0
         if part.any():
             self.colour[part] = self._from_mix(self._to_mix(frame[..., :3][part]) * self.cover[part][:, None])
 
@@ -139,7 +146,7 @@ class AlphaSplit:
         same_alpha = alpha_out == self.alpha
         moved = ~same_alpha | (colour_out != self.colour).any(axis=2)
         if self.finite is not None:
-            moved &= self.finite & np.isfinite(alpha_out)
+            moved &= self.finite & (np.abs(alpha_out.astype(np.float64)) <= SAMPLE_LIMIT)
         # where the alpha filter left the pixel, the colour filter's result as it is: premultiplied frames (emission
         # with alpha 0 included) and straight ones inside the element (alpha 1: the colour filter alone, bit for bit)
         direct = moved & (same_alpha if self.premultiplied else same_alpha & (self.cover >= 1))
@@ -148,7 +155,7 @@ class AlphaSplit:
         rest = np.flatnonzero(moved & ~direct)
         if rest.size == 0:
             return out
-        cover = (np.asarray(alpha_out.reshape(-1)[rest], np.float32) / np.float32(self.top))[:, None]
+        cover = np.clip(np.asarray(alpha_out.reshape(-1)[rest], np.float32) / np.float32(self.top), 0, 1)[:, None]
         lo, hi = self._colour_range(rest)
         with np.errstate(divide="ignore", invalid="ignore"):
             straight = self._to_mix(colour_out.reshape(-1, 3)[rest]) / cover
