@@ -17,6 +17,7 @@ from mlaa_stream.spatial.filter import DEFAULT_THRESHOLDS, PRESET_USES, PRESETS
 from mlaa_stream.spatial.fast_filter import FastFilter
 from mlaa_stream.cli.options import configure_logging, device_option, verbosity_options
 from mlaa_stream.cli.stats_spool import StatsSpool
+from mlaa_stream.temporal.methods import RING_FRAMES
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_NO_DEVICE, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
 # The reader of standard output went away (`-o - | head`): the status a shell reports for a process SIGPIPE ended,
@@ -398,8 +399,9 @@ def _job_for(kind: str, output: str) -> type:
               help="Temporal supersampling for video, folders and frame sequences: the input's "
                    "samples of the last K frames accumulated along the motion (issue 16). Off by "
                    "default: not yet never-worse than spatial only (docs/temporal.md).")
-@click.option("--temporal-frames", "temporal_frames", type=click.IntRange(2, 64), default=None,
-              help="K: input frames kept in the ring (default 16; more: steadier pans, more memory).")
+@click.option("--temporal-frames", "temporal_frames", type=click.IntRange(*RING_FRAMES), default=None,
+              help=f"K: input frames kept in the ring, {RING_FRAMES[0]} to {RING_FRAMES[1]} (default 16; more: "
+                   f"steadier pans, more memory).")
 @click.option("--temporal-method", type=click.Choice(["auto", "tss", "blend", "tss+blend"]), default="auto",
               show_default=True,
               help="auto: temporal supersampling, then the previous output reprojected and blended on "
