@@ -6,7 +6,8 @@ from __future__ import annotations
 import os
 from fractions import Fraction
 
-from mlaa_stream.cli.filter_cmd import EXIT_FAILED, EXIT_OK, Failed, Usage, _check_writable, _Job, video_trim
+from mlaa_stream.cli.filter_cmd import (EXIT_FAILED, EXIT_OK, Failed, Usage, _check_writable, _Job, deinterlace_note,
+                                        video_trim)
 from mlaa_stream.io.sequence import FIRST_FRAME_NUMBER
 
 
@@ -227,7 +228,8 @@ class VideoToImagesJob(_Job):
         def source():
             """The decoded frames, each with its output's number (meta), those done left out where `drop`."""
             inner = read_video(self.info, start=self.start, end=self.end, container=self.pipe_in,
-                               require_frames=True)
+                               require_frames=True, deinterlace=self.opts.get("deinterlace", "off"),
+                               on_deinterlace=deinterlace_note(self.con, self.input))
             try:
                 for position, item in enumerate(inner):
                     number = self.FIRST_NUMBER + position

@@ -17,6 +17,7 @@ from mlaa_stream.spatial.filter import DEFAULT_THRESHOLDS, PRESET_USES, PRESETS
 from mlaa_stream.spatial.fast_filter import FastFilter
 from mlaa_stream.cli.options import configure_logging, device_option, verbosity_options
 from mlaa_stream.cli.stats_spool import StatsSpool
+from mlaa_stream.temporal.methods import RING_FRAMES
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_NO_DEVICE, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
 # The reader of standard output went away (`-o - | head`): the status a shell reports for a process SIGPIPE ended,
@@ -56,10 +57,11 @@ NaN and infinite samples pass through unchanged.
 \b
 Video goes through PyAV (FFmpeg): frame rate, timestamps, resolution, pixel aspect ratio, colour
 tags, HDR10 mastering display and light levels (with libx265) and audio are kept; a source with more
-than 8 bits per sample stays 10/12/16-bit where the codec allows it. An interlaced source is named:
-it is filtered as progressive frames. If the input is truncated or corrupt, the frames that decode
-are filtered and the output is kept as a valid shorter file; the exit code is 1 and the message says
-at which frame decoding stopped.
+than 8 bits per sample stays 10/12/16-bit where the codec allows it. An interlaced source (its stream's
+field order, or its frames, say so) is deinterlaced with bwdif (yadif where FFmpeg lacks it) before the
+filter, one progressive frame per frame at the same timestamps, and said once (--deinterlace). If the
+input is truncated or corrupt, the frames that decode are filtered and the output is kept as a
+valid shorter file; the exit code is 1 and the message says at which frame decoding stopped.
 
 \b
 Exit codes: 0 all done; 1 some inputs failed (the others were processed); 2 usage error
@@ -87,6 +89,11 @@ class Console:
         if self.verbose and not self.quiet:
             click.echo(f"mlaa-stream: {msg}", err=True)
 
+    def note(self, msg: str) -> None:
+        """Something done to the input that the user should know of (not a fault): shown unless -q."""
+        if not self.quiet:
+            click.echo(f"mlaa-stream: {msg}", err=True)
+
 
 def _warn_unseen_gpu(filt, device: str | None, con: Console) -> None:
     """The default device is a CPU while a GPU's OpenCL driver sits on the machine unregistered (a GPU container
@@ -99,6 +106,20 @@ def _warn_unseen_gpu(filt, device: str | None, con: Console) -> None:
         return
     for driver in unregistered_gpu_drivers():
         con.warn(f"running on the CPU: {driver.hint()}")
+
+
+def deinterlace_note(con: Console, input_path: str):
+    """What read_video's on_deinterlace calls, once, when it makes the input progressive: says so, and how not to."""
+    from mlaa_stream.io.deinterlace import FORCED
+
+    label = "standard input" if input_path == "-" else input_path
+
+    def note(name: str, why: str) -> None:
+        if why == FORCED:
+            con.note(f"{label}: deinterlaced with {name} (--deinterlace on; the stream does not say it is interlaced)")
+        else:
+            con.note(f"{label}: interlaced ({why}): deinterlaced with {name}; --deinterlace off to keep the fields")
+    return note
 
 
 def is_broken_pipe(exc: BaseException | None) -> bool:
@@ -251,7 +272,7 @@ def _kind_of(path: str) -> str:
 def _warn_unused_options(ctx: click.Context, con: Console, kind: str, job: type) -> None:
     """Options given on the command line (not defaults) that this job has no use for: a warning each, not an
     error (--rate with a video input, the encoder's, container's and audio options with images out, --audio
-    copy/aac with images in)."""
+    copy/aac and --deinterlace with images in)."""
     from mlaa_stream.cli.convert_jobs import SequenceToVideoJob, VideoToImagesJob
 
     def given(name: str) -> bool:
@@ -260,6 +281,9 @@ def _warn_unused_options(ctx: click.Context, con: Console, kind: str, job: type)
     if given("rate") and job is not SequenceToVideoJob:
         why = "a video keeps its own frame rate" if job is _VideoJob else "images have no frame rate"
         con.warn(f"--rate has no effect here: it sets the frame rate of a video made from images; {why}")
+    if given("deinterlace") and kind != "video":
+        con.warn(f"--deinterlace has no effect here: it sets what happens to an interlaced video's fields, and the "
+                 f"input is images")
     if given("jpeg_quality") and job in (_VideoJob, SequenceToVideoJob):
         con.warn("--jpeg-quality has no effect here: it sets the quality of JPEG images written, and the output is "
                  "a video (--crf sets its encoder's)")
@@ -378,6 +402,11 @@ def _job_for(kind: str, output: str) -> type:
 @click.option("--end", "end", default=None, metavar="TIME", help="Video: stop before this time or frame.")
 @click.option("--rate", type=click.FloatRange(min=0, min_open=True), default=24.0, show_default=True,
               help="Frame rate of a video made from images (a folder or pattern with -o out.mp4).")
+@click.option("--deinterlace", type=click.Choice(["auto", "on", "off"]), default="auto", show_default=True,
+              help="Video: make interlaced frames progressive before the filter (bwdif, one frame per frame, same "
+                   "rate and timestamps), else the combing of moving edges is taken for jaggies and smeared. auto: "
+                   "where the stream's field order or its frames say it is interlaced; on: always; off: never (the "
+                   "fields filtered as one frame).")
 @click.option("--video-backend", type=click.Choice(["pyav", "opencv"]), default="pyav",
               show_default=True, help="opencv: the fallback (8-bit, mp4v, no audio).")
 @click.option("--overlay", type=click.Path(dir_okay=False), default=None,
@@ -398,8 +427,9 @@ def _job_for(kind: str, output: str) -> type:
               help="Temporal supersampling for video, folders and frame sequences: the input's "
                    "samples of the last K frames accumulated along the motion (issue 16). Off by "
                    "default: not yet never-worse than spatial only (docs/temporal.md).")
-@click.option("--temporal-frames", "temporal_frames", type=click.IntRange(2, 64), default=None,
-              help="K: input frames kept in the ring (default 16; more: steadier pans, more memory).")
+@click.option("--temporal-frames", "temporal_frames", type=click.IntRange(*RING_FRAMES), default=None,
+              help=f"K: input frames kept in the ring, {RING_FRAMES[0]} to {RING_FRAMES[1]} (default 16; more: "
+                   f"steadier pans, more memory).")
 @click.option("--temporal-method", type=click.Choice(["auto", "tss", "blend", "tss+blend"]), default="auto",
               show_default=True,
               help="auto: temporal supersampling, then the previous output reprojected and blended on "
@@ -450,7 +480,7 @@ def filter_command(ctx: click.Context, input_path: str, output: str, overwrite: 
                    bridge: bool | None, codec: str | None, container: str | None, audio: str,
                    crf: int, encoder_preset: str, pix_fmt: str | None, jpeg_quality: int | None,
                    start: str | None, end: str | None,
-                   rate: float, video_backend: str,
+                   rate: float, deinterlace: str, video_backend: str,
                    overlay: str | None, cluster: str | None, chunk_frames: int, progress_path: str | None,
                    in_flight: int, temporal: bool | None,
                    temporal_frames: int | None, temporal_method: str, lookahead: int | None, dense_motion: bool,
@@ -471,7 +501,7 @@ def filter_command(ctx: click.Context, input_path: str, output: str, overwrite: 
                            display_space=display_space, reconstruct=reconstruct, bridge=bridge,
                            codec=codec, container=container, audio=audio, crf=crf,
                            encoder_preset=encoder_preset, pix_fmt=pix_fmt, rate=rate, jpeg_quality=jpeg_quality,
-                           video_backend=video_backend, start=start, end=end,
+                           video_backend=video_backend, deinterlace=deinterlace, start=start, end=end,
                            overlay=overlay, in_flight=in_flight, device=device, progress_path=progress_path,
                            cluster=cluster, chunk_frames=chunk_frames, keep=keep, alpha=alpha,
                            temporal=TemporalOptions(temporal, temporal_mode, temporal_k, stats_path, show,
@@ -492,7 +522,7 @@ def filter_command(ctx: click.Context, input_path: str, output: str, overwrite: 
 def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, overwrite: bool,
             resume: bool, frames: str | None, preset: str | None, threshold, metric, display_space,
             reconstruct, codec: str | None, crf: int, encoder_preset: str, pix_fmt: str | None,
-            video_backend: str, overlay: str | None, in_flight: int, device: str | None,
+            video_backend: str, overlay: str | None, in_flight: int, device: str | None, deinterlace: str = "auto",
             temporal: "TemporalOptions | None" = None, bridge: bool | None = None, rate: float = 24.0,
             audio: str = "copy", progress_path: str | None = None, start: str | None = None,
             end: str | None = None, container: str | None = None, cluster: str | None = None,
@@ -600,15 +630,15 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
                      chunk_frames=chunk_frames, temporal_spec=temporal.spec() if cluster else None,
                      lookahead=temporal.frames_ahead if temporal.spec() is not None else 0,
                      encoder_preset=encoder_preset, pix_fmt=pix_fmt, rate=rate, jpeg_quality=jpeg_quality,
-                     video_backend=video_backend, filter_kwargs=kwargs)
+                     video_backend=video_backend, deinterlace=deinterlace, filter_kwargs=kwargs)
         runner.prepare()
         _warn_unused_options(ctx, con, kind, job)
         info = getattr(runner, "info", None)
-        if info is not None and getattr(info, "interlaced", None):
+        if info is not None and getattr(info, "interlaced", None) and deinterlace == "off":
             # two fields a field-time apart in one frame: their combing on anything that moves looks like jaggies
-            con.warn(f"{'standard input' if input_path == '-' else input_path} is interlaced ({info.interlaced}): it "
-                     f"is filtered and written as progressive frames, and the combing of moving edges is taken for "
-                     f"jaggies; deinterlace it first (e.g. ffmpeg -vf bwdif)")
+            con.warn(f"{'standard input' if input_path == '-' else input_path} is interlaced ({info.interlaced}): "
+                     f"with --deinterlace off it is filtered and written as progressive frames, and the combing of "
+                     f"moving edges is taken for jaggies (--deinterlace auto makes it progressive first)")
         if info is not None and getattr(info, "alpha_unread", False):
             # WebM VP9 keeps alpha in a side stream that FFmpeg's own VP9 decoder does not read
             con.warn(f"{'standard input' if input_path == '-' else input_path}: its alpha (WebM VP9 alpha_mode) is not "
@@ -1122,6 +1152,8 @@ class _VideoJob(_Job):
             raise Usage("--progress - and -o - both want standard output; give --progress a file")
         if (self.input == PIPE or out == PIPE) and o["video_backend"] == "opencv":
             raise Usage("pipes (-) need the pyav video backend")
+        if o.get("deinterlace") == "on" and o["video_backend"] == "opencv":
+            raise Usage("--deinterlace on needs the pyav video backend (libavfilter's bwdif)")
         self.pipe_in = None
         try:
             if self.input == PIPE:  # read once: the open container goes on to read_video
@@ -1198,6 +1230,10 @@ class _VideoJob(_Job):
         self._finished = True
         o = self.opts
         progress = self._progress(self.info.frames)
+        from mlaa_stream.io.deinterlace import filter_name, reason
+        why = reason(o.get("deinterlace", "off"), self.info.interlaced, False)   # the first frame's flag: probe_video
+        if why is not None:   # each worker decides as read_video does; said here, once
+            deinterlace_note(self.con, self.input)(filter_name(), why)
         try:
             with connect(o["cluster"]) as client:
                 self.written = filter_video_on_cluster(
@@ -1205,7 +1241,8 @@ class _VideoJob(_Job):
                     encoder_preset=o["encoder_preset"], pix_fmt=o["pix_fmt"], overwrite=o["overwrite"],
                     audio=o["audio"] != "none", on_frames=progress.update,
                     segment_seconds=o["chunk_frames"] / float(self.info.fps or 25),
-                    temporal=o.get("temporal_spec"), warn=self.con.warn, **o["filter_kwargs"])
+                    temporal=o.get("temporal_spec"), warn=self.con.warn, deinterlace=o.get("deinterlace", "off"),
+                    **o["filter_kwargs"])
         except (ClusterVideoError, OSError) as exc:
             self.con.error(str(exc))
             self.con.error(f"{self.output}: not written")
@@ -1229,7 +1266,8 @@ class _VideoJob(_Job):
             source = read_video_cv(self.info)
         else:
             source = read_video(self.info, start=self.start, end=self.end, container=self.pipe_in,
-                                require_frames=True)
+                                require_frames=True, deinterlace=self.opts.get("deinterlace", "off"),
+                                on_deinterlace=deinterlace_note(self.con, self.input))
         total = self.info.frames
         if total and self.info.fps and (self.start or self.end is not None):
             duration = (self.end if self.end is not None else total / float(self.info.fps)) - (self.start or 0)

@@ -393,3 +393,34 @@ def test_stats_rows_spooled_to_disk_come_back_whole(tmp_path, monkeypatch, metho
     monkeypatch.setattr(stats_spool.StatsSpool, "drain", watched)
     assert run("spooled") == whole and len(whole) == 10
     assert max(held) <= 3 and held[-1] < len(whole)
+
+
+@pytest.mark.parametrize("frames", [0, 1, 2, 3, 63, 64, 65, 1000])
+def test_temporal_frames_takes_what_the_api_takes(tmp_path, frames):
+    """--temporal-frames refuses exactly the values the API's check refuses (RING_FRAMES), naming the option."""
+    from mlaa_stream.temporal.methods import check_frames
+    try:
+        check_frames(frames)
+        api_refuses = False
+    except ValueError:
+        api_refuses = True
+    res = CliRunner().invoke(main, [str(tmp_path / "missing.png"), "-o", str(tmp_path / "b.png"), "--temporal",
+                                    "--temporal-frames", str(frames)])
+    assert res.exit_code == 2, res.output   # a usage error either way: the option's, else the missing input's
+    assert ("Invalid value for '--temporal-frames'" in res.output) == api_refuses, res.output
+
+
+def test_temporal_frames_range_is_the_apis_constant(tmp_path):
+    """The command line's range is RING_FRAMES itself, not a copy of its values: with the constant changed before the
+    CLI is imported (a fresh interpreter), the CLI follows it."""
+    import subprocess
+    import sys
+    code = ("import mlaa_stream.temporal.methods as m; m.RING_FRAMES = (3, 9)\n"
+            "from click.testing import CliRunner\n"
+            "from mlaa_stream.cli.main import main\n"
+            "for k in ('2', '9', '10'):\n"
+            "    r = CliRunner().invoke(main, ['missing.png', '-o', 'b.png', '--temporal', '--temporal-frames', k])\n"
+            "    print(k, \"Invalid value for '--temporal-frames'\" in r.output)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         cwd=tmp_path).stdout
+    assert out.split() == ["2", "True", "9", "False", "10", "True"], out

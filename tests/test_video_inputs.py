@@ -224,20 +224,22 @@ def test_a_container_that_cannot_hold_the_sources_codec_takes_its_own(tmp_path):
     assert r.exit_code == 1 and "'webm' format does not support 'libx264'" in r.output
 
 
-@pytest.mark.parametrize("tag,warned", [("It", "top field first"), ("Ib", "bottom field first"), ("Ip", None)])
-def test_an_interlaced_input_is_named_as_filtered_progressive(tmp_path, tag, warned):
-    """A y4m tagged interlaced (It / Ib; a broadcast capture) is filtered as progressive frames, the combing of its
-    moving edges taken for jaggies: the warning says so and how to deinterlace; a progressive one says nothing."""
-    src, out = tmp_path / f"in_{tag}.y4m", tmp_path / f"out_{tag}.mkv"
+@pytest.mark.parametrize("tag,field", [("It", "top field first"), ("Ib", "bottom field first"), ("Ip", None)])
+def test_an_interlaced_input_is_deinterlaced_or_named(tmp_path, tag, field):
+    """A y4m tagged interlaced (It / Ib; a broadcast capture) is deinterlaced before the filter by default, said once;
+    with --deinterlace off it is filtered as progressive frames, the combing of its moving edges taken for jaggies,
+    and the warning says so; a progressive one says nothing."""
+    src = tmp_path / f"in_{tag}.y4m"
     frame = np.random.default_rng(1).integers(0, 256, 32 * 16 * 3 // 2, dtype=np.uint8).tobytes()
     src.write_bytes(f"YUV4MPEG2 W32 H16 F25:1 {tag} A1:1 C420jpeg\n".encode() + (b"FRAME\n" + frame) * 3)
-    res = run(src, "-o", out)
-    assert res.exit_code == 0, res.output
-    assert out.exists()
-    if warned:
-        assert f"is interlaced ({warned})" in res.output and "bwdif" in res.output
-    else:
-        assert "is interlaced" not in res.output
+    for mode in ("auto", "off"):
+        out = tmp_path / f"out_{tag}_{mode}.mkv"
+        res = run(src, "-o", out, "--deinterlace", mode)
+        assert res.exit_code == 0, res.output
+        assert probe_video(str(out)).frames == 3
+        deinterlaced = f"interlaced ({field}): deinterlaced with bwdif; --deinterlace off to keep the fields"
+        assert (deinterlaced in res.output) == bool(field and mode == "auto"), res.output
+        assert (f"is interlaced ({field}): with --deinterlace off" in res.output) == bool(field and mode == "off")
 
 
 def write_y4m_planes(path, colourspace: str, w: int = 63, h: int = 47, frames: int = 4) -> None:

@@ -56,11 +56,12 @@ def plan_segments(duration: float, fps: Fraction | None, output: str,
 
 
 def encode_segment(source: str, segment: Segment, filter_kwargs: dict, codec: str | None, crf: int,
-                   encoder_preset: str, pix_fmt: str | None, temporal=None) -> int:
+                   encoder_preset: str, pix_fmt: str | None, temporal=None, deinterlace: str = "off") -> int:
     """Run on a worker: decode the segment's frames, filter them, encode them into segment.path (video only,
     at the source's timestamps). Returns the frames written. `temporal` (a TemporalSpec): a new
     stage runs over the `temporal.warmup` frames before the segment (decoded, filtered, not written; more
-    where frames are held: WarmedStage) and then over the segment's."""
+    where frames are held: WarmedStage) and then over the segment's. `deinterlace`: read_video's (auto / on / off);
+    the frames before the segment, decoded from its keyframe, are its first frame's field neighbours."""
     from mlaa_stream.cluster.frames import _worker_filter
     from mlaa_stream.cluster.temporal import MAX_WARMUP_FACTOR, ShortWarmup, WarmedStage
     from mlaa_stream.io.video import VideoWriter, probe_video
@@ -83,7 +84,7 @@ def encode_segment(source: str, segment: Segment, filter_kwargs: dict, codec: st
                              audio="none", overwrite=True, container_format="matroska",
                              extra_options={"bf": "0"}, copy_extras=False)
         try:
-            n = _run_segment(info, segment, start if start >= frame / 2 else None, filt, writer, stage)
+            n = _run_segment(info, segment, start if start >= frame / 2 else None, filt, writer, stage, deinterlace)
             writer.commit()
             return n
         except PipelineError as exc:
@@ -100,7 +101,7 @@ def encode_segment(source: str, segment: Segment, filter_kwargs: dict, codec: st
                 stage.close()
 
 
-def _run_segment(info, segment: Segment, start: float | None, filt, writer, stage) -> int:
+def _run_segment(info, segment: Segment, start: float | None, filt, writer, stage, deinterlace: str = "off") -> int:
     """Decode from `start`, filter, run the temporal stage (if any) and write the frames of `segment`
     (those before it are its warm-up). Returns the frames written."""
     from mlaa_stream.io.video import read_video
@@ -125,7 +126,7 @@ def _run_segment(info, segment: Segment, start: float | None, filt, writer, stag
     def source():
         # the stage's look-ahead reads the N frames after the segment too (not written)
         inner = read_video(info, start=start, end=segment.end if segment.end is None or not ahead
-                           else segment.end + ahead * frame)
+                           else segment.end + ahead * frame, deinterlace=deinterlace)
         try:
             for position, item in enumerate(inner):
                 warm[position] = is_warm(item)
@@ -211,10 +212,11 @@ def filter_video_on_cluster(client, source: str, output: str, *, preset: str | N
                             codec: str | None = None, crf: int = 18, encoder_preset: str = "veryfast",
                             pix_fmt: str | None = None, overwrite: bool = False, audio: bool = True,
                             segment_seconds: float = SEGMENT_SECONDS, on_frames=None, temporal=None,
-                            warn=None, **filter_kwargs) -> int:
+                            warn=None, deinterlace: str = "off", **filter_kwargs) -> int:
     """Filter the video `source` into `output` on the cluster behind `client`; returns the frames written.
     `temporal`: a TemporalSpec (mlaa_stream.cluster.temporal) turns the temporal stage on, with a warm-up
-    per segment. `warn(message)`: what of the source was not kept (chapters, attachments).
+    per segment. `warn(message)`: what of the source was not kept (chapters, attachments). `deinterlace`: auto / on /
+    off, as read_video takes it (each worker decides for its segment as read_video does).
     Raises ClusterVideoError naming the segment that failed twice; nothing is left under the output's name
     or as a segment file on failure."""
     from dask.distributed import as_completed
@@ -233,7 +235,8 @@ def filter_video_on_cluster(client, source: str, output: str, *, preset: str | N
         kwargs["keep"] = keep_rects(kwargs["keep"])
     segments = plan_segments(info.duration, info.fps, output, segment_seconds)
     futures = {client.submit(encode_segment, source, seg, kwargs, codec, crf, encoder_preset, pix_fmt, temporal,
-                             retries=1, pure=False, key=f"mlaa-seg-{seg.index}-{os.getpid()}-{id(segments)}"): seg
+                             deinterlace, retries=1, pure=False,
+                             key=f"mlaa-seg-{seg.index}-{os.getpid()}-{id(segments)}"): seg
                for seg in segments}
     frames, failure, counts = 0, None, {}
     try:

@@ -4,7 +4,8 @@ Kept: frame rate and timestamps (time base and pts are copied), resolution and p
 depth (a source with more than 8 bits per sample decodes to rgb48le/uint16 and is encoded to a >8-bit
 pixel format where the codec has one), alpha where the codec can store it, colour tags (matrix, range,
 primaries, transfer), HDR10 static metadata (mastering display, content light level: with libx265) and every audio
-stream (copied packet by packet, not re-encoded).
+stream (copied packet by packet, not re-encoded). Interlaced sources are made progressive on decode where asked
+(read_video's `deinterlace`: io/deinterlace.py), before the frames become RGB.
 OpenCV's VideoCapture/VideoWriter serve only as a fallback (8-bit, no audio, mp4v).
 
 The output is encoded under a temporary name in its directory and renamed when complete.
@@ -18,10 +19,11 @@ import struct
 import sys
 from dataclasses import dataclass
 from fractions import Fraction
-from typing import Iterator
+from typing import Callable, Iterator
 
 import numpy as np
 
+from mlaa_stream.io.deinterlace import FLAGGED
 from mlaa_stream.io.images import publish, remove_quietly, temp_path_for
 from mlaa_stream.io.item import Item
 
@@ -104,7 +106,9 @@ class VideoInfo:
     subtitle_streams: int = 0
     other_streams: tuple[str, ...] = ()  # streams not copied as audio or subtitle: data, attachments, more video
     sar: Fraction | None = None  # sample (pixel) aspect ratio of an anamorphic source; None: square or unknown
-    interlaced: str | None = None  # "top field first" / "bottom field first" (shown first); None: progressive, unknown
+    # "top field first" / "bottom field first" (shown first), "frames flagged interlaced" (the stream says neither, its
+    # first frame does); None: progressive, unknown
+    interlaced: str | None = None
     hdr10: tuple[str, ...] = ()  # HDR10 static metadata on the first frame, as x265 parameters (_hdr10_params)
     alpha_unread: bool = False  # the stream says it has alpha that the decoder does not give (WebM VP9's side stream)
 
@@ -218,8 +222,9 @@ class _CountedInput:
         return data
 
 
-def _describe(container, path: str, rotation: int, hdr10: tuple[str, ...] = ()) -> VideoInfo:
-    """What we keep from the first video stream of an open container."""
+def _describe(container, path: str, rotation: int, hdr10: tuple[str, ...] = (), flagged: bool = False) -> VideoInfo:
+    """What we keep from the first video stream of an open container; `flagged`: its first frame says it is
+    interlaced."""
     if not container.streams.video:
         raise VideoError(f"{path}: expected a video stream, found none")
     s = container.streams.video[0]
@@ -248,7 +253,8 @@ def _describe(container, path: str, rotation: int, hdr10: tuple[str, ...] = ()) 
                      frames_declared=declared, duration=duration, rotation=rotation,
                      subtitle_streams=len(container.streams.subtitles), other_streams=others,
                      sar=Fraction(sar) if sar and sar != 1 else None,
-                     interlaced=_FIELD_FIRST.get(getattr(cc, "field_order", None)), hdr10=hdr10,
+                     interlaced=_FIELD_FIRST.get(getattr(cc, "field_order", None)) or (FLAGGED if flagged else None),
+                     hdr10=hdr10,
                      alpha_unread=not alpha and str(_tag(s.metadata, "alpha_mode")) == "1")
 
 
@@ -257,18 +263,18 @@ def _tag(tags, name: str):
     return next((v for k, v in dict(tags or {}).items() if k.lower() == name), None)
 
 
-def _first_frame_facts(path: str) -> tuple[int, tuple[str, ...]]:
-    """From the first frame: the display rotation in degrees (0, 90, 180, -90; its display matrix) and its HDR10
-    static metadata as x265 parameters (_hdr10_params)."""
+def _first_frame_facts(path: str) -> tuple[int, tuple[str, ...], bool]:
+    """From the first frame: the display rotation in degrees (0, 90, 180, -90; its display matrix), its HDR10
+    static metadata as x265 parameters (_hdr10_params) and whether it is flagged interlaced."""
     try:
         with av.open(path) as c:
             if not c.streams.video:
-                return 0, ()  # no video stream: _describe says so
+                return 0, (), False  # no video stream: _describe says so
             for frame in c.decode(video=0):
-                return int(round(frame.rotation or 0)), _hdr10_params(frame)
+                return int(round(frame.rotation or 0)), _hdr10_params(frame), bool(frame.interlaced_frame)
     except (av.error.FFmpegError, OSError, EOFError, AttributeError):
         pass
-    return 0, ()
+    return 0, (), False
 
 
 def _hdr10_params(frame) -> tuple[str, ...]:
@@ -392,9 +398,14 @@ def parse_time(text: str, fps: Fraction | None) -> float:
 
 
 def read_video(info: VideoInfo, *, check_length: bool = True, start: float | None = None,
-               end: float | None = None, container=None, require_frames: bool = False) -> Iterator[Item]:
+               end: float | None = None, container=None, require_frames: bool = False, deinterlace: str = "off",
+               on_deinterlace: Callable[[str, str], None] | None = None) -> Iterator[Item]:
     """Decode every frame of `info.path` (between `start` and `end` seconds where given) to
     `info.sample_format`; Item.meta is a FrameTime.
+
+    `deinterlace` (auto / on / off; mlaa_stream/io/deinterlace.py): interlaced frames made progressive before they
+    become RGB, one per frame at its timestamp; auto where the stream's field order or its first frame says it is
+    interlaced. `on_deinterlace(filter, reason)` is called once when that starts.
 
     Raises VideoReadError naming the frame where decoding stopped, also when the stream ends well
     before the length its container declares (a truncated file that decodes without an error), and with
@@ -409,7 +420,7 @@ def read_video(info: VideoInfo, *, check_length: bool = True, start: float | Non
         except (av.error.FFmpegError, OSError) as exc:
             raise VideoReadError(f"{path}: cannot open: {exc}", 0) from exc
     n, last_time = 0, None
-    data_end = None  # the stream offset where the last packet's data ends (y4m on a pipe: _y4m_pipe_leftover)
+    data_end = [None]  # the stream offset where the last packet's data ends (y4m on a pipe: _y4m_pipe_leftover)
     half = 0.5 / float(info.fps or 25)  # a frame counts as inside [start, end) by its timestamp
     try:
         stream = container.streams.video[0]
@@ -417,38 +428,78 @@ def read_video(info: VideoInfo, *, check_length: bool = True, start: float | Non
         sws = _sws_flags()
         if start:  # to the keyframe before `start`; the frames before it are decoded and dropped
             container.seek(int(start / stream.time_base), stream=stream, backward=True, any_frame=False)
+        frames = _decoded(container, stream, data_end)
+        if deinterlace != "off":  # before the trim: the frames before `start` are the first one's field neighbours
+            frames = _deinterlaced(frames, info, deinterlace, on_deinterlace)
         try:
-            for packet in container.demux(stream):
-                if packet.size and packet.pos is not None and packet.pos >= 0:
-                    data_end = packet.pos + packet.size
-                for frame in packet.decode():
-                    ft = float(frame.pts * frame.time_base) if frame.pts is not None and frame.time_base else None
-                    if start and ft is not None and ft < start - half:
-                        continue
-                    if end is not None and ft is not None and ft >= end - half:
-                        if not n and require_frames:
-                            raise _nothing_between(path, start, end, info)
-                        return
-                    if (frame.width, frame.height) != (info.width, info.height):
-                        raise VideoReadError(
-                            f"{path}: frame {n}: expected {info.width}x{info.height}, got "
-                            f"{frame.width}x{frame.height} (size changes mid-stream are not "
-                            f"supported)", n)
-                    rng = frame.color_range or None
-                    rgb = frame.reformat(format=info.sample_format, src_color_range=rng,
-                                         interpolation=sws)
-                    if frame.pts is not None and frame.time_base:
-                        last_time = float(frame.pts * frame.time_base)
-                    yield Item(rgb.to_ndarray(), FrameTime(frame.pts, frame.time_base))
-                    n += 1
+            for frame in frames:
+                ft = float(frame.pts * frame.time_base) if frame.pts is not None and frame.time_base else None
+                if start and ft is not None and ft < start - half:
+                    continue
+                if end is not None and ft is not None and ft >= end - half:
+                    if not n and require_frames:
+                        raise _nothing_between(path, start, end, info)
+                    return
+                if (frame.width, frame.height) != (info.width, info.height):
+                    raise VideoReadError(
+                        f"{path}: frame {n}: expected {info.width}x{info.height}, got "
+                        f"{frame.width}x{frame.height} (size changes mid-stream are not "
+                        f"supported)", n)
+                rng = frame.color_range or None
+                rgb = frame.reformat(format=info.sample_format, src_color_range=rng,
+                                     interpolation=sws)
+                if frame.pts is not None and frame.time_base:
+                    last_time = float(frame.pts * frame.time_base)
+                yield Item(rgb.to_ndarray(), FrameTime(frame.pts, frame.time_base))
+                n += 1
         except (av.error.FFmpegError, EOFError) as exc:
             raise VideoReadError(f"{path}: decoding stopped at frame {n}: {exc}", n) from exc
         if not n and require_frames and (start or end is not None):
             raise _nothing_between(path, start, end, info)
         if check_length and not start and end is None:
-            _check_length(info, n, last_time, _y4m_pipe_leftover(container, data_end))
+            _check_length(info, n, last_time, _y4m_pipe_leftover(container, data_end[0]))
     finally:
         container.close()
+
+
+def _decoded(container, stream, data_end: list) -> Iterator:
+    """The stream's frames as decoded; data_end[0]: where the last packet's data ends in the stream."""
+    for packet in container.demux(stream):
+        if packet.size and packet.pos is not None and packet.pos >= 0:
+            data_end[0] = packet.pos + packet.size
+        yield from packet.decode()
+
+
+def _deinterlaced(frames: Iterator, info: VideoInfo, mode: str, on_deinterlace) -> Iterator:
+    """`frames` made progressive where `mode` (deinterlace.reason) says so, else as they are. A decoding error is
+    raised after the frames held by the deinterlacer (one) are given, as without it; a frame of another size goes
+    through as it is, for read_video to refuse."""
+    from mlaa_stream.io.deinterlace import Deinterlacer, reason
+
+    first = next(frames, None)
+    why = None if first is None else reason(mode, info.interlaced, bool(first.interlaced_frame))
+    if why is None:  # progressive: the decoder's frames themselves
+        if first is not None:
+            yield first
+            yield from frames
+        return
+    # auto on frames that say which are interlaced: those only (a progressive stretch of a broadcast stays sharp)
+    deint = Deinterlacer(info.interlaced, only_flagged=mode == "auto" and bool(first.interlaced_frame))
+    if on_deinterlace is not None:
+        on_deinterlace(deint.name, why)
+    frame = first
+    while frame is not None:
+        if (frame.width, frame.height) != (info.width, info.height):
+            yield from deint.flush()
+            yield frame
+            return
+        yield from deint.push(frame, info.time_base)
+        try:
+            frame = next(frames, None)
+        except (av.error.FFmpegError, EOFError):
+            yield from deint.flush()
+            raise
+    yield from deint.flush()
 
 
 def _nothing_between(path: str, start: float | None, end: float | None, info: VideoInfo) -> VideoReadError:
