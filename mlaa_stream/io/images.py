@@ -21,9 +21,13 @@ from typing import Callable
 import numpy as np
 import OpenImageIO as oiio
 
-# Sample types the filter takes as they are; any other (int8/16, uint32, double) is read as float32
-# and converted back to the file's own type when written.
+# Sample types the filter takes as they are.
 _NATIVE = {"uint8": np.uint8, "uint16": np.uint16, "half": np.float16, "float": np.float32}
+# Sample types read as they are too (a double or 8/16/32-bit integer TIFF) but filtered as float32 (integers scaled
+# to [-1, 1] as OpenImageIO converts them): split_for_filter puts back only the samples the filter changed, so the
+# others come back bit for bit (float32 holds neither a double nor an integer over 2^24). Any other type, and a file
+# whose channels have several types (an EXR's half colour and uint ids), is read as float32.
+_WIDE = {"double": np.float64, "int8": np.int8, "int16": np.int16, "uint": np.uint32, "int": np.int32}
 
 # Formats whose alpha is associated (colour premultiplied by alpha): EXR always, TIFF where its file says so (read
 # with oiio:UnassociatedAlpha unset). Every other format (PNG, TGA, WebP, BMP ...) stores straight alpha.
@@ -87,7 +91,7 @@ def is_temp_path(path: str) -> bool:
 
 
 def read_image(path: str) -> Image:
-    """Read subimage 0 of `path` as stored: uint8/uint16/half/float kept, other types as float32."""
+    """Read subimage 0 of `path` as stored: uint8/uint16/half/float and the _WIDE types kept, others as float32."""
     config = oiio.ImageSpec()
     # Unassociated alpha (PNG, TIFF) is returned as stored instead of premultiplied, so it round-trips.
     config.attribute("oiio:UnassociatedAlpha", 1)
@@ -130,7 +134,7 @@ def read_image(path: str) -> Image:
         inp.geterror()  # clear the probe's 'could not seek to subimage 1': a failed read must report its own error
         conversions = _conversions(path, spec)
         fmt = str(spec.format)
-        read_fmt = fmt if fmt in _NATIVE else "float"
+        read_fmt = fmt if fmt in _NATIVE or (fmt in _WIDE and not spec.channelformats) else "float"
         pixels = inp.read_image(0, 0, 0, spec.nchannels, read_fmt)
         # a truncated JPEG decodes with its missing rows grey and only an error ("Premature end of JPEG file")
         err = inp.geterror() if pixels is None or inp.has_error else ""
@@ -140,7 +144,7 @@ def read_image(path: str) -> Image:
         if spec.alpha_channel >= 0 and inp.format_name() not in _PREMULTIPLIED_FORMATS:
             spec.attribute("oiio:UnassociatedAlpha", 1)  # straight alpha, also where the reader does not say so (BMP)
         quality = jpeg_quality(path) if inp.format_name() == "jpeg" else None
-        lossy = inexact_channels(inp, spec)
+        lossy = inexact_channels(inp, spec) if read_fmt == "float" else ()
     finally:
         inp.close()
     pixels = np.asarray(pixels)
@@ -333,7 +337,40 @@ def split_for_filter(image: Image) -> tuple[np.ndarray, Callable[[np.ndarray], n
     """The frame the filter sees and a function that puts its result back among the other channels.
 
     Cryptomatte channels (ids) are never in the frame; an image with no other channel is refused (ImageReadError).
+    Samples of a _WIDE type (double, 8/16/32-bit integers) go to the filter as float32, and only those it changed
+    come back from it (in the file's type): the others are put back as read, bit for bit.
     """
+    frame, merge = _split_channels(image)
+    if frame.dtype.type not in _WIDE.values():
+        return frame, merge
+    sent = _as_float32(frame)
+    return sent, lambda out: merge(_changed_only(out, sent, frame))
+
+
+def _as_float32(samples: np.ndarray) -> np.ndarray:
+    """Samples of a _WIDE type as float32, integers scaled by their type's maximum (as OpenImageIO converts them)."""
+    if samples.dtype.kind == "f":
+        with np.errstate(over="ignore"):   # beyond float32: inf, which the filter leaves; put back as read
+            return samples.astype(np.float32)
+    return (samples / float(np.iinfo(samples.dtype).max)).astype(np.float32)
+
+
+def _changed_only(out: np.ndarray, sent: np.ndarray, native: np.ndarray) -> np.ndarray:
+    """`native` with the samples the filter changed (its float32 `out` differs from `sent`, what it was given, bit
+    for bit: a NaN it kept counts as kept) replaced by `out` in native's type (integers rounded, clipped)."""
+    out = np.asarray(out, np.float32).reshape(sent.shape)
+    changed = out.view(np.uint32) != sent.view(np.uint32)
+    result = native.copy()
+    if native.dtype.kind == "f":
+        result[changed] = out[changed]
+    else:
+        info = np.iinfo(native.dtype)
+        result[changed] = np.clip(np.rint(out[changed].astype(np.float64) * info.max), info.min, info.max)
+    return result
+
+
+def _split_channels(image: Image) -> tuple[np.ndarray, Callable[[np.ndarray], np.ndarray]]:
+    """split_for_filter's channels: the frame in the image's own sample type, and the function putting it back."""
     pixels = image.pixels
     nchannels = pixels.shape[2]
     names = tuple(image.spec.channelnames)
