@@ -55,6 +55,7 @@ class Image:
     conversions: tuple[str, ...] = ()  # colour-model changes made on reading (CMYK, palette), to report
     quality: int | None = None  # a JPEG's quality, estimated from its quantisation table (jpeg_quality): kept
     lossy: tuple[str, ...] = ()  # what writing back cannot keep bit for bit (inexact_channels), to warn about
+    format_name: str = ""  # OpenImageIO's name of the file's format ("openexr"): whether its channel names say much
 
     @property
     def channel_names(self) -> tuple[str, ...]:
@@ -143,14 +144,16 @@ def read_image(path: str) -> Image:
         spec = oiio.ImageSpec(spec)  # a copy that outlives the ImageInput
         if spec.alpha_channel >= 0 and inp.format_name() not in _PREMULTIPLIED_FORMATS:
             spec.attribute("oiio:UnassociatedAlpha", 1)  # straight alpha, also where the reader does not say so (BMP)
-        quality = jpeg_quality(path) if inp.format_name() == "jpeg" else None
+        format_name = inp.format_name()
+        quality = jpeg_quality(path) if format_name == "jpeg" else None
         lossy = inexact_channels(inp, spec) if read_fmt == "float" else ()
     finally:
         inp.close()
     pixels = np.asarray(pixels)
     if pixels.ndim == 2:
         pixels = pixels[:, :, None]
-    return Image(pixels=pixels, spec=spec, path=path, conversions=conversions, quality=quality, lossy=lossy)
+    return Image(pixels=pixels, spec=spec, path=path, conversions=conversions, quality=quality, lossy=lossy,
+                 format_name=format_name)
 
 
 def inexact_channels(inp: oiio.ImageInput, spec: oiio.ImageSpec) -> tuple[str, ...]:
@@ -301,12 +304,25 @@ def filter_channel_indices(names: tuple[str, ...], alpha_channel: int = -1,
                            data: frozenset[int] = frozenset()) -> tuple[int, ...]:
     """The channels that go through the filter, in the order it takes them (R, G, B[, A] or one grey).
 
-    By name where the names say which channels are colour: plain R, G, B (+ A), else plain Y, else the
-    R, G, B (+ A) of one layer of a multi-layer EXR ("ViewLayer.Combined.R" ...): the layer of the alpha
-    channel, else a beauty layer by name, else the first. OpenImageIO lists an EXR's channels by layer
-    name, so a pass that sorts first (Blender's "AO" before "Combined", a plain "Z" before "diffuse.R")
-    would otherwise be filtered in the beauty's place. Names that say nothing: filtered_channels.
+    By name where the names say which channels are colour (colour_by_name), else by position (filtered_channels).
     `data`: channels that are never filtered (cryptomatte_channels: ids); () where no other channel is left.
+    """
+    named = colour_by_name(names, alpha_channel, data)
+    if named:
+        return named
+    # by position among the channels that may be filtered (OpenImageIO may have taken a cryptomatte A for alpha)
+    rest = [k for k in range(len(names)) if k not in data]
+    alpha = rest.index(alpha_channel) if alpha_channel in rest else -1
+    return tuple(rest[:filtered_channels(len(rest), alpha)]) if rest else ()
+
+
+def colour_by_name(names: tuple[str, ...], alpha_channel: int = -1,
+                   data: frozenset[int] = frozenset()) -> tuple[int, ...]:
+    """The colour channels the names say, in the filter's order, or () where they say none: plain R, G, B (+ A),
+    else plain Y, else the R, G, B (+ A) of one layer of a multi-layer EXR ("ViewLayer.Combined.R" ...): the layer of
+    the alpha channel, else a beauty layer by name, else the first. OpenImageIO lists an EXR's channels by layer
+    name, so a pass that sorts first (Blender's "AO" before "Combined", a plain "Z" before "diffuse.R") would
+    otherwise be filtered in the beauty's place. `data` (cryptomatte_channels) are never colour.
     """
     where = {name: k for k, name in enumerate(names) if k not in data}
     if all(c in where for c in "RGB"):
@@ -319,26 +335,45 @@ def filter_channel_indices(names: tuple[str, ...], alpha_channel: int = -1,
         if dot and last in ("R", "G", "B", "A") and k not in data:
             layers.setdefault(layer, {})[last] = k
     rgb = [(layer, chans) for layer, chans in layers.items() if all(c in chans for c in "RGB")]
-    if rgb:
-        def rank(entry: tuple[str, dict[str, int]]) -> int:
-            layer, chans = entry
-            if alpha_channel >= 0 and chans.get("A") == alpha_channel:
-                return 0
-            return 1 if layer.rpartition(".")[2].lower() in _BEAUTY_LAYERS else 2
-        _, chans = min(rgb, key=rank)  # min keeps the first of equal rank: channel order
-        return tuple(chans[c] for c in "RGBA" if c in chans)
-    # by position among the channels that may be filtered (OpenImageIO may have taken a cryptomatte A for alpha)
-    rest = [k for k in range(len(names)) if k not in data]
-    alpha = rest.index(alpha_channel) if alpha_channel in rest else -1
-    return tuple(rest[:filtered_channels(len(rest), alpha)]) if rest else ()
+    if not rgb:
+        return ()
+
+    def rank(entry: tuple[str, dict[str, int]]) -> int:
+        layer, chans = entry
+        if alpha_channel >= 0 and chans.get("A") == alpha_channel:
+            return 0
+        return 1 if layer.rpartition(".")[2].lower() in _BEAUTY_LAYERS else 2
+    _, chans = min(rgb, key=rank)  # min keeps the first of equal rank: channel order
+    return tuple(chans[c] for c in "RGBA" if c in chans)
+
+
+# Formats whose files name their channels (an EXR's "Z", "N.x", "motion.u"); other formats' names are OpenImageIO's
+# defaults by position (a 2-channel TIFF's "R", "G" is grey and alpha), which say nothing of what a channel holds.
+_NAMED_CHANNEL_FORMATS = ("openexr",)
+
+
+def without_colour(image: Image) -> str | None:
+    """Why `image` holds nothing to filter -- "no colour channels (Z)", "only cryptomatte channels (...)" -- or
+    None where it has colour: a file that names its channels (an EXR) and names no colour (colour_by_name) holds data
+    -- depth, normals, positions, motion vectors, ids --, which a blend corrupts (a depth between two surfaces is
+    neither's). Render pipelines write such passes as files of their own beside the beauty."""
+    names = tuple(image.spec.channelnames)
+    if image.format_name not in _NAMED_CHANNEL_FORMATS or len(names) != image.pixels.shape[2]:
+        return None
+    data = cryptomatte_channels(names, image.spec)
+    if colour_by_name(names, image.spec.alpha_channel, data):
+        return None
+    shown = ", ".join(names[:6]) + (f" and {len(names) - 6} more" if len(names) > 6 else "")
+    return f"{'only cryptomatte' if len(data) == len(names) else 'no colour'} channels ({shown})"
 
 
 def split_for_filter(image: Image) -> tuple[np.ndarray, Callable[[np.ndarray], np.ndarray]]:
     """The frame the filter sees and a function that puts its result back among the other channels.
 
-    Cryptomatte channels (ids) are never in the frame; an image with no other channel is refused (ImageReadError).
-    Samples of a _WIDE type (double, 8/16/32-bit integers) go to the filter as float32, and only those it changed
-    come back from it (in the file's type): the others are put back as read, bit for bit.
+    Cryptomatte channels (ids) are never in the frame; an image without colour channels (without_colour) is refused
+    (ImageReadError): image_source passes such a file through unfiltered instead. Samples of a _WIDE type (double,
+    8/16/32-bit integers) go to the filter as float32, and only those it changed come back from it (in the file's
+    type): the others are put back as read, bit for bit.
     """
     frame, merge = _split_channels(image)
     if frame.dtype.type not in _WIDE.values():
@@ -376,11 +411,13 @@ def _split_channels(image: Image) -> tuple[np.ndarray, Callable[[np.ndarray], np
     names = tuple(image.spec.channelnames)
     if len(names) != nchannels:  # a spec that does not describe these pixels: by position
         names = ("",) * nchannels
+    reason = without_colour(image)
     data = cryptomatte_channels(names, image.spec)
     idx = filter_channel_indices(names, image.spec.alpha_channel, data)
-    if not idx:  # blending ids would corrupt them, and there is nothing else to filter: refuse, write nothing
-        raise ImageReadError(f"{image.path}: expected colour channels to filter, got only cryptomatte channels "
-                             f"({', '.join(names[k] for k in sorted(data))}); ids must not be blended")
+    if reason is not None or not idx:  # blending data (depth, ids) would corrupt it: refuse, write nothing
+        reason = reason or f"only cryptomatte channels ({', '.join(names[k] for k in sorted(data))})"
+        raise ImageReadError(f"{image.path}: expected colour channels to filter, got {reason}; data must not be "
+                             f"blended")
     if idx == tuple(range(nchannels)):
         return pixels, lambda out: out
     if idx == tuple(range(len(idx))):  # the leading channels: a cheaper split and concatenation
