@@ -40,6 +40,8 @@ class SequenceToVideoJob(_Job):
     """A folder of images or a frame pattern -> one video file (frame rate from --rate)."""
 
     def prepare(self) -> None:
+        import numpy as np
+
         from mlaa_stream.io.images import image_shape, read_image
         from mlaa_stream.io.video import VideoError, VideoInfo, VideoWriter, container_format_for
 
@@ -57,6 +59,9 @@ class SequenceToVideoJob(_Job):
             raise Usage(f"{self.plan[0].src}: float (linear-light) images cannot be encoded to video here; "
                         f"filter them to PNG frames first (linear light is encoded to sRGB there), then make the "
                         f"video from those")
+        if first.pixels.dtype not in (np.uint8, np.uint16):   # a TIFF's signed or 32-bit integers
+            raise Usage(f"{self.plan[0].src}: {first.pixels.dtype} samples cannot be encoded to video here (8- and "
+                        f"16-bit unsigned only); filter them to PNG frames first, then make the video from those")
         w, h, c = image_shape(self.plan[0].src)
         bits = 16 if first.pixels.dtype.itemsize == 2 else 8
         rate = Fraction(o["rate"]).limit_denominator(1001)

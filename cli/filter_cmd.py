@@ -44,7 +44,9 @@ linear (and untagged float images) are taken as linear light, others as sRGB-enc
 judged at the power of two of exposure that puts its 90th percentile near white, whatever exposure or
 units the renderer wrote (the output keeps the input's; TSS too). Linear light
 written to a format of display values (PNG, JPEG) is encoded to sRGB, clipped to 0-1, and EXR's
-premultiplied alpha written to a format of straight alpha (PNG) is divided out. In a folder,
+premultiplied alpha written to a format of straight alpha (PNG) is divided out. An EXR without colour
+channels (depth, normals, positions, motion vectors: no R, G, B or Y of its own or of a layer) is copied
+unchanged, said in a warning; it counts as written, has no --stats row, and is no failure. In a folder,
 files that are not images by their extension are skipped with a warning; a file that cannot be
 read or written is reported and the others are still processed. A sequence (%04d pattern) must keep
 one size, channel count and sample type; the first frame that differs stops it. Gaps in the
@@ -1032,9 +1034,10 @@ class _ImageJob(_Job):
             inner = image_source(read_plan, self.report, strict=self.strict)
             try:
                 for position, item in enumerate(inner):
-                    self.read_order[position] = item.meta[0]
-                    self.read_linear[position] = is_linear(item.meta[1])
-                    hook_index[position] = positions.get(id(item.meta[0]), position)
+                    if not item.passthrough:   # a file copied unchanged: neither the stage's nor the hooks'
+                        self.read_order[position] = item.meta[0]
+                        self.read_linear[position] = is_linear(item.meta[1])
+                        hook_index[position] = positions.get(id(item.meta[0]), position)
                     yield item
             finally:
                 inner.close()
@@ -1065,7 +1068,8 @@ class _ImageJob(_Job):
         if self.report.failed:
             self.con.error(f"{len(self.report.failed)} failed, {self.written} written")
             return EXIT_FAILED
-        self.con.info(f"{self.written} written, {len(self.report.skipped)} skipped")
+        copied = f" ({len(self.report.copied)} copied unchanged: no colour)" if self.report.copied else ""
+        self.con.info(f"{self.written} written{copied}, {len(self.report.skipped)} skipped")
         return EXIT_OK
 
     def _run_on_cluster(self) -> int:
@@ -1087,7 +1091,8 @@ class _ImageJob(_Job):
                                     overwrite=self.opts["overwrite"], strict=self.strict,
                                     chunk_frames=self.opts["chunk_frames"], on_frames=progress.update,
                                     temporal=temporal, done=done, jpeg_quality=self.opts.get("jpeg_quality"),
-                                    say=lambda msg: (progress.clear(), self.con.error(msg)))
+                                    say=lambda msg: (progress.clear(), self.con.error(msg)),
+                                    caution=lambda msg: (progress.clear(), self.con.warn(msg)))
         except ClusterAddressError as exc:
             progress.close()
             raise Usage(str(exc)) from exc
@@ -1126,6 +1131,8 @@ def _warm_up_images(job: "_ImageJob", filt, temporal: "_SequenceTemporal") -> No
     done = 0
     try:
         for item in image_source(warm, job.report, strict=job.strict):
+            if item.passthrough:   # no colour: not of the stage's sequence
+                continue
             f = filt.for_item(item) if hasattr(filt, "for_item") else filt
             temporal.warm(item.frame, f.process(item.frame), item.meta[0], is_linear(item.meta[1]))
             done += 1

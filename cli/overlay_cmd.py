@@ -94,7 +94,11 @@ def _run(input_path: str, output: str, lines_path: str, frame: int, strength: fl
     if not quiet and not lines:
         click.echo(f"mlaa-stream: warning: {lines_path}: no lines at frame {frame}; "
                    "the image is written unchanged", err=True)
-    pixels, put_back = split_for_filter(image)
+    try:
+        pixels, put_back = split_for_filter(image)   # an EXR of depth or ids only: refused, naming its channels
+    except ImageReadError as exc:
+        _err(str(exc))
+        return EXIT_FAILED
     try:
         renderer = OverlayRenderer(device, strength, linear=is_linear(image))
         if verbose:

@@ -55,8 +55,8 @@ class Antialiaser:
     `device`: an index or a name substring as `mlaa-stream devices` lists them (None: $MLAA_STREAM_DEVICE, else a
     GPU, else PoCL's CPU device). Other options are the Filter's (`preset` first, explicit keywords override it).
     Frames of one object are one sequence (the frame index, the temporal history): threads may share it (each frame
-    gets the next index; with a temporal stage the calls take turns), but a thread with a sequence of its own makes
-    its own. `temporal=True` (or "auto") adds temporal supersampling (mlaa_stream.temporal.tss.TSSStage: the input's
+    gets the next index, streams' frames too; with a temporal stage the calls take turns and another thread's frames
+    during a stream are refused), but a thread with a sequence of its own makes its own. `temporal=True` (or "auto") adds temporal supersampling (mlaa_stream.temporal.tss.TSSStage: the input's
     samples of the last `temporal_frames` frames (default 16, 2 to 64; a TSS setting, refused without TSS)
     accumulated along the motion; its ring is kept between calls) and the reprojection blend on moving edges of
     render regions;
@@ -166,8 +166,10 @@ class Antialiaser:
         frames along its first axis too; one frame is refused: aa(frame) filters it).
 
         Decoding runs in a reader thread and frames overlap on the device; leaving the loop early
-        (break) stops the reader. Errors are raised as PipelineError naming the frame index (counted as
-        `index` is: across calls and streams, the number the post hooks and the temporal stage get).
+        (break) stops the reader. Each frame takes the next `index` (across calls and streams, the number the post
+        hooks and the temporal stage get) when it reaches them: without a temporal stage, streams in several threads
+        may share this object, each frame's index unique and each stream's increasing (not consecutive where others
+        take some meanwhile). Errors are raised as PipelineError naming that index.
         """
         self._check_open()
         capture = hasattr(source, "read") and hasattr(source, "isOpened")
@@ -196,31 +198,43 @@ class Antialiaser:
             self._streams.pop(token, None)
 
     def _stream(self, frames: Any) -> Iterator[np.ndarray]:
-        base = self.index
+        claimed: dict[int, int] = {}   # position in this stream -> the index its frame took
+
+        def index_of(position: int) -> int:
+            """The frame's index, taken (the next one of this object) the first time its stage, hooks or the loop
+            need it: streams running at once, and calls, each get their own, and a stream's frames come in order."""
+            with self._lock:
+                if position not in claimed:
+                    claimed[position], self.index = self.index, self.index + 1
+                return claimed[position]
+
         temporal = None
         if self.temporal is not None:
             user_temporal, own = self.temporal, self._own_stage
 
             def temporal(a, b, i, **future):
-                out = user_temporal(a, b, base + i, **future)
+                out = user_temporal(a, b, index_of(i), **future)
                 if own:
                     _trim_stats(user_temporal)
                 return out
             temporal.lookahead = getattr(user_temporal, "lookahead", 0)   # the pipeline reads it
-        hooks = [(lambda h: (lambda f, i: h(f, base + i)))(h) for h in self.post_hooks]
+        hooks = [(lambda h: (lambda f, i: h(f, index_of(i))))(h) for h in self.post_hooks]
         items = stream_items(frames, self._filter, in_flight=self.in_flight, temporal=temporal, post_hooks=hooks)
         try:
             for item in items:
-                self.index = base + item.index + 1
+                index_of(item.index)
+                claimed.pop(item.index)
                 yield item.frame
                 # closed while the loop held a frame: stop here rather than refill the freed device buffers
                 self._check_open()
         except PipelineError as exc:
-            if not base:
+            # the pipeline counts from this stream's first frame; name the frame as the hooks and the temporal
+            # stage saw it, or (never given one: a read or filter failure) the index it would have taken
+            with self._lock:
+                index = claimed.get(exc.index, self.index)
+            if index == exc.index:
                 raise
-            # the pipeline counts from this stream's first frame; name the frame as the hooks and the
-            # temporal stage saw it (self.index's numbering, across calls and streams)
-            raise PipelineError(exc.stage, base + exc.index, exc.cause, exc.meta) from exc.cause
+            raise PipelineError(exc.stage, index, exc.cause, exc.meta) from exc.cause
         finally:
             items.close()   # stops the reader thread now, whatever ends the loop
 

@@ -2,7 +2,8 @@
 
 Bounded queues carry items (frame + index + the source's metadata) and end with a sentinel. The
 device stage keeps up to `in_flight` frames submitted to the filter, so the upload of frame N+1
-and the download of frame N-1 overlap the kernels of frame N; frames come out in order.
+and the download of frame N-1 overlap the kernels of frame N; frames come out in order. An item marked
+`passthrough` (nothing to filter) comes out in its place as it went in: no filter, temporal stage or post hooks.
 
 Errors: a failure while reading, filtering or in a hook stops the reader at once; the frames before
 the failing one still go through and are written, then `PipelineError` names the stage and the
@@ -12,6 +13,7 @@ imageio-ffmpeg's `read_frames`: a generator whose `finally` always stops its rea
 """
 from __future__ import annotations
 
+import itertools
 import queue
 import threading
 import time
@@ -41,6 +43,16 @@ END = _Sentinel()
 
 class PendingResult(Protocol):
     def result(self) -> np.ndarray: ...
+
+
+class _Unfiltered:
+    """The 'result' of a passthrough item: its frame as read."""
+
+    def __init__(self, frame: np.ndarray):
+        self.frame = frame
+
+    def result(self) -> np.ndarray:
+        return self.frame
 
 
 class FrameFilter(Protocol):
@@ -178,8 +190,8 @@ def stream_items(source: Iterable, filt: FrameFilter, *, in_flight: int = 2, que
 
     `in_flight` frames are submitted before the oldest one's result is taken (1 = serialized).
     A temporal stage with a `lookahead` attribute N > 0 is called as `temporal(frame_in, frame_filtered,
-    index, future=[raw frames index + 1 .. index + N])` (fewer at the end of the stream): a frame waits,
-    filtered, until the N frames after it are read.
+    index, future=[raw frames index + 1 .. index + N])` (fewer at the end of the stream, and none from a passthrough
+    item on: not of the sequence): a frame waits, filtered, until the N frames after it are read.
     Raises PipelineError after yielding every frame before the failing one. Frames are read ahead of the
     filter: an array in the memory of one of the source's recent ones (a reused buffer or a pool of them) is
     copied first, and so are the first frames, which such a pool may overwrite before it comes round.
@@ -212,9 +224,12 @@ def stream_items(source: Iterable, filt: FrameFilter, *, in_flight: int = 2, que
                 break
             t0 = time.perf_counter()
             try:
-                f = filt.for_item(obj) if hasattr(filt, "for_item") else filt
-                pending.append((obj, f.submit(obj.frame, premultiplied=True) if obj.premultiplied else
-                                   f.submit(obj.frame)))
+                if obj.passthrough:
+                    pending.append((obj, _Unfiltered(obj.frame)))
+                else:
+                    f = filt.for_item(obj) if hasattr(filt, "for_item") else filt
+                    pending.append((obj, f.submit(obj.frame, premultiplied=True) if obj.premultiplied else
+                                       f.submit(obj.frame)))
             except Exception as exc:
                 upstream = _Failure("filter", obj.index, exc, obj.meta)
                 break
@@ -274,6 +289,8 @@ def _finish(ready: deque, pending: deque, ahead: int, temporal: Temporal | None,
     """Run the temporal stage (with the raw frames of the next `ahead` items read; then the input put back in
     the `kept` rectangles) and the post hooks on the oldest collected frame."""
     item, out, result = ready.popleft()
+    if item.passthrough:
+        return item, None
     stage = "temporal"
     try:
         t1 = time.perf_counter()
@@ -283,8 +300,9 @@ def _finish(ready: deque, pending: deque, ahead: int, temporal: Temporal | None,
             result.publish_regions()
         spatial = out
         if temporal is not None and ahead:
-            later = [it.frame for it, _, _ in ready] + [it.frame for it, _ in pending]
-            out = temporal(item.frame, out, item.index, future=later[:ahead])
+            later = [it for it, _, _ in ready] + [it for it, _ in pending]
+            later = [it.frame for it in itertools.takewhile(lambda it: not it.passthrough, later[:ahead])]
+            out = temporal(item.frame, out, item.index, future=later)
             t2 = time.perf_counter()
             times.temporal += t2 - t1
             t1 = t2

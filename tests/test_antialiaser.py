@@ -141,7 +141,10 @@ def test_a_failing_post_hook_is_named_by_the_index_it_was_given():
         aa(frames[1])
         with pytest.raises(PipelineError, match="post failed at frame 3: bad overlay") as info:
             list(aa.stream(frames[2:]))
-        assert info.value.index == 3 and aa.index == 3
+        # the hook was given 3: the failed frame keeps it, as in aa(frame) (the next frame would repeat it)
+        assert info.value.index == 3 and aa.index == 4
+        aa(frames[0])
+        assert aa.index == 5
     assert pipeline_threads() == []
 
 
@@ -334,6 +337,35 @@ def test_antialiasers_in_threads_each_get_their_own_frames(preset):
 
     run_in_threads(work)
     assert errors == [] and wrong == []
+
+
+def test_streams_in_threads_sharing_a_spatial_antialiaser_get_their_own_indices():
+    """Each stream counted from the index when it began: two streams at once on one spatial Antialiaser gave
+    their post hooks the same indices (and `index` went back and forth). Every frame now takes the next index when
+    it reaches the hooks: unique across the streams (and calls), increasing within each stream."""
+    rng = np.random.default_rng(11)
+    frames = [(rng.random((24, 32, 3)) < 0.3).astype(np.uint8) * 255 for _ in range(8)]
+    hooked: dict[int, list[int]] = {}
+    errors = []
+
+    def hook(frame, index):
+        hooked.setdefault(threading.get_ident(), []).append(index)
+        return frame
+
+    with Antialiaser(post_hooks=[hook]) as aa:
+        def work(k: int) -> None:
+            try:
+                assert len(list(aa.stream(frames))) == 8
+            except Exception as exc:   # noqa: BLE001 - reported below
+                errors.append(exc)
+
+        run_in_threads(work)
+        assert errors == []
+        assert sorted(i for seen in hooked.values() for i in seen) == list(range(32)) and aa.index == 32
+        assert all(seen == sorted(seen) for seen in hooked.values())
+        aa(frames[0])
+        assert max(max(seen) for seen in hooked.values()) == 32
+    assert pipeline_threads() == []
 
 
 @pytest.mark.parametrize("temporal", ["tss", "recording", None])

@@ -80,17 +80,22 @@ def test_cryptomatte_layers_are_never_filtered_as_the_colour(tmp_path, crypto, a
     assert not np.array_equal(got[:, :, diffuse], want[:, :, diffuse])   # the colour layer was filtered
 
 
-def test_an_exr_of_cryptomatte_channels_only_is_refused(tmp_path):
+def test_an_exr_of_cryptomatte_channels_only_is_copied_unchanged(tmp_path):
+    """Refused before (nothing to filter, and the run failed); now copied as every file without colour is
+    (tests/test_exr_data_passes.py): render pipelines write cryptomatte as a file of its own beside the beauty."""
     _, mask = staircase()
     ids = crypto_ids(mask)
     names = ("CryptoAsset00.R", "CryptoAsset00.G", "CryptoAsset00.B", "CryptoAsset00.A")
     src = tmp_path / "crypto.exr"
     write_exr(src, np.stack([ids, ids * 0 + 1, ids[::-1], ids * 0], 2), names)
     with pytest.raises(ImageReadError, match="only cryptomatte channels"):
-        split_for_filter(read_image(str(src)))
+        split_for_filter(read_image(str(src)))   # what takes a frame to filter (the overlay command) refuses it
     result = run(src, "-o", tmp_path / "out.exr")
-    assert result.exit_code != 0 and "only cryptomatte channels" in result.output
-    assert not os.path.exists(tmp_path / "out.exr")
+    assert result.exit_code == 0, result.output
+    assert f"{src}: only cryptomatte channels ({', '.join(names)}): copied unchanged" in result.output
+    got_names, got = read_all(tmp_path / "out.exr")
+    want_names, want = read_all(src)
+    assert got_names == want_names and np.array_equal(got.view(np.uint32), want.view(np.uint32))
 
 
 @pytest.mark.parametrize("space, linear", [("ACEScct", False), ("acescct_ap1", False), ("ACES - ACEScc", False),

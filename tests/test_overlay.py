@@ -692,6 +692,23 @@ def test_cli_overlay(renderer, tmp_path):
     assert not [p for p in os.listdir(tmp_path) if "tmp" in p]
 
 
+
+def test_cli_overlay_refuses_an_exr_without_colour(tmp_path):
+    """Lines drawn into a depth pass would be depths of nothing: refused, naming the channels (a traceback before)."""
+    import OpenImageIO as oiio
+    from click.testing import CliRunner
+    from mlaa_stream.cli.main import main
+    src, dst = str(tmp_path / "depth.exr"), str(tmp_path / "out.exr")
+    spec = oiio.ImageSpec(40, 30, 1, "float")
+    spec.channelnames = ("Z",)
+    out = oiio.ImageOutput.create(src)
+    assert out.open(src, spec) and out.write_image(np.full((30, 40, 1), 7.5, np.float32)) and out.close()
+    lines = _write(tmp_path, {"type": "Feature", "properties": {"width": 4, "color": "#ffffff"},
+                              "geometry": {"type": "LineString", "coordinates": [[3, 15], [37, 15]]}})
+    r = CliRunner().invoke(main, ["overlay", src, "-o", dst, "--lines", lines])
+    assert r.exit_code == 1 and "expected colour channels to filter, got no colour channels (Z)" in r.output, r.output
+    assert "Traceback" not in r.output and not os.path.exists(dst)
+
 @pytest.mark.parametrize("zero_copy", [True, False])
 def test_lines_wholly_far_off_the_frame_leave_it_unchanged(zero_copy):
     """Points over DEVICE_CLIP_MARGIN px off the frame are cut on the host; when every segment is cut away the

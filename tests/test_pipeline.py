@@ -255,6 +255,22 @@ def test_lookahead_stage_gets_the_raw_frames_after_each_one(in_flight, lookahead
     assert stage.calls == [(i, list(range(i + 1, min(i + 1 + lookahead, 7)))) for i in range(7)]
 
 
+
+@pytest.mark.parametrize("in_flight,lookahead", [(1, 0), (2, 2), (3, 1)])
+def test_a_passthrough_item_comes_out_in_its_place_as_it_went_in(in_flight, lookahead):
+    """An item with nothing to filter (an EXR of depth) is neither submitted to the filter nor given to the
+    temporal stage or the hooks, and a look-ahead window ends before it (it is not of the sequence)."""
+    src = numbered(7)
+    items = [Item(f, meta=i, passthrough=i in (2, 3)) for i, f in enumerate(src)]
+    stage, filt, hooked, out = LookaheadStage(lookahead), HostFilter(), [], []
+    run_pipeline(items, filt, out.append, in_flight=in_flight, temporal=stage,
+                 post_hooks=[lambda f, i: (hooked.append(i), f)[1]])
+    assert [it.meta for it in out] == list(range(7)) and filt.n == 5 and hooked == [0, 1, 4, 5, 6]
+    assert all(out[i].frame is src[i] for i in (2, 3))
+    assert all(np.array_equal(out[i].frame, 255 - src[i]) for i in (0, 1, 4, 5, 6))
+    ahead = {0: [1], 1: [], 4: [5, 6], 5: [6], 6: []}
+    assert stage.calls == [(i, ahead[i][:lookahead]) for i in (0, 1, 4, 5, 6)]
+
 @pytest.mark.parametrize("where", ["read", "result", "temporal"])
 def test_lookahead_errors_write_the_frames_before_and_name_the_frame(where):
     """A read, filter or temporal failure at frame 4 with look-ahead 2: frames 0-3 are written (the stage still

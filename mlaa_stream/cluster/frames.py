@@ -155,8 +155,9 @@ def _with_temporal(stage, files: list[FrameFile], warm: set, report: Report, str
         inner = image_source(files, report, strict=strict, like=like)
         try:
             for position, item in enumerate(inner):
-                read_order[position] = item.meta[0]
-                read_linear[position] = is_linear(item.meta[1])
+                if not item.passthrough:   # a file copied unchanged never reaches the stage
+                    read_order[position] = item.meta[0]
+                    read_linear[position] = is_linear(item.meta[1])
                 yield item
         finally:
             inner.close()
@@ -180,9 +181,11 @@ def _with_temporal(stage, files: list[FrameFile], warm: set, report: Report, str
 def run_chunks(client, files: list[FrameFile], filter_kwargs: dict, *, overwrite: bool, strict: bool,
                chunk_frames: int = CHUNK_FRAMES, on_frames: Callable[[int], None] | None = None,
                say: Callable[[str], None] | None = None, temporal=None,
-               done: frozenset[str] = frozenset(), jpeg_quality: int | None = None) -> Report:
+               done: frozenset[str] = frozenset(), jpeg_quality: int | None = None,
+               caution: Callable[[str], None] | None = None) -> Report:
     """Filter `files` on the cluster behind `client`; returns what happened to each file. Progress:
-    `on_frames(done)` after each chunk. Raises ClusterJobError naming the chunk that failed twice.
+    `on_frames(done)` after each chunk; failures are said through `say`, warnings through `caution` (else `say`).
+    Raises ClusterJobError naming the chunk that failed twice.
     `temporal`: a TemporalSpec (mlaa_stream/cluster/temporal.py), or None for the spatial filter only.
     `done`: outputs known complete (--resume with the temporal stage: `files` is then the whole job, so that the
     chunks are those of the first run, each with its warm-up and look-ahead frames; a chunk whose outputs are all
@@ -190,7 +193,7 @@ def run_chunks(client, files: list[FrameFile], filter_kwargs: dict, *, overwrite
     from dask.distributed import as_completed
 
     say = say or (lambda msg: None)
-    report = Report(say=say)
+    report = Report(say=say, caution=caution or say)
     from mlaa_stream.cluster.temporal import MAX_WARMUP_FACTOR
     chunks = plan_chunks(files, chunk_frames, MAX_WARMUP_FACTOR * temporal.warmup if temporal is not None else 0,
                          temporal.lookahead if temporal is not None else 0)
@@ -224,7 +227,7 @@ def run_chunks(client, files: list[FrameFile], filter_kwargs: dict, *, overwrite
             for msg in r.failed:
                 report.fail(msg)
             for msg in r.warnings:
-                report.warn(msg)
+                report.note(msg)
             frames += sum(ff.dst not in done for ff in chunk.files)
             if on_frames is not None:
                 on_frames(frames)

@@ -21,9 +21,13 @@ from typing import Callable
 import numpy as np
 import OpenImageIO as oiio
 
-# Sample types the filter takes as they are; any other (int8/16, uint32, double) is read as float32
-# and converted back to the file's own type when written.
+# Sample types the filter takes as they are.
 _NATIVE = {"uint8": np.uint8, "uint16": np.uint16, "half": np.float16, "float": np.float32}
+# Sample types read as they are too (a double or 8/16/32-bit integer TIFF) but filtered as float32 (integers scaled
+# to [-1, 1] as OpenImageIO converts them): split_for_filter puts back only the samples the filter changed, so the
+# others come back bit for bit (float32 holds neither a double nor an integer over 2^24). Any other type, and a file
+# whose channels have several types (an EXR's half colour and uint ids), is read as float32.
+_WIDE = {"double": np.float64, "int8": np.int8, "int16": np.int16, "uint": np.uint32, "int": np.int32}
 
 # Formats whose alpha is associated (colour premultiplied by alpha): EXR always, TIFF where its file says so (read
 # with oiio:UnassociatedAlpha unset). Every other format (PNG, TGA, WebP, BMP ...) stores straight alpha.
@@ -51,6 +55,7 @@ class Image:
     conversions: tuple[str, ...] = ()  # colour-model changes made on reading (CMYK, palette), to report
     quality: int | None = None  # a JPEG's quality, estimated from its quantisation table (jpeg_quality): kept
     lossy: tuple[str, ...] = ()  # what writing back cannot keep bit for bit (inexact_channels), to warn about
+    format_name: str = ""  # OpenImageIO's name of the file's format ("openexr"): whether its channel names say much
 
     @property
     def channel_names(self) -> tuple[str, ...]:
@@ -87,7 +92,7 @@ def is_temp_path(path: str) -> bool:
 
 
 def read_image(path: str) -> Image:
-    """Read subimage 0 of `path` as stored: uint8/uint16/half/float kept, other types as float32."""
+    """Read subimage 0 of `path` as stored: uint8/uint16/half/float and the _WIDE types kept, others as float32."""
     config = oiio.ImageSpec()
     # Unassociated alpha (PNG, TIFF) is returned as stored instead of premultiplied, so it round-trips.
     config.attribute("oiio:UnassociatedAlpha", 1)
@@ -130,7 +135,7 @@ def read_image(path: str) -> Image:
         inp.geterror()  # clear the probe's 'could not seek to subimage 1': a failed read must report its own error
         conversions = _conversions(path, spec)
         fmt = str(spec.format)
-        read_fmt = fmt if fmt in _NATIVE else "float"
+        read_fmt = fmt if fmt in _NATIVE or (fmt in _WIDE and not spec.channelformats) else "float"
         pixels = inp.read_image(0, 0, 0, spec.nchannels, read_fmt)
         # a truncated JPEG decodes with its missing rows grey and only an error ("Premature end of JPEG file")
         err = inp.geterror() if pixels is None or inp.has_error else ""
@@ -139,14 +144,16 @@ def read_image(path: str) -> Image:
         spec = oiio.ImageSpec(spec)  # a copy that outlives the ImageInput
         if spec.alpha_channel >= 0 and inp.format_name() not in _PREMULTIPLIED_FORMATS:
             spec.attribute("oiio:UnassociatedAlpha", 1)  # straight alpha, also where the reader does not say so (BMP)
-        quality = jpeg_quality(path) if inp.format_name() == "jpeg" else None
-        lossy = inexact_channels(inp, spec)
+        format_name = inp.format_name()
+        quality = jpeg_quality(path) if format_name == "jpeg" else None
+        lossy = inexact_channels(inp, spec) if read_fmt == "float" else ()
     finally:
         inp.close()
     pixels = np.asarray(pixels)
     if pixels.ndim == 2:
         pixels = pixels[:, :, None]
-    return Image(pixels=pixels, spec=spec, path=path, conversions=conversions, quality=quality, lossy=lossy)
+    return Image(pixels=pixels, spec=spec, path=path, conversions=conversions, quality=quality, lossy=lossy,
+                 format_name=format_name)
 
 
 def inexact_channels(inp: oiio.ImageInput, spec: oiio.ImageSpec) -> tuple[str, ...]:
@@ -297,12 +304,25 @@ def filter_channel_indices(names: tuple[str, ...], alpha_channel: int = -1,
                            data: frozenset[int] = frozenset()) -> tuple[int, ...]:
     """The channels that go through the filter, in the order it takes them (R, G, B[, A] or one grey).
 
-    By name where the names say which channels are colour: plain R, G, B (+ A), else plain Y, else the
-    R, G, B (+ A) of one layer of a multi-layer EXR ("ViewLayer.Combined.R" ...): the layer of the alpha
-    channel, else a beauty layer by name, else the first. OpenImageIO lists an EXR's channels by layer
-    name, so a pass that sorts first (Blender's "AO" before "Combined", a plain "Z" before "diffuse.R")
-    would otherwise be filtered in the beauty's place. Names that say nothing: filtered_channels.
+    By name where the names say which channels are colour (colour_by_name), else by position (filtered_channels).
     `data`: channels that are never filtered (cryptomatte_channels: ids); () where no other channel is left.
+    """
+    named = colour_by_name(names, alpha_channel, data)
+    if named:
+        return named
+    # by position among the channels that may be filtered (OpenImageIO may have taken a cryptomatte A for alpha)
+    rest = [k for k in range(len(names)) if k not in data]
+    alpha = rest.index(alpha_channel) if alpha_channel in rest else -1
+    return tuple(rest[:filtered_channels(len(rest), alpha)]) if rest else ()
+
+
+def colour_by_name(names: tuple[str, ...], alpha_channel: int = -1,
+                   data: frozenset[int] = frozenset()) -> tuple[int, ...]:
+    """The colour channels the names say, in the filter's order, or () where they say none: plain R, G, B (+ A),
+    else plain Y, else the R, G, B (+ A) of one layer of a multi-layer EXR ("ViewLayer.Combined.R" ...): the layer of
+    the alpha channel, else a beauty layer by name, else the first. OpenImageIO lists an EXR's channels by layer
+    name, so a pass that sorts first (Blender's "AO" before "Combined", a plain "Z" before "diffuse.R") would
+    otherwise be filtered in the beauty's place. `data` (cryptomatte_channels) are never colour.
     """
     where = {name: k for k, name in enumerate(names) if k not in data}
     if all(c in where for c in "RGB"):
@@ -315,35 +335,89 @@ def filter_channel_indices(names: tuple[str, ...], alpha_channel: int = -1,
         if dot and last in ("R", "G", "B", "A") and k not in data:
             layers.setdefault(layer, {})[last] = k
     rgb = [(layer, chans) for layer, chans in layers.items() if all(c in chans for c in "RGB")]
-    if rgb:
-        def rank(entry: tuple[str, dict[str, int]]) -> int:
-            layer, chans = entry
-            if alpha_channel >= 0 and chans.get("A") == alpha_channel:
-                return 0
-            return 1 if layer.rpartition(".")[2].lower() in _BEAUTY_LAYERS else 2
-        _, chans = min(rgb, key=rank)  # min keeps the first of equal rank: channel order
-        return tuple(chans[c] for c in "RGBA" if c in chans)
-    # by position among the channels that may be filtered (OpenImageIO may have taken a cryptomatte A for alpha)
-    rest = [k for k in range(len(names)) if k not in data]
-    alpha = rest.index(alpha_channel) if alpha_channel in rest else -1
-    return tuple(rest[:filtered_channels(len(rest), alpha)]) if rest else ()
+    if not rgb:
+        return ()
+
+    def rank(entry: tuple[str, dict[str, int]]) -> int:
+        layer, chans = entry
+        if alpha_channel >= 0 and chans.get("A") == alpha_channel:
+            return 0
+        return 1 if layer.rpartition(".")[2].lower() in _BEAUTY_LAYERS else 2
+    _, chans = min(rgb, key=rank)  # min keeps the first of equal rank: channel order
+    return tuple(chans[c] for c in "RGBA" if c in chans)
+
+
+# Formats whose files name their channels (an EXR's "Z", "N.x", "motion.u"); other formats' names are OpenImageIO's
+# defaults by position (a 2-channel TIFF's "R", "G" is grey and alpha), which say nothing of what a channel holds.
+_NAMED_CHANNEL_FORMATS = ("openexr",)
+
+
+def without_colour(image: Image) -> str | None:
+    """Why `image` holds nothing to filter -- "no colour channels (Z)", "only cryptomatte channels (...)" -- or
+    None where it has colour: a file that names its channels (an EXR) and names no colour (colour_by_name) holds data
+    -- depth, normals, positions, motion vectors, ids --, which a blend corrupts (a depth between two surfaces is
+    neither's). Render pipelines write such passes as files of their own beside the beauty."""
+    names = tuple(image.spec.channelnames)
+    if image.format_name not in _NAMED_CHANNEL_FORMATS or len(names) != image.pixels.shape[2]:
+        return None
+    data = cryptomatte_channels(names, image.spec)
+    if colour_by_name(names, image.spec.alpha_channel, data):
+        return None
+    shown = ", ".join(names[:6]) + (f" and {len(names) - 6} more" if len(names) > 6 else "")
+    return f"{'only cryptomatte' if len(data) == len(names) else 'no colour'} channels ({shown})"
 
 
 def split_for_filter(image: Image) -> tuple[np.ndarray, Callable[[np.ndarray], np.ndarray]]:
     """The frame the filter sees and a function that puts its result back among the other channels.
 
-    Cryptomatte channels (ids) are never in the frame; an image with no other channel is refused (ImageReadError).
+    Cryptomatte channels (ids) are never in the frame; an image without colour channels (without_colour) is refused
+    (ImageReadError): image_source passes such a file through unfiltered instead. Samples of a _WIDE type (double,
+    8/16/32-bit integers) go to the filter as float32, and only those it changed come back from it (in the file's
+    type): the others are put back as read, bit for bit.
     """
+    frame, merge = _split_channels(image)
+    if frame.dtype.type not in _WIDE.values():
+        return frame, merge
+    sent = _as_float32(frame)
+    return sent, lambda out: merge(_changed_only(out, sent, frame))
+
+
+def _as_float32(samples: np.ndarray) -> np.ndarray:
+    """Samples of a _WIDE type as float32, integers scaled by their type's maximum (as OpenImageIO converts them)."""
+    if samples.dtype.kind == "f":
+        with np.errstate(over="ignore"):   # beyond float32: inf, which the filter leaves; put back as read
+            return samples.astype(np.float32)
+    return (samples / float(np.iinfo(samples.dtype).max)).astype(np.float32)
+
+
+def _changed_only(out: np.ndarray, sent: np.ndarray, native: np.ndarray) -> np.ndarray:
+    """`native` with the samples the filter changed (its float32 `out` differs from `sent`, what it was given, bit
+    for bit: a NaN it kept counts as kept) replaced by `out` in native's type (integers rounded, clipped)."""
+    out = np.asarray(out, np.float32).reshape(sent.shape)
+    changed = out.view(np.uint32) != sent.view(np.uint32)
+    result = native.copy()
+    if native.dtype.kind == "f":
+        result[changed] = out[changed]
+    else:
+        info = np.iinfo(native.dtype)
+        result[changed] = np.clip(np.rint(out[changed].astype(np.float64) * info.max), info.min, info.max)
+    return result
+
+
+def _split_channels(image: Image) -> tuple[np.ndarray, Callable[[np.ndarray], np.ndarray]]:
+    """split_for_filter's channels: the frame in the image's own sample type, and the function putting it back."""
     pixels = image.pixels
     nchannels = pixels.shape[2]
     names = tuple(image.spec.channelnames)
     if len(names) != nchannels:  # a spec that does not describe these pixels: by position
         names = ("",) * nchannels
+    reason = without_colour(image)
     data = cryptomatte_channels(names, image.spec)
     idx = filter_channel_indices(names, image.spec.alpha_channel, data)
-    if not idx:  # blending ids would corrupt them, and there is nothing else to filter: refuse, write nothing
-        raise ImageReadError(f"{image.path}: expected colour channels to filter, got only cryptomatte channels "
-                             f"({', '.join(names[k] for k in sorted(data))}); ids must not be blended")
+    if reason is not None or not idx:  # blending data (depth, ids) would corrupt it: refuse, write nothing
+        reason = reason or f"only cryptomatte channels ({', '.join(names[k] for k in sorted(data))})"
+        raise ImageReadError(f"{image.path}: expected colour channels to filter, got {reason}; data must not be "
+                             f"blended")
     if idx == tuple(range(nchannels)):
         return pixels, lambda out: out
     if idx == tuple(range(len(idx))):  # the leading channels: a cheaper split and concatenation

@@ -16,7 +16,8 @@ from dataclasses import dataclass, field
 from typing import Callable, Iterator
 
 from mlaa_stream.io.images import (Image, ImageReadError, ImageWriteError, is_image_path, is_premultiplied,
-                       is_temp_path, read_image, split_for_filter, unpremultiplies, write_image)
+                                   is_temp_path, read_image, split_for_filter, unpremultiplies, without_colour,
+                                   write_image)
 from mlaa_stream.io.item import Item
 
 _PRINTF = re.compile(r"%(0?)(\d*)d")
@@ -55,6 +56,7 @@ class Report:
     caution: Callable[[str], None] = lambda msg: None  # about the whole run (the CLI's warning), once each
     written: list[str] = field(default_factory=list)
     skipped: list[str] = field(default_factory=list)  # resume: outputs already complete
+    copied: list[str] = field(default_factory=list)  # written unfiltered: no colour channels (also in `written`)
     failed: list[str] = field(default_factory=list)  # messages naming the file
     warnings: list[str] = field(default_factory=list)
     cautioned: set[str] = field(default_factory=set)
@@ -72,6 +74,11 @@ class Report:
     def warn(self, msg: str) -> None:
         self.warnings.append(msg)
         self.say(msg)
+
+    def note(self, msg: str) -> None:
+        """A warning about one file that is no failure: kept in `warnings`, said through `caution`."""
+        self.warnings.append(msg)
+        self.caution(msg)
 
 
 # Colour-space names (lower case) of log encodings, which a linear keyword ("aces") must not make linear: ACEScc and
@@ -276,12 +283,15 @@ def image_source(files: list[FrameFile], report: Report, *, strict: bool,
                  like: tuple | None = None) -> Iterator[Item]:
     """Read each file; Item.meta = (FrameFile, Image, merge). Folder mode (not strict) reports a bad
     file and goes on; strict (a sequence) raises at the first unreadable or mismatched frame. `like`:
-    ((shape, dtype), FrameFile) every frame must match (a chunk of a longer sequence: its first frame)."""
+    ((shape, dtype), FrameFile) every frame must match (a chunk of a longer sequence: its first frame).
+    A file without colour channels (images.without_colour: an EXR of depth, normals, motion vectors) is a
+    passthrough Item, all its channels as read: image_sink writes it unchanged, never filtered."""
     first: tuple | None = like
     for ff in files:
         try:
             image = read_image(ff.src)
-            frame, merge = split_for_filter(image)
+            copy = without_colour(image)
+            frame, merge = (image.pixels, _unchanged) if copy else split_for_filter(image)
         except ImageReadError as exc:
             if strict:
                 raise
@@ -300,7 +310,12 @@ def image_source(files: list[FrameFile], report: Report, *, strict: bool,
                 raise SequenceError(
                     f"{ff.label}: expected {s0[1]}x{s0[0]} with {s0[2]} channels of {d0} like "
                     f"{first[1].src}, got {s1[1]}x{s1[0]} with {s1[2]} channels of {d1}{_data_window(image)}")
-        yield Item(frame, (ff, image, merge), premultiplied=is_premultiplied(image.spec))
+        yield Item(frame, (ff, image, merge), passthrough=bool(copy), premultiplied=is_premultiplied(image.spec))
+
+
+def _unchanged(pixels):
+    """A passthrough item's merge: its pixels are the whole image already."""
+    return pixels
 
 
 def _data_window(image: Image) -> str:
@@ -318,7 +333,9 @@ def image_sink(report: Report, *, overwrite: bool, strict: bool,
     """Write each filtered frame back in its source's format and metadata, atomically; linear-light frames
     written to an integer format are encoded to sRGB and premultiplied alpha written to a format of straight alpha
     is divided out (write_image), each said once through report.caution. JPEG outputs get `jpeg_quality` (1-100,
-    --jpeg-quality), else their JPEG source's quality, else write_image's default.
+    --jpeg-quality), else their JPEG source's quality, else write_image's default. A passthrough item (no colour) is
+    written as read, its channels, types and header as the input's (never sRGB-encoded: its data is not light),
+    said through report.note.
 
     A full disk (or a read-only file system) always stops the run; other write failures stop a
     sequence (strict) but only skip the file in a folder.
@@ -326,7 +343,8 @@ def image_sink(report: Report, *, overwrite: bool, strict: bool,
     def sink(item: Item) -> None:
         ff, image, merge = item.meta
         try:
-            encoded = write_image(ff.dst, merge(item.frame), image.spec, overwrite=overwrite, linear=is_linear(image),
+            encoded = write_image(ff.dst, merge(item.frame), image.spec, overwrite=overwrite,
+                                  linear=is_linear(image) and not item.passthrough,
                                   quality=jpeg_quality or image.quality)
         except ImageWriteError as exc:
             if strict:
@@ -339,6 +357,9 @@ def image_sink(report: Report, *, overwrite: bool, strict: bool,
             report.fail(f"{ff.dst}: cannot write: {exc.strerror or exc}")
             return
         report.written.append(ff.dst)
+        if item.passthrough:
+            report.copied.append(ff.dst)
+            report.note(f"{ff.src}: {without_colour(image)}: copied unchanged")
         src_ext, ext = os.path.splitext(ff.src)[1].lower(), os.path.splitext(ff.dst)[1].lower() or ff.dst
         if unpremultiplies(ff.dst, image.spec):   # EXR's associated alpha into PNG's straight alpha
             report.caution_once(f"premultiplied alpha of {src_ext or 'the input'} frames is divided out for {ext}, a "
