@@ -709,6 +709,28 @@ class Renderer:
                 acc += self._linear_pass(cam, dx, dy)
         return np.flipud(acc / (spp * spp))
 
+    def coverage_frames(self, cam: Camera, spp: int = TRUTH_SPP) -> tuple[np.ndarray, ...]:
+        """The world with its sky as transparency, as a renderer writes an element over nothing: the 1-spp linear
+        colour and coverage (1 where a pixel centre hit geometry, 0 on the sky) and the spp x spp jittered means of
+        the premultiplied colour and of the coverage. (H, W, 3), (H, W), (H, W, 3), (H, W) float64, row 0 the top."""
+        self.fbo32.use()
+
+        def one(dx: float, dy: float) -> tuple[np.ndarray, np.ndarray]:
+            rgb = self._linear_pass(cam, dx, dy).astype(np.float64)
+            depth = np.frombuffer(self.fbo32.read(components=1, attachment=-1, dtype="f4"), np.float32)
+            return rgb, (depth.reshape(self.height, self.width) < 1.0).astype(np.float64)  # the sky sits at 1
+
+        colour, cover = one(0.0, 0.0)
+        acc, acc_cover = np.zeros_like(colour), np.zeros_like(cover)
+        offsets = (np.arange(spp) + 0.5) / spp - 0.5
+        for dy in offsets:
+            for dx in offsets:
+                c, a = one(dx, dy)
+                acc += c * a[..., None]
+                acc_cover += a
+        n = spp * spp
+        return tuple(np.flipud(v).copy() for v in (colour, cover, acc / n, acc_cover / n))
+
     def _linear_pass(self, cam: Camera, dx: float, dy: float) -> np.ndarray:
         """One linear pass into the bound float target, the image shifted by (dx, dy) px: _linear_rows."""
         self.fbo32.clear(0, 0, 0, 1, depth=1.0)
