@@ -128,9 +128,9 @@ def test_untouched_pixels_and_semi_transparent_areas_bit_for_bit(filters):
 
 
 def test_premultiplied_float_frame():
-    """EXR's convention: where the alpha stays, the colour is the colour filter's alone (what alpha='keep' gives,
-    emission with alpha 0 included); the colour stays premultiplied (never over its alpha's share of the element's
-    brightest colour) and the alpha is antialiased."""
+    """EXR's convention: where the alpha stays 1, and on light with no coverage, the colour is the colour filter's
+    alone (what alpha='keep' gives); nothing (alpha 0, colour 0) gains no light; the colour stays premultiplied
+    (never over its alpha's share of the element's brightest colour) and the alpha is antialiased."""
     premul, cover = element(5)
     truth_p, truth_a = element(5, samples=SPP)
     frame = np.dstack([premul, cover]).astype(np.float32)
@@ -138,12 +138,15 @@ def test_premultiplied_float_frame():
     with Filter(linear_input=True) as f, Filter(linear_input=True, alpha="keep") as k:
         out, old = f.process(frame, premultiplied=True), k.process(frame, premultiplied=True)
     stay = out[..., 3] == frame[..., 3]
-    assert np.array_equal(out[stay], old[stay]) and stay[1:5, 1:5].all()
+    inside = stay & ((frame[..., 3] == 1) | (frame[..., :3] != 0).any(axis=2))
+    assert np.array_equal(out[inside], old[inside]) and inside[1:5, 1:5].all()
+    nothing = stay & (frame == 0).all(axis=2)
+    assert (out[nothing] == 0).all() and (old[nothing] != 0).any()
     assert removed(out[..., 3], cover, truth_a) > 0.6    # measured 0.69
     away = np.ones(cover.shape, bool)
     away[:7, :7] = False  # the light patch is in neither the element nor its truth
     assert removed(out[away][:, :3], premul[away], truth_p[away]) > 0.6   # 0.70
-    assert np.all(out[~stay][:, :3] <= out[~stay][:, 3:] * premul.max() + 1e-6)
+    assert np.all(out[:, 7:, :3] <= out[:, 7:, 3:] * premul.max() + 1e-6)
 
 
 def test_non_finite_samples_pass_through():
@@ -205,3 +208,47 @@ def test_alpha_bench_scores_renders_over_transparency():
         keep, cover = np.array(res[(fmt, "keep")]), np.array(res[(fmt, "coverage")])
         assert (cover[:, :3] > keep[:, :3]).all() and (cover[:, 3] > 50).all(), (fmt, cover, keep)  # >= 57.8
         assert (keep[:, 3] == 0).all()
+
+
+def test_command_line_png_and_exr_over_transparency(tmp_path):
+    """Through `mlaa-stream`: a straight-alpha PNG and a premultiplied EXR of one element get their alpha antialiased
+    (the EXR's colour stays premultiplied: never over alpha times the element's brightest colour); `--alpha keep`
+    leaves the alpha as read."""
+    import OpenImageIO as oiio
+    from click.testing import CliRunner
+
+    from mlaa_stream.cli.main import main
+    from mlaa_stream.io.images import read_image
+    premul, cover = element(7)
+    src = tmp_path / "in"
+    src.mkdir()
+    oiio.ImageBuf(straight8(premul, cover)).write(str(src / "el.png"))
+    oiio.ImageBuf(np.dstack([premul, cover]).astype(np.float32)).write(str(src / "el.exr"))
+    for args, changed in (([], True), (["--alpha", "keep"], False)):
+        out = tmp_path / f"out{len(args)}"
+        r = CliRunner().invoke(main, [str(src), "-o", str(out), *args])
+        assert r.exit_code == 0, r.output
+        for name in ("el.png", "el.exr"):
+            a, b = read_image(str(src / name)).pixels, read_image(str(out / name)).pixels
+            assert (not np.array_equal(a[..., 3], b[..., 3])) == changed, (name, args)
+        exr = read_image(str(out / "el.exr")).pixels
+        # the colour alone (keep) spreads light into transparent pixels whose alpha stays 0
+        assert np.all(exr[..., :3] <= exr[..., 3:] * premul.max() + 1e-3) == changed
+
+
+def test_temporal_output_keeps_the_spatial_rims():
+    """After a temporal stage (which resolves straight colour from input samples, black where transparent) every
+    pixel at or beside partial coverage is the spatial output's; elsewhere the stage's."""
+    from mlaa_stream.spatial.alpha import spatial_at_rims
+    spatial = np.zeros((8, 10, 4), np.uint8)
+    spatial[:, :5] = (200, 100, 50, 255)
+    spatial[:, 5, 3] = 128
+    spatial[:, 5, :3] = (200, 100, 50)
+    temporal = spatial.copy()
+    temporal[..., :3] //= 2   # a dark stage everywhere
+    out = spatial_at_rims(spatial, temporal)
+    assert np.array_equal(out[:, 4:7], spatial[:, 4:7])
+    assert np.array_equal(out[:, :4], temporal[:, :4]) and np.array_equal(out[:, 7:], temporal[:, 7:])
+    opaque = spatial.copy()
+    opaque[..., 3] = 255
+    assert spatial_at_rims(opaque, temporal) is temporal

@@ -147,9 +147,13 @@ class AlphaSplit:
         moved = ~same_alpha | (colour_out != self.colour).any(axis=2)
         if self.finite is not None:
             moved &= self.finite & (np.abs(alpha_out.astype(np.float64)) <= SAMPLE_LIMIT)
-        # where the alpha filter left the pixel, the colour filter's result as it is: premultiplied frames (emission
-        # with alpha 0 included) and straight ones inside the element (alpha 1: the colour filter alone, bit for bit)
-        direct = moved & (same_alpha if self.premultiplied else same_alpha & (self.cover >= 1))
+        # where the alpha filter left the pixel, the colour filter's result as it is inside the element (alpha 1: the
+        # colour filter alone, bit for bit) and, premultiplied, on light with no coverage (emission: alpha 0, colour
+        # not 0); a pixel of nothing (alpha 0, colour 0) gains no light while its alpha stays 0
+        inside = self.cover >= 1
+        if self.premultiplied:
+            inside |= (self.cover <= 0) & (self.frame[..., :3] != 0).any(axis=2)
+        direct = moved & same_alpha & inside
         np.copyto(out[..., :3], colour_out, where=direct[..., None])
         np.copyto(out[..., 3], alpha_out, where=moved)
         rest = np.flatnonzero(moved & ~direct)
