@@ -41,19 +41,33 @@ def has_coverage(frame: np.ndarray) -> bool:
     return alpha.size > 0 and bool(alpha.min() != alpha.max())
 
 
+def _rgb(frame: np.ndarray) -> np.ndarray:
+    """The colour channels of an (H, W, 4) frame as a new contiguous array (cv2 where it takes the type: ~5x
+    numpy's strided copy)."""
+    if frame.dtype in (np.uint8, np.uint16, np.float32) and frame.flags.c_contiguous:
+        return cv2.cvtColor(frame, cv2.COLOR_RGBA2RGB)
+    return np.ascontiguousarray(frame[..., :3])
+
+
+def _any_channel_differs(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(H, W) bool: some channel of the (H, W, 3) arrays differs."""
+    if a.dtype in (np.uint8, np.uint16):
+        d = cv2.split(cv2.absdiff(a, b))
+        return cv2.max(cv2.max(d[0], d[1]), d[2]) > 0
+    return (a != b).any(axis=2)
+
+
 def varied_tiles(plane: np.ndarray, tile: int, step: float = 0.0) -> np.ndarray:
     """Per tile x tile block of the (H, W) `plane`, whether a pixel of it lies within 2 px (the reach of the widest
     pass, the footprint table's 5 x 5 window) of two 4-neighbours differing by more than `step` of full scale:
     (tiles_y, tiles_x) bool. A block without one (step 0) is left as it is by every filter."""
     top = float(np.iinfo(plane.dtype).max) if plane.dtype.kind in "ui" else 1.0
-    v = plane.astype(np.float32) / np.float32(top)
-    jump = np.zeros(v.shape, bool)
+    work = plane.astype(np.float32) if plane.dtype not in (np.uint8, np.uint16, np.float32) else plane
+    cross = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
+    # a pixel and its 4-neighbours span more than `step`: it is one end of such a pair (or between two)
     with np.errstate(invalid="ignore"):  # inf - inf: no step
-        dx, dy = np.abs(np.diff(v, axis=1)) > step, np.abs(np.diff(v, axis=0)) > step
-    jump[:, 1:] |= dx
-    jump[:, :-1] |= dx
-    jump[1:] |= dy
-    jump[:-1] |= dy
+        span = cv2.dilate(work, cross).astype(np.float32) - cv2.erode(work, cross).astype(np.float32)
+        jump = span > step * top
     near = cv2.dilate(jump.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
     h, w = near.shape
     ty, tx = -(-h // tile), -(-w // tile)
@@ -83,10 +97,10 @@ class AlphaSplit:
             a = np.clip(np.where(self.finite, a, 0.0), 0.0, 1.0).astype(np.float32)
         self.cover = a
         if self.premultiplied:
-            self.colour = np.ascontiguousarray(frame[..., :3])
+            self.colour = _rgb(frame)
             return
         # straight colour premultiplied in mix space: 0 where alpha is 0, as it is where alpha is 1
-        self.colour = np.ascontiguousarray(frame[..., :3]).copy()
+        self.colour = _rgb(frame)
         clear = self.cover <= 0
         part = (self.cover > 0) & (self.cover < 1)
         if self.finite is not None:  # samples passed through stay as they are, for the filter to pass them
@@ -123,14 +137,16 @@ class AlphaSplit:
                 straight = (self._to_mix(self.frame[..., :3]) / self.cover[..., None]).astype(np.float32)
             covered &= np.isfinite(straight).all(axis=2)
         else:
-            straight = np.ascontiguousarray(self.frame[..., :3], np.float32 if not self.integer else None)
+            straight = _rgb(self.frame) if self.integer else _rgb(self.frame).astype(np.float32)
         if straight.dtype.kind == "f":
             low, high = float(np.finfo(np.float32).max), float(-np.finfo(np.float32).max)
-        else:
+            uncovered = ~covered
+            lo_in, hi_in = straight.copy(), straight.copy()
+            lo_in[uncovered], hi_in[uncovered] = low, high
+        else:  # integers: the uncovered pixels to the top / to 0 by a mask of the type's top (cv2: fast)
             low, high = self.top, 0.0
-        uncovered = ~covered
-        lo_in, hi_in = straight.copy(), straight.copy()
-        lo_in[uncovered], hi_in[uncovered] = low, high
+            top = cv2.cvtColor(covered.astype(straight.dtype) * straight.dtype.type(self.top), cv2.COLOR_GRAY2RGB)
+            lo_in, hi_in = cv2.max(straight, cv2.bitwise_not(top)), cv2.min(straight, top)
         lo = cv2.erode(lo_in, kernel, borderType=cv2.BORDER_CONSTANT, borderValue=low).reshape(-1, 3)[rest]
         hi = cv2.dilate(hi_in, kernel, borderType=cv2.BORDER_CONSTANT, borderValue=high).reshape(-1, 3)[rest]
         none = cv2.dilate(covered.astype(np.uint8), kernel).reshape(-1)[rest] == 0
@@ -144,7 +160,7 @@ class AlphaSplit:
         alpha (`alpha_out`, as `alpha`)."""
         out = self.frame.copy()
         same_alpha = alpha_out == self.alpha
-        moved = ~same_alpha | (colour_out != self.colour).any(axis=2)
+        moved = ~same_alpha | _any_channel_differs(colour_out, self.colour)
         if self.finite is not None:
             moved &= self.finite & (np.abs(alpha_out.astype(np.float64)) <= SAMPLE_LIMIT)
         # where the alpha filter left the pixel, the colour filter's result as it is inside the element (alpha 1: the
