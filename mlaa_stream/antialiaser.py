@@ -72,6 +72,8 @@ class Antialiaser:
     and the temporal stage take them as they are instead of sRGB-decoding them.
     `keep`: rectangles every output frame takes unchanged from its input (subtitles, a HUD over a render:
     spatial/keep.py), as KeepRect or 'X,Y,W,H' strings in pixels or % of the frame.
+    `alpha`: "coverage" antialiases the alpha of BGRA frames whose alpha varies (straight alpha, as OpenCV reads
+    PNGs) with their colour (spatial/alpha.py); "keep" leaves it as it is.
     """
 
     def __init__(self, device: str | int | None = None, *, preset: str | None = None,
@@ -79,7 +81,7 @@ class Antialiaser:
                  reconstruct: bool | None = None, temporal: Temporal | bool | str | None = None,
                  temporal_frames: int | None = None, post_hooks: Sequence[PostHook] | None = (), in_flight: int = 2,
                  lookahead: int = 0, linear_input: bool = False, dense_motion: bool = False,
-                 keep: Sequence[KeepRect | str] | str | None = None):
+                 keep: Sequence[KeepRect | str] | str | None = None, alpha: str = "coverage"):
         if preset is not None and preset not in PRESETS:
             raise ValueError(f"expected a preset among {', '.join(sorted(PRESETS))}, got {preset!r}")
         kwargs = dict(PRESETS.get(preset or "default", {}))
@@ -91,6 +93,7 @@ class Antialiaser:
             kwargs["linear_input"] = True
         if keep is not None:
             kwargs["keep"] = keep_rects(keep)
+        kwargs["alpha"] = alpha
         method = "auto" if temporal is True else temporal
         # a stage that is no method's name nor callable (temporal=1), hooks that are not callables and in_flight
         # < 1 failed only at the first frame ("'int' object is not callable") or the first stream: named here

@@ -252,3 +252,13 @@ def test_temporal_output_keeps_the_spatial_rims():
     opaque = spatial.copy()
     opaque[..., 3] = 255
     assert spatial_at_rims(opaque, temporal) is temporal
+
+
+def test_antialiaser_takes_the_alpha_mode():
+    from mlaa_stream.antialiaser import Antialiaser
+    bgra = straight8(*element(8))[..., [2, 1, 0, 3]].copy()
+    with Antialiaser() as aa, Antialiaser(alpha="keep") as keep:
+        assert not np.array_equal(aa(bgra)[..., 3], bgra[..., 3])
+        assert np.array_equal(keep(bgra)[..., 3], bgra[..., 3])
+    with pytest.raises(ValueError, match="alpha"):
+        Antialiaser(alpha="premultiplied")
