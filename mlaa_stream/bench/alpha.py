@@ -18,10 +18,10 @@ import time
 
 import numpy as np
 
-from mlaa_stream.bench.rendered_views import WORLD_VIEWS
+from mlaa_stream.bench.rendered_views import WORLD_VIEWS, render_args
 from mlaa_stream.device.colour import srgb_to_linear
 from mlaa_stream.spatial.filter import ALPHA_MODES, Filter
-from mlaa_stream.yardstick.rendered import Camera, Renderer, _context, egl_available, shot
+from mlaa_stream.yardstick.rendered import Camera, Renderer, _context, shot
 from mlaa_stream.yardstick.scenes import encode8
 
 PLATES = ("grey 0.2", "texture", "grey 0.8")
@@ -129,14 +129,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--timing", action="store_true", help="also ms per 1920x1080 RGBA frame")
     ap.add_argument("--device", default=None, help="OpenCL device (as --device of mlaa-stream)")
     args = ap.parse_args(argv)
-    ok, why = egl_available()
-    if not ok:
-        raise SystemExit(f"needs a headless OpenGL (EGL) context for the renders ({why}); see README")
-    sizes = [tuple(int(v) for v in s.split("x")) for s in args.sizes.split(",") if s]
-    worlds = [w for w in args.world.split(",") if w]
-    unknown = [w for w in worlds if w not in WORLD_VIEWS]
-    if unknown:
-        raise SystemExit(f"--world: expected names from {', '.join(WORLD_VIEWS)}, got {', '.join(unknown)}")
+    sizes, worlds = render_args(args.sizes, args.world)
     run(sizes, worlds, args.device)
     if args.timing:
         timing(args.device)

@@ -49,6 +49,19 @@ TOWN_VIEWS: dict[str, tuple[tuple, tuple, float]] = {
 WORLD_VIEWS = {"plaza": VIEWS, "town": TOWN_VIEWS}
 
 
+def render_args(sizes: str, worlds: str) -> tuple[list[tuple[int, int]], list[str]]:
+    """A render benchmark's --sizes ('WxH,WxH') and --world ('plaza,town') parsed, after checking that EGL is there
+    (SystemExit naming what is wrong)."""
+    ok, why = egl_available()
+    if not ok:
+        raise SystemExit(f"needs a headless OpenGL (EGL) context for the renders ({why}); see README")
+    names = [w for w in worlds.split(",") if w]
+    unknown = [w for w in names if w not in WORLD_VIEWS]
+    if unknown:
+        raise SystemExit(f"--world: expected names from {', '.join(WORLD_VIEWS)}, got {', '.join(unknown)}")
+    return [tuple(int(v) for v in s.split("x")) for s in sizes.split(",") if s], names
+
+
 def render_views(sizes: list[tuple[int, int]], samples: tuple[int, ...] = (1,), world: str = "plaza",
                  textures: str = "procedural", texture_repeat: float = 1.0,
                  msaa: tuple[int, ...] = ()) -> dict[str, tuple[np.ndarray, np.ndarray]]:
