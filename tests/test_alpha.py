@@ -262,3 +262,19 @@ def test_antialiaser_takes_the_alpha_mode():
         assert np.array_equal(keep(bgra)[..., 3], bgra[..., 3])
     with pytest.raises(ValueError, match="alpha"):
         Antialiaser(alpha="premultiplied")
+
+
+def test_the_colour_stored_under_transparency_does_not_matter(filters):
+    """Straight alpha leaves the colour of transparent pixels free (black, white, the colour bled outwards): the
+    composite of the output is the same whatever it is, and those pixels the filter leaves keep theirs."""
+    coverage, _ = filters
+    black = straight8(*element(9))
+    noisy = black.copy()
+    clear = black[..., 3] == 0
+    noisy[clear, :3] = np.random.default_rng(9).integers(0, 256, (int(clear.sum()), 3))
+    a, b = coverage.process(black), coverage.process(noisy)
+    plate = np.full(black.shape[:2] + (3,), 0.5)
+    assert np.array_equal(a[..., 3], b[..., 3])
+    assert np.abs(composite(a, plate) - composite(b, plate)).max() < 1e-12
+    left = b[..., 3] == 0
+    assert np.array_equal(b[left], noisy[left])
