@@ -591,22 +591,20 @@ class Filter:
             return self._alpha_filters[fallback]
 
     def filter_alpha(self, plane: np.ndarray, regions: np.ndarray | None) -> np.ndarray:
-        """An alpha plane (H, W) filtered as coverage: with this filter's fallback, and inside the colour's render
-        regions (`regions`: its flags per tile, or None), where the alpha steps by HARD_STEP or more, with the
-        fallback on every pixel, as a 1-spp render's coverage."""
+        """An alpha plane (H, W) filtered as coverage: with this filter's fallback; where the colour is mostly a
+        render (`regions`: its render-region flags per tile, or None; the tiles where the alpha steps by HARD_STEP
+        or more lie mostly in them), those tiles with the fallback on every pixel, as a 1-spp render's coverage."""
         if regions is None or self.fallback != "auto" or not np.any(regions):
             return self._alpha_filter(self.fallback).process(plane)
         from mlaa_stream.spatial.fallback import FALLBACK_TILE, region_pixels
-        # as a render: tiles of the colour's regions where the alpha steps as 1-spp coverage does
-        render = (np.asarray(regions) > 0) & varied_tiles(plane, FALLBACK_TILE, HARD_STEP)
-        varied = varied_tiles(plane, FALLBACK_TILE)  # tiles neither filter changes need neither
-        if not render.any():
+        hard = varied_tiles(plane, FALLBACK_TILE, HARD_STEP)
+        if 2 * np.count_nonzero(hard & (np.asarray(regions) > 0)) <= np.count_nonzero(hard):
             return self._alpha_filter(self.fallback).process(plane)
         rendered = self._alpha_filter("everywhere").process(plane)
-        if not (varied & ~render).any():
+        if not (varied_tiles(plane, FALLBACK_TILE) & ~hard).any():  # no soft alpha (a matte, a ramp) to leave
             return rendered
         out = self._alpha_filter(self.fallback).process(plane)
-        return np.where(region_pixels(render, *plane.shape[:2]), rendered, out)
+        return np.where(region_pixels(hard, *plane.shape[:2]), rendered, out)
 
     def close(self) -> None:
         """Wait for work in flight and free the device buffers."""
