@@ -278,3 +278,26 @@ def test_the_colour_stored_under_transparency_does_not_matter(filters):
     assert np.abs(composite(a, plate) - composite(b, plate)).max() < 1e-12
     left = b[..., 3] == 0
     assert np.array_equal(b[left], noisy[left])
+
+
+def test_grey_and_alpha_png(tmp_path):
+    """A grey + alpha PNG: the alpha antialiased with the grey, the rim keeping the element's grey."""
+    import OpenImageIO as oiio
+    from click.testing import CliRunner
+
+    from mlaa_stream.cli.main import main
+    rgba = straight8(*element(3))
+    la = np.ascontiguousarray(rgba[..., [1, 3]])
+    spec = oiio.ImageSpec(la.shape[1], la.shape[0], 2, "uint8")
+    spec.channelnames, spec.alpha_channel = ("Y", "A"), 1
+    out = oiio.ImageOutput.create(str(tmp_path / "la.png"))
+    assert out.open(str(tmp_path / "la.png"), spec) and out.write_image(la)
+    out.close()
+    r = CliRunner().invoke(main, [str(tmp_path / "la.png"), "-o", str(tmp_path / "out.png")])
+    assert r.exit_code == 0, r.output
+    got = oiio.ImageBuf(str(tmp_path / "out.png")).get_pixels(oiio.UINT8)
+    assert got.shape == la.shape
+    moved = got[..., 1] != la[..., 1]
+    assert moved.sum() > 100
+    rim = moved & (la[..., 1] == 0) & (got[..., 1] > 0)   # coverage spread outwards: the grey of a neighbour
+    assert rim.any() and (got[rim][:, 0] > 0).all()

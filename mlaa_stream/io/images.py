@@ -418,6 +418,18 @@ def _split_channels(image: Image) -> tuple[np.ndarray, Callable[[np.ndarray], np
         reason = reason or f"only cryptomatte channels ({', '.join(names[k] for k in sorted(data))})"
         raise ImageReadError(f"{image.path}: expected colour channels to filter, got {reason}; data must not be "
                              f"blended")
+    alpha = image.spec.alpha_channel
+    if len(idx) == 1 and 0 <= alpha < nchannels and alpha not in data and alpha != idx[0]:
+        # grey + alpha: the filter takes RGBA (the grey three times, R = G = B stays so) to filter the alpha as
+        # coverage with it (spatial/alpha.py); its R and A come back
+        grey = idx[0]
+
+        def merge_grey(out: np.ndarray) -> np.ndarray:
+            full = pixels.copy()
+            full[:, :, grey], full[:, :, alpha] = out[:, :, 0], out[:, :, 3]
+            return full
+
+        return np.ascontiguousarray(pixels[:, :, [grey, grey, grey, alpha]]), merge_grey
     if idx == tuple(range(nchannels)):
         return pixels, lambda out: out
     if idx == tuple(range(len(idx))):  # the leading channels: a cheaper split and concatenation
