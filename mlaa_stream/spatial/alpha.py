@@ -8,10 +8,10 @@ stays jagged and a dark fringe appears once the frame is composited (docs/spatia
 Here (AlphaSplit):
 - the colour is filtered premultiplied by alpha in the filter's mix space (linear light for sRGB frames): the
   transparent pixels hold 0, as a supersampled render's do, and a blend across the silhouette is a coverage mix;
-- the alpha is filtered as a grey image of linear samples (coverage), by a filter with the colour filter's options;
-  where the colour's filter found render regions and the alpha steps by more than HARD_STEP (a 1-spp render's
-  coverage is 0 or 1: soft mattes and ramps are no such thing), by one whose fallback runs everywhere (preset
-  `rendered`), chosen per tile;
+- the alpha is filtered as a grey image of linear samples (coverage), by a filter with the colour filter's options
+  (Filter.filter_alpha); where most of the tiles in which the alpha steps by more than HARD_STEP (a 1-spp render's
+  coverage is 0 or 1: soft mattes and ramps are no such thing) lie in the colour's render regions, those tiles by
+  one whose fallback runs everywhere (preset `rendered`), as the colour of a render is;
 - the straight colour is the filtered premultiplied colour divided by the filtered alpha, clamped per channel to
   the range of the input's straight colours with alpha > 0 in the 5x5 window around the pixel (so that a rim pixel
   keeps a colour of the element, never the transparent pixels' own), and premultiplied again for premultiplied
@@ -39,6 +39,11 @@ def has_coverage(frame: np.ndarray) -> bool:
     if alpha.dtype.kind == "f":
         alpha = alpha[np.isfinite(alpha)]
     return alpha.size > 0 and bool(alpha.min() != alpha.max())
+
+
+def _in_range(samples: np.ndarray) -> np.ndarray:
+    """Float samples the filter takes (finite, within SAMPLE_LIMIT), compared in float32: 1e15 is inf in half."""
+    return np.abs(samples.astype(np.float32, copy=False)) <= np.float32(SAMPLE_LIMIT)
 
 
 def _rgb(frame: np.ndarray) -> np.ndarray:
@@ -91,7 +96,7 @@ class AlphaSplit:
                      if self.integer and self.decode else None)
         self.alpha = np.ascontiguousarray(frame[..., 3])
         # samples the filter passes through (non-finite, out of range: spatial/nonfinite.py) pass through here too
-        self.finite = ((np.abs(frame.astype(np.float64)) <= SAMPLE_LIMIT).all(axis=2) if not self.integer else None)
+        self.finite = None if self.integer else _in_range(frame).all(axis=2)
         a = np.asarray(self.alpha, np.float32) / np.float32(self.top)
         if self.finite is not None:
             a = np.clip(np.where(self.finite, a, 0.0), 0.0, 1.0).astype(np.float32)
@@ -162,7 +167,7 @@ class AlphaSplit:
         same_alpha = alpha_out == self.alpha
         moved = ~same_alpha | _any_channel_differs(colour_out, self.colour)
         if self.finite is not None:
-            moved &= self.finite & (np.abs(alpha_out.astype(np.float64)) <= SAMPLE_LIMIT)
+            moved &= self.finite & _in_range(alpha_out)
         # where the alpha filter left the pixel, the colour filter's result as it is inside the element (alpha 1: the
         # colour filter alone, bit for bit) and, premultiplied, on light with no coverage (emission: alpha 0, colour
         # not 0); a pixel of nothing (alpha 0, colour 0) gains no light while its alpha stays 0
