@@ -301,3 +301,32 @@ def test_grey_and_alpha_png(tmp_path):
     assert moved.sum() > 100
     rim = moved & (la[..., 1] == 0) & (got[..., 1] > 0)   # coverage spread outwards: the grey of a neighbour
     assert rim.any() and (got[rim][:, 0] > 0).all()
+
+
+@pytest.mark.skipif("qtrle" not in __import__("av").codecs_available, reason="this FFmpeg has no qtrle encoder")
+def test_video_with_alpha(tmp_path):
+    """A QuickTime Animation clip of an element over transparency (straight alpha, as video carries it): its alpha
+    comes out antialiased, and the rim keeps the element's colour."""
+    import av
+    from click.testing import CliRunner
+
+    from mlaa_stream.cli.main import main
+    src, out = tmp_path / "el.mov", tmp_path / "out.mov"
+    frames = [straight8(*element(10 + k)) for k in range(2)]
+    with av.open(str(src), "w") as c:
+        s = c.add_stream("qtrle", rate=25)
+        s.width, s.height, s.pix_fmt = 96, 72, "argb"
+        for f in frames:
+            for p in s.encode(av.VideoFrame.from_ndarray(f, format="rgba").reformat(format="argb")):
+                c.mux(p)
+        for p in s.encode():
+            c.mux(p)
+    r = CliRunner().invoke(main, [str(src), "-o", str(out)])
+    assert r.exit_code == 0, r.output
+    with av.open(str(out)) as c:
+        got = [f.to_ndarray(format="rgba") for f in c.decode(video=0)]
+    assert len(got) == 2
+    for f, g in zip(frames, got):
+        assert (g[..., 3] != f[..., 3]).sum() > 100
+        gained = (f[..., 3] == 0) & (g[..., 3] > 0)
+        assert gained.any() and (g[gained][:, :3].max(axis=1) > 0).all()  # not the transparent pixels' black
