@@ -21,6 +21,8 @@ alpha is one value everywhere (an opaque render) is filtered as before, alpha ke
 """
 from __future__ import annotations
 
+from functools import lru_cache
+
 import cv2
 import numpy as np
 
@@ -39,6 +41,14 @@ def has_coverage(frame: np.ndarray) -> bool:
     if alpha.dtype.kind == "f":
         alpha = alpha[np.isfinite(alpha)]
     return alpha.size > 0 and bool(alpha.min() != alpha.max())
+
+
+@lru_cache(maxsize=None)
+def _decode_table(top: int) -> np.ndarray:
+    """sRGB decode of every integer sample 0 .. top (uint8, uint16), float32: made once."""
+    table = srgb_to_linear(np.arange(top + 1) / top).astype(np.float32)
+    table.setflags(write=False)
+    return table
 
 
 def _in_range(samples: np.ndarray) -> np.ndarray:
@@ -92,8 +102,7 @@ class AlphaSplit:
         self.dtype = frame.dtype
         self.integer = frame.dtype.kind in "ui"
         self.top = float(np.iinfo(frame.dtype).max) if self.integer else 1.0
-        self._lut = (srgb_to_linear(np.arange(int(self.top) + 1) / self.top).astype(np.float32)
-                     if self.integer and self.decode else None)
+        self._lut = _decode_table(int(self.top)) if self.integer and self.decode else None
         self.alpha = np.ascontiguousarray(frame[..., 3])
         # samples the filter passes through (non-finite, out of range: spatial/nonfinite.py) pass through here too
         self.finite = None if self.integer else _in_range(frame).all(axis=2)
