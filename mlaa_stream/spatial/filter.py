@@ -448,8 +448,8 @@ class Filter:
         return self.alpha == "coverage" and has_coverage(frame)
 
     def _submit(self, frame: np.ndarray, want_regions: bool = False) -> PendingFrame:
-        """submit without the alpha split; `want_regions`: read the frame's render-region flags back (PendingFrame.regions)
-        even without keep_regions."""
+        """submit without the alpha split; `want_regions`: read the frame's render-region flags back
+        (PendingFrame.regions) even without keep_regions."""
         fmt = frame_format(frame, self.bgr)
         with self._lock:
             bufs = self._prepare(fmt)
