@@ -57,9 +57,9 @@ class Antialiaser:
     Frames of one object are one sequence (the frame index, the temporal history): threads may share it (each frame
     gets the next index, streams' frames too; with a temporal stage the calls take turns and another thread's frames
     during a stream are refused), but a thread with a sequence of its own makes its own. `temporal=True` (or
-    "auto") adds temporal supersampling (mlaa_stream.temporal.tss.TSSStage: the input's samples of the last `temporal_frames` frames (default 16, 2 to 64; a TSS setting, refused without TSS)
-    accumulated along the motion; its ring is kept between calls) and the reprojection blend on moving edges of
-    render regions;
+    "auto") adds temporal supersampling (mlaa_stream.temporal.tss.TSSStage: the input's samples of the last
+    `temporal_frames` frames (default 16, 2 to 64; a TSS setting, refused without TSS) accumulated along the motion;
+    its ring is kept between calls) and the reprojection blend on moving edges of render regions;
     "tss", "blend" and "tss+blend" are the other methods of mlaa_stream.temporal.methods; or pass any
     `(frame_in, frame_filtered, index) -> frame` stage.
     `lookahead=N` (files, not live capture): in `stream`, temporal supersampling also reads the N frames after
