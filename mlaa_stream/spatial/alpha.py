@@ -33,6 +33,11 @@ RANGE_RADIUS = 2  # the window of input colours a rim pixel's straight colour is
 HARD_STEP = 0.125  # an alpha step (of full scale) between neighbours that marks 1-spp coverage, for render regions
 
 
+def _full_scale(dtype: np.dtype) -> float:
+    """The sample value of full coverage (alpha 1) and full intensity: an integer type's largest, else 1."""
+    return float(np.iinfo(dtype).max) if np.dtype(dtype).kind in "ui" else 1.0
+
+
 def has_coverage(frame: np.ndarray) -> bool:
     """True when `frame` has an alpha channel (a fourth one) that is not one value everywhere."""
     if frame.ndim != 3 or frame.shape[2] != 4:
@@ -76,11 +81,11 @@ def varied_tiles(plane: np.ndarray, tile: int, step: float = 0.0) -> np.ndarray:
     """Per tile x tile block of the (H, W) `plane`, whether a pixel of it lies within 2 px (the reach of the widest
     pass, the footprint table's 5 x 5 window) of two 4-neighbours differing by more than `step` of full scale:
     (tiles_y, tiles_x) bool. A block without one (step 0) is left as it is by every filter."""
-    top = float(np.iinfo(plane.dtype).max) if plane.dtype.kind in "ui" else 1.0
+    top = _full_scale(plane.dtype)
     work = plane.astype(np.float32) if plane.dtype not in (np.uint8, np.uint16, np.float32) else plane
     cross = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
     # a pixel and its 4-neighbours span more than `step`: it is one end of such a pair (or between two)
-    with np.errstate(invalid="ignore"):  # inf - inf: no step
+    with np.errstate(invalid="ignore", over="ignore"):  # inf - inf: no step; max - -max: a step
         span = cv2.dilate(work, cross).astype(np.float32) - cv2.erode(work, cross).astype(np.float32)
         jump = span > step * top
     near = cv2.dilate(jump.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
@@ -101,7 +106,7 @@ class AlphaSplit:
         self.frame, self.premultiplied, self.decode = frame, bool(premultiplied), bool(decode)
         self.dtype = frame.dtype
         self.integer = frame.dtype.kind in "ui"
-        self.top = float(np.iinfo(frame.dtype).max) if self.integer else 1.0
+        self.top = _full_scale(frame.dtype)
         self._lut = _decode_table(int(self.top)) if self.integer and self.decode else None
         self.alpha = np.ascontiguousarray(frame[..., 3])
         # samples the filter passes through (non-finite, out of range: spatial/nonfinite.py) pass through here too
@@ -207,8 +212,7 @@ def spatial_at_rims(spatial: np.ndarray, temporal: np.ndarray) -> np.ndarray:
     if not has_coverage(spatial):
         return temporal
     alpha = spatial[..., 3]
-    full = np.iinfo(alpha.dtype).max if alpha.dtype.kind in "ui" else 1.0
-    rim = cv2.dilate((alpha < full).astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+    rim = cv2.dilate((alpha < _full_scale(alpha.dtype)).astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
     out = temporal.copy()
     out[rim] = spatial[rim]
     return out
