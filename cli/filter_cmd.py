@@ -15,6 +15,7 @@ import click
 
 from mlaa_stream.spatial.filter import DEFAULT_THRESHOLDS, PRESET_USES, PRESETS
 from mlaa_stream.spatial.fast_filter import FastFilter
+from mlaa_stream.spatial.transfer import TRANSFER_NAMES
 from mlaa_stream.cli.options import configure_logging, device_option, verbosity_options
 from mlaa_stream.cli.stats_spool import StatsSpool
 from mlaa_stream.temporal.methods import RING_FRAMES
@@ -635,6 +636,11 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
                      video_backend=video_backend, deinterlace=deinterlace, filter_kwargs=kwargs)
         runner.prepare()
         _warn_unused_options(ctx, con, kind, job)
+        transfer = getattr(runner, "transfer", None)
+        if transfer is not None and kwargs.get("linear", True):  # --display-space: the codes' own mix, as asked
+            kwargs["transfer"] = transfer   # the same dict the job holds: a cluster's workers get it too
+            con.info(f"{'standard input' if input_path == '-' else input_path}: HDR video coded with "
+                     f"{TRANSFER_NAMES[transfer]}: filtered in the linear light it codes")
         info = getattr(runner, "info", None)
         if info is not None and getattr(info, "interlaced", None) and deinterlace == "off":
             # two fields a field-time apart in one frame: their combing on anything that moves looks like jaggies
@@ -1170,6 +1176,10 @@ class _VideoJob(_Job):
         except VideoError as exc:
             raise Failed(str(exc)) from exc
         self.start, self.end = self._trim()
+        from mlaa_stream.spatial.transfer import FFMPEG_TRC
+        # HDR10 (PQ) / HLG: the codes are filtered in the light they code (spatial/transfer.py); OpenCV's decoder
+        # does not say what its frames code
+        self.transfer = FFMPEG_TRC.get(self.info.colour.get("color_trc")) if o["video_backend"] != "opencv" else None
         self.con.info(f"{self.input}: {self.info.width}x{self.info.height} {self.info.pix_fmt} "
                       f"{self.info.bits}-bit, {self.info.fps} fps, {self.info.frames or '?'} frames, "
                       f"{self.info.audio_streams} audio streams")

@@ -186,6 +186,26 @@ inline float lut_read(__global const float *lut, float x)
 
 inline float srgb_to_linear(__global const float *luts, float v) { return lut_read(luts, v); }
 
+// A linear sample's argument to the encode table (luts' third table). ENCODE_WARP 1 (HDR video's transfers,
+// spatial/transfer.py): the table holds the transfer's signal of (u^4 x its peak) over u in [0, 1], so a sample v
+// (relative to reference white) reads it at u = (v ENCODE_SCALE)^(1/4), ENCODE_SCALE = reference white / peak: the
+// fourth root spreads the curve's steep dark end over the table. The edge tests then see the video's own codes.
+#ifndef ENCODE_WARP
+#define ENCODE_WARP 0
+#endif
+#ifndef ENCODE_SCALE
+#define ENCODE_SCALE 1.0f
+#endif
+inline float encode_arg(float v)
+{
+#if ENCODE_WARP
+    v *= ENCODE_SCALE;
+    return v > 0.0f ? SQRT(SQRT(v)) : 0.0f;   // NaN reads entry 0, as lut_read does
+#else
+    return v;
+#endif
+}
+
 // CIELAB (D65) of a colour already decoded to linear light (r, g, b from the sRGB->linear table).
 inline float3 lab_from_linear(__global const float *luts, float r, float g, float b)
 {
@@ -282,7 +302,7 @@ __kernel void linear_levels(__global const float *luts, __global float *lin)
     const int v = get_global_id(0);
     float c = (float)v * (1.0f / PIXEL_MAX);
 #if LINEAR_INPUT
-    c = lut_read(luts + 2 * (LUT_SIZE + 1), c);
+    c = lut_read(luts + 2 * (LUT_SIZE + 1), encode_arg(c));
 #endif
     lin[v] = lut_read(luts, c);
 }

@@ -24,7 +24,8 @@ inline float4 to_encoded(__global const float *luts, float4 c)
 #if LINEAR_INPUT
     // linear samples: encode for the perceptual comparison (tables hold linear->sRGB after the Lab part)
     __global const float *enc = luts + 2 * (LUT_SIZE + 1);
-    return (float4)(lut_read(enc, c.x), lut_read(enc, c.y), lut_read(enc, c.z), c.w);
+    return (float4)(lut_read(enc, encode_arg(c.x)), lut_read(enc, encode_arg(c.y)), lut_read(enc, encode_arg(c.z)),
+                    c.w);
 #else
     return c;
 #endif

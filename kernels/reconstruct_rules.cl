@@ -103,7 +103,7 @@ inline float3 lab_of(__global const float *luts, float4 c)
 {
 #if LINEAR_INPUT
     __global const float *enc = luts + 2 * (LUT_SIZE + 1);
-    c = (float4)(lut_read(enc, c.x), lut_read(enc, c.y), lut_read(enc, c.z), c.w);
+    c = (float4)(lut_read(enc, encode_arg(c.x)), lut_read(enc, encode_arg(c.y)), lut_read(enc, encode_arg(c.z)), c.w);
 #endif
     return rgb_to_lab(luts, c);
 }

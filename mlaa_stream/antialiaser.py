@@ -74,6 +74,9 @@ class Antialiaser:
     spatial/keep.py), as KeepRect or 'X,Y,W,H' strings in pixels or % of the frame.
     `alpha`: "coverage" antialiases the alpha of BGRA frames whose alpha varies (straight alpha, as OpenCV reads
     PNGs) with their colour (spatial/alpha.py); "keep" leaves it as it is.
+    `transfer="pq"` / `"hlg"`: the frames are 8/16-bit codes of HDR video (HDR10's SMPTE ST 2084, HLG): the filter
+    works in the linear light they code and codes its output back (spatial/transfer.py); a temporal stage still
+    mixes the codes.
     """
 
     def __init__(self, device: str | int | None = None, *, preset: str | None = None,
@@ -81,7 +84,8 @@ class Antialiaser:
                  reconstruct: bool | None = None, temporal: Temporal | bool | str | None = None,
                  temporal_frames: int | None = None, post_hooks: Sequence[PostHook] | None = (), in_flight: int = 2,
                  lookahead: int = 0, linear_input: bool = False, dense_motion: bool = False,
-                 keep: Sequence[KeepRect | str] | str | None = None, alpha: str = "coverage"):
+                 keep: Sequence[KeepRect | str] | str | None = None, alpha: str = "coverage",
+                 transfer: str | None = None):
         if preset is not None and preset not in PRESETS:
             raise ValueError(f"expected a preset among {', '.join(sorted(PRESETS))}, got {preset!r}")
         kwargs = dict(PRESETS.get(preset or "default", {}))
@@ -94,6 +98,8 @@ class Antialiaser:
         if keep is not None:
             kwargs["keep"] = keep_rects(keep)
         kwargs["alpha"] = alpha
+        if transfer is not None:
+            kwargs["transfer"] = transfer
         method = "auto" if temporal is True else temporal
         # a stage that is no method's name nor callable (temporal=1), hooks that are not callables and in_flight
         # < 1 failed only at the first frame ("'int' object is not callable") or the first stream: named here

@@ -37,7 +37,7 @@ class FastFilter(Filter):
     def _direct_ok(self, frame: np.ndarray) -> bool:
         fmt = frame_format(frame, self.bgr)
         return (self.direct and frame.dtype.kind in "ui" and frame.dtype == fmt.dtype and frame.flags.c_contiguous
-                and not self._wants_alpha(frame))
+                and self.transfer is None and not self._wants_alpha(frame))
 
     def process(self, frame: np.ndarray, premultiplied: bool = False) -> np.ndarray:
         """Filter one frame: the kernels read `frame` itself (nothing else runs on it until this returns)."""

@@ -25,6 +25,8 @@ from mlaa_stream.spatial.alpha import HARD_STEP, AlphaSplit, has_coverage, varie
 from mlaa_stream.spatial.exposure import exposure_scale, scale_colour
 from mlaa_stream.spatial.keep import KeepRect, kept_patches, keep_rects, restore_patches
 from mlaa_stream.spatial.nonfinite import NonFinite, replace_non_finite
+from mlaa_stream.spatial.transfer import TransferFrame, check_transfer, with_encode_table
+from mlaa_stream.spatial.transfer import kernel_defines as transfer_defines
 
 METRICS = {"lab": 0, "luma": 1, "rgb": 2}
 # Default discontinuity thresholds per metric: ΔE76 for lab, fraction of full scale for the others.
@@ -241,31 +243,29 @@ class PendingFrame:
             self._owner.last_regions = self.regions
 
 
-class AlphaPendingFrame:
-    """A frame in flight whose alpha is filtered as coverage (spatial/alpha.py): its premultiplied colour is on the
-    device; `result()` waits for it, filters the alpha plane inside the colour's render regions as a render and
-    merges the two. The same interface as PendingFrame."""
+class DerivedPendingFrame:
+    """A frame in flight whose result is made on the host from another pending frame's (`inner`) by `finish`: the
+    alpha as coverage (spatial/alpha.py: the alpha plane filtered and merged with the colour) and HDR codes
+    (spatial/transfer.py: the linear output coded back). The same interface as PendingFrame."""
 
-    def __init__(self, owner: "Filter", split: AlphaSplit, colour: PendingFrame, patches: list):
-        self._owner, self._split, self._colour, self._patches = owner, split, colour, patches
+    def __init__(self, inner: "PendingFrame | DerivedPendingFrame", finish):
+        self._inner, self._finish = inner, finish
         self._result: np.ndarray | None = None
 
     @property
     def regions(self) -> np.ndarray | None:
-        return self._colour.regions
+        return self._inner.regions
 
     def publish_regions(self) -> None:
-        self._colour.publish_regions()
+        self._inner.publish_regions()
 
     def result(self) -> np.ndarray:
         """The filtered frame (see PendingFrame.result: each call returns an array of its own)."""
         if self._result is not None:
             self.publish_regions()
             return self._result.copy()
-        colour = self._colour.result()
-        alpha = self._owner.filter_alpha(self._split.alpha, self._colour.regions)
-        self._result = restore_patches(self._split.merge(colour, alpha), self._patches)
-        self._split = None
+        self._result = self._finish(self._inner)
+        self._finish = None  # what it holds (the split frame, the codes) is not needed again
         return self._result
 
 
@@ -306,7 +306,7 @@ class Filter:
                  keep_regions: bool = False, footprint_table: np.ndarray | None | str = "default",
                  refine_table: np.ndarray | None | str = "default", moire: bool = True,
                  keep: Sequence[KeepRect | str] | str | None = None, auto_exposure: bool = True,
-                 alpha: str = "coverage"):
+                 alpha: str = "coverage", transfer: str | None = None):
         """`preset`: one of PRESETS; its options replace the keywords of the same names. `fallback`: FXAA
         for the pixels MLAA leaves (spatial/fallback.py): "auto" where the neighbourhood shows 1-spp
         aliasing and is no flat-colour art, with the footprint table in render regions; "edges" the same
@@ -323,7 +323,9 @@ class Filter:
         float frame with `linear_input` is filtered at the power of two of exposure that puts its key near display
         white and multiplied back (spatial/exposure.py); False filters it as its samples are. `alpha`: "coverage"
         antialiases the alpha of an RGBA frame with its colour where the alpha is not one value (an element over
-        transparency; spatial/alpha.py), "keep" leaves it as it is and filters the colour alone."""
+        transparency; spatial/alpha.py), "keep" leaves it as it is and filters the colour alone. `transfer`: "pq" or
+        "hlg": the frames' integer samples code light by SMPTE ST 2084 or ARIB STD-B67 (HDR video): they are filtered
+        in the linear light they code (as with linear_input) and coded back (spatial/transfer.py)."""
         if show not in SHOWS:
             raise ValueError(f"show: expected None or 'regions', got {show!r}")
         self.show = show
@@ -347,11 +349,14 @@ class Filter:
             raise ValueError(f"short_corner: expected a factor in [0, 1], got {short_corner!r}")
         if not 0.0 <= float(subpixel) <= 1.0:
             raise ValueError(f"subpixel: expected a factor in [0, 1], got {subpixel!r}")
+        self.transfer = check_transfer(transfer)
+        linear_input = bool(linear_input) or self.transfer is not None
         self.options = FilterOptions(thr, metric, bool(linear), bool(linear_input),
                                      float(rounding), bool(blend_u), float(ramp), float(short_corner),
                                      bool(aa_guard), bool(grain_guard), float(subpixel))
         self.bgr = bool(bgr)
-        self.auto_exposure = bool(auto_exposure)
+        # HDR codes are decoded relative to reference white, the display white the filter's tests were tuned at
+        self.auto_exposure = bool(auto_exposure) and self.transfer is None
         if alpha not in ALPHA_MODES:
             raise ValueError(f"alpha: expected one of {', '.join(ALPHA_MODES)}, got {alpha!r}")
         self.alpha = alpha
@@ -375,7 +380,7 @@ class Filter:
         self.queue = cl.CommandQueue(self.context.ctx, dev,
                                      properties=props if dev.queue_properties & props else 0)
         self._luts = cl.Buffer(self.context.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
-                               hostbuf=device_luts())
+                               hostbuf=with_encode_table(device_luts(), self.transfer))
         self._table = cl.Buffer(self.context.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
                                 hostbuf=area_table())
         self._buffers: _FrameBuffers | None = None
@@ -399,7 +404,8 @@ class Filter:
             return self._buffers
         self.finish()
         self._buffers = bufs = _FrameBuffers(self.context, fmt)
-        defs = defines_for(fmt, **self.options.pass_defines(), QUIET_LEVELS=quiet_levels(self.options, fmt))
+        defs = defines_for(fmt, **self.options.pass_defines(), QUIET_LEVELS=quiet_levels(self.options, fmt),
+                           **transfer_defines(self.transfer))
         if self.fast:
             from mlaa_stream.spatial.fast import FastPasses
             self._fast = FastPasses(self.context, fmt, defs, self._luts)
@@ -433,13 +439,28 @@ class Filter:
         return bufs
 
     # -- per frame ---------------------------------------------------------------------------
-    def submit(self, frame: np.ndarray, premultiplied: bool = False) -> "PendingFrame | AlphaPendingFrame":
+    def submit(self, frame: np.ndarray, premultiplied: bool = False) -> "PendingFrame | DerivedPendingFrame":
         """Enqueue upload, passes and download of `frame` without waiting; see PendingFrame. `premultiplied`: the
         colour of an RGBA frame is premultiplied by its alpha (EXR's convention), for alpha="coverage"."""
+        if self.transfer is not None:  # HDR codes: filtered in the light they code, coded back (spatial/transfer.py)
+            frame_format(frame, self.bgr)  # a frame the filter cannot take is named as such first
+            coded = TransferFrame(frame, self.transfer)
+            return DerivedPendingFrame(self._submit_linear(coded.linear, premultiplied),
+                                       lambda inner: coded.codes(inner.result()))
+        return self._submit_linear(frame, premultiplied)
+
+    def _submit_linear(self, frame: np.ndarray, premultiplied: bool) -> "PendingFrame | DerivedPendingFrame":
+        """submit of a frame in the filter's own terms (after a transfer's decode)."""
         if self._wants_alpha(frame):
             split = AlphaSplit(frame, premultiplied, decode=self.options.linear and not self.options.linear_input)
-            colour = self._submit(split.colour, want_regions=self.fallback == "auto")
-            return AlphaPendingFrame(self, split, colour, kept_patches(frame, self.keep))
+            patches = kept_patches(frame, self.keep)
+
+            def merged(colour: PendingFrame) -> np.ndarray:
+                filtered = colour.result()  # sets colour.regions
+                alpha = self.filter_alpha(split.alpha, colour.regions)
+                return restore_patches(split.merge(filtered, alpha), patches)
+
+            return DerivedPendingFrame(self._submit(split.colour, want_regions=self.fallback == "auto"), merged)
         return self._submit(frame)
 
     def _wants_alpha(self, frame: np.ndarray) -> bool:

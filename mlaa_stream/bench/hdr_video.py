@@ -1,0 +1,119 @@
+"""Renders coded as HDR video: `python -m mlaa_stream.bench.hdr_video [--sizes 960x540] [--transfers pq,hlg]
+[--world plaza,town] [--sky 1] [--timing]`.
+
+An HDR10 (PQ) or HLG video of a render holds 10-bit codes of light by a curve that is not sRGB's. Every held-out view
+(bench/rendered_views.py) of each world is rendered in linear light with its highlights unclamped (1 spp at pixel
+centres; truth the 8x8 jittered mean in linear light), BT.2408's reference white put at linear 1, and coded with each
+transfer to 16-bit codes as a 10-bit video decodes to (spatial/transfer.py). The default filter runs on the codes as
+they are -- taken as sRGB-coded, as it did before the transfer was read from the video -- and with
+`transfer=` (the codes decoded to linear light, filtered, coded back). Scores are taken on the codes, the space the
+curves were designed to make even for the eye: error removed % / damage away from edges (levels of 8 bits).
+`--timing`: ms per 1920x1080 frame (the atrium tiled 3x3 as PQ codes), both ways.
+Needs EGL, as the rendered scenes do. A benchmark, never a unit test.
+"""
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from mlaa_stream.bench.rendered_views import WORLD_VIEWS, render_args
+from mlaa_stream.spatial.filter import Filter
+from mlaa_stream.spatial.transfer import TRANSFERS, linear_to_hlg, linear_to_pq
+from mlaa_stream.yardstick import metrics as M
+from mlaa_stream.yardstick.rendered import Camera, Renderer, _context, shot
+
+_CODE = {"pq": linear_to_pq, "hlg": linear_to_hlg}
+
+
+def coded(linear: np.ndarray, transfer: str) -> np.ndarray:
+    """Linear light (reference white 1) -> 16-bit codes of `transfer`, computed in float64 (exact codes)."""
+    signal = _CODE[transfer](np.asarray(linear, np.float64))
+    return np.clip(np.rint(np.asarray(signal, np.float64) * 65535.0), 0, 65535).astype(np.uint16)
+
+
+def run(sizes: list[tuple[int, int]], transfers: list[str], worlds: list[str], sky: float = 1.0,
+        device: str | None = None, log=print) -> dict[tuple[str, str], list[tuple[float, float]]]:
+    """{(transfer, "codes" | "transfer"): [(error removed %, damage) per view]}, printing a row per view."""
+    res: dict[tuple[str, str], list[tuple[float, float]]] = {}
+    filters = {"codes": Filter(device), **{t: Filter(device, transfer=t) for t in transfers}}
+    try:
+        log("error removed % / damage: the codes filtered as sRGB-coded | with transfer=")
+        for width, height in sizes:
+            for world in worlds:
+                renderer = Renderer(_context(), width, height, world, hdr=True, sky_gain=sky)
+                try:
+                    for name, view in WORLD_VIEWS[world].items():
+                        cam = Camera(*view)
+                        lin, truth_lin = renderer.input_linear(cam), renderer.truth_linear(cam)
+                        cells = []
+                        for t in transfers:
+                            inp, truth = coded(lin, t), coded(truth_lin, t)
+                            for how, filt in (("codes", filters["codes"]), ("transfer", filters[t])):
+                                out = filt.process(inp)
+                                score = (100 * M.error_removed(out, inp, truth), M.damage(out, inp, truth))
+                                res.setdefault((t, how), []).append(score)
+                                cells.append(score)
+                        row = "  ".join(f"{t} {a[0]:5.1f} / {a[1]:.2f} | {b[0]:5.1f} / {b[1]:.2f}"
+                                        for t, a, b in zip(transfers, cells[0::2], cells[1::2]))
+                        log(f"  {world} {name}_{width}: {row}")
+                finally:
+                    renderer.release()
+        for t in transfers:
+            a, b = res[(t, "codes")], res[(t, "transfer")]
+            better = sum(y[0] > x[0] for x, y in zip(a, b))
+            log(f"  mean {t}: {np.mean([s[0] for s in a]):.1f} / {np.mean([s[1] for s in a]):.2f} | "
+                f"{np.mean([s[0] for s in b]):.1f} / {np.mean([s[1] for s in b]):.2f} "
+                f"(more error removed on {better} of {len(a)} views)")
+    finally:
+        for f in filters.values():
+            f.close()
+    return res
+
+
+def timing(device: str | None = None, log=print) -> dict[str, float]:
+    """ms per 1920x1080 frame of PQ codes (the bench's atrium view rendered in linear light at 640x360, tiled 3x3),
+    both ways."""
+    renderer = Renderer(_context(), 640, 360, hdr=True)
+    try:
+        linear = renderer.input_linear(shot("rendered_atrium", 640, 360)[0])
+    finally:
+        renderer.release()
+    codes = np.ascontiguousarray(np.tile(coded(linear, "pq"), (3, 3, 1)))
+    out = {}
+    for name, kwargs in (("codes as sRGB", {}), ("transfer=pq", {"transfer": "pq"})):
+        with Filter(device, **kwargs) as f:
+            times = []
+            for k in range(10):
+                t = time.perf_counter()
+                f.process(codes)
+                if k >= 2:
+                    times.append(1e3 * (time.perf_counter() - t))
+            out[name] = float(np.median(times))
+            log(f"{name}: {out[name]:.1f} ms per 1920x1080 frame ({f.device_name})")
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m mlaa_stream.bench.hdr_video", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--sizes", default="960x540", help="frame sizes WxH, comma-separated (default 960x540)")
+    ap.add_argument("--transfers", default=",".join(TRANSFERS), help="pq, hlg or both (default pq,hlg)")
+    ap.add_argument("--world", default="plaza,town", help="worlds, comma-separated (default plaza,town)")
+    ap.add_argument("--sky", type=float, default=1.0, help="the sky's radiance gain (default 1)")
+    ap.add_argument("--timing", action="store_true", help="also ms per 1920x1080 frame")
+    ap.add_argument("--device", default=None, help="OpenCL device (as --device of mlaa-stream)")
+    args = ap.parse_args(argv)
+    transfers = [t for t in args.transfers.split(",") if t]
+    unknown = [t for t in transfers if t not in TRANSFERS]
+    if unknown or not transfers:
+        raise SystemExit(f"--transfers: expected names from {', '.join(TRANSFERS)}, got {args.transfers}")
+    sizes, worlds = render_args(args.sizes, args.world)
+    run(sizes, transfers, worlds, args.sky, args.device)
+    if args.timing:
+        timing(args.device)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

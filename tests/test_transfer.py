@@ -1,0 +1,149 @@
+"""HDR video's transfers (spatial/transfer.py): PQ / HLG codes filtered in the light they code, coded back."""
+from __future__ import annotations
+
+import av
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from mlaa_stream.cli.main import main as cli
+from mlaa_stream.io.video import probe_video
+from mlaa_stream.spatial.filter import Filter
+from mlaa_stream.spatial.transfer import (_HLG_WHITE, TRANSFERS, TransferFrame, decode_table, hlg_to_linear,
+                                          linear_to_hlg, linear_to_pq, pq_to_linear)
+from mlaa_stream.yardstick import metrics as M
+
+
+def coded(linear: np.ndarray, transfer: str) -> np.ndarray:
+    """Linear light (reference white 1) -> exact 16-bit codes (float64)."""
+    signal = (linear_to_pq if transfer == "pq" else linear_to_hlg)(np.asarray(linear, np.float64))
+    return np.clip(np.rint(signal * 65535.0), 0, 65535).astype(np.uint16)
+
+
+def half_plane(h: int, w: int, samples: int, slope: float, offset: float, bright: float, dark: float) -> np.ndarray:
+    """(h, w, 3) linear light: `bright` below the line y = slope x + offset, `dark` above, the box mean of
+    samples x samples point samples per pixel (1: the pixel centre)."""
+    y, x = (np.mgrid[0:h * samples, 0:w * samples] + 0.5) / samples
+    img = np.where(y > slope * x + offset, bright, dark).reshape(h, samples, w, samples).mean(axis=(1, 3))
+    return np.repeat(img[..., None], 3, axis=2)
+
+
+def test_curves_at_known_points():
+    """BT.2408: reference white (203 cd/m2) is PQ 58 % and HLG 75 %; PQ's peak is 10000 cd/m2; HLG's square-root
+    segment ends at a signal of 0.5 (E = 1/12)."""
+    assert float(linear_to_pq(np.float64(1.0))) == pytest.approx(0.5807, abs=2e-4)
+    assert float(linear_to_pq(np.float64(100 / 203))) == pytest.approx(0.5081, abs=2e-4)
+    assert float(pq_to_linear(1.0)) == pytest.approx(10000 / 203, rel=1e-9)
+    assert float(hlg_to_linear(0.75)) == pytest.approx(1.0, rel=1e-9)
+    assert float(linear_to_hlg(np.float64(1.0))) == pytest.approx(0.75, abs=1e-9)
+    assert float(hlg_to_linear(0.5)) * _HLG_WHITE == pytest.approx(1 / 12, rel=1e-9)
+    assert float(hlg_to_linear(0.5 - 1e-9)) == pytest.approx(float(hlg_to_linear(0.5 + 1e-9)), rel=1e-6)
+    for transfer in TRANSFERS:
+        v = np.linspace(0.001, 1, 1000)  # PQ codes light 0 at a signal of 7e-7, not 0
+        back = (linear_to_pq if transfer == "pq" else linear_to_hlg)(
+            (pq_to_linear if transfer == "pq" else hlg_to_linear)(v))
+        assert np.abs(back - v).max() < 1e-8  # HLG: its published constants meet at 1 to 5e-9
+
+
+@pytest.mark.parametrize("transfer", TRANSFERS)
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+def test_every_code_round_trips_bit_for_bit(transfer, dtype):
+    """Codes the filter leaves come back as they were; changed samples are coded by the float32 curve within one
+    code of the exact one (16 bits) or exactly (8 bits)."""
+    top = np.iinfo(dtype).max
+    codes = np.arange(top + 1, dtype=dtype).reshape(1, -1, 1).repeat(3, axis=2)
+    frame = TransferFrame(codes, transfer)
+    assert np.array_equal(frame.codes(frame.linear.copy()), codes)
+    nudged = frame.linear * np.float32(1 + 1e-7) + np.float32(1e-30)  # every sample changed, by nothing to speak of
+    again = frame.codes(nudged).astype(np.int64)
+    assert np.abs(again - codes).max() <= (1 if dtype == np.uint16 else 0)
+    assert decode_table(transfer, top)[top] == pytest.approx(10000 / 203 if transfer == "pq" else 3.7741, rel=1e-4)
+
+
+@pytest.mark.parametrize("transfer", TRANSFERS)
+def test_edges_between_lights_are_blended_as_light(transfer):
+    """Half-planes at three slopes between two lights (a lamp on a dark wall, a highlight on a lit one, shadow
+    detail), 1 spp against a 16x16 box truth in linear light, scored on the codes: with the transfer the filter
+    removes 0.66 or more of the error on every case (the codes as sRGB: 0.50-0.96) and more than without it on
+    average; a blend in the codes' sRGB decode put the rim too dark."""
+    gains, scores = [], []
+    for bright, dark in ((1000, 0.5), (1000, 300), (150, 20)):
+        for slope in (0.3, 0.7, 2.5):
+            inp = coded(half_plane(48, 64, 1, slope, 10.3, bright / 203, dark / 203), transfer)
+            truth = coded(half_plane(48, 64, 16, slope, 10.3, bright / 203, dark / 203), transfer)
+            with Filter(transfer=transfer) as f, Filter() as plain:
+                out, before = f.process(inp), plain.process(inp)
+            scores.append(M.error_removed(out, inp, truth))
+            gains.append(scores[-1] - M.error_removed(before, inp, truth))
+    assert min(scores) >= 0.66, scores
+    assert np.mean(gains) >= 0.08, gains
+
+
+def test_untouched_pixels_keep_their_codes_and_alpha_round_trips():
+    """A flat field and a textured one keep every code where the filter changed nothing; an RGBA frame's alpha (a
+    coverage, coded linearly) comes back as it was where it is one value."""
+    rng = np.random.default_rng(5)
+    base = coded(half_plane(40, 56, 1, 0.4, 12.2, 600 / 203, 2 / 203), "pq")
+    base[30:, :] = 30000   # a flat band
+    with Filter(transfer="pq") as f:
+        out = f.process(base)
+    assert np.array_equal(out[32:, 2:-2], base[32:, 2:-2])
+    assert (out != base).any()
+    rgba = np.concatenate([base, np.full(base.shape[:2] + (1,), 65535, np.uint16)], axis=2)
+    rgba[..., :3] = np.clip(rgba[..., :3].astype(np.int64) + rng.integers(0, 2, rgba[..., :3].shape), 0, 65535)
+    with Filter(transfer="pq") as f:
+        out4 = f.process(rgba)
+    assert np.array_equal(out4[..., 3], rgba[..., 3])
+
+
+def test_edge_tests_read_the_codes():
+    """With a transfer the edge tests see the video's own codes (common.cl encode_arg): the edges found on a frame of
+    codes are those the filter finds taking the same codes as sRGB (up to the table's interpolation: 0.5 %)."""
+    rng = np.random.default_rng(11)
+    lin = np.repeat(rng.choice([0.01, 0.3, 1.0, 4.0, 20.0], size=(36, 48, 1)), 3, axis=2)
+    codes = coded(lin, "pq")
+    with Filter(transfer="pq") as f, Filter() as plain:
+        edges_transfer = f.intermediates(codes)["edges"]
+        edges_codes = plain.intermediates(codes)["edges"]
+    assert edges_codes.any()
+    assert np.mean(edges_transfer != edges_codes) <= 0.005
+
+
+def test_bad_transfer_and_float_frames_are_refused():
+    with pytest.raises(ValueError, match="transfer"):
+        Filter(transfer="gamma")
+    with Filter(transfer="pq") as f, pytest.raises(ValueError, match="linear light already"):
+        f.process(np.full((8, 8, 3), 0.5, np.float32))
+
+
+@pytest.mark.skipif("libx265" not in av.codecs_available, reason="this FFmpeg has no libx265 to write an HDR10 source")
+def test_an_hdr10_video_is_filtered_in_light(tmp_path):
+    """An HEVC 10-bit BT.2020 / PQ clip of a bright diagonal on a dark ground: the command line reads its transfer
+    (said with -v) and the output keeps it; the blended rim is brighter than when the same clip says it is BT.709
+    (the codes mixed through the sRGB decode: too dark), and the flat ground keeps its codes."""
+    frame = coded(half_plane(48, 64, 1, 0.45, 9.7, 1000 / 203, 1 / 203), "pq")
+    clips = {}
+    for name, trc in (("pq", 16), ("sdr", 1)):
+        src = tmp_path / f"{name}.mkv"
+        with av.open(str(src), "w") as out:
+            s = out.add_stream("libx265", rate=25, options={"x265-params": "log-level=error:lossless=1"})
+            s.width, s.height, s.pix_fmt = 64, 48, "yuv444p10le"
+            s.codec_context.color_primaries, s.codec_context.color_trc, s.codec_context.colorspace = 9, trc, 9
+            for _ in range(2):
+                vf = av.VideoFrame.from_ndarray(frame, format="rgb48le").reformat(format="yuv444p10le",
+                                                                                  dst_colorspace=9)
+                for p in s.encode(vf):
+                    out.mux(p)
+            for p in s.encode():
+                out.mux(p)
+        res = CliRunner().invoke(cli, [str(src), "-v", "-o", str(tmp_path / f"{name}_out.mkv"),
+                                       "--codec", "ffv1"])
+        assert res.exit_code == 0, res.output
+        assert ("SMPTE ST 2084" in res.output) == (name == "pq")
+        assert probe_video(str(tmp_path / f"{name}_out.mkv")).colour["color_trc"] == trc
+        with av.open(str(tmp_path / f"{name}_out.mkv")) as c:
+            clips[name] = next(c.decode(video=0)).to_ndarray(format="rgb48le").astype(np.int64)
+    rim = (clips["pq"] != clips["sdr"]).any(axis=2)   # the same clip, the same encode: the blends differ only
+    assert rim.sum() >= 20
+    assert clips["pq"][rim].mean() > clips["sdr"][rim].mean() + 1000
+    assert np.array_equal(clips["pq"][40:, :4], clips["sdr"][40:, :4])
