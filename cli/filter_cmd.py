@@ -15,7 +15,7 @@ import click
 
 from mlaa_stream.spatial.filter import DEFAULT_THRESHOLDS, PRESET_USES, PRESETS
 from mlaa_stream.spatial.fast_filter import FastFilter
-from mlaa_stream.spatial.transfer import TRANSFER_NAMES
+from mlaa_stream.device.transfer import TRANSFER_NAMES
 from mlaa_stream.cli.options import configure_logging, device_option, verbosity_options
 from mlaa_stream.cli.stats_spool import StatsSpool
 from mlaa_stream.temporal.methods import RING_FRAMES
@@ -1176,8 +1176,8 @@ class _VideoJob(_Job):
         except VideoError as exc:
             raise Failed(str(exc)) from exc
         self.start, self.end = self._trim()
-        from mlaa_stream.spatial.transfer import FFMPEG_TRC
-        # HDR10 (PQ) / HLG: the codes are filtered in the light they code (spatial/transfer.py); OpenCV's decoder
+        from mlaa_stream.device.transfer import FFMPEG_TRC
+        # HDR10 (PQ) / HLG: the codes are filtered in the light they code (device/transfer.py); OpenCV's decoder
         # does not say what its frames code
         self.transfer = FFMPEG_TRC.get(self.info.colour.get("color_trc")) if o["video_backend"] != "opencv" else None
         self.con.info(f"{self.input}: {self.info.width}x{self.info.height} {self.info.pix_fmt} "

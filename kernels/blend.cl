@@ -19,8 +19,7 @@ inline float4 to_mix_space(__global const float *luts, float4 c)
 inline float4 from_mix_space(__global const float *luts, float4 c)
 {
 #if DECODE
-    __global const float *enc = luts + 2 * (LUT_SIZE + 1);
-    return (float4)(lut_read(enc, c.x), lut_read(enc, c.y), lut_read(enc, c.z), c.w);
+    return (float4)(encode_mix(luts, c.x), encode_mix(luts, c.y), encode_mix(luts, c.z), c.w);
 #else
     return c;
 #endif

@@ -35,8 +35,7 @@ inline float3 to_mix(__global const float *luts, float3 c)
 inline void store_rgb(__global PIXEL_T *dst, __global const float *luts, int i, float3 v)
 {
 #if DECODE
-    __global const float *enc = luts + 2 * (LUT_SIZE + 1);
-    v = (float3)(lut_read(enc, v.x), lut_read(enc, v.y), lut_read(enc, v.z));
+    v = (float3)(encode_mix(luts, v.x), encode_mix(luts, v.y), encode_mix(luts, v.z));
 #endif
 #if CHANNELS == 4
     store_px(dst, i, (float4)(v, load_px(dst, i).w));   // the stored alpha round-trips exactly

@@ -187,9 +187,9 @@ inline float lut_read(__global const float *lut, float x)
 inline float srgb_to_linear(__global const float *luts, float v) { return lut_read(luts, v); }
 
 // A linear sample's argument to the encode table (luts' third table). ENCODE_WARP 1 (HDR video's transfers,
-// spatial/transfer.py): the table holds the transfer's signal of (u^4 x its peak) over u in [0, 1], so a sample v
+// device/transfer.py): the table holds the transfer's signal of (u^4 x its peak) over u in [0, 1], so light v
 // (relative to reference white) reads it at u = (v ENCODE_SCALE)^(1/4), ENCODE_SCALE = reference white / peak: the
-// fourth root spreads the curve's steep dark end over the table. The edge tests then see the video's own codes.
+// fourth root spreads the curve's steep dark end over the table's entries.
 #ifndef ENCODE_WARP
 #define ENCODE_WARP 0
 #endif
@@ -204,6 +204,12 @@ inline float encode_arg(float v)
 #else
     return v;
 #endif
+}
+
+// Mix space (linear light) -> stored scale [0, 1]: the encode table (sRGB, or an HDR transfer's).
+inline float encode_mix(__global const float *luts, float v)
+{
+    return lut_read(luts + 2 * (LUT_SIZE + 1), encode_arg(v));
 }
 
 // CIELAB (D65) of a colour already decoded to linear light (r, g, b from the sRGB->linear table).

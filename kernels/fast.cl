@@ -508,8 +508,7 @@ __kernel void fast_blend(__global const PIXEL_T *src, __global const uchar *edge
 #endif
             out.w = c.w;
 #if DECODE
-            __global const float *enc = luts + 2 * (LUT_SIZE + 1);
-            out = (float4)(lut_read(enc, out.x), lut_read(enc, out.y), lut_read(enc, out.z), out.w);
+            out = (float4)(encode_mix(luts, out.x), encode_mix(luts, out.y), encode_mix(luts, out.z), out.w);
 #endif
             store_px(dst, i, out);
         }

@@ -87,8 +87,7 @@ inline float3 colour_at_mix(__global const PIXEL_T *img, __global const float *l
 inline float3 fxaa_encode(__global const float *luts, float3 c)
 {
 #if DECODE
-    __global const float *enc = luts + 2 * (LUT_SIZE + 1);
-    c = (float3)(lut_read(enc, c.x), lut_read(enc, c.y), lut_read(enc, c.z));
+    c = (float3)(encode_mix(luts, c.x), encode_mix(luts, c.y), encode_mix(luts, c.z));
 #endif
     return c;
 }

@@ -231,7 +231,7 @@ __kernel void moire_lowpass(__global const PIXEL_T *src, __global const uchar *s
                              + 0.5f * moire_mix(luts, src, k[3 * r + 1], c);
                 float m = 0.25f * (row[0] + row[2]) + 0.5f * row[1];
 #if DECODE
-                m = lut_read(luts + 2 * (LUT_SIZE + 1), m);
+                m = encode_mix(luts, m);
 #endif
                 dst[(size_t)i * CHANNELS + c] = to_pixel(m);
             }

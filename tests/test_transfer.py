@@ -1,4 +1,4 @@
-"""HDR video's transfers (spatial/transfer.py): PQ / HLG codes filtered in the light they code, coded back."""
+"""HDR video's transfers (device/transfer.py): PQ / HLG codes filtered in the light they code, coded back."""
 from __future__ import annotations
 
 import av
@@ -9,8 +9,9 @@ from click.testing import CliRunner
 from mlaa_stream.cli.main import main as cli
 from mlaa_stream.io.video import probe_video
 from mlaa_stream.spatial.filter import Filter
-from mlaa_stream.spatial.transfer import (_HLG_WHITE, TRANSFERS, TransferFrame, decode_table, hlg_to_linear,
-                                          linear_to_hlg, linear_to_pq, pq_to_linear)
+from mlaa_stream.device.colour import device_luts, lut_read
+from mlaa_stream.device.transfer import (_HLG_WHITE, TRANSFERS, decode_table, hlg_to_linear, kernel_defines,
+                                          linear_to_hlg, linear_to_pq, pq_to_linear, with_transfer_tables)
 from mlaa_stream.yardstick import metrics as M
 
 
@@ -46,18 +47,27 @@ def test_curves_at_known_points():
 
 
 @pytest.mark.parametrize("transfer", TRANSFERS)
-@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
-def test_every_code_round_trips_bit_for_bit(transfer, dtype):
-    """Codes the filter leaves come back as they were; changed samples are coded by the float32 curve within one
-    code of the exact one (16 bits) or exactly (8 bits)."""
-    top = np.iinfo(dtype).max
-    codes = np.arange(top + 1, dtype=dtype).reshape(1, -1, 1).repeat(3, axis=2)
-    frame = TransferFrame(codes, transfer)
-    assert np.array_equal(frame.codes(frame.linear.copy()), codes)
-    nudged = frame.linear * np.float32(1 + 1e-7) + np.float32(1e-30)  # every sample changed, by nothing to speak of
-    again = frame.codes(nudged).astype(np.int64)
-    assert np.abs(again - codes).max() <= (1 if dtype == np.uint16 else 0)
-    assert decode_table(transfer, top)[top] == pytest.approx(10000 / 203 if transfer == "pq" else 3.7741, rel=1e-4)
+def test_tables_code_light_within_a_code(transfer):
+    """The device's tables as the kernels read them (common.cl lut_read, encode_arg): the encode lands within 0.05 of
+    a 16-bit code of the exact curve from 1e-6 of reference white to the peak; a code decoded and coded again comes
+    back within 5 codes of 65535 (the darkest codes, where the decode table's first entries interpolate a steep
+    curve) and within 1 from code 1024 up."""
+    luts = with_transfer_tables(device_luts(), transfer)
+    n = luts.size // 3
+    scale = np.float32(kernel_defines(transfer)["ENCODE_SCALE"])
+    assert kernel_defines(transfer)["ENCODE_WARP"] == 1 and kernel_defines(None) == {}
+
+    def encode_mix(v):
+        return lut_read(luts[2 * n:], np.sqrt(np.sqrt(np.asarray(v, np.float32) * scale)))
+
+    light = np.geomspace(1e-6, float(decode_table(transfer, 65535)[-1]), 100000)
+    exact = (linear_to_pq if transfer == "pq" else linear_to_hlg)(light)
+    assert np.abs(encode_mix(light) - exact).max() * 65535 < 0.05
+    codes = np.arange(65536)
+    again = encode_mix(lut_read(luts[:n], (codes / 65535).astype(np.float32))) * 65535
+    assert np.abs(again - codes).max() < 5 and np.abs(again - codes)[1024:].max() < 1
+    assert decode_table(transfer, 65535)[-1] == pytest.approx(10000 / 203 if transfer == "pq" else 3.7741, rel=1e-4)
+    assert np.array_equal(with_transfer_tables(luts, None), luts)
 
 
 @pytest.mark.parametrize("transfer", TRANSFERS)
@@ -97,23 +107,41 @@ def test_untouched_pixels_keep_their_codes_and_alpha_round_trips():
 
 
 def test_edge_tests_read_the_codes():
-    """With a transfer the edge tests see the video's own codes (common.cl encode_arg): the edges found on a frame of
-    codes are those the filter finds taking the same codes as sRGB (up to the table's interpolation: 0.5 %)."""
+    """With a transfer the edge tests read the codes as they read any integer frame (Filter._lin_lab): the edges found
+    are those of the filter without the transfer, bit for bit."""
     rng = np.random.default_rng(11)
     lin = np.repeat(rng.choice([0.01, 0.3, 1.0, 4.0, 20.0], size=(36, 48, 1)), 3, axis=2)
     codes = coded(lin, "pq")
     with Filter(transfer="pq") as f, Filter() as plain:
         edges_transfer = f.intermediates(codes)["edges"]
         edges_codes = plain.intermediates(codes)["edges"]
-    assert edges_codes.any()
-    assert np.mean(edges_transfer != edges_codes) <= 0.005
+        assert edges_codes.any()
+        assert np.array_equal(edges_transfer, edges_codes)
+        assert not np.array_equal(f.process(codes), plain.process(codes))   # the same edges, blended in light
 
 
 def test_bad_transfer_and_float_frames_are_refused():
     with pytest.raises(ValueError, match="transfer"):
         Filter(transfer="gamma")
-    with Filter(transfer="pq") as f, pytest.raises(ValueError, match="linear light already"):
+    with pytest.raises(ValueError, match="exclude each other"):
+        Filter(transfer="pq", linear_input=True)
+    with Filter(transfer="pq") as f, pytest.raises(ValueError, match="8- or 16-bit codes"):
         f.process(np.full((8, 8, 3), 0.5, np.float32))
+
+
+@pytest.mark.parametrize("transfer", TRANSFERS)
+def test_an_element_over_transparency_keeps_its_colour(transfer):
+    """An RGBA frame of HDR codes whose alpha is a 1-spp silhouette (spatial/alpha.py): the alpha is antialiased and
+    the rim's straight colour is the element's own within 8 codes of 65535 (its premultiplied light divided by the
+    filtered alpha, through the transfer's curves), not darkened towards the transparent pixels."""
+    cover = half_plane(40, 56, 1, 0.6, 8.4, 1.0, 0.0)[..., 0]
+    element = coded(np.full((40, 56, 3), 2.5), transfer)
+    rgba = np.concatenate([element * (cover[..., None] > 0), (cover[..., None] * 65535).astype(np.uint16)], axis=2)
+    with Filter(transfer=transfer) as f:
+        out = f.process(rgba)
+    rim = (out[..., 3] > 0) & (out[..., 3] < 65535)
+    assert rim.sum() >= 20
+    assert np.abs(out[rim][:, :3].astype(np.int64) - element[0, 0].astype(np.int64)).max() <= 8
 
 
 @pytest.mark.skipif("libx265" not in av.codecs_available, reason="this FFmpeg has no libx265 to write an HDR10 source")

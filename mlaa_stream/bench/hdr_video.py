@@ -4,7 +4,7 @@
 An HDR10 (PQ) or HLG video of a render holds 10-bit codes of light by a curve that is not sRGB's. Every held-out view
 (bench/rendered_views.py) of each world is rendered in linear light with its highlights unclamped (1 spp at pixel
 centres; truth the 8x8 jittered mean in linear light), BT.2408's reference white put at linear 1, and coded with each
-transfer to 16-bit codes as a 10-bit video decodes to (spatial/transfer.py). The default filter runs on the codes as
+transfer to 16-bit codes as a 10-bit video decodes to (device/transfer.py). The default filter runs on the codes as
 they are -- taken as sRGB-coded, as it did before the transfer was read from the video -- and with
 `transfer=` (the codes decoded to linear light, filtered, coded back). Scores are taken on the codes, the space the
 curves were designed to make even for the eye: error removed % / damage away from edges (levels of 8 bits).
@@ -20,7 +20,7 @@ import numpy as np
 
 from mlaa_stream.bench.rendered_views import WORLD_VIEWS, render_args
 from mlaa_stream.spatial.filter import Filter
-from mlaa_stream.spatial.transfer import TRANSFERS, linear_to_hlg, linear_to_pq
+from mlaa_stream.device.transfer import TRANSFERS, linear_to_hlg, linear_to_pq
 from mlaa_stream.yardstick import metrics as M
 from mlaa_stream.yardstick.rendered import Camera, Renderer, _context, shot
 

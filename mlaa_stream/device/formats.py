@@ -5,6 +5,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mlaa_stream.device.transfer import kernel_defines as transfer_defines
+
 LUT_SIZE = 4096
 
 _PIXEL_TYPES = {
@@ -16,13 +18,15 @@ _PIXEL_TYPES = {
 
 @dataclass(frozen=True)
 class FrameFormat:
-    """What the kernels need to know about a frame: size, channels, sample type, channel order."""
+    """What the kernels need to know about a frame: size, channels, sample type, channel order, and the transfer
+    its integer samples code light with where it is not sRGB (device/transfer.py: "pq", "hlg")."""
 
     height: int
     width: int
     channels: int
     dtype: np.dtype
     bgr: bool = False
+    transfer: str | None = None
 
     @property
     def pixels(self) -> int:
@@ -70,6 +74,7 @@ def defines_for(fmt: FrameFormat, **options: object) -> dict[str, object]:
     }
     if ctype == "float":
         d["PIXEL_IS_FLOAT"] = 1
+    d.update(transfer_defines(fmt.transfer))
     d.update(options)
     return d
 

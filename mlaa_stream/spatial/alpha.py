@@ -28,6 +28,8 @@ import numpy as np
 
 from mlaa_stream.device.colour import linear_to_srgb, srgb_to_linear
 from mlaa_stream.spatial.nonfinite import SAMPLE_LIMIT
+from mlaa_stream.device.transfer import decode_table as transfer_table
+from mlaa_stream.device.transfer import encode as transfer_encode
 
 RANGE_RADIUS = 2  # the window of input colours a rim pixel's straight colour is clamped to: 5x5
 HARD_STEP = 0.125  # an alpha step (of full scale) between neighbours that marks 1-spp coverage, for render regions
@@ -102,12 +104,16 @@ class AlphaSplit:
     `decode`: the filter mixes in linear light and the samples are sRGB-encoded (integer or float). Work on the host
     is per pixel only where alpha is fractional (splitting) or where a filter changed something (merging)."""
 
-    def __init__(self, frame: np.ndarray, premultiplied: bool, decode: bool):
+    def __init__(self, frame: np.ndarray, premultiplied: bool, decode: bool, transfer: str | None = None):
         self.frame, self.premultiplied, self.decode = frame, bool(premultiplied), bool(decode)
+        self.transfer = transfer if decode else None  # HDR codes (device/transfer.py): mixed in the light they code
         self.dtype = frame.dtype
         self.integer = frame.dtype.kind in "ui"
         self.top = _full_scale(frame.dtype)
-        self._lut = _decode_table(int(self.top)) if self.integer and self.decode else None
+        self._lut = None
+        if self.integer and self.decode:
+            self._lut = _decode_table(int(self.top)) if self.transfer is None else \
+                transfer_table(self.transfer, int(self.top))
         self.alpha = np.ascontiguousarray(frame[..., 3])
         # samples the filter passes through (non-finite, out of range: spatial/nonfinite.py) pass through here too
         self.finite = None if self.integer else _in_range(frame).all(axis=2)
@@ -137,7 +143,10 @@ class AlphaSplit:
         return srgb_to_linear(v).astype(np.float32) if self.decode else v
 
     def _from_mix(self, mix: np.ndarray) -> np.ndarray:
-        v = linear_to_srgb(mix) if self.decode else mix
+        if self.transfer is not None:
+            v = transfer_encode(np.asarray(mix, np.float64), self.transfer)
+        else:
+            v = linear_to_srgb(mix) if self.decode else mix
         if self.integer:
             return np.clip(np.rint(v * self.top), 0, self.top).astype(self.dtype)
         return np.asarray(v).astype(self.dtype)

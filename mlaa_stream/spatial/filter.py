@@ -11,7 +11,7 @@ queue with explicit events).
 from __future__ import annotations
 
 import threading
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from fractions import Fraction
 from typing import Sequence
 
@@ -25,8 +25,7 @@ from mlaa_stream.spatial.alpha import HARD_STEP, AlphaSplit, has_coverage, varie
 from mlaa_stream.spatial.exposure import exposure_scale, scale_colour
 from mlaa_stream.spatial.keep import KeepRect, kept_patches, keep_rects, restore_patches
 from mlaa_stream.spatial.nonfinite import NonFinite, replace_non_finite
-from mlaa_stream.spatial.transfer import TransferFrame, check_transfer, with_encode_table
-from mlaa_stream.spatial.transfer import kernel_defines as transfer_defines
+from mlaa_stream.device.transfer import check_transfer, with_transfer_tables
 
 METRICS = {"lab": 0, "luma": 1, "rgb": 2}
 # Default discontinuity thresholds per metric: ΔE76 for lab, fraction of full scale for the others.
@@ -244,9 +243,9 @@ class PendingFrame:
 
 
 class DerivedPendingFrame:
-    """A frame in flight whose result is made on the host from another pending frame's (`inner`) by `finish`: the
-    alpha as coverage (spatial/alpha.py: the alpha plane filtered and merged with the colour) and HDR codes
-    (spatial/transfer.py: the linear output coded back). The same interface as PendingFrame."""
+    """A frame in flight whose result is made on the host from another pending frame's (`inner`) by `finish` (the
+    alpha as coverage, spatial/alpha.py: the alpha plane filtered and merged with the colour). The same interface
+    as PendingFrame."""
 
     def __init__(self, inner: "PendingFrame | DerivedPendingFrame", finish):
         self._inner, self._finish = inner, finish
@@ -324,8 +323,8 @@ class Filter:
         white and multiplied back (spatial/exposure.py); False filters it as its samples are. `alpha`: "coverage"
         antialiases the alpha of an RGBA frame with its colour where the alpha is not one value (an element over
         transparency; spatial/alpha.py), "keep" leaves it as it is and filters the colour alone. `transfer`: "pq" or
-        "hlg": the frames' integer samples code light by SMPTE ST 2084 or ARIB STD-B67 (HDR video): they are filtered
-        in the linear light they code (as with linear_input) and coded back (spatial/transfer.py)."""
+        "hlg": the frames' integer samples code light by SMPTE ST 2084 or ARIB STD-B67 (HDR video): the passes mix the
+        light they code and code the mix back (device/transfer.py)."""
         if show not in SHOWS:
             raise ValueError(f"show: expected None or 'regions', got {show!r}")
         self.show = show
@@ -350,13 +349,14 @@ class Filter:
         if not 0.0 <= float(subpixel) <= 1.0:
             raise ValueError(f"subpixel: expected a factor in [0, 1], got {subpixel!r}")
         self.transfer = check_transfer(transfer)
-        linear_input = bool(linear_input) or self.transfer is not None
+        if self.transfer is not None and linear_input:
+            raise ValueError("transfer and linear_input exclude each other: a transfer's frames hold codes, "
+                             "linear_input's linear light")
         self.options = FilterOptions(thr, metric, bool(linear), bool(linear_input),
                                      float(rounding), bool(blend_u), float(ramp), float(short_corner),
                                      bool(aa_guard), bool(grain_guard), float(subpixel))
         self.bgr = bool(bgr)
-        # HDR codes are decoded relative to reference white, the display white the filter's tests were tuned at
-        self.auto_exposure = bool(auto_exposure) and self.transfer is None
+        self.auto_exposure = bool(auto_exposure)
         if alpha not in ALPHA_MODES:
             raise ValueError(f"alpha: expected one of {', '.join(ALPHA_MODES)}, got {alpha!r}")
         self.alpha = alpha
@@ -380,7 +380,10 @@ class Filter:
         self.queue = cl.CommandQueue(self.context.ctx, dev,
                                      properties=props if dev.queue_properties & props else 0)
         self._luts = cl.Buffer(self.context.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
-                               hostbuf=with_encode_table(device_luts(), self.transfer))
+                               hostbuf=with_transfer_tables(device_luts(), self.transfer))
+        # the edge tests' CIELAB: of the codes through the sRGB decode (device/transfer.py), as for any integer frame
+        self._lab_luts = self._luts if self.transfer is None else cl.Buffer(
+            self.context.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=device_luts())
         self._table = cl.Buffer(self.context.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
                                 hostbuf=area_table())
         self._buffers: _FrameBuffers | None = None
@@ -404,8 +407,7 @@ class Filter:
             return self._buffers
         self.finish()
         self._buffers = bufs = _FrameBuffers(self.context, fmt)
-        defs = defines_for(fmt, **self.options.pass_defines(), QUIET_LEVELS=quiet_levels(self.options, fmt),
-                           **transfer_defines(self.transfer))
+        defs = defines_for(fmt, **self.options.pass_defines(), QUIET_LEVELS=quiet_levels(self.options, fmt))
         if self.fast:
             from mlaa_stream.spatial.fast import FastPasses
             self._fast = FastPasses(self.context, fmt, defs, self._luts)
@@ -413,6 +415,8 @@ class Filter:
         k = self.context.kernel
         self._k_edges = k("edges", "detect_edges", defs)
         self._lin = linear_levels(self.context, "edges", defs, fmt, self._luts)
+        self._lin_lab = self._lin if self.transfer is None else linear_levels(self.context, "edges", defs, fmt,
+                                                                              self._lab_luts)
         self._k_hdist = k("distances", "hline_distances", defs)
         self._k_vdist = k("distances", "vline_distances_columns" if self.context.column_sweeps else "vline_distances",
                           defs)
@@ -442,17 +446,9 @@ class Filter:
     def submit(self, frame: np.ndarray, premultiplied: bool = False) -> "PendingFrame | DerivedPendingFrame":
         """Enqueue upload, passes and download of `frame` without waiting; see PendingFrame. `premultiplied`: the
         colour of an RGBA frame is premultiplied by its alpha (EXR's convention), for alpha="coverage"."""
-        if self.transfer is not None:  # HDR codes: filtered in the light they code, coded back (spatial/transfer.py)
-            frame_format(frame, self.bgr)  # a frame the filter cannot take is named as such first
-            coded = TransferFrame(frame, self.transfer)
-            return DerivedPendingFrame(self._submit_linear(coded.linear, premultiplied),
-                                       lambda inner: coded.codes(inner.result()))
-        return self._submit_linear(frame, premultiplied)
-
-    def _submit_linear(self, frame: np.ndarray, premultiplied: bool) -> "PendingFrame | DerivedPendingFrame":
-        """submit of a frame in the filter's own terms (after a transfer's decode)."""
         if self._wants_alpha(frame):
-            split = AlphaSplit(frame, premultiplied, decode=self.options.linear and not self.options.linear_input)
+            split = AlphaSplit(frame, premultiplied, decode=self.options.linear and not self.options.linear_input,
+                               transfer=self.transfer)
             patches = kept_patches(frame, self.keep)
 
             def merged(colour: PendingFrame) -> np.ndarray:
@@ -463,15 +459,23 @@ class Filter:
             return DerivedPendingFrame(self._submit(split.colour, want_regions=self.fallback == "auto"), merged)
         return self._submit(frame)
 
+    def _format(self, frame: np.ndarray) -> FrameFormat:
+        """frame_format with this filter's transfer: the passes read the samples through it (device/transfer.py)."""
+        fmt = frame_format(frame, self.bgr)
+        return fmt if self.transfer is None else replace(fmt, transfer=self.transfer)
+
     def _wants_alpha(self, frame: np.ndarray) -> bool:
         """True when `frame`'s alpha is filtered as coverage (alpha="coverage" and an alpha that varies)."""
         frame_format(frame, self.bgr)  # a frame the filter cannot take is named as such first
+        if self.transfer is not None and frame.dtype.kind == "f":
+            raise ValueError(f"transfer={self.transfer!r}: expected a frame of 8- or 16-bit codes (a decoded HDR video "
+                             f"frame), got {frame.dtype}; float frames of linear light take linear_input=True")
         return self.alpha == "coverage" and has_coverage(frame)
 
     def _submit(self, frame: np.ndarray, want_regions: bool = False) -> PendingFrame:
         """submit without the alpha split; `want_regions`: read the frame's render-region flags back
         (PendingFrame.regions) even without keep_regions."""
-        fmt = frame_format(frame, self.bgr)
+        fmt = self._format(frame)
         with self._lock:
             bufs = self._prepare(fmt)
             slot = self._frame_no % bufs.SLOTS
@@ -522,7 +526,7 @@ class Filter:
         # PoCL's own choice (docs/spatial_tuning.md)
         g_edges = (g2[0], -(-h // EDGE_ROWS))
         l_edges = (1, 1) if self.context.device.type & cl.device_type.CPU else None
-        ev["edges"] = self._k_edges(q, g_edges, l_edges, src, self._luts, self._lin, bufs.edges, W, H,
+        ev["edges"] = self._k_edges(q, g_edges, l_edges, src, self._luts, self._lin_lab, bufs.edges, W, H,
                                     np.float32(self.options.threshold), wait_for=after)
         ev["hlines"] = self._k_hdist(q, (max(h - 1, 1),), None, bufs.edges, bufs.hdist, W, H,
                                      wait_for=[ev["edges"]])
@@ -548,7 +552,7 @@ class Filter:
     def profile(self, frame: np.ndarray, runs: int = 20, warmup: int = 3) -> dict[str, float]:
         """Median device milliseconds of each pass (and of upload/download) over `runs` frames,
         serialised on a profiling queue: for the benchmark, never for unit tests."""
-        fmt = frame_format(frame, self.bgr)
+        fmt = self._format(frame)
         self.finish()
         bufs = self._prepare(fmt)
         q = cl.CommandQueue(self.context.ctx, self.context.device,

@@ -4,10 +4,12 @@ ARIB STD-B67 (HLG) are filtered in the linear light they code.
 The filter's mix space for integer frames is the sRGB decode of the samples. PQ and HLG code light by other
 curves (PQ: absolute luminance up to 10000 cd/m2; HLG: a square root below and a logarithm above), so a coverage
 mix of their codes through the sRGB decode is not a coverage mix of light: an edge between a highlight and a
-shadow came out darker than the truth (docs/spatial_tuning.md "HDR video"). Here (TransferFrame) the codes are
-decoded by a table to linear light relative to BT.2408's reference white (203 cd/m2 for PQ; the HLG signal 0.75),
-the filter takes that as it takes a linear-light EXR (`linear_input`: highlights over 1, auto exposure), and the
-output is coded back: samples the filter left keep their codes bit for bit, changed ones are coded by the curve.
+shadow came out darker than the truth (docs/spatial_tuning.md "HDR video"). Here the filter's decode and encode
+tables (with_transfer_tables) are the transfer's: its passes mix light relative to BT.2408's reference white (203
+cd/m2 for PQ; the HLG signal 0.75) and code the mix back, on the device, the frame staying in its codes. The edge
+tests (CIELAB of the codes through the sRGB decode, Filter's `_lin_lab`) and the render-region statistics still read
+the codes as they read any integer frame: a linear-light CIELAB clips at display white, and would not see the edges
+between two highlights (a lamp on a lit wall) that the codes show.
 """
 from __future__ import annotations
 
@@ -93,20 +95,27 @@ def _peak(transfer: str) -> float:
 
 
 def kernel_defines(transfer: str | None) -> dict:
-    """Build defines for the filter's passes (common.cl encode_arg): the edge tests read a linear sample's code."""
+    """Build defines for the filter's passes: the encode table's argument (common.cl encode_arg)."""
     return {} if transfer is None else {"ENCODE_WARP": 1, "ENCODE_SCALE": float(1.0 / _peak(transfer))}
 
 
-def with_encode_table(luts: np.ndarray, transfer: str | None) -> np.ndarray:
-    """The filter's tables (device.colour.device_luts) with the encode table (the third) replaced by the transfer's
-    signal of (u^4 x its peak) over u in [0, 1] (common.cl encode_arg), for HDR codes' edge tests."""
+def with_transfer_tables(luts: np.ndarray, transfer: str | None) -> np.ndarray:
+    """The filter's tables (device.colour.device_luts: decode, CIELAB f, encode) with the decode (code / top ->
+    light relative to reference white) and the encode (the signal of u^4 x the peak over u in [0, 1], read through
+    common.cl's encode_arg) of `transfer` in place of sRGB's; `luts` itself for None."""
     if transfer is None:
         return luts
     n = luts.size // 3
-    u = np.linspace(0.0, 1.0, n)
+    x = np.linspace(0.0, 1.0, n)
     out = luts.copy()
-    out[2 * n:] = _ENCODE[transfer](u ** 4 * _peak(transfer)).astype(np.float32)
+    out[:n] = _DECODE[transfer](x).astype(np.float32)
+    out[2 * n:] = _ENCODE[transfer](x ** 4 * _peak(transfer)).astype(np.float32)
     return out
+
+
+def encode(linear: np.ndarray, transfer: str) -> np.ndarray:
+    """Light relative to reference white -> the transfer's signal (0..1), in linear's float type."""
+    return _ENCODE[transfer](linear)
 
 
 @lru_cache(maxsize=None)
@@ -115,37 +124,3 @@ def decode_table(transfer: str, top: int) -> np.ndarray:
     table = _DECODE[transfer](np.arange(top + 1) / top).astype(np.float32)
     table.setflags(write=False)
     return table
-
-
-class TransferFrame:
-    """One integer frame coded by `transfer`: `linear` is what the filter takes (float32, colour in light relative
-    to reference white, alpha as a fraction); `codes(out)` codes a filtered `linear` back."""
-
-    def __init__(self, frame: np.ndarray, transfer: str):
-        if frame.dtype not in (np.uint8, np.uint16):
-            raise ValueError(f"transfer={transfer!r}: expected a frame of 8- or 16-bit codes (a decoded HDR video "
-                             f"frame), got {frame.dtype}; float frames are linear light already (linear_input=True)")
-        self.frame, self.transfer = frame, transfer
-        self.top = int(np.iinfo(frame.dtype).max)
-        table = decode_table(transfer, self.top)
-        if frame.ndim == 3 and frame.shape[2] == 4:  # alpha is coverage, coded linearly
-            self.linear = np.empty(frame.shape, np.float32)
-            self.linear[..., :3] = table[frame[..., :3]]
-            self.linear[..., 3] = frame[..., 3] * np.float32(1.0 / self.top)
-        else:
-            self.linear = table[frame]
-
-    def codes(self, out: np.ndarray) -> np.ndarray:
-        """The frame's codes with every sample the filter changed in `out` (shaped as `linear`) coded anew."""
-        result = self.frame.copy()
-        changed = out != self.linear
-        if not changed.any():
-            return result
-        colour = changed.copy()
-        if colour.ndim == 3 and colour.shape[2] == 4:
-            colour[..., 3] = False
-            alpha = changed[..., 3]
-            result[..., 3][alpha] = np.rint(np.clip(out[..., 3][alpha], 0.0, 1.0) * self.top)
-        signal = _ENCODE[self.transfer](out[colour])
-        result[colour] = np.clip(np.rint(signal * np.float32(self.top)), 0, self.top)
-        return result
