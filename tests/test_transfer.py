@@ -175,3 +175,23 @@ def test_an_hdr10_video_is_filtered_in_light(tmp_path):
     assert rim.sum() >= 20
     assert clips["pq"][rim].mean() > clips["sdr"][rim].mean() + 1000
     assert np.array_equal(clips["pq"][40:, :4], clips["sdr"][40:, :4])
+
+
+def test_fast_preset_and_antialiaser_take_the_transfer():
+    """The fast preset (FastFilter: on a CPU the kernels read the frame itself) and the OpenCV-loop API (BGR frames)
+    mix the transfer's light: on a lamp-on-dark-ground edge their rims differ from the codes' sRGB mix and are
+    brighter, and a flat area keeps its codes."""
+    from mlaa_stream import Antialiaser
+    from mlaa_stream.spatial.fast_filter import FastFilter
+
+    frame = coded(half_plane(40, 56, 1, 0.45, 9.7, 1000 / 203, 1 / 203), "pq")
+    frame[32:, :] = 20000
+    with FastFilter(transfer="pq") as f, FastFilter() as plain:
+        fast, fast_plain = f.process(frame).astype(np.int64), plain.process(frame).astype(np.int64)
+    bgr = np.ascontiguousarray(frame[..., ::-1])
+    with Antialiaser(transfer="pq") as aa, Antialiaser() as plain_aa:
+        api, api_plain = aa(bgr).astype(np.int64), plain_aa(bgr).astype(np.int64)
+    for got, before, source in ((fast, fast_plain, frame), (api, api_plain, bgr)):
+        rim = (got != before).any(axis=2)
+        assert rim.sum() >= 10 and got[rim].mean() > before[rim].mean() + 500
+        assert np.array_equal(got[36:, 2:-2], source[36:, 2:-2])

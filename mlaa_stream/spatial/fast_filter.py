@@ -37,7 +37,7 @@ class FastFilter(Filter):
     def _direct_ok(self, frame: np.ndarray) -> bool:
         fmt = frame_format(frame, self.bgr)
         return (self.direct and frame.dtype.kind in "ui" and frame.dtype == fmt.dtype and frame.flags.c_contiguous
-                and self.transfer is None and not self._wants_alpha(frame))
+                and not self._wants_alpha(frame))
 
     def process(self, frame: np.ndarray, premultiplied: bool = False) -> np.ndarray:
         """Filter one frame: the kernels read `frame` itself (nothing else runs on it until this returns)."""
@@ -54,7 +54,7 @@ class FastFilter(Filter):
         """Enqueue the passes on `frame` and a new output array, both wrapped as device buffers."""
         mf = cl.mem_flags
         with self._lock:
-            self._prepare(frame_format(frame, self.bgr))
+            self._prepare(self._format(frame))
             out = np.empty_like(frame)
             src = cl.Buffer(self.context.ctx, mf.READ_ONLY | mf.USE_HOST_PTR, hostbuf=frame)
             dst = cl.Buffer(self.context.ctx, mf.WRITE_ONLY | mf.USE_HOST_PTR, hostbuf=out)
