@@ -1,5 +1,5 @@
 """Fuzz the spatial filter with hypothesis (run by test_reliability.py in a subprocess, so that a native
-crash fails that test instead of killing pytest): shapes, dtypes, channels, presets, linear input and
+crash fails that test instead of killing pytest): shapes, dtypes, channels, presets, linear input, HDR transfers and
 special values (NaN, ±Inf, negative, huge). Prints one summary line: `examples N seconds S`.
 
     python tests/fuzz_filter.py [MAX_EXAMPLES]
@@ -12,6 +12,7 @@ import time
 import numpy as np
 from hypothesis import HealthCheck, given, settings, strategies as st
 
+from mlaa_stream.device.transfer import TRANSFERS
 from mlaa_stream.spatial.filter import PRESETS, Filter
 from mlaa_stream.spatial.nonfinite import SAMPLE_LIMIT
 
@@ -19,7 +20,8 @@ from mlaa_stream.spatial.nonfinite import SAMPLE_LIMIT
 SHAPES = [(3, 5), (24, 31)]
 CASES = ([(preset, np.uint8, 3) for preset in PRESETS]
          + [("default", dt, c) for dt in (np.uint8, np.uint16, np.float16, np.float32) for c in (0, 1, 4)]
-         + [("linear_input", dt, c) for dt in (np.float16, np.float32) for c in (0, 1, 3, 4)])
+         + [("linear_input", dt, c) for dt in (np.float16, np.float32) for c in (0, 1, 3, 4)]
+         + [(transfer, dt, c) for transfer in TRANSFERS for dt in (np.uint8, np.uint16) for c in (0, 3, 4)])
 FLOAT_SPECIALS = [np.nan, np.inf, -np.inf, -5.0, -1e30, 1e30, 3e38, -3e38, 0.0, 1.0, 65504.0]
 _filters: dict[str, Filter] = {}
 examples = 0
@@ -27,7 +29,8 @@ examples = 0
 
 def filter_for(options: str) -> Filter:
     if options not in _filters:
-        kwargs = {"linear_input": True} if options == "linear_input" else PRESETS[options]
+        kwargs = ({"linear_input": True} if options == "linear_input" else
+                  {"transfer": options} if options in TRANSFERS else PRESETS[options])
         _filters[options] = Filter(**kwargs)
     return _filters[options]
 
