@@ -1005,18 +1005,26 @@ class _ImageJob(_Job):
 
         encoded = filt
 
-        def make_linear():
-            """Linear-light inputs (EXR, untagged float) are not sRGB-decoded before blending."""
-            kwargs = dict(self.opts["filter_kwargs"], linear_input=True)
-            try:
-                return (FastFilter if kwargs.get("fast") else Filter)(context=encoded.context, bgr=False, **kwargs)
-            except TypeError as exc:  # a Filter without linear_input: treat them as encoded
-                self.con.warn(f"linear-light inputs filtered as display-encoded ({exc})")
+        def make_variant(options: dict):
+            """Linear-light inputs (EXR, untagged float) are not sRGB-decoded before blending; HDR images (PQ / HLG
+            PNGs) are decoded by their transfer (device/transfer.py)."""
+            kwargs = dict(self.opts["filter_kwargs"], **options)
+            what = ("linear-light" if "linear_input" in options else
+                    f"HDR ({TRANSFER_NAMES.get(options.get('transfer'), options.get('transfer'))})")
+            if "transfer" in options and not kwargs.get("linear", True):   # --display-space: the codes' own mix
                 return encoded
+            try:
+                made = (FastFilter if kwargs.get("fast") else Filter)(context=encoded.context, bgr=False, **kwargs)
+            except TypeError as exc:  # a Filter without the option: treat them as encoded
+                self.con.warn(f"{what} inputs filtered as display-encoded ({exc})")
+                return encoded
+            if "transfer" in options:
+                self.con.info(f"{what} images: filtered in the linear light their codes stand for")
+            return made
 
         if self.opts.get("cluster"):
             return self._run_on_cluster()
-        filt = FilterSet(encoded, make_linear)
+        filt = FilterSet(encoded, make_variant)
         read_plan = getattr(self, "read_plan", self.plan) if temporal is not None else self.plan
         read_ahead = getattr(self, "read_ahead", set())
         progress = self._progress(len(read_plan))

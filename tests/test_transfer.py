@@ -195,3 +195,36 @@ def test_fast_preset_and_antialiaser_take_the_transfer():
         rim = (got != before).any(axis=2)
         assert rim.sum() >= 10 and got[rim].mean() > before[rim].mean() + 500
         assert np.array_equal(got[36:, 2:-2], source[36:, 2:-2])
+
+
+def _png(path, frame: np.ndarray, cicp: tuple | None) -> None:
+    import OpenImageIO as oiio
+    spec = oiio.ImageSpec(frame.shape[1], frame.shape[0], 3, "uint16")
+    if cicp is not None:
+        spec.attribute("CICP", "int[4]", cicp)
+    out = oiio.ImageOutput.create(str(path))
+    assert out.open(str(path), spec) and out.write_image(frame)
+    out.close()
+
+
+def test_an_hdr_png_is_filtered_in_light(tmp_path):
+    """A 16-bit PNG whose cICP says BT.2020 / PQ (as HDR screenshots are saved), in a folder beside the same image
+    untagged: the tagged one's rim is mixed as light (brighter) and it keeps its cICP; the untagged one is filtered
+    as sRGB, as before."""
+    import OpenImageIO as oiio
+    frame = coded(half_plane(40, 56, 1, 0.45, 9.7, 1000 / 203, 1 / 203), "pq")
+    (tmp_path / "in").mkdir()
+    _png(tmp_path / "in" / "hdr.png", frame, (9, 16, 0, 1))
+    _png(tmp_path / "in" / "sdr.png", frame, None)
+    res = CliRunner().invoke(cli, [str(tmp_path / "in"), "-v", "-o", str(tmp_path / "out")])
+    assert res.exit_code == 0, res.output
+    assert "SMPTE ST 2084" in res.output
+    out = {}
+    for name in ("hdr", "sdr"):
+        image = oiio.ImageInput.open(str(tmp_path / "out" / f"{name}.png"))
+        out[name] = image.read_image(format="uint16").astype(np.int64)
+        out[name + "_cicp"] = image.spec().getattribute("CICP")
+        image.close()
+    assert tuple(out["hdr_cicp"]) == (9, 16, 0, 1) and out["sdr_cicp"] is None
+    rim = (out["hdr"] != out["sdr"]).any(axis=2)
+    assert rim.sum() >= 20 and out["hdr"][rim].mean() > out["sdr"][rim].mean() + 1000

@@ -102,9 +102,8 @@ def filter_chunk(chunk: Chunk, filter_kwargs: dict, overwrite: bool, strict: boo
             result.skipped.append(ff.dst)
         else:
             todo.append(ff)
-    linear_kwargs = dict(filter_kwargs, linear_input=True)
     encoded = _worker_filter(filter_kwargs)
-    filt = FilterSet(encoded, lambda: _worker_filter(linear_kwargs))
+    filt = FilterSet(encoded, lambda options: _worker_filter(dict(filter_kwargs, **options)))
     w = temporal.warmup if temporal is not None else 0
     while True:
         report = Report()

@@ -18,6 +18,7 @@ from typing import Callable, Iterator
 from mlaa_stream.io.images import (Image, ImageReadError, ImageWriteError, is_image_path, is_premultiplied,
                                    is_temp_path, read_image, split_for_filter, unpremultiplies, without_colour,
                                    write_image)
+from mlaa_stream.device.transfer import FFMPEG_TRC, TRANSFERS
 from mlaa_stream.io.item import Item
 
 _PRINTF = re.compile(r"%(0?)(\d*)d")
@@ -104,25 +105,44 @@ def is_linear(image: Image) -> bool:
     return image.pixels.dtype.kind == "f" if tagged is None else tagged
 
 
-class FilterSet:
-    """The filter for display-encoded images and, made on first need, one for linear-light images
-    (`linear_input=True`): EXRs and sRGB PNGs can share a folder."""
+def image_transfer(image: Image) -> str | None:
+    """The HDR transfer an integer image's samples code light with ("pq", "hlg"; device/transfer.py): its CICP
+    (PNG's cICP, AVIF / HEIF / JPEG XL's colour description: H.273's codes, FFmpeg's too) or an OpenColorIO-style
+    colour space name (pq_rec2020_display, hlg_rec2020_display); None for anything else."""
+    if image.pixels.dtype.kind not in "ui":
+        return None
+    cicp = image.spec.getattribute("CICP")
+    if cicp is not None and len(cicp) >= 2:
+        return FFMPEG_TRC.get(int(cicp[1]))
+    name = image.spec.get_string_attribute("oiio:ColorSpace", "").lower()
+    return next((t for t in TRANSFERS if name.startswith(f"{t}_") or f"_{t}_" in name), None)
 
-    def __init__(self, encoded, make_linear: Callable[[], object]):
-        self.encoded, self._make_linear, self.linear = encoded, make_linear, None
+
+class FilterSet:
+    """The filter for display-encoded images and, made on first need by `make(options)` with the filter's options
+    for them, one for linear-light images (`linear_input=True`: EXRs and sRGB PNGs can share a folder) and one per
+    HDR transfer (`transfer=`: PQ / HLG PNGs, image_transfer)."""
+
+    def __init__(self, encoded, make: Callable[[dict], object]):
+        self.encoded, self._make = encoded, make
+        self.variants: dict[tuple, object] = {}
 
     def for_item(self, item: Item):
-        if not is_linear(item.meta[1]):
+        image = item.meta[1]
+        transfer = image_transfer(image)
+        key = ("transfer", transfer) if transfer else ("linear_input", True) if is_linear(image) else None
+        if key is None:
             return self.encoded
-        if self.linear is None:
-            self.linear = self._make_linear()
-            if hasattr(self.linear, "regions_owner"):  # a temporal stage reads the encoded filter's last_regions
-                self.linear.regions_owner = self.encoded
-        return self.linear
+        if key not in self.variants:
+            made = self.variants[key] = self._make(dict([key]))
+            if hasattr(made, "regions_owner"):  # a temporal stage reads the encoded filter's last_regions
+                made.regions_owner = self.encoded
+        return self.variants[key]
 
     def close(self) -> None:
-        if self.linear is not None and self.linear is not self.encoded:
-            self.linear.close()
+        for made in self.variants.values():
+            if made is not self.encoded:
+                made.close()
 
 
 class SequenceError(ValueError):
