@@ -191,7 +191,8 @@ def test_a_build_that_ends_the_driver_process_is_a_kernel_build_error():
 
 
 # Every test of the core passes and of the fast preset (~30 s), and the kernel-vs-reference tests of bridging,
-# reconstruction, GRLAA, FXAA, the FXAA fallback, the moire pass and temporal supersampling's two resolves (all of
+# reconstruction, GRLAA, FXAA, the FXAA fallback, the moire pass, temporal supersampling's two resolves, the alpha
+# merge and HDR transfers' tables (all of
 # those files on rusticl took 11.5 min here: too long for every CI run).
 KERNEL_TESTS = ["tests/test_mlaa.py", "tests/test_bridge.py::test_kernel_matches_reference_on_random_wires",
                 "tests/test_reconstruct.py::test_kernel_matches_reference",
@@ -211,7 +212,10 @@ KERNEL_TESTS = ["tests/test_mlaa.py", "tests/test_bridge.py::test_kernel_matches
                 "tests/test_moire.py::test_kernel_matches_reference",
                 "tests/test_fast.py", "tests/test_column_sweeps.py",
                 "tests/test_tss.py::test_kernel_matches_reference",
-                "tests/test_tss.py::test_kernel_matches_reference_on_hdr_float_frames"]
+                "tests/test_tss.py::test_kernel_matches_reference_on_hdr_float_frames",
+                "tests/test_alpha.py::test_device_merge_matches_its_reference",
+                "tests/test_transfer.py::test_edges_between_lights_are_blended_as_light",
+                "tests/test_transfer.py::test_edge_tests_read_the_codes"]
 
 
 @needs_rusticl

@@ -21,7 +21,7 @@ import pyopencl as cl
 from mlaa_stream.device.colour import device_luts
 from mlaa_stream.device.context import Context, default_context, linear_levels
 from mlaa_stream.device.formats import FrameFormat, defines_for, frame_format
-from mlaa_stream.spatial.alpha import HARD_STEP, AlphaSplit, has_coverage, varied_tiles
+from mlaa_stream.spatial.alpha import HARD_STEP, AlphaSplit, MergePass, has_coverage, varied_tiles
 from mlaa_stream.spatial.exposure import exposure_scale, scale_colour
 from mlaa_stream.spatial.keep import KeepRect, kept_patches, keep_rects, restore_patches
 from mlaa_stream.spatial.nonfinite import NonFinite, replace_non_finite
@@ -362,6 +362,7 @@ class Filter:
         self.alpha = alpha
         self._alpha_filters: dict[str, "Filter"] = {}  # fallback mode -> the filter of alpha planes (_alpha_filter)
         self._alpha_lock = threading.Lock()
+        self._merger: MergePass | None = None
         self.fast = bool(fast)  # spatial/fast.py: seed 004's passes instead of the default chain
         self.reconstruct = bool(reconstruct) and not self.fast
         self.bridge = bool(bridge) and not self.fast
@@ -454,7 +455,7 @@ class Filter:
             def merged(colour: PendingFrame) -> np.ndarray:
                 filtered = colour.result()  # sets colour.regions
                 alpha = self.filter_alpha(split.alpha, colour.regions)
-                return restore_patches(split.merge(filtered, alpha), patches)
+                return restore_patches(self._merge_pass().merge(split, filtered, alpha), patches)
 
             return DerivedPendingFrame(self._submit(split.colour, want_regions=self.fallback == "auto"), merged)
         return self._submit(frame)
@@ -615,6 +616,13 @@ class Filter:
                     auto_exposure=False, alpha="keep")
             return self._alpha_filters[fallback]
 
+    def _merge_pass(self) -> MergePass:
+        """The device merge of alpha as coverage (spatial/alpha.py), made on first need."""
+        with self._alpha_lock:
+            if self._merger is None:
+                self._merger = MergePass(self.context, self._luts, self.options.pass_defines())
+            return self._merger
+
     def filter_alpha(self, plane: np.ndarray, regions: np.ndarray | None) -> np.ndarray:
         """An alpha plane (H, W) filtered as coverage: with this filter's fallback; where the colour is mostly a
         render (`regions`: its render-region flags per tile, or None; the tiles where the alpha steps by HARD_STEP
@@ -642,6 +650,7 @@ class Filter:
             self._bridger = None
             self._fallback = None
             self._fast = None
+            self._merger = None
             children, self._alpha_filters = list(self._alpha_filters.values()), {}
             for child in children:
                 child.close()
