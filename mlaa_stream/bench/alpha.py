@@ -8,7 +8,8 @@ coverage -- handed to the filter as an 8-bit straight-alpha frame (transparent p
 them) and as a premultiplied linear float frame, with alpha="keep" (the colour filtered alone, as before) and
 alpha="coverage" (spatial/alpha.py). Scored: the error removed % of the composite over three plates (linear 0.2
 grey, a soft texture, 0.8 grey; sRGB-encoded levels, as the bench scores) and of the alpha against the truth's
-coverage. `--timing`: ms per 1920x1080 frame (the atrium view tiled 3x3), median of 8 after 2, RGB against RGBA.
+coverage. `--timing`: ms per 1920x1080 frame (the atrium view tiled 3x3), median of 8 after 2: RGB, RGBA PNG-style and
+premultiplied float EXR-style frames, alpha as coverage and kept.
 Needs EGL, as the rendered scenes do. A benchmark, never a unit test.
 """
 from __future__ import annotations
@@ -94,24 +95,29 @@ def run(sizes: list[tuple[int, int]], worlds: list[str], device: str | None = No
 
 
 def timing(device: str | None = None, log=print) -> dict[str, float]:
-    """ms per 1920x1080 frame: the atrium view (its sky transparent) tiled 3x3, as RGB and as RGBA both ways."""
+    """ms per 1920x1080 frame: the atrium view (its sky transparent) tiled 3x3, as RGB, as RGBA both ways and as a
+    premultiplied float EXR frame both ways."""
     renderer = Renderer(_context(), 640, 360)
     try:
         colour, cover, _, _ = renderer.coverage_frames(shot("rendered_atrium", 640, 360)[0], spp=1)
     finally:
         renderer.release()
-    png = np.ascontiguousarray(np.tile(frames_of(colour, cover)["png"], (3, 3, 1)))
-    cases = {"RGB (sky black)": (ALPHA_MODES[0], np.ascontiguousarray(png[..., :3]))}
-    cases.update({f"RGBA alpha={m}": (m, png) for m in ALPHA_MODES})
+    frames = frames_of(colour, cover)
+    png = np.ascontiguousarray(np.tile(frames["png"], (3, 3, 1)))
+    exr = np.ascontiguousarray(np.tile(frames["exr"], (3, 3, 1)))
+    cases = {"RGB (sky black)": (ALPHA_MODES[0], np.ascontiguousarray(png[..., :3]), False)}
+    cases.update({f"RGBA alpha={m}": (m, png, False) for m in ALPHA_MODES})
+    cases.update({f"EXR RGBA (premultiplied float) alpha={m}": ("exr " + m, exr, True) for m in ALPHA_MODES})
     out = {}
     filters = {m: Filter(device, alpha=m) for m in ALPHA_MODES}
+    filters.update({"exr " + m: Filter(device, alpha=m, linear_input=True) for m in ALPHA_MODES})
     try:
-        for name, (mode, frame) in cases.items():
+        for name, (mode, frame, premultiplied) in cases.items():
             f = filters[mode]
             times = []
             for k in range(10):
                 t = time.perf_counter()
-                f.process(frame)
+                f.process(frame, premultiplied=premultiplied)
                 if k >= 2:
                     times.append(1e3 * (time.perf_counter() - t))
             out[name] = float(np.median(times))
