@@ -373,3 +373,25 @@ def test_device_merge_matches_its_reference(dtype, premultiplied, options, toler
     allowed = np.where(ref < 1024, 16, tolerance) if "transfer" in options else tolerance
     assert (diff <= allowed).all(), diff.max()
     assert (got != frame.astype(np.float64)).any()
+
+
+def test_the_alpha_filter_box_gives_the_whole_planes_result():
+    """Filter.filter_alpha filters only the box of tiles where the alpha varies (plus a margin, grown to few sizes):
+    bit for bit what filtering the whole plane gives, for a hard-edged disc in a corner, a disc beside a soft ramp
+    (both filters and the tile choice), with the colour's render regions and without; no variation: the plane."""
+    from mlaa_stream.spatial.filter import _box_span
+    y, x = np.mgrid[0:240, 0:328]
+    disc = (((x - 260) ** 2 + (y - 50) ** 2) < 37 ** 2).astype(np.uint8) * 255
+    ramp = (np.clip((x - 60) / 9.0, 0, 1) * (y > 150) * 255).astype(np.uint8)
+    regions = np.zeros((30, 41), np.uint8)
+    regions[:12, 25:] = 1
+    with Filter() as f:
+        for plane in (disc, np.maximum(disc, ramp)):
+            for reg in (regions, None):
+                whole = f._filter_alpha_box(plane, reg, varied_tiles(plane, 8))
+                boxed = f.filter_alpha(plane, reg)
+                assert (boxed != plane).any() and np.array_equal(boxed, whole)
+        flat = np.full((240, 328), 255, np.uint8)
+        assert np.array_equal(f.filter_alpha(flat, regions), flat)
+    assert _box_span(10, 12, 41) == (8, 16) and _box_span(0, 3, 41) == (0, 8) and _box_span(38, 41, 41) == (33, 41)
+    assert _box_span(0, 41, 41) == (0, 41)

@@ -33,6 +33,8 @@ from mlaa_stream.device.transfer import encode as transfer_encode
 
 RANGE_RADIUS = 2  # the window of input colours a rim pixel's straight colour is clamped to: 5x5
 HARD_STEP = 0.125  # an alpha step (of full scale) between neighbours that marks 1-spp coverage, for render regions
+ALPHA_MARGIN = 2  # tiles round the box where the alpha varies that its filter also gets (Filter.filter_alpha)
+ALPHA_BOX_STEP = 8  # the box's sides in multiples of this many tiles (64 px): few buffer sizes for a moving element
 
 
 def _full_scale(dtype: np.dtype) -> float:

@@ -21,7 +21,7 @@ import pyopencl as cl
 from mlaa_stream.device.colour import device_luts
 from mlaa_stream.device.context import Context, default_context, linear_levels
 from mlaa_stream.device.formats import FrameFormat, defines_for, frame_format
-from mlaa_stream.spatial.alpha import HARD_STEP, AlphaSplit, MergePass, has_coverage, varied_tiles
+from mlaa_stream.spatial.alpha import ALPHA_BOX_STEP, ALPHA_MARGIN, HARD_STEP, AlphaSplit, MergePass, has_coverage, varied_tiles
 from mlaa_stream.spatial.exposure import exposure_scale, scale_colour
 from mlaa_stream.spatial.keep import KeepRect, kept_patches, keep_rects, restore_patches
 from mlaa_stream.spatial.nonfinite import NonFinite, replace_non_finite
@@ -240,6 +240,15 @@ class PendingFrame:
         collects the frames after it before its temporal stage runs (look-ahead) calls this first."""
         if self._owner is not None and self._regions is not None:
             self._owner.last_regions = self.regions
+
+
+def _box_span(lo: int, hi: int, n: int) -> tuple[int, int]:
+    """Tiles lo .. hi - 1 of n with ALPHA_MARGIN more each side, the span grown to a multiple of ALPHA_BOX_STEP tiles
+    within 0 .. n: a moving element's box takes few sizes, so its filter seldom makes new buffers."""
+    lo, hi = max(lo - ALPHA_MARGIN, 0), min(hi + ALPHA_MARGIN, n)
+    size = min(-(-(hi - lo) // ALPHA_BOX_STEP) * ALPHA_BOX_STEP, n)
+    lo = min(lo, n - size)
+    return lo, lo + size
 
 
 class DerivedPendingFrame:
@@ -626,15 +635,34 @@ class Filter:
     def filter_alpha(self, plane: np.ndarray, regions: np.ndarray | None) -> np.ndarray:
         """An alpha plane (H, W) filtered as coverage: with this filter's fallback; where the colour is mostly a
         render (`regions`: its render-region flags per tile, or None; the tiles where the alpha steps by HARD_STEP
-        or more lie mostly in them), those tiles with the fallback on every pixel, as a 1-spp render's coverage."""
+        or more lie mostly in them), those tiles with the fallback on every pixel, as a 1-spp render's coverage.
+        Only the box of tiles where the alpha varies (and ALPHA_MARGIN tiles round it) is filtered: outside it the
+        alpha is one value over every pass's reach, which no filter changes (an element over transparency is
+        often a part of the frame)."""
+        from mlaa_stream.spatial.fallback import FALLBACK_TILE
+        varied = varied_tiles(plane, FALLBACK_TILE)
+        rows, cols = np.flatnonzero(varied.any(axis=1)), np.flatnonzero(varied.any(axis=0))
+        out = plane.copy()
+        if rows.size == 0:
+            return out
+        ty0, ty1 = _box_span(rows[0], rows[-1] + 1, varied.shape[0])
+        tx0, tx1 = _box_span(cols[0], cols[-1] + 1, varied.shape[1])
+        box = (slice(ty0 * FALLBACK_TILE, ty1 * FALLBACK_TILE), slice(tx0 * FALLBACK_TILE, tx1 * FALLBACK_TILE))
+        crop = np.ascontiguousarray(plane[box])
+        out[box] = self._filter_alpha_box(crop, None if regions is None else np.asarray(regions)[ty0:ty1, tx0:tx1],
+                                          varied[ty0:ty1, tx0:tx1])
+        return out
+
+    def _filter_alpha_box(self, plane: np.ndarray, regions: np.ndarray | None, varied: np.ndarray) -> np.ndarray:
+        """filter_alpha on a box of whole tiles (`regions`, `varied`: its tiles' flags)."""
         if regions is None or self.fallback != "auto" or not np.any(regions):
             return self._alpha_filter(self.fallback).process(plane)
         from mlaa_stream.spatial.fallback import FALLBACK_TILE, region_pixels
         hard = varied_tiles(plane, FALLBACK_TILE, HARD_STEP)
-        if 2 * np.count_nonzero(hard & (np.asarray(regions) > 0)) <= np.count_nonzero(hard):
+        if 2 * np.count_nonzero(hard & (regions > 0)) <= np.count_nonzero(hard):
             return self._alpha_filter(self.fallback).process(plane)
         rendered = self._alpha_filter("everywhere").process(plane)
-        if not (varied_tiles(plane, FALLBACK_TILE) & ~hard).any():  # no soft alpha (a matte, a ramp) to leave
+        if not (varied & ~hard).any():  # no soft alpha (a matte, a ramp) to leave
             return rendered
         out = self._alpha_filter(self.fallback).process(plane)
         return np.where(region_pixels(hard, *plane.shape[:2]), rendered, out)
