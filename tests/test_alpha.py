@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from mlaa_stream.device.colour import linear_to_srgb, srgb_to_linear
-from mlaa_stream.spatial.alpha import AlphaSplit, MergePass, has_coverage, varied_tiles
+from mlaa_stream.spatial.alpha import AlphaSplit, MergePass, has_coverage, varied_box, varied_tiles
 from mlaa_stream.spatial.filter import Filter
 
 SPP = 8
@@ -379,7 +379,6 @@ def test_the_alpha_filter_box_gives_the_whole_planes_result():
     """Filter.filter_alpha filters only the box of tiles where the alpha varies (plus a margin, grown to few sizes):
     bit for bit what filtering the whole plane gives, for a hard-edged disc in a corner, a disc beside a soft ramp
     (both filters and the tile choice), with the colour's render regions and without; no variation: the plane."""
-    from mlaa_stream.spatial.filter import _box_span
     y, x = np.mgrid[0:240, 0:328]
     disc = (((x - 260) ** 2 + (y - 50) ** 2) < 37 ** 2).astype(np.uint8) * 255
     ramp = (np.clip((x - 60) / 9.0, 0, 1) * (y > 150) * 255).astype(np.uint8)
@@ -393,5 +392,10 @@ def test_the_alpha_filter_box_gives_the_whole_planes_result():
                 assert (boxed != plane).any() and np.array_equal(boxed, whole)
         flat = np.full((240, 328), 255, np.uint8)
         assert np.array_equal(f.filter_alpha(flat, regions), flat)
-    assert _box_span(10, 12, 41) == (8, 16) and _box_span(0, 3, 41) == (0, 8) and _box_span(38, 41, 41) == (33, 41)
-    assert _box_span(0, 41, 41) == (0, 41)
+    tiles = np.zeros((30, 41), bool)
+    tiles[10:12, 0:3] = True
+    assert varied_box(tiles) == (8, 16, 0, 8)   # 2 tiles of margin, sides of 8 tiles
+    tiles[:] = False
+    tiles[29, 38:] = True
+    assert varied_box(tiles) == (22, 30, 33, 41)   # grown inwards at the frame's edge
+    assert varied_box(np.ones((30, 41), bool)) == (0, 30, 0, 41) and varied_box(tiles & False) is None

@@ -42,15 +42,14 @@ def pq_to_linear(v: np.ndarray) -> np.ndarray:
 
 
 def _float(x: np.ndarray) -> tuple[np.ndarray, type]:
-    """`x` as float64 if it is, else float32 (the filter's output: float32 is ~15x faster for pow here), and that
-    type."""
+    """`x` as float64 if it is, else float32 (~15x faster for pow here, within a 16-bit code), and that type."""
     f = np.float64 if np.asarray(x).dtype == np.float64 else np.float32
     return np.asarray(x, f), f
 
 
 def linear_to_pq(lin: np.ndarray) -> np.ndarray:
-    """Light relative to reference white -> PQ signal (0..1) (the inverse EOTF), in lin's float type (float32 codes
-    of 16 bits land within one of the exact ones: changed samples only are coded so)."""
+    """Light relative to reference white -> PQ signal (0..1) (the inverse EOTF), in lin's float type (float32: 16-bit
+    codes within one of the exact ones)."""
     lin, f = _float(lin)
     y = np.clip(lin * f(REFERENCE_WHITE_NITS / PQ_PEAK_NITS), 0.0, 1.0) ** f(_M1)
     return ((f(_C1) + f(_C2) * y) / (f(1.0) + f(_C3) * y)) ** f(_M2)

@@ -109,6 +109,24 @@ def varied_tiles(plane: np.ndarray, tile: int, step: float = 0.0) -> np.ndarray:
     return padded.reshape(ty, tile, tx, tile).any(axis=(1, 3))
 
 
+def varied_box(varied: np.ndarray) -> tuple[int, int, int, int] | None:
+    """The tiles (ty0, ty1, tx0, tx1) of the box round the `varied` ones (varied_tiles) with ALPHA_MARGIN more each
+    side, its sides grown to multiples of ALPHA_BOX_STEP tiles within the frame (a moving element's box takes few
+    sizes, so its filter seldom makes new buffers); None where no tile varies."""
+    rows, cols = np.flatnonzero(varied.any(axis=1)), np.flatnonzero(varied.any(axis=0))
+    if rows.size == 0:
+        return None
+
+    def span(lo: int, hi: int, n: int) -> tuple[int, int]:
+        lo, hi = max(lo - ALPHA_MARGIN, 0), min(hi + ALPHA_MARGIN, n)
+        size = min(-(-(hi - lo) // ALPHA_BOX_STEP) * ALPHA_BOX_STEP, n)
+        lo = min(lo, n - size)
+        return lo, lo + size
+
+    return (*span(int(rows[0]), int(rows[-1]) + 1, varied.shape[0]),
+            *span(int(cols[0]), int(cols[-1]) + 1, varied.shape[1]))
+
+
 class AlphaSplit:
     """One RGBA frame split into the premultiplied colour and the alpha that the filters see (`colour`, `alpha`),
     and merged back (`merge`). `premultiplied`: the frame's colour is premultiplied by its alpha already (EXR);

@@ -21,11 +21,11 @@ import pyopencl as cl
 from mlaa_stream.device.colour import device_luts
 from mlaa_stream.device.context import Context, default_context, linear_levels
 from mlaa_stream.device.formats import FrameFormat, defines_for, frame_format
-from mlaa_stream.spatial.alpha import ALPHA_BOX_STEP, ALPHA_MARGIN, HARD_STEP, AlphaSplit, MergePass, has_coverage, varied_tiles
+from mlaa_stream.device.transfer import check_transfer, with_transfer_tables
+from mlaa_stream.spatial.alpha import HARD_STEP, AlphaSplit, MergePass, has_coverage, varied_box, varied_tiles
 from mlaa_stream.spatial.exposure import exposure_scale, scale_colour
 from mlaa_stream.spatial.keep import KeepRect, kept_patches, keep_rects, restore_patches
 from mlaa_stream.spatial.nonfinite import NonFinite, replace_non_finite
-from mlaa_stream.device.transfer import check_transfer, with_transfer_tables
 
 METRICS = {"lab": 0, "luma": 1, "rgb": 2}
 # Default discontinuity thresholds per metric: ΔE76 for lab, fraction of full scale for the others.
@@ -242,15 +242,6 @@ class PendingFrame:
             self._owner.last_regions = self.regions
 
 
-def _box_span(lo: int, hi: int, n: int) -> tuple[int, int]:
-    """Tiles lo .. hi - 1 of n with ALPHA_MARGIN more each side, the span grown to a multiple of ALPHA_BOX_STEP tiles
-    within 0 .. n: a moving element's box takes few sizes, so its filter seldom makes new buffers."""
-    lo, hi = max(lo - ALPHA_MARGIN, 0), min(hi + ALPHA_MARGIN, n)
-    size = min(-(-(hi - lo) // ALPHA_BOX_STEP) * ALPHA_BOX_STEP, n)
-    lo = min(lo, n - size)
-    return lo, lo + size
-
-
 class DerivedPendingFrame:
     """A frame in flight whose result is made on the host from another pending frame's (`inner`) by `finish` (the
     alpha as coverage, spatial/alpha.py: the alpha plane filtered and merged with the colour). The same interface
@@ -273,7 +264,7 @@ class DerivedPendingFrame:
             self.publish_regions()
             return self._result.copy()
         self._result = self._finish(self._inner)
-        self._finish = None  # what it holds (the split frame, the codes) is not needed again
+        self._finish = None  # what it holds (the split frame) is not needed again
         return self._result
 
 
@@ -641,12 +632,11 @@ class Filter:
         often a part of the frame)."""
         from mlaa_stream.spatial.fallback import FALLBACK_TILE
         varied = varied_tiles(plane, FALLBACK_TILE)
-        rows, cols = np.flatnonzero(varied.any(axis=1)), np.flatnonzero(varied.any(axis=0))
         out = plane.copy()
-        if rows.size == 0:
+        tiles = varied_box(varied)
+        if tiles is None:
             return out
-        ty0, ty1 = _box_span(rows[0], rows[-1] + 1, varied.shape[0])
-        tx0, tx1 = _box_span(cols[0], cols[-1] + 1, varied.shape[1])
+        ty0, ty1, tx0, tx1 = tiles
         box = (slice(ty0 * FALLBACK_TILE, ty1 * FALLBACK_TILE), slice(tx0 * FALLBACK_TILE, tx1 * FALLBACK_TILE))
         crop = np.ascontiguousarray(plane[box])
         out[box] = self._filter_alpha_box(crop, None if regions is None else np.asarray(regions)[ty0:ty1, tx0:tx1],
