@@ -228,3 +228,18 @@ def test_an_hdr_png_is_filtered_in_light(tmp_path):
     assert tuple(out["hdr_cicp"]) == (9, 16, 0, 1) and out["sdr_cicp"] is None
     rim = (out["hdr"] != out["sdr"]).any(axis=2)
     assert rim.sum() >= 20 and out["hdr"][rim].mean() > out["sdr"][rim].mean() + 1000
+
+
+def test_the_hdr_video_bench_runs():
+    """`python -m mlaa_stream.bench.hdr_video` at a small size (the held-out views coded as PQ): a row per view, and
+    the transfer removes more error than the codes taken as sRGB on average."""
+    from mlaa_stream.yardstick.rendered import egl_available
+    ok, why = egl_available()
+    if not ok:
+        pytest.skip(why)
+    from mlaa_stream.bench import hdr_video
+    lines: list[str] = []
+    res = hdr_video.run([(192, 108)], ["pq"], ["plaza"], log=lines.append)
+    codes, transfer = res[("pq", "codes")], res[("pq", "transfer")]
+    assert len(codes) == len(transfer) == 4 and any("far_tele_192" in line for line in lines)
+    assert np.mean([s[0] for s in transfer]) > np.mean([s[0] for s in codes])

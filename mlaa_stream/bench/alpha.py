@@ -19,10 +19,10 @@ import time
 
 import numpy as np
 
-from mlaa_stream.bench.rendered_views import WORLD_VIEWS, render_args
+from mlaa_stream.bench.rendered_views import held_out_views, render_args
 from mlaa_stream.device.colour import srgb_to_linear
 from mlaa_stream.spatial.filter import ALPHA_MODES, Filter
-from mlaa_stream.yardstick.rendered import Camera, Renderer, _context, shot
+from mlaa_stream.yardstick.rendered import Renderer, _context, shot
 from mlaa_stream.yardstick.scenes import encode8
 
 PLATES = ("grey 0.2", "texture", "grey 0.8")
@@ -70,22 +70,16 @@ def run(sizes: list[tuple[int, int]], worlds: list[str], device: str | None = No
                for fmt in ("png", "exr") for mode in ALPHA_MODES}
     log("error removed %: composite over " + ", ".join(PLATES) + "; alpha -- alpha=" + " | ".join(ALPHA_MODES))
     try:
-        for width, height in sizes:
-            for world in worlds:
-                renderer = Renderer(_context(), width, height, world)
-                try:
-                    for name, view in WORLD_VIEWS[world].items():
-                        colour, cover, truth_p, truth_a = renderer.coverage_frames(Camera(*view))
-                        for fmt, frame in frames_of(colour, cover).items():
-                            cells = []
-                            for mode in ALPHA_MODES:
-                                out = filters[(fmt, mode)].process(frame, premultiplied=fmt == "exr")
-                                s = scores(out, frame, (truth_p, truth_a), fmt == "exr")
-                                res.setdefault((fmt, mode), []).append(s)
-                                cells.append(" / ".join(f"{v:5.1f}" for v in s))
-                            log(f"  {world} {name}_{width} {fmt}: " + " | ".join(cells))
-                finally:
-                    renderer.release()
+        for world, name, width, renderer, cam in held_out_views(sizes, worlds):
+            colour, cover, truth_p, truth_a = renderer.coverage_frames(cam)
+            for fmt, frame in frames_of(colour, cover).items():
+                cells = []
+                for mode in ALPHA_MODES:
+                    out = filters[(fmt, mode)].process(frame, premultiplied=fmt == "exr")
+                    s = scores(out, frame, (truth_p, truth_a), fmt == "exr")
+                    res.setdefault((fmt, mode), []).append(s)
+                    cells.append(" / ".join(f"{v:5.1f}" for v in s))
+                log(f"  {world} {name}_{width} {fmt}: " + " | ".join(cells))
     finally:
         for f in filters.values():
             f.close()

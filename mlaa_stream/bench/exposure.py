@@ -16,10 +16,9 @@ import argparse
 
 import numpy as np
 
-from mlaa_stream.bench.rendered_views import WORLD_VIEWS, render_args
+from mlaa_stream.bench.rendered_views import held_out_views, render_args
 from mlaa_stream.spatial.filter import Filter
 from mlaa_stream.yardstick import metrics as M
-from mlaa_stream.yardstick.rendered import Camera, Renderer, _context
 from mlaa_stream.yardstick.scenes import encode8
 
 
@@ -35,27 +34,20 @@ def run(sizes: list[tuple[int, int]], skies: list[float], exposures: list[float]
         for sky in skies:
             log(f"sky x{sky:g}: error removed % / damage, auto_exposure off | on, at exposure "
                 + ", ".join(f"x{e:g}" for e in exposures))
-            for width, height in sizes:
-                for world in worlds:
-                    renderer = Renderer(_context(), width, height, world, hdr=True, sky_gain=sky)
-                    try:
-                        for name, view in WORLD_VIEWS[world].items():
-                            cam = Camera(*view)
-                            lin = renderer.input_linear(cam)
-                            seen = encode8(np.clip(lin, 0, 1))
-                            truth = encode8(np.clip(renderer.truth_linear(cam), 0, 1))
-                            cells = []
-                            for e in exposures:
-                                for on, filt in ((False, plain), (True, auto)):
-                                    out = encode8(np.clip(filt.process(lin * np.float32(e)) / np.float32(e), 0, 1))
-                                    score = (100 * M.error_removed(out, seen, truth), M.damage(out, seen, truth))
-                                    res.setdefault((sky, e, on), []).append(score)
-                                    cells.append(score)
-                            row = "  ".join(f"{a[0]:5.1f} / {a[1]:.2f} | {b[0]:5.1f} / {b[1]:.2f}"
-                                            for a, b in zip(cells[0::2], cells[1::2]))
-                            log(f"  {name}_{width}: {row}")
-                    finally:
-                        renderer.release()
+            for _world, name, width, renderer, cam in held_out_views(sizes, worlds, hdr=True, sky_gain=sky):
+                lin = renderer.input_linear(cam)
+                seen = encode8(np.clip(lin, 0, 1))
+                truth = encode8(np.clip(renderer.truth_linear(cam), 0, 1))
+                cells = []
+                for e in exposures:
+                    for on, filt in ((False, plain), (True, auto)):
+                        out = encode8(np.clip(filt.process(lin * np.float32(e)) / np.float32(e), 0, 1))
+                        score = (100 * M.error_removed(out, seen, truth), M.damage(out, seen, truth))
+                        res.setdefault((sky, e, on), []).append(score)
+                        cells.append(score)
+                row = "  ".join(f"{a[0]:5.1f} / {a[1]:.2f} | {b[0]:5.1f} / {b[1]:.2f}"
+                                for a, b in zip(cells[0::2], cells[1::2]))
+                log(f"  {name}_{width}: {row}")
             row = "  ".join(f"x{e:g} {np.mean([s[0] for s in res[(sky, e, False)]]):.1f} / "
                             f"{np.mean([s[1] for s in res[(sky, e, False)]]):.2f} | "
                             f"{np.mean([s[0] for s in res[(sky, e, True)]]):.1f} / "

@@ -18,11 +18,11 @@ import time
 
 import numpy as np
 
-from mlaa_stream.bench.rendered_views import WORLD_VIEWS, render_args
+from mlaa_stream.bench.rendered_views import held_out_views, render_args
 from mlaa_stream.spatial.filter import Filter
 from mlaa_stream.device.transfer import TRANSFERS, linear_to_hlg, linear_to_pq
 from mlaa_stream.yardstick import metrics as M
-from mlaa_stream.yardstick.rendered import Camera, Renderer, _context, shot
+from mlaa_stream.yardstick.rendered import Renderer, _context, shot
 
 _CODE = {"pq": linear_to_pq, "hlg": linear_to_hlg}
 
@@ -40,26 +40,19 @@ def run(sizes: list[tuple[int, int]], transfers: list[str], worlds: list[str], s
     filters = {"codes": Filter(device), **{t: Filter(device, transfer=t) for t in transfers}}
     try:
         log("error removed % / damage: the codes filtered as sRGB-coded | with transfer=")
-        for width, height in sizes:
-            for world in worlds:
-                renderer = Renderer(_context(), width, height, world, hdr=True, sky_gain=sky)
-                try:
-                    for name, view in WORLD_VIEWS[world].items():
-                        cam = Camera(*view)
-                        lin, truth_lin = renderer.input_linear(cam), renderer.truth_linear(cam)
-                        cells = []
-                        for t in transfers:
-                            inp, truth = coded(lin, t), coded(truth_lin, t)
-                            for how, filt in (("codes", filters["codes"]), ("transfer", filters[t])):
-                                out = filt.process(inp)
-                                score = (100 * M.error_removed(out, inp, truth), M.damage(out, inp, truth))
-                                res.setdefault((t, how), []).append(score)
-                                cells.append(score)
-                        row = "  ".join(f"{t} {a[0]:5.1f} / {a[1]:.2f} | {b[0]:5.1f} / {b[1]:.2f}"
-                                        for t, a, b in zip(transfers, cells[0::2], cells[1::2]))
-                        log(f"  {world} {name}_{width}: {row}")
-                finally:
-                    renderer.release()
+        for world, name, width, renderer, cam in held_out_views(sizes, worlds, hdr=True, sky_gain=sky):
+            lin, truth_lin = renderer.input_linear(cam), renderer.truth_linear(cam)
+            cells = []
+            for t in transfers:
+                inp, truth = coded(lin, t), coded(truth_lin, t)
+                for how, filt in (("codes", filters["codes"]), ("transfer", filters[t])):
+                    out = filt.process(inp)
+                    score = (100 * M.error_removed(out, inp, truth), M.damage(out, inp, truth))
+                    res.setdefault((t, how), []).append(score)
+                    cells.append(score)
+            row = "  ".join(f"{t} {a[0]:5.1f} / {a[1]:.2f} | {b[0]:5.1f} / {b[1]:.2f}"
+                            for t, a, b in zip(transfers, cells[0::2], cells[1::2]))
+            log(f"  {world} {name}_{width}: {row}")
         for t in transfers:
             a, b = res[(t, "codes")], res[(t, "transfer")]
             better = sum(y[0] > x[0] for x, y in zip(a, b))

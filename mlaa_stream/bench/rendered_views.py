@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import math
+from typing import Iterator
 
 import numpy as np
 
@@ -60,6 +61,21 @@ def render_args(sizes: str, worlds: str) -> tuple[list[tuple[int, int]], list[st
     if unknown:
         raise SystemExit(f"--world: expected names from {', '.join(WORLD_VIEWS)}, got {', '.join(unknown)}")
     return [tuple(int(v) for v in s.split("x")) for s in sizes.split(",") if s], names
+
+
+def held_out_views(sizes: list[tuple[int, int]], worlds: list[str],
+                   **renderer_options) -> Iterator[tuple[str, str, int, Renderer, Camera]]:
+    """Every held-out view of each world at each size, as (world, view name, width, renderer, camera): the
+    renderer (Renderer(..., **renderer_options): hdr, sky_gain) is made per size and world and released after its
+    views."""
+    for width, height in sizes:
+        for world in worlds:
+            renderer = Renderer(_context(), width, height, world, **renderer_options)
+            try:
+                for name, view in WORLD_VIEWS[world].items():
+                    yield world, name, width, renderer, Camera(*view)
+            finally:
+                renderer.release()
 
 
 def render_views(sizes: list[tuple[int, int]], samples: tuple[int, ...] = (1,), world: str = "plaza",
