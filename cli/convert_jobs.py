@@ -7,8 +7,8 @@ import os
 from fractions import Fraction
 
 from mlaa_stream.cli.filter_cmd import (EXIT_FAILED, EXIT_OK, Failed, Usage, _check_writable, _Job, deinterlace_note,
-                                        video_trim)
-from mlaa_stream.io.sequence import FIRST_FRAME_NUMBER
+                                        video_transfer, video_trim)
+from mlaa_stream.io.sequence import FIRST_FRAME_NUMBER, image_transfer
 
 
 def _sequence_plan(job: _Job) -> list:
@@ -34,6 +34,29 @@ def _sequence_plan(job: _Job) -> list:
     if missing:
         job.con.warn(f"{job.input}: missing frames {format_ranges(missing)} (the video skips them)")
     return [FrameFile(p, "", n) for n, p in found]
+
+
+_TRC = {"pq": 16, "hlg": 18}   # H.273 / FFmpeg transfer codes
+_BT2020 = 9                   # H.273 / FFmpeg colour primaries and (non-constant luminance) matrix of BT.2020
+
+
+def hdr_cicp(colour: dict, transfer: str | None) -> tuple[int, int, int, int] | None:
+    """The cICP (primaries, transfer, matrix 0: RGB, full range) an image written from a video with an HDR
+    transfer carries, from the video's colour tags (io/images.py write_image); None without a transfer."""
+    if transfer is None:
+        return None
+    return int(colour.get("color_primaries", 2) or 2), _TRC[transfer], 0, 1
+
+
+def hdr_colour_tags(first, transfer: str | None) -> dict:
+    """The colour tags (VideoInfo.colour) of a video made from HDR images: BT.2020 (or the images' cICP primaries)
+    with the transfer; {} (untagged, as before) without one."""
+    if transfer is None:
+        return {}
+    cicp = first.spec.getattribute("CICP")
+    primaries = int(cicp[0]) if cicp is not None and len(cicp) >= 1 and int(cicp[0]) not in (0, 2) else _BT2020
+    return {"color_primaries": primaries, "color_trc": _TRC[transfer],
+            "colorspace": _BT2020 if primaries == _BT2020 else 1, "color_range": 1}
 
 
 class SequenceToVideoJob(_Job):
@@ -68,12 +91,14 @@ class SequenceToVideoJob(_Job):
         # RGBA or grey + alpha, alpha last: kept where the encoder stores it (VP9 in WebM, qtrle, ffv1, png ...), named
         # by the writer where it does not (libx264)
         self.alpha = c in (2, 4) and first.spec.alpha_channel == c - 1
+        # HDR frames (a PQ / HLG PNG's cICP, or --transfer): filtered as the light they code, the video tagged so
+        self.transfer = image_transfer(first, o.get("transfer", "auto"))
         self.info = VideoInfo(path=self.input, width=w, height=h, fps=rate, time_base=1 / rate,
                               # as a player expects (4:2:0; 10-bit from 16-bit frames): the encoder's
                               # closest format to it, 4:4:4 only where the size is odd
                               frames=len(self.plan), bits=bits, has_alpha=self.alpha,
                               pix_fmt=("yuva420p" if self.alpha else "yuv420p") + ("10le" if bits > 8 else ""),
-                              codec="images", colour={}, audio_streams=0)
+                              codec="images", colour=hdr_colour_tags(first, self.transfer), audio_streams=0)
         if c in (2, 4) and not self.alpha:
             self.con.warn(f"{self.input}: alpha is not kept in the video")
         try:
@@ -165,6 +190,7 @@ class VideoToImagesJob(_Job):
         except VideoError as exc:
             raise Failed(str(exc)) from exc
         self.start, self.end = video_trim(self.opts, self.info)  # --start/--end, as for a video out
+        self.transfer = video_transfer(self.info, o.get("transfer", "auto"))   # HDR codes filtered as light
         if self.info.audio_streams:
             self.con.warn(f"{self.input}: audio is not written to images")
         if self.info.rotation:  # a phone's video: a player turns it, an image viewer will not
@@ -243,11 +269,13 @@ class VideoToImagesJob(_Job):
             finally:
                 inner.close()
 
+        cicp = hdr_cicp(self.info.colour, self.transfer)
+
         def sink(item) -> None:
             if item.meta in self.done:
                 return
             write_image(frame_path(self.output, item.meta), item.frame, overwrite=self.overwrite,
-                        quality=self.opts.get("jpeg_quality"))
+                        quality=self.opts.get("jpeg_quality"), cicp=cicp)
             self.written += 1
 
         try:

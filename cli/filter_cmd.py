@@ -15,7 +15,7 @@ import click
 
 from mlaa_stream.spatial.filter import DEFAULT_THRESHOLDS, PRESET_USES, PRESETS
 from mlaa_stream.spatial.fast_filter import FastFilter
-from mlaa_stream.device.transfer import TRANSFER_NAMES
+from mlaa_stream.device.transfer import TRANSFER_CHOICES, TRANSFER_NAMES
 from mlaa_stream.cli.options import configure_logging, device_option, verbosity_options
 from mlaa_stream.cli.stats_spool import StatsSpool
 from mlaa_stream.temporal.methods import RING_FRAMES
@@ -204,6 +204,15 @@ def _filter_kwargs(ctx: click.Context, preset: str | None, threshold, metric, di
     if bridge is not None:
         kwargs["bridge"] = bridge
     return kwargs
+
+
+def video_transfer(info, choice: str, opencv: bool = False) -> str | None:
+    """The HDR transfer a video's codes are filtered through (device/transfer.py): --transfer's `choice`, or for
+    "auto" the stream's colour tags (HDR10's PQ, HLG; OpenCV's decoder does not say what its frames code)."""
+    from mlaa_stream.device.transfer import FFMPEG_TRC
+    if choice == "auto":
+        return None if opencv else FFMPEG_TRC.get(info.colour.get("color_trc"))
+    return None if choice == "sdr" else choice
 
 
 def _check_writable(folder: str) -> None:
@@ -465,6 +474,10 @@ def _job_for(kind: str, output: str) -> type:
               help="An RGBA frame's alpha: coverage antialiases a silhouette against transparency in the alpha too "
                    "(an element rendered over transparency: the colour of the rim stays the element's, no dark "
                    "fringe once composited); keep leaves the alpha as it is and filters the colour alone.")
+@click.option("--transfer", "transfer", type=click.Choice(TRANSFER_CHOICES), default="auto", show_default=True,
+              help="How integer samples code light: auto reads it from a video's colour tags and an image's cICP or "
+                   "colour space (HDR10's PQ, HLG: mixed as the light they code); pq or hlg say so for files that "
+                   "do not (a y4m, an untagged PNG); sdr takes every file as sRGB-coded.")
 @click.option("--keep", "keep", multiple=True, metavar="X,Y,W,H",
               help="Leave this rectangle of every frame exactly as it is (burned-in subtitles, a HUD or a slate "
                    "over a render, which the filter would soften); pixels or % of the frame, e.g. "
@@ -488,7 +501,7 @@ def filter_command(ctx: click.Context, input_path: str, output: str, overwrite: 
                    in_flight: int, temporal: bool | None,
                    temporal_frames: int | None, temporal_method: str, lookahead: int | None, dense_motion: bool,
                    temporal_mode: str,
-                   temporal_k: float | None, stats_path: str | None, alpha: str, keep: tuple[str, ...],
+                   temporal_k: float | None, stats_path: str | None, alpha: str, transfer: str, keep: tuple[str, ...],
                    show: str | None, device: str | None, verbose: int, quiet: bool) -> None:
     """Remove jaggies from an image, a folder of images, a frame sequence or a video.
 
@@ -506,7 +519,7 @@ def filter_command(ctx: click.Context, input_path: str, output: str, overwrite: 
                            encoder_preset=encoder_preset, pix_fmt=pix_fmt, rate=rate, jpeg_quality=jpeg_quality,
                            video_backend=video_backend, deinterlace=deinterlace, start=start, end=end,
                            overlay=overlay, in_flight=in_flight, device=device, progress_path=progress_path,
-                           cluster=cluster, chunk_frames=chunk_frames, keep=keep, alpha=alpha,
+                           cluster=cluster, chunk_frames=chunk_frames, keep=keep, alpha=alpha, transfer=transfer,
                            temporal=TemporalOptions(temporal, temporal_mode, temporal_k, stats_path, show,
                                                     temporal_frames, temporal_method, lookahead, dense_motion))
     except Terminated as exc:
@@ -530,7 +543,7 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
             audio: str = "copy", progress_path: str | None = None, start: str | None = None,
             end: str | None = None, container: str | None = None, cluster: str | None = None,
             chunk_frames: int = 16, keep: tuple[str, ...] = (), jpeg_quality: int | None = None,
-            alpha: str = "coverage") -> int:
+            alpha: str = "coverage", transfer: str = "auto") -> int:
     """Check everything that can be checked without a device, then build the filter and run."""
     from mlaa_stream.io.sequence import printf_pattern
 
@@ -633,7 +646,7 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
                      chunk_frames=chunk_frames, temporal_spec=temporal.spec() if cluster else None,
                      lookahead=temporal.frames_ahead if temporal.spec() is not None else 0,
                      encoder_preset=encoder_preset, pix_fmt=pix_fmt, rate=rate, jpeg_quality=jpeg_quality,
-                     video_backend=video_backend, deinterlace=deinterlace, filter_kwargs=kwargs)
+                     video_backend=video_backend, deinterlace=deinterlace, filter_kwargs=kwargs, transfer=transfer)
         runner.prepare()
         _warn_unused_options(ctx, con, kind, job)
         transfer = getattr(runner, "transfer", None)
@@ -1024,7 +1037,7 @@ class _ImageJob(_Job):
 
         if self.opts.get("cluster"):
             return self._run_on_cluster()
-        filt = FilterSet(encoded, make_variant)
+        filt = FilterSet(encoded, make_variant, self.opts.get("transfer", "auto"))
         read_plan = getattr(self, "read_plan", self.plan) if temporal is not None else self.plan
         read_ahead = getattr(self, "read_ahead", set())
         progress = self._progress(len(read_plan))
@@ -1105,6 +1118,7 @@ class _ImageJob(_Job):
                                     overwrite=self.opts["overwrite"], strict=self.strict,
                                     chunk_frames=self.opts["chunk_frames"], on_frames=progress.update,
                                     temporal=temporal, done=done, jpeg_quality=self.opts.get("jpeg_quality"),
+                                    transfer=self.opts.get("transfer", "auto"),
                                     say=lambda msg: (progress.clear(), self.con.error(msg)),
                                     caution=lambda msg: (progress.clear(), self.con.warn(msg)))
         except ClusterAddressError as exc:
@@ -1184,10 +1198,7 @@ class _VideoJob(_Job):
         except VideoError as exc:
             raise Failed(str(exc)) from exc
         self.start, self.end = self._trim()
-        from mlaa_stream.device.transfer import FFMPEG_TRC
-        # HDR10 (PQ) / HLG: the codes are filtered in the light they code (device/transfer.py); OpenCV's decoder
-        # does not say what its frames code
-        self.transfer = FFMPEG_TRC.get(self.info.colour.get("color_trc")) if o["video_backend"] != "opencv" else None
+        self.transfer = video_transfer(self.info, o.get("transfer", "auto"), o["video_backend"] == "opencv")
         self.con.info(f"{self.input}: {self.info.width}x{self.info.height} {self.info.pix_fmt} "
                       f"{self.info.bits}-bit, {self.info.fps} fps, {self.info.frames or '?'} frames, "
                       f"{self.info.audio_streams} audio streams")

@@ -153,17 +153,7 @@ def test_an_hdr10_video_is_filtered_in_light(tmp_path):
     clips = {}
     for name, trc in (("pq", 16), ("sdr", 1)):
         src = tmp_path / f"{name}.mkv"
-        with av.open(str(src), "w") as out:
-            s = out.add_stream("libx265", rate=25, options={"x265-params": "log-level=error:lossless=1"})
-            s.width, s.height, s.pix_fmt = 64, 48, "yuv444p10le"
-            s.codec_context.color_primaries, s.codec_context.color_trc, s.codec_context.colorspace = 9, trc, 9
-            for _ in range(2):
-                vf = av.VideoFrame.from_ndarray(frame, format="rgb48le").reformat(format="yuv444p10le",
-                                                                                  dst_colorspace=9)
-                for p in s.encode(vf):
-                    out.mux(p)
-            for p in s.encode():
-                out.mux(p)
+        _hdr10_clip(src, frame, trc)
         res = CliRunner().invoke(cli, [str(src), "-v", "-o", str(tmp_path / f"{name}_out.mkv"),
                                        "--codec", "ffv1"])
         assert res.exit_code == 0, res.output
@@ -243,3 +233,69 @@ def test_the_hdr_video_bench_runs():
     codes, transfer = res[("pq", "codes")], res[("pq", "transfer")]
     assert len(codes) == len(transfer) == 4 and any("far_tele_192" in line for line in lines)
     assert np.mean([s[0] for s in transfer]) > np.mean([s[0] for s in codes])
+
+
+def _hdr10_clip(path, frame: np.ndarray, trc: int, frames: int = 2) -> None:
+    """A lossless HEVC 10-bit 4:4:4 clip of `frame` (16-bit RGB codes) tagged BT.2020 with transfer `trc`."""
+    with av.open(str(path), "w") as out:
+        s = out.add_stream("libx265", rate=25, options={"x265-params": "log-level=error:lossless=1"})
+        s.width, s.height, s.pix_fmt = frame.shape[1], frame.shape[0], "yuv444p10le"
+        s.codec_context.color_primaries, s.codec_context.color_trc, s.codec_context.colorspace = 9, trc, 9
+        for _ in range(frames):
+            vf = av.VideoFrame.from_ndarray(frame, format="rgb48le").reformat(format="yuv444p10le", dst_colorspace=9)
+            for p in s.encode(vf):
+                out.mux(p)
+        for p in s.encode():
+            out.mux(p)
+
+
+def _read_png(path) -> tuple[np.ndarray, tuple | None]:
+    import OpenImageIO as oiio
+    image = oiio.ImageInput.open(str(path))
+    try:
+        cicp = image.spec().getattribute("CICP")
+        return image.read_image(format="uint16").astype(np.int64), (tuple(cicp) if cicp is not None else None)
+    finally:
+        image.close()
+
+
+def test_transfer_option_says_what_files_do_not(tmp_path):
+    """--transfer pq filters an untagged 16-bit PNG as the tagged one is filtered (auto), --transfer sdr a tagged
+    one as the untagged one is (the codes taken as sRGB)."""
+    frame = coded(half_plane(40, 56, 1, 0.45, 9.7, 1000 / 203, 1 / 203), "pq")
+    for name, cicp in (("tagged", (9, 16, 0, 1)), ("plain", None)):
+        (tmp_path / name).mkdir()
+        _png(tmp_path / name / "f.png", frame, cicp)
+    runs = {"tagged auto": ("tagged", "auto"), "plain auto": ("plain", "auto"), "plain pq": ("plain", "pq"),
+            "tagged sdr": ("tagged", "sdr")}
+    out = {}
+    for key, (folder, choice) in runs.items():
+        dst = tmp_path / key.replace(" ", "_")
+        res = CliRunner().invoke(cli, [str(tmp_path / folder), "-o", str(dst), "--transfer", choice])
+        assert res.exit_code == 0, res.output
+        out[key] = _read_png(dst / "f.png")[0]
+    assert np.array_equal(out["plain pq"], out["tagged auto"]) and np.array_equal(out["tagged sdr"], out["plain auto"])
+    assert not np.array_equal(out["tagged auto"], out["plain auto"])
+
+
+@pytest.mark.skipif("libx265" not in av.codecs_available, reason="this FFmpeg has no libx265 to write an HDR10 source")
+def test_hdr10_video_to_frames_and_back_keeps_its_transfer(tmp_path):
+    """An HDR10 clip written out as PNG frames: filtered through PQ (the frames equal the video filtered to a video,
+    decoded) and each frame carries the video's cICP (BT.2020, PQ); those frames made into a video again: it is
+    tagged BT.2020 / PQ (before: frames and video untagged, shown as SDR by anything that read them)."""
+    frame = coded(half_plane(48, 64, 1, 0.45, 9.7, 1000 / 203, 1 / 203), "pq")
+    _hdr10_clip(tmp_path / "in.mkv", frame, 16)
+    res = CliRunner().invoke(cli, [str(tmp_path / "in.mkv"), "-o", str(tmp_path / "frames" / "f_%04d.png")])
+    assert res.exit_code == 0, res.output
+    pixels, cicp = _read_png(tmp_path / "frames" / "f_0001.png")
+    assert cicp == (9, 16, 0, 1)
+    res = CliRunner().invoke(cli, [str(tmp_path / "in.mkv"), "-o", str(tmp_path / "out.mkv"), "--codec", "ffv1"])
+    assert res.exit_code == 0, res.output
+    with av.open(str(tmp_path / "out.mkv")) as c:
+        video = next(c.decode(video=0)).to_ndarray(format="rgb48le").astype(np.int64)
+    assert np.abs(pixels - video).max() <= 64   # the same filter; ffv1's YUV round trip of the video only
+    res = CliRunner().invoke(cli, [str(tmp_path / "frames" / "f_%04d.png"), "-o", str(tmp_path / "again.mkv"),
+                                   "--codec", "ffv1"])
+    assert res.exit_code == 0, res.output
+    tags = probe_video(str(tmp_path / "again.mkv")).colour
+    assert tags["color_trc"] == 16 and tags["color_primaries"] == 9

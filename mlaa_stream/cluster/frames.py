@@ -87,7 +87,8 @@ def _worker_filter(kwargs: dict):
 
 
 def filter_chunk(chunk: Chunk, filter_kwargs: dict, overwrite: bool, strict: bool,
-                 like: tuple | None = None, temporal=None, jpeg_quality: int | None = None) -> ChunkResult:
+                 like: tuple | None = None, temporal=None, jpeg_quality: int | None = None,
+                 transfer: str = "auto") -> ChunkResult:
     """Run on a worker: read, filter and write the chunk's frames. Outputs a previous run of this chunk
     completed are kept (a rerun after a worker died). Raises (and the task is retried) where a sequence
     would stop on one machine. `temporal` (a TemporalSpec): a new stage runs over the chunk's warm-up
@@ -103,7 +104,7 @@ def filter_chunk(chunk: Chunk, filter_kwargs: dict, overwrite: bool, strict: boo
         else:
             todo.append(ff)
     encoded = _worker_filter(filter_kwargs)
-    filt = FilterSet(encoded, lambda options: _worker_filter(dict(filter_kwargs, **options)))
+    filt = FilterSet(encoded, lambda options: _worker_filter(dict(filter_kwargs, **options)), transfer)
     w = temporal.warmup if temporal is not None else 0
     while True:
         report = Report()
@@ -181,11 +182,12 @@ def run_chunks(client, files: list[FrameFile], filter_kwargs: dict, *, overwrite
                chunk_frames: int = CHUNK_FRAMES, on_frames: Callable[[int], None] | None = None,
                say: Callable[[str], None] | None = None, temporal=None,
                done: frozenset[str] = frozenset(), jpeg_quality: int | None = None,
-               caution: Callable[[str], None] | None = None) -> Report:
+               caution: Callable[[str], None] | None = None, transfer: str = "auto") -> Report:
     """Filter `files` on the cluster behind `client`; returns what happened to each file. Progress:
     `on_frames(done)` after each chunk; failures are said through `say`, warnings through `caution` (else `say`).
     Raises ClusterJobError naming the chunk that failed twice.
     `temporal`: a TemporalSpec (mlaa_stream/cluster/temporal.py), or None for the spatial filter only.
+    `transfer`: --transfer (io/sequence.py image_transfer's choice).
     `done`: outputs known complete (--resume with the temporal stage: `files` is then the whole job, so that the
     chunks are those of the first run, each with its warm-up and look-ahead frames; a chunk whose outputs are all
     done is not run, and the others write only what is missing, as a chunk rerun after its worker died does)."""
@@ -203,7 +205,7 @@ def run_chunks(client, files: list[FrameFile], filter_kwargs: dict, *, overwrite
         first = read_image(files[0].src)
         like = ((first.pixels.shape, first.pixels.dtype), files[0])
     futures = {client.submit(filter_chunk, c, filter_kwargs, overwrite, strict, like, temporal, jpeg_quality,
-                             retries=1, pure=False,
+                             transfer, retries=1, pure=False,
                              key=f"mlaa-chunk-{c.index}-{os.getpid()}-{id(files)}"): c for c in chunks}
     frames = 0
     failure: BaseException | None = None

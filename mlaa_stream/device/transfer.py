@@ -18,6 +18,7 @@ from functools import lru_cache
 import numpy as np
 
 TRANSFERS = ("pq", "hlg")
+TRANSFER_CHOICES = ("auto", *TRANSFERS, "sdr")   # --transfer: read from the file's tags, said, or none
 TRANSFER_NAMES = {"pq": "SMPTE ST 2084 (PQ, HDR10)", "hlg": "ARIB STD-B67 (HLG)"}
 # FFmpeg's AVColorTransferCharacteristic values (a video's color_trc) of the transfers above
 FFMPEG_TRC = {16: "pq", 18: "hlg"}

@@ -688,15 +688,17 @@ def srgb_encoded(pixels: np.ndarray, spec: oiio.ImageSpec) -> tuple[np.ndarray, 
 
 
 def write_image(path: str, pixels: np.ndarray, spec: oiio.ImageSpec | None = None, *,
-                overwrite: bool = False, linear: bool = False, quality: int | None = None) -> bool:
+                overwrite: bool = False, linear: bool = False, quality: int | None = None,
+                cicp: tuple[int, int, int, int] | None = None) -> bool:
     """Write `pixels` to `path` atomically (temporary name, then rename), in the spec's sample type.
 
     Without a spec the sample type is the array's and alpha is straight (as decoded video has it). Premultiplied
     alpha (is_premultiplied: EXR) is divided out for a format of straight alpha (unpremultiplies: PNG). `linear`:
     float pixels are linear light (is_linear); where the format stores integers they are encoded to sRGB
     (srgb_encoded), else written as they are. True when they were encoded. `quality`: a JPEG output's, 1-100 (the
-    source JPEG's, Image.quality, or --jpeg-quality); None: DEFAULT_JPEG_QUALITY. A full disk raises OSError(ENOSPC);
-    any other failure raises ImageWriteError naming the file.
+    source JPEG's, Image.quality, or --jpeg-quality); None: DEFAULT_JPEG_QUALITY. `cicp`: the colour description
+    (primaries, transfer, matrix, range; H.273) to write, for HDR frames from a video. A full disk raises
+    OSError(ENOSPC); any other failure raises ImageWriteError naming the file.
     """
     pixels = np.ascontiguousarray(pixels)
     if pixels.ndim == 2:
@@ -708,6 +710,8 @@ def write_image(path: str, pixels: np.ndarray, spec: oiio.ImageSpec | None = Non
                                   f"got {pixels.dtype}")
         spec = oiio.ImageSpec(pixels.shape[1], pixels.shape[0], pixels.shape[2], fmt)
         spec.attribute("oiio:UnassociatedAlpha", 1)
+    if cicp is not None:
+        spec.attribute("CICP", "int[4]", tuple(int(v) for v in cicp))
     spec = output_spec(spec, pixels)
     if unpremultiplies(path, spec):
         pixels, spec = unpremultiplied(pixels, spec)

@@ -105,12 +105,15 @@ def is_linear(image: Image) -> bool:
     return image.pixels.dtype.kind == "f" if tagged is None else tagged
 
 
-def image_transfer(image: Image) -> str | None:
-    """The HDR transfer an integer image's samples code light with ("pq", "hlg"; device/transfer.py): its CICP
-    (PNG's cICP, AVIF / HEIF / JPEG XL's colour description: H.273's codes, FFmpeg's too) or an OpenColorIO-style
-    colour space name (pq_rec2020_display, hlg_rec2020_display); None for anything else."""
-    if image.pixels.dtype.kind not in "ui":
+def image_transfer(image: Image, choice: str = "auto") -> str | None:
+    """The HDR transfer an integer image's samples code light with ("pq", "hlg"; device/transfer.py): `choice` where
+    it names one ("sdr": none), else ("auto") its CICP (PNG's cICP, AVIF / HEIF / JPEG XL's colour description:
+    H.273's codes, FFmpeg's too) or an OpenColorIO-style colour space name (pq_rec2020_display,
+    hlg_rec2020_display); None for anything else and for float images (linear light or display-encoded)."""
+    if image.pixels.dtype.kind not in "ui" or choice == "sdr":
         return None
+    if choice != "auto":
+        return choice
     cicp = image.spec.getattribute("CICP")
     if cicp is not None and len(cicp) >= 2:
         return FFMPEG_TRC.get(int(cicp[1]))
@@ -121,15 +124,15 @@ def image_transfer(image: Image) -> str | None:
 class FilterSet:
     """The filter for display-encoded images and, made on first need by `make(options)` with the filter's options
     for them, one for linear-light images (`linear_input=True`: EXRs and sRGB PNGs can share a folder) and one per
-    HDR transfer (`transfer=`: PQ / HLG PNGs, image_transfer)."""
+    HDR transfer (`transfer=`: PQ / HLG PNGs, image_transfer with `transfer` as its choice)."""
 
-    def __init__(self, encoded, make: Callable[[dict], object]):
-        self.encoded, self._make = encoded, make
+    def __init__(self, encoded, make: Callable[[dict], object], transfer: str = "auto"):
+        self.encoded, self._make, self.transfer = encoded, make, transfer
         self.variants: dict[tuple, object] = {}
 
     def for_item(self, item: Item):
         image = item.meta[1]
-        transfer = image_transfer(image)
+        transfer = image_transfer(image, self.transfer)
         key = ("transfer", transfer) if transfer else ("linear_input", True) if is_linear(image) else None
         if key is None:
             return self.encoded
