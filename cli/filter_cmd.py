@@ -652,8 +652,8 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
         transfer = getattr(runner, "transfer", None)
         if transfer is not None and kwargs.get("linear", True):  # --display-space: the codes' own mix, as asked
             kwargs["transfer"] = transfer   # the same dict the job holds: a cluster's workers get it too
-            con.info(f"{'standard input' if input_path == '-' else input_path}: HDR video coded with "
-                     f"{TRANSFER_NAMES[transfer]}: filtered in the linear light it codes")
+            con.info(f"{'standard input' if input_path == '-' else input_path}: coded with {TRANSFER_NAMES[transfer]} "
+                     f"(HDR): filtered in the linear light its codes stand for")
         info = getattr(runner, "info", None)
         if info is not None and getattr(info, "interlaced", None) and deinterlace == "off":
             # two fields a field-time apart in one frame: their combing on anything that moves looks like jaggies
