@@ -21,6 +21,7 @@ alpha is one value everywhere (an opaque render) is filtered as before, alpha ke
 """
 from __future__ import annotations
 
+import threading
 from functools import lru_cache
 
 import cv2
@@ -256,6 +257,7 @@ class MergePass:
         self.context, self.luts, self.pass_defines = context, luts, dict(pass_defines)
         self.queue = cl.CommandQueue(context.ctx, context.device)   # in order: upload, merge, download
         self._buffers: dict[tuple, list] = {}   # (h, w, dtype) -> [frame, colour in, colour out, alpha, out]
+        self._lock = threading.Lock()   # frames collected in two threads share the buffers
 
     def merge(self, split: AlphaSplit, colour_out: np.ndarray, alpha_out: np.ndarray) -> np.ndarray:
         import pyopencl as cl
@@ -271,14 +273,15 @@ class MergePass:
         kernel = self.context.kernel("alpha", "alpha_merge", defs)
         arrays = [np.ascontiguousarray(a, work) for a in (split.frame, split.colour, colour_out, alpha_out)]
         key = (h, w, work)
-        if key not in self._buffers:
-            self._buffers = {key: [self.context.buffer(a.nbytes) for a in (*arrays, arrays[0])]}  # the last: out
-        bufs = self._buffers[key]
-        for buf, a in zip(bufs, arrays):
-            cl.enqueue_copy(self.queue, buf, a, is_blocking=False)
-        kernel(self.queue, (w, h), None, *bufs[:4], self.luts, bufs[4], np.int32(w), np.int32(h))
         out = np.empty((h, w, 4), work)
-        cl.enqueue_copy(self.queue, out, bufs[4], is_blocking=True)
+        with self._lock:
+            if key not in self._buffers:
+                self._buffers = {key: [self.context.buffer(a.nbytes) for a in (*arrays, arrays[0])]}  # last: out
+            bufs = self._buffers[key]
+            for buf, a in zip(bufs, arrays):
+                cl.enqueue_copy(self.queue, buf, a, is_blocking=False)
+            kernel(self.queue, (w, h), None, *bufs[:4], self.luts, bufs[4], np.int32(w), np.int32(h))
+            cl.enqueue_copy(self.queue, out, bufs[4], is_blocking=True)
         return out if work == split.dtype else out.astype(split.dtype)
 
 
