@@ -17,8 +17,6 @@
 //         box half-widths: w *= clamp((REJECT - t) / (REJECT - 1), 0, 1) -- history that far off is
 //         another surface (a disocclusion the flow missed), not aliasing to be averaged
 //   out = c + w (h - c), encoded back by table; where w = 0 the current pixel is copied untouched.
-//   Integer codes of an HDR transfer (ENCODE_WARP, device/transfer.py): the decode and encode tables are the
-//   transfer's, so the blend mixes the light the codes stand for (relative to reference white, up to 49).
 //   FLAT rule (any mode, before everything above): where all 9 samples of the pixel's 3x3 neighbourhood
 //   (edges replicated) are bit-identical in the frame's own type, the clip box is [c - EXT_FLOOR,
 //   c + EXT_FLOOR] and the blend could move the pixel by a rounding level at most, so it is skipped:
@@ -55,9 +53,8 @@ inline float4 from_linear(__global const float *luts, float4 c)
 #if LINEAR_INPUT
     return c;
 #else
-    // encode_mix: with ENCODE_WARP (integer codes of an HDR transfer, device/transfer.py) the encode table is the
-    // transfer's, read at encode_arg of the light; without it lut_read(enc, c) as ever
-    return (float4)(encode_mix(luts, c.x), encode_mix(luts, c.y), encode_mix(luts, c.z), c.w);
+    __global const float *enc = luts + 2 * (LUT_SIZE + 1);
+    return (float4)(lut_read(enc, c.x), lut_read(enc, c.y), lut_read(enc, c.z), c.w);
 #endif
 }
 

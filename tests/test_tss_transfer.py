@@ -1,20 +1,17 @@
-"""The temporal stages on HDR video's codes (device/transfer.py): TSS and the blend mix the light PQ / HLG codes stand
-for, as the spatial Filter(transfer=...) does; without a transfer every output is as before (tests/test_tss.py,
-tests/test_temporal.py)."""
+"""The temporal stages on HDR video's codes (device/transfer.py): TSS averages the light PQ / HLG codes stand for, as
+the spatial Filter(transfer=...) mixes it; the blend keeps blending the codes; without a transfer every output is as
+before (tests/test_tss.py, tests/test_temporal.py)."""
 from __future__ import annotations
 
 import cv2
 import numpy as np
-import pyopencl as cl
 import pytest
 
-from mlaa_stream.device.colour import device_luts
 from mlaa_stream.device.formats import frame_format, with_transfer
-from mlaa_stream.device.transfer import pq_to_linear, with_transfer_tables
+from mlaa_stream.device.transfer import pq_to_linear
 from mlaa_stream.spatial.filter import Filter
 from mlaa_stream.temporal.methods import make_stage
-from mlaa_stream.temporal.stage import (CUR_AFFINE, PREV_AFFINE, SEGMENT, decode_table, kernel_defines, make_params,
-                                        temporal_reference)
+from mlaa_stream.temporal.stage import decode_table
 from mlaa_stream.temporal.tss import (EPS, GRID, LINEAR_RANGE, MIN_CELLS, ONE, OVER, TSSStage, encode_table,
                                       level_table, tss_frame_reference)
 from mlaa_stream.yardstick import metrics as M
@@ -63,7 +60,7 @@ def test_tss_tables_hold_the_light_of_the_codes():
     assert frame_format(np.zeros((2, 2, 3), np.float32), False) == with_transfer(
         frame_format(np.zeros((2, 2, 3), np.float32), False), "pq")   # float frames hold no codes of a transfer
     ltab, etab = level_table(fmt), encode_table(fmt)
-    light = decode_table(fmt)   # the blend's decode table: the transfer's, as the TSS ring reads it
+    light = decode_table(fmt)   # the decode table the TSS ring reads: the transfer's
     assert np.array_equal(ltab == OVER, light > LINEAR_RANGE) and ONE - 16 < ltab[light <= LINEAR_RANGE].max() < ONE
     back = np.abs(etab[ltab].astype(np.int64) - np.arange(65536))
     inside = light <= LINEAR_RANGE
@@ -85,46 +82,6 @@ def test_dark_codes_within_a_ring_step_keep_the_spatial_pixel(stage_parts):
     stage = TSSStage(frames=len(ring), bgr=False, context=stage_parts, transfer="pq")
     out, cells = _run_kernel(stage, cur, cur, ring, False, 1)
     assert np.array_equal(cells, rcells) and np.array_equal(out, cur)
-
-
-def test_blend_kernel_matches_reference_on_pq_codes(stage_parts):
-    """The blend (kernels/temporal.cl) on 16-bit PQ codes: decode and encode by the transfer's tables, within one code
-    of the reference (as the other formats, tests/test_temporal.py), and unlike the sRGB tables' blend."""
-    rng = np.random.default_rng(7)
-    h, w = 29, 70
-    cur = coded(rng.choice([0.01, 0.5, 2.0, 6.0], (h, w, 3)) * rng.uniform(0.8, 1.2, (h, w, 3)), "pq")
-    hist = (pq_to_linear(cur / 65535.0) * rng.uniform(0.6, 1.4, (h, w, 1))).astype(np.float16)
-    hist = np.concatenate([hist, np.ones((h, w, 1), np.float16)], -1)
-    flow = (rng.standard_normal((h, w, 2)) * 1.5).astype(np.float32)
-    params = make_params((1.01, 0.02, 1.3, -0.01, 0.99, -0.7), (1.0, 0.0, 0.5, 0.0, 1.0, 0.2), 1, 1, 0.5, 0.5,
-                         1.25, False)
-    fmt = with_transfer(frame_format(cur, False), "pq")
-    ctx = stage_parts
-    kern = ctx.kernel("temporal", "temporal_blend", kernel_defines(fmt))
-    mf = cl.mem_flags
-
-    def buf(a):
-        return cl.Buffer(ctx.ctx, mf.READ_WRITE | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(a))
-
-    dst, hist_out, conf = ctx.buffer(cur.nbytes), ctx.buffer(hist.nbytes), ctx.buffer(h * w)
-    kern(ctx.queue, (-(-w // SEGMENT), h), None, buf(cur), buf(hist), hist_out, dst, conf, buf(flow), buf(-flow),
-         buf(flow), buf(params), buf(with_transfer_tables(device_luts(), "pq")), buf(decode_table(fmt)), np.int32(w),
-         np.int32(h), np.int32(w), np.int32(h), np.int32(w), np.int32(h), np.int32(CUR_AFFINE), np.int32(PREV_AFFINE),
-         buf(np.zeros((h, w), np.uint8)), np.int32(0))
-    out, ho, co = np.empty_like(cur), np.empty_like(hist), np.empty((h, w), np.uint8)
-    for dev, host in ((dst, out), (hist_out, ho), (conf, co)):
-        cl.enqueue_copy(ctx.queue, host, dev)
-    ctx.queue.finish()
-    ref, rhist, rconf = temporal_reference(cur, hist, params, CUR_AFFINE, PREV_AFFINE, flow, -flow, flow,
-                                           transfer="pq")
-    assert 0.05 < (rconf > 0).mean() < 1.0
-    d = np.abs(out.astype(np.int64) - ref.astype(np.int64))
-    assert d.max() <= 1 and (d == 0).mean() >= 0.999
-    np.testing.assert_allclose(ho.astype(np.float32), rhist.astype(np.float32), rtol=2e-3, atol=1e-3)
-    assert np.abs(co.astype(int) - rconf.astype(int)).max() <= 1
-    assert float(rhist[..., :3].astype(np.float32).max()) > 1.5   # the history holds light over reference white
-    plain, _, _ = temporal_reference(cur, hist, params, CUR_AFFINE, PREV_AFFINE, flow, -flow, flow)
-    assert (np.abs(plain.astype(np.int64) - ref.astype(np.int64)) > 257)[rconf > 0].mean() > 0.2
 
 
 def _lamp_pan(n: int, h: int, w: int, samples: int, speed: tuple[float, float] = (0.3, 0.11)) -> np.ndarray:
@@ -164,15 +121,14 @@ def test_tss_pan_of_a_lamp_edge_converges_to_the_light():
 
 def test_every_way_of_making_a_stage_takes_the_transfer():
     """make_stage's methods, TemporalSpec.stage (the command line, the cluster: from the Filter's transfer) and the
-    Antialiaser hand the transfer to every stage they make; a transfer with linear input is refused."""
+    Antialiaser hand the transfer to every TSS stage they make; a transfer with linear input is refused."""
     from mlaa_stream import Antialiaser
     from mlaa_stream.cluster.temporal import TemporalSpec
     with Filter(transfer="hlg", bgr=False) as filt:
-        for method in ("auto", "tss", "blend", "tss+blend"):
+        for method in ("auto", "tss", "tss+blend"):   # the blend keeps blending the codes: it has no transfer
             stage = TemporalSpec(method).stage(filt)
-            parts = [getattr(stage, "tss", None), getattr(stage, "blend", None)] if method != "tss" and \
-                method != "blend" else [stage]
-            assert all(p.transfer == "hlg" for p in parts), method
+            assert (stage if method == "tss" else stage.tss).transfer == "hlg", method
+            assert not hasattr(getattr(stage, "blend", None), "transfer")
             stage.close()
         with make_stage("tss", filt.context, bgr=False) as plain:
             assert plain.transfer is None

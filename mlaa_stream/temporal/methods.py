@@ -53,7 +53,8 @@ def make_stage(method: str, context, *, bgr: bool, frames: int | None = None, mo
     them in as `future`: mlaa_stream.pipeline does); not for the blend alone, which reads the past only.
     `linear_input`: the frames are linear light (EXR; the spatial Filter's linear_input). `dense_samples`: TSS tracks
     per-tile motion on dense frames (tss.TSSStage's; slow, off by default). `transfer`: "pq" / "hlg", the frames are
-    codes of HDR video (the spatial Filter's transfer): every stage mixes the light they stand for."""
+    codes of HDR video (the spatial Filter's transfer): TSS averages the light they stand for; the blend (history
+    reprojection) keeps blending the codes, as TAA resolves in a perceptual space (docs/temporal.md, "HDR video")."""
     check(method)
     if lookahead and method == "blend":
         raise ValueError("lookahead: the blend method reads the past only; use a method with TSS")
@@ -66,8 +67,7 @@ def make_stage(method: str, context, *, bgr: bool, frames: int | None = None, mo
         kw["motion"] = motion
     if method == "blend":
         from mlaa_stream.temporal.stage import TemporalStage
-        return TemporalStage(context=context, mode=mode, bgr=bgr, show=show, linear_input=linear_input,
-                             transfer=transfer, **kw)
+        return TemporalStage(context=context, mode=mode, bgr=bgr, show=show, linear_input=linear_input, **kw)
     from mlaa_stream.temporal.tss import DEFAULT_FRAMES, TSSStage, TSSThenBlend
     ring = DEFAULT_FRAMES if frames is None else check_frames(frames, "frames")   # 0 is refused, not made the default
     if method == "tss":

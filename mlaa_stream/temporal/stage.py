@@ -26,8 +26,8 @@ import pyopencl as cl
 
 from mlaa_stream.device.colour import device_luts, lut_read
 from mlaa_stream.device.context import Context, default_context
-from mlaa_stream.device.formats import LUT_SIZE, FrameFormat, defines_for, frame_format, with_transfer
-from mlaa_stream.device.transfer import check_transfer, encode_arg, with_transfer_tables
+from mlaa_stream.device.formats import LUT_SIZE, FrameFormat, defines_for, frame_format
+from mlaa_stream.device.transfer import with_transfer_tables
 from mlaa_stream.spatial.fallback import FALLBACK_TILE
 from mlaa_stream.spatial.exposure import HeldExposure, exposed
 from mlaa_stream.spatial.nonfinite import restore_out_of_range
@@ -339,8 +339,7 @@ class TemporalStage:
                  context: Context | None = None, k: float = DEFAULT_K, gamma: float = GAMMA,
                  fb_check: bool = True, linear_input: bool = False, preset: str = "fast",
                  where: str = "everywhere", regions_from=None,
-                 motion: Callable[[int], np.ndarray | None] | None = None, auto_exposure: bool = True,
-                 transfer: str | None = None):
+                 motion: Callable[[int], np.ndarray | None] | None = None, auto_exposure: bool = True):
         """where="render": history only on moving pixels of render regions (WHERE); the regions are the
         `regions` argument of each call, or else `regions_from.last_regions` (a Filter(keep_regions=True)
         whose frame was collected just before the call).
@@ -349,9 +348,7 @@ class TemporalStage:
         motion vectors; tss_check's exact-motion oracle), or None for DIS; a known field gets no
         forward-backward check. `auto_exposure`: linear-light float frames are blended at the power of two of
         exposure that puts their key near 1 (spatial/exposure.py), held over the shot, as the spatial filter sees
-        them; False: at the exposure they come in (TSSThenBlend hands its blend frames at TSS's scale).
-        `transfer`: "pq" or "hlg" (HDR video, device/transfer.py): integer frames are blended in the light their codes
-        stand for, as the spatial Filter(transfer=...) mixes them, and coded back."""
+        them; False: at the exposure they come in (TSSThenBlend hands its blend frames at TSS's scale)."""
         if mode not in MODES:
             raise ValueError(f"mode: expected one of {', '.join(MODES)}, got {mode!r}")
         if show not in SHOWS:
@@ -368,10 +365,6 @@ class TemporalStage:
         self.strength, self.k, self.gamma = float(strength_k), float(k), float(gamma)
         self.mode, self.bgr, self.show = mode, bool(bgr), show
         self.fb_check, self.linear_input = bool(fb_check), bool(linear_input)
-        self.transfer = check_transfer(transfer)
-        if self.transfer is not None and self.linear_input:
-            raise ValueError("transfer and linear_input exclude each other: a transfer's frames hold codes, "
-                             "linear input holds light")
         self.exposure = HeldExposure() if auto_exposure else None
         self.stats: list[dict] = []
         self._off = mode == "off" or self.strength == 0.0
@@ -383,9 +376,8 @@ class TemporalStage:
         self._buffers: _Buffers | None = None
         if not self._off:
             self.queue = cl.CommandQueue(self.context.ctx, self.context.device)
-            # with a transfer its decode and encode (the kernel's from_linear reads the encode through encode_arg)
             self._luts = cl.Buffer(self.context.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
-                                   hostbuf=with_transfer_tables(device_luts(), self.transfer))
+                                   hostbuf=device_luts())
         self.reset()
 
     @property
@@ -450,7 +442,7 @@ class TemporalStage:
                                "history_weight_mean": 0.0})
             return frame_filtered
         what = f"frame {index}"
-        fmt = with_transfer(frame_format(frame_filtered, self.bgr, what=f"{what} (filtered)"), self.transfer)
+        fmt = frame_format(frame_filtered, self.bgr, what=f"{what} (filtered)")
         fin = frame_format(frame_in, self.bgr, what=f"{what} (input)")
         if (fin.height, fin.width) != (fmt.height, fmt.width):
             raise ValueError(f"{what}: expected the input and filtered frames to be the same size, "
@@ -789,17 +781,16 @@ def sample_field(fld: np.ndarray, scale: int, xs: np.ndarray, ys: np.ndarray) ->
 def temporal_reference(cur: np.ndarray, hist: np.ndarray, params: np.ndarray, cur_mode: int,
                        prev_mode: int, flow_b: np.ndarray | None = None, flow_f: np.ndarray | None = None,
                        flow_prev: np.ndarray | None = None, bgr: bool = False,
-                       linear_input: bool = False, gate: np.ndarray | None = None,
-                       transfer: str | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                       linear_input: bool = False,
+                       gate: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """What kernels/temporal.cl computes, in float32 numpy (slow, plain): returns (out frame,
     new history (H, W, 4) float16, weight (H, W) uint8). `hist` is (H, W, 4) float16 linear RGBA;
-    `gate` (H, W), when given: no history where it is 0 (where="render"); `transfer`: integer codes of that
-    transfer (HDR video: decoded and coded back by its tables, the encode read through encode_arg)."""
+    `gate` (H, W), when given: no history where it is 0 (where="render")."""
     f32 = np.float32
-    fmt = with_transfer(frame_format(cur, bgr), transfer)
+    fmt = frame_format(cur, bgr)
     h, w = fmt.height, fmt.width
     pmax = f32(_PMAX[fmt.dtype])
-    luts = with_transfer_tables(device_luts(), fmt.transfer)
+    luts = device_luts()
     raw = np.asarray(cur).reshape(h, w, fmt.channels)
     a = raw.astype(f32) * (f32(1.0) / pmax)
     if fmt.channels == 1:
@@ -885,7 +876,7 @@ def temporal_reference(cur: np.ndarray, hist: np.ndarray, params: np.ndarray, cu
     conf = (wgt * f32(255.0) + f32(0.5)).astype(np.uint8)
     enc = out_lin.copy()
     if not linear_input:
-        enc[..., :3] = lut_read(luts[2 * (LUT_SIZE + 1):], encode_arg(out_lin[..., :3], fmt.transfer))
+        enc[..., :3] = lut_read(luts[2 * (LUT_SIZE + 1):], out_lin[..., :3])
     if np.issubdtype(fmt.dtype, np.integer):
         stored = np.floor(np.clip(enc * pmax + f32(0.5), 0, pmax)).astype(fmt.dtype)
     else:

@@ -1712,8 +1712,8 @@ class TSSThenBlend:
                  lookahead: int = 0, linear_input: bool = False, dense_samples: bool = False,
                  transfer: str | None = None, **blend_kwargs):
         """`blend_mode`: the blend's motion model when not `mode` ("auto": "dense"); `lookahead`, `dense_samples`:
-        TSS's (the blend reads the past only); `linear_input`: both stages' (linear-light frames); `transfer`: both
-        stages' (codes of HDR video, mixed as light). `show="history"`:
+        TSS's (the blend reads the past only); `linear_input`: both stages' (linear-light frames); `transfer`: TSS's
+        (codes of HDR video, averaged as light; the blend keeps blending the codes: make_stage). `show="history"`:
         the blend's weights where it runs everywhere ("tss+blend"); with the blend only in render regions ("auto")
         TSS's samples per pixel, as the blend's view would be rejection everywhere else."""
         from mlaa_stream.temporal.stage import TemporalStage
@@ -1722,7 +1722,7 @@ class TSSThenBlend:
         self._tss_view = show == "history" and blend_kwargs.get("where") == "render"
         self.blend = TemporalStage(device, bgr=bgr, mode=blend_mode or mode, show=None if self._tss_view else show,
                                    context=self.tss.context, linear_input=linear_input, auto_exposure=False,
-                                   transfer=transfer, **blend_kwargs)
+                                   **blend_kwargs)
         self._scale = 1.0   # the exposure the blend's history is at (TSS's, spatial/exposure.py)
 
     @property
