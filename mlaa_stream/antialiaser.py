@@ -75,7 +75,8 @@ class Antialiaser:
     `alpha`: "coverage" antialiases the alpha of BGRA frames whose alpha varies (straight alpha, as OpenCV reads
     PNGs) with their colour (spatial/alpha.py); "keep" leaves it as it is.
     `transfer="pq"` / `"hlg"`: the frames are 8/16-bit codes of HDR video (HDR10's SMPTE ST 2084, HLG): the filter
-    works in the linear light they code and codes its output back (device/transfer.py); so does the temporal stage.
+    works in the linear light they code and codes its output back (device/transfer.py); so does temporal
+    supersampling, while the blend keeps blending the codes.
     """
 
     def __init__(self, device: str | int | None = None, *, preset: str | None = None,
