@@ -2,7 +2,8 @@
 // Reference: mlaa_stream.temporal.tss.tss_reference (the plain statement; the module's header says why).
 //
 // The ring: K input frames as linear light in 16-bit fixed point, L = floor(clamp(lin, 0, 1) 65535 + 0.5)
-// (ltab: the stored code's L, one load; float frames: at most TSS_TOP, TSS_OVER over range), planar by row
+// (ltab: the stored code's L, one load; float frames and codes of a transfer: lin / TSS_RANGE, at most TSS_TOP,
+// TSS_OVER over range), planar by row
 // (row y of a slot: width Ls of R, then G, then B; grey frames one plane), written once per frame by
 // tss_ingest. So the resolve reads contiguous 16-bit samples, compares and sums integers and decodes nothing
 // per tap; the output is encoded from L by one load of etab (integer frames: 65536 entries; float frames read the tables).
@@ -41,10 +42,12 @@
 // Float frames can hold values above 1 (HDR renders, linear EXR). The ring holds [0, TSS_RANGE] (linear
 // float frames: LINEAR_RANGE of mlaa_stream.temporal.tss, else 1); a sample above it is stored as TSS_OVER and
 // is never averaged: in-range samples top out at TSS_TOP, the colour box is capped there, and a pixel whose
-// 3x3 box or spatial output is over range keeps the spatial pixel. Integer frames have no over-range code
-// (TSS_TOP = TSS_OVER: the cap changes nothing).
+// 3x3 box or spatial output is over range keeps the spatial pixel. Integer codes of an HDR transfer
+// (ENCODE_WARP, device/transfer.py: light up to 49) are held the same way: their ltab maps a code to its light over
+// [0, LINEAR_RANGE], TSS_OVER above it, and etab codes the light back (tss.py level_table, encode_table). Other
+// integer frames have no over-range code (TSS_TOP = TSS_OVER: the cap changes nothing).
 #define TSS_OVER 65535
-#ifdef PIXEL_IS_FLOAT
+#if defined(PIXEL_IS_FLOAT) || ENCODE_WARP
 #define TSS_TOP 65534
 #else
 #define TSS_TOP 65535
@@ -139,10 +142,19 @@ inline void tss_store(__global const float *luts, __global const ushort *ltab, _
     const float mm[3] = {mr, mg, mb};
     PIXEL_T ev[3];
     int dead = 1;
+#if ENCODE_WARP
+    // codes of a transfer: also dead where every plane's L is within one ring step of the spatial pixel's. The
+    // ring's step (LINEAR_RANGE / 65535 of reference white, 0.05 cd/m2 for PQ) spans more than DEAD_CODES codes
+    // below ~0.2 cd/m2: there the round trip through the ring alone would move a code by up to 2000
+    int ldead = 1;
+#endif
     for (int c = 0; c < TSS_PLANES; ++c) {
         const float s = (float)sl[c];
         float t = s + (mm[c] / fn - s) * a + 0.5f;
         const int q = (int)(t > 0.0f ? (t < TSS_ONE ? t : TSS_ONE) : 0.0f);
+#if ENCODE_WARP
+        ldead &= abs(q - sl[c]) <= 1;
+#endif
 #if !LINEAR_INPUT && !defined(PIXEL_IS_FLOAT)
         const PIXEL_T e = etab[q];
 #elif LINEAR_INPUT
@@ -172,6 +184,9 @@ inline void tss_store(__global const float *luts, __global const ushort *ltab, _
 #endif
         ev[c] = e;
     }
+#if ENCODE_WARP
+    dead |= ldead;
+#endif
     for (int c = 0; c < TSS_PLANES; ++c) {
         const PIXEL_T e = dead ? (CHANNELS == 1 ? sp[0] : sp[ORDER_BGR ? 2 - c : c]) : ev[c];
 #if CHANNELS == 1

@@ -75,8 +75,8 @@ class Antialiaser:
     `alpha`: "coverage" antialiases the alpha of BGRA frames whose alpha varies (straight alpha, as OpenCV reads
     PNGs) with their colour (spatial/alpha.py); "keep" leaves it as it is.
     `transfer="pq"` / `"hlg"`: the frames are 8/16-bit codes of HDR video (HDR10's SMPTE ST 2084, HLG): the filter
-    works in the linear light they code and codes its output back (device/transfer.py); a temporal stage still
-    mixes the codes.
+    works in the linear light they code and codes its output back (device/transfer.py); so does temporal
+    supersampling, while the blend keeps blending the codes.
     """
 
     def __init__(self, device: str | int | None = None, *, preset: str | None = None,
@@ -130,7 +130,7 @@ class Antialiaser:
         if isinstance(method, str):
             temporal = make_stage(method, self._filter.context, bgr=True, frames=temporal_frames,
                                   regions_from=self._filter, lookahead=lookahead, linear_input=linear_input,
-                                  dense_samples=dense_motion)
+                                  dense_samples=dense_motion, transfer=transfer)
         elif lookahead or dense_motion or temporal_frames is not None:
             raise ValueError("lookahead, dense_motion, temporal_frames: need temporal=True or one of the temporal "
                              "methods with TSS")

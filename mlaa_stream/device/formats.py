@@ -1,7 +1,7 @@
 """Frame formats: which numpy frames we accept, and the one function that turns them into defines."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -59,6 +59,12 @@ def frame_format(frame: np.ndarray, bgr: bool = False, what: str = "frame") -> F
     if h < 1 or w < 1:
         raise ValueError(f"{what}: expected at least 1x1 pixels, got {w}x{h}")
     return FrameFormat(h, w, channels, dtype, bool(bgr) and channels >= 3)
+
+
+def with_transfer(fmt: FrameFormat, transfer: str | None) -> FrameFormat:
+    """`fmt` carrying `transfer` where its samples are integer codes (device/transfer.py); float frames hold light or
+    sRGB-coded values, never a transfer's codes: `fmt` as it is."""
+    return replace(fmt, transfer=transfer) if transfer is not None and fmt.dtype.kind in "ui" else fmt
 
 
 def defines_for(fmt: FrameFormat, **options: object) -> dict[str, object]:

@@ -99,6 +99,18 @@ def kernel_defines(transfer: str | None) -> dict:
     return {} if transfer is None else {"ENCODE_WARP": 1, "ENCODE_SCALE": float(1.0 / _peak(transfer))}
 
 
+def encode_arg(v: np.ndarray, transfer: str | None) -> np.ndarray:
+    """common.cl's encode_arg in float32 numpy (the references' twin): `v` itself without a transfer, else
+    (v ENCODE_SCALE)^(1/4), 0 for v <= 0 and NaN."""
+    v = np.asarray(v, np.float32)
+    if transfer is None:
+        return v
+    s = v * np.float32(kernel_defines(transfer)["ENCODE_SCALE"])
+    with np.errstate(invalid="ignore"):
+        pos = s > 0
+    return np.where(pos, np.sqrt(np.sqrt(np.where(pos, s, np.float32(1)))), np.float32(0)).astype(np.float32)
+
+
 def with_transfer_tables(luts: np.ndarray, transfer: str | None) -> np.ndarray:
     """The filter's tables (device.colour.device_luts: decode, CIELAB f, encode) with the decode (code / top ->
     light relative to reference white) and the encode (the signal of u^4 x the peak over u in [0, 1], read through

@@ -45,14 +45,16 @@ def check_frames(frames: object, name: str = "temporal_frames") -> int:
 
 def make_stage(method: str, context, *, bgr: bool, frames: int | None = None, mode: str = "adaptive",
                k: float | None = None, show: str | None = None, regions_from=None, motion=None, lookahead: int = 0,
-               linear_input: bool = False, dense_samples: bool = False):
+               linear_input: bool = False, dense_samples: bool = False, transfer: str | None = None):
     """A new temporal stage (fresh state) on `context` (the filter's OpenCL context). `regions_from`: the
     Filter(keep_regions=True) whose frames the stage gets ("auto" reads its last_regions). `motion`: known
     motion for the blend's dense frames instead of DIS (stage.TemporalStage's `motion`; methods with a blend).
     `lookahead`: N frames after the current one that TSS also reads (the stage's `lookahead`; the caller hands
     them in as `future`: mlaa_stream.pipeline does); not for the blend alone, which reads the past only.
     `linear_input`: the frames are linear light (EXR; the spatial Filter's linear_input). `dense_samples`: TSS tracks
-    per-tile motion on dense frames (tss.TSSStage's; slow, off by default)."""
+    per-tile motion on dense frames (tss.TSSStage's; slow, off by default). `transfer`: "pq" / "hlg", the frames are
+    codes of HDR video (the spatial Filter's transfer): TSS averages the light they stand for; the blend (history
+    reprojection) keeps blending the codes, as TAA resolves in a perceptual space (docs/temporal.md, "HDR video")."""
     check(method)
     if lookahead and method == "blend":
         raise ValueError("lookahead: the blend method reads the past only; use a method with TSS")
@@ -70,13 +72,13 @@ def make_stage(method: str, context, *, bgr: bool, frames: int | None = None, mo
     ring = DEFAULT_FRAMES if frames is None else check_frames(frames, "frames")   # 0 is refused, not made the default
     if method == "tss":
         return TSSStage(context=context, frames=ring, mode=mode, bgr=bgr, show=show, lookahead=lookahead,
-                        linear_input=linear_input, dense_samples=dense_samples)
+                        linear_input=linear_input, dense_samples=dense_samples, transfer=transfer)
     if method == "auto":   # docs/temporal.md: dense flow follows a dolly's zoom, which one translation does not;
         # the blob test makes the forward-backward check redundant
         kw.update(where="render", regions_from=regions_from, fb_check=False,
                   blend_mode="dense" if mode == "adaptive" else mode)
     return TSSThenBlend(context=context, frames=ring, mode=mode, bgr=bgr, show=show, lookahead=lookahead,
-                        linear_input=linear_input, dense_samples=dense_samples, **kw)
+                        linear_input=linear_input, dense_samples=dense_samples, transfer=transfer, **kw)
 
 
 def stats_lists(stage) -> list[list]:

@@ -27,6 +27,7 @@ import pyopencl as cl
 from mlaa_stream.device.colour import device_luts, lut_read
 from mlaa_stream.device.context import Context, default_context
 from mlaa_stream.device.formats import LUT_SIZE, FrameFormat, defines_for, frame_format
+from mlaa_stream.device.transfer import with_transfer_tables
 from mlaa_stream.spatial.fallback import FALLBACK_TILE
 from mlaa_stream.spatial.exposure import HeldExposure, exposed
 from mlaa_stream.spatial.nonfinite import restore_out_of_range
@@ -718,13 +719,15 @@ def _catmull_rom(t: np.ndarray) -> list[np.ndarray]:
 def decode_table(fmt: FrameFormat, linear_input: bool = False) -> np.ndarray:
     """The kernel's decode table for integer samples: entry v = the linear value the tables give for
     v / PIXEL_MAX (common.cl's lut_read, the same float32 arithmetic), so one load replaces the
-    interpolated read with the same bits. Float frames and linear input read no table (one entry)."""
+    interpolated read with the same bits; a format with a transfer (HDR video) reads the transfer's decode table
+    (device/transfer.py with_transfer_tables: light relative to reference white). Float frames and linear input read
+    no table (one entry)."""
     if linear_input or not np.issubdtype(fmt.dtype, np.integer):
         return np.zeros(1, np.float32)
     pmax = np.float32(_PMAX[fmt.dtype])
     codes = np.arange(int(pmax) + 1, dtype=np.float32) * (np.float32(1.0) / pmax)
     # common.cl's lut_read in float32 throughout (colour.lut_read widens the fraction to float64)
-    lut = device_luts()
+    lut = with_transfer_tables(device_luts(), fmt.transfer)
     t = codes * np.float32(LUT_SIZE)
     i = np.minimum(t.astype(np.int32), LUT_SIZE - 1)
     f = t - i.astype(np.float32)

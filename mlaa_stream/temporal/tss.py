@@ -4,8 +4,9 @@ Each input pixel of frame t is a point sample of the scene at a known sub-pixel 
 motion is known; a moving camera puts the samples of past frames at new positions inside the current
 frame's pixels (the jitter a renderer's TAA adds on purpose; seed 002's T2x). The stage keeps a ring
 of the last K *input* frames (linear light in 16-bit fixed point, L = floor(clamp(lin, 0, 1) 65535 + 0.5):
-`ring_of`; linear-light float frames, `linear_input`: lin / LINEAR_RANGE; a float sample over the range is
-marked OVER and never averaged, and a pixel near one keeps the spatial output) with a map from the current
+`ring_of`; linear-light float frames, `linear_input`, and the codes of HDR video, `transfer` (their light relative
+to reference white, device/transfer.py): lin / LINEAR_RANGE; a sample over the range is marked OVER and never
+averaged, and a pixel near one keeps the spatial output) with a map from the current
 frame's pixels into each of them, and resolves each output pixel from the samples that land inside its
 footprint:
 
@@ -71,7 +72,8 @@ import cv2
 import numpy as np
 
 from mlaa_stream.device.colour import device_luts, lut_read
-from mlaa_stream.device.formats import LUT_SIZE, frame_format
+from mlaa_stream.device.formats import LUT_SIZE, frame_format, with_transfer
+from mlaa_stream.device.transfer import check_transfer, encode_arg, with_transfer_tables
 from mlaa_stream.spatial.exposure import HeldExposure, exposed
 from mlaa_stream.spatial.noise import level_of, luma256, quiet_pixels
 from mlaa_stream.spatial.nonfinite import restore_out_of_range
@@ -904,13 +906,14 @@ def _blur_align(pyr: Pyramid) -> np.ndarray:
 
 
 # --- numpy reference of the resolve --------------------------------------------------------------------
-def linear_of(frame: np.ndarray, bgr: bool, linear_input: bool = False) -> np.ndarray:
-    """(H, W, 3) float32 linear RGB of a frame, by the kernel's arithmetic (decode table / tables)."""
-    fmt = frame_format(frame, bgr)
+def linear_of(frame: np.ndarray, bgr: bool, linear_input: bool = False, transfer: str | None = None) -> np.ndarray:
+    """(H, W, 3) float32 linear RGB of a frame, by the kernel's arithmetic (decode table / tables; integer codes of
+    a `transfer`: its decode, light relative to reference white)."""
+    fmt = with_transfer(frame_format(frame, bgr), transfer)
     h, w = fmt.height, fmt.width
     raw = np.asarray(frame).reshape(h, w, fmt.channels)
     if np.issubdtype(fmt.dtype, np.integer) and not linear_input:
-        lin = decode_table(fmt)[raw.astype(np.int64)]
+        lin = decode_table(fmt)[raw.astype(np.int64)]   # the transfer's decode where fmt carries one
     else:
         a = raw.astype(np.float32) * np.float32(1.0 / _PMAX[fmt.dtype])   # load_px's normalisation
         lin = a if linear_input else lut_read(device_luts(), a).astype(np.float32)
@@ -922,34 +925,52 @@ def linear_of(frame: np.ndarray, bgr: bool, linear_input: bool = False) -> np.nd
 
 def level_table(fmt) -> np.ndarray:
     """ltab: the ring sample L of every stored code of an integer format (one entry for float frames):
-    linear light (the decode table) in 16-bit fixed point, L = floor(clamp(lin, 0, 1) 65535 + 0.5)."""
+    linear light (the decode table) in 16-bit fixed point, L = floor(clamp(lin, 0, 1) 65535 + 0.5). Codes of a
+    transfer (HDR video: light up to 49 times reference white, which a clip at 1 would flatten) are held as
+    linear float frames are: L = lin / LINEAR_RANGE rounded as ring_of rounds them, at most ONE - 1, OVER over the
+    range (PQ above 3250 cd/m2)."""
     if not np.issubdtype(fmt.dtype, np.integer):
         return np.zeros(1, np.uint16)
     lin = decode_table(fmt)
-    return np.floor(np.clip(lin, 0, 1) * np.float32(ONE) + np.float32(0.5)).astype(np.uint16)
+    if fmt.transfer is None:
+        return np.floor(np.clip(lin, 0, 1) * np.float32(ONE) + np.float32(0.5)).astype(np.uint16)
+    f32 = np.float32
+    x = (lin * f32(1.0 / LINEAR_RANGE)).astype(f32)
+    q = np.where(x > 0, np.minimum(x * f32(ONE) + f32(0.5), f32(ONE - 1)), f32(0)).astype(np.uint16)
+    return np.where(lin > LINEAR_RANGE, OVER, q).astype(np.uint16)
 
 
 def encode_table(fmt) -> np.ndarray:
     """etab: the stored code of every L (65536 entries) for an integer format (one entry for float frames):
-    the encode table read at L / 65535 (colour.lut_read), rounded as store_px does."""
+    the encode table read at L / 65535 (colour.lut_read), rounded as store_px does; codes of a transfer: the light
+    L / 65535 x LINEAR_RANGE (level_table) through the transfer's encode as the spatial passes read it
+    (common.cl encode_mix: encode_arg, then the table)."""
     if not np.issubdtype(fmt.dtype, np.integer):
         return np.zeros(1, fmt.dtype)
     f32 = np.float32
-    x = np.arange(ONE + 1, dtype=f32) * f32(1.0 / ONE)
-    enc = lut_read(device_luts()[2 * (LUT_SIZE + 1):], x).astype(f32)
+    if fmt.transfer is None:
+        x = np.arange(ONE + 1, dtype=f32) * f32(1.0 / ONE)
+    else:
+        x = encode_arg(np.arange(ONE + 1, dtype=f32) * (f32(LINEAR_RANGE) / f32(ONE)), fmt.transfer)
+    table = with_transfer_tables(device_luts(), fmt.transfer)[2 * (LUT_SIZE + 1):]
+    enc = lut_read(table, x).astype(f32)
     pmax = f32(_PMAX[fmt.dtype])
     return np.floor(np.clip(enc * pmax + f32(0.5), 0, pmax)).astype(fmt.dtype)
 
 
-def ring_range(dtype, linear_input: bool) -> int:
-    """The linear light the ring's 16 bits span, [0, range] (kernels/tss.cl TSS_RANGE)."""
-    return LINEAR_RANGE if linear_input and not np.issubdtype(np.dtype(dtype), np.integer) else 1
+def ring_range(dtype, linear_input: bool, transfer: str | None = None) -> int:
+    """The linear light the ring's 16 bits span, [0, range] (kernels/tss.cl TSS_RANGE): LINEAR_RANGE for linear-light
+    float frames and for integer codes of a transfer (HDR video, level_table), else 1."""
+    integer = np.issubdtype(np.dtype(dtype), np.integer)
+    if (linear_input and not integer) or (transfer is not None and integer and not linear_input):
+        return LINEAR_RANGE
+    return 1
 
 
-def ring_of(frame: np.ndarray, bgr: bool, linear_input: bool = False) -> np.ndarray:
-    """(H, W, 3) int32 ring samples L of a frame, as kernels/tss.cl's tss_ingest stores them (float frames:
-    at most ONE - 1, OVER where the stored value is over the ring's range)."""
-    fmt = frame_format(frame, bgr)
+def ring_of(frame: np.ndarray, bgr: bool, linear_input: bool = False, transfer: str | None = None) -> np.ndarray:
+    """(H, W, 3) int32 ring samples L of a frame, as kernels/tss.cl's tss_ingest stores them (float frames and
+    integer codes of a `transfer`: at most ONE - 1, OVER where the stored value is over the ring's range)."""
+    fmt = with_transfer(frame_format(frame, bgr), transfer)
     if np.issubdtype(fmt.dtype, np.integer) and not linear_input:
         raw = np.asarray(frame).reshape(fmt.height, fmt.width, fmt.channels).astype(np.int64)
         q = level_table(fmt)[raw].astype(np.int32)
@@ -1048,11 +1069,13 @@ def eps_q(eps: float, rng: int = 1) -> int:
     return int(round(float(eps) * ONE / rng))
 
 
-def encode_levels(q: np.ndarray, like: np.ndarray, bgr: bool, linear_input: bool = False) -> np.ndarray:
+def encode_levels(q: np.ndarray, like: np.ndarray, bgr: bool, linear_input: bool = False,
+                  transfer: str | None = None) -> np.ndarray:
     """Ring samples L (H, W, 3) back to the frame's type and layout (alpha taken from `like`), as
-    tss_store does: etab for integer frames, the encode table for float frames, L / ONE for linear input."""
+    tss_store does: etab for integer frames (codes of a `transfer`: its etab), the encode table for float frames,
+    L / ONE for linear input."""
     f32 = np.float32
-    fmt = frame_format(like, bgr)
+    fmt = with_transfer(frame_format(like, bgr), transfer)
     h, w = fmt.height, fmt.width
     raw = np.asarray(like).reshape(h, w, fmt.channels)
     if linear_input:
@@ -1074,20 +1097,25 @@ def encode_levels(q: np.ndarray, like: np.ndarray, bgr: bool, linear_input: bool
 def tss_frame_reference(spatial: np.ndarray, cur: np.ndarray, ring: list[tuple], bgr: bool,
                         flow_scale: int = 1, grid: int = GRID, eps: float = EPS,
                         min_cells: int = MIN_CELLS, full_cells: int | None = None,
-                        linear_input: bool = False) -> tuple[np.ndarray, np.ndarray]:
+                        linear_input: bool = False, transfer: str | None = None) -> tuple[np.ndarray, np.ndarray]:
     """kernels/tss.cl on whole frames: ring = (input frame, map, valid) triples (frames in the input's
     type); returns (output frame like `spatial`, filled cells (H, W) uint8). Where fewer than
-    min_cells are filled, or the spatial pixel is over range (float frames), the spatial pixel is copied bit
-    for bit."""
-    rq = [(ring_of(f, bgr, linear_input), m, ok) for f, m, ok in ring]
+    min_cells are filled, or the spatial pixel is over range (float frames, codes of a transfer), the spatial pixel
+    is copied bit for bit. `transfer`: integer frames are codes of it (HDR video: the ring holds their light)."""
+    rq = [(ring_of(f, bgr, linear_input, transfer), m, ok) for f, m, ok in ring]
     dtype = frame_format(spatial, bgr).dtype
-    top = ONE if np.issubdtype(dtype, np.integer) else ONE - 1
-    sq = ring_of(spatial, bgr, linear_input)
-    q, n = tss_reference(sq, ring_of(cur, bgr, linear_input), rq, flow_scale, grid, eps, min_cells,
-                         full_cells, top, ring_range(dtype, linear_input))
-    enc = encode_levels(q, spatial, bgr, linear_input)
+    rng = ring_range(dtype, linear_input, transfer)
+    top = ONE if np.issubdtype(dtype, np.integer) and rng == 1 else ONE - 1
+    sq = ring_of(spatial, bgr, linear_input, transfer)
+    q, n = tss_reference(sq, ring_of(cur, bgr, linear_input, transfer), rq, flow_scale, grid, eps, min_cells,
+                         full_cells, top, rng)
+    enc = encode_levels(q, spatial, bgr, linear_input, transfer)
     keep = ((n < min_cells) | (sq > top).any(-1)).reshape(n.shape + (1,) * (np.ndim(spatial) - 2))
     keep = keep | within_dead_zone(enc, spatial, bgr, linear_input)
+    if rng != 1 and np.issubdtype(dtype, np.integer):
+        # codes of a transfer: the spatial pixel also stands where the resolve is within one ring step of its L in
+        # every channel (the ring's step spans more than one 8-bit level of PQ's codes below ~0.2 cd/m2; tss.cl)
+        keep = keep | (np.abs(q - sq) <= 1).all(-1).reshape(keep.shape)
     return np.where(keep, spatial, enc).astype(spatial.dtype), n
 
 
@@ -1152,7 +1180,7 @@ def kernel_defines(fmt, grid: int = GRID, eps: float = EPS, min_cells: int = MIN
     from mlaa_stream.device.formats import defines_for
     full = FULL_CELLS if full_cells is None else int(full_cells)
     dead = dead_codes(fmt.dtype) if np.issubdtype(fmt.dtype, np.integer) else 0
-    rng = ring_range(fmt.dtype, linear_input)
+    rng = ring_range(fmt.dtype, linear_input, fmt.transfer)   # fmt.transfer: defines_for adds ENCODE_WARP too
     return defines_for(fmt, GRID=int(grid), MIN_CELLS=int(min_cells), FULL_CELLS=full, EPSQ=eps_q(eps, rng),
                        LINEAR_INPUT=int(linear_input), DEAD_CODES=dead, TSS_RANGE=rng)
 
@@ -1219,13 +1247,16 @@ class TSSStage:
     order; a jump in `index`, a new size, a cut or reset() start a new ring. With `lookahead` N, pass the raw
     frames index + 1 .. index + N as `future` (fewer at the end). `stats` gets one dict
     per frame (index, model, ring, lookahead, flow_ms, resolve_ms, cells_mean, ...). backend "device"
-    (kernels/tss.cl) or "numpy" (tss_frame_reference, slow)."""
+    (kernels/tss.cl) or "numpy" (tss_frame_reference, slow). `transfer`: "pq" or "hlg" (HDR video,
+    device/transfer.py): integer frames are codes of it; the ring holds the light they stand for over [0, LINEAR_RANGE]
+    (level_table) and the resolve's mix is coded back by the transfer (encode_table), as the spatial
+    Filter(transfer=...) mixes light."""
 
     def __init__(self, device: str | int | None = None, *, frames: int = DEFAULT_FRAMES, bgr: bool = True,
                  mode: str = "adaptive", grid: int = GRID, eps: float = EPS, min_cells: int = MIN_CELLS,
                  full_cells: int | None = None, refine: bool = True, fb_check: bool = True, show: str | None = None,
                  context=None, backend: str = "device", dense_samples: bool = False, lookahead: int = 0,
-                 linear_input: bool = False, auto_exposure: bool = True):
+                 linear_input: bool = False, auto_exposure: bool = True, transfer: str | None = None):
         if int(frames) < 1:
             raise ValueError(f"frames: expected K >= 1, got {frames!r}")
         if int(lookahead) < 0:
@@ -1240,6 +1271,10 @@ class TSSStage:
             raise ValueError(f"mode: expected adaptive, dense, global or static, got {mode!r}")
         self.frames, self.bgr, self.mode, self.show = int(frames), bool(bgr), mode, show
         self.linear_input = bool(linear_input)   # frames are linear light (EXR): no sRGB decode, grey encoded
+        self.transfer = check_transfer(transfer)
+        if self.transfer is not None and self.linear_input:
+            raise ValueError("transfer and linear_input exclude each other: a transfer's frames hold codes, "
+                             "linear input holds light")
         # linear-light float frames are resolved at the power of two of exposure that puts their key near 1, as the
         # spatial filter sees them (spatial/exposure.py), held over the shot; False: at the exposure they come in
         self.exposure = HeldExposure() if auto_exposure else None
@@ -1262,7 +1297,7 @@ class TSSStage:
             self.context = context or default_context(device)
             self.queue = cl.CommandQueue(self.context.ctx, self.context.device)
             self._luts = cl.Buffer(self.context.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
-                                   hostbuf=device_luts())
+                                   hostbuf=with_transfer_tables(device_luts(), self.transfer))
         self._frames: dict[int, np.ndarray] = {}     # numpy backend: ring slot -> input frame
         self.reset()
 
@@ -1414,7 +1449,7 @@ class TSSStage:
                 ring = [(self._frames[e.slot], tile_shifts(e.homography, w, h, pyr.flow_scale) if e.projective
                          else e.shift if e.translated else e.field, e.valid) for e in entries]
                 return tss_frame_reference(frame_filtered, frame_in, ring, self.bgr, pyr.flow_scale, self.grid,
-                                           self.eps, self.min_cells, full_cells, self.linear_input)
+                                           self.eps, self.min_cells, full_cells, self.linear_input, self.transfer)
             rect = self._layer_rect(fm, pyr, w, h)
             if rect is not None:   # as the device: background translations, then the layers' rectangle
                 out, cells = reference(self._background_entries(taps), self.full_cells)
@@ -1499,7 +1534,7 @@ class TSSStage:
 
     # -- device ------------------------------------------------------------------------------------------
     def _prepare(self, frame: np.ndarray, pyr: Pyramid) -> _Buffers:
-        fmt = frame_format(frame, self.bgr)
+        fmt = with_transfer(frame_format(frame, self.bgr), self.transfer)   # tables and ENCODE_WARP of a transfer
         shape = pyr.flow.shape[:2]
         if self._buffers is not None and self._buffers.fmt == fmt and self._buffers.flow_shape == shape:
             return self._buffers
@@ -1674,14 +1709,16 @@ class TSSThenBlend:
 
     def __init__(self, device: str | int | None = None, *, frames: int = DEFAULT_FRAMES, bgr: bool = True,
                  mode: str = "adaptive", show: str | None = None, context=None, blend_mode: str | None = None,
-                 lookahead: int = 0, linear_input: bool = False, dense_samples: bool = False, **blend_kwargs):
+                 lookahead: int = 0, linear_input: bool = False, dense_samples: bool = False,
+                 transfer: str | None = None, **blend_kwargs):
         """`blend_mode`: the blend's motion model when not `mode` ("auto": "dense"); `lookahead`, `dense_samples`:
-        TSS's (the blend reads the past only); `linear_input`: both stages' (linear-light frames). `show="history"`:
+        TSS's (the blend reads the past only); `linear_input`: both stages' (linear-light frames); `transfer`: TSS's
+        (codes of HDR video, averaged as light; the blend keeps blending the codes: make_stage). `show="history"`:
         the blend's weights where it runs everywhere ("tss+blend"); with the blend only in render regions ("auto")
         TSS's samples per pixel, as the blend's view would be rejection everywhere else."""
         from mlaa_stream.temporal.stage import TemporalStage
         self.tss = TSSStage(device, frames=frames, bgr=bgr, mode=mode, context=context, lookahead=lookahead,
-                            linear_input=linear_input, dense_samples=dense_samples)
+                            linear_input=linear_input, dense_samples=dense_samples, transfer=transfer)
         self._tss_view = show == "history" and blend_kwargs.get("where") == "render"
         self.blend = TemporalStage(device, bgr=bgr, mode=blend_mode or mode, show=None if self._tss_view else show,
                                    context=self.tss.context, linear_input=linear_input, auto_exposure=False,
