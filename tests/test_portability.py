@@ -215,7 +215,8 @@ KERNEL_TESTS = ["tests/test_mlaa.py", "tests/test_bridge.py::test_kernel_matches
                 "tests/test_tss.py::test_kernel_matches_reference_on_hdr_float_frames",
                 "tests/test_alpha.py::test_device_merge_matches_its_reference",
                 "tests/test_transfer.py::test_edges_between_lights_are_blended_as_light",
-                "tests/test_transfer.py::test_edge_tests_read_the_codes"]
+                "tests/test_transfer.py::test_edge_tests_read_the_codes",
+                "tests/test_tss_transfer.py::test_tss_kernel_matches_reference_on_pq_codes"]
 
 
 @needs_rusticl
