@@ -222,7 +222,7 @@ def test_an_hdr_png_is_filtered_in_light(tmp_path):
 
 def test_the_hdr_video_bench_runs():
     """`python -m mlaa_stream.bench.hdr_video` at a small size (the held-out views coded as PQ): a row per view, and
-    the transfer removes more error than the codes taken as sRGB on average."""
+    the transfer removes more error than the codes taken as sRGB on average; `--temporal tss` a row per shot."""
     from mlaa_stream.yardstick.rendered import egl_available
     ok, why = egl_available()
     if not ok:
@@ -233,6 +233,9 @@ def test_the_hdr_video_bench_runs():
     codes, transfer = res[("pq", "codes")], res[("pq", "transfer")]
     assert len(codes) == len(transfer) == 4 and any("far_tele_192" in line for line in lines)
     assert np.mean([s[0] for s in transfer]) > np.mean([s[0] for s in codes])
+    shots = hdr_video.run_temporal((160, 90), ["plaza"], ["tss"], frames=3, log=lines.append)
+    assert set(shots) == {"spatial", "tss codes", "tss light"} and len(shots["spatial"]) == 8   # 4 views x pan, dolly
+    assert "mean:" in lines[-1]
 
 
 def _hdr10_clip(path, frame: np.ndarray, trc: int, frames: int = 2) -> None:

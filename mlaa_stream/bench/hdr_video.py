@@ -8,7 +8,10 @@ transfer to 16-bit codes as a 10-bit video decodes to (device/transfer.py). The 
 they are -- taken as sRGB-coded, as it did before the transfer was read from the video -- and with
 `transfer=` (the codes decoded to linear light, filtered, coded back). Scores are taken on the codes, the space the
 curves were designed to make even for the eye: error removed % / damage away from edges (levels of 8 bits).
-`--timing`: ms per 1920x1080 frame (the atrium tiled 3x3 as PQ codes), both ways.
+`--timing`: ms per 1920x1080 frame (the atrium tiled 3x3 as PQ codes), both ways. `--temporal`: the held-out shots
+(each view as a pan and a dolly, `--frames` frames at the first size) coded as PQ, through the spatial filter with
+the transfer, then each temporal method (causal) with the stage's transfer off (the codes) and on (light); error
+removed % / damage of all frames.
 Needs EGL, as the rendered scenes do. A benchmark, never a unit test.
 """
 from __future__ import annotations
@@ -18,8 +21,9 @@ import time
 
 import numpy as np
 
-from mlaa_stream.bench.rendered_views import held_out_views, render_args
+from mlaa_stream.bench.rendered_views import held_out_views, render_args, view_cameras
 from mlaa_stream.spatial.filter import Filter
+from mlaa_stream.temporal.methods import make_stage, needs_regions
 from mlaa_stream.device.transfer import TRANSFERS, linear_to_hlg, linear_to_pq
 from mlaa_stream.yardstick import metrics as M
 from mlaa_stream.yardstick.rendered import Renderer, _context, shot
@@ -65,6 +69,42 @@ def run(sizes: list[tuple[int, int]], transfers: list[str], worlds: list[str], s
     return res
 
 
+def run_temporal(size: tuple[int, int], worlds: list[str], methods: list[str], frames: int = 8,
+                 device: str | None = None, log=print) -> dict[str, list[tuple[float, float]]]:
+    """{"spatial" | "<method> codes" | "<method> light": [(error removed %, damage) per shot]} on the held-out shots
+    coded as PQ, printing a row per shot."""
+    width, height = size
+    res: dict[str, list[tuple[float, float]]] = {}
+    with Filter(device, transfer="pq", keep_regions=True) as filt:
+        for world in worlds:
+            renderer = Renderer(_context(), width, height, world, hdr=True)
+            try:
+                for shot_name, cameras in view_cameras(width, height, frames, world).items():
+                    inp = np.stack([coded(renderer.input_linear(c), "pq") for c in cameras])
+                    truth = np.stack([coded(renderer.truth_linear(c), "pq") for c in cameras])
+                    row = {"spatial": np.stack([filt.process(f) for f in inp])}
+                    for method in methods:
+                        for how, transfer in (("codes", None), ("light", "pq")):
+                            stage = make_stage(method, filt.context, bgr=False, transfer=transfer,
+                                               regions_from=filt if needs_regions(method) else None)
+                            try:   # the spatial frame filtered just before the call: its render regions are read
+                                row[f"{method} {how}"] = np.stack([stage(f, filt.process(f), i)
+                                                                   for i, f in enumerate(inp)])
+                            finally:
+                                stage.close()
+                    cells = []
+                    for key, out in row.items():
+                        score = (100 * M.error_removed(out, inp, truth), M.damage(out, inp, truth))
+                        res.setdefault(key, []).append(score)
+                        cells.append(f"{key} {score[0]:.1f} / {score[1]:.2f}")
+                    log(f"  {world} {shot_name}: " + "  ".join(cells))
+            finally:
+                renderer.release()
+    log("  mean: " + "  ".join(f"{k} {np.mean([s[0] for s in v]):.2f} / {np.mean([s[1] for s in v]):.3f}"
+                                for k, v in res.items()))
+    return res
+
+
 def timing(device: str | None = None, log=print) -> dict[str, float]:
     """ms per 1920x1080 frame of PQ codes (the bench's atrium view rendered in linear light at 640x360, tiled 3x3),
     both ways."""
@@ -95,6 +135,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--world", default="plaza,town", help="worlds, comma-separated (default plaza,town)")
     ap.add_argument("--sky", type=float, default=1.0, help="the sky's radiance gain (default 1)")
     ap.add_argument("--timing", action="store_true", help="also ms per 1920x1080 frame")
+    ap.add_argument("--temporal", default="", metavar="METHODS",
+                    help="also the held-out shots through these temporal methods, comma-separated (e.g. tss,auto)")
+    ap.add_argument("--frames", type=int, default=8, help="frames per --temporal shot (default 8)")
     ap.add_argument("--device", default=None, help="OpenCL device (as --device of mlaa-stream)")
     args = ap.parse_args(argv)
     transfers = [t for t in args.transfers.split(",") if t]
@@ -103,6 +146,8 @@ def main(argv: list[str] | None = None) -> int:
         raise SystemExit(f"--transfers: expected names from {', '.join(TRANSFERS)}, got {args.transfers}")
     sizes, worlds = render_args(args.sizes, args.world)
     run(sizes, transfers, worlds, args.sky, args.device)
+    if args.temporal:
+        run_temporal(sizes[0], worlds, [m for m in args.temporal.split(",") if m], args.frames, args.device)
     if args.timing:
         timing(args.device)
     return 0
