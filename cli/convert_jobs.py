@@ -8,6 +8,7 @@ from fractions import Fraction
 
 from mlaa_stream.cli.filter_cmd import (EXIT_FAILED, EXIT_OK, Failed, Usage, _check_writable, _Job, deinterlace_note,
                                         video_transfer, video_trim)
+from mlaa_stream.device.transfer import TRC_OF
 from mlaa_stream.io.sequence import FIRST_FRAME_NUMBER, image_transfer
 
 
@@ -36,7 +37,6 @@ def _sequence_plan(job: _Job) -> list:
     return [FrameFile(p, "", n) for n, p in found]
 
 
-_TRC = {"pq": 16, "hlg": 18}   # H.273 / FFmpeg transfer codes
 _BT2020 = 9                   # H.273 / FFmpeg colour primaries and (non-constant luminance) matrix of BT.2020
 
 
@@ -45,7 +45,7 @@ def hdr_cicp(colour: dict, transfer: str | None) -> tuple[int, int, int, int] | 
     transfer carries, from the video's colour tags (io/images.py write_image); None without a transfer."""
     if transfer is None:
         return None
-    return int(colour.get("color_primaries", 2) or 2), _TRC[transfer], 0, 1
+    return int(colour.get("color_primaries", 2) or 2), TRC_OF[transfer], 0, 1
 
 
 def hdr_colour_tags(first, transfer: str | None) -> dict:
@@ -55,7 +55,7 @@ def hdr_colour_tags(first, transfer: str | None) -> dict:
         return {}
     cicp = first.spec.getattribute("CICP")
     primaries = int(cicp[0]) if cicp is not None and len(cicp) >= 1 and int(cicp[0]) not in (0, 2) else _BT2020
-    return {"color_primaries": primaries, "color_trc": _TRC[transfer],
+    return {"color_primaries": primaries, "color_trc": TRC_OF[transfer],
             "colorspace": _BT2020 if primaries == _BT2020 else 1, "color_range": 1}
 
 

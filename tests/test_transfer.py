@@ -7,18 +7,13 @@ import pytest
 from click.testing import CliRunner
 
 from mlaa_stream.cli.main import main as cli
+from mlaa_stream.bench.hdr_video import coded   # linear light -> exact 16-bit codes
 from mlaa_stream.io.video import probe_video
 from mlaa_stream.spatial.filter import Filter
 from mlaa_stream.device.colour import device_luts, lut_read
 from mlaa_stream.device.transfer import (_HLG_WHITE, TRANSFERS, decode_table, hlg_to_linear, kernel_defines,
                                           linear_to_hlg, linear_to_pq, pq_to_linear, with_transfer_tables)
 from mlaa_stream.yardstick import metrics as M
-
-
-def coded(linear: np.ndarray, transfer: str) -> np.ndarray:
-    """Linear light (reference white 1) -> exact 16-bit codes (float64)."""
-    signal = (linear_to_pq if transfer == "pq" else linear_to_hlg)(np.asarray(linear, np.float64))
-    return np.clip(np.rint(signal * 65535.0), 0, 65535).astype(np.uint16)
 
 
 def half_plane(h: int, w: int, samples: int, slope: float, offset: float, bright: float, dark: float) -> np.ndarray:

@@ -24,16 +24,13 @@ import numpy as np
 from mlaa_stream.bench.rendered_views import held_out_views, render_args, view_cameras
 from mlaa_stream.spatial.filter import Filter
 from mlaa_stream.temporal.methods import make_stage, needs_regions
-from mlaa_stream.device.transfer import TRANSFERS, linear_to_hlg, linear_to_pq
+from mlaa_stream.device.transfer import TRANSFERS, encode
 from mlaa_stream.yardstick import metrics as M
 from mlaa_stream.yardstick.rendered import Renderer, _context, shot
 
-_CODE = {"pq": linear_to_pq, "hlg": linear_to_hlg}
-
-
 def coded(linear: np.ndarray, transfer: str) -> np.ndarray:
     """Linear light (reference white 1) -> 16-bit codes of `transfer`, computed in float64 (exact codes)."""
-    signal = _CODE[transfer](np.asarray(linear, np.float64))
+    signal = encode(np.asarray(linear, np.float64), transfer)
     return np.clip(np.rint(np.asarray(signal, np.float64) * 65535.0), 0, 65535).astype(np.uint16)
 
 

@@ -52,15 +52,13 @@ class TemporalSpec:
 
     def stage(self, filt, show: str | None = None):
         """A new stage (fresh state) on the OpenCL context of `filt` (the spatial Filter whose frames it gets;
-        made with keep_regions=needs_regions(method)), frames in RGB order; the stage mixes light in `filt`'s transfer
-        (HDR video) as the filter does."""
-        from mlaa_stream.device.transfer import TRANSFERS
+        made with keep_regions=needs_regions(method)), frames in RGB order; TSS averages light in `filt`'s transfer
+        (HDR video) as the filter mixes it."""
         from mlaa_stream.temporal.methods import make_stage
-        transfer = getattr(filt, "transfer", None)   # a FilterSet's is a choice ("auto", "sdr"): no transfer of its own
         return make_stage(self.method, filt.context, bgr=False, frames=self.frames, mode=self.mode, k=self.k,
                           show=show, regions_from=filt, lookahead=self.lookahead,
                           dense_samples=self.dense_samples and self.method != "blend",
-                          transfer=transfer if transfer in TRANSFERS else None)
+                          transfer=getattr(filt, "transfer", None))
 
 
 # A chunk's warm-up may reach back at most this many times `warmup` frames to find `warmup` changes.

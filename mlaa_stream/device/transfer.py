@@ -20,8 +20,9 @@ import numpy as np
 TRANSFERS = ("pq", "hlg")
 TRANSFER_CHOICES = ("auto", *TRANSFERS, "sdr")   # --transfer: read from the file's tags, said, or none
 TRANSFER_NAMES = {"pq": "SMPTE ST 2084 (PQ, HDR10)", "hlg": "ARIB STD-B67 (HLG)"}
-# FFmpeg's AVColorTransferCharacteristic values (a video's color_trc) of the transfers above
+# FFmpeg's AVColorTransferCharacteristic values (a video's color_trc; H.273's, as in a PNG's cICP) of the transfers
 FFMPEG_TRC = {16: "pq", 18: "hlg"}
+TRC_OF = {name: code for code, name in FFMPEG_TRC.items()}
 
 # SMPTE ST 2084's constants (the PQ EOTF and its inverse)
 _M1, _M2 = 2610.0 / 16384.0, 2523.0 / 4096.0 * 128.0
