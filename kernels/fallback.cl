@@ -594,12 +594,13 @@ inline float3 mix_channels(__global const PIXEL_T *src, __global const float *lu
 #define FP_COHERENCES 3
 
 // How many of the two levels t a band statistic reaches, per lane (footprint.py footprint_buckets: no square roots).
-inline int8 fp_strength(float8 tr, float8 det2)
+// Strength: l1 = (tr + sqrt(det2)) / 2 >= t^2 scale2 (footprint.py footprint_buckets: scale2 s^2 or s).
+inline int8 fp_strength(float8 tr, float8 det2, float8 scale2)
 {
     int8 n = 0;
-    const float t[2] = {0.02f, 0.08f};  // STRENGTH_LEVELS: l1 = (tr + sqrt(det2)) / 2 >= t^2
+    const float t[2] = {STRENGTH_LO, STRENGTH_HI};  // footprint.py STRENGTH_LEVELS
     for (int k = 0; k < 2; ++k) {
-        const float8 need = 2.0f * t[k] * t[k] - tr;
+        const float8 need = 2.0f * t[k] * t[k] * scale2 - tr;
         n -= (need <= 0.0f) | (det2 >= need * need);  // a vector comparison is -1 where true
     }
     return n;
@@ -621,12 +622,13 @@ inline int8 fp_coherence(float8 tr, float8 det2)
 #if FALLBACK_TILE != 8
 #error "footprint_tile runs a tile row as 8 lanes: FALLBACK_TILE 8"
 #endif
-// The tile's windows: colours (planar) over rows y0 - 2 .. y0 + FALLBACK_TILE + 1 (columns alike) and the gradient
-// products gx^2, gy^2, gx gy of linear luma (central differences) there, luma read over one pixel more each way.
+// The tile's windows: colours (planar) over rows y0 - 2 .. y0 + FALLBACK_TILE + 1 (columns alike), their linear
+// luma and the gradient products gx^2, gy^2, gx gy of it (central differences) there, luma read over one pixel more
+// each way.
 inline void fp_read_window(__global const PIXEL_T *src, __global const float *luts, __global const float *lin,
                            int x0, int y0, int w, int h, float wr[FP_CC][FP_CC], float wg[FP_CC][FP_CC],
-                           float wb[FP_CC][FP_CC], float pxx[FP_CC][FP_CC], float pyy[FP_CC][FP_CC],
-                           float pxy[FP_CC][FP_CC])
+                           float wb[FP_CC][FP_CC], float wy[FP_CC][FP_CC], float pxx[FP_CC][FP_CC],
+                           float pyy[FP_CC][FP_CC], float pxy[FP_CC][FP_CC])
 {
     float luma[FP_LC][FP_LC];
     for (int j = 0; j < FP_LC; ++j) {
@@ -638,6 +640,7 @@ inline void fp_read_window(__global const PIXEL_T *src, __global const float *lu
                 wr[j - 1][k - 1] = c.x;
                 wg[j - 1][k - 1] = c.y;
                 wb[j - 1][k - 1] = c.z;
+                wy[j - 1][k - 1] = luma[j][k];
             }
         }
     }
@@ -651,13 +654,15 @@ inline void fp_read_window(__global const PIXEL_T *src, __global const float *lu
         }
 }
 
-// The bucket per lane (footprint.py footprint_buckets) from the window's sums of the gradient products; `changed`
-// -1 where the pixel's colour differs from the input's.
-inline int8 fp_bucket(float8 sxx, float8 syy, float8 sxy, int8 changed)
+// The bucket per lane (footprint.py footprint_buckets) from the window's sums of the gradient products and of its
+// luma (sy); `changed` -1 where the pixel's colour differs from the input's; `weber_squared` as the reference's.
+inline int8 fp_bucket(float8 sxx, float8 syy, float8 sxy, float8 sy, int8 changed, int weber_squared)
 {
     sxx *= 1.0f / (FP_N * FP_N);
     syy *= 1.0f / (FP_N * FP_N);
     sxy *= 1.0f / (FP_N * FP_N);
+    const float8 scale = (sy * (1.0f / (FP_N * FP_N)) + STRENGTH_FLOOR) * STRENGTH_UNIT;
+    const float8 scale2 = weber_squared ? scale * scale : scale;
     const float8 u = sxx - syy, v = 2.0f * sxy, tr = sxx + syy, det2 = u * u + v * v;
     const float8 au = fabs(u), av = fabs(v);
     // octant of the doubled angle: the gradient's orientation in eight bins of pi / 8
@@ -665,7 +670,7 @@ inline int8 fp_bucket(float8 sxx, float8 syy, float8 sxy, int8 changed)
     const int8 lower = select(select((int8)5, (int8)4, av < au), select((int8)7, (int8)6, av > au), u >= 0.0f);
     const int8 upper = select(select((int8)3, (int8)2, av > au), select((int8)1, (int8)0, av < au), u > 0.0f);
     const int8 octant = select(lower, upper, v >= 0.0f);
-    return ((octant * FP_STRENGTHS + fp_strength(tr, det2)) * FP_COHERENCES + fp_coherence(tr, det2)) * 2 - changed;
+    return ((octant * FP_STRENGTHS + fp_strength(tr, det2, scale2)) * FP_COHERENCES + fp_coherence(tr, det2)) * 2 - changed;
 }
 
 // q += sum over the 5x5 window of row r's lanes (rows r .. r + 4) of (window - m) * the table's weight of the tap,
@@ -739,17 +744,17 @@ RARELY_CALLED void footprint_tile(__global const PIXEL_T *src, __global const fl
                                   int y1, int w, int h, const uint *take)
 {
     float wr[FP_CC][FP_CC], wg[FP_CC][FP_CC], wb[FP_CC][FP_CC];  // the colours, one plane per channel
-    float pxx[FP_CC][FP_CC], pyy[FP_CC][FP_CC], pxy[FP_CC][FP_CC];
-    fp_read_window(src, luts, lin, x0, y0, w, h, wr, wg, wb, pxx, pyy, pxy);
+    float wy[FP_CC][FP_CC], pxx[FP_CC][FP_CC], pyy[FP_CC][FP_CC], pxy[FP_CC][FP_CC];
+    fp_read_window(src, luts, lin, x0, y0, w, h, wr, wg, wb, wy, pxx, pyy, pxy);
     for (int y = y0; y < y1; ++y) {
         const int r = y - y0;  // the row's windows: rows r .. r + 4 of the colours and of the products
         if (!take[r]) continue;
-        // per column: the 5 rows' sums of the products, and whether its 5 colours are one (-1 where true); as two
-        // overlapping float8 of columns 0 .. 7 and 4 .. 11
-        float cxx[FP_CC], cyy[FP_CC], cxy[FP_CC];
+        // per column: the 5 rows' sums of the products and of the luma, and whether its 5 colours are one (-1 where
+        // true); as two overlapping float8 of columns 0 .. 7 and 4 .. 11
+        float cxx[FP_CC], cyy[FP_CC], cxy[FP_CC], cy[FP_CC];
         int one[FP_CC];
         for (int k = 0; k <= FP_CC - 8; k += FP_CC - 8) {
-            float8 sxx = 0.0f, syy = 0.0f, sxy = 0.0f;
+            float8 sxx = 0.0f, syy = 0.0f, sxy = 0.0f, sy = 0.0f;
             int8 same = -1;
             const float8 tr_ = LOAD_FLOAT8_PRIVATE(&wr[r][k]), tg = LOAD_FLOAT8_PRIVATE(&wg[r][k]),
                          tb = LOAD_FLOAT8_PRIVATE(&wb[r][k]);
@@ -757,12 +762,14 @@ RARELY_CALLED void footprint_tile(__global const PIXEL_T *src, __global const fl
                 sxx += LOAD_FLOAT8_PRIVATE(&pxx[j][k]);
                 syy += LOAD_FLOAT8_PRIVATE(&pyy[j][k]);
                 sxy += LOAD_FLOAT8_PRIVATE(&pxy[j][k]);
+                sy += LOAD_FLOAT8_PRIVATE(&wy[j][k]);
                 same &= (LOAD_FLOAT8_PRIVATE(&wr[j][k]) == tr_) & (LOAD_FLOAT8_PRIVATE(&wg[j][k]) == tg)
                         & (LOAD_FLOAT8_PRIVATE(&wb[j][k]) == tb);
             }
             STORE_FLOAT8_PRIVATE(sxx, &cxx[k]);
             STORE_FLOAT8_PRIVATE(syy, &cyy[k]);
             STORE_FLOAT8_PRIVATE(sxy, &cxy[k]);
+            STORE_FLOAT8_PRIVATE(sy, &cy[k]);
             STORE_INT8_PRIVATE(same, &one[k]);
         }
         int chg[FALLBACK_TILE];
@@ -779,15 +786,16 @@ RARELY_CALLED void footprint_tile(__global const PIXEL_T *src, __global const fl
         const float8 mr = LOAD_FLOAT8_PRIVATE(&wr[r + FP_R][FP_R]), mg = LOAD_FLOAT8_PRIVATE(&wg[r + FP_R][FP_R]),
                      mb = LOAD_FLOAT8_PRIVATE(&wb[r + FP_R][FP_R]);
         int8 flat = -1;  // the 5x5 window is one colour
-        float8 sxx = 0.0f, syy = 0.0f, sxy = 0.0f;
+        float8 sxx = 0.0f, syy = 0.0f, sxy = 0.0f, sy = 0.0f;
         for (int k = 0; k < FP_N; ++k) {
             flat &= LOAD_INT8_PRIVATE(&one[k]) & (LOAD_FLOAT8_PRIVATE(&wr[r][k]) == mr)
                     & (LOAD_FLOAT8_PRIVATE(&wg[r][k]) == mg) & (LOAD_FLOAT8_PRIVATE(&wb[r][k]) == mb);
             sxx += LOAD_FLOAT8_PRIVATE(&cxx[k]);
             syy += LOAD_FLOAT8_PRIVATE(&cyy[k]);
             sxy += LOAD_FLOAT8_PRIVATE(&cxy[k]);
+            sy += LOAD_FLOAT8_PRIVATE(&cy[k]);
         }
-        const int8 bucket = fp_bucket(sxx, syy, sxy, changed);
+        const int8 bucket = fp_bucket(sxx, syy, sxy, sy, changed, 1);
         const int8 base = bucket * FOOTPRINT_WEIGHTS;
         const float8 cr = LOAD_FLOAT8_PRIVATE(chr), cg = LOAD_FLOAT8_PRIVATE(chgr), cb = LOAD_FLOAT8_PRIVATE(chb);
         float8 qr = mr, qg = mg, qb = mb;
@@ -849,8 +857,8 @@ RARELY_CALLED void refine_tile(__global const PIXEL_T *src, __global const float
     }
     if (!any) return;
     float wr[FP_CC][FP_CC], wg[FP_CC][FP_CC], wb[FP_CC][FP_CC];
-    float pxx[FP_CC][FP_CC], pyy[FP_CC][FP_CC], pxy[FP_CC][FP_CC];
-    fp_read_window(mid, luts, lin, x0, y0, w, h, wr, wg, wb, pxx, pyy, pxy);
+    float wy[FP_CC][FP_CC], pxx[FP_CC][FP_CC], pyy[FP_CC][FP_CC], pxy[FP_CC][FP_CC];
+    fp_read_window(mid, luts, lin, x0, y0, w, h, wr, wg, wb, wy, pxx, pyy, pxy);
     float ir[RF_IN][RF_IN], ig[RF_IN][RF_IN], ib[RF_IN][RF_IN];
     for (int j = 0; j < RF_IN; ++j) {
         const int row = clamp_to(y0 + j - 1, h - 1) * w;
@@ -865,22 +873,25 @@ RARELY_CALLED void refine_tile(__global const PIXEL_T *src, __global const float
     for (int y = y0; y < y1; ++y) {
         const int r = y - y0;
         if (!take[r]) continue;
-        float8 sxx = 0.0f, syy = 0.0f, sxy = 0.0f;  // per column of 5 rows, then across (footprint_tile's order)
+        // per column of 5 rows, then across (footprint_tile's order)
+        float8 sxx = 0.0f, syy = 0.0f, sxy = 0.0f, sy = 0.0f;
         for (int k = 0; k < FP_N; ++k) {
-            float8 c8xx = 0.0f, c8yy = 0.0f, c8xy = 0.0f;
+            float8 c8xx = 0.0f, c8yy = 0.0f, c8xy = 0.0f, c8y = 0.0f;
             for (int j = r; j < r + FP_N; ++j) {
                 c8xx += LOAD_FLOAT8_PRIVATE(&pxx[j][k]);
                 c8yy += LOAD_FLOAT8_PRIVATE(&pyy[j][k]);
                 c8xy += LOAD_FLOAT8_PRIVATE(&pxy[j][k]);
+                c8y += LOAD_FLOAT8_PRIVATE(&wy[j][k]);
             }
             sxx += c8xx;
             syy += c8yy;
             sxy += c8xy;
+            sy += c8y;
         }
         int chg[FALLBACK_TILE];
         for (int o = 0; o < FALLBACK_TILE; ++o)
             chg[o] = -px_differs(src, mid, IDX(min(x0 + o, w - 1), y, w));
-        const int8 base = fp_bucket(sxx, syy, sxy, LOAD_INT8_PRIVATE(chg)) * REFINE_WEIGHTS;
+        const int8 base = fp_bucket(sxx, syy, sxy, sy, LOAD_INT8_PRIVATE(chg), 0) * REFINE_WEIGHTS;
         const float8 mr = LOAD_FLOAT8_PRIVATE(&wr[r + FP_R][FP_R]), mg = LOAD_FLOAT8_PRIVATE(&wg[r + FP_R][FP_R]),
                      mb = LOAD_FLOAT8_PRIVATE(&wb[r + FP_R][FP_R]);
         float8 qr = mr, qg = mg, qb = mb;

@@ -50,12 +50,16 @@ def test_the_octant_is_the_gradients_orientation(angle):
     assert np.all(parts(b)[0] == int(angle // 22.5))
 
 
-@pytest.mark.parametrize("slope,band", [(0.0, 0), (0.01, 0), (0.05, 1), (0.2, 2)])
-def test_strength_bands(slope, band):
-    """Known answer: a ramp's sqrt(l1) is its slope: under 0.02, 0.02-0.08, over 0.08 are bands 0, 1, 2."""
-    lin = ramp(30, slope)
-    b = footprint_buckets(lin, np.zeros(lin.shape[:2], bool))[4:-4, 4:-4]
-    assert np.all(parts(b)[1] == band)
+@pytest.mark.parametrize("gain", [1.0, 0.2])
+@pytest.mark.parametrize("slope,band", [(0.0, 0), (0.03, 0), (0.1, 1), (0.3, 2)])
+def test_strength_bands(slope, band, gain):
+    """Known answer: a ramp's sqrt(l1) is its slope and its 5x5 mean the centre's luma (0.5): slope / s, s = (0.5 +
+    STRENGTH_FLOOR) / STRENGTH_REF, under 0.02, 0.02-0.08, over 0.08 are bands 0, 1, 2 -- and the same ramp five
+    times darker (the same contrast, a dim render) falls in the same band."""
+    lin = gain * (ramp(30, slope) - 0.3 + 0.5 - slope * (np.cos(np.radians(30)) + np.sin(np.radians(30))) * 8)
+    assert abs(lin[8, 8, 0] - 0.5 * gain) < 1e-5
+    b = footprint_buckets(lin.astype(np.float32), np.zeros(lin.shape[:2], bool))
+    assert parts(b)[1][8, 8] == band
 
 
 def test_coherence_bands_and_the_changed_flag():

@@ -64,12 +64,12 @@ def test_fit_recovers_a_known_filter():
         mid = (0.7 * inp + 0.3 * rng.uniform(0, 1, (40, 48, 3))).astype(np.float32)
         changed = rng.random((40, 48)) < 0.5
         feats = refine_features(inp, mid)
-        w = truth_table[footprint_buckets(mid, changed)]
+        w = truth_table[footprint_buckets(mid, changed, weber_squared=False)]
         truth = mid + np.einsum("hwcf,hwf->hwc", feats, w)
         frames.append((inp, mid, changed, truth, np.ones((40, 48), bool)))
     table = fit_refine(frames, ridge=1e-9, min_samples=50)
-    counts = np.bincount(np.concatenate([footprint_buckets(m, c).ravel() for _, m, c, _, _ in frames]),
-                         minlength=BUCKETS)
+    counts = np.bincount(np.concatenate([footprint_buckets(m, c, weber_squared=False).ravel()
+                                         for _, m, c, _, _ in frames]), minlength=BUCKETS)
     seen = np.flatnonzero(counts >= 200)  # pixels (3 channel samples each): enough for 34 weights
     assert len(seen) > 10
     np.testing.assert_allclose(table[seen], truth_table[seen], atol=2e-3)

@@ -3,7 +3,8 @@
     python -m mlaa_stream.bench.rendered_views [--methods none,fxaa,mlaa,mlaa:screen,mlaa:rendered]
                                                [--sizes 640x360,960x540] [--samples 1,2,3]
                                                [--world plaza|town] [--textures procedural|photo|relief]
-                                               [--texture-repeat 4] [--msaa 4] [--crf 18,23] [--verdicts]
+                                               [--texture-repeat 4] [--msaa 4] [--crf 18,23] [--exposures 0.5,0.3]
+                                               [--verdicts]
 
 The bench's rendered scenes are what the spatial filter's rendered-content rules were measured on; these views
 are not, so a rule that only fits those five scenes shows here. Each view is rendered like the bench's (1 spp at
@@ -15,6 +16,8 @@ they are. `--textures photo|relief`: the worlds' walls, roofs and floors texture
 are; yardstick/photo_textures.py; `--texture-repeat 4`: four times finer). `--msaa 4`: also inputs drawn with MSAA
 (view_WIDTH_msaa4: edges from 4 coverage samples, shading once per pixel, as games with multisampling draw them).
 `--crf 18,23`: also each 1-spp view through H.264 (view_WIDTH_crfN), as rendered video reaches the filter.
+`--exposures 0.5,0.3`: also each 1-spp view and its truth with the linear light times these factors (view_WIDTH_expF:
+a dim render -- dusk, an interior -- as the renderer would encode it).
 Needs what the rendered scenes need (EGL; `pip install 'mlaa-stream[bench]'`
 for FLIP). A benchmark, never a unit test.
 """
@@ -30,7 +33,7 @@ from mlaa_stream.bench.accuracy import METHODS
 from mlaa_stream.yardstick import metrics as M
 from mlaa_stream.yardstick.photo_textures import TEXTURE_SETS
 from mlaa_stream.yardstick.rendered import Camera, Renderer, _context, _yawed, egl_available
-from mlaa_stream.yardstick.scenes import Scene, edge_mask
+from mlaa_stream.yardstick.scenes import Scene, edge_mask, encode8
 
 # name -> (eye, target, vertical field of view in degrees): views the bench's shots (rendered.shot) do not use
 VIEWS: dict[str, tuple[tuple, tuple, float]] = {
@@ -79,24 +82,31 @@ def held_out_views(sizes: list[tuple[int, int]], worlds: list[str],
 
 
 def render_views(sizes: list[tuple[int, int]], samples: tuple[int, ...] = (1,), world: str = "plaza",
-                 textures: str = "procedural", texture_repeat: float = 1.0,
-                 msaa: tuple[int, ...] = ()) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+                 textures: str = "procedural", texture_repeat: float = 1.0, msaa: tuple[int, ...] = (),
+                 exposures: tuple[float, ...] = ()) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """{view_WIDTH: (input, truth)} for every view of `world` (its surfaces textured by the set `textures`, repeated
     `texture_repeat` times as often) at every size; for every n > 1 of `samples` also {view_WIDTH_NxN: (input
     supersampled with n x n samples per pixel, truth)}; for every n of `msaa` {view_WIDTH_msaaN: (input drawn with
-    n-sample MSAA, truth)}."""
+    n-sample MSAA, truth)}; for every factor e of `exposures` {view_WIDTH_expE: (the 1-spp input, truth), both with
+    their linear light times e, clipped at 1, encoded as the truth is}."""
     frames = {}
     for width, height in sizes:
         renderer = Renderer(_context(), width, height, world, textures, texture_repeat)
         try:
             for name, (eye, target, fov) in WORLD_VIEWS[world].items():
                 cam = Camera(eye, target, fov)
-                truth = renderer.truth_frame(cam)
+                truth_linear = renderer.truth_linear(cam)
+                truth = encode8(truth_linear)
                 for n in samples:
                     key = f"{name}_{width}" if n == 1 else f"{name}_{width}_{n}x{n}"
                     frames[key] = (renderer.input_frame(cam) if n == 1 else renderer.truth_frame(cam, n), truth)
                 for n in msaa:
                     frames[f"{name}_{width}_msaa{n}"] = (renderer.msaa_frame(cam, n), truth)
+                if exposures:
+                    inp_linear = renderer.input_linear(cam)
+                    for e in exposures:
+                        frames[f"{name}_{width}_exp{e:g}"] = tuple(encode8(np.clip(a * e, 0.0, 1.0))
+                                                                   for a in (inp_linear, truth_linear))
         finally:
             renderer.release()
     return frames
@@ -199,6 +209,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="also every 1-spp view with film grain of these deviations in 8-bit levels (comma-separated;"
                          " seeded Gaussian, one value for R, G and B, added to input and truth alike, as grain added "
                          "after rendering; view_WIDTH_grainN)")
+    ap.add_argument("--exposures", default="",
+                    help="also every 1-spp view and its truth with the linear light times these factors "
+                         "(comma-separated, e.g. 0.5,0.3: dim renders; view_WIDTH_expF)")
     ap.add_argument("--verdicts", action="store_true",
                     help="also print each view's frame evidence: ramps and hard stair ends among its steps, and "
                          "whether it is judged supersampled or 1-spp geometry (docs/spatial_tuning.md)")
@@ -218,7 +231,13 @@ def main(argv: list[str] | None = None) -> int:
     msaa, crfs = _int_list("--msaa", args.msaa, 2), _int_list("--crf", args.crf, 0)
     grains = _int_list("--grain", args.grain, 1)
     try:
-        frames = render_views(sizes, samples, args.world, args.textures, args.texture_repeat, msaa)
+        exposures = tuple(float(e) for e in args.exposures.split(",") if e)
+    except ValueError:
+        exposures = (0.0,)
+    if any(not (0.0 < e < 100.0) for e in exposures):
+        raise SystemExit(f"--exposures: expected factors over 0, comma-separated, got {args.exposures!r}")
+    try:
+        frames = render_views(sizes, samples, args.world, args.textures, args.texture_repeat, msaa, exposures)
     except ValueError as e:
         raise SystemExit(f"--msaa: {e}") from None
     if crfs:
@@ -235,7 +254,7 @@ def main(argv: list[str] | None = None) -> int:
 
     def group(view: str) -> str:  # the mean's row: "mean" for 1-spp views, "mean NxN" / "mean msaaN" / "mean crfN"
         last = view.rsplit("_", 1)[-1]
-        return f"mean {last}" if "x" in last or last.startswith(("msaa", "crf", "grain")) else "mean"
+        return f"mean {last}" if "x" in last or last.startswith(("msaa", "crf", "grain", "exp")) else "mean"
 
     print("view".ljust(20) + "".join(m.rjust(24) for m in methods))
     removed = {(m, group(v)): [] for m in methods for v in frames}

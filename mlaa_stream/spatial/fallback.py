@@ -11,7 +11,8 @@ import pyopencl as cl
 from mlaa_stream.device.colour import device_luts, lut_read
 from mlaa_stream.device.context import Context
 from mlaa_stream.device.formats import LUT_SIZE, FrameFormat, frame_format
-from mlaa_stream.spatial.footprint import BUCKETS, WEIGHTS, footprint_reference, table_of
+from mlaa_stream.spatial.footprint import (BUCKETS, STRENGTH_FLOOR, STRENGTH_LEVELS, STRENGTH_REF, WEIGHTS,
+                                           footprint_reference, table_of)
 from mlaa_stream.spatial.fxaa import _MAX, fxaa_defines, fxaa_mix_reference, luma_reference
 from mlaa_stream.spatial.noise import NOISE_BINS, noise_defines, quiet_pixels
 from mlaa_stream.spatial.overlays import overlay_defines, overlay_tiles
@@ -90,6 +91,8 @@ def fallback_defines(fmt: FrameFormat, linear: bool, linear_input: bool, everywh
             "SUPERSAMPLED_CLEAN_PCT": SUPERSAMPLED_CLEAN_PCT, "SUPERSAMPLED_HARD_PCT": SUPERSAMPLED_HARD_PCT,
             "RENDER_RANGE": float(RENDER_RANGE), "RENDER_REGIONS": int(regions),
             "FOOTPRINT_TABLE": int(table), "FOOTPRINT_BUCKETS": BUCKETS, "FOOTPRINT_WEIGHTS": WEIGHTS,
+            "STRENGTH_LO": float(STRENGTH_LEVELS[0]), "STRENGTH_HI": float(STRENGTH_LEVELS[1]),
+            "STRENGTH_FLOOR": float(STRENGTH_FLOOR), "STRENGTH_UNIT": float(np.float32(1.0 / STRENGTH_REF)),
             "REFINE_TABLE": int(refine), "REFINE_WEIGHTS": REFINE_WEIGHTS, "REFINE_GATE": float(REFINE_GATE),
             "REFINE_GATE_LEVELS": int(np.ceil(REFINE_GATE * _MAX[np.dtype(fmt.dtype)])), **noise_defines()}
 

@@ -17,9 +17,11 @@ Per pixel, in mix space (linear light by default), for each colour channel c:
   MLAA passes and the FXAA fallback; [lo_c, hi_c]: the range of the 3x3 input window and the chain's colour (no
   overshoot: no halo around edges);
 - bucket b from the structure tensor of linear luma (central differences, averaged over the 5x5 window):
-  ANGLES orientations of the dominant gradient, STRENGTHS bands of its eigenvalue, COHERENCES bands of
-  (sqrt(l1) - sqrt(l2)) / (sqrt(l1) + sqrt(l2)), and whether the chain changed the pixel. The bands are tested
-  without square roots (the kernel and this reference then agree on every bucket);
+  ANGLES orientations of the dominant gradient, STRENGTHS bands of its eigenvalue relative to the window's mean
+  luma m, sqrt(l1) / s with s = (m + STRENGTH_FLOOR) / STRENGTH_REF (Weber's contrast: the same structure lands in
+  the same band in a dim render as in a bright one; the refine table's bands use sqrt(s), spatial/refine.py),
+  COHERENCES bands of (sqrt(l1) - sqrt(l2)) / (sqrt(l1) + sqrt(l2)), and whether the chain changed the pixel. The
+  bands are tested without square roots (the kernel and this reference then agree on every bucket);
 - a pixel whose 5x5 window is one colour and which the chain left keeps its colour, and so does a pixel that the
   chain changed on a straight edge run of FALLBACK_KEEP_RUN pixels or more (fallback.py: the MLAA passes' verdict
   on a straight edge stands).
@@ -41,7 +43,9 @@ CHAIN_WEIGHT = TAPS                   # index of the chain's colour's weight
 CENTRE_TAP = TAPS // 2                # its feature is always 0, so its weight has no effect
 ANGLES, STRENGTHS, COHERENCES = 8, 3, 3
 BUCKETS = ANGLES * STRENGTHS * COHERENCES * 2
-STRENGTH_LEVELS = (0.02, 0.08)       # sqrt(l1) in linear luma per pixel: flat shading / texture / edges
+STRENGTH_LEVELS = (0.02, 0.08)       # sqrt(l1) / s in linear luma per pixel: flat shading / texture / edges
+STRENGTH_REF = 0.2                   # s = (m + STRENGTH_FLOOR) / STRENGTH_REF: the levels hold as they are at m = 0.19
+STRENGTH_FLOOR = 0.01                # linear luma added to the window's mean m (near black: quantisation, not contrast)
 COHERENCE_LEVELS = (0.3, 0.6)        # isotropic (corners, dots) / mixed / one direction (edges, lines)
 LUMA = (0.2126, 0.7152, 0.0722)      # Rec. 709 weights on linear RGB
 TABLE_FILE = "footprint_table.npy"
@@ -110,27 +114,32 @@ def range3(a: np.ndarray, also: np.ndarray | None = None) -> tuple[np.ndarray, n
     return lo, hi
 
 
-def footprint_buckets(lin: np.ndarray, changed: np.ndarray) -> np.ndarray:
+def footprint_buckets(lin: np.ndarray, changed: np.ndarray, weber_squared: bool = True) -> np.ndarray:
     """Bucket per pixel, (h, w) int32, of `lin` ((h, w, 3) float32 RGB in mix space) and `changed` ((h, w) bool:
-    the chain changed the pixel)."""
+    the chain changed the pixel). The strength levels scale with s (`weber_squared`: l1 is compared against
+    t^2 s^2, the footprint table's Weber contrast) or with sqrt(s) (t^2 s: the refine table's)."""
     f32 = np.float32
     y = (lin[..., 0] * f32(LUMA[0]) + lin[..., 1] * f32(LUMA[1]) + lin[..., 2] * f32(LUMA[2])).astype(f32)
     sxx = np.zeros_like(y)
-    syy, sxy = sxx.copy(), sxx.copy()
+    syy, sxy, sy = sxx.copy(), sxx.copy(), sxx.copy()
     r = TABLE_RADIUS
     for dx in range(-r, r + 1):  # per column of the window, then across (the kernel's order of summation)
-        cxx, cyy, cxy = np.zeros_like(y), np.zeros_like(y), np.zeros_like(y)
+        cxx, cyy, cxy, cy = np.zeros_like(y), np.zeros_like(y), np.zeros_like(y), np.zeros_like(y)
         for dy in range(-r, r + 1):  # central differences at each tap, every read clamped at the frame's edge
             a = (_shifted(y, dy, dx + 1) - _shifted(y, dy, dx - 1)) * f32(0.5)
             b = (_shifted(y, dy + 1, dx) - _shifted(y, dy - 1, dx)) * f32(0.5)
             cxx += a * a
             cyy += b * b
             cxy += a * b
+            cy += _shifted(y, dy, dx)
         sxx += cxx
         syy += cyy
         sxy += cxy
+        sy += cy
     n = f32(1.0 / TAPS)
     sxx, syy, sxy = sxx * n, syy * n, sxy * n
+    scale = (sy * n + f32(STRENGTH_FLOOR)) * f32(1.0 / STRENGTH_REF)
+    scale2 = scale * scale if weber_squared else scale  # the strength levels' unit, squared
     u, v = sxx - syy, f32(2) * sxy         # the doubled angle's vector: (l1 - l2) (cos 2t, sin 2t)
     tr, det2 = sxx + syy, u * u + v * v    # l1 + l2 and (l1 - l2)^2
     au, av = np.abs(u), np.abs(v)
@@ -139,8 +148,8 @@ def footprint_buckets(lin: np.ndarray, changed: np.ndarray) -> np.ndarray:
                       np.where(u < 0, np.where(av < au, 4, 5), np.where(av > au, 6, 7)))
 
     # the bands, tested without square roots (the kernel's arithmetic): how many of the levels t each reaches
-    def strength(t: np.float32) -> np.ndarray:  # l1 = (tr + sqrt(det2)) / 2 >= t^2
-        need = f32(2) * t * t - tr
+    def strength(t: np.float32) -> np.ndarray:  # l1 = (tr + sqrt(det2)) / 2 >= t^2 scale^2
+        need = f32(2) * t * t * scale2 - tr
         return (need <= 0) | (det2 >= need * need)
 
     def coherence(t: np.float32) -> np.ndarray:  # (sqrt l1 - sqrt l2) >= t (sqrt l1 + sqrt l2)

@@ -15,7 +15,9 @@ the FXAA fallback and the footprint table, and `in` the input, for each colour c
 
 - o_k: the 25 offsets of the 5x5 window, i_j the 9 of the 3x3 window, row by row (reads clamped at the frame's
   edges); [lo_c, hi_c]: the range of mid's 3x3 window;
-- bucket b: footprint_buckets of mid (its structure tensor) and whether mid differs from the input;
+- bucket b: footprint_buckets of mid (its structure tensor) and whether mid differs from the input, with the
+  strength levels scaled by the square root of the first table's Weber unit (weber_squared=False): measured between
+  absolute levels and the first table's (docs/spatial_tuning.md, "Dim renders");
 - only pixels with strong local contrast in the input (any channel's range over its 3x3 window at least
   REFINE_GATE of full scale, in stored values) and, as for the first table, not a pixel the chain changed on a
   straight edge run (fallback.py FALLBACK_KEEP_RUN): elsewhere the second stage moved flat shading for little gain
@@ -81,7 +83,7 @@ def refine_reference(inp: np.ndarray, mid: np.ndarray, changed: np.ndarray, tabl
     RGB, `changed` (h, w) bool: mid differs from the input."""
     f32 = np.float32
     feats = refine_features(inp, mid)
-    pred = table_sum(mid, feats, table[footprint_buckets(mid, changed)])
+    pred = table_sum(mid, feats, table[footprint_buckets(mid, changed, weber_squared=False)])
     lo, hi = range3(mid)
     return np.clip(pred, lo, hi).astype(f32)
 
@@ -92,6 +94,7 @@ def fit_refine(samples, ridge: float = 1e-4, min_samples: int = 200) -> np.ndarr
     pixels to fit) (h, w) bool. A bucket with too few samples keeps mid's colour (all weights 0)."""
     def rows():
         for inp, mid, changed, truth, mask in samples:
-            yield (refine_features(inp, mid)[mask], (truth - mid)[mask], footprint_buckets(mid, changed)[mask])
+            yield (refine_features(inp, mid)[mask], (truth - mid)[mask],
+                   footprint_buckets(mid, changed, weber_squared=False)[mask])
     return solve_buckets(rows(), REFINE_WEIGHTS, np.zeros((BUCKETS, REFINE_WEIGHTS), np.float32), ridge,
                          min_samples)
