@@ -670,7 +670,8 @@ inline int8 fp_bucket(float8 sxx, float8 syy, float8 sxy, float8 sy, int8 change
     const int8 lower = select(select((int8)5, (int8)4, av < au), select((int8)7, (int8)6, av > au), u >= 0.0f);
     const int8 upper = select(select((int8)3, (int8)2, av > au), select((int8)1, (int8)0, av < au), u > 0.0f);
     const int8 octant = select(lower, upper, v >= 0.0f);
-    return ((octant * FP_STRENGTHS + fp_strength(tr, det2, scale2)) * FP_COHERENCES + fp_coherence(tr, det2)) * 2 - changed;
+    const int8 strength = fp_strength(tr, det2, scale2);
+    return ((octant * FP_STRENGTHS + strength) * FP_COHERENCES + fp_coherence(tr, det2)) * 2 - changed;
 }
 
 // q += sum over the 5x5 window of row r's lanes (rows r .. r + 4) of (window - m) * the table's weight of the tap,
