@@ -275,6 +275,30 @@ def test_rendered_views_bench_runs(capsys):
 
 
 @needs_egl
+def test_rendered_views_dim_exposures(capsys):
+    """`--exposures`: each 1-spp view and its truth again with the linear light times the factor, encoded as the
+    truth is (known answer: the 1-spp view's linear light halved, within the codes' rounding), scored and printed;
+    a factor of 0 or a word is refused by name."""
+    from mlaa_stream.bench import rendered_views
+    from mlaa_stream.device.colour import srgb_to_linear
+    frames = rendered_views.render_views([(96, 54)], exposures=(0.5,))
+    for name in rendered_views.VIEWS:
+        inp, truth = frames[f"{name}_96"]
+        dim, dim_truth = frames[f"{name}_96_exp0.5"]
+        assert dim.shape == inp.shape and dim.dtype == np.uint8
+        half = 0.5 * srgb_to_linear(inp.astype(np.float64) / 255)
+        lo, hi = (srgb_to_linear(np.clip(dim.astype(np.float64) + d, 0, 255) / 255) for d in (-1.01, 1.01))
+        assert np.all((lo <= half + 1e-9) & (half <= hi + 1e-9))  # within a code of the halved light
+        assert dim.mean() < inp.mean() and dim_truth.mean() < truth.mean()
+    assert rendered_views.main(["--methods", "none,mlaa", "--sizes", "96x54", "--exposures", "0.3"]) == 0
+    out = capsys.readouterr().out
+    assert all(f"{name}_96_exp0.3" in out for name in rendered_views.VIEWS) and "mean exp0.3" in out
+    for bad in ("0", "dark"):
+        with pytest.raises(SystemExit, match="--exposures"):
+            rendered_views.main(["--sizes", "96x54", "--exposures", bad])
+
+
+@needs_egl
 def test_the_town_renders_like_the_plaza():
     """The second world through the same renderer: 1-spp input and 8x8 truth differ on edges (a few per cent of the
     pixels) and agree where the input is flat, as the plaza's scenes do (test_truth_differs_but_is_close_away_...)."""
