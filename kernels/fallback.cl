@@ -21,7 +21,8 @@
 // changed moves FALLBACK_MIX of the way from their colour to FXAA's.
 // Except: a pixel on a straight edge run of FALLBACK_KEEP_RUN pixels or more (hdist / vdist of distances.cl) keeps
 // the MLAA passes' colour -- their verdict on a straight edge: FXAA's sub-pixel blend would smear pixel-aligned
-// rules and stems wherever noise or compression makes their windows busy.
+// rules and stems wherever noise or compression makes their windows busy. In render regions the run must be
+// REGION_KEEP_RUN pixels or more: a render's straight runs of 16-31 px are edges at sub-pixel offsets, not rules.
 // Render regions: a tile whose wide neighbourhood (RENDER_RADIUS tiles each way) looks like a 1-spp 3D render is
 // treated as busy, and every pixel of it then takes the footprint table (below). The neighbourhood test: at least
 // RENDER_MIN busy pixels (count_changed's k = 2) in tiles with a luma range of RENDER_RANGE or more, busy pixels at
@@ -84,6 +85,9 @@
 #endif
 #ifndef FALLBACK_KEEP_RUN
 #define FALLBACK_KEEP_RUN 16
+#endif
+#ifndef REGION_KEEP_RUN
+#define REGION_KEEP_RUN 32
 #endif
 #ifndef RENDER_RADIUS
 #define RENDER_RADIUS 7
@@ -278,24 +282,22 @@ RARELY_CALLED int window_two_colours(__global const PIXEL_T *src, int x, int y, 
 #define WINDOW_BUSY_EXACT(src, x, y, w, h) window_has_exact_colours(src, x, y, w, h)
 #endif
 
-#if FALLBACK_KEEP_RUN > 0
 // The longest straight edge run (distances.cl: left + right + 1, up + down + 1) among the edges that pixel (x, y)
-// borders is at least FALLBACK_KEEP_RUN pixels.
+// borders is at least `min_run` pixels (0: no test).
 inline int on_long_run(__global const uchar *edges, __global const ushort2 *hdist, __global const ushort2 *vdist,
-                       int x, int y, int w)
+                       int x, int y, int w, int min_run)
 {
+    if (min_run <= 0) return 0;
     const int i = IDX(x, y, w);
     int run = 0;
     if (edges[i] & EDGE_BOTTOM) run = max(run, hdist[i].x + hdist[i].y + 1);
     if (y > 0 && (edges[i - w] & EDGE_BOTTOM)) run = max(run, hdist[i - w].x + hdist[i - w].y + 1);
     if (edges[i] & EDGE_RIGHT) run = max(run, vdist[i].x + vdist[i].y + 1);
     if (x > 0 && (edges[i - 1] & EDGE_RIGHT)) run = max(run, vdist[i - 1].x + vdist[i - 1].y + 1);
-    return run >= FALLBACK_KEEP_RUN;
+    return run >= min_run;
 }
-#define ON_LONG_RUN(edges, hdist, vdist, x, y, w) on_long_run(edges, hdist, vdist, x, y, w)
-#else
-#define ON_LONG_RUN(edges, hdist, vdist, x, y, w) 0
-#endif
+#define ON_LONG_RUN(edges, hdist, vdist, x, y, w) on_long_run(edges, hdist, vdist, x, y, w, FALLBACK_KEEP_RUN)
+#define ON_REGION_RUN(edges, hdist, vdist, x, y, w) on_long_run(edges, hdist, vdist, x, y, w, REGION_KEEP_RUN)
 
 // How many of the tile's pixels (x0..x1, y0..y1) lie within a tenth of its luma range (px_luma) from its darkest or
 // lightest: the two-tone test of render regions; NOT_MEASURED where the range is under RENDER_RANGE.
@@ -933,7 +935,7 @@ __kernel void refine_fallback(__global const PIXEL_T *src, __global const float 
         for (int y = y0; y < y1; ++y) {
             take[y - y0] = 0;
             for (int x = x0; x < x1; ++x)
-                if (!(ON_LONG_RUN(edges, hdist, vdist, x, y, w) && px_differs(src, mid, IDX(x, y, w))) &&
+                if (!(ON_REGION_RUN(edges, hdist, vdist, x, y, w) && px_differs(src, mid, IDX(x, y, w))) &&
                     !noise_quiet(quiet_px, IDX(x, y, w), level))
                     take[y - y0] |= 1u << (x - x0);
             any |= take[y - y0];
@@ -986,14 +988,15 @@ inline void fallback_tile(__global const PIXEL_T *src, __global const float *lut
                 // outside busy regions only pixels MLAA left, and only in busy windows (flat-colour art stops here)
                 eligible = eligible && (region || rich || (evidence && !changed_px && WINDOW_BUSY(src, x, y, w, h)));
                 eligible = eligible && !fxaa_keeps(src, x, y, w, h);
-                eligible = eligible && !ON_LONG_RUN(edges, hdist, vdist, x, y, w);
+                eligible = eligible && !(region ? ON_REGION_RUN(edges, hdist, vdist, x, y, w)
+                                                : ON_LONG_RUN(edges, hdist, vdist, x, y, w));
                 if (eligible)
                     towards_fxaa(src, luts, dst, changed_px ? dst : src,
                                  changed_px ? FALLBACK_MIX : FALLBACK_WEIGHT, x, y, w, h);
             }
 #if FOOTPRINT_TABLE
-            // the table too leaves a colour the chain gave a pixel on a straight edge run (FALLBACK_KEEP_RUN)
-            if (region && !(ON_LONG_RUN(edges, hdist, vdist, x, y, w) && px_differs(src, dst, IDX(x, y, w))))
+            // the table too leaves a colour the chain gave a pixel on a straight edge run (REGION_KEEP_RUN)
+            if (region && !(ON_REGION_RUN(edges, hdist, vdist, x, y, w) && px_differs(src, dst, IDX(x, y, w))))
                 take[y - y0] |= 1u << (x - x0);
 #endif
         }

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from mlaa_stream.device.colour import linear_to_srgb, srgb_to_linear
-from mlaa_stream.spatial.fallback import long_runs
+from mlaa_stream.spatial.fallback import FALLBACK_KEEP_RUN, long_runs
 from mlaa_stream.spatial.filter import Filter
 from mlaa_stream.spatial.footprint import (BUCKETS, CENTRE_TAP, COHERENCES, STRENGTHS, TABLE_RADIUS, WEIGHTS,
                                            as_table, fit_table, footprint_buckets, footprint_reference,
@@ -138,9 +138,13 @@ def test_table_checked_and_shipped():
 def test_kernel_with_known_tables():
     """Known answers through the device: with the identity table a render-like frame comes out as without a
     table; with the tent table every render-region pixel is the tent average of its 3x3 input window in linear
-    light (within one level of rounding), but for pixels the chain changed on straight edge runs, which keep
-    the chain's colour."""
+    light (within one level of rounding), but for pixels the chain changed on straight edge runs (REGION_KEEP_RUN
+    px or longer: a shallow edge across a flat band), which keep the chain's colour."""
     frame = shaded_polygons(5, 96, 128)
+    yy, xx = np.mgrid[0:96, 0:128] + 0.5
+    band = (yy > 40) & (yy < 60)
+    frame[band] = (200, 190, 170)
+    frame[band & (yy > 46 + xx / 48)] = (60, 50, 40)  # runs of 48 px
     regions = regions_of(frame)
     assert regions.mean() > 0.9
     with Filter(footprint_table=None) as n, Filter(footprint_table=identity_table(), refine_table=None) as i, \
@@ -157,6 +161,8 @@ def test_kernel_with_known_tables():
         passes = m.intermediates(frame)
     kept = long_runs(passes["edges"], passes["hdist"], passes["vdist"]) & np.any(chain != frame, -1)
     assert 0 < kept[regions].mean() < 0.2
+    shorter = long_runs(passes["edges"], passes["hdist"], passes["vdist"], FALLBACK_KEEP_RUN) & ~kept
+    assert (shorter & regions & np.any(chain != frame, -1)).sum() > 20  # runs of 16-31 px take the table (below)
     np.testing.assert_array_equal(tent_out[kept], chain[kept])
     assert np.all(np.abs(tent_out - want).max(-1)[regions & ~kept] <= 1.0)
     assert np.array_equal(tent_out[~regions], chain[~regions])

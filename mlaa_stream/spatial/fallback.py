@@ -32,6 +32,9 @@ FALLBACK_RICH_MIN, FALLBACK_RICH_DIV, FALLBACK_MIX = 12, 20, 0.5
 # ... except a pixel on a straight edge run of FALLBACK_KEEP_RUN pixels or more: MLAA's verdict on a straight edge
 # stands, so pixel-aligned rules and stems keep their sharpness where noise or compression makes windows busy.
 FALLBACK_KEEP_RUN = 16
+# In render regions (below) the run must be REGION_KEEP_RUN pixels or more, for FXAA and the footprint tables: a
+# render's straight runs of 16-31 px are edges at sub-pixel offsets (docs/spatial_tuning.md, "REGION_KEEP_RUN").
+REGION_KEEP_RUN = 32
 # Render regions (kernels/fallback.cl): a tile whose neighbourhood of RENDER_RADIUS tiles each way holds at least
 # RENDER_MIN busy pixels in tiles of a luma range of RENDER_RANGE or more, busy pixels at least 1 / RENDER_DIV of its
 # edge-bordering pixels, and busy tiles with on average at most RENDER_NEAR_PCT % of their pixels within a tenth of
@@ -82,7 +85,8 @@ def fallback_defines(fmt: FrameFormat, linear: bool, linear_input: bool, everywh
             "FALLBACK_SAME_LEVELS": int(np.floor(FALLBACK_SAME / 255.0 * _MAX[np.dtype(fmt.dtype)])),
             "FALLBACK_WEIGHT": float(FALLBACK_WEIGHT), "FALLBACK_MIX": float(FALLBACK_MIX),
             "FALLBACK_RICH_MIN": FALLBACK_RICH_MIN, "FALLBACK_RICH_DIV": FALLBACK_RICH_DIV,
-            "FALLBACK_KEEP_RUN": 0 if everywhere else FALLBACK_KEEP_RUN, "RENDER_RADIUS": RENDER_RADIUS,
+            "FALLBACK_KEEP_RUN": 0 if everywhere else FALLBACK_KEEP_RUN,
+            "REGION_KEEP_RUN": 0 if everywhere else REGION_KEEP_RUN, "RENDER_RADIUS": RENDER_RADIUS,
             "RENDER_MIN": RENDER_MIN, "RENDER_DIV": RENDER_DIV, "RENDER_DIV_1SPP": RENDER_DIV_1SPP,
             "RENDER_NEAR_PCT": RENDER_NEAR_PCT,
             "RENDER_FRAME_PCT": RENDER_FRAME_PCT, "SUPERSAMPLED_STEP": float(SUPERSAMPLED_STEP),
@@ -278,16 +282,18 @@ def _window_colours(rgb: np.ndarray, same: float = FALLBACK_SAME) -> np.ndarray:
     return distinct
 
 
-def long_runs(edges: np.ndarray, hdist: np.ndarray, vdist: np.ndarray) -> np.ndarray:
+def long_runs(edges: np.ndarray, hdist: np.ndarray, vdist: np.ndarray, min_run: int | None = None) -> np.ndarray:
     """kernels/fallback.cl on_long_run for every pixel: the longest straight run among the edges it borders is
-    FALLBACK_KEEP_RUN pixels or more (hdist, vdist: (h, w, 2) as distances.cl writes them)."""
+    `min_run` pixels or more (default REGION_KEEP_RUN, the render regions' and so the footprint tables'; 0: none)
+    (hdist, vdist: (h, w, 2) as distances.cl writes them)."""
+    min_run = REGION_KEEP_RUN if min_run is None else min_run
     e = np.asarray(edges)
     hl = np.where(e & 1, hdist.astype(np.int64).sum(-1) + 1, 0)
     vl = np.where(e & 2, vdist.astype(np.int64).sum(-1) + 1, 0)
     run = np.maximum(hl, vl)
     run[1:] = np.maximum(run[1:], hl[:-1])
     run[:, 1:] = np.maximum(run[:, 1:], vl[:, :-1])
-    return run >= FALLBACK_KEEP_RUN
+    return run >= min_run if min_run > 0 else np.zeros(e.shape, bool)
 
 
 def _frame_masks(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray, bgr: bool) -> tuple:
@@ -400,7 +406,7 @@ def fallback_reference(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray,
         if frame_supersampled:  # no tile busy, none with evidence: FXAA in render regions only
             eligible &= rendered
         runs = long_runs(e, hdist, vdist)
-        eligible &= ~runs
+        eligible &= ~np.where(rendered, runs, long_runs(e, hdist, vdist, FALLBACK_KEEP_RUN))
     early, fx = fxaa_mix_reference(src, linear=linear, linear_input=linear_input, bgr=bgr)
     eligible &= ~early
     decode = linear and not linear_input

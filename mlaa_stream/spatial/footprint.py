@@ -23,7 +23,7 @@ Per pixel, in mix space (linear light by default), for each colour channel c:
   COHERENCES bands of (sqrt(l1) - sqrt(l2)) / (sqrt(l1) + sqrt(l2)), and whether the chain changed the pixel. The
   bands are tested without square roots (the kernel and this reference then agree on every bucket);
 - a pixel whose 5x5 window is one colour and which the chain left keeps its colour, and so does a pixel that the
-  chain changed on a straight edge run of FALLBACK_KEEP_RUN pixels or more (fallback.py: the MLAA passes' verdict
+  chain changed on a straight edge run of REGION_KEEP_RUN pixels or more (fallback.py: the MLAA passes' verdict
   on a straight edge stands).
 
 The table (BUCKETS x WEIGHTS float32) ships as mlaa_stream/data/footprint_table.npy; `python -m

@@ -20,7 +20,7 @@ the FXAA fallback and the footprint table, and `in` the input, for each colour c
   absolute levels and the first table's (docs/spatial_tuning.md, "Dim renders");
 - only pixels with strong local contrast in the input (any channel's range over its 3x3 window at least
   REFINE_GATE of full scale, in stored values) and, as for the first table, not a pixel the chain changed on a
-  straight edge run (fallback.py FALLBACK_KEEP_RUN): elsewhere the second stage moved flat shading for little gain
+  straight edge run (fallback.py REGION_KEEP_RUN): elsewhere the second stage moved flat shading for little gain
   and raised the damage away from edges.
 
 The table (BUCKETS x REFINE_WEIGHTS float32) ships as mlaa_stream/data/footprint_refine.npy; `python -m
