@@ -299,6 +299,37 @@ def test_rendered_views_dim_exposures(capsys):
 
 
 @needs_egl
+def test_rendered_views_tonemaps(capsys):
+    """`--tonemaps`: the truth's samples each through the tone curve, then their mean (known answers: the identity
+    map gives truth_linear; clipping each sample gives at most the clipped mean, Jensen); the tone-mapped input
+    and truth agree but on edges; scored and printed; an unknown curve is refused by name."""
+    from mlaa_stream.bench import rendered_views
+    from mlaa_stream.yardstick.scenes import edge_mask
+    renderer = R.Renderer(R._context(), 96, 54, hdr=True)
+    try:
+        cam = R.Camera(*rendered_views.VIEWS["low_arches"])
+        truth = renderer.truth_linear(cam, 4)
+        same, clipped = renderer.truth_mapped(cam, [lambda x: x, lambda x: np.minimum(x, 1.0)], 4)
+    finally:
+        renderer.release()
+    np.testing.assert_allclose(same, truth, rtol=0, atol=1e-9)
+    assert truth.max() > 1.0 and np.all(clipped <= np.minimum(truth, 1.0) + 1e-9)
+    assert np.any(clipped < np.minimum(truth, 1.0) - 1e-3)  # highlights' edges: the mean of clipped samples is less
+    frames = rendered_views.render_views([(96, 54)], tonemaps=("aces", "reinhard"))
+    for name in rendered_views.VIEWS:
+        for t in ("aces", "reinhard"):
+            inp, tm_truth = frames[f"{name}_96_tm{t}"]
+            assert inp.shape == tm_truth.shape == (54, 96, 3) and inp.dtype == tm_truth.dtype == np.uint8
+            d = np.abs(inp.astype(np.int16) - tm_truth).max(-1)
+            assert np.median(d) <= 1 and 0.01 < edge_mask(inp, tm_truth).mean() < 0.3
+    assert rendered_views.main(["--methods", "none,mlaa", "--sizes", "96x54", "--tonemaps", "aces"]) == 0
+    out = capsys.readouterr().out
+    assert all(f"{name}_96_tmaces" in out for name in rendered_views.VIEWS) and "mean tmaces" in out
+    with pytest.raises(SystemExit, match="--tonemaps"):
+        rendered_views.main(["--sizes", "96x54", "--tonemaps", "filmic"])
+
+
+@needs_egl
 def test_the_town_renders_like_the_plaza():
     """The second world through the same renderer: 1-spp input and 8x8 truth differ on edges (a few per cent of the
     pixels) and agree where the input is flat, as the plaza's scenes do (test_truth_differs_but_is_close_away_...)."""

@@ -4,7 +4,7 @@
                                                [--sizes 640x360,960x540] [--samples 1,2,3]
                                                [--world plaza|town] [--textures procedural|photo|relief]
                                                [--texture-repeat 4] [--msaa 4] [--crf 18,23] [--exposures 0.5,0.3]
-                                               [--verdicts]
+                                               [--tonemaps aces,reinhard] [--verdicts]
 
 The bench's rendered scenes are what the spatial filter's rendered-content rules were measured on; these views
 are not, so a rule that only fits those five scenes shows here. Each view is rendered like the bench's (1 spp at
@@ -17,7 +17,10 @@ are; yardstick/photo_textures.py; `--texture-repeat 4`: four times finer). `--ms
 (view_WIDTH_msaa4: edges from 4 coverage samples, shading once per pixel, as games with multisampling draw them).
 `--crf 18,23`: also each 1-spp view through H.264 (view_WIDTH_crfN), as rendered video reaches the filter.
 `--exposures 0.5,0.3`: also each 1-spp view and its truth with the linear light times these factors (view_WIDTH_expF:
-a dim render -- dusk, an interior -- as the renderer would encode it).
+a dim render -- dusk, an interior -- as the renderer would encode it). `--tonemaps aces,reinhard`: also each view
+rendered with its highlights kept (over 1) and a game's tone curve applied to every sample, the 1-spp input's and
+each of the truth's 8x8 before their mean (view_WIDTH_tmNAME: a game's frame, as a renderer with supersampling
+would resolve it).
 Needs what the rendered scenes need (EGL; `pip install 'mlaa-stream[bench]'`
 for FLIP). A benchmark, never a unit test.
 """
@@ -53,6 +56,20 @@ TOWN_VIEWS: dict[str, tuple[tuple, tuple, float]] = {
 WORLD_VIEWS = {"plaza": VIEWS, "town": TOWN_VIEWS}
 
 
+def aces_filmic(x: np.ndarray) -> np.ndarray:
+    """Narkowicz's fit of the ACES filmic reference curve (linear scene light -> linear display light, 0..1)."""
+    return np.clip(x * (2.51 * x + 0.03) / (x * (2.43 * x + 0.59) + 0.14), 0.0, 1.0)
+
+
+def reinhard(x: np.ndarray) -> np.ndarray:
+    """Reinhard's curve x / (1 + x) after an exposure of 1.5 (scene white 1 -> 0.6 of display white)."""
+    return 1.5 * x / (1.0 + 1.5 * x)
+
+
+# --tonemaps: tone curves a game applies to its HDR light before display, per sample
+TONEMAPS = {"aces": aces_filmic, "reinhard": reinhard}
+
+
 def render_args(sizes: str, worlds: str) -> tuple[list[tuple[int, int]], list[str]]:
     """A render benchmark's --sizes ('WxH,WxH') and --world ('plaza,town') parsed, after checking that EGL is there
     (SystemExit naming what is wrong)."""
@@ -83,12 +100,15 @@ def held_out_views(sizes: list[tuple[int, int]], worlds: list[str],
 
 def render_views(sizes: list[tuple[int, int]], samples: tuple[int, ...] = (1,), world: str = "plaza",
                  textures: str = "procedural", texture_repeat: float = 1.0, msaa: tuple[int, ...] = (),
-                 exposures: tuple[float, ...] = ()) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+                 exposures: tuple[float, ...] = (), tonemaps: tuple[str, ...] = ()
+                 ) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """{view_WIDTH: (input, truth)} for every view of `world` (its surfaces textured by the set `textures`, repeated
     `texture_repeat` times as often) at every size; for every n > 1 of `samples` also {view_WIDTH_NxN: (input
     supersampled with n x n samples per pixel, truth)}; for every n of `msaa` {view_WIDTH_msaaN: (input drawn with
     n-sample MSAA, truth)}; for every factor e of `exposures` {view_WIDTH_expE: (the 1-spp input, truth), both with
-    their linear light times e, clipped at 1, encoded as the truth is}."""
+    their linear light times e, clipped at 1, encoded as the truth is}; for every name of `tonemaps` (TONEMAPS)
+    {view_WIDTH_tmNAME: (the 1-spp light, highlights kept, through the curve; the truth's samples each through it,
+    then their mean), both encoded as the truth is}."""
     frames = {}
     for width, height in sizes:
         renderer = Renderer(_context(), width, height, world, textures, texture_repeat)
@@ -109,6 +129,25 @@ def render_views(sizes: list[tuple[int, int]], samples: tuple[int, ...] = (1,), 
                                                                    for a in (inp_linear, truth_linear))
         finally:
             renderer.release()
+        if tonemaps:
+            frames.update(_tonemapped_views(width, height, world, textures, texture_repeat, tonemaps))
+    return frames
+
+
+def _tonemapped_views(width: int, height: int, world: str, textures: str, texture_repeat: float,
+                      tonemaps: tuple[str, ...]) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """render_views' view_WIDTH_tmNAME frames: the world rendered with highlights kept (Renderer(hdr=True))."""
+    frames = {}
+    curves = [TONEMAPS[t] for t in tonemaps]
+    renderer = Renderer(_context(), width, height, world, textures, texture_repeat, hdr=True)
+    try:
+        for name, (eye, target, fov) in WORLD_VIEWS[world].items():
+            cam = Camera(eye, target, fov)
+            inp_linear = renderer.input_linear(cam).astype(np.float64)
+            for t, curve, truth in zip(tonemaps, curves, renderer.truth_mapped(cam, curves)):
+                frames[f"{name}_{width}_tm{t}"] = (encode8(curve(inp_linear)), encode8(truth))
+    finally:
+        renderer.release()
     return frames
 
 
@@ -212,6 +251,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--exposures", default="",
                     help="also every 1-spp view and its truth with the linear light times these factors "
                          "(comma-separated, e.g. 0.5,0.3: dim renders; view_WIDTH_expF)")
+    ap.add_argument("--tonemaps", default="",
+                    help="also every view rendered with its highlights kept and a tone curve applied to each "
+                         f"sample (comma-separated, of {', '.join(TONEMAPS)}: a game's frame; view_WIDTH_tmNAME)")
     ap.add_argument("--verdicts", action="store_true",
                     help="also print each view's frame evidence: ramps and hard stair ends among its steps, and "
                          "whether it is judged supersampled or 1-spp geometry (docs/spatial_tuning.md)")
@@ -236,8 +278,13 @@ def main(argv: list[str] | None = None) -> int:
         exposures = (0.0,)
     if any(not (0.0 < e < 100.0) for e in exposures):
         raise SystemExit(f"--exposures: expected factors over 0, comma-separated, got {args.exposures!r}")
+    tonemaps = tuple(t for t in args.tonemaps.split(",") if t)
+    unknown = [t for t in tonemaps if t not in TONEMAPS]
+    if unknown:
+        raise SystemExit(f"--tonemaps: expected names from {', '.join(TONEMAPS)}, got {', '.join(unknown)}")
     try:
-        frames = render_views(sizes, samples, args.world, args.textures, args.texture_repeat, msaa, exposures)
+        frames = render_views(sizes, samples, args.world, args.textures, args.texture_repeat, msaa, exposures,
+                              tonemaps)
     except ValueError as e:
         raise SystemExit(f"--msaa: {e}") from None
     if crfs:
@@ -254,7 +301,7 @@ def main(argv: list[str] | None = None) -> int:
 
     def group(view: str) -> str:  # the mean's row: "mean" for 1-spp views, "mean NxN" / "mean msaaN" / "mean crfN"
         last = view.rsplit("_", 1)[-1]
-        return f"mean {last}" if "x" in last or last.startswith(("msaa", "crf", "grain", "exp")) else "mean"
+        return f"mean {last}" if "x" in last or last.startswith(("msaa", "crf", "grain", "exp", "tm")) else "mean"
 
     print("view".ljust(20) + "".join(m.rjust(24) for m in methods))
     removed = {(m, group(v)): [] for m in methods for v in frames}

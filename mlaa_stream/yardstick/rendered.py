@@ -29,6 +29,7 @@ import time
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -708,6 +709,21 @@ class Renderer:
             for dx in offsets:
                 acc += self._linear_pass(cam, dx, dy)
         return np.flipud(acc / (spp * spp))
+
+    def truth_mapped(self, cam: Camera, maps: list[Callable[[np.ndarray], np.ndarray]],
+                     spp: int = TRUTH_SPP) -> list[np.ndarray]:
+        """For each function of `maps` (linear light -> display light, e.g. a tone curve), the mean of spp x spp
+        jittered passes each mapped on its own, as a renderer that tone-maps every sample before the resolve shows
+        them: (H, W, 3) float64 per map, row 0 the top. With hdr=True the passes keep highlights over 1."""
+        self.fbo32.use()
+        accs = [np.zeros((self.height, self.width, 3), np.float64) for _ in maps]
+        offsets = (np.arange(spp) + 0.5) / spp - 0.5
+        for dy in offsets:
+            for dx in offsets:
+                sample = self._linear_pass(cam, dx, dy).astype(np.float64)
+                for acc, f in zip(accs, maps):
+                    acc += f(sample)
+        return [np.flipud(acc / (spp * spp)).copy() for acc in accs]
 
     def coverage_frames(self, cam: Camera, spp: int = TRUTH_SPP) -> tuple[np.ndarray, ...]:
         """The world with its sky as transparency, as a renderer writes an element over nothing: the 1-spp linear
