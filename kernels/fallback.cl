@@ -22,7 +22,7 @@
 // Except: a pixel on a straight edge run of FALLBACK_KEEP_RUN pixels or more (hdist / vdist of distances.cl) keeps
 // the MLAA passes' colour -- their verdict on a straight edge: FXAA's sub-pixel blend would smear pixel-aligned
 // rules and stems wherever noise or compression makes their windows busy. In render regions the run must be
-// REGION_KEEP_RUN pixels or more: a render's straight runs of 16-31 px are edges at sub-pixel offsets, not rules.
+// REGION_KEEP_RUN pixels or more: a render's straight runs of 16-31 px are mostly edges at sub-pixel offsets.
 // Render regions: a tile whose wide neighbourhood (RENDER_RADIUS tiles each way) looks like a 1-spp 3D render is
 // treated as busy, and every pixel of it then takes the footprint table (below). The neighbourhood test: at least
 // RENDER_MIN busy pixels (count_changed's k = 2) in tiles with a luma range of RENDER_RANGE or more, busy pixels at

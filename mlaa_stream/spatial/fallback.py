@@ -33,7 +33,7 @@ FALLBACK_RICH_MIN, FALLBACK_RICH_DIV, FALLBACK_MIX = 12, 20, 0.5
 # stands, so pixel-aligned rules and stems keep their sharpness where noise or compression makes windows busy.
 FALLBACK_KEEP_RUN = 16
 # In render regions (below) the run must be REGION_KEEP_RUN pixels or more, for FXAA and the footprint tables: a
-# render's straight runs of 16-31 px are edges at sub-pixel offsets (docs/spatial_tuning.md, "REGION_KEEP_RUN").
+# render's straight runs of 16-31 px are mostly edges at sub-pixel offsets (docs/spatial_tuning.md, "REGION_KEEP_RUN").
 REGION_KEEP_RUN = 32
 # Render regions (kernels/fallback.cl): a tile whose neighbourhood of RENDER_RADIUS tiles each way holds at least
 # RENDER_MIN busy pixels in tiles of a luma range of RENDER_RANGE or more, busy pixels at least 1 / RENDER_DIV of its

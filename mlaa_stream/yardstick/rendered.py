@@ -702,13 +702,7 @@ class Renderer:
 
     def truth_linear(self, cam: Camera, spp: int = TRUTH_SPP) -> np.ndarray:
         """The mean of spp x spp jittered passes in linear light: (H, W, 3) float64."""
-        self.fbo32.use()
-        acc = np.zeros((self.height, self.width, 3), np.float64)
-        offsets = (np.arange(spp) + 0.5) / spp - 0.5
-        for dy in offsets:
-            for dx in offsets:
-                acc += self._linear_pass(cam, dx, dy)
-        return np.flipud(acc / (spp * spp))
+        return self.truth_mapped(cam, [lambda light: light], spp)[0]
 
     def truth_mapped(self, cam: Camera, maps: list[Callable[[np.ndarray], np.ndarray]],
                      spp: int = TRUTH_SPP) -> list[np.ndarray]:
