@@ -116,7 +116,7 @@ def test_flip_of_a_sequence_is_the_mean_over_its_frames():
     """Known answer: a shot whose first frame is the truth and whose second is the aliased input scores half the
     input's FLIP (the first frame alone would say 0: a temporal stage returns it as the spatial filter does)."""
     if not M.flip_available():
-        pytest.skip("flip-evaluator is not installed (pip install 'mlaa-stream[bench]')")
+        pytest.skip("flip-evaluator is not installed (pip install 'mlaa-stream[flip]')")
     inp, truth = _pair(2, (40, 40, 3))
     outs = np.stack([truth, inp])
     got = M.score(outs, np.stack([inp, inp]), np.stack([truth, truth]), with_flip=True)["flip"]

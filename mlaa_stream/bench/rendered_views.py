@@ -21,8 +21,8 @@ a dim render -- dusk, an interior -- as the renderer would encode it). `--tonema
 rendered with its highlights kept (over 1) and a game's tone curve applied to every sample, the 1-spp input's and
 each of the truth's 8x8 before their mean (view_WIDTH_tmNAME: a game's frame, as a renderer with supersampling
 would resolve it).
-Needs what the rendered scenes need (EGL; `pip install 'mlaa-stream[bench]'`
-for FLIP). A benchmark, never a unit test.
+Needs what the rendered scenes need (EGL; `pip install 'mlaa-stream[bench]'`; `'mlaa-stream[flip]'` for FLIP).
+A benchmark, never a unit test.
 """
 from __future__ import annotations
 
