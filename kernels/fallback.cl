@@ -521,9 +521,13 @@ __kernel void render_tiles(__global const int8 *rows, __global const uchar *coun
 // SUPERSAMPLED_HARD_PCT % of the strong steps) only tiles with bit 2 as well (the neighbourhood's clean
 // transitions mostly hard steps), and the tiles' counts k = 0..2 are cleared: fxaa_fallback then finds no tile
 // busy and none with evidence outside render regions.
+// A frame of a shot held as a render (hold[parity] > 0: a frame of the same shot within RENDER_HOLD_FRAMES was
+// judged one by its own share; `cut`: none before this frame counts) is one too, unless it is supersampled: a video
+// codec's P- and B-frames fall under RENDER_FRAME_PCT where the keyframe before them passes (spatial/shots.py).
+// Work item 0 writes the hold for the next frame into hold[1 - parity].
 // One work item per tile column; each sums the columns' shares (tiles_x of them: cheaper than another pass).
 __kernel void render_frame(__global uchar *render, __global uchar *counts, __global const int8 *shares,
-                           const int tiles_x, const int tiles_y)
+                           __global int *hold, const int parity, const int cut, const int tiles_x, const int tiles_y)
 {
     const int tx = get_global_id(0);
     if (tx >= tiles_x) return;
@@ -534,7 +538,10 @@ __kernel void render_frame(__global uchar *render, __global uchar *counts, __glo
                              (total.s4 - total.s5) * 100 < SUPERSAMPLED_HARD_PCT * total.s2;
     const int one_spp = total.s2 > 0 && (total.s4 - total.s5) * 100 >= SUPERSAMPLED_HARD_PCT * total.s2;
     const int regions = one_spp ? total.s6 : total.s1;
-    const uchar bit = total.s0 > 0 && regions * 100 >= RENDER_FRAME_PCT * total.s0 ? 2 : (one_spp ? 8 : 1);
+    const int own = total.s0 > 0 && regions * 100 >= RENDER_FRAME_PCT * total.s0;
+    const int held = !cut && hold[parity] > 0;
+    if (tx == 0) hold[1 - parity] = own ? RENDER_HOLD_FRAMES : (held ? hold[parity] - 1 : 0);
+    const uchar bit = total.s0 > 0 && (own || (held && !supersampled)) ? 2 : (one_spp ? 8 : 1);
     for (int ty = 0; ty < tiles_y; ++ty) {
         const int tile = ty * tiles_x + tx;
         render[tile] = (uchar)((render[tile] & bit) != 0 && (!supersampled || (render[tile] & 4) != 0));

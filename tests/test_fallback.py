@@ -239,6 +239,7 @@ def test_a_render_frame_takes_every_busy_neighbourhood(seed):
     assert regions_of(mostly_sky)[:, :192].mean() > 0.5  # the render part keeps its own regions
     with Filter(keep_regions=True) as f:
         for frame in (sky, mostly_render, mostly_sky):
+            f.new_shot()  # three frames judged alone (a shot holds its render verdict: tests/test_shots.py)
             f.process(frame)
             h, w = frame.shape[:2]
             tiles = np.repeat(np.repeat(f.last_regions > 0, FALLBACK_TILE, 0), FALLBACK_TILE, 1)[:h, :w]

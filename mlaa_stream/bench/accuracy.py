@@ -73,6 +73,7 @@ class SpatialTemporal:
 
     def reset(self) -> None:
         self.stage.reset()
+        self.filter.new_shot()
         self.index = 0
 
     def close(self) -> None:
@@ -146,10 +147,11 @@ def _close(proc) -> None:
 
 
 def run_scene(proc: Processor, scene: Scene) -> np.ndarray:
-    """All frames of a scene through one method, in order (a temporal method starts afresh)."""
-    reset = getattr(proc, "reset", None)
-    if reset is not None:
-        reset()
+    """All frames of a scene through one method, in order (a temporal method starts afresh, a filter's held render
+    verdict too: Filter.new_shot)."""
+    for hook in ("reset", "new_shot"):
+        if callable(getattr(proc, hook, None)):
+            getattr(proc, hook)()
     if hasattr(proc, "process_all"):   # a temporal method reading frames ahead
         return proc.process_all(scene.inputs)
     return np.stack([proc.process(f) for f in scene.inputs])

@@ -17,6 +17,7 @@ from mlaa_stream.spatial.fxaa import _MAX, fxaa_defines, fxaa_mix_reference, lum
 from mlaa_stream.spatial.noise import NOISE_BINS, noise_defines, quiet_pixels
 from mlaa_stream.spatial.overlays import overlay_defines, overlay_tiles
 from mlaa_stream.spatial.refine import REFINE_GATE, REFINE_WEIGHTS, gate, refine_reference, refine_table_of
+from mlaa_stream.spatial.shots import RENDER_HOLD_FRAMES
 
 SEGMENT = 64  # pixels of a tile band per work item of count_changed (a multiple of FALLBACK_TILE)
 
@@ -89,7 +90,8 @@ def fallback_defines(fmt: FrameFormat, linear: bool, linear_input: bool, everywh
             "REGION_KEEP_RUN": 0 if everywhere else REGION_KEEP_RUN, "RENDER_RADIUS": RENDER_RADIUS,
             "RENDER_MIN": RENDER_MIN, "RENDER_DIV": RENDER_DIV, "RENDER_DIV_1SPP": RENDER_DIV_1SPP,
             "RENDER_NEAR_PCT": RENDER_NEAR_PCT,
-            "RENDER_FRAME_PCT": RENDER_FRAME_PCT, "SUPERSAMPLED_STEP": float(SUPERSAMPLED_STEP),
+            "RENDER_FRAME_PCT": RENDER_FRAME_PCT, "RENDER_HOLD_FRAMES": RENDER_HOLD_FRAMES,
+            "SUPERSAMPLED_STEP": float(SUPERSAMPLED_STEP),
             "SUPERSAMPLED_PCT": SUPERSAMPLED_PCT, "SUPERSAMPLED_MIN": SUPERSAMPLED_MIN,
             "RENDER_RAMP_PCT": RENDER_RAMP_PCT, "RAMP_FLANK": float(RAMP_FLANK),
             "SUPERSAMPLED_CLEAN_PCT": SUPERSAMPLED_CLEAN_PCT, "SUPERSAMPLED_HARD_PCT": SUPERSAMPLED_HARD_PCT,
@@ -145,6 +147,11 @@ class FallbackPass:
         self._row_sums = context.buffer(32 * n)  # render_rows' int8 per tile
         self._render = context.buffer(n)  # render_tiles' flag per tile
         self._shares = context.buffer(32 * self.tiles[0])  # render_tiles' int8 per tile column
+        # render_frame's held verdict (spatial/shots.py): frames left in the hold, read from [parity], written to the
+        # other; frames run in order (each frame's passes wait for the previous frame's)
+        self._hold = context.buffer(8)
+        cl.enqueue_copy(context.queue, self._hold, np.zeros(2, np.int32), is_blocking=True)
+        self._parity = 0
         self._table = context.buffer(4 * BUCKETS * WEIGHTS)  # the footprint table (unused without one)
         if table is not None:
             cl.enqueue_copy(context.queue, self._table, np.ascontiguousarray(table, np.float32), is_blocking=True)
@@ -173,10 +180,11 @@ class FallbackPass:
         flags = np.empty(shape, np.uint8)
         return flags, cl.enqueue_copy(queue, flags, self._render, wait_for=wait_for, is_blocking=False)
 
-    def enqueue(self, queue, src, dst, edges, hdist, vdist, luts, lin, wait_for: list, events: dict) -> cl.Event:
+    def enqueue(self, queue, src, dst, edges, hdist, vdist, luts, lin, wait_for: list, events: dict,
+                cut: bool = True) -> cl.Event:
         """dst holds the MLAA passes' output of src, `edges`, `hdist` and `vdist` their edge and line-distance
         buffers, `lin` the frame format's linear_levels table; returns the event after which dst holds the
-        result."""
+        result. `cut`: no frame before this one holds the render verdict (spatial/shots.py)."""
         W, H = np.int32(self.fmt.width), np.int32(self.fmt.height)
         tx, ty = np.int32(self.tiles[0]), np.int32(self.tiles[1])
         noise = []
@@ -201,8 +209,10 @@ class FallbackPass:
                                                             self._counts, self._render, self._shares, tx, ty,
                                                             wait_for=[events["render_rows"]])
                 events["render_frame"] = self._render_frame(queue, (self.tiles[0],), None, self._render,
-                                                            self._counts, self._shares, tx, ty,
+                                                            self._counts, self._shares, self._hold,
+                                                            np.int32(self._parity), np.int32(bool(cut)), tx, ty,
                                                             wait_for=[events["render_tiles"]])
+                self._parity ^= 1
                 events["overlay_counts"] = self._overlay_counts(queue, (-(-self.fmt.width // SEGMENT), self.tiles[1]),
                                                                 None, src, self._render, self._overlays, W, H, tx, ty,
                                                                 wait_for=[events["render_frame"]])
@@ -313,13 +323,13 @@ def _frame_masks(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray, bgr: 
 
 
 def render_regions_of(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray, *, linear_input: bool = False,
-                      bgr: bool = False) -> np.ndarray:
+                      bgr: bool = False, held: bool = False) -> np.ndarray:
     """The render regions kernels/fallback.cl finds in `src` (per pixel, (h, w) bool), given the MLAA passes'
-    output and edge buffer (Filter.intermediates: "out", "edges")."""
+    output and edge buffer (Filter.intermediates: "out", "edges"); `held`: in a shot held as a render."""
     _, _, _, borders, changed, rgb = _frame_masks(src, mlaa_out, edges, bgr)
     luma = luma_reference(rgb, linear_input)
     return render_regions(_busy_pixels(changed, borders, rgb, quiet_pixels(src, bgr), luma), borders, luma,
-                          overlay_tiles(src, bgr))
+                          overlay_tiles(src, bgr), held)
 
 
 def _busy_pixels(changed: np.ndarray, borders: np.ndarray, rgb: np.ndarray, quiet: np.ndarray,
@@ -366,11 +376,11 @@ def fallback_reference(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray,
                        vdist: np.ndarray, *, linear: bool = True, linear_input: bool = False, bgr: bool = False,
                        everywhere: bool = False, regions: bool = True,
                        table: np.ndarray | None | str = "default",
-                       refine: np.ndarray | None | str = "default") -> np.ndarray:
+                       refine: np.ndarray | None | str = "default", held: bool = False) -> np.ndarray:
     """What kernels/fallback.cl makes of `mlaa_out`, the MLAA passes' output of `src` with edge buffer
     `edges` ((h, w) uint8, EDGE_BOTTOM 1 | EDGE_RIGHT 2) and line distances `hdist`, `vdist`, in numpy.
     `table`: the footprint table ("default": the shipped one; None: none); `refine`: the refine table after it
-    (spatial/refine.py; the same)."""
+    (spatial/refine.py; the same); `held`: a frame of a shot held as a render (spatial/shots.py)."""
     table, refine = table_of(table), refine_table_of(refine)
     fmt, a, mlaa, borders, changed, rgb = _frame_masks(src, mlaa_out, edges, bgr)
     f32 = np.float32
@@ -397,7 +407,7 @@ def fallback_reference(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray,
         busy_px = _busy_pixels(changed, borders, rgb, quiet, luma)
         busy_changed = region_sums(busy_px)
         frame_supersampled = regions and supersampled(borders, luma)  # render_frame then clears every tile's counts
-        rendered = (render_regions(busy_px, borders, luma, overlay_tiles(src, bgr)) & ~quiet if regions
+        rendered = (render_regions(busy_px, borders, luma, overlay_tiles(src, bgr), held) & ~quiet if regions
                     else np.zeros((h, w), bool))
         busy = rendered | ((busy_changed >= FALLBACK_RICH_MIN)
                            & (busy_changed * FALLBACK_RICH_DIV >= region_sums(borders)))
@@ -513,10 +523,12 @@ def _supersampled_by(counts: tuple[np.ndarray, ...]) -> bool:
 
 
 def render_regions(busy: np.ndarray, borders: np.ndarray, luma: np.ndarray,
-                   overlays: np.ndarray | None = None) -> np.ndarray:
+                   overlays: np.ndarray | None = None, held: bool = False) -> np.ndarray:
     """kernels/fallback.cl's render regions per pixel (render_tiles and render_frame): `busy` and `borders` the pixel
     masks of count_changed's k = 2 and k = 1, `luma` px_luma of the input (h, w); `overlays` (per tile, spatial/
-    overlays.py overlay_tiles, kernels/overlays.cl after render_frame): tiles of text over a render, no regions."""
+    overlays.py overlay_tiles, kernels/overlays.cl after render_frame): tiles of text over a render, no regions;
+    `held`: a frame of a shot held as a render (spatial/shots.py), a render whatever its own share unless it is
+    supersampled."""
     t, r = FALLBACK_TILE, RENDER_RADIUS
     h, w = busy.shape
     th, tw = -(-h // t), -(-w // t)
@@ -544,9 +556,11 @@ def render_regions(busy: np.ndarray, borders: np.ndarray, luma: np.ndarray,
     div = RENDER_DIV_1SPP if one_spp_geometry(strong, clean, clean_ramps) else RENDER_DIV
     flag = (bm >= RENDER_MIN) & (b * div >= a) & (nw * 100 <= RENDER_NEAR_PCT * t * t * bm)
     edge_tiles = border_t > 0
-    if edge_tiles.any() and (flag & edge_tiles).sum() * 100 >= RENDER_FRAME_PCT * edge_tiles.sum():
+    frame_supersampled = _supersampled_by(counts)
+    if edge_tiles.any() and ((held and not frame_supersampled)
+                             or (flag & edge_tiles).sum() * 100 >= RENDER_FRAME_PCT * edge_tiles.sum()):
         flag = b > 0  # a render: every tile near a busy pixel
-    if _supersampled_by(counts):  # regions only where the neighbourhood's clean transitions are mostly hard
+    if frame_supersampled:  # regions only where the neighbourhood's clean transitions are mostly hard
         _, _, clean_px, clean_ramps_px = counts
         flag &= window(tile_sums(clean_ramps_px)) * 100 < RENDER_RAMP_PCT * np.maximum(window(tile_sums(clean_px)), 1)
     if overlays is not None:

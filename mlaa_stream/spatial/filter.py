@@ -26,6 +26,7 @@ from mlaa_stream.spatial.alpha import HARD_STEP, AlphaSplit, MergePass, has_cove
 from mlaa_stream.spatial.exposure import exposure_scale, scale_colour
 from mlaa_stream.spatial.keep import KeepRect, kept_patches, keep_rects, restore_patches
 from mlaa_stream.spatial.nonfinite import NonFinite, replace_non_finite
+from mlaa_stream.spatial.shots import ShotTracker
 
 METRICS = {"lab": 0, "luma": 1, "rgb": 2}
 # Default discontinuity thresholds per metric: ΔE76 for lab, fraction of full scale for the others.
@@ -305,7 +306,7 @@ class Filter:
                  keep_regions: bool = False, footprint_table: np.ndarray | None | str = "default",
                  refine_table: np.ndarray | None | str = "default", moire: bool = True,
                  keep: Sequence[KeepRect | str] | str | None = None, auto_exposure: bool = True,
-                 alpha: str = "coverage", transfer: str | None = None):
+                 alpha: str = "coverage", transfer: str | None = None, hold_render: bool = True):
         """`preset`: one of PRESETS; its options replace the keywords of the same names. `fallback`: FXAA
         for the pixels MLAA leaves (spatial/fallback.py): "auto" where the neighbourhood shows 1-spp
         aliasing and is no flat-colour art, with the footprint table in render regions; "edges" the same
@@ -324,7 +325,10 @@ class Filter:
         antialiases the alpha of an RGBA frame with its colour where the alpha is not one value (an element over
         transparency; spatial/alpha.py), "keep" leaves it as it is and filters the colour alone. `transfer`: "pq" or
         "hlg": the frames' integer samples code light by SMPTE ST 2084 or ARIB STD-B67 (HDR video): the passes mix the
-        light they code and code the mix back (device/transfer.py)."""
+        light they code and code the mix back (device/transfer.py). `hold_render`: frames submitted one after another
+        form shots; a frame judged a render holds that verdict for the frames after it until a cut (spatial/shots.py:
+        a codec's P- and B-frames fall under the share their keyframe passes); False judges every frame alone, as
+        does a frame after new_shot()."""
         if show not in SHOWS:
             raise ValueError(f"show: expected None or 'regions', got {show!r}")
         self.show = show
@@ -332,6 +336,7 @@ class Filter:
         self.keep_regions = bool(keep_regions) or show == "regions"
         self.last_regions: np.ndarray | None = None  # the flags of the frame collected last (keep_regions)
         self.regions_owner: "Filter" = self  # whose last_regions this filter's frames set (io.sequence.FilterSet)
+        self._shots = ShotTracker() if hold_render else None
         if preset is not None:
             if preset not in PRESETS:
                 raise ValueError(f"preset: expected one of {', '.join(sorted(PRESETS))}, got {preset!r}")
@@ -493,7 +498,8 @@ class Filter:
                 scale_colour(staging.reshape(frame.shape), scale)
             up = cl.enqueue_copy(self.queue, bufs.src[slot], staging, is_blocking=False)
             after = [up] + ([self._last_event] if self._last_event is not None else [])
-            done = self._enqueue_passes(bufs, bufs.src[slot], bufs.dst[slot], after)
+            cut = self._shots is None or self._fallback is None or self._shots.cut(frame)
+            done = self._enqueue_passes(bufs, bufs.src[slot], bufs.dst[slot], after, cut=cut)
             host_out = np.empty_like(staging)
             down = cl.enqueue_copy(self.queue, host_out, bufs.dst[slot], wait_for=[done],
                                    is_blocking=False)
@@ -511,9 +517,10 @@ class Filter:
                             owner=self.regions_owner, patches=kept_patches(frame, self.keep))
 
     def _enqueue_passes(self, bufs: _FrameBuffers, src, dst, after: list, queue=None,
-                        events: dict | None = None):
+                        events: dict | None = None, cut: bool = True):
         """Enqueue every pass of one frame after the events `after`; returns the last event.
-        `events`, when given, receives each pass's event (for profiling)."""
+        `events`, when given, receives each pass's event (for profiling); `cut`: the frame starts a shot (no held
+        render verdict; spatial/shots.py)."""
         w, h = bufs.fmt.width, bufs.fmt.height
         W, H = np.int32(w), np.int32(h)
         q, g2 = queue or self.queue, (-(-w // SEGMENT), h)  # one work item per SEGMENT pixels of a row
@@ -545,7 +552,7 @@ class Filter:
             last = self._bridger.enqueue(q, src, dst, self._luts, wait_for=[last], events=ev)
         if self._fallback is not None:  # FXAA where MLAA left pixels of an aliased neighbourhood
             last = self._fallback.enqueue(q, src, dst, bufs.edges, bufs.hdist, bufs.vdist, self._luts, self._lin,
-                                          wait_for=[last], events=ev)
+                                          wait_for=[last], events=ev, cut=cut)
         if self._moire is not None:  # moire in two-colour art; the blend's feature shares are free by now
             last = self._moire.enqueue(q, src, dst, bufs.edges, self._luts, bufs.shares, wait_for=[last], events=ev)
         return last
@@ -570,6 +577,11 @@ class Filter:
                 for name, e in ev.items():
                     times.setdefault(name, []).append((e.profile.end - e.profile.start) * 1e-6)
         return {name: float(np.median(v)) for name, v in times.items()}
+
+    def new_shot(self) -> None:
+        """The next frame starts a shot: no render verdict of the frames before it is held (hold_render)."""
+        if self._shots is not None:
+            self._shots.reset()
 
     def process(self, frame: np.ndarray, premultiplied: bool = False) -> np.ndarray:
         """Filter one frame and return it (same shape and dtype); `premultiplied` as for submit."""

@@ -31,6 +31,7 @@ from mlaa_stream.device.transfer import with_transfer_tables
 from mlaa_stream.spatial.fallback import FALLBACK_TILE
 from mlaa_stream.spatial.exposure import HeldExposure, exposed
 from mlaa_stream.spatial.nonfinite import restore_out_of_range
+from mlaa_stream.spatial.shots import CUT_HIST, histogram_distance
 
 MODES = ("adaptive", "dense", "global", "static", "off")
 SHOWS = (None, "history")
@@ -63,7 +64,7 @@ FB_ABS, FB_REL = 0.5, 0.1   # forward-backward tolerance in px: FB_ABS + FB_REL 
 # Cheap measurements that choose the model (grey levels 0..255 of the "small" frame).
 SMALL_WIDTH = 320        # measurements run on a frame at most this wide
 FLOW_WIDTH = 1024        # dense flow and the global refinement run at most this wide (1080p: half)
-CUT_HIST = 0.45          # scene cut: half the L1 distance of 32-bin grey histograms above this ...
+# scene cut: half the L1 distance of 32-bin grey histograms above CUT_HIST (spatial/shots.py) ...
 CUT_RESIDUAL = 24.0      # ... or mean |difference| after the best global alignment above this
 STATIC_LEVEL, STATIC_FRACTION = 3.0, 0.002   # static: under this share of pixels differ by > level
 GLOBAL_LEVEL, GLOBAL_FRACTION = 10.0, 0.005  # global accepted: blobs of residual outliers under this share
@@ -177,13 +178,6 @@ class Pyramid:
         """Free what gradients() kept (a frame whose motion is measured needs them no more)."""
         for key in [k for k in self._blur if k.startswith("gradients_")]:
             del self._blur[key]
-
-
-def histogram_distance(a: np.ndarray, b: np.ndarray, bins: int = 32) -> float:
-    """Half the L1 distance of the normalised grey histograms: 0 same, 1 disjoint."""
-    ha = cv2.calcHist([a], [0], None, [bins], [0, 256]).ravel()
-    hb = cv2.calcHist([b], [0], None, [bins], [0, 256]).ravel()
-    return float(0.5 * np.abs(ha / max(ha.sum(), 1) - hb / max(hb.sum(), 1)).sum())
 
 
 def changed_fraction(a: np.ndarray, b: np.ndarray, level: float) -> float:
