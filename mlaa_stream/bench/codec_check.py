@@ -70,6 +70,7 @@ def main(argv: list[str] | None = None) -> int:
         for crf in map(int, args.crf.split(",")):
             coded = through_h264(inputs, crf)
             share = np.mean([region_share(off, f) for f in coded[:2]])
+            default.new_shot()  # each clip its own shot (the render verdict is held over one: spatial/shots.py)
             scores = [M.error_removed(np.stack([f.process(x) for x in coded]), coded, truths)
                       for f in (default, screen)]
             print(name.ljust(16) + f"{crf:5d}{share * 100:8.0f}%" + "".join(f"{v * 100:8.1f}%" for v in scores))

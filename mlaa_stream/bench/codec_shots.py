@@ -82,7 +82,7 @@ def main(argv: list[str] | None = None) -> int:
     names = [s for s in args.shots.split(",") if s] or None
     verdicts = f"{'own verdicts':{args.frames}s}" if args.verdicts else ""
     print(f"{'shot':34s} {'crf':>4s}  {verdicts}  {'each frame alone':>20s}  {'held':>20s}")
-    means = {False: [], True: []}
+    means: dict[tuple[int, bool], list] = {}
     passes_filter = Filter(device=args.device, fallback="off")
     for world in worlds:
         for width, height in sizes:
@@ -96,13 +96,14 @@ def main(argv: list[str] | None = None) -> int:
                         with Filter(device=args.device, hold_render=hold) as f:
                             outs = np.stack([f.process(x) for x in coded])
                         s = scores(outs, coded, truths)
-                        means[hold].append(s)
+                        means.setdefault((crf, hold), []).append(s)
                         row += f"  {100 * s[0]:6.1f} / {s[1]:.3f} / {s[2]:.2f}"
                     print(row, flush=True)
     passes_filter.close()
-    for hold, label in ((False, "mean, each frame alone"), (True, "mean, held")):
-        m = np.mean(means[hold], axis=0)
-        print(f"{label}: {100 * m[0]:.1f} % / {m[1]:.3f} / {m[2]:.2f}")
+    for crf in crfs:
+        alone, held = (np.mean(means[crf, hold], axis=0) for hold in (False, True))
+        print(f"mean, crf {crf:2d} ({len(means[crf, False])} shots): each frame alone {100 * alone[0]:.1f} % / "
+              f"{alone[1]:.3f} / {alone[2]:.2f}, held {100 * held[0]:.1f} % / {held[1]:.3f} / {held[2]:.2f}")
     return 0
 
 
