@@ -191,9 +191,9 @@ def test_a_build_that_ends_the_driver_process_is_a_kernel_build_error():
 
 
 # Every test of the core passes and of the fast preset (~30 s), and the kernel-vs-reference tests of bridging,
-# reconstruction, GRLAA, FXAA, the FXAA fallback, the moire pass, temporal supersampling's two resolves, the alpha
-# merge and HDR transfers' tables (all of
-# those files on rusticl took 11.5 min here: too long for every CI run).
+# reconstruction, GRLAA, FXAA, the FXAA fallback (a shot's held render verdict too), the moire pass, temporal
+# supersampling's two resolves, the alpha merge and HDR transfers' tables (all of those files on rusticl took 11.5 min
+# here: too long for every CI run).
 KERNEL_TESTS = ["tests/test_mlaa.py", "tests/test_bridge.py::test_kernel_matches_reference_on_random_wires",
                 "tests/test_reconstruct.py::test_kernel_matches_reference",
                 "tests/test_overlay.py::test_kernel_matches_reference",
@@ -204,6 +204,7 @@ KERNEL_TESTS = ["tests/test_mlaa.py", "tests/test_bridge.py::test_kernel_matches
                 "tests/test_fallback.py::test_kernel_matches_reference_in_a_render_frame",
                 "tests/test_fallback.py::test_a_supersampled_frame_takes_no_fxaa_and_regions_stay_local",
                 "tests/test_fallback.py::test_a_noisy_photograph_has_no_render_region",
+                "tests/test_shots.py::test_a_frame_of_a_render_shot_is_held_a_render",
                 "tests/test_refine.py::test_kernel_with_known_tables",
                 "tests/test_overlays.py::test_kernel_matches_the_reference",
                 "tests/test_noise.py::test_census_and_level_match_the_reference",
