@@ -522,9 +522,11 @@ __kernel void render_tiles(__global const int8 *rows, __global const uchar *coun
 // transitions mostly hard steps), and the tiles' counts k = 0..2 are cleared: fxaa_fallback then finds no tile
 // busy and none with evidence outside render regions.
 // A frame of a shot held as a render (hold[parity] > 0: a frame of the same shot within RENDER_HOLD_FRAMES was
-// judged one by its own share; `cut`: none before this frame counts) is one too, unless it is supersampled: a video
-// codec's P- and B-frames fall under RENDER_FRAME_PCT where the keyframe before them passes (spatial/shots.py).
-// Work item 0 writes the hold for the next frame into hold[1 - parity].
+// judged one by its own share; `cut`: none before this frame counts) is one too: a video codec's P- and B-frames
+// fall under RENDER_FRAME_PCT where the keyframe before them passes (spatial/shots.py). So is one that looks
+// supersampled, if it is one of at most HELD_SUPERSAMPLED_RUN such frames in a row (hold[2 + parity] before it): a
+// codec's blur makes its B-frames look so; a shot that turns supersampled for longer is judged supersampled.
+// Work item 0 writes the hold and the run for the next frame into hold[1 - parity] and hold[3 - parity].
 // One work item per tile column; each sums the columns' shares (tiles_x of them: cheaper than another pass).
 __kernel void render_frame(__global uchar *render, __global uchar *counts, __global const int8 *shares,
                            __global int *hold, const int parity, const int cut, const int tiles_x, const int tiles_y)
@@ -533,14 +535,21 @@ __kernel void render_frame(__global uchar *render, __global uchar *counts, __glo
     if (tx >= tiles_x) return;
     int8 total = (int8)(0);
     for (int k = 0; k < tiles_x; ++k) total += shares[k];
-    const int supersampled = ((total.s2 >= SUPERSAMPLED_MIN && total.s3 * 100 >= SUPERSAMPLED_PCT * total.s2) ||
-                              (total.s4 >= SUPERSAMPLED_MIN && total.s5 * 100 >= SUPERSAMPLED_CLEAN_PCT * total.s4)) &&
-                             (total.s4 - total.s5) * 100 < SUPERSAMPLED_HARD_PCT * total.s2;
+    const int looks_supersampled =
+        ((total.s2 >= SUPERSAMPLED_MIN && total.s3 * 100 >= SUPERSAMPLED_PCT * total.s2) ||
+         (total.s4 >= SUPERSAMPLED_MIN && total.s5 * 100 >= SUPERSAMPLED_CLEAN_PCT * total.s4)) &&
+        (total.s4 - total.s5) * 100 < SUPERSAMPLED_HARD_PCT * total.s2;
     const int one_spp = total.s2 > 0 && (total.s4 - total.s5) * 100 >= SUPERSAMPLED_HARD_PCT * total.s2;
     const int regions = one_spp ? total.s6 : total.s1;
     const int own = total.s0 > 0 && regions * 100 >= RENDER_FRAME_PCT * total.s0;
     const int held = !cut && hold[parity] > 0;
-    if (tx == 0) hold[1 - parity] = own ? RENDER_HOLD_FRAMES : (held ? hold[parity] - 1 : 0);
+    // frames in a row that look supersampled, this one included: a codec's B-frames between its reference frames
+    const int run = looks_supersampled ? (cut ? 1 : hold[2 + parity] + 1) : 0;
+    const int supersampled = looks_supersampled && !(held && run <= HELD_SUPERSAMPLED_RUN);
+    if (tx == 0) {
+        hold[1 - parity] = own ? RENDER_HOLD_FRAMES : (held ? hold[parity] - 1 : 0);
+        hold[3 - parity] = run;
+    }
     const uchar bit = total.s0 > 0 && (own || (held && !supersampled)) ? 2 : (one_spp ? 8 : 1);
     for (int ty = 0; ty < tiles_y; ++ty) {
         const int tile = ty * tiles_x + tx;

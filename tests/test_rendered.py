@@ -373,6 +373,7 @@ def test_a_supersampled_render_is_left_to_the_mlaa_passes():
     with Filter(keep_regions=True) as f, Filter(fallback="off") as g:
         f.process(one)
         assert (f.last_regions > 0).mean() > 0.5
+        f.new_shot()  # two renders, not one shot (a shot holds its render verdict: tests/test_shots.py)
         out = f.process(supersampled)
         assert (f.last_regions > 0).mean() < 0.1
         mlaa_only = g.process(supersampled)

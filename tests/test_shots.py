@@ -4,7 +4,8 @@ import pytest
 
 from mlaa_stream.spatial.fallback import FALLBACK_TILE, RENDER_RADIUS, fallback_reference, render_regions_of
 from mlaa_stream.spatial.filter import Filter
-from mlaa_stream.spatial.shots import CUT_HIST, ShotTracker, histogram_distance, thumbnail
+from mlaa_stream.spatial.shots import (CUT_HIST, HELD_SUPERSAMPLED_RUN, ShotTracker, histogram_distance,
+                                      thumbnail)
 from tests.test_fallback import _as, cables_on_sky, flat_art, ramps_beside_render, shaded_polygons
 
 
@@ -111,23 +112,34 @@ def test_the_hold_ends_after_render_hold_frames(monkeypatch):
     assert held == [True, True, False, True]
 
 
-def test_a_supersampled_frame_is_not_held_a_render():
-    """Known answer: a frame judged supersampled (ramps beside a render, tests/test_fallback.py, and cables on a sky
-    that a held render verdict would make regions) in a shot held as a render is judged as it would be alone: the
-    reference's regions and output with `held` are the ones without, the cables no region, and the kernel's output
-    the reference's."""
+def test_frames_that_look_supersampled_are_held_for_a_short_run_only():
+    """Known answer (HELD_SUPERSAMPLED_RUN): a frame judged supersampled (ramps beside a render, tests/test_fallback.py,
+    and cables on a sky that only a render verdict makes regions) in a shot held as a render is held -- its cables
+    regions, its output the reference's with `held_supersampled` -- while it is one of at most HELD_SUPERSAMPLED_RUN
+    such frames in a row, as a codec's B-frames are; the next one in the run is judged supersampled (the reference
+    without the hold), and so is the same frame after new_shot()."""
     render, _ = frames()
     ramps = ramps_beside_render(0)
     gap = np.full((144, (RENDER_RADIUS + 2) * FALLBACK_TILE, 3), 200, np.uint8)
     ss = np.concatenate([ramps, ramps[:, 192:], gap, cables_on_sky(0, 144, 96)], 1)
+    h, w = ss.shape[:2]
     tracker = ShotTracker()
     assert [tracker.cut(f) for f in (render, ss)] == [True, False]
     with Filter(fallback="off") as g:
         p = g.intermediates(ss)
-    assert not render_regions_of(ss, p["out"], p["edges"], held=True)[:, -96:].any()
     args = (ss, p["out"], p["edges"], p["hdist"], p["vdist"])
-    want = fallback_reference(*args)
-    np.testing.assert_array_equal(fallback_reference(*args, held=True), want)
-    with Filter() as f:
+    alone = fallback_reference(*args)
+    np.testing.assert_array_equal(fallback_reference(*args, held=True), alone)  # looks supersampled: not held
+    held = fallback_reference(*args, held=True, held_supersampled=True)
+    assert not np.array_equal(held, alone)
+    assert not render_regions_of(ss, p["out"], p["edges"])[:, -96:].any()
+    with Filter(keep_regions=True) as f:
         f.process(render)
-        np.testing.assert_array_equal(f.process(ss), want)
+        for _ in range(HELD_SUPERSAMPLED_RUN):
+            np.testing.assert_array_equal(f.process(ss), held)
+            assert tiles_to_pixels(f.last_regions, h, w)[:, -96:].mean() > 0.95
+        np.testing.assert_array_equal(f.process(ss), alone)
+        f.process(render)  # a frame that does not look supersampled ends the run
+        np.testing.assert_array_equal(f.process(ss), held)
+        f.new_shot()
+        np.testing.assert_array_equal(f.process(ss), alone)

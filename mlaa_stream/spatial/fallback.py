@@ -17,7 +17,7 @@ from mlaa_stream.spatial.fxaa import _MAX, fxaa_defines, fxaa_mix_reference, lum
 from mlaa_stream.spatial.noise import NOISE_BINS, noise_defines, quiet_pixels
 from mlaa_stream.spatial.overlays import overlay_defines, overlay_tiles
 from mlaa_stream.spatial.refine import REFINE_GATE, REFINE_WEIGHTS, gate, refine_reference, refine_table_of
-from mlaa_stream.spatial.shots import RENDER_HOLD_FRAMES
+from mlaa_stream.spatial.shots import HELD_SUPERSAMPLED_RUN, RENDER_HOLD_FRAMES
 
 SEGMENT = 64  # pixels of a tile band per work item of count_changed (a multiple of FALLBACK_TILE)
 
@@ -91,6 +91,7 @@ def fallback_defines(fmt: FrameFormat, linear: bool, linear_input: bool, everywh
             "RENDER_MIN": RENDER_MIN, "RENDER_DIV": RENDER_DIV, "RENDER_DIV_1SPP": RENDER_DIV_1SPP,
             "RENDER_NEAR_PCT": RENDER_NEAR_PCT,
             "RENDER_FRAME_PCT": RENDER_FRAME_PCT, "RENDER_HOLD_FRAMES": RENDER_HOLD_FRAMES,
+            "HELD_SUPERSAMPLED_RUN": HELD_SUPERSAMPLED_RUN,
             "SUPERSAMPLED_STEP": float(SUPERSAMPLED_STEP),
             "SUPERSAMPLED_PCT": SUPERSAMPLED_PCT, "SUPERSAMPLED_MIN": SUPERSAMPLED_MIN,
             "RENDER_RAMP_PCT": RENDER_RAMP_PCT, "RAMP_FLANK": float(RAMP_FLANK),
@@ -149,8 +150,8 @@ class FallbackPass:
         self._shares = context.buffer(32 * self.tiles[0])  # render_tiles' int8 per tile column
         # render_frame's held verdict (spatial/shots.py): frames left in the hold, read from [parity], written to the
         # other; frames run in order (each frame's passes wait for the previous frame's)
-        self._hold = context.buffer(8)
-        cl.enqueue_copy(context.queue, self._hold, np.zeros(2, np.int32), is_blocking=True)
+        self._hold = context.buffer(16)  # and frames in a row that look supersampled, the same way
+        cl.enqueue_copy(context.queue, self._hold, np.zeros(4, np.int32), is_blocking=True)
         self._parity = 0
         self._table = context.buffer(4 * BUCKETS * WEIGHTS)  # the footprint table (unused without one)
         if table is not None:
@@ -376,11 +377,13 @@ def fallback_reference(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray,
                        vdist: np.ndarray, *, linear: bool = True, linear_input: bool = False, bgr: bool = False,
                        everywhere: bool = False, regions: bool = True,
                        table: np.ndarray | None | str = "default",
-                       refine: np.ndarray | None | str = "default", held: bool = False) -> np.ndarray:
+                       refine: np.ndarray | None | str = "default", held: bool = False,
+                       held_supersampled: bool = False) -> np.ndarray:
     """What kernels/fallback.cl makes of `mlaa_out`, the MLAA passes' output of `src` with edge buffer
     `edges` ((h, w) uint8, EDGE_BOTTOM 1 | EDGE_RIGHT 2) and line distances `hdist`, `vdist`, in numpy.
     `table`: the footprint table ("default": the shipped one; None: none); `refine`: the refine table after it
-    (spatial/refine.py; the same); `held`: a frame of a shot held as a render (spatial/shots.py)."""
+    (spatial/refine.py; the same); `held`: a frame of a shot held as a render (spatial/shots.py); `held_supersampled`:
+    held whether or not it looks supersampled (one of at most HELD_SUPERSAMPLED_RUN such frames in a row)."""
     table, refine = table_of(table), refine_table_of(refine)
     fmt, a, mlaa, borders, changed, rgb = _frame_masks(src, mlaa_out, edges, bgr)
     f32 = np.float32
@@ -406,8 +409,10 @@ def fallback_reference(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray,
         luma = luma_reference(rgb, linear_input)
         busy_px = _busy_pixels(changed, borders, rgb, quiet, luma)
         busy_changed = region_sums(busy_px)
-        frame_supersampled = regions and supersampled(borders, luma)  # render_frame then clears every tile's counts
-        rendered = (render_regions(busy_px, borders, luma, overlay_tiles(src, bgr), held) & ~quiet if regions
+        # render_frame then clears every tile's counts
+        frame_supersampled = regions and supersampled(borders, luma) and not (held and held_supersampled)
+        rendered = (render_regions(busy_px, borders, luma, overlay_tiles(src, bgr), held, held_supersampled) & ~quiet
+                    if regions
                     else np.zeros((h, w), bool))
         busy = rendered | ((busy_changed >= FALLBACK_RICH_MIN)
                            & (busy_changed * FALLBACK_RICH_DIV >= region_sums(borders)))
@@ -523,12 +528,13 @@ def _supersampled_by(counts: tuple[np.ndarray, ...]) -> bool:
 
 
 def render_regions(busy: np.ndarray, borders: np.ndarray, luma: np.ndarray,
-                   overlays: np.ndarray | None = None, held: bool = False) -> np.ndarray:
+                   overlays: np.ndarray | None = None, held: bool = False,
+                   held_supersampled: bool = False) -> np.ndarray:
     """kernels/fallback.cl's render regions per pixel (render_tiles and render_frame): `busy` and `borders` the pixel
     masks of count_changed's k = 2 and k = 1, `luma` px_luma of the input (h, w); `overlays` (per tile, spatial/
     overlays.py overlay_tiles, kernels/overlays.cl after render_frame): tiles of text over a render, no regions;
-    `held`: a frame of a shot held as a render (spatial/shots.py), a render whatever its own share unless it is
-    supersampled."""
+    `held`: a frame of a shot held as a render (spatial/shots.py), a render whatever its own share unless it looks
+    supersampled; `held_supersampled`: even then (fallback_reference)."""
     t, r = FALLBACK_TILE, RENDER_RADIUS
     h, w = busy.shape
     th, tw = -(-h // t), -(-w // t)
@@ -556,7 +562,7 @@ def render_regions(busy: np.ndarray, borders: np.ndarray, luma: np.ndarray,
     div = RENDER_DIV_1SPP if one_spp_geometry(strong, clean, clean_ramps) else RENDER_DIV
     flag = (bm >= RENDER_MIN) & (b * div >= a) & (nw * 100 <= RENDER_NEAR_PCT * t * t * bm)
     edge_tiles = border_t > 0
-    frame_supersampled = _supersampled_by(counts)
+    frame_supersampled = _supersampled_by(counts) and not (held and held_supersampled)
     if edge_tiles.any() and ((held and not frame_supersampled)
                              or (flag & edge_tiles).sum() * 100 >= RENDER_FRAME_PCT * edge_tiles.sum()):
         flag = b > 0  # a render: every tile near a busy pixel

@@ -14,6 +14,10 @@ import numpy as np
 
 # x264's default keyframe interval: a render judged at its keyframe is held to the next one
 RENDER_HOLD_FRAMES = 250
+# A held frame that looks supersampled stays held if it is one of at most this many such frames in a row: a codec's
+# blur makes its B-frames look supersampled (x264's default: up to 3 B-frames between reference frames); a shot that
+# turns supersampled for longer is judged supersampled (docs/spatial_tuning.md, "RENDER_HOLD_FRAMES").
+HELD_SUPERSAMPLED_RUN = 3
 CUT_HIST = 0.45
 THUMB_STEP = 8  # the histogram's thumbnail: one pixel in THUMB_STEP x THUMB_STEP
 
