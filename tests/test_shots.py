@@ -24,13 +24,15 @@ def tiles_to_pixels(flags: np.ndarray, h: int, w: int) -> np.ndarray:
 
 
 def test_thumbnail_and_histogram_distance_known_answers():
-    """A thumbnail takes one pixel in 8 each way, the mean of three channels, codes scaled to 0..255 (uint16 and
-    floats clipped to [0, 1]); the distance is 0 for the same histogram and 1 for disjoint ones."""
+    """A thumbnail takes one pixel in 8 each way of the green channel (grey frames: their one), codes scaled to 0..255
+    (uint16 and floats clipped to [0, 1]); the distance is 0 for the same histogram and 1 for disjoint ones."""
     rng = np.random.default_rng(3)
     a = rng.integers(0, 256, (64, 96, 3), dtype=np.uint8)
     t = thumbnail(a)
     assert t.shape == (8, 12) and t.dtype == np.uint8
-    np.testing.assert_array_equal(t, a[::8, ::8].mean(-1, dtype=np.float32).astype(np.uint8))
+    np.testing.assert_array_equal(t, a[::8, ::8, 1])
+    np.testing.assert_array_equal(thumbnail(a[..., ::-1]), t)  # BGR: the same middle channel
+    np.testing.assert_array_equal(thumbnail(a[..., 1]), t)
     np.testing.assert_array_equal(thumbnail(a.astype(np.uint16) * 257), t)
     np.testing.assert_allclose(thumbnail(a.astype(np.float32) / 255).astype(int), t, atol=1)
     np.testing.assert_array_equal(thumbnail(np.dstack([a, a[..., :1]])), t)  # alpha is no colour

@@ -4,8 +4,8 @@ render_frame).
 A video codec spends its bits unevenly: a compressed render's keyframe keeps the busy texture that judges it a
 render (RENDER_FRAME_PCT), the P- and B-frames after it are smoothed under that share, and the verdict flips from
 frame to frame (docs/spatial_tuning.md, "RENDER_HOLD_FRAMES"). A frame judged a render by its own share holds the
-verdict for the RENDER_HOLD_FRAMES frames after it, until a cut: a grey histogram that moved by more than CUT_HIST
-(half the L1 distance, as the temporal stage's cut test) from the previous frame's.
+verdict for the RENDER_HOLD_FRAMES frames after it, until a cut: a histogram of its green channel that moved by more
+than CUT_HIST (half the L1 distance, as the temporal stage's cut test on grey) from the previous frame's.
 """
 from __future__ import annotations
 
@@ -30,12 +30,14 @@ def histogram_distance(a: np.ndarray, b: np.ndarray, bins: int = 32) -> float:
 
 
 def thumbnail(frame: np.ndarray) -> np.ndarray:
-    """A uint8 grey thumbnail of `frame` (H, W[, C]; integer codes or float in [0, 1], clipped): the mean of its
-    first three channels, one pixel in THUMB_STEP each way."""
+    """A uint8 thumbnail of `frame` (H, W[, C]; integer codes or float in [0, 1], clipped): one pixel in THUMB_STEP
+    each way, of its green channel (the middle one in RGB and BGR alike, most of luma; a grey frame's only one)."""
     a = np.asarray(frame)[::THUMB_STEP, ::THUMB_STEP]
     if a.ndim == 3:
-        a = a[..., :3].mean(axis=-1, dtype=np.float32)
-    scale = 255.0 / np.iinfo(frame.dtype).max if frame.dtype.kind in "ui" else 255.0
+        a = a[..., min(1, a.shape[-1] - 1)]
+    if a.dtype == np.uint8:
+        return np.ascontiguousarray(a)
+    scale = 255.0 / np.iinfo(a.dtype).max if a.dtype.kind in "ui" else 255.0
     return np.clip(np.nan_to_num(a.astype(np.float32) * scale), 0, 255).astype(np.uint8)
 
 
