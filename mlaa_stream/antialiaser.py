@@ -77,6 +77,9 @@ class Antialiaser:
     `transfer="pq"` / `"hlg"`: the frames are 8/16-bit codes of HDR video (HDR10's SMPTE ST 2084, HLG): the filter
     works in the linear light they code and codes its output back (device/transfer.py); so does temporal
     supersampling, while the blend keeps blending the codes.
+    `hold_render`: the frames form shots (spatial/shots.py): a frame judged a render holds that verdict for the
+    frames after it until a cut, as a video codec's P- and B-frames need; `new_shot()` starts a shot by hand (frames
+    that are not one sequence); False judges every frame alone.
     """
 
     def __init__(self, device: str | int | None = None, *, preset: str | None = None,
@@ -85,7 +88,7 @@ class Antialiaser:
                  temporal_frames: int | None = None, post_hooks: Sequence[PostHook] | None = (), in_flight: int = 2,
                  lookahead: int = 0, linear_input: bool = False, dense_motion: bool = False,
                  keep: Sequence[KeepRect | str] | str | None = None, alpha: str = "coverage",
-                 transfer: str | None = None):
+                 transfer: str | None = None, hold_render: bool = True):
         if preset is not None and preset not in PRESETS:
             raise ValueError(f"expected a preset among {', '.join(sorted(PRESETS))}, got {preset!r}")
         kwargs = dict(PRESETS.get(preset or "default", {}))
@@ -124,6 +127,8 @@ class Antialiaser:
             check_frames(temporal_frames)   # before the filter is made: a ring of one frame holds no history
         if isinstance(method, str) and needs_regions(method) and not kwargs.get("fast"):
             kwargs["keep_regions"] = True  # the stage reads the filter's render regions
+        if not kwargs.get("fast"):  # the fast preset has no render regions to hold
+            kwargs["hold_render"] = hold_render
         # the fast preset without host copies on CPU devices (spatial/fast_filter.py)
         self._filter = (FastFilter if kwargs.get("fast") else Filter)(device, bgr=True, **kwargs)
         self.device_name: str = self._filter.device_name
@@ -145,6 +150,12 @@ class Antialiaser:
         self._lock = threading.Lock()
         # the streams of a temporal stage begun and not ended -> the thread that drives each (last resumed it)
         self._streams: dict[object, int] = {}
+
+    def new_shot(self) -> None:
+        """The next frame starts a shot: the filter holds no render verdict from the frames before it."""
+        new_shot = getattr(self._filter, "new_shot", None)
+        if new_shot is not None:
+            new_shot()
 
     def __call__(self, frame: np.ndarray) -> np.ndarray:
         """Antialias one frame (blocking); returns a new array of the same shape and dtype.

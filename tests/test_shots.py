@@ -145,3 +145,28 @@ def test_frames_that_look_supersampled_are_held_for_a_short_run_only():
         np.testing.assert_array_equal(f.process(ss), held)
         f.new_shot()
         np.testing.assert_array_equal(f.process(ss), alone)
+
+
+def test_the_antialiaser_holds_and_starts_shots():
+    """The Antialiaser's filter holds a render verdict over its calls (the second frame after the render frame as the
+    Filter's), new_shot() and hold_render=False judge it alone, and the fast preset (no render regions) takes both."""
+    from mlaa_stream.antialiaser import Antialiaser
+    render, other = frames()
+    with Filter(bgr=True) as f:
+        f.process(render)
+        held = f.process(other)
+    with Filter(bgr=True, hold_render=False) as f:
+        alone = f.process(other)
+    assert not np.array_equal(held, alone)
+    with Antialiaser() as aa:
+        aa(render)
+        np.testing.assert_array_equal(aa(other), held)
+        aa.new_shot()
+        np.testing.assert_array_equal(aa(other), alone)
+    with Antialiaser(hold_render=False) as aa:
+        aa(render)
+        np.testing.assert_array_equal(aa(other), alone)
+    with Antialiaser(preset="fast", hold_render=True) as aa:
+        aa(render)
+        aa.new_shot()
+        assert aa(other).shape == other.shape

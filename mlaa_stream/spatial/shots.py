@@ -18,7 +18,7 @@ RENDER_HOLD_FRAMES = 250
 # blur makes its B-frames look supersampled (x264's default: up to 3 B-frames between reference frames); a shot that
 # turns supersampled for longer is judged supersampled (docs/spatial_tuning.md, "RENDER_HOLD_FRAMES").
 HELD_SUPERSAMPLED_RUN = 3
-CUT_HIST = 0.45
+CUT_HIST = 0.45  # a cut: histograms this far apart (half their L1 distance; also temporal/stage.py's cut test)
 THUMB_STEP = 8  # the histogram's thumbnail: one pixel in THUMB_STEP x THUMB_STEP
 
 
