@@ -146,12 +146,17 @@ def _close(proc) -> None:
         close()
 
 
-def run_scene(proc: Processor, scene: Scene) -> np.ndarray:
-    """All frames of a scene through one method, in order (a temporal method starts afresh, a filter's held render
-    verdict too: Filter.new_shot)."""
+def new_shot(proc: object) -> None:
+    """What follows is a shot of its own (or a still judged alone): a temporal method starts afresh, a filter holds no
+    render verdict from before (Filter.new_shot)."""
     for hook in ("reset", "new_shot"):
         if callable(getattr(proc, hook, None)):
             getattr(proc, hook)()
+
+
+def run_scene(proc: Processor, scene: Scene) -> np.ndarray:
+    """All frames of a scene through one method, in order, as a shot of its own (new_shot)."""
+    new_shot(proc)
     if hasattr(proc, "process_all"):   # a temporal method reading frames ahead
         return proc.process_all(scene.inputs)
     return np.stack([proc.process(f) for f in scene.inputs])

@@ -75,6 +75,7 @@ def run(sizes: list[tuple[int, int]], worlds: list[str], device: str | None = No
             for fmt, frame in frames_of(colour, cover).items():
                 cells = []
                 for mode in ALPHA_MODES:
+                    filters[(fmt, mode)].new_shot()  # every view judged alone
                     out = filters[(fmt, mode)].process(frame, premultiplied=fmt == "exr")
                     s = scores(out, frame, (truth_p, truth_a), fmt == "exr")
                     res.setdefault((fmt, mode), []).append(s)

@@ -41,6 +41,7 @@ def bench_bridge(device=None, runs: int = 25) -> dict:
             row = {}
             outs = {}
             for name, f in (("core", core), ("core+bridge", bridged)):
+                f.new_shot()  # each scene its own shot
                 outs[name] = out = np.stack([f.process(x) for x in s.inputs])
                 r = {k: score_scene(out, s, False)[k] for k in ("error_removed", "damage", "broken_wires")}
                 if s.wires is not None:

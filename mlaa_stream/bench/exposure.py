@@ -41,6 +41,7 @@ def run(sizes: list[tuple[int, int]], skies: list[float], exposures: list[float]
                 cells = []
                 for e in exposures:
                     for on, filt in ((False, plain), (True, auto)):
+                        filt.new_shot()  # every view and exposure judged alone
                         out = encode8(np.clip(filt.process(lin * np.float32(e)) / np.float32(e), 0, 1))
                         score = (100 * M.error_removed(out, seen, truth), M.damage(out, seen, truth))
                         res.setdefault((sky, e, on), []).append(score)

@@ -72,6 +72,7 @@ def training_frames(sizes: list[tuple[int, int]], refine: bool = False,
                 for eye, target, fov in WORLD_TRAIN_VIEWS[world].values():
                     cam = Camera(eye, target, fov)
                     inp, truth = renderer.input_frame(cam), renderer.truth_frame(cam)
+                    chain.new_shot()  # every training view judged alone
                     out = chain.process(inp)
                     passes = mlaa.intermediates(inp)
                     runs = long_runs(passes["edges"], passes["hdist"], passes["vdist"])
@@ -121,6 +122,7 @@ def main(argv: list[str] | None = None) -> int:
     with Filter(**check) as f:  # in-sample check: the held-out views are rendered_views' job
         names = [f"{n}_{w}" for world in worlds for w, _ in sizes for n in WORLD_TRAIN_VIEWS[world]]
         for (inp, truth, first, _), name in zip(frames, names):
+            f.new_shot()
             print(f"{name:16s} error removed without the table {M.error_removed(first, inp, truth):.3f}, "
                   f"with it {M.error_removed(f.process(inp), inp, truth):.3f}")
     return 0

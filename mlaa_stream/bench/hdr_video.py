@@ -47,6 +47,7 @@ def run(sizes: list[tuple[int, int]], transfers: list[str], worlds: list[str], s
             for t in transfers:
                 inp, truth = coded(lin, t), coded(truth_lin, t)
                 for how, filt in (("codes", filters["codes"]), ("transfer", filters[t])):
+                    filt.new_shot()  # every view judged alone
                     out = filt.process(inp)
                     score = (100 * M.error_removed(out, inp, truth), M.damage(out, inp, truth))
                     res.setdefault((t, how), []).append(score)
@@ -79,11 +80,13 @@ def run_temporal(size: tuple[int, int], worlds: list[str], methods: list[str], f
                 for shot_name, cameras in view_cameras(width, height, frames, world).items():
                     inp = np.stack([coded(renderer.input_linear(c), "pq") for c in cameras])
                     truth = np.stack([coded(renderer.truth_linear(c), "pq") for c in cameras])
+                    filt.new_shot()  # each shot its own
                     row = {"spatial": np.stack([filt.process(f) for f in inp])}
                     for method in methods:
                         for how, transfer in (("codes", None), ("light", "pq")):
                             stage = make_stage(method, filt.context, bgr=False, transfer=transfer,
                                                regions_from=filt if needs_regions(method) else None)
+                            filt.new_shot()
                             try:   # the spatial frame filtered just before the call: its render regions are read
                                 row[f"{method} {how}"] = np.stack([stage(f, filt.process(f), i)
                                                                    for i, f in enumerate(inp)])

@@ -21,7 +21,7 @@ import argparse
 
 import numpy as np
 
-from mlaa_stream.bench.accuracy import METHODS
+from mlaa_stream.bench.accuracy import METHODS, new_shot
 from mlaa_stream.spatial.keep import keep_rects, restore_kept
 from mlaa_stream.yardstick.scenes import coverage, generate_scenes, text_polygons
 
@@ -149,6 +149,7 @@ def main(argv: list[str] | None = None) -> int:
     for key, (inp, truth, mask, rects) in frames.items():
         row = key.ljust(34)
         for m in methods:
+            new_shot(procs[m])  # every frame judged alone
             out = procs[m].process(inp)
             if m == "mlaa+keep":
                 out = restore_kept(inp, out, keep_rects(rects))

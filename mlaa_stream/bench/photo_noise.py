@@ -17,7 +17,7 @@ import argparse
 
 import numpy as np
 
-from mlaa_stream.bench.accuracy import METHODS
+from mlaa_stream.bench.accuracy import METHODS, new_shot
 from mlaa_stream.spatial.filter import Filter
 
 
@@ -71,6 +71,7 @@ def main(argv: list[str] | None = None) -> int:
         if keeps:
             proc.keep_regions = True
         for name, x in frames.items():
+            new_shot(proc)  # every frame judged alone
             out = proc.process(x).astype(np.float64)
             rms = float(np.sqrt(np.mean((out - x) ** 2)))
             regions = proc.last_regions if keeps else None

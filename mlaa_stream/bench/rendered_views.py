@@ -32,7 +32,7 @@ from typing import Iterator
 
 import numpy as np
 
-from mlaa_stream.bench.accuracy import METHODS
+from mlaa_stream.bench.accuracy import METHODS, new_shot
 from mlaa_stream.yardstick import metrics as M
 from mlaa_stream.yardstick.photo_textures import TEXTURE_SETS
 from mlaa_stream.yardstick.rendered import Camera, Renderer, _context, _yawed, egl_available
@@ -309,6 +309,7 @@ def main(argv: list[str] | None = None) -> int:
     for m in methods:
         proc = METHODS[m](args.device)
         for view, (inp, truth) in frames.items():
+            new_shot(proc)  # every view judged alone
             out = proc.process(inp)
             sc = M.score(out, inp, truth, edge_mask(inp, truth), with_flip=with_flip)
             removed[m, group(view)].append(sc["error_removed"])

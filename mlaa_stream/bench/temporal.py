@@ -306,6 +306,7 @@ def main(argv: list[str] | None = None) -> int:
             if sc.animated:
                 scenes.append((sc.name, sc))
     for name, scene in scenes:
+        spatial_filter.new_shot()  # each scene its own shot
         spatial = [spatial_filter.process(f) for f in scene.inputs]
         results[name], model_use[name] = {}, {}
         for mode in methods:

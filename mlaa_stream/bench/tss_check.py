@@ -191,6 +191,7 @@ def main(argv: list[str] | None = None) -> int:
               f"{'FLIP all':>9s} {'changed':>8s} {'sampled':>8s} {'ms':>6s}  models")
         for s in scenes:
             spatial, regions = [], []
+            filt.new_shot()  # each scene its own shot
             for f in s.inputs:
                 spatial.append(filt.process(f))
                 regions.append(filt.last_regions)
