@@ -1,5 +1,5 @@
 // tss.cl -- temporal supersampling resolve (issue 16; seed 002's T2x generalised to K frames).
-// Reference: mlaa_stream.temporal.tss.tss_reference (the plain statement; the module's header says why).
+// Reference: mlaa_stream.temporal.resolve.tss_reference (the plain statement; the module's header says why).
 //
 // The ring: K input frames as linear light in 16-bit fixed point, L = floor(clamp(lin, 0, 1) 65535 + 0.5)
 // (ltab: the stored code's L, one load; float frames and codes of a transfer: lin / TSS_RANGE, at most TSS_TOP,
@@ -40,7 +40,7 @@
 #endif
 #define TSS_ONE 65535.0f
 // Float frames can hold values above 1 (HDR renders, linear EXR). The ring holds [0, TSS_RANGE] (linear
-// float frames: LINEAR_RANGE of mlaa_stream.temporal.tss, else 1); a sample above it is stored as TSS_OVER and
+// float frames: LINEAR_RANGE of mlaa_stream.temporal.resolve, else 1); a sample above it is stored as TSS_OVER and
 // is never averaged: in-range samples top out at TSS_TOP, the colour box is capped there, and a pixel whose
 // 3x3 box or spatial output is over range keeps the spatial pixel. Integer codes of an HDR transfer
 // (ENCODE_WARP, device/transfer.py: light up to 49) are held the same way: their ltab maps a code to its light over
@@ -259,7 +259,7 @@ __kernel void tss_resolve(__global const ushort *ring, __global const PIXEL_T *s
             px = xf + shift[2 * j];
             py = yf + shift[2 * j + 1];
         } else {
-            // bilinear read of the field at 1/fs (mlaa_stream.temporal.tss.sample_field)
+            // bilinear read of the field at 1/fs (mlaa_stream.temporal.stage.sample_field)
             float fx = (xf + 0.5f) / (float)fs - 0.5f, fy = (yf + 0.5f) / (float)fs - 0.5f;
             fx = fx > 0.0f ? (fx < (float)(fw - 1) ? fx : (float)(fw - 1)) : 0.0f;
             fy = fy > 0.0f ? (fy < (float)(fh - 1) ? fy : (float)(fh - 1)) : 0.0f;

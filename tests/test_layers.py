@@ -12,7 +12,8 @@ from mlaa_stream.bench.temporal import exact_motion, scene_mover, scene_rotation
 from mlaa_stream.spatial.filter import Filter
 from mlaa_stream.temporal import layers as L
 from mlaa_stream.temporal.stage import Pyramid
-from mlaa_stream.temporal.tss import MotionRing, TSSStage
+from mlaa_stream.temporal.motion_ring import MotionRing
+from mlaa_stream.temporal.tss import TSSStage
 from mlaa_stream.yardstick import metrics as M
 
 H, W = 144, 240

@@ -7,7 +7,8 @@ import pytest
 
 from mlaa_stream.bench.temporal import scene_cut, scene_mover, scene_pan
 from mlaa_stream.spatial.filter import Filter
-from mlaa_stream.temporal.tss import TSSStage, tss_frame_reference
+from mlaa_stream.temporal.resolve import tss_frame_reference
+from mlaa_stream.temporal.tss import TSSStage
 from mlaa_stream.yardstick import metrics as M
 
 
@@ -43,8 +44,8 @@ def _random_ring(rng, h, w, channels, dtype, k, dense, fs=1):
 
 def _run_kernel(stage, cur, spatial, ring, bgr, fs):
     """Drive the device path of TSSStage with a hand-made ring (maps and valid masks as given)."""
-    from mlaa_stream.temporal.stage import Pyramid
-    from mlaa_stream.temporal.tss import FrameMotion, RingEntry, Decision
+    from mlaa_stream.temporal.motion_ring import FrameMotion, RingEntry
+    from mlaa_stream.temporal.stage import Decision, Pyramid
     import pyopencl as cl
     h, w = cur.shape[:2]
     pyr = Pyramid(np.zeros((-(-h // fs), -(-w // fs)), np.uint8), np.zeros((1, 1), np.uint8), fs, 1)
@@ -78,7 +79,7 @@ def test_kernel_matches_reference(stage_parts, channels, dtype, bgr, dense, fs, 
                 for j, (f, m, _) in enumerate(ring)]
     stage = TSSStage(frames=k + 1, bgr=bgr, context=stage_parts, dense_samples=dense)
     out, cells = _run_kernel(stage, cur, spatial, ring, bgr, fs)
-    from mlaa_stream.temporal.tss import GRID, EPS, MIN_CELLS
+    from mlaa_stream.temporal.resolve import GRID, EPS, MIN_CELLS
     ref, rcells = tss_frame_reference(spatial, cur, ring, bgr, fs, GRID, EPS, MIN_CELLS,
                                       stage.field_full_cells if dense else stage.full_cells)
     assert np.array_equal(cells, rcells) and cells.max() >= 2
@@ -90,7 +91,7 @@ def test_kernel_matches_reference(stage_parts, channels, dtype, bgr, dense, fs, 
 def test_kernel_matches_reference_at_other_grids(stage_parts, grid):
     """Both resolves at footprints of 3x3 and 8x8 cells (tss_resolve keeps one bit per cell in a 64-bit word:
     8x8 fills its top bit) against the reference: bit-identical; a grid over 8 is refused."""
-    from mlaa_stream.temporal.tss import EPS, MIN_CELLS
+    from mlaa_stream.temporal.resolve import EPS, MIN_CELLS
     rng = np.random.default_rng(40 + grid)
     h, w, fs, k = 37, 53, 2, 24
     for dense in (True, False):
@@ -113,7 +114,7 @@ def test_kernel_matches_reference_on_hdr_float_frames(stage_parts, linear, dense
     reference, and every pixel whose 3x3 input box or spatial pixel is over the ring's range keeps the spatial
     pixel bit for bit (a sample over range is never averaged: before, such values came out clipped or as NaN)."""
     import cv2
-    from mlaa_stream.temporal.tss import EPS, GRID, LINEAR_RANGE, MIN_CELLS
+    from mlaa_stream.temporal.resolve import EPS, GRID, LINEAR_RANGE, MIN_CELLS
     rng = np.random.default_rng(11 + 2 * linear + dense)
     h, w, fs, k = 37, 53, 2 if dense else 1, 9
     cur, spatial, ring = _random_ring(rng, h, w, 3, np.float32, k, dense, fs)
@@ -379,7 +380,7 @@ def test_band_check_masks_a_second_motion_along_long_edges():
     (the vertical edges did not move). With both edges moved alike nothing is masked. The 48-px tile
     check cannot see this: the tiles on the horizontal edges hold one edge direction only. (240 x 144:
     whole 48-px tiles, so no partial tile row copies a band's mask.)"""
-    from mlaa_stream.temporal import tss as T
+    from mlaa_stream.temporal import motion_ring as T
     assert T.BAND == 32
     ring = _two_edges(40.0, 80.0)
     d, valid = T._Refiner(_two_edges(40.6, 80.0)).step(ring, (0.0, 0.0))
@@ -397,7 +398,7 @@ def test_still_bands_leave_the_estimate_and_lose_their_samples():
     0 while the frame's is over 2 STATIC_TOL) then counts for nothing, so the translation converges to
     the moving edge's -0.6 px, and the last step's band check masks the still band's rows (64-95: 0.6 px
     off the frame) and keeps the moving one's (the tile check masks its 48-px tiles, rows 48-95, too)."""
-    from mlaa_stream.temporal import tss as T
+    from mlaa_stream.temporal import motion_ring as T
     assert T.BAND == 32 and T.STATIC_TOL > 0
     ring = _two_edges(40.0, 80.0)
     ref = T._Refiner(_two_edges(40.6, 80.0))
@@ -482,7 +483,7 @@ def test_homography_steps_recover_a_projective_map():
     refiner's points find the map from frame 3 to frame 0 (A_0^-1 A_3) within 0.05 px over the frame, where the
     translation alone is off by over 0.3 px at the sides."""
     import cv2
-    from mlaa_stream.temporal import tss as T
+    from mlaa_stream.temporal import motion_ring as T
     frames, a = _projective_frames(4, perspective=2e-5)
     cur, ring = (cv2.GaussianBlur(f.astype(np.float32), (0, 0), 1.0) for f in (frames[3], frames[0]))
     ref = T._Refiner(cur)
@@ -506,7 +507,7 @@ def test_projective_maps_only_where_a_translation_does_not_fit(filt):
     projective maps from the third frame on (the translation departs by PROJECTIVE_MIN px at a corner), whose
     per-tile translations follow the true motion within 0.1 px; the kernel (per-tile tables of
     tss_resolve_shift) returns what the numpy reference does, bit for bit; a pure translation keeps one table."""
-    from mlaa_stream.temporal import tss as T
+    from mlaa_stream.temporal import resolve as T
     for perspective, projective in ((5e-6, True), (0.0, False)):
         frames, a = _projective_frames(6, perspective=perspective)
         frames = [np.repeat(f[..., None], 3, -1).astype(np.uint8) for f in frames]
@@ -563,7 +564,7 @@ def test_band_growth_keeps_aliasing_and_drops_a_second_motion():
     and 10. Band 0 deviates by 0.4 px at every age (a bias of 1-spp aliasing along its edges: kept), band 1 by
     0.12 px per frame of age (a second motion: off where its deviation is over BAND_TOL, from age 4), band 2 by
     1.0 px (over BAND_FAR: off at any age); a band without texture is never off."""
-    from mlaa_stream.temporal.tss import BAND_FAR, BAND_GROWTH, BAND_TOL, _band_slopes, _bands_growing
+    from mlaa_stream.temporal.motion_ring import BAND_FAR, BAND_GROWTH, BAND_TOL, _band_slopes, _bands_growing
     assert BAND_GROWTH > 0 and BAND_FAR < 1.0
     ages = (1, 4, 7, 10)
     textured = np.array([True, True, True, False])
@@ -668,7 +669,7 @@ def test_tracked_frames_keep_only_the_newest_ring_frames(stage_parts, zoom_frame
     """dense_samples: on a tracked frame, ring frames over TRACKED_AGE frames old leave the ring (a dolly's field
     departs from a tile's translation with age); a K = 16 ring on a 10-frame dolly holds TRACKED_AGE past frames
     and the current one, the newest TRACKED_AGE frames in order."""
-    from mlaa_stream.temporal.tss import TRACKED_AGE
+    from mlaa_stream.temporal.motion_ring import TRACKED_AGE
     frames, _, _ = zoom_frames(1.01, n=TRACKED_AGE + 3, w=320, h=240)
     st = TSSStage(frames=16, bgr=False, context=stage_parts, mode="global", dense_samples=True)
     for t, f in enumerate(frames):
@@ -683,7 +684,7 @@ def test_trajectory_fit_drops_the_common_offset():
     frame's quantised edges) become the least-squares polynomial without its offset c; a shaking camera (residual
     over TRAJECTORY_TOL) and a ring holding a dense field keep their estimates; look-ahead frames join the fit
     from the ring's measured estimates."""
-    from mlaa_stream.temporal.tss import TRAJECTORY_DEGREE, TRAJECTORY_TOL, MotionRing, RingEntry
+    from mlaa_stream.temporal.motion_ring import TRAJECTORY_DEGREE, TRAJECTORY_TOL, MotionRing, RingEntry
     rng = np.random.default_rng(3)
     index, ages = 20, np.arange(15, 0, -1)
     motion = np.outer(ages, [-0.35, -0.15]) + np.outer(ages ** 2, [0.004, -0.002])
@@ -722,12 +723,12 @@ def test_trajectory_fit_drops_the_common_offset():
 def test_trajectory_fit_brings_a_flat_colour_pan_closer_to_its_motion(filt, monkeypatch):
     """The bench's vector pan (0.35, 0.15) px per frame: long horizontal edges make each direct estimate jump with
     their quantised rows; the ring's fitted line is closer to the exact motion than the estimates alone."""
-    import mlaa_stream.temporal.tss as tss
+    import mlaa_stream.temporal.motion_ring as motion_ring
     sc = scene_pan(16, 480, 270)
     spatial = [filt.process(f) for f in sc.inputs]
 
     def ring_error(tol: float) -> float:
-        monkeypatch.setattr(tss, "TRAJECTORY_TOL", tol)
+        monkeypatch.setattr(motion_ring, "TRAJECTORY_TOL", tol)
         stage = TSSStage(bgr=False, frames=16)
         _run(stage, sc, spatial)
         ring = stage.motion
@@ -758,3 +759,27 @@ def test_stripes_of_one_direction_keep_the_spatial_output(filt, speed):
     with TSSStage(context=filt.context, bgr=False) as stage:
         outs = _run(stage, pan, sp)
     assert not any("aperture" in r for r in stage.stats) and not np.array_equal(outs[-1], sp[-1])
+
+
+def test_set_constant_reaches_every_module_that_holds_the_constant():
+    """The benches' --tss-set (tss.set_constant): FULL_CELLS lives in resolve.py and the stage holds a copy; both
+    take the value (read as the constant's type), so the stage's kernel defines and the numpy reference agree.
+    A name that is no constant of the three modules is refused."""
+    from mlaa_stream.device.formats import frame_format
+    from mlaa_stream.temporal import motion_ring, resolve, tss
+    saved = {n: getattr(m, n) for m, n in ((resolve, "FULL_CELLS"), (tss, "FULL_CELLS"),
+                                           (motion_ring, "TRAJECTORY_AHEAD"), (motion_ring, "BAND_TOL"))}
+    try:
+        tss.set_constant("FULL_CELLS", "12")
+        assert resolve.FULL_CELLS == 12 and tss.FULL_CELLS == 12 and type(tss.FULL_CELLS) is int
+        assert tss.kernel_defines(frame_format(np.zeros((4, 4, 3), np.uint8), False))["FULL_CELLS"] == 12
+        tss.set_constant("TRAJECTORY_AHEAD", "false")
+        assert motion_ring.TRAJECTORY_AHEAD is False
+        tss.set_constant("BAND_TOL", "1e9")
+        assert motion_ring.BAND_TOL == 1e9
+        for bad in ("NO_SUCH_CONSTANT", "set_constant", "np"):
+            with pytest.raises(KeyError):
+                tss.set_constant(bad, "1")
+    finally:
+        resolve.FULL_CELLS = tss.FULL_CELLS = saved["FULL_CELLS"]
+        motion_ring.TRAJECTORY_AHEAD, motion_ring.BAND_TOL = saved["TRAJECTORY_AHEAD"], saved["BAND_TOL"]

@@ -12,8 +12,9 @@ from mlaa_stream.device.transfer import pq_to_linear
 from mlaa_stream.spatial.filter import Filter
 from mlaa_stream.temporal.methods import make_stage
 from mlaa_stream.temporal.stage import decode_table
-from mlaa_stream.temporal.tss import (EPS, GRID, LINEAR_RANGE, MIN_CELLS, ONE, OVER, TSSStage, encode_table,
-                                      level_table, tss_frame_reference)
+from mlaa_stream.temporal.resolve import (EPS, GRID, LINEAR_RANGE, MIN_CELLS, ONE, OVER, encode_table, level_table,
+                                          tss_frame_reference)
+from mlaa_stream.temporal.tss import TSSStage
 from mlaa_stream.yardstick import metrics as M
 from test_transfer import coded
 from test_tss import _random_ring, _run_kernel

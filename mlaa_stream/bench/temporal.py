@@ -248,7 +248,7 @@ def _tss_mode(mode: str) -> tuple[int, int]:
 
 def _set_tss_constants(pairs: list[str]) -> None:
     """--tss-set NAME=VALUE: the tuning runs of docs/temporal.md, by command."""
-    import mlaa_stream.temporal.tss as tss
+    from mlaa_stream.temporal.tss import set_constant
     names = ("FULL_CELLS", "FULL_CELLS_AHEAD", "REFINE_POINTS", "REFINE_STEPS", "NEWEST_STEPS", "REFINE_EVERY", "TILE_TOL",
              "BAND_TOL", "BAND_TEXTURE", "STATIC_TOL", "BAND_GROWTH", "BAND_FAR", "TRAJECTORY_MIN", "TRAJECTORY_TOL",
              "TRAJECTORY_DEGREE", "TRAJECTORY_AHEAD")
@@ -256,8 +256,7 @@ def _set_tss_constants(pairs: list[str]) -> None:
         name, _, value = pair.partition("=")
         if name not in names:
             raise SystemExit(f"--tss-set: expected one of {', '.join(names)}, got {name!r}")
-        kind = type(getattr(tss, name))
-        setattr(tss, name, value.lower() in ("1", "true") if kind is bool else kind(value))
+        set_constant(name, value)
 
 
 def _fmt(v: float, digits: int = 3) -> str:
@@ -278,7 +277,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--scenes", default=",".join(SCENES))
     ap.add_argument("--out", default=str(DOCS))
     ap.add_argument("--tss-set", action="append", default=[], metavar="NAME=VALUE",
-                    help="tuning: set a constant of mlaa_stream.temporal.tss for this run (FULL_CELLS, BAND_TOL, "
+                    help="tuning: set a constant of temporal supersampling for this run (FULL_CELLS, BAND_TOL, "
                          "REFINE_POINTS, REFINE_STEPS, NEWEST_STEPS, REFINE_EVERY, TILE_TOL; repeatable)")
     args = ap.parse_args(argv)
     _set_tss_constants(args.tss_set)

@@ -20,7 +20,7 @@ second world's (yardstick/town.py) instead of the plaza's; `--view-frames N`: N 
 --lookahead N[,N...]: the method with TSS reading N frames after the current one too (a row per N, named
 "<method>+N" for N > 0; what `--lookahead N` runs; default DEFAULT_LOOKAHEAD, what `--temporal` reads); each
 row is checked against spatial only.
---tss-set sets a module constant of mlaa_stream.temporal.tss for the run (e.g. BAND_TOL=1e9).
+--tss-set sets a constant of temporal supersampling for the run (mlaa_stream.temporal.tss.set_constant) (e.g. BAND_TOL=1e9).
 --exact-motion adds two oracle rows to each of the bench's rendered shots (and the held-out shots with --views), with
 the renderer's exact motion (mlaa_stream.yardstick.rendered.reprojection, from each frame's depth; needs EGL):
 "tss:exact", the TSS resolve (tss_frame_reference, the kernel's twin) with every ring frame's exact per-pixel map,
@@ -43,11 +43,13 @@ import dataclasses
 import time
 
 import numpy as np
-from mlaa_stream.bench.temporal import scene_stripes
 
+from mlaa_stream.bench.temporal import scene_stripes
 from mlaa_stream.spatial.filter import Filter
-from mlaa_stream.temporal import tss as T
 from mlaa_stream.temporal.methods import DEFAULT_LOOKAHEAD, METHODS, make_stage, needs_regions
+from mlaa_stream.temporal.motion_ring import DEFAULT_FRAMES
+from mlaa_stream.temporal.resolve import tss_frame_reference
+from mlaa_stream.temporal.tss import set_constant
 from mlaa_stream.yardstick import metrics as M
 from mlaa_stream.yardstick.scenes import SCENES, Scene, edge_mask, generate_scenes
 
@@ -136,8 +138,8 @@ def exact_tss(scene: Scene, spatial: np.ndarray, maps: dict) -> np.ndarray:
     """TSS's resolve with exact maps: each frame from its last DEFAULT_FRAMES - 1 inputs and itself."""
     outs = []
     for t, (f, sp) in enumerate(zip(scene.inputs, spatial)):
-        ring = [(scene.inputs[u], maps[t, u], None) for u in range(max(0, t - T.DEFAULT_FRAMES + 1), t)]
-        outs.append(T.tss_frame_reference(sp, f, ring + [(f, (0.0, 0.0), None)], bgr=False)[0])
+        ring = [(scene.inputs[u], maps[t, u], None) for u in range(max(0, t - DEFAULT_FRAMES + 1), t)]
+        outs.append(tss_frame_reference(sp, f, ring + [(f, (0.0, 0.0), None)], bgr=False)[0])
     return np.stack(outs)
 
 
@@ -173,9 +175,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     lookaheads = [0] if args.method == "blend" else [int(v) for v in args.lookahead.split(",")]   # blend: the past
     for item in args.tss_set:
-        name, value = item.split("=", 1)
-        kind = type(getattr(T, name))
-        setattr(T, name, value.lower() in ("1", "true") if kind is bool else kind(float(value)))
+        set_constant(*item.split("=", 1))
     with_flip = M.flip_available()
     every = generate_scenes(names=args.scenes.split(","))
     scenes = [s for s in every if s.animated] + [m for m in [rendered_mover(every)] if m is not None]

@@ -790,7 +790,7 @@ class Renderer:
 def reprojection(cam_from: Camera, cam_to: Camera, depth: np.ndarray) -> np.ndarray:
     """Exact motion of a still world: where the point each pixel centre of cam_from's frame hit (window depth
     `depth`, Renderer.depth_frame) lies in cam_to's frame. Returns (H, W, 2) float32 offsets (x, y) in pixels,
-    position in cam_to's frame = pixel index + offset (the maps of mlaa_stream.temporal.tss). The sky (depth 1)
+    position in cam_to's frame = pixel index + offset (the maps of mlaa_stream.temporal.motion_ring). The sky (depth 1)
     is taken at the far plane. Occlusion is not tested: a point hidden in cam_to's frame still gets its
     position (the temporal stages' colour box is what rejects such samples)."""
     h, w = depth.shape
