@@ -487,3 +487,18 @@ def test_a_machine_without_egl_reads_the_cache_and_names_what_it_cannot_render(t
     R.cache_path(R.default_cache_dir(), "rendered_orbit", False).unlink()
     with pytest.raises(SceneUnavailable, match="rendered_orbit.*no EGL here"):
         generate_scenes(names=["rendered"])
+
+
+@needs_egl
+def test_codec_shots_bench_runs(capsys):
+    """python -m mlaa_stream.bench.codec_shots at a tiny size: one shot, uncompressed and through H.264, the default
+    judging each frame alone and holding the verdict and FXAA as columns; an unknown method is refused."""
+    from mlaa_stream.bench import codec_shots
+    assert codec_shots.main(["--shots", "far_tele_pan", "--worlds", "plaza", "--sizes", "96x54", "--frames", "3",
+                             "--crf", "0,23", "--methods", "alone,held,fxaa"]) == 0
+    out = capsys.readouterr().out
+    assert "plaza:far_tele_pan_96" in out and out.count("plaza:far_tele_pan_96") == 2
+    means = [line for line in out.splitlines() if line.startswith("mean, crf")]
+    assert len(means) == 2 and all("alone" in m and "held" in m and "fxaa" in m for m in means)
+    with pytest.raises(SystemExit, match="--methods"):
+        codec_shots.main(["--methods", "held,nope"])

@@ -140,7 +140,8 @@ def time_method(proc: Processor, frames: list[np.ndarray], n: int = 20, warmup: 
     return statistics.median(times)
 
 
-def _close(proc) -> None:
+def close_processor(proc) -> None:
+    """Releases a method's device resources where it holds any."""
     close = getattr(proc, "close", None)
     if close is not None:
         close()
@@ -156,10 +157,15 @@ def new_shot(proc: object) -> None:
 
 def run_scene(proc: Processor, scene: Scene) -> np.ndarray:
     """All frames of a scene through one method, in order, as a shot of its own (new_shot)."""
+    return run_frames(proc, scene.inputs)
+
+
+def run_frames(proc: Processor, frames) -> np.ndarray:
+    """Frames of one shot through one method, in order, as a shot of its own (new_shot)."""
     new_shot(proc)
     if hasattr(proc, "process_all"):   # a temporal method reading frames ahead
-        return proc.process_all(scene.inputs)
-    return np.stack([proc.process(f) for f in scene.inputs])
+        return proc.process_all(frames)
+    return np.stack([proc.process(f) for f in frames])
 
 
 def score_scene(outs: np.ndarray, scene: Scene, with_flip: bool) -> dict[str, float]:
@@ -196,7 +202,7 @@ def run_bench(scenes: list[Scene], method_names: list[str] | None = None, device
                 dev = getattr(proc, "device_name", res.device)
                 ms = time_method(proc, timing, timed_frames, warmup) if timing else math.nan
             finally:
-                _close(proc)
+                close_processor(proc)
             res.timings[name] = Timing(ms, timed_frames, dev)
             log(f"{name}: {ms:.1f} ms per 1080p frame on {dev}")
             for s in scenes:
@@ -204,7 +210,7 @@ def run_bench(scenes: list[Scene], method_names: list[str] | None = None, device
                 try:
                     outs = run_scene(proc, s)
                 finally:
-                    _close(proc)
+                    close_processor(proc)
                 sc = score_scene(outs, s, with_flip)
                 res.rows.append(_row(name, s, sc, ms, dev, ""))
                 log(f"  {s.name}: error removed {_pct(sc['error_removed'])}, "

@@ -2,15 +2,17 @@
 
     python -m mlaa_stream.bench.codec_shots [--sizes 960x540] [--frames 12] [--crf 0,18,23,28]
                                             [--worlds plaza,town] [--shots far_tele_pan,...] [--verdicts]
+                                            [--methods alone,held,fxaa,mlaa:rendered]
 
 A video codec spends its bits unevenly: a compressed render's keyframe keeps the busy texture that makes the frame
 a render (spatial/fallback.py RENDER_FRAME_PCT), its P- and B-frames may fall under it, and then the verdict flips
 from frame to frame. Each held-out shot (bench/rendered_views.py view_cameras: a pan and a dolly per view) is
 rendered like the bench's (1 spp; truth 8x8 samples in linear light), sent through libx264 (veryfast, as
-codec_check; crf 0: uncompressed), and filtered by the default with `hold_render` off and on (spatial/shots.py).
+codec_check; crf 0: uncompressed), and filtered by the default with `hold_render` off ("alone") and on ("held",
+spatial/shots.py), and by any other method of `mlaa-stream bench` named in `--methods` (a fresh one per shot).
 Per shot and CRF (`--verdicts`: first the frames judged a render by their own share, R, or not, .): error
 removed % (the mean over frames, the codec's frame counted as the input) / temporal error relative to the input's /
-damage away from edges (levels, mean over frames), for each setting. Needs EGL (`pip install 'mlaa-stream[bench]'`).
+damage away from edges (levels, mean over frames), for each method. Needs EGL (`pip install 'mlaa-stream[bench]'`).
 A benchmark, never a unit test.
 """
 from __future__ import annotations
@@ -19,12 +21,16 @@ import argparse
 
 import numpy as np
 
+from mlaa_stream.bench.accuracy import METHODS, close_processor, run_frames
 from mlaa_stream.bench.codec_check import through_h264
 from mlaa_stream.bench.rendered_views import WORLD_VIEWS, view_cameras
 from mlaa_stream.spatial.fallback import render_regions_of
 from mlaa_stream.spatial.filter import Filter
 from mlaa_stream.yardstick import metrics as M
 from mlaa_stream.yardstick.rendered import Renderer, _context, egl_available
+
+
+SETTINGS = {"alone": False, "held": True}   # --methods: the default with hold_render off / on
 
 
 def shot_frames(world: str, width: int, height: int, frames: int, names: list[str] | None):
@@ -64,8 +70,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--verdicts", action="store_true",
                     help="also print each frame's own verdict (R: a render by its own share; the numpy reference, "
                          "~1 s a frame at 960x540)")
+    ap.add_argument("--methods", default="alone,held",
+                    help="comma-separated: alone (the default judging each frame by itself), held (the default), or "
+                         f"methods of the bench ({', '.join(m for m in METHODS if m != 'mlaa')})")
     ap.add_argument("--device", default=None)
     args = ap.parse_args(argv)
+    methods = [m for m in args.methods.split(",") if m]
+    unknown = [m for m in methods if m not in SETTINGS and m not in METHODS]
+    if not methods or unknown:
+        raise SystemExit(f"--methods: expected alone, held or methods of the bench, got {args.methods!r}")
     ok, why = egl_available()
     if not ok:
         raise SystemExit(f"rendered shots need a headless OpenGL context: {why}")
@@ -81,8 +94,8 @@ def main(argv: list[str] | None = None) -> int:
         raise SystemExit("--frames: at least 2 (temporal error compares frames)")
     names = [s for s in args.shots.split(",") if s] or None
     verdicts = f"{'own verdicts':{args.frames}s}" if args.verdicts else ""
-    print(f"{'shot':34s} {'crf':>4s}  {verdicts}  {'each frame alone':>20s}  {'held':>20s}")
-    means: dict[tuple[int, bool], list] = {}
+    print(f"{'shot':34s} {'crf':>4s}  {verdicts}" + "".join(f"  {m:>20s}" for m in methods))
+    means: dict[tuple[int, str], list] = {}
     passes_filter = Filter(device=args.device, fallback="off")
     for world in worlds:
         for width, height in sizes:
@@ -92,18 +105,22 @@ def main(argv: list[str] | None = None) -> int:
                     row = f"{world + ':' + name + f'_{width}':34s} {crf:4d}  "
                     if args.verdicts:
                         row += f"{''.join(own_verdict(passes_filter, f) for f in coded):{args.frames}s}"
-                    for hold in (False, True):
-                        with Filter(device=args.device, hold_render=hold) as f:
-                            outs = np.stack([f.process(x) for x in coded])
+                    for m in methods:
+                        proc = (Filter(device=args.device, hold_render=SETTINGS[m]) if m in SETTINGS
+                                else METHODS[m](args.device))
+                        try:
+                            outs = run_frames(proc, coded)
+                        finally:
+                            close_processor(proc)
                         s = scores(outs, coded, truths)
-                        means.setdefault((crf, hold), []).append(s)
+                        means.setdefault((crf, m), []).append(s)
                         row += f"  {100 * s[0]:6.1f} / {s[1]:.3f} / {s[2]:.2f}"
                     print(row, flush=True)
     passes_filter.close()
     for crf in crfs:
-        alone, held = (np.mean(means[crf, hold], axis=0) for hold in (False, True))
-        print(f"mean, crf {crf:2d} ({len(means[crf, False])} shots): each frame alone {100 * alone[0]:.1f} % / "
-              f"{alone[1]:.3f} / {alone[2]:.2f}, held {100 * held[0]:.1f} % / {held[1]:.3f} / {held[2]:.2f}")
+        cells = [f"{m} {100 * v[0]:.1f} % / {v[1]:.3f} / {v[2]:.2f}"
+                 for m, v in ((m, np.mean(means[crf, m], axis=0)) for m in methods)]
+        print(f"mean, crf {crf:2d} ({len(means[crf, methods[0]])} shots): " + ", ".join(cells))
     return 0
 
 
