@@ -6,13 +6,13 @@ from __future__ import annotations
 import os
 from fractions import Fraction
 
-from mlaa_stream.cli.filter_cmd import (EXIT_FAILED, EXIT_OK, Failed, Usage, _check_writable, _Job, deinterlace_note,
-                                        video_transfer, video_trim)
+from mlaa_stream.cli.console import EXIT_FAILED, EXIT_OK, Failed, Usage
+from mlaa_stream.cli.filter_jobs import Job, check_writable, deinterlace_note, video_transfer, video_trim
 from mlaa_stream.device.transfer import TRC_OF
 from mlaa_stream.io.sequence import FIRST_FRAME_NUMBER, image_transfer
 
 
-def _sequence_plan(job: _Job) -> list:
+def _sequence_plan(job: Job) -> list:
     """The input images in order (folder: name order; pattern: frame numbers), as FrameFile items."""
     from mlaa_stream.io.sequence import FrameFile, expand_pattern, format_ranges, list_folder, parse_frames
 
@@ -59,7 +59,7 @@ def hdr_colour_tags(first, transfer: str | None) -> dict:
             "colorspace": _BT2020 if primaries == _BT2020 else 1, "color_range": 1}
 
 
-class SequenceToVideoJob(_Job):
+class SequenceToVideoJob(Job):
     """A folder of images or a frame pattern -> one video file (frame rate from --rate)."""
 
     def prepare(self) -> None:
@@ -74,7 +74,7 @@ class SequenceToVideoJob(_Job):
         folder = os.path.dirname(os.path.abspath(self.output))
         if not os.path.isdir(folder):
             raise Failed(f"{folder}: the output folder does not exist")
-        _check_writable(folder)
+        check_writable(folder)
         self.plan = _sequence_plan(self)
         first = read_image(self.plan[0].src)
         if first.pixels.dtype.kind == "f":
@@ -102,7 +102,7 @@ class SequenceToVideoJob(_Job):
         if c in (2, 4) and not self.alpha:
             self.con.warn(f"{self.input}: alpha is not kept in the video")
         try:
-            # -f/--format as for a video in (_VideoJob); images have no audio to copy (--audio copy/aac: a warning)
+            # -f/--format as for a video in (VideoJob); images have no audio to copy (--audio copy/aac: a warning)
             self.writer = VideoWriter(self.output, self.info, codec=o["codec"], crf=o["crf"],
                                       preset=o["encoder_preset"], pix_fmt=o["pix_fmt"], audio="none",
                                       overwrite=o["overwrite"],
@@ -140,8 +140,8 @@ class SequenceToVideoJob(_Job):
                 frame = np.repeat(frame, 3, axis=2) if frame.shape[2] < 3 else frame[..., rgb]
             self.writer.write(np.ascontiguousarray(frame))
 
-        self.read_order: dict = {}  # position -> FrameFile, for the temporal stage (_SequenceTemporal)
-        self.read_linear: dict = {}  # position -> the frame is linear light: _SequenceTemporal reads it too
+        self.read_order: dict = {}  # position -> FrameFile, for the temporal stage (SequenceTemporal)
+        self.read_linear: dict = {}  # position -> the frame is linear light: SequenceTemporal reads it too
 
         def source():
             for position, item in enumerate(image_source(self.plan, report, strict=True)):
@@ -169,7 +169,7 @@ class SequenceToVideoJob(_Job):
             writer.abort()
 
 
-class VideoToImagesJob(_Job):
+class VideoToImagesJob(Job):
     """A video -> numbered images through a frame pattern (clean/%04d.png), numbered from 1 as ffmpeg does."""
 
     FIRST_NUMBER = FIRST_FRAME_NUMBER   # as a folder written through a pattern (io/sequence.py plan_images)
@@ -180,7 +180,7 @@ class VideoToImagesJob(_Job):
         o = self.opts
         folder = os.path.dirname(os.path.abspath(self.output))
         os.makedirs(folder, exist_ok=True)
-        _check_writable(folder)
+        check_writable(folder)
         self.pipe_in = None
         try:
             if self.input == PIPE:  # read once: the open container goes on to read_video
@@ -217,7 +217,7 @@ class VideoToImagesJob(_Job):
 
     def _complete(self, existing: list[tuple[int, str]]) -> set[int]:
         """--resume: the numbers of the existing outputs that are complete (the video's size and channels, PNG/JPEG
-        end marker), as for a folder (_ImageJob._keep_complete); an incomplete one is removed and written again."""
+        end marker), as for a folder (ImageJob._keep_complete); an incomplete one is removed and written again."""
         from mlaa_stream.io.images import check_complete
 
         channels = 4 if self.info.has_alpha else 3

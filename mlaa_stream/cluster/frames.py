@@ -147,7 +147,7 @@ def _with_temporal(stage, files: list[FrameFile], warm: set, report: Report, str
                    sink):
     """(temporal hook, source, sink) for a chunk read with its warm-up (`warm`): the stage (a WarmedStage)
     is called with the frame number (a folder: the file's position in name order), as on one machine
-    (cli/filter_cmd._SequenceTemporal), and only the frames in `write` reach the sink."""
+    (cli/filter_jobs.SequenceTemporal), and only the frames in `write` reach the sink."""
     read_order: dict[int, FrameFile] = {}
     read_linear: dict[int, bool] = {}   # position -> linear light (the stage's colour space), as on one machine
 
