@@ -534,6 +534,15 @@ def test_codec_check_runs(capsys):
     assert np.abs(coded.astype(int) - frames).mean() < 16  # yuv420p halves the chroma of a busy texture
     assert codec_check.main(["--scenes", "text_ui", "--crf", "28"]) == 0
     assert "text_ui" in capsys.readouterr().out
+    jpeg = codec_check.through_jpeg(frames, 75)
+    assert jpeg.shape == frames.shape and np.any(jpeg != frames) and np.abs(jpeg.astype(int) - frames).mean() < 16
+    big = codec_check.tiled(frames, 200, 150)   # 96 x 64 repeated: whole copies, then the cut ones
+    assert big.shape == (2, 150, 200, 3) and np.array_equal(big[:, 64:128, 96:192], frames)
+    assert codec_check.main(["--scenes", "text_ui", "--crf", "", "--jpeg", "60", "--tile", "512x448"]) == 0
+    out = capsys.readouterr().out
+    assert "jpeg q 60" in out and "crf" not in out.split("\n", 1)[1]
+    with pytest.raises(SystemExit):
+        codec_check.main(["--scenes", "text_ui", "--crf", "", "--jpeg", ""])
 
 
 def test_show_regions_view():
