@@ -22,7 +22,7 @@ import numpy as np
 from mlaa_stream.spatial.fallback import render_regions_of
 from mlaa_stream.spatial.filter import Filter
 from mlaa_stream.yardstick import metrics as M
-from mlaa_stream.yardstick.scenes import generate_scenes
+from mlaa_stream.yardstick.scenes import generate_scenes, through_jpeg
 
 
 def through_h264(frames: np.ndarray, crf: int) -> np.ndarray:
@@ -40,14 +40,6 @@ def through_h264(frames: np.ndarray, crf: int) -> np.ndarray:
     buf.seek(0)
     with av.open(buf) as container:
         return np.stack([f.to_ndarray(format="rgb24") for f in container.decode(video=0)])
-
-
-def through_jpeg(frames: np.ndarray, quality: int) -> np.ndarray:
-    """(T, H, W, 3) uint8 RGB -> each frame after JPEG at `quality` (OpenCV's encoder, 4:2:0) and back."""
-    import cv2
-    return np.stack([cv2.imdecode(cv2.imencode(".jpg", np.ascontiguousarray(f[..., ::-1]),
-                                               [cv2.IMWRITE_JPEG_QUALITY, int(quality)])[1],
-                                  cv2.IMREAD_COLOR)[..., ::-1] for f in frames])
 
 
 def tiled(frames: np.ndarray, width: int, height: int) -> np.ndarray:

@@ -411,9 +411,9 @@ def fallback_reference(src: np.ndarray, mlaa_out: np.ndarray, edges: np.ndarray,
         busy_changed = region_sums(busy_px)
         # render_frame then clears every tile's counts
         frame_supersampled = regions and supersampled(borders, luma) and not (held and held_supersampled)
-        rendered = (render_regions(busy_px, borders, luma, overlay_tiles(src, bgr), held, held_supersampled) & ~quiet
-                    if regions
-                    else np.zeros((h, w), bool))
+        rendered = np.zeros((h, w), bool)
+        if regions:
+            rendered = render_regions(busy_px, borders, luma, overlay_tiles(src, bgr), held, held_supersampled) & ~quiet
         busy = rendered | ((busy_changed >= FALLBACK_RICH_MIN)
                            & (busy_changed * FALLBACK_RICH_DIV >= region_sums(borders)))
         evidence = region_sums(changed & borders) >= FALLBACK_MIN_CHANGED

@@ -560,19 +560,23 @@ def scene_antialiased(rng: np.random.Generator, small: bool) -> list[Scene]:
 COMPRESSED_QUALITY = 85  # JPEG quality of the compressed group: a screen recording's or a web video's level
 
 
+def through_jpeg(frames: np.ndarray, quality: int) -> np.ndarray:
+    """(T, H, W, 3) uint8 RGB -> each frame after JPEG at `quality` (OpenCV's encoder, 4:2:0) and back."""
+    import cv2
+
+    return np.stack([cv2.imdecode(cv2.imencode(".jpg", f[..., ::-1], [cv2.IMWRITE_JPEG_QUALITY, int(quality)])[1],
+                                  cv2.IMREAD_COLOR)[..., ::-1] for f in frames])
+
+
 def scene_compressed(rng: np.random.Generator, small: bool) -> list[Scene]:
     """Aliased flat-colour art (the text_ui and checkerboard scenes) through a lossy codec (JPEG at
     COMPRESSED_QUALITY, cv2): screen recordings and video of UI. The codec's ringing gives flat-colour windows
     many colours, so tests for "busy, rendered-like content" must not take it for a render. Truth: the clean
     8x8-spp truth."""
-    import cv2
-
     out = []
     for make in (scene_text, scene_checker):
         for sc in make(rng, small):
-            ins = np.stack([cv2.imdecode(cv2.imencode(".jpg", f[..., ::-1],
-                                                      [cv2.IMWRITE_JPEG_QUALITY, COMPRESSED_QUALITY])[1],
-                                         cv2.IMREAD_COLOR)[..., ::-1] for f in sc.inputs])
+            ins = through_jpeg(sc.inputs, COMPRESSED_QUALITY)
             out.append(Scene(f"{sc.name}_jpeg", "compressed", ins, sc.truths, edge_mask(ins, sc.truths),
                              None, None, None, f"{sc.notes}, through JPEG q{COMPRESSED_QUALITY}"))
     return out
