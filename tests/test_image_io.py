@@ -158,6 +158,23 @@ def test_a_truncated_tiff_names_its_own_read_error_not_the_subimage_probe(tmp_pa
     assert "subimage" not in str(ei.value)
 
 
+def test_a_webp_is_read_not_refused_after_the_subimage_probe(tmp_path):
+    # OpenImageIO's WebP reader cannot decode subimage 0 after a failed seek to subimage 1 (the multi-image probe):
+    # every WebP was refused with "reading pixels failed: Couldn't decode subimage 0"
+    if oiio.ImageOutput.create(str(tmp_path / "probe.webp")) is None:
+        oiio.geterror()
+        pytest.skip("this OpenImageIO has no WebP writer")
+    arr = np.random.default_rng(6).integers(0, 255, (12, 17, 3), dtype=np.uint8)
+    path = tmp_path / "frame.webp"
+    write_raw(path, arr, "uint8", {"compression": "lossless"})
+    inp = oiio.ImageInput.open(str(path))
+    expected = inp.read_image(0, 0, 0, 3, "uint8")
+    inp.close()
+    im = read_image(str(path))
+    assert im.pixels.shape == (12, 17, 3)
+    np.testing.assert_array_equal(im.pixels, expected)
+
+
 def test_a_missing_file_is_refused_naming_it(tmp_path):
     with pytest.raises(ImageReadError, match="nope.png: cannot read"):
         read_image(str(tmp_path / "nope.png"))

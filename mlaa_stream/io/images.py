@@ -133,6 +133,14 @@ def read_image(path: str) -> Image:
                                  f"file); filter it as a video or split it into frames first "
                                  f"(e.g. ffmpeg -i {os.path.basename(path)} frames/%04d.png)")
         inp.geterror()  # clear the probe's 'could not seek to subimage 1': a failed read must report its own error
+        # reopened after the probe: a failed seek leaves some readers unable to decode subimage 0 (WebP's:
+        # "Couldn't decode subimage 0", even after seeking back), so every WebP was refused as unreadable
+        inp.close()
+        inp = oiio.ImageInput.open(path, config)
+        if inp is None:
+            raise ImageReadError(f"{path}: expected an image OpenImageIO can read, got: "
+                                 f"{oiio.geterror() or 'unknown format'}")
+        spec = inp.spec()   # the reopened input's: the first one's is gone with it
         conversions = _conversions(path, spec)
         fmt = str(spec.format)
         read_fmt = fmt if fmt in _NATIVE or (fmt in _WIDE and not spec.channelformats) else "float"
