@@ -277,6 +277,27 @@ def test_publish_never_replaces_without_overwrite(tmp_path):
     assert final.read_bytes() == b"new" and not tmp.exists()
 
 
+@pytest.mark.parametrize("src_ext,fmt,dst_ext", [(".exr", "half", ".png"), (".tif", "uint8", ".jpg"),
+                                                (".tif", "uint16", ".png"), (".exr", "half", ".tif")])
+def test_a_tiled_input_is_written_to_a_format_of_scanlines(tmp_path, src_ext, fmt, dst_ext):
+    # a tiled EXR or TIFF's spec carries its tile sizes: PNG's and JPEG's writers refused them ("png does not support
+    # tiled images"), so no tiled render could be written as PNG or JPEG frames; TIFF keeps the tiles
+    arr = np.random.default_rng(7).random((20, 30, 3)).astype(np.float32)
+    spec = oiio.ImageSpec(30, 20, 3, fmt)
+    spec.tile_width = spec.tile_height = 16
+    src = tmp_path / f"tiled{src_ext}"
+    out = oiio.ImageOutput.create(str(src))
+    assert out.open(str(src), spec) and out.write_image(arr) and out.close(), oiio.geterror()
+    im = read_image(str(src))
+    assert im.spec.tile_width == 16
+    dst = tmp_path / f"out{dst_ext}"
+    write_image(str(dst), im.pixels, im.spec)
+    back = read_image(str(dst))
+    assert back.pixels.shape == (20, 30, 3)
+    assert back.spec.tile_width == (16 if dst_ext == ".tif" else 0)
+    assert leftovers(tmp_path) == []
+
+
 def test_unknown_output_extension_is_a_write_error_naming_the_file(tmp_path):
     with pytest.raises(ImageWriteError, match="out.nope: no OpenImageIO writer"):
         write_image(str(tmp_path / "out.nope"), np.ones((2, 2, 3), np.uint8))

@@ -750,6 +750,12 @@ def _write_file(tmp: str, pixels: np.ndarray, spec: oiio.ImageSpec, final: str) 
     if out is None:
         raise ImageWriteError(f"{final}: no OpenImageIO writer for this extension "
                               f"({oiio.geterror() or 'unknown format'})")
+    if spec.tile_width and not out.supports("tiles"):
+        # a tiled input (a render's tiled EXR, a tiled TIFF) into a format of scanlines (PNG, JPEG ...): written as
+        # scanlines, else its writer refuses the tile sizes the input's spec carries ("does not support tiled images")
+        spec = oiio.ImageSpec(spec)
+        spec.tile_width = spec.tile_height = 0
+        spec.tile_depth = 1
     ok = out.open(tmp, spec) and out.write_image(pixels) and _write_mip_levels(out, tmp, spec, pixels)
     err = "" if ok else out.geterror()
     ok = out.close() and ok
