@@ -65,7 +65,7 @@ class SequenceToVideoJob(Job):
     def prepare(self) -> None:
         import numpy as np
 
-        from mlaa_stream.io.images import image_shape, read_image
+        from mlaa_stream.io.images import ImageReadError, image_shape, read_image
         from mlaa_stream.io.video import VideoError, VideoInfo, VideoWriter, container_format_for
 
         o = self.opts
@@ -76,7 +76,10 @@ class SequenceToVideoJob(Job):
             raise Failed(f"{folder}: the output folder does not exist")
         check_writable(folder)
         self.plan = _sequence_plan(self)
-        first = read_image(self.plan[0].src)
+        try:
+            first = read_image(self.plan[0].src)   # its type, channels and tags set the video's
+        except ImageReadError as exc:   # a corrupt or empty first frame: an error naming it, not a traceback
+            raise Failed(f"{exc}; {self.output} not written") from exc
         if first.pixels.dtype.kind == "f":
             # PNG frames of linear-light EXRs are sRGB-encoded (io/images.py write_image); float TIFFs stay float
             raise Usage(f"{self.plan[0].src}: float (linear-light) images cannot be encoded to video here; "

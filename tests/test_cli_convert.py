@@ -175,6 +175,21 @@ def test_float_frames_to_video_are_refused_and_existing_outputs_need_y(tmp_path)
     assert len(video_frames(tmp_path / "o.mp4")[0]) == 3
 
 
+@pytest.mark.parametrize("cut", ["empty", "truncated"])
+def test_an_unreadable_first_frame_to_video_is_an_error_naming_it_not_a_traceback(tmp_path, cut):
+    # the first frame is read before the run (its type and channels set the video's): an empty or truncated one
+    # ended the command in an ImageReadError traceback
+    staircases(tmp_path / "seq", 3)
+    whole = (tmp_path / "seq" / "shot.1001.png").read_bytes()
+    (tmp_path / "seq" / "shot.1000.png").write_bytes(b"" if cut == "empty" else whole[:len(whole) // 2])
+    for src in (tmp_path / "seq", tmp_path / "seq" / "shot.%04d.png"):
+        r = run(src, "-o", tmp_path / "out.mp4")
+        assert r.exit_code == 1, stderr(r)
+        assert r.exception is None or isinstance(r.exception, SystemExit)
+        assert "shot.1000.png" in stderr(r) and "Traceback" not in stderr(r)
+        assert not (tmp_path / "out.mp4").exists()
+
+
 def test_one_summary_line_when_stderr_is_not_a_terminal_and_none_with_q(tmp_path):
     staircases(tmp_path / "seq", 2)
     r = run(tmp_path / "seq", "-o", tmp_path / "out")
