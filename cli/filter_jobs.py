@@ -97,12 +97,16 @@ class SequenceTemporal:
         use = getattr(self.stage, "set_linear_input", None)
         return bool(use(linear)) if use is not None else False
 
-    def warm(self, frame_in, frame_out, ff, linear: bool = False) -> None:
-        """A frame before the first one to write (--resume): through the stage, output discarded."""
+    def warm(self, frame_in, frame_out, ff, linear: bool = False, future=()) -> None:
+        """A frame before the first one to write (--resume): through the stage, output discarded. `future`: the
+        raw frames after it (look-ahead), as the pipeline hands them in."""
         self._use_linear(linear)
         number = ff.sequence_number if ff.sequence_number is not None else (self._prev[0] + 1 if self._prev else 0)
         self._prev = (number, (frame_in.shape, frame_in.dtype))
-        self.stage(frame_in, frame_out, number)
+        if self.lookahead:
+            self.stage(frame_in, frame_out, number, future=list(future)[:self.lookahead])
+        else:
+            self.stage(frame_in, frame_out, number)
 
 
 class Job:
@@ -424,18 +428,35 @@ def _warm_up_images(job: "ImageJob", filt, temporal: "SequenceTemporal") -> None
     """--resume with the temporal stage: the inputs of the last skipped frames before the first one to
     write go through the spatial filter and the stage (outputs discarded, not in --stats), so the
     first written frame has the history it would have had in an uninterrupted run."""
-    from mlaa_stream.io.sequence import image_source, is_linear
+    from mlaa_stream.io.sequence import Report, image_source, is_linear
     from mlaa_stream.temporal.methods import stats_lists
     warm = job.warm_up[-_ring_frames(temporal.stage):]
     stage = temporal.stage
     keep = [(rows, len(rows)) for rows in stats_lists(stage)]
     done = 0
+    items = list(image_source(warm, job.report, strict=job.strict))
+    n_warm = len(items)
+    if temporal.lookahead and warm:
+        # with --lookahead the uninterrupted run handed each warm-up frame the N frames after it, and the stage keeps
+        # what it measured of them (their motion decisions, ring slots): without them the first written frames
+        # came out different. The frames after the warm-up (the first ones to write ...) are read here too; one
+        # that fails ends the look-ahead there, and the run reports it when it reads it
+        at = job.positions.get(id(warm[-1]))
+        after = job.whole_plan[at + 1:at + 1 + temporal.lookahead] if at is not None else []
+        items += list(image_source(after, Report(), strict=False))
     try:
-        for item in image_source(warm, job.report, strict=job.strict):
+        for k, item in enumerate(items[:n_warm]):
             if item.passthrough:   # no colour: not of the stage's sequence
                 continue
+            future = []
+            for prev, nxt in zip(items[k:], items[k + 1:k + 1 + temporal.lookahead]):
+                # as the pipeline's look-ahead: consecutive numbers, up to a file without colour
+                if nxt.passthrough or prev.meta[0].sequence_number is None or \
+                        nxt.meta[0].sequence_number != prev.meta[0].sequence_number + 1:
+                    break
+                future.append(nxt.frame)
             f = filt.for_item(item) if hasattr(filt, "for_item") else filt
-            temporal.warm(item.frame, f.process(item.frame), item.meta[0], is_linear(item.meta[1]))
+            temporal.warm(item.frame, f.process(item.frame), item.meta[0], is_linear(item.meta[1]), future)
             done += 1
     finally:
         for rows, n in keep:

@@ -227,8 +227,8 @@ def test_lookahead_on_a_sequence_stops_at_gaps(tmp_path):
 
 
 def test_lookahead_folder_resume_is_bit_for_bit(tmp_path):
-    """--resume with --lookahead: the written frames come out as in the whole run (the warm-up needs no frames
-    ahead: they change no state the written frames read)."""
+    """--resume with --lookahead: the written frames come out as in the whole run (the warm-up frames read their
+    frames ahead too, as in the whole run: test_lookahead_resume_of_a_render_is_bit_for_bit)."""
     from mlaa_stream.io.images import read_image, write_image
     src, out = tmp_path / "in", tmp_path / "out"
     src.mkdir()
@@ -238,6 +238,34 @@ def test_lookahead_folder_resume_is_bit_for_bit(tmp_path):
     whole = _resume_after_losing(tmp_path, args, [out / f"shot_{n}.png" for n in "ef"], ["4", "5"])
     for p, pixels in whole.items():
         np.testing.assert_array_equal(read_image(str(p)).pixels, pixels)
+
+
+def test_lookahead_resume_of_a_render_is_bit_for_bit(tmp_path):
+    """--temporal (auto: TSS, then the blend on moving render pixels) with its default look-ahead on a rendered pan,
+    resumed after frame 3: the warm-up frames get the frames after them as the whole run handed them in (the stage
+    keeps what it measured of them), else every written frame differed from the whole run's (the first by 7
+    levels)."""
+    from mlaa_stream.io.images import read_image, write_image
+    from mlaa_stream.yardstick.rendered import egl_available, generate_rendered
+    from mlaa_stream.yardstick.scenes import SceneUnavailable
+    try:
+        pan = generate_rendered(small=True, names=["rendered_pan"])[0]
+    except SceneUnavailable as exc:
+        pytest.skip(f"rendered scenes need EGL or their cache: {exc} ({egl_available()[1]})")
+    frames = list(pan.inputs)
+    for n, f in enumerate(frames, start=1):
+        write_image(str(tmp_path / f"p.{n:04d}.png"), f)
+    out = tmp_path / "o"
+    args = [str(tmp_path / "p.%04d.png"), "-o", str(out / "p.%04d.png"), "--temporal", "-q"]
+    res = CliRunner().invoke(main, args)
+    assert res.exit_code == 0, res.output
+    whole = {n: read_image(str(out / f"p.{n:04d}.png")).pixels for n in range(4, len(frames) + 1)}
+    for n in whole:
+        (out / f"p.{n:04d}.png").unlink()
+    res = CliRunner().invoke(main, args + ["--resume"])
+    assert res.exit_code == 0, res.output
+    for n, pixels in whole.items():
+        np.testing.assert_array_equal(read_image(str(out / f"p.{n:04d}.png")).pixels, pixels, err_msg=f"frame {n}")
 
 
 def test_lookahead_on_video_and_refusals(tmp_path):
