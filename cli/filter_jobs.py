@@ -259,6 +259,33 @@ class ImageJob(Job):
         self.read_ahead_numbers = {ff.sequence_number for ff in extra}
         self.read_plan = [ff for ff in whole if id(ff) not in skipped or id(ff) in ids]
 
+    def _warm_ups_after_holes(self, ring: int) -> None:
+        """--resume with the temporal stage: before each frame to write that follows outputs skipped (a hole: a
+        cluster's chunks done out of order, an earlier --frames range), up to `ring` of the skipped frames just
+        before it are read too, not written, as _warm_up_images does before the first one: else the stage reset
+        there ("gap in the numbering") and the frames after the hole came out unlike the whole run's."""
+        whole, read = getattr(self, "whole_plan", None), getattr(self, "read_ahead", None)
+        if not whole or read is None or not self.plan:
+            return
+        todo = {id(ff) for ff in self.plan}
+        first = next(i for i, ff in enumerate(whole) if id(ff) in todo)
+        extra = []
+        for i in range(first + 1, len(whole)):
+            if id(whole[i]) not in todo or id(whole[i - 1]) in todo:
+                continue
+            j = i - 1
+            while j > first and i - j <= ring and id(whole[j]) not in todo and whole[j].sequence_number is not None \
+                    and whole[j + 1].sequence_number is not None \
+                    and whole[j].sequence_number == whole[j + 1].sequence_number - 1:
+                extra.append(whole[j])
+                j -= 1
+        if not extra:
+            return
+        self.read_ahead = read | {id(ff) for ff in extra}
+        self.read_ahead_numbers = self.read_ahead_numbers | {ff.sequence_number for ff in extra}
+        wanted = todo | self.read_ahead
+        self.read_plan = [ff for ff in whole if id(ff) in wanted]
+
     def _warm_up(self, filt, temporal) -> None:
         _warm_up_images(self, filt, temporal)
 
@@ -315,6 +342,8 @@ class ImageJob(Job):
         if self.opts.get("cluster"):
             return self._run_on_cluster()
         filt = FilterSet(encoded, make_variant, self.opts.get("transfer", "auto"))
+        if temporal is not None:
+            self._warm_ups_after_holes(_ring_frames(temporal.stage))
         read_plan = getattr(self, "read_plan", self.plan) if temporal is not None else self.plan
         read_ahead = getattr(self, "read_ahead", set())
         progress = self._progress(len(read_plan))

@@ -268,6 +268,33 @@ def test_lookahead_resume_of_a_render_is_bit_for_bit(tmp_path):
         np.testing.assert_array_equal(read_image(str(out / f"p.{n:04d}.png")).pixels, pixels, err_msg=f"frame {n}")
 
 
+@pytest.mark.parametrize("lookahead", ["0", "2"])
+def test_resume_warms_up_after_every_hole_of_skipped_outputs(tmp_path, lookahead):
+    """--resume where outputs in the middle exist (a cluster's chunks done out of order, an earlier --frames run):
+    the frames after such a hole get the skipped frames before them through the stage as the first one does, else
+    the stage reset there ("gap in the numbering", though no input is missing) and they came out unlike the whole
+    run's; --stats lists the written frames only."""
+    from mlaa_stream.io.images import read_image, write_image
+    frames = _wide_pan(9)
+    for n, f in enumerate(frames, start=1):
+        write_image(str(tmp_path / f"s.{n:04d}.png"), f)
+    out, stats = tmp_path / "o", tmp_path / "stats.csv"
+    args = [str(tmp_path / "s.%04d.png"), "-o", str(out / "s.%04d.png"), "--temporal", "--temporal-method", "tss",
+            "--temporal-frames", "4", "--lookahead", lookahead]
+    res = CliRunner().invoke(main, args)
+    assert res.exit_code == 0, res.output
+    lost = (3, 8, 9)   # frames 4-7 stay: a hole longer than the look-ahead before 8
+    whole = {n: read_image(str(out / f"s.{n:04d}.png")).pixels for n in lost}
+    for n in lost:
+        (out / f"s.{n:04d}.png").unlink()
+    res = CliRunner().invoke(main, args + ["--resume", "--stats", str(stats), "-v"])
+    assert res.exit_code == 0, res.output
+    assert "temporal history reset" not in res.output
+    assert [r["index"] for r in csv.DictReader(stats.open())] == [str(n) for n in lost]
+    for n, pixels in whole.items():
+        np.testing.assert_array_equal(read_image(str(out / f"s.{n:04d}.png")).pixels, pixels, err_msg=f"frame {n}")
+
+
 def test_lookahead_on_video_and_refusals(tmp_path):
     """--lookahead implies --temporal; a video gets it (stats per frame); the blend alone refuses it with a message
     naming the option."""
