@@ -158,8 +158,13 @@ class SequenceToVideoJob(Job):
             self.writer.commit()
             self._finished = True
         except PipelineError as exc:
-            self.con.error(f"{exc.meta[0].label if exc.meta else f'frame {exc.index}'}: {exc.stage} failed: "
-                           f"{exc.cause}; {self.output} not written")
+            # a read error has no item: its index is the failing file's place in the plan (a sequence stops at the
+            # first one), not its frame number -- "frame 3: read failed: frame 4 (a.0004.png): ..." named two frames
+            ff = exc.meta[0] if exc.meta else self.plan[exc.index] if 0 <= exc.index < len(self.plan) else None
+            cause = str(exc.cause)
+            where = "" if ff is not None and ff.src in cause else \
+                f"{ff.label if ff is not None else f'frame {exc.index}'}: {exc.stage} failed: "
+            self.con.error(f"{where}{cause}; {self.output} not written")
             return EXIT_FAILED
         finally:
             progress.close()

@@ -190,6 +190,22 @@ def test_an_unreadable_first_frame_to_video_is_an_error_naming_it_not_a_tracebac
         assert not (tmp_path / "out.mp4").exists()
 
 
+def test_a_frame_that_stops_a_video_is_named_by_its_own_number(tmp_path):
+    # a read error carries the file's place in the plan (2), which was given as its frame number: "frame 2: read
+    # failed: frame 1003 (shot.1003.png): expected ..." named two frames
+    staircases(tmp_path / "seq", 4)
+    staircases(tmp_path / "other", 3, size=(20, 30))
+    os.replace(tmp_path / "other" / "shot.1003.png", tmp_path / "seq" / "shot.1003.png")
+    r = run(tmp_path / "seq" / "shot.%04d.png", "-o", tmp_path / "out.mp4")
+    assert r.exit_code == 1
+    errors = [line for line in stderr(r).splitlines() if "error:" in line]
+    assert len(errors) == 1 and "frame 1003 (" in errors[0] and "frame 2" not in errors[0], errors
+    r = run(tmp_path / "seq", "-o", tmp_path / "out.mp4")   # a folder: the file, no number
+    errors = [line for line in stderr(r).splitlines() if "error:" in line]
+    assert r.exit_code == 1 and len(errors) == 1 and "shot.1003.png" in errors[0] and "frame 2" not in errors[0]
+    assert not (tmp_path / "out.mp4").exists()
+
+
 def test_one_summary_line_when_stderr_is_not_a_terminal_and_none_with_q(tmp_path):
     staircases(tmp_path / "seq", 2)
     r = run(tmp_path / "seq", "-o", tmp_path / "out")
