@@ -141,7 +141,7 @@ class ImageJob(Job):
     """An image, a folder of images or a numbered sequence."""
 
     def prepare(self) -> None:
-        from mlaa_stream.io.images import is_image_path, remove_quietly, stale_temp_files
+        from mlaa_stream.io.images import has_writer, is_image_path, remove_quietly, stale_temp_files
         from mlaa_stream.io.sequence import (Report, expand_pattern, format_ranges, is_pattern, list_folder,
                                 output_over_input, parse_frames, plan_images, same_file)
 
@@ -197,6 +197,11 @@ class ImageJob(Job):
         clash = output_over_input(self.plan)
         if clash is not None:
             raise Usage(clash)
+        if is_pattern(self.output) and self.plan and not has_writer(self.plan[0].dst):
+            # one extension for every output: said before anything is filtered, not once per frame after its filter
+            ext = os.path.splitext(self.output)[1]
+            raise Usage(f"{self.output}: OpenImageIO has no writer for {ext or 'a name without an extension'}; "
+                        f"name an image format (.exr, .png, .tif, .jpg ...)")
         dst_dirs = sorted({os.path.dirname(os.path.abspath(ff.dst)) for ff in self.plan})
         if self.kind != "image" or is_pattern(self.output):   # a pattern's folder is made, as for a video's frames
             for d in dst_dirs:

@@ -86,6 +86,15 @@ def is_image_path(path: str) -> bool:
     return os.path.splitext(path)[1].lower() in image_extensions()
 
 
+def has_writer(path: str) -> bool:
+    """True when OpenImageIO has a writer for `path`'s extension (nothing is opened or created)."""
+    out = oiio.ImageOutput.create(path)
+    if out is None:
+        oiio.geterror()  # clear it
+        return False
+    return True
+
+
 def is_temp_path(path: str) -> bool:
     """True for our own temporary output names (skipped when listing a folder)."""
     return _TMP_MARK in os.path.basename(path)
