@@ -468,7 +468,18 @@ def _warm_up_images(job: "ImageJob", filt, temporal: "SequenceTemporal") -> None
     stage = temporal.stage
     keep = [(rows, len(rows)) for rows in stats_lists(stage)]
     done = 0
-    items = list(image_source(warm, job.report, strict=job.strict))
+    items: list = []
+    for ff in warm:
+        # a warm-up frame's output is done: one that cannot be read now (damaged since, a size of its own) is no
+        # failure of this run -- it stopped a sequence in an ImageReadError traceback, and counted as failed in a
+        # folder --, said in a warning; the history starts after it, as the stage resets at a gap
+        unread = Report()
+        got = list(image_source([ff], unread, strict=False))
+        if unread.failed:
+            why = unread.failed[-1].removeprefix(f"{ff.src}: ")
+            job.con.warn(f"{ff.src}: not read for the temporal warm-up, whose history starts after it: {why}")
+            items = []
+        items += got
     n_warm = len(items)
     if temporal.lookahead and warm:
         # with --lookahead the uninterrupted run handed each warm-up frame the N frames after it, and the stage keeps

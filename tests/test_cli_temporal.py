@@ -3,6 +3,7 @@ resets at gaps in the numbering, single images spatial only."""
 from __future__ import annotations
 
 import csv
+import os
 from pathlib import Path
 
 import numpy as np
@@ -293,6 +294,32 @@ def test_resume_warms_up_after_every_hole_of_skipped_outputs(tmp_path, lookahead
     assert [r["index"] for r in csv.DictReader(stats.open())] == [str(n) for n in lost]
     for n, pixels in whole.items():
         np.testing.assert_array_equal(read_image(str(out / f"s.{n:04d}.png")).pixels, pixels, err_msg=f"frame {n}")
+
+
+def test_a_warm_up_frame_that_cannot_be_read_is_a_warning_not_a_failure(tmp_path):
+    """--resume --temporal where the input of a frame done (a warm-up frame) is damaged since: a sequence ended in an
+    ImageReadError traceback, a folder counted it as failed (exit 1) though every output was there; now a warning,
+    the history starting after it, and the frames to write written."""
+    from mlaa_stream.io.images import write_image
+    src = tmp_path / "in"
+    src.mkdir()
+    for n, f in enumerate(_pan_frames(6), start=1):
+        write_image(str(src / f"s.{n:04d}.png"), f)
+    runs = {"seq": (src / "s.%04d.png", tmp_path / "seq" / "s.%04d.png"), "folder": (src, tmp_path / "folder")}
+    for inp, target in runs.values():
+        res = CliRunner().invoke(main, [str(inp), "-o", str(target), "--temporal", "-q"])
+        assert res.exit_code == 0, res.output
+    whole = (src / "s.0002.png").read_bytes()
+    (src / "s.0002.png").write_bytes(whole[:len(whole) // 3])
+    for what, (inp, target) in runs.items():
+        out = tmp_path / what
+        for n in (4, 5, 6):
+            (out / f"s.{n:04d}.png").unlink()
+        res = CliRunner().invoke(main, [str(inp), "-o", str(target), "--temporal", "--resume"])
+        assert res.exit_code == 0, res.output
+        assert res.exception is None or isinstance(res.exception, SystemExit), repr(res.exception)
+        assert "s.0002.png: not read for the temporal warm-up" in res.output
+        assert sorted(os.listdir(out)) == [f"s.{n:04d}.png" for n in range(1, 7)]
 
 
 def test_lookahead_on_video_and_refusals(tmp_path):
