@@ -655,6 +655,10 @@ def unexplained_blobs(cur: np.ndarray, prev: np.ndarray, flow_b: np.ndarray | No
     the translation), what survives a 3x3 erosion (aliasing leaves thin lines along moving edges, which do not;
     a mover the flow missed, or the background it uncovers, does), grown by BLOB_MARGIN pixels."""
     h, w = cur.shape[:2]
+    if cur.dtype == np.float16 or prev.dtype == np.float16:
+        # OpenCV's remap and warpAffine take no half floats: a half EXR render's frames ended the run with
+        # "(-215:Assertion failed) ifunc != 0 in function 'remap'" at its second frame (the default method)
+        cur, prev = np.asarray(cur, np.float32), np.asarray(prev, np.float32)
     if flow_b is not None:
         xs, ys = _pixel_grid(h, w)
         f = cv2.resize(flow_b, (w, h), interpolation=cv2.INTER_LINEAR) * np.float32(flow_scale)
