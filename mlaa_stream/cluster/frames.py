@@ -201,8 +201,11 @@ def run_chunks(client, files: list[FrameFile], filter_kwargs: dict, *, overwrite
     chunks = [c for c in chunks if any(ff.dst not in done for ff in c.files)]
     like = None
     if strict and files:
-        from mlaa_stream.io.images import read_image
-        first = read_image(files[0].src)
+        from mlaa_stream.io.images import ImageReadError, read_image
+        try:
+            first = read_image(files[0].src)   # the size and type every chunk's frames must have
+        except ImageReadError as exc:   # a damaged first frame: the job's error, not a traceback (--cluster)
+            raise ClusterJobError(f"{files[0].label}: read failed: {exc}") from exc
         like = ((first.pixels.shape, first.pixels.dtype), files[0])
     futures = {client.submit(filter_chunk, c, filter_kwargs, overwrite, strict, like, temporal, jpeg_quality,
                              transfer, retries=1, pure=False,
