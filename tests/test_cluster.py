@@ -266,3 +266,19 @@ def test_a_damaged_first_frame_is_the_jobs_error_not_a_traceback(tmp_path):
                                   "--cluster", "local:1"])
     assert r.exit_code == 1 and "shot.1001.png" in r.output, r.output
     assert r.exception is None or isinstance(r.exception, SystemExit), repr(r.exception)
+
+
+def test_resume_through_the_api_keeps_the_output_of_an_input_that_no_longer_opens(client, tmp_path):
+    # filter_on_cluster(resume=True) held each output to its input's size: `*image_shape(src)` of an input that does
+    # not open (None) was a TypeError; the command line keeps such an output as done
+    from mlaa_stream.cluster.frames import filter_on_cluster
+
+    sequence(tmp_path / "in", n=3)
+    r = CliRunner().invoke(main, [str(tmp_path / "in" / "shot.%04d.png"), "-o", str(tmp_path / "out" / "c.%04d.png")])
+    assert r.exit_code == 0, r.output
+    (tmp_path / "in" / "shot.1002.png").write_bytes(b"\x89PNG\r\n\x1a\n broken")
+    before = files(tmp_path / "out")
+    report = filter_on_cluster(client, str(tmp_path / "in" / "shot.%04d.png"), str(tmp_path / "out" / "c.%04d.png"),
+                               resume=True)   # every output done: no task
+    assert not report.failed and not report.written
+    assert files(tmp_path / "out") == before
