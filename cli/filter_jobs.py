@@ -369,7 +369,7 @@ class ImageJob(Job):
 
         def source():
             """image_source, remembering which file each position is (for the temporal stage and the hooks)."""
-            inner = image_source(read_plan, self.report, strict=self.strict)
+            inner = image_source(read_plan, self.report, strict=self.strict, optional=frozenset(read_ahead))
             try:
                 for position, item in enumerate(inner):
                     if not item.passthrough:   # a file copied unchanged: neither the stage's nor the hooks'

@@ -322,6 +322,29 @@ def test_a_warm_up_frame_that_cannot_be_read_is_a_warning_not_a_failure(tmp_path
         assert sorted(os.listdir(out)) == [f"s.{n:04d}.png" for n in range(1, 7)]
 
 
+@pytest.mark.parametrize("what", ["seq", "folder"])
+def test_a_frame_read_only_for_the_stage_that_cannot_be_read_is_a_warning(tmp_path, what):
+    """--resume --temporal with a hole: the skipped frames after one to write (look-ahead) and before the next one
+    (its warm-up) are read, not written. One whose input is damaged since stopped a sequence there ("stopped: 1 of 3
+    outputs written") and failed a folder (exit 1), though its output is done; now a warning, the rest written."""
+    from mlaa_stream.io.images import write_image
+    src = tmp_path / "in"
+    src.mkdir()
+    for n, f in enumerate(_pan_frames(8), start=1):
+        write_image(str(src / f"s.{n:04d}.png"), f)
+    inp, out = (src / "s.%04d.png", tmp_path / "o" / "s.%04d.png") if what == "seq" else (src, tmp_path / "o")
+    res = CliRunner().invoke(main, [str(inp), "-o", str(out), "--temporal", "-q"])
+    assert res.exit_code == 0, res.output
+    for n in (4, 7, 8):
+        (tmp_path / "o" / f"s.{n:04d}.png").unlink()
+    whole = (src / "s.0005.png").read_bytes()
+    (src / "s.0005.png").write_bytes(whole[:len(whole) // 3])
+    res = CliRunner().invoke(main, [str(inp), "-o", str(out), "--temporal", "--resume"])
+    assert res.exit_code == 0, res.output
+    assert "s.0005.png: left out of the temporal stage" in res.output
+    assert sorted(os.listdir(tmp_path / "o")) == [f"s.{n:04d}.png" for n in range(1, 9)]
+
+
 def test_lookahead_on_video_and_refusals(tmp_path):
     """--lookahead implies --temporal; a video gets it (stats per frame); the blend alone refuses it with a message
     naming the option."""
