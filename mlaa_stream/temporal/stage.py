@@ -30,7 +30,7 @@ from mlaa_stream.device.formats import LUT_SIZE, FrameFormat, defines_for, frame
 from mlaa_stream.device.transfer import with_transfer_tables
 from mlaa_stream.spatial.fallback import FALLBACK_TILE
 from mlaa_stream.spatial.exposure import HeldExposure, exposed
-from mlaa_stream.spatial.nonfinite import restore_out_of_range
+from mlaa_stream.spatial.nonfinite import SAMPLE_LIMIT, replace_non_finite, restore_out_of_range
 from mlaa_stream.spatial.shots import CUT_HIST, histogram_distance
 
 MODES = ("adaptive", "dense", "global", "static", "off")
@@ -454,6 +454,10 @@ class TemporalStage:
                 fi = exposed(np.asarray(frame_in, np.float32), scale)
                 ff = exposed(np.asarray(frame_filtered, np.float32), scale)
                 fmt = frame_format(ff, self.bgr, what=f"{what} (filtered)")
+            # the kernel's 3x3 clamp of the current frame read a NaN or inf as its neighbours' bound and wrote NaN
+            # beside it on the pixels the render gate blends (README "Non-finite samples": they never spread):
+            # replaced as the spatial filter replaces them, put back below by restore_out_of_range
+            fi, ff = _finite(fi), _finite(ff)
             out = self._step(fi, ff, int(index), fmt, regions, measured)
         if self.show is not None:
             return out
@@ -606,6 +610,20 @@ def _pixel_grid(h: int, w: int) -> tuple[np.ndarray, np.ndarray]:
     ys, xs = np.mgrid[0:h, 0:w].astype(np.float32)
     xs.flags.writeable = ys.flags.writeable = False
     return xs, ys
+
+
+def _finite(frame: np.ndarray) -> np.ndarray:
+    """`frame` itself, or where a float frame holds non-finite or out-of-range samples a copy with each replaced by
+    the nearest finite sample of its channel along the row (spatial/nonfinite.py replace_non_finite)."""
+    f = np.asarray(frame)
+    if f.dtype.kind != "f":
+        return frame
+    with np.errstate(invalid="ignore"):
+        if (np.abs(f) <= SAMPLE_LIMIT).all():
+            return frame
+    f = f.copy()
+    replace_non_finite(f)
+    return f
 
 
 def _one_level(dtype: np.dtype) -> float:
