@@ -65,7 +65,7 @@ class SequenceToVideoJob(Job):
     def prepare(self) -> None:
         import numpy as np
 
-        from mlaa_stream.io.images import image_shape, read_image
+        from mlaa_stream.io.images import ImageReadError, image_shape, read_image
         from mlaa_stream.io.video import VideoError, VideoInfo, VideoWriter, container_format_for
 
         o = self.opts
@@ -76,7 +76,10 @@ class SequenceToVideoJob(Job):
             raise Failed(f"{folder}: the output folder does not exist")
         check_writable(folder)
         self.plan = _sequence_plan(self)
-        first = read_image(self.plan[0].src)
+        try:
+            first = read_image(self.plan[0].src)   # its type, channels and tags set the video's
+        except ImageReadError as exc:   # a corrupt or empty first frame: an error naming it, not a traceback
+            raise Failed(f"{exc}; {self.output} not written") from exc
         if first.pixels.dtype.kind == "f":
             # PNG frames of linear-light EXRs are sRGB-encoded (io/images.py write_image); float TIFFs stay float
             raise Usage(f"{self.plan[0].src}: float (linear-light) images cannot be encoded to video here; "
@@ -155,8 +158,13 @@ class SequenceToVideoJob(Job):
             self.writer.commit()
             self._finished = True
         except PipelineError as exc:
-            self.con.error(f"{exc.meta[0].label if exc.meta else f'frame {exc.index}'}: {exc.stage} failed: "
-                           f"{exc.cause}; {self.output} not written")
+            # a read error has no item: its index is the failing file's place in the plan (a sequence stops at the
+            # first one), not its frame number -- "frame 3: read failed: frame 4 (a.0004.png): ..." named two frames
+            ff = exc.meta[0] if exc.meta else self.plan[exc.index] if 0 <= exc.index < len(self.plan) else None
+            cause = str(exc.cause)
+            where = "" if ff is not None and ff.src in cause else \
+                f"{ff.label if ff is not None else f'frame {exc.index}'}: {exc.stage} failed: "
+            self.con.error(f"{where}{cause}; {self.output} not written")
             return EXIT_FAILED
         finally:
             progress.close()

@@ -97,12 +97,16 @@ class SequenceTemporal:
         use = getattr(self.stage, "set_linear_input", None)
         return bool(use(linear)) if use is not None else False
 
-    def warm(self, frame_in, frame_out, ff, linear: bool = False) -> None:
-        """A frame before the first one to write (--resume): through the stage, output discarded."""
+    def warm(self, frame_in, frame_out, ff, linear: bool = False, future=()) -> None:
+        """A frame before the first one to write (--resume): through the stage, output discarded. `future`: the
+        raw frames after it (look-ahead), as the pipeline hands them in."""
         self._use_linear(linear)
         number = ff.sequence_number if ff.sequence_number is not None else (self._prev[0] + 1 if self._prev else 0)
         self._prev = (number, (frame_in.shape, frame_in.dtype))
-        self.stage(frame_in, frame_out, number)
+        if self.lookahead:
+            self.stage(frame_in, frame_out, number, future=list(future)[:self.lookahead])
+        else:
+            self.stage(frame_in, frame_out, number)
 
 
 class Job:
@@ -137,7 +141,7 @@ class ImageJob(Job):
     """An image, a folder of images or a numbered sequence."""
 
     def prepare(self) -> None:
-        from mlaa_stream.io.images import is_image_path, remove_quietly, stale_temp_files
+        from mlaa_stream.io.images import has_writer, is_image_path, remove_quietly, stale_temp_files
         from mlaa_stream.io.sequence import (Report, expand_pattern, format_ranges, is_pattern, list_folder,
                                 output_over_input, parse_frames, plan_images, same_file)
 
@@ -193,6 +197,11 @@ class ImageJob(Job):
         clash = output_over_input(self.plan)
         if clash is not None:
             raise Usage(clash)
+        if is_pattern(self.output) and self.plan and not has_writer(self.plan[0].dst):
+            # one extension for every output: said before anything is filtered, not once per frame after its filter
+            ext = os.path.splitext(self.output)[1]
+            raise Usage(f"{self.output}: OpenImageIO has no writer for {ext or 'a name without an extension'}; "
+                        f"name an image format (.exr, .png, .tif, .jpg ...)")
         dst_dirs = sorted({os.path.dirname(os.path.abspath(ff.dst)) for ff in self.plan})
         if self.kind != "image" or is_pattern(self.output):   # a pattern's folder is made, as for a video's frames
             for d in dst_dirs:
@@ -255,6 +264,33 @@ class ImageJob(Job):
         self.read_ahead_numbers = {ff.sequence_number for ff in extra}
         self.read_plan = [ff for ff in whole if id(ff) not in skipped or id(ff) in ids]
 
+    def _warm_ups_after_holes(self, ring: int) -> None:
+        """--resume with the temporal stage: before each frame to write that follows outputs skipped (a hole: a
+        cluster's chunks done out of order, an earlier --frames range), up to `ring` of the skipped frames just
+        before it are read too, not written, as _warm_up_images does before the first one: else the stage reset
+        there ("gap in the numbering") and the frames after the hole came out unlike the whole run's."""
+        whole, read = getattr(self, "whole_plan", None), getattr(self, "read_ahead", None)
+        if not whole or read is None or not self.plan:
+            return
+        todo = {id(ff) for ff in self.plan}
+        first = next(i for i, ff in enumerate(whole) if id(ff) in todo)
+        extra = []
+        for i in range(first + 1, len(whole)):
+            if id(whole[i]) not in todo or id(whole[i - 1]) in todo:
+                continue
+            j = i - 1
+            while j > first and i - j <= ring and id(whole[j]) not in todo and whole[j].sequence_number is not None \
+                    and whole[j + 1].sequence_number is not None \
+                    and whole[j].sequence_number == whole[j + 1].sequence_number - 1:
+                extra.append(whole[j])
+                j -= 1
+        if not extra:
+            return
+        self.read_ahead = read | {id(ff) for ff in extra}
+        self.read_ahead_numbers = self.read_ahead_numbers | {ff.sequence_number for ff in extra}
+        wanted = todo | self.read_ahead
+        self.read_plan = [ff for ff in whole if id(ff) in wanted]
+
     def _warm_up(self, filt, temporal) -> None:
         _warm_up_images(self, filt, temporal)
 
@@ -311,6 +347,8 @@ class ImageJob(Job):
         if self.opts.get("cluster"):
             return self._run_on_cluster()
         filt = FilterSet(encoded, make_variant, self.opts.get("transfer", "auto"))
+        if temporal is not None:
+            self._warm_ups_after_holes(_ring_frames(temporal.stage))
         read_plan = getattr(self, "read_plan", self.plan) if temporal is not None else self.plan
         read_ahead = getattr(self, "read_ahead", set())
         progress = self._progress(len(read_plan))
@@ -331,7 +369,7 @@ class ImageJob(Job):
 
         def source():
             """image_source, remembering which file each position is (for the temporal stage and the hooks)."""
-            inner = image_source(read_plan, self.report, strict=self.strict)
+            inner = image_source(read_plan, self.report, strict=self.strict, optional=frozenset(read_ahead))
             try:
                 for position, item in enumerate(inner):
                     if not item.passthrough:   # a file copied unchanged: neither the stage's nor the hooks'
@@ -424,18 +462,46 @@ def _warm_up_images(job: "ImageJob", filt, temporal: "SequenceTemporal") -> None
     """--resume with the temporal stage: the inputs of the last skipped frames before the first one to
     write go through the spatial filter and the stage (outputs discarded, not in --stats), so the
     first written frame has the history it would have had in an uninterrupted run."""
-    from mlaa_stream.io.sequence import image_source, is_linear
+    from mlaa_stream.io.sequence import Report, image_source, is_linear
     from mlaa_stream.temporal.methods import stats_lists
     warm = job.warm_up[-_ring_frames(temporal.stage):]
     stage = temporal.stage
     keep = [(rows, len(rows)) for rows in stats_lists(stage)]
     done = 0
+    items: list = []
+    for ff in warm:
+        # a warm-up frame's output is done: one that cannot be read now (damaged since, a size of its own) is no
+        # failure of this run -- it stopped a sequence in an ImageReadError traceback, and counted as failed in a
+        # folder --, said in a warning; the history starts after it, as the stage resets at a gap
+        unread = Report()
+        got = list(image_source([ff], unread, strict=False))
+        if unread.failed:
+            why = unread.failed[-1].removeprefix(f"{ff.src}: ")
+            job.con.warn(f"{ff.src}: not read for the temporal warm-up, whose history starts after it: {why}")
+            items = []
+        items += got
+    n_warm = len(items)
+    if temporal.lookahead and warm:
+        # with --lookahead the uninterrupted run handed each warm-up frame the N frames after it, and the stage keeps
+        # what it measured of them (their motion decisions, ring slots): without them the first written frames
+        # came out different. The frames after the warm-up (the first ones to write ...) are read here too; one
+        # that fails ends the look-ahead there, and the run reports it when it reads it
+        at = job.positions.get(id(warm[-1]))
+        after = job.whole_plan[at + 1:at + 1 + temporal.lookahead] if at is not None else []
+        items += list(image_source(after, Report(), strict=False))
     try:
-        for item in image_source(warm, job.report, strict=job.strict):
+        for k, item in enumerate(items[:n_warm]):
             if item.passthrough:   # no colour: not of the stage's sequence
                 continue
+            future = []
+            for prev, nxt in zip(items[k:], items[k + 1:k + 1 + temporal.lookahead]):
+                # as the pipeline's look-ahead: consecutive numbers, up to a file without colour
+                if nxt.passthrough or prev.meta[0].sequence_number is None or \
+                        nxt.meta[0].sequence_number != prev.meta[0].sequence_number + 1:
+                    break
+                future.append(nxt.frame)
             f = filt.for_item(item) if hasattr(filt, "for_item") else filt
-            temporal.warm(item.frame, f.process(item.frame), item.meta[0], is_linear(item.meta[1]))
+            temporal.warm(item.frame, f.process(item.frame), item.meta[0], is_linear(item.meta[1]), future)
             done += 1
     finally:
         for rows, n in keep:

@@ -175,6 +175,37 @@ def test_float_frames_to_video_are_refused_and_existing_outputs_need_y(tmp_path)
     assert len(video_frames(tmp_path / "o.mp4")[0]) == 3
 
 
+@pytest.mark.parametrize("cut", ["empty", "truncated"])
+def test_an_unreadable_first_frame_to_video_is_an_error_naming_it_not_a_traceback(tmp_path, cut):
+    # the first frame is read before the run (its type and channels set the video's): an empty or truncated one
+    # ended the command in an ImageReadError traceback
+    staircases(tmp_path / "seq", 3)
+    whole = (tmp_path / "seq" / "shot.1001.png").read_bytes()
+    (tmp_path / "seq" / "shot.1000.png").write_bytes(b"" if cut == "empty" else whole[:len(whole) // 2])
+    for src in (tmp_path / "seq", tmp_path / "seq" / "shot.%04d.png"):
+        r = run(src, "-o", tmp_path / "out.mp4")
+        assert r.exit_code == 1, stderr(r)
+        assert r.exception is None or isinstance(r.exception, SystemExit)
+        assert "shot.1000.png" in stderr(r) and "Traceback" not in stderr(r)
+        assert not (tmp_path / "out.mp4").exists()
+
+
+def test_a_frame_that_stops_a_video_is_named_by_its_own_number(tmp_path):
+    # a read error carries the file's place in the plan (2), which was given as its frame number: "frame 2: read
+    # failed: frame 1003 (shot.1003.png): expected ..." named two frames
+    staircases(tmp_path / "seq", 4)
+    staircases(tmp_path / "other", 3, size=(20, 30))
+    os.replace(tmp_path / "other" / "shot.1003.png", tmp_path / "seq" / "shot.1003.png")
+    r = run(tmp_path / "seq" / "shot.%04d.png", "-o", tmp_path / "out.mp4")
+    assert r.exit_code == 1
+    errors = [line for line in stderr(r).splitlines() if "error:" in line]
+    assert len(errors) == 1 and "frame 1003 (" in errors[0] and "frame 2" not in errors[0], errors
+    r = run(tmp_path / "seq", "-o", tmp_path / "out.mp4")   # a folder: the file, no number
+    errors = [line for line in stderr(r).splitlines() if "error:" in line]
+    assert r.exit_code == 1 and len(errors) == 1 and "shot.1003.png" in errors[0] and "frame 2" not in errors[0]
+    assert not (tmp_path / "out.mp4").exists()
+
+
 def test_one_summary_line_when_stderr_is_not_a_terminal_and_none_with_q(tmp_path):
     staircases(tmp_path / "seq", 2)
     r = run(tmp_path / "seq", "-o", tmp_path / "out")

@@ -335,6 +335,17 @@ def test_a_folder_or_one_image_to_an_output_pattern_is_numbered_in_name_order_fr
 
 
 
+@pytest.mark.parametrize("name", ["%04d.xyz", "%04d"])
+def test_an_output_pattern_without_a_writer_is_refused_before_any_frame_is_filtered(tmp_path, name):
+    # every frame was filtered, then its write failed ("no OpenImageIO writer"), one error per frame, exit 1
+    make_sequence(tmp_path / "seq", range(1, 4))
+    for src in (tmp_path / "seq", tmp_path / "seq" / "shot.%04d.png"):
+        r = run(src, "-o", tmp_path / "o" / name)
+        assert r.exit_code == 2, stderr(r)
+        assert stderr(r).count("error:") == 1 and "OpenImageIO has no writer for" in stderr(r), stderr(r)
+        assert not (tmp_path / "o").exists()
+
+
 def test_a_folder_or_sequence_to_one_image_name_is_refused_naming_a_pattern(tmp_path):
     make_sequence(tmp_path / "seq", (1, 2))
     for src in (tmp_path / "seq", tmp_path / "seq" / "shot.%04d.png"):

@@ -3,6 +3,7 @@ resets at gaps in the numbering, single images spatial only."""
 from __future__ import annotations
 
 import csv
+import os
 from pathlib import Path
 
 import numpy as np
@@ -227,8 +228,8 @@ def test_lookahead_on_a_sequence_stops_at_gaps(tmp_path):
 
 
 def test_lookahead_folder_resume_is_bit_for_bit(tmp_path):
-    """--resume with --lookahead: the written frames come out as in the whole run (the warm-up needs no frames
-    ahead: they change no state the written frames read)."""
+    """--resume with --lookahead: the written frames come out as in the whole run (the warm-up frames read their
+    frames ahead too, as in the whole run: test_lookahead_resume_of_a_render_is_bit_for_bit)."""
     from mlaa_stream.io.images import read_image, write_image
     src, out = tmp_path / "in", tmp_path / "out"
     src.mkdir()
@@ -238,6 +239,110 @@ def test_lookahead_folder_resume_is_bit_for_bit(tmp_path):
     whole = _resume_after_losing(tmp_path, args, [out / f"shot_{n}.png" for n in "ef"], ["4", "5"])
     for p, pixels in whole.items():
         np.testing.assert_array_equal(read_image(str(p)).pixels, pixels)
+
+
+def test_lookahead_resume_of_a_render_is_bit_for_bit(tmp_path):
+    """--temporal (auto: TSS, then the blend on moving render pixels) with its default look-ahead on a rendered pan,
+    resumed after frame 3: the warm-up frames get the frames after them as the whole run handed them in (the stage
+    keeps what it measured of them), else every written frame differed from the whole run's (the first by 7
+    levels)."""
+    from mlaa_stream.io.images import read_image, write_image
+    from mlaa_stream.yardstick.rendered import egl_available, generate_rendered
+    from mlaa_stream.yardstick.scenes import SceneUnavailable
+    try:
+        pan = generate_rendered(small=True, names=["rendered_pan"])[0]
+    except SceneUnavailable as exc:
+        pytest.skip(f"rendered scenes need EGL or their cache: {exc} ({egl_available()[1]})")
+    frames = list(pan.inputs)
+    for n, f in enumerate(frames, start=1):
+        write_image(str(tmp_path / f"p.{n:04d}.png"), f)
+    out = tmp_path / "o"
+    args = [str(tmp_path / "p.%04d.png"), "-o", str(out / "p.%04d.png"), "--temporal", "-q"]
+    res = CliRunner().invoke(main, args)
+    assert res.exit_code == 0, res.output
+    whole = {n: read_image(str(out / f"p.{n:04d}.png")).pixels for n in range(4, len(frames) + 1)}
+    for n in whole:
+        (out / f"p.{n:04d}.png").unlink()
+    res = CliRunner().invoke(main, args + ["--resume"])
+    assert res.exit_code == 0, res.output
+    for n, pixels in whole.items():
+        np.testing.assert_array_equal(read_image(str(out / f"p.{n:04d}.png")).pixels, pixels, err_msg=f"frame {n}")
+
+
+@pytest.mark.parametrize("lookahead", ["0", "2"])
+def test_resume_warms_up_after_every_hole_of_skipped_outputs(tmp_path, lookahead):
+    """--resume where outputs in the middle exist (a cluster's chunks done out of order, an earlier --frames run):
+    the frames after such a hole get the skipped frames before them through the stage as the first one does, else
+    the stage reset there ("gap in the numbering", though no input is missing) and they came out unlike the whole
+    run's; --stats lists the written frames only."""
+    from mlaa_stream.io.images import read_image, write_image
+    frames = _wide_pan(9)
+    for n, f in enumerate(frames, start=1):
+        write_image(str(tmp_path / f"s.{n:04d}.png"), f)
+    out, stats = tmp_path / "o", tmp_path / "stats.csv"
+    args = [str(tmp_path / "s.%04d.png"), "-o", str(out / "s.%04d.png"), "--temporal", "--temporal-method", "tss",
+            "--temporal-frames", "4", "--lookahead", lookahead]
+    res = CliRunner().invoke(main, args)
+    assert res.exit_code == 0, res.output
+    lost = (3, 8, 9)   # frames 4-7 stay: a hole longer than the look-ahead before 8
+    whole = {n: read_image(str(out / f"s.{n:04d}.png")).pixels for n in lost}
+    for n in lost:
+        (out / f"s.{n:04d}.png").unlink()
+    res = CliRunner().invoke(main, args + ["--resume", "--stats", str(stats), "-v"])
+    assert res.exit_code == 0, res.output
+    assert "temporal history reset" not in res.output
+    assert [r["index"] for r in csv.DictReader(stats.open())] == [str(n) for n in lost]
+    for n, pixels in whole.items():
+        np.testing.assert_array_equal(read_image(str(out / f"s.{n:04d}.png")).pixels, pixels, err_msg=f"frame {n}")
+
+
+def test_a_warm_up_frame_that_cannot_be_read_is_a_warning_not_a_failure(tmp_path):
+    """--resume --temporal where the input of a frame done (a warm-up frame) is damaged since: a sequence ended in an
+    ImageReadError traceback, a folder counted it as failed (exit 1) though every output was there; now a warning,
+    the history starting after it, and the frames to write written."""
+    from mlaa_stream.io.images import write_image
+    src = tmp_path / "in"
+    src.mkdir()
+    for n, f in enumerate(_pan_frames(6), start=1):
+        write_image(str(src / f"s.{n:04d}.png"), f)
+    runs = {"seq": (src / "s.%04d.png", tmp_path / "seq" / "s.%04d.png"), "folder": (src, tmp_path / "folder")}
+    for inp, target in runs.values():
+        res = CliRunner().invoke(main, [str(inp), "-o", str(target), "--temporal", "-q"])
+        assert res.exit_code == 0, res.output
+    whole = (src / "s.0002.png").read_bytes()
+    (src / "s.0002.png").write_bytes(whole[:len(whole) // 3])
+    for what, (inp, target) in runs.items():
+        out = tmp_path / what
+        for n in (4, 5, 6):
+            (out / f"s.{n:04d}.png").unlink()
+        res = CliRunner().invoke(main, [str(inp), "-o", str(target), "--temporal", "--resume"])
+        assert res.exit_code == 0, res.output
+        assert res.exception is None or isinstance(res.exception, SystemExit), repr(res.exception)
+        assert "s.0002.png: not read for the temporal warm-up" in res.output
+        assert sorted(os.listdir(out)) == [f"s.{n:04d}.png" for n in range(1, 7)]
+
+
+@pytest.mark.parametrize("what", ["seq", "folder"])
+def test_a_frame_read_only_for_the_stage_that_cannot_be_read_is_a_warning(tmp_path, what):
+    """--resume --temporal with a hole: the skipped frames after one to write (look-ahead) and before the next one
+    (its warm-up) are read, not written. One whose input is damaged since stopped a sequence there ("stopped: 1 of 3
+    outputs written") and failed a folder (exit 1), though its output is done; now a warning, the rest written."""
+    from mlaa_stream.io.images import write_image
+    src = tmp_path / "in"
+    src.mkdir()
+    for n, f in enumerate(_pan_frames(8), start=1):
+        write_image(str(src / f"s.{n:04d}.png"), f)
+    inp, out = (src / "s.%04d.png", tmp_path / "o" / "s.%04d.png") if what == "seq" else (src, tmp_path / "o")
+    res = CliRunner().invoke(main, [str(inp), "-o", str(out), "--temporal", "-q"])
+    assert res.exit_code == 0, res.output
+    for n in (4, 7, 8):
+        (tmp_path / "o" / f"s.{n:04d}.png").unlink()
+    whole = (src / "s.0005.png").read_bytes()
+    (src / "s.0005.png").write_bytes(whole[:len(whole) // 3])
+    res = CliRunner().invoke(main, [str(inp), "-o", str(out), "--temporal", "--resume"])
+    assert res.exit_code == 0, res.output
+    assert "s.0005.png: left out of the temporal stage" in res.output
+    assert sorted(os.listdir(tmp_path / "o")) == [f"s.{n:04d}.png" for n in range(1, 9)]
 
 
 def test_lookahead_on_video_and_refusals(tmp_path):

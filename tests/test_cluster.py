@@ -247,3 +247,38 @@ def test_the_command_line_on_a_cluster_says_what_it_wrote(reference, tmp_path):
     with connect("local:1") as client:
         levels = list(client.run(handler_levels).values())
     assert len(levels) == 1 and levels[0] and set(levels[0]) == {logging.CRITICAL}
+
+
+def test_a_damaged_first_frame_is_the_jobs_error_not_a_traceback(tmp_path):
+    # run_chunks reads a sequence's first frame on the client (the size every chunk must keep): a damaged one raised
+    # ImageReadError, which --cluster did not catch (a traceback; one machine says it and exits 1)
+    from mlaa_stream.cluster.frames import ClusterJobError, run_chunks
+    from mlaa_stream.io.sequence import expand_pattern, plan_images
+
+    sequence(tmp_path / "in", n=3)
+    whole = (tmp_path / "in" / "shot.1001.png").read_bytes()
+    (tmp_path / "in" / "shot.1001.png").write_bytes(whole[:len(whole) // 3])
+    found, _ = expand_pattern(str(tmp_path / "in" / "shot.%04d.png"))
+    plan = plan_images([p for _, p in found], str(tmp_path / "out" / "c.%04d.png"), [n for n, _ in found])
+    with pytest.raises(ClusterJobError, match=r"frame 1001 \(.*shot.1001.png\): read failed"):
+        run_chunks(None, plan, {}, overwrite=False, strict=True)   # refused before any task: no client needed
+    r = CliRunner().invoke(main, [str(tmp_path / "in" / "shot.%04d.png"), "-o", str(tmp_path / "o" / "c.%04d.png"),
+                                  "--cluster", "local:1"])
+    assert r.exit_code == 1 and "shot.1001.png" in r.output, r.output
+    assert r.exception is None or isinstance(r.exception, SystemExit), repr(r.exception)
+
+
+def test_resume_through_the_api_keeps_the_output_of_an_input_that_no_longer_opens(client, tmp_path):
+    # filter_on_cluster(resume=True) held each output to its input's size: `*image_shape(src)` of an input that does
+    # not open (None) was a TypeError; the command line keeps such an output as done
+    from mlaa_stream.cluster.frames import filter_on_cluster
+
+    sequence(tmp_path / "in", n=3)
+    r = CliRunner().invoke(main, [str(tmp_path / "in" / "shot.%04d.png"), "-o", str(tmp_path / "out" / "c.%04d.png")])
+    assert r.exit_code == 0, r.output
+    (tmp_path / "in" / "shot.1002.png").write_bytes(b"\x89PNG\r\n\x1a\n broken")
+    before = files(tmp_path / "out")
+    report = filter_on_cluster(client, str(tmp_path / "in" / "shot.%04d.png"), str(tmp_path / "out" / "c.%04d.png"),
+                               resume=True)   # every output done: no task
+    assert not report.failed and not report.written
+    assert files(tmp_path / "out") == before

@@ -158,6 +158,23 @@ def test_a_truncated_tiff_names_its_own_read_error_not_the_subimage_probe(tmp_pa
     assert "subimage" not in str(ei.value)
 
 
+def test_a_webp_is_read_not_refused_after_the_subimage_probe(tmp_path):
+    # OpenImageIO's WebP reader cannot decode subimage 0 after a failed seek to subimage 1 (the multi-image probe):
+    # every WebP was refused with "reading pixels failed: Couldn't decode subimage 0"
+    if oiio.ImageOutput.create(str(tmp_path / "probe.webp")) is None:
+        oiio.geterror()
+        pytest.skip("this OpenImageIO has no WebP writer")
+    arr = np.random.default_rng(6).integers(0, 255, (12, 17, 3), dtype=np.uint8)
+    path = tmp_path / "frame.webp"
+    write_raw(path, arr, "uint8", {"compression": "lossless"})
+    inp = oiio.ImageInput.open(str(path))
+    expected = inp.read_image(0, 0, 0, 3, "uint8")
+    inp.close()
+    im = read_image(str(path))
+    assert im.pixels.shape == (12, 17, 3)
+    np.testing.assert_array_equal(im.pixels, expected)
+
+
 def test_a_missing_file_is_refused_naming_it(tmp_path):
     with pytest.raises(ImageReadError, match="nope.png: cannot read"):
         read_image(str(tmp_path / "nope.png"))
@@ -258,6 +275,27 @@ def test_publish_never_replaces_without_overwrite(tmp_path):
     tmp.write_bytes(b"new")
     publish(str(tmp), str(final), overwrite=True)
     assert final.read_bytes() == b"new" and not tmp.exists()
+
+
+@pytest.mark.parametrize("src_ext,fmt,dst_ext", [(".exr", "half", ".png"), (".tif", "uint8", ".jpg"),
+                                                (".tif", "uint16", ".png"), (".exr", "half", ".tif")])
+def test_a_tiled_input_is_written_to_a_format_of_scanlines(tmp_path, src_ext, fmt, dst_ext):
+    # a tiled EXR or TIFF's spec carries its tile sizes: PNG's and JPEG's writers refused them ("png does not support
+    # tiled images"), so no tiled render could be written as PNG or JPEG frames; TIFF keeps the tiles
+    arr = np.random.default_rng(7).random((20, 30, 3)).astype(np.float32)
+    spec = oiio.ImageSpec(30, 20, 3, fmt)
+    spec.tile_width = spec.tile_height = 16
+    src = tmp_path / f"tiled{src_ext}"
+    out = oiio.ImageOutput.create(str(src))
+    assert out.open(str(src), spec) and out.write_image(arr) and out.close(), oiio.geterror()
+    im = read_image(str(src))
+    assert im.spec.tile_width == 16
+    dst = tmp_path / f"out{dst_ext}"
+    write_image(str(dst), im.pixels, im.spec)
+    back = read_image(str(dst))
+    assert back.pixels.shape == (20, 30, 3)
+    assert back.spec.tile_width == (16 if dst_ext == ".tif" else 0)
+    assert leftovers(tmp_path) == []
 
 
 def test_unknown_output_extension_is_a_write_error_naming_the_file(tmp_path):

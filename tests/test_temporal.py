@@ -186,6 +186,53 @@ def test_unexplained_blobs_known_answer():
     assert explained[30:50, 20:40].all()             # the background the square uncovered stays out
 
 
+def test_unexplained_blobs_take_half_float_frames():
+    """A half EXR's frames (the default method's gate on a render): OpenCV's remap and warpAffine have no half
+    floats, and the second frame of every half EXR render ended the run with "ifunc != 0 in function 'remap'"; the
+    answer is the float32 frames' own."""
+    h, w = 48, 64
+    prev = np.full((h, w, 3), 0.25, np.float32)
+    cur = prev.copy()
+    prev[10:20, 8:18] = 0.8
+    cur[10:20, 20:30] = 0.8
+    flow = np.zeros((h, w, 2), np.float32)
+    flow[10:20, 20:30, 0] = -12.0
+    for f, t in ((flow, (0.0, 0.0)), (None, (1.5, -0.5))):
+        want = unexplained_blobs(cur, prev, f, 1, t)
+        got = unexplained_blobs(cur.astype(np.float16), prev.astype(np.float16), f, 1, t)
+        np.testing.assert_array_equal(got, want)
+        assert want.any()
+
+
+@pytest.mark.parametrize("mode", ["dense", "global"])
+def test_non_finite_samples_do_not_spread_where_the_render_gate_blends(device, mode):
+    """where="render" (the default method's blend) on a linear frame with a NaN row and an inf run: the kernel's
+    3x3 clamp read them as its neighbours' bounds and wrote NaN beside them on gated pixels (README "Non-finite
+    samples": they pass through and never spread); now replaced before the kernel as the spatial filter does."""
+    import cv2
+    from mlaa_stream.spatial.fallback import FALLBACK_TILE
+    from mlaa_stream.temporal.stage import TemporalStage
+
+    h, w = 64, 96
+    base = np.random.default_rng(1).random((h // 4, w // 2, 3)).astype(np.float32)
+    base = cv2.resize(base, (w * 2, h), interpolation=cv2.INTER_NEAREST)
+    frames = [np.ascontiguousarray(base[:, 3 * k:3 * k + w]) for k in range(4)]   # blocks panning 3 px a frame
+    frames[3] = frames[3].copy()
+    frames[3][20:22, :, 0] = np.nan
+    frames[3][40, 10:30, 1] = np.inf
+    regions = np.ones((-(-h // FALLBACK_TILE), -(-w // FALLBACK_TILE)), np.uint8)   # all render
+    stage = TemporalStage(context=device, bgr=False, where="render", fb_check=False, mode=mode, linear_input=True)
+    for i, f in enumerate(frames):
+        bad = ~np.isfinite(f)
+        filtered = cv2.GaussianBlur(np.nan_to_num(f), (3, 3), 0.8)   # edges the filter changed: the gate's
+        filtered[bad] = f[bad]
+        out = stage(f, filtered, i, regions=regions)
+        assert stage.stats[-1]["model"] == ("reset" if i == 0 else mode)
+        assert np.isfinite(out[~bad]).all(), f"frame {i}: {np.count_nonzero(~np.isfinite(out[~bad]))} samples"
+        np.testing.assert_array_equal(out[bad], f[bad])
+    assert stage.stats[-1]["gate_share"] > 0
+
+
 @pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
 def test_decode_table_is_the_interpolated_table_read(dtype):
     """The kernel's per-code decode table holds what lut_read gives for v / PIXEL_MAX (within 1 float32

@@ -201,8 +201,11 @@ def run_chunks(client, files: list[FrameFile], filter_kwargs: dict, *, overwrite
     chunks = [c for c in chunks if any(ff.dst not in done for ff in c.files)]
     like = None
     if strict and files:
-        from mlaa_stream.io.images import read_image
-        first = read_image(files[0].src)
+        from mlaa_stream.io.images import ImageReadError, read_image
+        try:
+            first = read_image(files[0].src)   # the size and type every chunk's frames must have
+        except ImageReadError as exc:   # a damaged first frame: the job's error, not a traceback (--cluster)
+            raise ClusterJobError(f"{files[0].label}: read failed: {exc}") from exc
         like = ((first.pixels.shape, first.pixels.dtype), files[0])
     futures = {client.submit(filter_chunk, c, filter_kwargs, overwrite, strict, like, temporal, jpeg_quality,
                              transfer, retries=1, pure=False,
@@ -276,7 +279,12 @@ def filter_on_cluster(client, input_path: str, output: str, *, preset: str | Non
     existing = [f for f in plan if os.path.exists(f.dst)]
     done: frozenset[str] = frozenset()
     if existing and resume:
-        done = frozenset(f.dst for f in existing if check_complete(f.dst, *image_shape(f.src), decode=False) is None)
+        def complete(f: FrameFile) -> bool:
+            # an input that no longer opens has no size to hold its output to: kept, as the command line keeps it
+            # (ImageJob._keep_complete); `*image_shape(...)` of None was a TypeError
+            shape = image_shape(f.src)
+            return shape is None or check_complete(f.dst, *shape, decode=False) is None
+        done = frozenset(f.dst for f in existing if complete(f))
         if temporal is None:  # the temporal stage reads the complete ones too (run_chunks' `done`)
             plan, done = [f for f in plan if f.dst not in done], frozenset()
     elif existing and not overwrite:

@@ -86,6 +86,15 @@ def is_image_path(path: str) -> bool:
     return os.path.splitext(path)[1].lower() in image_extensions()
 
 
+def has_writer(path: str) -> bool:
+    """True when OpenImageIO has a writer for `path`'s extension (nothing is opened or created)."""
+    out = oiio.ImageOutput.create(path)
+    if out is None:
+        oiio.geterror()  # clear it
+        return False
+    return True
+
+
 def is_temp_path(path: str) -> bool:
     """True for our own temporary output names (skipped when listing a folder)."""
     return _TMP_MARK in os.path.basename(path)
@@ -133,6 +142,14 @@ def read_image(path: str) -> Image:
                                  f"file); filter it as a video or split it into frames first "
                                  f"(e.g. ffmpeg -i {os.path.basename(path)} frames/%04d.png)")
         inp.geterror()  # clear the probe's 'could not seek to subimage 1': a failed read must report its own error
+        # reopened after the probe: a failed seek leaves some readers unable to decode subimage 0 (WebP's:
+        # "Couldn't decode subimage 0", even after seeking back), so every WebP was refused as unreadable
+        inp.close()
+        inp = oiio.ImageInput.open(path, config)
+        if inp is None:
+            raise ImageReadError(f"{path}: expected an image OpenImageIO can read, got: "
+                                 f"{oiio.geterror() or 'unknown format'}")
+        spec = inp.spec()   # the reopened input's: the first one's is gone with it
         conversions = _conversions(path, spec)
         fmt = str(spec.format)
         read_fmt = fmt if fmt in _NATIVE or (fmt in _WIDE and not spec.channelformats) else "float"
@@ -742,6 +759,12 @@ def _write_file(tmp: str, pixels: np.ndarray, spec: oiio.ImageSpec, final: str) 
     if out is None:
         raise ImageWriteError(f"{final}: no OpenImageIO writer for this extension "
                               f"({oiio.geterror() or 'unknown format'})")
+    if spec.tile_width and not out.supports("tiles"):
+        # a tiled input (a render's tiled EXR, a tiled TIFF) into a format of scanlines (PNG, JPEG ...): written as
+        # scanlines, else its writer refuses the tile sizes the input's spec carries ("does not support tiled images")
+        spec = oiio.ImageSpec(spec)
+        spec.tile_width = spec.tile_height = 0
+        spec.tile_depth = 1
     ok = out.open(tmp, spec) and out.write_image(pixels) and _write_mip_levels(out, tmp, spec, pixels)
     err = "" if ok else out.geterror()
     ok = out.close() and ok

@@ -303,10 +303,13 @@ def output_over_input(plan: list[FrameFile]) -> str | None:
 
 
 def image_source(files: list[FrameFile], report: Report, *, strict: bool,
-                 like: tuple | None = None) -> Iterator[Item]:
+                 like: tuple | None = None, optional: frozenset[int] = frozenset()) -> Iterator[Item]:
     """Read each file; Item.meta = (FrameFile, Image, merge). Folder mode (not strict) reports a bad
     file and goes on; strict (a sequence) raises at the first unreadable or mismatched frame. `like`:
     ((shape, dtype), FrameFile) every frame must match (a chunk of a longer sequence: its first frame).
+    `optional`: ids of files read only for the temporal stage, their outputs done (--resume's look-ahead and
+    warm-up frames): one that cannot be read is left out with a warning (report.note), in either mode, and none is
+    held to the sequence's size.
     A file without colour channels (images.without_colour: an EXR of depth, normals, motion vectors) is a
     passthrough Item, all its channels as read: image_sink writes it unchanged, never filtered."""
     first: tuple | None = like
@@ -316,6 +319,10 @@ def image_source(files: list[FrameFile], report: Report, *, strict: bool,
             copy = without_colour(image)
             frame, merge = (image.pixels, _unchanged) if copy else split_for_filter(image)
         except ImageReadError as exc:
+            if id(ff) in optional:   # its output is done: no failure of this run (the stage resets at the gap)
+                why = str(exc).removeprefix(f"{ff.src}: ")
+                report.note(f"{ff.src}: left out of the temporal stage, which read it only (its output is done): {why}")
+                continue
             if strict:
                 raise
             report.fail(str(exc))
@@ -324,7 +331,7 @@ def image_source(files: list[FrameFile], report: Report, *, strict: bool,
             report.inform(f"{ff.src}: {note}")
         for note in image.lossy:   # the same for every frame of a sequence: said once
             report.caution_once(note)
-        if strict:
+        if strict and id(ff) not in optional:
             shape = (image.pixels.shape, image.pixels.dtype)
             if first is None:
                 first = (shape, ff)

@@ -30,7 +30,7 @@ from mlaa_stream.device.formats import LUT_SIZE, FrameFormat, defines_for, frame
 from mlaa_stream.device.transfer import with_transfer_tables
 from mlaa_stream.spatial.fallback import FALLBACK_TILE
 from mlaa_stream.spatial.exposure import HeldExposure, exposed
-from mlaa_stream.spatial.nonfinite import restore_out_of_range
+from mlaa_stream.spatial.nonfinite import SAMPLE_LIMIT, replace_non_finite, restore_out_of_range
 from mlaa_stream.spatial.shots import CUT_HIST, histogram_distance
 
 MODES = ("adaptive", "dense", "global", "static", "off")
@@ -454,6 +454,10 @@ class TemporalStage:
                 fi = exposed(np.asarray(frame_in, np.float32), scale)
                 ff = exposed(np.asarray(frame_filtered, np.float32), scale)
                 fmt = frame_format(ff, self.bgr, what=f"{what} (filtered)")
+            # the kernel's 3x3 clamp of the current frame read a NaN or inf as its neighbours' bound and wrote NaN
+            # beside it on the pixels the render gate blends (README "Non-finite samples": they never spread):
+            # replaced as the spatial filter replaces them, put back below by restore_out_of_range
+            fi, ff = _finite(fi), _finite(ff)
             out = self._step(fi, ff, int(index), fmt, regions, measured)
         if self.show is not None:
             return out
@@ -608,6 +612,20 @@ def _pixel_grid(h: int, w: int) -> tuple[np.ndarray, np.ndarray]:
     return xs, ys
 
 
+def _finite(frame: np.ndarray) -> np.ndarray:
+    """`frame` itself, or where a float frame holds non-finite or out-of-range samples a copy with each replaced by
+    the nearest finite sample of its channel along the row (spatial/nonfinite.py replace_non_finite)."""
+    f = np.asarray(frame)
+    if f.dtype.kind != "f":
+        return frame
+    with np.errstate(invalid="ignore"):
+        if (np.abs(f) <= SAMPLE_LIMIT).all():
+            return frame
+    f = f.copy()
+    replace_non_finite(f)
+    return f
+
+
 def _one_level(dtype: np.dtype) -> float:
     """One 8-bit level in a frame type's units."""
     return {"f": 1.0 / 255.0}.get(dtype.kind, 257.0 if dtype == np.uint16 else 1.0)
@@ -655,6 +673,10 @@ def unexplained_blobs(cur: np.ndarray, prev: np.ndarray, flow_b: np.ndarray | No
     the translation), what survives a 3x3 erosion (aliasing leaves thin lines along moving edges, which do not;
     a mover the flow missed, or the background it uncovers, does), grown by BLOB_MARGIN pixels."""
     h, w = cur.shape[:2]
+    if cur.dtype == np.float16 or prev.dtype == np.float16:
+        # OpenCV's remap and warpAffine take no half floats: a half EXR render's frames ended the run with
+        # "(-215:Assertion failed) ifunc != 0 in function 'remap'" at its second frame (the default method)
+        cur, prev = np.asarray(cur, np.float32), np.asarray(prev, np.float32)
     if flow_b is not None:
         xs, ys = _pixel_grid(h, w)
         f = cv2.resize(flow_b, (w, h), interpolation=cv2.INTER_LINEAR) * np.float32(flow_scale)
