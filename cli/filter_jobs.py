@@ -46,7 +46,9 @@ def check_writable(folder: str) -> None:
 
 
 def video_trim(opts: dict, info) -> tuple[float | None, float | None]:
-    """--start/--end of a video input in seconds (None: not given); refused when empty or backwards."""
+    """--start/--end of a video input in seconds on its timestamps (None: not given); refused when empty or backwards.
+    The user's times count from the video's first timestamp (VideoInfo.start_time: an MPEG-TS capture's may be hours),
+    as FFmpeg's -ss: taken as timestamps, --start 1:30 kept the whole of a video starting at 10 s and shifted it."""
     from mlaa_stream.io.video import parse_time
 
     try:
@@ -58,7 +60,8 @@ def video_trim(opts: dict, info) -> tuple[float | None, float | None]:
         raise Usage(f"--end ({opts['end']}) must come after --start ({opts['start']})")
     if opts["video_backend"] == "opencv" and (start or end is not None):
         raise Usage("--start/--end need the pyav video backend")
-    return start, end
+    t0 = getattr(info, "start_time", 0.0)
+    return (None if start is None else start + t0), (None if end is None else end + t0)
 
 
 class SequenceTemporal:
@@ -579,7 +582,8 @@ class VideoJob(Job):
                                 on_deinterlace=deinterlace_note(self.con, self.input))
         total = self.info.frames
         if total and self.info.fps and (self.start or self.end is not None):
-            duration = (self.end if self.end is not None else total / float(self.info.fps)) - (self.start or 0)
+            t0 = self.info.start_time   # the trim's times are timestamps (video_trim)
+            duration = (self.end if self.end is not None else t0 + total / float(self.info.fps)) - (self.start or t0)
             total = max(int(round(duration * float(self.info.fps))), 0)
         progress = self._progress(total)
         try:

@@ -47,3 +47,46 @@ def test_parse_time_refuses_non_finite_times_and_negative_frames(bad):
 def test_a_nan_start_is_a_usage_error(tmp_path):
     r = run(CLIP, "-o", tmp_path / "t.mp4", "--start", "nan")
     assert r.exit_code == 2 and "expected a time" in stderr(r)
+
+
+def _clip_from(path, first_ms: int, n: int = 25) -> None:
+    """An H.264 MKV of `n` frames at 25 fps whose timestamps start at `first_ms` (an MPEG-TS capture's, a cut
+    segment's), a moving edge on each frame."""
+    import av
+    import numpy as np
+    from fractions import Fraction
+
+    tb = Fraction(1, 1000)
+    with av.open(str(path), "w") as out:
+        s = out.add_stream("libx264", rate=25)
+        s.width, s.height, s.pix_fmt = 96, 64, "yuv420p"
+        s.time_base = s.codec_context.time_base = tb
+        for i in range(n):
+            img = np.zeros((64, 96, 3), np.uint8)
+            img[:, 20 + i:] = 200
+            f = av.VideoFrame.from_ndarray(img, format="rgb24")
+            f.pts, f.time_base = first_ms + 40 * i, tb
+            for p in s.encode(f):
+                out.mux(p)
+        for p in s.encode():
+            out.mux(p)
+
+
+def test_start_and_end_count_from_the_first_timestamp(tmp_path):
+    """--start/--end count from the video's first timestamp, as FFmpeg's -ss does: on a video whose timestamps start
+    at 10 s, --start 0.2 --end 0.4 was 'no frame between 0.2 s and 0.4 s', and --start 0.2 alone kept every frame."""
+    import av
+
+    src, out = tmp_path / "late.mkv", tmp_path / "t.mkv"
+    _clip_from(src, 10_000)
+    r = run(src, "-o", out, "--start", "0.2", "--end", "0.4")
+    assert r.exit_code == 0, stderr(r)
+    with av.open(str(out)) as c:
+        pts = [f.pts for f in c.decode(video=0)]
+    assert pts == [0, 40, 80, 120, 160]   # frames 5..9 of the source, the output from 0 as --help says
+    r = run(src, "-o", out, "-y", "--start", "0.8")
+    assert r.exit_code == 0, stderr(r)
+    with av.open(str(out)) as c:
+        assert len(list(c.decode(video=0))) == 5   # frames 20..24, not all 25 shifted by -0.8 s
+    r = run(src, "-o", out, "-y", "--start", "2")
+    assert r.exit_code == 1 and "no frame between 2 s and the end" in stderr(r)

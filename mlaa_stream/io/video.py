@@ -111,6 +111,9 @@ class VideoInfo:
     interlaced: str | None = None
     hdr10: tuple[str, ...] = ()  # HDR10 static metadata on the first frame, as x265 parameters (_hdr10_params)
     alpha_unread: bool = False  # the stream says it has alpha that the decoder does not give (WebM VP9's side stream)
+    # seconds of the container's first timestamp (MPEG-TS captures, cut segments: often far from 0; negative ones --
+    # an edit list's priming -- count as 0): --start/--end count from it, as FFmpeg's -ss does
+    start_time: float = 0.0
 
     @property
     def sample_format(self) -> str:
@@ -254,7 +257,7 @@ def _describe(container, path: str, rotation: int, hdr10: tuple[str, ...] = (), 
                      subtitle_streams=len(container.streams.subtitles), other_streams=others,
                      sar=Fraction(sar) if sar and sar != 1 else None,
                      interlaced=_FIELD_FIRST.get(getattr(cc, "field_order", None)) or (FLAGGED if flagged else None),
-                     hdr10=hdr10,
+                     hdr10=hdr10, start_time=max(0.0, (container.start_time or 0) / 1e6),
                      alpha_unread=not alpha and str(_tag(s.metadata, "alpha_mode")) == "1")
 
 
@@ -503,10 +506,12 @@ def _deinterlaced(frames: Iterator, info: VideoInfo, mode: str, on_deinterlace) 
 
 
 def _nothing_between(path: str, start: float | None, end: float | None, info: VideoInfo) -> VideoReadError:
-    """The error for a trim (--start/--end) that holds no frame: nothing is worth writing."""
+    """The error for a trim (--start/--end) that holds no frame: nothing is worth writing. The times are said from
+    the video's first timestamp (info.start_time), as the user gave them."""
+    t0 = info.start_time
     length = f" (the video is {info.duration:.3f} s long)" if info.duration else ""
-    return VideoReadError(f"{path}: no frame between {start or 0:g} s and "
-                          f"{'the end' if end is None else f'{end:g} s'}{length}", 0)
+    return VideoReadError(f"{path}: no frame between {max(0.0, (start or t0) - t0):g} s and "
+                          f"{'the end' if end is None else f'{end - t0:g} s'}{length}", 0)
 
 
 _Y4M_MAGIC = b"YUV4MPEG2 "
