@@ -90,3 +90,18 @@ def test_start_and_end_count_from_the_first_timestamp(tmp_path):
         assert len(list(c.decode(video=0))) == 5   # frames 20..24, not all 25 shifted by -0.8 s
     r = run(src, "-o", out, "-y", "--start", "2")
     assert r.exit_code == 1 and "no frame between 2 s and the end" in stderr(r)
+
+
+def test_a_start_between_two_frames_writes_every_frame_it_counts(tmp_path):
+    """--start half way between two frames keeps the frame nearest to it, up to half a frame before; that frame got a
+    negative time, and MP4's edit list hid it: '5 frames' written, 4 played. The output now starts at it."""
+    import av
+
+    out = tmp_path / "t.mp4"
+    r = run(CLIP, "-o", out, "--start", "0.1", "--end", "0.3")   # frames at 24 fps: 0.083 is nearest to 0.1
+    assert r.exit_code == 0, stderr(r)
+    with av.open(str(out)) as c:
+        s = c.streams.video[0]
+        assert s.frames == 5
+        pts = [f.pts for f in c.decode(video=0)]
+    assert len(pts) == 5 and pts[0] == 0 and s.average_rate == 24

@@ -850,6 +850,14 @@ class VideoWriter:
         tb = self._time_base
         if when is not None and when.pts is not None and when.time_base:
             t = when.pts * Fraction(when.time_base) - Fraction(self.offset).limit_denominator(1_000_000)
+            if self.offset and t < 0 and not self.frames_written:
+                # --start between two frames: read_video keeps the frame nearest to it, up to half a frame before.
+                # The output starts at that frame, audio too: at a negative time MP4's edit list hid it (one frame
+                # fewer than written), MKV's muxer moved it to 0 and every later frame with it
+                self.offset += float(t)
+                if self.audio_end is not None:
+                    self.audio_end -= float(t)
+                t = Fraction(0)
         else:
             t = self.frames_written / (self.info.fps or Fraction(25))
         pts = int(round(t / tb))
