@@ -138,6 +138,9 @@ def _kind_of(path: str) -> str:
     if inp is not None:
         inp.close()
         return "image"
+    # clear the failed probe's error: left pending, OpenImageIO printed it at exit ("... exited with a pending error
+    # message ... could not find a format reader for ...") after a video without a known extension was filtered
+    oiio.geterror()
     return "video"  # probe_video says so if it is not one either
 
 

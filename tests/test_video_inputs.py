@@ -395,3 +395,22 @@ def test_a_webm_whose_vp9_alpha_is_not_read_is_named(tmp_path):
     assert res.exit_code == 0 and "alpha (WebM VP9 alpha_mode) is not read" in res.output, res.output
     clip = os.path.join(os.path.dirname(__file__), "..", "fixtures", "demo", "clip.mp4")
     assert not probe_video(clip).alpha_unread
+
+
+def test_a_video_without_a_known_extension_leaves_no_image_library_error(tmp_path):
+    """A video named without a video extension (no extension, .vob, .dv) is probed as an image first: the failed
+    probe's error was left pending, and OpenImageIO printed 'exited with a pending error message ... could not find
+    a format reader' at exit -- on standard output, after the y4m stream of `-o -`, corrupting it."""
+    import shutil
+    import subprocess
+    import sys
+
+    src = tmp_path / "capture"
+    shutil.copy(os.path.join(os.path.dirname(__file__), "..", "fixtures", "demo", "clip.mp4"), src)
+    r = subprocess.run([sys.executable, "-c", "from mlaa_stream.cli.main import main; main()", str(src), "-o", "-",
+                        "-f", "y4m"], capture_output=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert b"OpenImageIO" not in r.stdout + r.stderr
+    frame = 64 * 48 * 3 // 2   # the demo clip: 10 frames of 64x48 4:2:0
+    assert r.stdout.startswith(b"YUV4MPEG2 ")
+    assert len(r.stdout) == r.stdout.index(b"\n") + 1 + 10 * (len(b"FRAME\n") + frame)
