@@ -151,3 +151,23 @@ def test_a_y4m_with_a_header_and_no_frame_is_an_error(tmp_path):
     r = subprocess.run([*CLI, str(tmp_path / "h.y4m"), "-o", str(tmp_path / "o.mkv")], capture_output=True,
                        timeout=120)
     assert r.returncode == 1 and not (tmp_path / "o.mkv").exists(), r.stderr.decode()
+
+
+def test_audio_on_standard_input_that_is_not_kept_is_named(tmp_path):
+    """`cat in.mkv | mlaa-stream - -o out.mkv`: standard input is read once, for its video, so its audio cannot be
+    copied; it was dropped without a word (a file's audio is copied by default)."""
+    src, out = tmp_path / "in.mkv", tmp_path / "out.mkv"
+    with av.open(DEMO_CLIP) as c, av.open(str(src), "w") as o:   # the demo clip (H.264 + AAC) remuxed to MKV
+        streams = {s.index: o.add_stream_from_template(s) for s in c.streams if s.type in ("video", "audio")}
+        for pkt in c.demux(*[c.streams[i] for i in streams]):
+            if pkt.dts is not None:
+                pkt.stream = streams[pkt.stream.index]
+                o.mux(pkt)
+    with open(src, "rb") as stdin:
+        r = subprocess.run([*CLI, "-", "-o", str(out)], stdin=stdin, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert "audio streams not kept: standard input is read once" in r.stderr
+    with open(src, "rb") as stdin:
+        r = subprocess.run([*CLI, "-", "-o", str(out), "-y", "--audio", "none"], stdin=stdin, capture_output=True,
+                           text=True, timeout=300)
+    assert r.returncode == 0 and "not kept" not in r.stderr, r.stderr

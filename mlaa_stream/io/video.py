@@ -655,8 +655,11 @@ class VideoWriter:
         audio = audio or ("copy" if copy_audio else "none")
         held = [k for k, n in (("audio", info.audio_streams), ("subtitle", info.subtitle_streams)) if n]
         dropped = []  # the writer's first warnings
-        if raw and audio != "none" and info.path != PIPE and held:
-            dropped.append(f"{path}: {' and '.join(held)} streams not kept: {container_format} holds video only")
+        if (raw or info.path == PIPE) and audio != "none" and held:
+            # a pipe's audio was dropped without a word (an MKV or TS with audio on standard input)
+            why = ("standard input is read once, for its video (give the file as INPUT to keep them)"
+                   if info.path == PIPE else f"{container_format} holds video only")
+            dropped.append(f"{path}: {' and '.join(held)} streams not kept: {why}")
         if info.path == PIPE or raw:
             audio = "none"  # a pipe is read once (its audio is not there to copy); y4m holds video only
         if audio not in ("copy", "aac", "none"):
