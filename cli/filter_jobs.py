@@ -459,6 +459,7 @@ class VideoJob(Job):
         out = self.output
         if out != PIPE:
             self._check_output_file(out)
+            out = self.output   # a folder: the input's name in it (the writer was given the folder itself)
         elif o.get("progress_path") == PIPE:
             raise Usage("--progress - and -o - both want standard output; give --progress a file")
         if (self.input == PIPE or out == PIPE) and o["video_backend"] == "opencv":

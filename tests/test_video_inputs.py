@@ -414,3 +414,17 @@ def test_a_video_without_a_known_extension_leaves_no_image_library_error(tmp_pat
     frame = 64 * 48 * 3 // 2   # the demo clip: 10 frames of 64x48 4:2:0
     assert r.stdout.startswith(b"YUV4MPEG2 ")
     assert len(r.stdout) == r.stdout.index(b"\n") + 1 + 10 * (len(b"FRAME\n") + frame)
+
+
+@pytest.mark.parametrize("slash", ["", "/"])
+def test_a_video_into_a_folder_takes_its_name(tmp_path, slash):
+    """`mlaa-stream in.mp4 -o clean/` (a folder there): the output is clean/in.mp4, as for images; the writer was
+    handed the folder itself ('cannot create the output: Could not determine output format')."""
+    folder = tmp_path / "clean"
+    folder.mkdir()
+    src = os.path.join(os.path.dirname(__file__), "..", "fixtures", "demo", "clip.mp4")
+    r = run(src, "-o", f"{folder}{slash}")
+    assert r.exit_code == 0, r.output
+    assert os.listdir(folder) == ["clip.mp4"]
+    with av.open(str(folder / "clip.mp4")) as c:
+        assert sum(1 for _ in c.decode(video=0)) == 10
