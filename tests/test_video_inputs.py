@@ -428,3 +428,29 @@ def test_a_video_into_a_folder_takes_its_name(tmp_path, slash):
     assert os.listdir(folder) == ["clip.mp4"]
     with av.open(str(folder / "clip.mp4")) as c:
         assert sum(1 for _ in c.decode(video=0)) == 10
+
+
+def test_an_av1_source_stays_av1(tmp_path):
+    """No --codec: the source's family where FFmpeg has an encoder for it. An AV1 source decodes with libdav1d, whose
+    name no family had, and its family named only libaom-av1 (PyAV's wheels have SVT-AV1): it became H.264, in WebM
+    VP9 with a warning that WebM 'cannot hold libx264'."""
+    if "libsvtav1" not in av.codecs_available and "libaom-av1" not in av.codecs_available:
+        pytest.skip("this FFmpeg has no AV1 encoder")
+    encoder = "libsvtav1" if "libsvtav1" in av.codecs_available else "libaom-av1"
+    src = tmp_path / "in.webm"
+    with av.open(str(src), "w") as out:
+        s = out.add_stream(encoder, rate=25)
+        s.width, s.height, s.pix_fmt = 96, 64, "yuv420p"
+        for i in range(4):
+            img = np.zeros((64, 96, 3), np.uint8)
+            img[:, 30 + i:] = 220
+            for p in s.encode(av.VideoFrame.from_ndarray(img, format="rgb24")):
+                out.mux(p)
+        for p in s.encode():
+            out.mux(p)
+    r = run(src, "-o", tmp_path / "out.webm")
+    assert r.exit_code == 0, r.output
+    assert "cannot hold" not in r.output
+    with av.open(str(tmp_path / "out.webm")) as c:
+        assert c.streams.video[0].codec_context.codec.canonical_name == "av1"
+        assert sum(1 for _ in c.decode(video=0)) == 4

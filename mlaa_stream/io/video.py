@@ -304,10 +304,12 @@ def _hdr10_params(frame) -> tuple[str, ...]:
     return tuple(out)
 
 
-# The encoder that keeps a source's codec family when no --codec is given (None: DEFAULT_CODEC).
+# The encoder that keeps a source's codec family when no --codec is given (None: DEFAULT_CODEC); by FFmpeg's name of
+# the family (AV1 decodes with libdav1d, whose name is no family's), several where builds have one or the other
+# (PyAV's wheels have SVT-AV1, not libaom).
 CODEC_FAMILY = {"hevc": "libx265", "prores": "prores_ks", "ffv1": "ffv1", "vp9": "libvpx-vp9",
-                "av1": "libaom-av1", "dnxhd": "dnxhd", "mjpeg": "mjpeg", "png": "png", "utvideo": "utvideo",
-                "qtrle": "qtrle"}   # QuickTime Animation: lossless, with alpha (argb)
+                "av1": ("libaom-av1", "libsvtav1"), "dnxhd": "dnxhd", "mjpeg": "mjpeg", "png": "png",
+                "utvideo": "utvideo", "qtrle": "qtrle"}   # QuickTime Animation: lossless, with alpha (argb)
 # Container and stream tags that describe the file written, not the content: not copied.
 _NOT_COPIED_TAGS = {"encoder", "major_brand", "minor_version", "compatible_brands", "duration",
                     "number_of_frames", "number_of_bytes", "_statistics_tags", "_statistics_writing_app",
@@ -317,8 +319,13 @@ _NOT_COPIED_TAGS = {"encoder", "major_brand", "minor_version", "compatible_brand
 def codec_for(info: VideoInfo) -> str:
     """The encoder for `info` when none is asked for: the source's family (HEVC stays HEVC, ProRes stays
     ProRes) where FFmpeg has an encoder for it, else DEFAULT_CODEC."""
-    name = CODEC_FAMILY.get(info.codec)
-    return name if name and name in av.codecs_available else DEFAULT_CODEC
+    try:
+        family = av.Codec(info.codec, "r").canonical_name   # the decoder's family: libdav1d -> av1
+    except Exception:  # noqa: BLE001 - no such decoder here (OpenCV's "opencv"): the name as it is
+        family = info.codec
+    names = CODEC_FAMILY.get(family, ())
+    names = (names,) if isinstance(names, str) else names
+    return next((name for name in names if name in av.codecs_available), DEFAULT_CODEC)
 
 
 def _container_holds(format_name: str, codec: str) -> bool:
@@ -718,6 +725,8 @@ class VideoWriter:
         if self._codec_chosen is not None and not _container_holds(self._out.format.name, self.codec):
             self._take_containers_codec()
         self._keep_hdr10()
+        if self.codec == "libsvtav1":   # SVT-AV1 logs its whole configuration on stderr; errors only (SVT_LOG=1)
+            os.environ.setdefault("SVT_LOG", "1")
         stream = self._out.add_stream(self.codec, rate=rate, options=dict(self._options))
         if info.rotation:
             stream.set_display_rotation(info.rotation)
