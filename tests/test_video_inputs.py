@@ -454,3 +454,30 @@ def test_an_av1_source_stays_av1(tmp_path):
     with av.open(str(tmp_path / "out.webm")) as c:
         assert c.streams.video[0].codec_context.codec.canonical_name == "av1"
         assert sum(1 for _ in c.decode(video=0)) == 4
+
+
+def test_a_dnxhr_source_and_codec_dnxhd_are_written(tmp_path):
+    """FFmpeg's dnxhd encoder opens only with a profile (or a DNxHD bit rate): a DNxHR source (its family kept) and
+    --codec dnxhd both failed with 'cannot start encoding with dnxhd (yuv422p): Invalid argument'."""
+    if "dnxhd" not in av.codecs_available:
+        pytest.skip("this FFmpeg has no dnxhd encoder")
+    src = tmp_path / "in.mov"
+    with av.open(str(src), "w") as out:
+        s = out.add_stream("dnxhd", rate=25, options={"profile": "dnxhr_sq"})
+        s.width, s.height, s.pix_fmt = 256, 144, "yuv422p"
+        for i in range(3):
+            img = np.zeros((144, 256, 3), np.uint8)
+            img[:, 100 + i:] = 220
+            for p in s.encode(av.VideoFrame.from_ndarray(img, format="rgb24")):
+                out.mux(p)
+        for p in s.encode():
+            out.mux(p)
+    r = run(src, "-o", tmp_path / "out.mov")
+    assert r.exit_code == 0, r.output
+    with av.open(str(tmp_path / "out.mov")) as c:
+        assert c.streams.video[0].codec_context.profile == "DNXHR SQ"   # the source's profile
+        assert sum(1 for _ in c.decode(video=0)) == 3
+    r = run(src, "-o", tmp_path / "hqx.mov", "--codec", "dnxhd", "--pix-fmt", "yuv422p10le")
+    assert r.exit_code == 0, r.output
+    with av.open(str(tmp_path / "hqx.mov")) as c:
+        assert c.streams.video[0].codec_context.profile == "DNXHR HQX"   # 10-bit: the profile that holds it

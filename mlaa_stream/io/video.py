@@ -114,6 +114,7 @@ class VideoInfo:
     # seconds of the container's first timestamp (MPEG-TS captures, cut segments: often far from 0; negative ones --
     # an edit list's priming -- count as 0): --start/--end count from it, as FFmpeg's -ss does
     start_time: float = 0.0
+    profile: str | None = None  # the codec's profile as FFmpeg names it ("DNXHR SQ", "High 10"); None: unknown
 
     @property
     def sample_format(self) -> str:
@@ -258,6 +259,7 @@ def _describe(container, path: str, rotation: int, hdr10: tuple[str, ...] = (), 
                      sar=Fraction(sar) if sar and sar != 1 else None,
                      interlaced=_FIELD_FIRST.get(getattr(cc, "field_order", None)) or (FLAGGED if flagged else None),
                      hdr10=hdr10, start_time=max(0.0, (container.start_time or 0) / 1e6),
+                     profile=cc.profile if isinstance(cc.profile, str) else None,
                      alpha_unread=not alpha and str(_tag(s.metadata, "alpha_mode")) == "1")
 
 
@@ -637,6 +639,22 @@ def encoder_options(codec: str, crf: int | None, preset: str | None) -> dict[str
     return opts
 
 
+# DNxHD's encoder opens only with a profile (DNxHR, frames from 256x120) or, as DNxHD, a bit rate naming one of its
+# fixed formats; without either avcodec_open2 fails (EINVAL): a DNxHR source or --codec dnxhd was never written.
+_DNXHR_FOR_FORMAT = {"yuv422p": "dnxhr_hq", "yuv422p10le": "dnxhr_hqx", "yuv444p10le": "dnxhr_444",
+                     "gbrp10le": "dnxhr_444"}
+
+
+def _dnxhd_options(info: VideoInfo, pix_fmt: str) -> dict[str, str]:
+    """The dnxhd encoder's profile: a DNxHR source's own at its pixel format, else the DNxHR profile of the pixel
+    format (HQ for 8-bit 4:2:2, HQX for 10-bit, 444). A DNxHD source's bit rate as the container measures it names no
+    format of the encoder's table (121241600 for its 120 Mb/s): it is written as DNxHR."""
+    profile = (info.profile or "").lower().replace(" ", "_")
+    if pix_fmt == info.pix_fmt and profile.startswith("dnxhr_"):
+        return {"profile": profile}
+    return {"profile": _DNXHR_FOR_FORMAT.get(pix_fmt, "dnxhr_hq")}
+
+
 class VideoWriter:
     """Encode RGB(A) frames like `info`'s source, copying its audio; `commit()` renames into place."""
 
@@ -692,6 +710,8 @@ class VideoWriter:
         self.warnings: list[str] = dropped
         self._tmp = None if path == PIPE else temp_path_for(path)  # standard output: written as it comes
         self._options = {**encoder_options(codec, crf, preset), **(extra_options or {})}
+        if codec == "dnxhd":
+            self._options = {**_dnxhd_options(info, self.pix_fmt), **self._options}
         self._audio_in = None
         self._audio_packets: Iterator | None = None
         self._audio_map: dict = {}
