@@ -105,3 +105,60 @@ def test_a_start_between_two_frames_writes_every_frame_it_counts(tmp_path):
         assert s.frames == 5
         pts = [f.pts for f in c.decode(video=0)]
     assert len(pts) == 5 and pts[0] == 0 and s.average_rate == 24
+
+
+def _gop_clip(path, fmt: str | None = None, n: int = 50, gop: int = 10) -> None:
+    """H.264 at 25 fps, a keyframe every `gop` frames, frame i's bright band at x = 10 + i (which frame it is)."""
+    import av
+    import numpy as np
+
+    with av.open(str(path), "w", format=fmt) as out:
+        s = out.add_stream("libx264", rate=25, options={"g": str(gop), "keyint_min": str(gop), "sc_threshold": "0"})
+        s.width, s.height, s.pix_fmt = 96, 64, "yuv420p"
+        for i in range(n):
+            img = np.full((64, 96, 3), 30, np.uint8)
+            img[:, i + 10:i + 14] = 230
+            for p in s.encode(av.VideoFrame.from_ndarray(img, format="rgb24")):
+                out.mux(p)
+        for p in s.encode():
+            out.mux(p)
+
+
+def _columns(path) -> list[int]:
+    """Where each frame of `path` has its bright band (which source frame it is): the centre of its light."""
+    import av
+    import numpy as np
+
+    out = []
+    with av.open(str(path)) as c:
+        for f in c.decode(video=0):
+            light = np.clip(f.to_ndarray(format="gray")[32].astype(float) - 100, 0, None)
+            out.append(int(round((light * np.arange(light.size)).sum() / light.sum() - 11.5)))
+    return out
+
+
+def test_a_trim_of_an_mpeg_ts_keeps_the_frames_before_the_next_keyframe(tmp_path):
+    """MPEG-TS seeks land on the packet at the time asked, keyframe or not, and nothing decodes until the next one:
+    --start 0.5 --end 1.0 kept only the frames from the keyframe after 0.5 s on (or none at all)."""
+    src = tmp_path / "in.ts"
+    _gop_clip(src, "mpegts")
+    r = run(src, "-o", tmp_path / "t.mkv", "--start", "0.5", "--end", "1.0")
+    assert r.exit_code == 0, stderr(r)
+    got = _columns(tmp_path / "t.mkv")
+    assert len(got) >= 12 and got == list(range(got[0], got[0] + len(got))) and 12 <= got[0] <= 13
+
+
+def test_a_trim_of_standard_input_reads_on_to_the_start(tmp_path):
+    """Standard input cannot seek: the trim seeked it anyway ('read failed at frame 0: Operation not permitted' for
+    MPEG-TS, 'no frame between 1 s and 1.4 s' for an MKV with audio and one keyframe); its frames before --start are
+    read and dropped."""
+    import subprocess
+    import sys
+
+    src, out = tmp_path / "in.ts", tmp_path / "t.mkv"
+    _gop_clip(src, "mpegts")
+    with open(src, "rb") as stdin:
+        r = subprocess.run([sys.executable, "-c", "from mlaa_stream.cli.main import main; main()", "-", "-o", str(out),
+                            "--start", "1", "--end", "1.4"], stdin=stdin, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert _columns(out) == list(range(25, 35))

@@ -438,9 +438,10 @@ def read_video(info: VideoInfo, *, check_length: bool = True, start: float | Non
         stream = container.streams.video[0]
         stream.thread_type = "AUTO"
         sws = _sws_flags()
-        if start:  # to the keyframe before `start`; the frames before it are decoded and dropped
-            container.seek(int(start / stream.time_base), stream=stream, backward=True, any_frame=False)
-        frames = _decoded(container, stream, data_end)
+        if start and info.path != PIPE:  # to the keyframe before `start`; the frames before it are decoded and dropped
+            frames = _decoded_from(container, stream, start, half, data_end)
+        else:  # a pipe cannot seek ('Operation not permitted', or nothing read): its frames before `start` are dropped
+            frames = _decoded(container, stream, data_end)
         if deinterlace != "off":  # before the trim: the frames before `start` are the first one's field neighbours
             frames = _deinterlaced(frames, info, deinterlace, on_deinterlace)
         try:
@@ -480,6 +481,30 @@ def _decoded(container, stream, data_end: list) -> Iterator:
         if packet.size and packet.pos is not None and packet.pos >= 0:
             data_end[0] = packet.pos + packet.size
         yield from packet.decode()
+
+
+def _decoded_from(container, stream, start: float, half: float, data_end: list) -> Iterator:
+    """The stream's frames as decoded from the keyframe before `start` (seconds; `half`: half a frame). A seek can land
+    past it -- MPEG-TS lands on the packet at the time asked, keyframe or not, and nothing decodes until the next
+    keyframe: a trim lost the frames up to it, or all of them --: then again from further back (1, 4, 16 ... s before
+    `start`), in the end from the beginning, until the first frame decoded comes before `start`."""
+    back = 0.0
+    while True:
+        target = start - back
+        if target > 0:
+            container.seek(int(target / stream.time_base), stream=stream, backward=True, any_frame=False)
+        else:
+            container.seek(0)   # the container's beginning (in MPEG-TS a seek to the stream's first time lands past it)
+        frames = _decoded(container, stream, data_end)
+        first = next(frames, None)
+        ft = float(first.pts * first.time_base) if first is not None and first.pts is not None and first.time_base \
+            else None
+        if target <= 0 or (first is not None and (ft is None or ft < start - half)):
+            if first is not None:
+                yield first
+            yield from frames
+            return
+        back = back * 4 if back else 1.0
 
 
 def _deinterlaced(frames: Iterator, info: VideoInfo, mode: str, on_deinterlace) -> Iterator:
