@@ -481,3 +481,31 @@ def test_a_dnxhr_source_and_codec_dnxhd_are_written(tmp_path):
     assert r.exit_code == 0, r.output
     with av.open(str(tmp_path / "hqx.mov")) as c:
         assert c.streams.video[0].codec_context.profile == "DNXHR HQX"   # 10-bit: the profile that holds it
+
+
+@pytest.mark.parametrize("codec", ["apng", "png"])
+def test_a_colour_source_into_png_frames_keeps_its_colour(codec):
+    """APNG's and PNG's formats list a palette and grey before nothing YUV-like: the pick closest to a YUV source was
+    pal8 (every frame failed: 'write failed at frame 0: Operation not supported'), then grey (the colour dropped)."""
+    assert choose_pix_fmt(codec, "yuv420p", 64, 48) == "rgb24"
+    assert choose_pix_fmt(codec, "yuv420p10le", 64, 48) == "rgb48be"
+    assert choose_pix_fmt(codec, "yuva420p", 64, 48) == "rgba"   # not ya8: grey with alpha
+    assert choose_pix_fmt(codec, "pal8", 64, 48) == "rgb24"   # a palette's colours
+
+
+def test_a_gif_is_never_given_a_palette_nor_grey():
+    """GIF's encoder lists 3-3-2 RGB, grey and pal8: pal8, which swscale cannot write, or grey (the colour dropped)
+    were picked; its 3-3-2 RGB keeps colour (the writer names the 3 bits)."""
+    assert choose_pix_fmt("gif", "yuv420p", 64, 48) == "rgb8"
+    assert choose_pix_fmt("gif", "pal8", 64, 48) == "rgb8"
+
+
+def test_a_video_into_an_animated_png_is_written_in_colour(tmp_path):
+    src = os.path.join(os.path.dirname(__file__), "..", "fixtures", "demo", "clip.mp4")
+    r = run(src, "-o", tmp_path / "out.apng", "--audio", "none")
+    assert r.exit_code == 0, r.output
+    with av.open(str(tmp_path / "out.apng")) as c:
+        decoded = list(c.decode(video=0))
+    frames = [f.to_ndarray(format="rgb24") for f in decoded]
+    assert len(frames) == 10 and decoded[0].format.name == "rgb24"
+    assert np.abs(frames[0][..., 0].astype(int) - frames[0][..., 2]).max() > 50   # colour, not grey

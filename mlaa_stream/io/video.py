@@ -631,6 +631,10 @@ def choose_pix_fmt(codec: str, src_pix_fmt: str, width: int, height: int) -> str
     src_sub = src.chroma_width(2) < 2 or src.chroma_height(2) < 2
     lossless = codec in LOSSLESS_RGB_CODECS
 
+    def colours(fmt) -> int:
+        """Colour planes (alpha aside): 1 for grey; a palette's one plane of indices stands for colours."""
+        return 3 if fmt.name.startswith("pal") else sum(1 for c in fmt.components if not c.is_alpha)
+
     def key(name: str) -> tuple:
         f = av.VideoFormat(name)
         bits, alpha = _format_bits_alpha(name)
@@ -638,7 +642,10 @@ def choose_pix_fmt(codec: str, src_pix_fmt: str, width: int, height: int) -> str
         sub_h = f.chroma_height(2) < 2
         fits = (not sub_w or width % 2 == 0) and (not sub_h or height % 2 == 0)
         fits = fits or (salpha and name in (opened or ()))   # libvpx-vp9's yuva420p: any size
-        return (not fits, salpha and not alpha, bits < sbits, name.startswith(("nv", "yuvj", "bayer")),
+        # never a palette, which swscale cannot write (APNG's and GIF's first formats like YUV's, not RGB: every
+        # frame failed, ENOTSUP), and a colour source never to grey (the colour dropped) where the codec has colour
+        return (name.startswith("pal"), not fits, salpha and not alpha, colours(f) < colours(src), bits < sbits,
+                name.startswith(("nv", "yuvj", "bayer")),
                 lossless and not f.is_rgb, name != src_pix_fmt,
                 f.is_rgb != src.is_rgb, (sub_w or sub_h) != src_sub, abs(bits - sbits), alpha != salpha,
                 formats.index(name))
