@@ -509,3 +509,13 @@ def test_a_video_into_an_animated_png_is_written_in_colour(tmp_path):
     frames = [f.to_ndarray(format="rgb24") for f in decoded]
     assert len(frames) == 10 and decoded[0].format.name == "rgb24"
     assert np.abs(frames[0][..., 0].astype(int) - frames[0][..., 2]).max() > 50   # colour, not grey
+
+
+@pytest.mark.parametrize("name,audio", [("out.webm", "copy"), ("out.gif", "aac")])
+def test_audio_not_kept_suggests_re_encoding_only_where_it_helps(tmp_path, name, audio):
+    """The warning for audio a container cannot hold said '(--audio aac re-encodes the audio)' where AAC cannot go
+    either (WebM, GIF) and to a user who had asked for --audio aac."""
+    src = os.path.join(os.path.dirname(__file__), "..", "fixtures", "demo", "clip.mp4")
+    r = run(src, "-o", tmp_path / name, "--audio", audio)
+    assert r.exit_code == 0, r.output
+    assert "audio streams not kept" in r.output and "--audio aac" not in r.output

@@ -826,7 +826,10 @@ class VideoWriter:
                 self._out.start_encoding()
             except Exception as exc:  # e.g. SRT subtitles in MP4, or AAC in WebM
                 dropped = keep[-1]
-                hint = " (--audio aac re-encodes the audio)" if dropped == "audio" else " (MKV holds them)"
+                # re-encoding helps only where the container holds AAC and it was not asked already (GIF, APNG, WebP)
+                hint = (" (--audio aac re-encodes the audio)" if self.audio == "copy" and
+                        _container_holds(self._out.format.name, "aac") else "") if dropped == "audio" \
+                    else " (MKV holds them)"
                 self.warnings.append(f"{self.path}: {dropped} streams not kept: {self._out.format.name} "
                                      f"cannot hold them ({exc}){hint}")
                 self._close_quietly()
