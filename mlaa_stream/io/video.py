@@ -347,6 +347,9 @@ def _copy_tags(src: dict, dst) -> None:
             dst[key] = value
 
 
+# FFmpeg's default channel layout for a channel count (av_channel_layout_default): what a layout of unspecified order
+# is encoded as with --audio aac
+_DEFAULT_LAYOUTS = {1: "mono", 2: "stereo", 3: "2.1", 4: "4.0", 5: "5.0", 6: "5.1", 7: "6.1", 8: "7.1"}
 # Output formats whose muxer stores attachment streams (fonts for subtitles, cover art) in its header.
 _ATTACHMENT_FORMATS = ("matroska",)
 
@@ -901,7 +904,11 @@ class VideoWriter:
         for s in ins:
             if s.type == "audio" and self.audio == "aac":
                 out = self._out.add_stream("aac", rate=s.codec_context.sample_rate or 48000)
-                out.layout = s.codec_context.layout
+                layout = s.codec_context.layout
+                # a layout of unspecified order ("1 channels": PCM in MKV, WAV), which the AAC encoder refuses
+                # (avcodec_open2: Invalid argument, the audio dropped): the default layout of its channel count
+                unordered = layout.name.endswith(" channels")
+                out.layout = _DEFAULT_LAYOUTS.get(len(layout.channels), layout) if unordered else layout
                 self._decoders[s.index] = out
             else:
                 out = self._out.add_stream_from_template(s)
