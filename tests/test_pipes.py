@@ -171,3 +171,15 @@ def test_audio_on_standard_input_that_is_not_kept_is_named(tmp_path):
         r = subprocess.run([*CLI, "-", "-o", str(out), "-y", "--audio", "none"], stdin=stdin, capture_output=True,
                            text=True, timeout=300)
     assert r.returncode == 0 and "not kept" not in r.stderr, r.stderr
+
+
+def test_standard_output_in_a_format_ffmpeg_lacks_is_an_error_not_a_traceback(tmp_path):
+    """`-o - -f FORMAT` with a format FFmpeg has no muxer for: the writer's cleanup unlinked its temporary file, of
+    which standard output has none, and a TypeError traceback hid the message."""
+    from click.testing import CliRunner
+
+    from mlaa_stream.cli.main import main
+
+    r = CliRunner().invoke(main, [DEMO_CLIP, "-o", "-", "-f", "nosuchformat"])
+    assert r.exit_code == 1 and isinstance(r.exception, SystemExit), r.output
+    assert "no container format 'nosuchformat'" in r.output

@@ -758,7 +758,8 @@ class VideoWriter:
         try:
             self._open(tuple(k for k in kinds if (info.audio_streams if k == "audio" else info.subtitle_streams)))
         except VideoError:
-            remove_quietly(self._tmp)
+            if self._tmp is not None:   # standard output has none: unlink(None) hid the error under a TypeError
+                remove_quietly(self._tmp)
             raise
         except Exception as exc:
             self._close_quietly()
