@@ -503,7 +503,7 @@ class VideoJob(Job):
         temporary files of killed runs there are removed."""
         from mlaa_stream.io.images import remove_quietly, stale_temp_files
         from mlaa_stream.io.sequence import same_file
-        from mlaa_stream.io.video import PIPE
+        from mlaa_stream.io.video import PIPE, is_special_file
 
         o = self.opts
         if os.path.isdir(out) or out.endswith(("/", os.sep)):
@@ -513,6 +513,8 @@ class VideoJob(Job):
             raise Usage(f"{out}: output is the input; choose another output")
         if o["resume"]:
             self.con.warn("--resume applies to folders and sequences; a video is redone")
+        if is_special_file(out):   # /dev/null, a named pipe: written into, nothing replaced, nothing left beside it
+            return
         if os.path.exists(out) and not o["overwrite"]:
             raise Usage(f"{out}: exists; use --overwrite to replace it")
         folder = os.path.dirname(os.path.abspath(out))

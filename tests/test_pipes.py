@@ -183,3 +183,32 @@ def test_standard_output_in_a_format_ffmpeg_lacks_is_an_error_not_a_traceback(tm
     r = CliRunner().invoke(main, [DEMO_CLIP, "-o", "-", "-f", "nosuchformat"])
     assert r.exit_code == 1 and isinstance(r.exception, SystemExit), r.output
     assert "no container format 'nosuchformat'" in r.output
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="no named pipes here")
+def test_a_named_pipe_as_output_is_written_into_not_replaced(tmp_path):
+    """-o FIFO (a player reading a named pipe; /dev/null alike): the video was written under a temporary name and
+    renamed over it, replacing the pipe (or, as root, the device node /dev/null) with a regular file."""
+    import io
+    import stat
+    import threading
+
+    from click.testing import CliRunner
+
+    from mlaa_stream.cli.main import main
+
+    fifo = tmp_path / "player"
+    os.mkfifo(fifo)
+    got = []
+    reader = threading.Thread(target=lambda: got.append(open(fifo, "rb").read()), daemon=True)
+    reader.start()
+    r = CliRunner().invoke(main, [DEMO_CLIP, "-o", str(fifo), "-f", "matroska"])
+    reader.join(timeout=10)
+    if reader.is_alive():   # nothing opened the pipe to write (the run refused it): let the reader go
+        with open(fifo, "wb"):
+            pass
+        reader.join(timeout=10)
+    assert r.exit_code == 0, r.output
+    assert stat.S_ISFIFO(os.stat(fifo).st_mode) and sorted(os.listdir(tmp_path)) == ["player"]
+    with av.open(io.BytesIO(got[0])) as c:
+        assert sum(1 for _ in c.decode(video=0)) == 10

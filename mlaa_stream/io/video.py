@@ -136,6 +136,18 @@ def is_video_path(path: str) -> bool:
     return os.path.splitext(path)[1].lower() in VIDEO_EXTENSIONS
 
 
+def is_special_file(path: str) -> bool:
+    """Whether `path` exists as something other than a regular file or a folder: a device (/dev/null), a named pipe,
+    a socket -- written into as it is, never replaced."""
+    import stat
+
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        return False
+    return not (stat.S_ISREG(mode) or stat.S_ISDIR(mode))
+
+
 def _require_av() -> None:
     if av is None:
         raise VideoError(f"PyAV cannot be imported ({_AV_ERROR}); use --video-backend opencv "
@@ -743,7 +755,9 @@ class VideoWriter:
         self._last_pts: int | None = None  # the last frame's, in the stream's time base: each next one is later
         self._retimed = 0  # frames whose source timestamp was not after the one before
         self.warnings: list[str] = dropped
-        self._tmp = None if path == PIPE else temp_path_for(path)  # standard output: written as it comes
+        # standard output, and a device or named pipe (/dev/null, a FIFO a player reads): written as it comes; renamed
+        # into place, a temporary file replaced the device node itself (as root, /dev/null became a regular file)
+        self._tmp = None if path == PIPE or is_special_file(path) else temp_path_for(path)
         self._options = {**encoder_options(codec, crf, preset), **(extra_options or {})}
         if codec == "dnxhd":
             self._options = {**_dnxhd_options(info, self.pix_fmt), **self._options}
@@ -771,7 +785,7 @@ class VideoWriter:
         ("audio", "subtitle"); where the container cannot hold them, try again with fewer, and say so."""
         info = self.info
         try:
-            target = sys.stdout.buffer if self._tmp is None else self._tmp
+            target = self._tmp if self._tmp is not None else sys.stdout.buffer if self.path == PIPE else self.path
             # y4m's muxer takes more than 8 bits per sample only as a non-standard extension
             options = {"strict": "-1"} if self.container_format in _RAW_FORMATS and info.bits > 8 else None
             self._out = av.open(target, "w", format=self.container_format, options=options)
