@@ -519,3 +519,16 @@ def test_audio_not_kept_suggests_re_encoding_only_where_it_helps(tmp_path, name,
     r = run(src, "-o", tmp_path / name, "--audio", audio)
     assert r.exit_code == 0, r.output
     assert "audio streams not kept" in r.output and "--audio aac" not in r.output
+
+
+def test_crf_and_encoder_preset_an_encoder_ignores_are_named(tmp_path):
+    """--crf and --encoder-preset set x264 / x265 (--crf VP9 / AV1 too): given with ProRes they were dropped without
+    a word, as the options that do nothing for images are not."""
+    if "prores_ks" not in av.codecs_available:
+        pytest.skip("this FFmpeg has no prores_ks encoder")
+    src = os.path.join(os.path.dirname(__file__), "..", "fixtures", "demo", "clip.mp4")
+    r = run(src, "-o", tmp_path / "out.mov", "--codec", "prores_ks", "--crf", "10", "--encoder-preset", "slow")
+    assert r.exit_code == 0, r.output
+    assert "--crf, --encoder-preset have no effect with prores_ks" in r.output
+    r = run(src, "-o", tmp_path / "out.mp4", "--crf", "10", "--encoder-preset", "slow")
+    assert r.exit_code == 0 and "no effect" not in r.output, r.output
