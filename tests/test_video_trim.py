@@ -162,3 +162,17 @@ def test_a_trim_of_standard_input_reads_on_to_the_start(tmp_path):
                             "--start", "1", "--end", "1.4"], stdin=stdin, capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
     assert _columns(out) == list(range(25, 35))
+
+
+def test_a_trim_of_a_raw_h264_stream_counts_its_frames(tmp_path):
+    """A raw H.264 stream (a Raspberry Pi camera's .h264) has no timestamps: FFmpeg cannot seek it ('decoding stopped
+    at frame 0: Operation not permitted'), and a trim could not place its frames; they are placed at the nominal
+    rate, as the writer times them, and read from the beginning."""
+    src = tmp_path / "cam.h264"
+    _gop_clip(src, "h264")
+    r = run(src, "-o", tmp_path / "t.mkv", "--start", "0.5", "--end", "1.0")
+    assert r.exit_code == 0, stderr(r)
+    assert _columns(tmp_path / "t.mkv") == list(range(12, 25))
+    r = run(src, "-o", tmp_path / "e.mkv", "--end", "0.4")
+    assert r.exit_code == 0, stderr(r)
+    assert _columns(tmp_path / "e.mkv") == list(range(0, 10))

@@ -453,15 +453,22 @@ def read_video(info: VideoInfo, *, check_length: bool = True, start: float | Non
         stream = container.streams.video[0]
         stream.thread_type = "AUTO"
         sws = _sws_flags()
+        from_start = [True]   # the frames come from the stream's beginning (no seek), as they do without `start`
         if start and info.path != PIPE:  # to the keyframe before `start`; the frames before it are decoded and dropped
-            frames = _decoded_from(container, stream, start, half, data_end)
+            frames = _decoded_from(container, stream, start, half, data_end, from_start, info.path)
         else:  # a pipe cannot seek ('Operation not permitted', or nothing read): its frames before `start` are dropped
             frames = _decoded(container, stream, data_end)
         if deinterlace != "off":  # before the trim: the frames before `start` are the first one's field neighbours
             frames = _deinterlaced(frames, info, deinterlace, on_deinterlace)
+        decoded = 0   # frames decoded so far, those before `start` too
         try:
             for frame in frames:
                 ft = float(frame.pts * frame.time_base) if frame.pts is not None and frame.time_base else None
+                if ft is None and from_start[0] and (start or end is not None):
+                    # no timestamps (a raw H.264 / HEVC stream, a Raspberry Pi's .h264): its place at the nominal
+                    # rate, as the writer times it; a trim kept every frame
+                    ft = decoded / float(info.fps or 25)
+                decoded += 1
                 if start and ft is not None and ft < start - half:
                     continue
                 if end is not None and ft is not None and ft >= end - half:
@@ -498,18 +505,32 @@ def _decoded(container, stream, data_end: list) -> Iterator:
         yield from packet.decode()
 
 
-def _decoded_from(container, stream, start: float, half: float, data_end: list) -> Iterator:
+def _decoded_from(container, stream, start: float, half: float, data_end: list, from_start: list,
+                  path: str) -> Iterator:
     """The stream's frames as decoded from the keyframe before `start` (seconds; `half`: half a frame). A seek can land
     past it -- MPEG-TS lands on the packet at the time asked, keyframe or not, and nothing decodes until the next
     keyframe: a trim lost the frames up to it, or all of them --: then again from further back (1, 4, 16 ... s before
-    `start`), in the end from the beginning, until the first frame decoded comes before `start`."""
+    `start`), in the end from the beginning, until the first frame decoded comes before `start`. A stream FFmpeg cannot
+    seek (raw H.264 / HEVC, without timestamps: 'Operation not permitted') is read from its beginning.
+    `from_start[0]`: set False where the frames come from a seek, not the beginning. `path`: the file, opened again."""
     back = 0.0
     while True:
         target = start - back
-        if target > 0:
-            container.seek(int(target / stream.time_base), stream=stream, backward=True, any_frame=False)
-        else:
-            container.seek(0)   # the container's beginning (in MPEG-TS a seek to the stream's first time lands past it)
+        try:
+            if target > 0:
+                container.seek(int(target / stream.time_base), stream=stream, backward=True, any_frame=False)
+            else:
+                container.seek(0)   # the beginning (MPEG-TS's seek to its stream's first time lands past it)
+        except av.error.FFmpegError:
+            if back:
+                raise
+            # the failed seek read the stream to its end looking for timestamps: from the beginning of a new opening
+            with av.open(path) as fresh:
+                again = fresh.streams.video[0]
+                again.thread_type = "AUTO"
+                yield from _decoded(fresh, again, data_end)
+            return
+        from_start[0] = target <= 0
         frames = _decoded(container, stream, data_end)
         first = next(frames, None)
         ft = float(first.pts * first.time_base) if first is not None and first.pts is not None and first.time_base \
