@@ -211,3 +211,27 @@ def test_audio_aac_re_encodes_pcm_of_unspecified_layout(tmp_path):
     with av.open(str(out)) as c:
         assert c.streams.audio[0].codec_context.name == "aac"
         assert sum(f.samples for f in c.decode(audio=0)) >= 19200 - 1024
+
+
+@pytest.mark.parametrize("ext,kept", [("mp4", True), ("mkv", True), ("ts", False), ("avi", False)])
+def test_a_rotation_the_output_cannot_store_is_named(tmp_path, ext, kept):
+    """A phone's clip says it is displayed turned (its display matrix): MP4, MOV, MKV and WebM keep that; AVI, MPEG-TS,
+    NUT and y4m have nowhere to put it, and the output played on its side without a word."""
+    src = tmp_path / "phone.mp4"
+    with av.open(str(src), "w") as out:
+        s = out.add_stream("libx264", rate=25)
+        s.width, s.height, s.pix_fmt = 64, 48, "yuv420p"
+        s.set_display_rotation(90)
+        for i in range(12):
+            img = np.zeros((48, 64, 3), np.uint8)
+            img[:, 20 + i:] = 200
+            for p in s.encode(av.VideoFrame.from_ndarray(img, format="rgb24")):
+                out.mux(p)
+        for p in s.encode():
+            out.mux(p)
+    r = run(src, "-o", tmp_path / f"out.{ext}")
+    assert r.exit_code == 0, r.output
+    with av.open(str(tmp_path / f"out.{ext}")) as c:
+        rotation = next(c.decode(video=0)).rotation
+    assert (rotation == 90) == kept
+    assert ("display rotation of" in r.output and "90 degrees) not kept" in r.output) == (not kept)

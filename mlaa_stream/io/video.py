@@ -54,6 +54,9 @@ _FPS_TIME_BASE_FORMATS = frozenset({"avi"})
 # Encoders that store the pixel aspect ratio in their bitstream (H.264/HEVC VUI, MPEG-4 Part 2's VOL): kept in any
 # container.
 _SAR_IN_BITSTREAM = frozenset({"libx264", "libx264rgb", "libx265", "mpeg4"})
+# Containers that store a display rotation (a display matrix), measured with PyAV 18 / FFmpeg 8: not AVI, MPEG-TS,
+# NUT, y4m, MXF, FLV, ASF, MPEG-PS.
+_ROTATION_FORMATS = frozenset({"mp4", "mov", "ipod", "3gp", "3g2", "ismv", "matroska", "webm"})
 # Containers that store it from the stream, which PyAV cannot set (MP4/MOV take the codec's parameters): with any
 # other encoder it is lost -- y4m's A tag written 0:0, measured with PyAV 18 / FFmpeg 8 for each of these.
 _SAR_FROM_STREAM_FORMATS = frozenset({"matroska", "webm", "yuv4mpegpipe", "nut", "avi"})
@@ -821,6 +824,11 @@ class VideoWriter:
         stream = self._out.add_stream(self.codec, rate=rate, options=dict(self._options))
         if info.rotation:
             stream.set_display_rotation(info.rotation)
+            if not any(f in _ROTATION_FORMATS for f in self._out.format.name.split(",")):
+                # AVI, MPEG-TS, NUT, y4m ... have no display matrix: a phone's clip played on its side without a word
+                self.warnings.append(f"{self.path}: display rotation of {info.path} ({info.rotation} degrees) not "
+                                     f"kept: {self._out.format.name} does not store it (MP4, MOV, MKV and WebM do); it "
+                                     f"plays as stored")
         self._copy_metadata(stream)
         stream.width, stream.height = info.width, info.height
         stream.pix_fmt = self.pix_fmt
