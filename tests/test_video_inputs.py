@@ -532,3 +532,28 @@ def test_crf_and_encoder_preset_an_encoder_ignores_are_named(tmp_path):
     assert "--crf, --encoder-preset have no effect with prores_ks" in r.output
     r = run(src, "-o", tmp_path / "out.mp4", "--crf", "10", "--encoder-preset", "slow")
     assert r.exit_code == 0 and "no effect" not in r.output, r.output
+
+
+def test_a_variable_frame_rate_into_a_container_of_one_rate_is_not_called_damaged(tmp_path):
+    """AVI and y4m hold one frame per tick of 1/rate: a variable-rate source's frames closer than that share a tick,
+    and the warning blamed the input ('timestamp not after the previous frame's (damaged input?)')."""
+    src = tmp_path / "vfr.mkv"
+    tb = Fraction(1, 1000)
+    with av.open(str(src), "w") as out:
+        s = out.add_stream("libx264", rate=25)
+        s.width, s.height, s.pix_fmt = 64, 48, "yuv420p"
+        s.time_base = s.codec_context.time_base = tb
+        t = 0
+        for i in range(12):
+            img = np.zeros((48, 64, 3), np.uint8)
+            img[:, 20 + i:] = 200
+            f = av.VideoFrame.from_ndarray(img, format="rgb24")
+            f.pts, f.time_base = t, tb
+            for p in s.encode(f):
+                out.mux(p)
+            t += 40 if i % 3 else 100   # 25 fps on average, in steps of 40 and 100 ms
+        for p in s.encode():
+            out.mux(p)
+    r = run(src, "-o", tmp_path / "out.avi")
+    assert r.exit_code == 0, r.output
+    assert "a variable frame rate" in r.output and "damaged" not in r.output

@@ -778,6 +778,7 @@ class VideoWriter:
         self.last_time: float | None = None  # seconds, end of the last frame written
         self._last_pts: int | None = None  # the last frame's, in the stream's time base: each next one is later
         self._retimed = 0  # frames whose source timestamp was not after the one before
+        self._last_t: Fraction | None = None  # the last frame's time as the source gave it (seconds)
         self.warnings: list[str] = dropped
         # standard output, and a device or named pipe (/dev/null, a FIFO a player reads): written as it comes; renamed
         # into place, a temporary file replaced the device node itself (as root, /dev/null became a regular file)
@@ -979,15 +980,21 @@ class VideoWriter:
         else:
             t = self.frames_written / (self.info.fps or Fraction(25))
         pts = int(round(t / tb))
+        source_t, previous_t, self._last_t = t, self._last_t, t
         if self._last_pts is not None and pts <= self._last_pts:
             # a damaged timestamp (a corrupt block's, or one far ahead before it): the muxer refuses a frame
             # that is not after the one before; it goes one frame after that one instead
             t = (self._last_pts + 1) * tb + (1 / (self.info.fps or Fraction(25)) - tb)
             pts = int(round(t / tb))
             if not self._retimed:
-                self.warnings.append(f"{self.path}: frame {self.frames_written} (and any later like it): timestamp "
-                                     f"not after the previous frame's (damaged input?): written one frame after "
-                                     f"it, later than in the source")
+                # a variable frame rate into a container of one rate (AVI, y4m: a time base of one frame): frames
+                # closer than a frame apart share a tick, and were called damaged
+                why = ("timestamp not after the previous frame's (damaged input?)"
+                       if previous_t is None or source_t <= previous_t else
+                       f"less than a frame after the previous one (a variable frame rate), and "
+                       f"{self._out.format.name} here holds one frame per 1/{1 / tb} s")
+                self.warnings.append(f"{self.path}: frame {self.frames_written} (and any later like it): {why}: "
+                                     f"written one frame after it, later than in the source")
             self._retimed += 1
         vf.pts = self._last_pts = pts
         vf.time_base = tb
