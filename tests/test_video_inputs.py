@@ -557,3 +557,18 @@ def test_a_variable_frame_rate_into_a_container_of_one_rate_is_not_called_damage
     r = run(src, "-o", tmp_path / "out.avi")
     assert r.exit_code == 0, r.output
     assert "a variable frame rate" in r.output and "damaged" not in r.output
+
+
+def test_a_crf_over_x265s_range_is_named_and_encoded_at_its_most(tmp_path):
+    """--crf takes up to 63 (VP9, AV1): libx265 refused more than 51 ('cannot start encoding ... Invalid data found
+    when processing input'), and libx264 took it as 51 without a word."""
+    src = os.path.join(os.path.dirname(__file__), "..", "fixtures", "demo", "clip.mp4")
+    for codec in ("libx265", "libx264"):
+        if codec not in av.codecs_available:
+            continue
+        out = tmp_path / f"{codec}.mkv"
+        r = run(src, "-o", out, "--codec", codec, "--crf", "60")
+        assert r.exit_code == 0, r.output
+        assert f"--crf 60: {codec} takes 0 to 51" in r.output
+        with av.open(str(out)) as c:
+            assert sum(1 for _ in c.decode(video=0)) == 10

@@ -820,6 +820,13 @@ class VideoWriter:
         if self._codec_chosen is not None and not _container_holds(self._out.format.name, self.codec):
             self._take_containers_codec()
         self._keep_hdr10()
+        crf = self._options.get("crf")
+        if self.codec in ("libx264", "libx264rgb", "libx265") and crf is not None and float(crf) > 51:
+            # --crf goes to 63 for VP9 and AV1; x264 took more as 51 without a word, x265 refused to start
+            # ('Invalid data found when processing input')
+            self.warnings.append(f"{self.path}: --crf {crf}: {self.codec} takes 0 to 51 (VP9 and AV1 up to 63); "
+                                 f"encoded at 51")
+            self._options["crf"] = "51"
         if self.codec == "libsvtav1":   # SVT-AV1 logs its whole configuration on stderr; errors only (SVT_LOG=1)
             os.environ.setdefault("SVT_LOG", "1")
         stream = self._out.add_stream(self.codec, rate=rate, options=dict(self._options))
