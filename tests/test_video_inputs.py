@@ -572,3 +572,24 @@ def test_a_crf_over_x265s_range_is_named_and_encoded_at_its_most(tmp_path):
         assert f"--crf 60: {codec} takes 0 to 51" in r.output
         with av.open(str(out)) as c:
             assert sum(1 for _ in c.decode(video=0)) == 10
+
+
+def test_a_subsampled_pix_fmt_at_an_odd_size_names_the_cause(tmp_path):
+    """--pix-fmt yuv420p for a 161x91 source: x264 failed with 'Generic error in an external library', naming no
+    cause; the error now says the format halves the chroma, which an odd size cannot."""
+    src = tmp_path / "odd.mkv"
+    with av.open(str(src), "w") as out:
+        s = out.add_stream("libx264", rate=25)
+        s.width, s.height, s.pix_fmt = 65, 47, "yuv444p"
+        for i in range(3):
+            img = np.zeros((47, 65, 3), np.uint8)
+            img[:, 20 + i:] = 200
+            for p in s.encode(av.VideoFrame.from_ndarray(img, format="rgb24")):
+                out.mux(p)
+        for p in s.encode():
+            out.mux(p)
+    r = run(src, "-o", tmp_path / "out.mkv", "--pix-fmt", "yuv420p")
+    assert r.exit_code == 1 and "yuv420p halves the chroma, which 65x47 cannot" in r.output, r.output
+    r = run(src, "-o", tmp_path / "out.mkv", "--pix-fmt", "nosuchformat")
+    assert r.exit_code == 1 and "not a pixel format" in r.output and "halves" not in r.output, r.output
+    assert os.listdir(tmp_path) == ["odd.mkv"]

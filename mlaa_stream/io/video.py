@@ -802,7 +802,15 @@ class VideoWriter:
             raise
         except Exception as exc:
             self._close_quietly()
-            raise VideoError(f"{path}: cannot start encoding with {self.codec} ({self.pix_fmt}): {exc}") from exc
+            try:
+                fmt = av.VideoFormat(self.pix_fmt)
+                odd = (fmt.chroma_width(2) < 2 and info.width % 2) or (fmt.chroma_height(2) < 2 and info.height % 2)
+            except ValueError:   # no such pixel format: the error says so
+                odd = False
+            # x264's "Generic error in an external library" for --pix-fmt yuv420p at 161x91 named no cause
+            hint = (f" ({self.pix_fmt} halves the chroma, which {info.width}x{info.height} cannot: a 4:4:4 format, "
+                    f"or leave --pix-fmt out)" if odd else "")
+            raise VideoError(f"{path}: cannot start encoding with {self.codec} ({self.pix_fmt}): {exc}{hint}") from exc
 
     # -- setup ---------------------------------------------------------------------------------
     def _open(self, keep: tuple[str, ...]) -> None:
