@@ -268,7 +268,8 @@ def _job_for(kind: str, output: str) -> type:
 @click.option("--codec", default=None,
               help="Video encoder: libx264, libx265, ffv1 / libx264rgb (lossless intermediates), "
                    "prores_ks ... (default: the source's family, HEVC -> libx265, ProRes -> prores_ks, "
-                   "FFV1 -> ffv1; others libx264; the container's own where it cannot hold that one: WebM -> VP9).")
+                   "FFV1 -> ffv1, AV1 -> libaom-av1 or libsvtav1, DNxHR -> dnxhd; others libx264; the container's "
+                   "own where it cannot hold that one: WebM -> VP9).")
 @click.option("-f", "--format", "container", default=None, metavar="NAME",
               help="Output container (FFmpeg's name, or y4m / mkv / ts); needed with -o - (standard "
                    "output): y4m (raw, 8-16 bit), nut, matroska, mpegts. Default: from the file name.")
