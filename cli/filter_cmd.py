@@ -53,7 +53,8 @@ just before the first one to write through the temporal stage (its history, outp
 NaN and infinite samples pass through unchanged.
 
 \b
-Video goes through PyAV (FFmpeg): frame rate, timestamps, resolution, pixel aspect ratio, colour
+Video goes through PyAV (FFmpeg): frame rate, timestamps (from the first one: an MPEG-TS capture's
+clock offset is dropped, as FFmpeg does), resolution, pixel aspect ratio, colour
 tags, HDR10 mastering display and light levels (with libx265) and audio are kept; a source with more
 than 8 bits per sample stays 10/12/16-bit where the codec allows it. An interlaced source (its stream's
 field order, or its frames, say so) is deinterlaced with bwdif (yadif where FFmpeg lacks it) before the

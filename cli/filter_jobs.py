@@ -486,7 +486,11 @@ class VideoJob(Job):
                 self.writer = VideoWriter(out, self.info, codec=o["codec"], crf=o["crf"],
                                           preset=o["encoder_preset"], pix_fmt=o["pix_fmt"],
                                           overwrite=o["overwrite"], audio=o["audio"],
-                                          offset=self.start or 0.0, end=self.end,
+                                          # from --start, else from the container's first timestamp, as FFmpeg
+                                          # writes a file: an MPEG-TS capture's hours of offset made a 1-s MKV
+                                          # 'last' 16:41 and an MP4 open on a long empty edit
+                                          offset=self.start if self.start is not None else self.info.start_time,
+                                          end=self.end,
                                           container_format=container_format_for(o.get("container"), out))
         except VideoError as exc:
             raise Failed(str(exc)) from exc

@@ -176,3 +176,60 @@ def test_a_trim_of_a_raw_h264_stream_counts_its_frames(tmp_path):
     r = run(src, "-o", tmp_path / "e.mkv", "--end", "0.4")
     assert r.exit_code == 0, stderr(r)
     assert _columns(tmp_path / "e.mkv") == list(range(0, 10))
+
+
+def _late_ts(path, first_s: int = 1000) -> None:
+    """An MPEG-TS capture whose clock starts at `first_s` seconds: 25 frames at 25 fps and a second of AAC from the
+    same time."""
+    import av
+    import numpy as np
+    from fractions import Fraction
+
+    tb = Fraction(1, 90000)
+    with av.open(str(path), "w", format="mpegts") as out:
+        v = out.add_stream("libx264", rate=25)
+        v.width, v.height, v.pix_fmt = 96, 64, "yuv420p"
+        v.time_base = v.codec_context.time_base = tb
+        a = out.add_stream("aac", rate=48000)
+        for i in range(25):
+            img = np.full((64, 96, 3), 30, np.uint8)
+            img[:, 10 + i:14 + i] = 230
+            f = av.VideoFrame.from_ndarray(img, format="rgb24")
+            f.pts, f.time_base = first_s * 90000 + 3600 * i, tb
+            for p in v.encode(f):
+                out.mux(p)
+        for p in v.encode():
+            out.mux(p)
+        tone = (0.2 * np.sin(np.arange(48000) / 10)).astype(np.float32)[None]
+        for k in range(0, 48000, 1024):
+            f = av.AudioFrame.from_ndarray(tone[:, k:k + 1024], format="fltp", layout="mono")
+            f.sample_rate, f.pts, f.time_base = 48000, first_s * 48000 + k, Fraction(1, 48000)
+            for p in a.encode(f):
+                out.mux(p)
+        for p in a.encode():
+            out.mux(p)
+
+
+def test_a_capture_whose_clock_starts_late_is_written_from_zero(tmp_path):
+    """An MPEG-TS capture's timestamps start where the broadcast clock was (here 1000 s): kept as they were, a 1-s MKV
+    said it lasted 16:41 and an MP4 opened on an empty edit that long. The output starts at 0, as FFmpeg writes files;
+    the streams keep their places against each other and every audio packet is copied."""
+    import av
+
+    src = tmp_path / "cap.ts"
+    _late_ts(src)
+    r = run(src, "-o", tmp_path / "out.mkv")
+    assert r.exit_code == 0, stderr(r)
+    with av.open(str(src)) as c:
+        src_audio = sum(1 for p in c.demux(audio=0) if p.size)
+        v0 = float(c.streams.video[0].start_time * c.streams.video[0].time_base)
+        a0 = float(c.streams.audio[0].start_time * c.streams.audio[0].time_base)
+    with av.open(str(tmp_path / "out.mkv")) as c:
+        assert c.duration / 1e6 < 2
+        assert sum(1 for p in c.demux(audio=0) if p.size) == src_audio
+    with av.open(str(tmp_path / "out.mkv")) as c:
+        video = [float(f.pts * f.time_base) for f in c.decode(video=0)]
+    with av.open(str(tmp_path / "out.mkv")) as c:
+        audio = [float(p.pts * p.time_base) for p in c.demux(audio=0) if p.size]
+    assert len(video) == 25 and min(video[0], audio[0]) < 0.01
+    assert abs((video[0] - audio[0]) - (v0 - a0)) < 0.002   # in sync as in the source

@@ -362,6 +362,8 @@ def _copy_tags(src: dict, dst) -> None:
             dst[key] = value
 
 
+# Seconds a copied packet may lie before the output's start and still be kept (at 0): rounding, not content.
+_START_SLACK = 0.001
 # FFmpeg's default channel layout for a channel count (av_channel_layout_default): what a layout of unspecified order
 # is encoded as with --audio aac
 _DEFAULT_LAYOUTS = {1: "mono", 2: "stereo", 3: "2.1", 4: "4.0", 5: "5.0", 6: "5.1", 7: "6.1", 8: "7.1"}
@@ -1057,11 +1059,13 @@ class VideoWriter:
                 return
             self._lookahead = None
             if self.offset:
-                if t < 0:
-                    continue  # before --start
+                # before --start (or the container's first timestamp); the offset is a float and the container's
+                # start time whole microseconds: a packet at the very start came out a hair before it, and was lost
+                if t < -_START_SLACK:
+                    continue
                 shift = int(round(self.offset / pkt.time_base))
-                pkt.pts = None if pkt.pts is None else pkt.pts - shift
-                pkt.dts = None if pkt.dts is None else pkt.dts - shift
+                pkt.pts = None if pkt.pts is None else max(0, pkt.pts - shift)
+                pkt.dts = None if pkt.dts is None else max(0, pkt.dts - shift)
             index = pkt.stream.index
             if index in self._decoders:  # --audio aac: decode, re-encode
                 for frame in pkt.decode():
