@@ -53,7 +53,8 @@ just before the first one to write through the temporal stage (its history, outp
 NaN and infinite samples pass through unchanged.
 
 \b
-Video goes through PyAV (FFmpeg): frame rate, timestamps, resolution, pixel aspect ratio, colour
+Video goes through PyAV (FFmpeg): frame rate, timestamps (from the first one: an MPEG-TS capture's
+clock offset is dropped, as FFmpeg does), resolution, pixel aspect ratio, colour
 tags, HDR10 mastering display and light levels (with libx265) and audio are kept; a source with more
 than 8 bits per sample stays 10/12/16-bit where the codec allows it. An interlaced source (its stream's
 field order, or its frames, say so) is deinterlaced with bwdif (yadif where FFmpeg lacks it) before the
@@ -138,13 +139,17 @@ def _kind_of(path: str) -> str:
     if inp is not None:
         inp.close()
         return "image"
+    # clear the failed probe's error: left pending, OpenImageIO printed it at exit ("... exited with a pending error
+    # message ... could not find a format reader for ...") after a video without a known extension was filtered
+    oiio.geterror()
     return "video"  # probe_video says so if it is not one either
 
 
-def _warn_unused_options(ctx: click.Context, con: Console, kind: str, job: type) -> None:
+def _warn_unused_options(ctx: click.Context, con: Console, kind: str, job: type, runner: object = None) -> None:
     """Options given on the command line (not defaults) that this job has no use for: a warning each, not an
     error (--rate with a video input, the encoder's, container's and audio options with images out, --audio
-    copy/aac and --deinterlace with images in)."""
+    copy/aac and --deinterlace with images in, --crf and --encoder-preset with an encoder that has no such setting:
+    `runner`'s writer says which encoder it took)."""
     from mlaa_stream.cli.convert_jobs import SequenceToVideoJob, VideoToImagesJob
 
     def given(name: str) -> bool:
@@ -162,6 +167,18 @@ def _warn_unused_options(ctx: click.Context, con: Console, kind: str, job: type)
     if given("audio") and job is SequenceToVideoJob and ctx.params.get("audio") != "none":
         con.warn(f"--audio {ctx.params['audio']} has no effect here: it sets what happens to a video's audio "
                  f"tracks, and images have none (the video is made without audio)")
+    writer = getattr(runner, "writer", None)
+    if writer is not None and (given("crf") or given("encoder_preset")):
+        # ProRes, FFV1, DNxHD ... take neither (the OpenCV fallback's mp4v neither): they were dropped without a word
+        from mlaa_stream.io.video import encoder_options
+        codec = getattr(writer, "codec", "mp4v (the OpenCV fallback)")
+        takes = encoder_options(codec, 0, "preset")
+        flags = (("crf", "--crf", "crf"), ("encoder_preset", "--encoder-preset", "preset"))
+        unused = [flag for name, flag, key in flags if given(name) and key not in takes]
+        if unused:
+            con.warn(f"{', '.join(unused)} {'has' if len(unused) == 1 else 'have'} no effect with {codec}: "
+                     f"{'it sets' if len(unused) == 1 else 'they set'} x264 / x265 "
+                     f"{'(and VP9 / AV1) ' if '--crf' in unused else ''}encoding")
     if job is ImageJob or job is VideoToImagesJob:   # images out: no video encoder, container or audio
         encoder = (("codec", "--codec"), ("crf", "--crf"), ("encoder_preset", "--encoder-preset"),
                    ("pix_fmt", "--pix-fmt"))
@@ -252,7 +269,8 @@ def _job_for(kind: str, output: str) -> type:
 @click.option("--codec", default=None,
               help="Video encoder: libx264, libx265, ffv1 / libx264rgb (lossless intermediates), "
                    "prores_ks ... (default: the source's family, HEVC -> libx265, ProRes -> prores_ks, "
-                   "FFV1 -> ffv1; others libx264; the container's own where it cannot hold that one: WebM -> VP9).")
+                   "FFV1 -> ffv1, AV1 -> libaom-av1 or libsvtav1, DNxHR -> dnxhd; others libx264; the container's "
+                   "own where it cannot hold that one: WebM -> VP9).")
 @click.option("-f", "--format", "container", default=None, metavar="NAME",
               help="Output container (FFmpeg's name, or y4m / mkv / ts); needed with -o - (standard "
                    "output): y4m (raw, 8-16 bit), nut, matroska, mpegts. Default: from the file name.")
@@ -508,7 +526,7 @@ def _filter(ctx: click.Context, con: Console, input_path: str, output: str, *, o
                      encoder_preset=encoder_preset, pix_fmt=pix_fmt, rate=rate, jpeg_quality=jpeg_quality,
                      video_backend=video_backend, deinterlace=deinterlace, filter_kwargs=kwargs, transfer=transfer)
         runner.prepare()
-        _warn_unused_options(ctx, con, kind, job)
+        _warn_unused_options(ctx, con, kind, job, runner)
         transfer = getattr(runner, "transfer", None)
         if transfer is not None and kwargs.get("linear", True):  # --display-space: the codes' own mix, as asked
             kwargs["transfer"] = transfer   # the same dict the job holds: a cluster's workers get it too

@@ -46,7 +46,9 @@ def check_writable(folder: str) -> None:
 
 
 def video_trim(opts: dict, info) -> tuple[float | None, float | None]:
-    """--start/--end of a video input in seconds (None: not given); refused when empty or backwards."""
+    """--start/--end of a video input in seconds on its timestamps (None: not given); refused when empty or backwards.
+    The user's times count from the video's first timestamp (VideoInfo.start_time: an MPEG-TS capture's may be hours),
+    as FFmpeg's -ss: taken as timestamps, --start 1:30 kept the whole of a video starting at 10 s and shifted it."""
     from mlaa_stream.io.video import parse_time
 
     try:
@@ -58,7 +60,8 @@ def video_trim(opts: dict, info) -> tuple[float | None, float | None]:
         raise Usage(f"--end ({opts['end']}) must come after --start ({opts['start']})")
     if opts["video_backend"] == "opencv" and (start or end is not None):
         raise Usage("--start/--end need the pyav video backend")
-    return start, end
+    t0 = getattr(info, "start_time", 0.0)
+    return (None if start is None else start + t0), (None if end is None else end + t0)
 
 
 class SequenceTemporal:
@@ -522,6 +525,7 @@ class VideoJob(Job):
         out = self.output
         if out != PIPE:
             self._check_output_file(out)
+            out = self.output   # a folder: the input's name in it (the writer was given the folder itself)
         elif o.get("progress_path") == PIPE:
             raise Usage("--progress - and -o - both want standard output; give --progress a file")
         if (self.input == PIPE or out == PIPE) and o["video_backend"] == "opencv":
@@ -548,7 +552,11 @@ class VideoJob(Job):
                 self.writer = VideoWriter(out, self.info, codec=o["codec"], crf=o["crf"],
                                           preset=o["encoder_preset"], pix_fmt=o["pix_fmt"],
                                           overwrite=o["overwrite"], audio=o["audio"],
-                                          offset=self.start or 0.0, end=self.end,
+                                          # from --start, else from the container's first timestamp, as FFmpeg
+                                          # writes a file: an MPEG-TS capture's hours of offset made a 1-s MKV
+                                          # 'last' 16:41 and an MP4 open on a long empty edit
+                                          offset=self.start if self.start is not None else self.info.start_time,
+                                          end=self.end,
                                           container_format=container_format_for(o.get("container"), out))
         except VideoError as exc:
             raise Failed(str(exc)) from exc
@@ -565,7 +573,7 @@ class VideoJob(Job):
         temporary files of killed runs there are removed."""
         from mlaa_stream.io.images import remove_quietly, stale_temp_files
         from mlaa_stream.io.sequence import same_file
-        from mlaa_stream.io.video import PIPE
+        from mlaa_stream.io.video import PIPE, is_special_file
 
         o = self.opts
         if os.path.isdir(out) or out.endswith(("/", os.sep)):
@@ -575,6 +583,8 @@ class VideoJob(Job):
             raise Usage(f"{out}: output is the input; choose another output")
         if o["resume"]:
             self.con.warn("--resume applies to folders and sequences; a video is redone")
+        if is_special_file(out):   # /dev/null, a named pipe: written into, nothing replaced, nothing left beside it
+            return
         if os.path.exists(out) and not o["overwrite"]:
             raise Usage(f"{out}: exists; use --overwrite to replace it")
         folder = os.path.dirname(os.path.abspath(out))
@@ -645,7 +655,8 @@ class VideoJob(Job):
                                 on_deinterlace=deinterlace_note(self.con, self.input))
         total = self.info.frames
         if total and self.info.fps and (self.start or self.end is not None):
-            duration = (self.end if self.end is not None else total / float(self.info.fps)) - (self.start or 0)
+            t0 = self.info.start_time   # the trim's times are timestamps (video_trim)
+            duration = (self.end if self.end is not None else t0 + total / float(self.info.fps)) - (self.start or t0)
             total = max(int(round(duration * float(self.info.fps))), 0)
         progress = self._progress(total)
         try:

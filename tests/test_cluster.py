@@ -282,3 +282,27 @@ def test_resume_through_the_api_keeps_the_output_of_an_input_that_no_longer_open
                                resume=True)   # every output done: no task
     assert not report.failed and not report.written
     assert files(tmp_path / "out") == before
+
+
+def test_an_mpeg_ts_in_segments_keeps_every_frame(client, tmp_path):
+    """Each segment decodes from a seek to its start: MPEG-TS lands on the packet at that time, keyframe or not, and
+    nothing decoded until the next keyframe, so each segment after the first lost its first frames (18 of these 50
+    written, without an error). read_video now seeks again from further back."""
+    import av
+
+    from mlaa_stream.cluster.video import filter_video_on_cluster
+
+    src = str(tmp_path / "in.ts")
+    with av.open(src, "w") as out:
+        s = out.add_stream("libx264", rate=25, options={"g": "10", "keyint_min": "10", "sc_threshold": "0"})
+        s.width, s.height, s.pix_fmt = 64, 48, "yuv420p"
+        for i in range(50):
+            img = np.full((48, 64, 3), 30, np.uint8)
+            img[:, i % 50:] = 220
+            for p in s.encode(av.VideoFrame.from_ndarray(img, format="rgb24")):
+                out.mux(p)
+        for p in s.encode():
+            out.mux(p)
+    n = filter_video_on_cluster(client, src, str(tmp_path / "cl.mkv"), segment_seconds=0.3)
+    frames, _ = decoded(tmp_path / "cl.mkv")
+    assert n == len(frames) == 50

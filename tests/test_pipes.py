@@ -151,3 +151,64 @@ def test_a_y4m_with_a_header_and_no_frame_is_an_error(tmp_path):
     r = subprocess.run([*CLI, str(tmp_path / "h.y4m"), "-o", str(tmp_path / "o.mkv")], capture_output=True,
                        timeout=120)
     assert r.returncode == 1 and not (tmp_path / "o.mkv").exists(), r.stderr.decode()
+
+
+def test_audio_on_standard_input_that_is_not_kept_is_named(tmp_path):
+    """`cat in.mkv | mlaa-stream - -o out.mkv`: standard input is read once, for its video, so its audio cannot be
+    copied; it was dropped without a word (a file's audio is copied by default)."""
+    src, out = tmp_path / "in.mkv", tmp_path / "out.mkv"
+    with av.open(DEMO_CLIP) as c, av.open(str(src), "w") as o:   # the demo clip (H.264 + AAC) remuxed to MKV
+        streams = {s.index: o.add_stream_from_template(s) for s in c.streams if s.type in ("video", "audio")}
+        for pkt in c.demux(*[c.streams[i] for i in streams]):
+            if pkt.dts is not None:
+                pkt.stream = streams[pkt.stream.index]
+                o.mux(pkt)
+    with open(src, "rb") as stdin:
+        r = subprocess.run([*CLI, "-", "-o", str(out)], stdin=stdin, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert "audio streams not kept: standard input is read once" in r.stderr
+    with open(src, "rb") as stdin:
+        r = subprocess.run([*CLI, "-", "-o", str(out), "-y", "--audio", "none"], stdin=stdin, capture_output=True,
+                           text=True, timeout=300)
+    assert r.returncode == 0 and "not kept" not in r.stderr, r.stderr
+
+
+def test_standard_output_in_a_format_ffmpeg_lacks_is_an_error_not_a_traceback(tmp_path):
+    """`-o - -f FORMAT` with a format FFmpeg has no muxer for: the writer's cleanup unlinked its temporary file, of
+    which standard output has none, and a TypeError traceback hid the message."""
+    from click.testing import CliRunner
+
+    from mlaa_stream.cli.main import main
+
+    r = CliRunner().invoke(main, [DEMO_CLIP, "-o", "-", "-f", "nosuchformat"])
+    assert r.exit_code == 1 and isinstance(r.exception, SystemExit), r.output
+    assert "no container format 'nosuchformat'" in r.output
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="no named pipes here")
+def test_a_named_pipe_as_output_is_written_into_not_replaced(tmp_path):
+    """-o FIFO (a player reading a named pipe; /dev/null alike): the video was written under a temporary name and
+    renamed over it, replacing the pipe (or, as root, the device node /dev/null) with a regular file."""
+    import io
+    import stat
+    import threading
+
+    from click.testing import CliRunner
+
+    from mlaa_stream.cli.main import main
+
+    fifo = tmp_path / "player"
+    os.mkfifo(fifo)
+    got = []
+    reader = threading.Thread(target=lambda: got.append(open(fifo, "rb").read()), daemon=True)
+    reader.start()
+    r = CliRunner().invoke(main, [DEMO_CLIP, "-o", str(fifo), "-f", "matroska"])
+    reader.join(timeout=10)
+    if reader.is_alive():   # nothing opened the pipe to write (the run refused it): let the reader go
+        with open(fifo, "wb"):
+            pass
+        reader.join(timeout=10)
+    assert r.exit_code == 0, r.output
+    assert stat.S_ISFIFO(os.stat(fifo).st_mode) and sorted(os.listdir(tmp_path)) == ["player"]
+    with av.open(io.BytesIO(got[0])) as c:
+        assert sum(1 for _ in c.decode(video=0)) == 10

@@ -395,3 +395,201 @@ def test_a_webm_whose_vp9_alpha_is_not_read_is_named(tmp_path):
     assert res.exit_code == 0 and "alpha (WebM VP9 alpha_mode) is not read" in res.output, res.output
     clip = os.path.join(os.path.dirname(__file__), "..", "fixtures", "demo", "clip.mp4")
     assert not probe_video(clip).alpha_unread
+
+
+def test_a_video_without_a_known_extension_leaves_no_image_library_error(tmp_path):
+    """A video named without a video extension (no extension, .vob, .dv) is probed as an image first: the failed
+    probe's error was left pending, and OpenImageIO printed 'exited with a pending error message ... could not find
+    a format reader' at exit -- on standard output, after the y4m stream of `-o -`, corrupting it."""
+    import shutil
+    import subprocess
+    import sys
+
+    src = tmp_path / "capture"
+    shutil.copy(os.path.join(os.path.dirname(__file__), "..", "fixtures", "demo", "clip.mp4"), src)
+    r = subprocess.run([sys.executable, "-c", "from mlaa_stream.cli.main import main; main()", str(src), "-o", "-",
+                        "-f", "y4m"], capture_output=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert b"OpenImageIO" not in r.stdout + r.stderr
+    frame = 64 * 48 * 3 // 2   # the demo clip: 10 frames of 64x48 4:2:0
+    assert r.stdout.startswith(b"YUV4MPEG2 ")
+    assert len(r.stdout) == r.stdout.index(b"\n") + 1 + 10 * (len(b"FRAME\n") + frame)
+
+
+@pytest.mark.parametrize("slash", ["", "/"])
+def test_a_video_into_a_folder_takes_its_name(tmp_path, slash):
+    """`mlaa-stream in.mp4 -o clean/` (a folder there): the output is clean/in.mp4, as for images; the writer was
+    handed the folder itself ('cannot create the output: Could not determine output format')."""
+    folder = tmp_path / "clean"
+    folder.mkdir()
+    src = os.path.join(os.path.dirname(__file__), "..", "fixtures", "demo", "clip.mp4")
+    r = run(src, "-o", f"{folder}{slash}")
+    assert r.exit_code == 0, r.output
+    assert os.listdir(folder) == ["clip.mp4"]
+    with av.open(str(folder / "clip.mp4")) as c:
+        assert sum(1 for _ in c.decode(video=0)) == 10
+
+
+def test_an_av1_source_stays_av1(tmp_path):
+    """No --codec: the source's family where FFmpeg has an encoder for it. An AV1 source decodes with libdav1d, whose
+    name no family had, and its family named only libaom-av1 (PyAV's wheels have SVT-AV1): it became H.264, in WebM
+    VP9 with a warning that WebM 'cannot hold libx264'."""
+    if "libsvtav1" not in av.codecs_available and "libaom-av1" not in av.codecs_available:
+        pytest.skip("this FFmpeg has no AV1 encoder")
+    encoder = "libsvtav1" if "libsvtav1" in av.codecs_available else "libaom-av1"
+    src = tmp_path / "in.webm"
+    with av.open(str(src), "w") as out:
+        s = out.add_stream(encoder, rate=25)
+        s.width, s.height, s.pix_fmt = 96, 64, "yuv420p"
+        for i in range(4):
+            img = np.zeros((64, 96, 3), np.uint8)
+            img[:, 30 + i:] = 220
+            for p in s.encode(av.VideoFrame.from_ndarray(img, format="rgb24")):
+                out.mux(p)
+        for p in s.encode():
+            out.mux(p)
+    r = run(src, "-o", tmp_path / "out.webm")
+    assert r.exit_code == 0, r.output
+    assert "cannot hold" not in r.output
+    with av.open(str(tmp_path / "out.webm")) as c:
+        assert c.streams.video[0].codec_context.codec.canonical_name == "av1"
+        assert sum(1 for _ in c.decode(video=0)) == 4
+
+
+def test_a_dnxhr_source_and_codec_dnxhd_are_written(tmp_path):
+    """FFmpeg's dnxhd encoder opens only with a profile (or a DNxHD bit rate): a DNxHR source (its family kept) and
+    --codec dnxhd both failed with 'cannot start encoding with dnxhd (yuv422p): Invalid argument'."""
+    if "dnxhd" not in av.codecs_available:
+        pytest.skip("this FFmpeg has no dnxhd encoder")
+    src = tmp_path / "in.mov"
+    with av.open(str(src), "w") as out:
+        s = out.add_stream("dnxhd", rate=25, options={"profile": "dnxhr_sq"})
+        s.width, s.height, s.pix_fmt = 256, 144, "yuv422p"
+        for i in range(3):
+            img = np.zeros((144, 256, 3), np.uint8)
+            img[:, 100 + i:] = 220
+            for p in s.encode(av.VideoFrame.from_ndarray(img, format="rgb24")):
+                out.mux(p)
+        for p in s.encode():
+            out.mux(p)
+    r = run(src, "-o", tmp_path / "out.mov")
+    assert r.exit_code == 0, r.output
+    with av.open(str(tmp_path / "out.mov")) as c:
+        assert c.streams.video[0].codec_context.profile == "DNXHR SQ"   # the source's profile
+        assert sum(1 for _ in c.decode(video=0)) == 3
+    r = run(src, "-o", tmp_path / "hqx.mov", "--codec", "dnxhd", "--pix-fmt", "yuv422p10le")
+    assert r.exit_code == 0, r.output
+    with av.open(str(tmp_path / "hqx.mov")) as c:
+        assert c.streams.video[0].codec_context.profile == "DNXHR HQX"   # 10-bit: the profile that holds it
+
+
+@pytest.mark.parametrize("codec", ["apng", "png"])
+def test_a_colour_source_into_png_frames_keeps_its_colour(codec):
+    """APNG's and PNG's formats list a palette and grey before nothing YUV-like: the pick closest to a YUV source was
+    pal8 (every frame failed: 'write failed at frame 0: Operation not supported'), then grey (the colour dropped)."""
+    assert choose_pix_fmt(codec, "yuv420p", 64, 48) == "rgb24"
+    assert choose_pix_fmt(codec, "yuv420p10le", 64, 48) == "rgb48be"
+    assert choose_pix_fmt(codec, "yuva420p", 64, 48) == "rgba"   # not ya8: grey with alpha
+    assert choose_pix_fmt(codec, "pal8", 64, 48) == "rgb24"   # a palette's colours
+
+
+def test_a_gif_is_never_given_a_palette_nor_grey():
+    """GIF's encoder lists 3-3-2 RGB, grey and pal8: pal8, which swscale cannot write, or grey (the colour dropped)
+    were picked; its 3-3-2 RGB keeps colour (the writer names the 3 bits)."""
+    assert choose_pix_fmt("gif", "yuv420p", 64, 48) == "rgb8"
+    assert choose_pix_fmt("gif", "pal8", 64, 48) == "rgb8"
+
+
+def test_a_video_into_an_animated_png_is_written_in_colour(tmp_path):
+    src = os.path.join(os.path.dirname(__file__), "..", "fixtures", "demo", "clip.mp4")
+    r = run(src, "-o", tmp_path / "out.apng", "--audio", "none")
+    assert r.exit_code == 0, r.output
+    with av.open(str(tmp_path / "out.apng")) as c:
+        decoded = list(c.decode(video=0))
+    frames = [f.to_ndarray(format="rgb24") for f in decoded]
+    assert len(frames) == 10 and decoded[0].format.name == "rgb24"
+    assert np.abs(frames[0][..., 0].astype(int) - frames[0][..., 2]).max() > 50   # colour, not grey
+
+
+@pytest.mark.parametrize("name,audio", [("out.webm", "copy"), ("out.gif", "aac")])
+def test_audio_not_kept_suggests_re_encoding_only_where_it_helps(tmp_path, name, audio):
+    """The warning for audio a container cannot hold said '(--audio aac re-encodes the audio)' where AAC cannot go
+    either (WebM, GIF) and to a user who had asked for --audio aac."""
+    src = os.path.join(os.path.dirname(__file__), "..", "fixtures", "demo", "clip.mp4")
+    r = run(src, "-o", tmp_path / name, "--audio", audio)
+    assert r.exit_code == 0, r.output
+    assert "audio streams not kept" in r.output and "--audio aac" not in r.output
+
+
+def test_crf_and_encoder_preset_an_encoder_ignores_are_named(tmp_path):
+    """--crf and --encoder-preset set x264 / x265 (--crf VP9 / AV1 too): given with ProRes they were dropped without
+    a word, as the options that do nothing for images are not."""
+    if "prores_ks" not in av.codecs_available:
+        pytest.skip("this FFmpeg has no prores_ks encoder")
+    src = os.path.join(os.path.dirname(__file__), "..", "fixtures", "demo", "clip.mp4")
+    r = run(src, "-o", tmp_path / "out.mov", "--codec", "prores_ks", "--crf", "10", "--encoder-preset", "slow")
+    assert r.exit_code == 0, r.output
+    assert "--crf, --encoder-preset have no effect with prores_ks" in r.output
+    r = run(src, "-o", tmp_path / "out.mp4", "--crf", "10", "--encoder-preset", "slow")
+    assert r.exit_code == 0 and "no effect" not in r.output, r.output
+
+
+def test_a_variable_frame_rate_into_a_container_of_one_rate_is_not_called_damaged(tmp_path):
+    """AVI and y4m hold one frame per tick of 1/rate: a variable-rate source's frames closer than that share a tick,
+    and the warning blamed the input ('timestamp not after the previous frame's (damaged input?)')."""
+    src = tmp_path / "vfr.mkv"
+    tb = Fraction(1, 1000)
+    with av.open(str(src), "w") as out:
+        s = out.add_stream("libx264", rate=25)
+        s.width, s.height, s.pix_fmt = 64, 48, "yuv420p"
+        s.time_base = s.codec_context.time_base = tb
+        t = 0
+        for i in range(12):
+            img = np.zeros((48, 64, 3), np.uint8)
+            img[:, 20 + i:] = 200
+            f = av.VideoFrame.from_ndarray(img, format="rgb24")
+            f.pts, f.time_base = t, tb
+            for p in s.encode(f):
+                out.mux(p)
+            t += 40 if i % 3 else 100   # 25 fps on average, in steps of 40 and 100 ms
+        for p in s.encode():
+            out.mux(p)
+    r = run(src, "-o", tmp_path / "out.avi")
+    assert r.exit_code == 0, r.output
+    assert "a variable frame rate" in r.output and "damaged" not in r.output
+
+
+def test_a_crf_over_x265s_range_is_named_and_encoded_at_its_most(tmp_path):
+    """--crf takes up to 63 (VP9, AV1): libx265 refused more than 51 ('cannot start encoding ... Invalid data found
+    when processing input'), and libx264 took it as 51 without a word."""
+    src = os.path.join(os.path.dirname(__file__), "..", "fixtures", "demo", "clip.mp4")
+    for codec in ("libx265", "libx264"):
+        if codec not in av.codecs_available:
+            continue
+        out = tmp_path / f"{codec}.mkv"
+        r = run(src, "-o", out, "--codec", codec, "--crf", "60")
+        assert r.exit_code == 0, r.output
+        assert f"--crf 60: {codec} takes 0 to 51" in r.output
+        with av.open(str(out)) as c:
+            assert sum(1 for _ in c.decode(video=0)) == 10
+
+
+def test_a_subsampled_pix_fmt_at_an_odd_size_names_the_cause(tmp_path):
+    """--pix-fmt yuv420p for a 161x91 source: x264 failed with 'Generic error in an external library', naming no
+    cause; the error now says the format halves the chroma, which an odd size cannot."""
+    src = tmp_path / "odd.mkv"
+    with av.open(str(src), "w") as out:
+        s = out.add_stream("libx264", rate=25)
+        s.width, s.height, s.pix_fmt = 65, 47, "yuv444p"
+        for i in range(3):
+            img = np.zeros((47, 65, 3), np.uint8)
+            img[:, 20 + i:] = 200
+            for p in s.encode(av.VideoFrame.from_ndarray(img, format="rgb24")):
+                out.mux(p)
+        for p in s.encode():
+            out.mux(p)
+    r = run(src, "-o", tmp_path / "out.mkv", "--pix-fmt", "yuv420p")
+    assert r.exit_code == 1 and "yuv420p halves the chroma, which 65x47 cannot" in r.output, r.output
+    r = run(src, "-o", tmp_path / "out.mkv", "--pix-fmt", "nosuchformat")
+    assert r.exit_code == 1 and "not a pixel format" in r.output and "halves" not in r.output, r.output
+    assert os.listdir(tmp_path) == ["odd.mkv"]

@@ -225,3 +225,20 @@ def test_opencv_fallback_reads_and_writes(tmp_path):
         w.write(it.frame)
     w.commit()
     assert probe_video(out).frames == 10
+
+
+def test_opencv_fallback_reads_a_variable_frame_rate_mkv_without_a_false_truncation(tmp_path):
+    """OpenCV counts an MKV's frames as its duration x the mean rate: a variable rate has fewer, and the fallback
+    called the whole file truncated ('expected about N frames', exit 1); a cut one is still caught."""
+    src = str(tmp_path / "vfr.mkv")
+    make_vfr_mkv(src)
+    info = probe_video_cv(src)
+    assert info.frames != 40
+    assert len(list(read_video_cv(info))) == 40
+    long = str(tmp_path / "long.mkv")
+    make_demo.write_clip(long, frames=30, audio=False)
+    data = open(long, "rb").read()
+    cut = str(tmp_path / "cut.mkv")
+    open(cut, "wb").write(data[: len(data) // 2])
+    with pytest.raises(VideoReadError, match="truncated"):
+        list(read_video_cv(probe_video_cv(cut)))

@@ -178,3 +178,60 @@ def test_trimmed_chapters_shift_and_mp4_names_the_attachments_it_drops(chaptered
     assert attachments(tmp_path / "o.mp4") == []
     assert "o.mp4: 1 attachment (Font One.ttf) not kept: mp4 cannot hold them" in r.output
     assert "attachment stream 1" not in r.output  # named once
+
+
+def test_audio_aac_re_encodes_pcm_of_unspecified_layout(tmp_path):
+    """PCM in MKV (or WAV) reads back with a layout of unspecified order ('1 channels'), which the AAC encoder refused:
+    --audio aac dropped the audio with 'matroska cannot hold them (... avcodec_open2("aac") ... Invalid argument)'."""
+    src, out = tmp_path / "pcm.mkv", tmp_path / "out.mkv"
+    with av.open(str(src), "w") as o:
+        v = o.add_stream("libx264", rate=25)
+        v.width, v.height, v.pix_fmt = 64, 48, "yuv420p"
+        a = o.add_stream("pcm_s16le", rate=48000)
+        a.layout = "mono"
+        for i in range(10):
+            img = np.zeros((48, 64, 3), np.uint8)
+            img[:, 20 + i:] = 200
+            for p in v.encode(av.VideoFrame.from_ndarray(img, format="rgb24")):
+                o.mux(p)
+        for p in v.encode():
+            o.mux(p)
+        tone = (3000 * np.sin(np.arange(19200) / 20)).astype(np.int16)[None]
+        for k in range(0, 19200, 960):
+            f = av.AudioFrame.from_ndarray(tone[:, k:k + 960], format="s16", layout="mono")
+            f.sample_rate, f.pts = 48000, k
+            for p in a.encode(f):
+                o.mux(p)
+        for p in a.encode():
+            o.mux(p)
+    with av.open(str(src)) as c:
+        assert c.streams.audio[0].codec_context.layout.name.endswith("channels")   # what the encoder refused
+    r = run(src, "-o", out, "--audio", "aac")
+    assert r.exit_code == 0 and "not kept" not in r.output, r.output
+    with av.open(str(out)) as c:
+        assert c.streams.audio[0].codec_context.name == "aac"
+        assert sum(f.samples for f in c.decode(audio=0)) >= 19200 - 1024
+
+
+@pytest.mark.parametrize("ext,kept", [("mp4", True), ("mkv", True), ("ts", False), ("avi", False)])
+def test_a_rotation_the_output_cannot_store_is_named(tmp_path, ext, kept):
+    """A phone's clip says it is displayed turned (its display matrix): MP4, MOV, MKV and WebM keep that; AVI, MPEG-TS,
+    NUT and y4m have nowhere to put it, and the output played on its side without a word."""
+    src = tmp_path / "phone.mp4"
+    with av.open(str(src), "w") as out:
+        s = out.add_stream("libx264", rate=25)
+        s.width, s.height, s.pix_fmt = 64, 48, "yuv420p"
+        s.set_display_rotation(90)
+        for i in range(12):
+            img = np.zeros((48, 64, 3), np.uint8)
+            img[:, 20 + i:] = 200
+            for p in s.encode(av.VideoFrame.from_ndarray(img, format="rgb24")):
+                out.mux(p)
+        for p in s.encode():
+            out.mux(p)
+    r = run(src, "-o", tmp_path / f"out.{ext}")
+    assert r.exit_code == 0, r.output
+    with av.open(str(tmp_path / f"out.{ext}")) as c:
+        rotation = next(c.decode(video=0)).rotation
+    assert (rotation == 90) == kept
+    assert ("display rotation of" in r.output and "90 degrees) not kept" in r.output) == (not kept)

@@ -54,6 +54,9 @@ _FPS_TIME_BASE_FORMATS = frozenset({"avi"})
 # Encoders that store the pixel aspect ratio in their bitstream (H.264/HEVC VUI, MPEG-4 Part 2's VOL): kept in any
 # container.
 _SAR_IN_BITSTREAM = frozenset({"libx264", "libx264rgb", "libx265", "mpeg4"})
+# Containers that store a display rotation (a display matrix), measured with PyAV 18 / FFmpeg 8: not AVI, MPEG-TS,
+# NUT, y4m, MXF, FLV, ASF, MPEG-PS.
+_ROTATION_FORMATS = frozenset({"mp4", "mov", "ipod", "3gp", "3g2", "ismv", "matroska", "webm"})
 # Containers that store it from the stream, which PyAV cannot set (MP4/MOV take the codec's parameters): with any
 # other encoder it is lost -- y4m's A tag written 0:0, measured with PyAV 18 / FFmpeg 8 for each of these.
 _SAR_FROM_STREAM_FORMATS = frozenset({"matroska", "webm", "yuv4mpegpipe", "nut", "avi"})
@@ -111,6 +114,10 @@ class VideoInfo:
     interlaced: str | None = None
     hdr10: tuple[str, ...] = ()  # HDR10 static metadata on the first frame, as x265 parameters (_hdr10_params)
     alpha_unread: bool = False  # the stream says it has alpha that the decoder does not give (WebM VP9's side stream)
+    # seconds of the container's first timestamp (MPEG-TS captures, cut segments: often far from 0; negative ones --
+    # an edit list's priming -- count as 0): --start/--end count from it, as FFmpeg's -ss does
+    start_time: float = 0.0
+    profile: str | None = None  # the codec's profile as FFmpeg names it ("DNXHR SQ", "High 10"); None: unknown
 
     @property
     def sample_format(self) -> str:
@@ -130,6 +137,18 @@ class FrameTime:
 
 def is_video_path(path: str) -> bool:
     return os.path.splitext(path)[1].lower() in VIDEO_EXTENSIONS
+
+
+def is_special_file(path: str) -> bool:
+    """Whether `path` exists as something other than a regular file or a folder: a device (/dev/null), a named pipe,
+    a socket -- written into as it is, never replaced."""
+    import stat
+
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        return False
+    return not (stat.S_ISREG(mode) or stat.S_ISDIR(mode))
 
 
 def _require_av() -> None:
@@ -254,7 +273,8 @@ def _describe(container, path: str, rotation: int, hdr10: tuple[str, ...] = (), 
                      subtitle_streams=len(container.streams.subtitles), other_streams=others,
                      sar=Fraction(sar) if sar and sar != 1 else None,
                      interlaced=_FIELD_FIRST.get(getattr(cc, "field_order", None)) or (FLAGGED if flagged else None),
-                     hdr10=hdr10,
+                     hdr10=hdr10, start_time=max(0.0, (container.start_time or 0) / 1e6),
+                     profile=cc.profile if isinstance(cc.profile, str) else None,
                      alpha_unread=not alpha and str(_tag(s.metadata, "alpha_mode")) == "1")
 
 
@@ -301,10 +321,12 @@ def _hdr10_params(frame) -> tuple[str, ...]:
     return tuple(out)
 
 
-# The encoder that keeps a source's codec family when no --codec is given (None: DEFAULT_CODEC).
+# The encoder that keeps a source's codec family when no --codec is given (None: DEFAULT_CODEC); by FFmpeg's name of
+# the family (AV1 decodes with libdav1d, whose name is no family's), several where builds have one or the other
+# (PyAV's wheels have SVT-AV1, not libaom).
 CODEC_FAMILY = {"hevc": "libx265", "prores": "prores_ks", "ffv1": "ffv1", "vp9": "libvpx-vp9",
-                "av1": "libaom-av1", "dnxhd": "dnxhd", "mjpeg": "mjpeg", "png": "png", "utvideo": "utvideo",
-                "qtrle": "qtrle"}   # QuickTime Animation: lossless, with alpha (argb)
+                "av1": ("libaom-av1", "libsvtav1"), "dnxhd": "dnxhd", "mjpeg": "mjpeg", "png": "png",
+                "utvideo": "utvideo", "qtrle": "qtrle"}   # QuickTime Animation: lossless, with alpha (argb)
 # Container and stream tags that describe the file written, not the content: not copied.
 _NOT_COPIED_TAGS = {"encoder", "major_brand", "minor_version", "compatible_brands", "duration",
                     "number_of_frames", "number_of_bytes", "_statistics_tags", "_statistics_writing_app",
@@ -314,8 +336,13 @@ _NOT_COPIED_TAGS = {"encoder", "major_brand", "minor_version", "compatible_brand
 def codec_for(info: VideoInfo) -> str:
     """The encoder for `info` when none is asked for: the source's family (HEVC stays HEVC, ProRes stays
     ProRes) where FFmpeg has an encoder for it, else DEFAULT_CODEC."""
-    name = CODEC_FAMILY.get(info.codec)
-    return name if name and name in av.codecs_available else DEFAULT_CODEC
+    try:
+        family = av.Codec(info.codec, "r").canonical_name   # the decoder's family: libdav1d -> av1
+    except Exception:  # noqa: BLE001 - no such decoder here (OpenCV's "opencv"): the name as it is
+        family = info.codec
+    names = CODEC_FAMILY.get(family, ())
+    names = (names,) if isinstance(names, str) else names
+    return next((name for name in names if name in av.codecs_available), DEFAULT_CODEC)
 
 
 def _container_holds(format_name: str, codec: str) -> bool:
@@ -335,6 +362,11 @@ def _copy_tags(src: dict, dst) -> None:
             dst[key] = value
 
 
+# Seconds a copied packet may lie before the output's start and still be kept (at 0): rounding, not content.
+_START_SLACK = 0.001
+# FFmpeg's default channel layout for a channel count (av_channel_layout_default): what a layout of unspecified order
+# is encoded as with --audio aac
+_DEFAULT_LAYOUTS = {1: "mono", 2: "stereo", 3: "2.1", 4: "4.0", 5: "5.0", 6: "5.1", 7: "6.1", 8: "7.1"}
 # Output formats whose muxer stores attachment streams (fonts for subtitles, cover art) in its header.
 _ATTACHMENT_FORMATS = ("matroska",)
 
@@ -426,14 +458,22 @@ def read_video(info: VideoInfo, *, check_length: bool = True, start: float | Non
         stream = container.streams.video[0]
         stream.thread_type = "AUTO"
         sws = _sws_flags()
-        if start:  # to the keyframe before `start`; the frames before it are decoded and dropped
-            container.seek(int(start / stream.time_base), stream=stream, backward=True, any_frame=False)
-        frames = _decoded(container, stream, data_end)
+        from_start = [True]   # the frames come from the stream's beginning (no seek), as they do without `start`
+        if start and info.path != PIPE:  # to the keyframe before `start`; the frames before it are decoded and dropped
+            frames = _decoded_from(container, stream, start, half, data_end, from_start, info.path)
+        else:  # a pipe cannot seek ('Operation not permitted', or nothing read): its frames before `start` are dropped
+            frames = _decoded(container, stream, data_end)
         if deinterlace != "off":  # before the trim: the frames before `start` are the first one's field neighbours
             frames = _deinterlaced(frames, info, deinterlace, on_deinterlace)
+        decoded = 0   # frames decoded so far, those before `start` too
         try:
             for frame in frames:
                 ft = float(frame.pts * frame.time_base) if frame.pts is not None and frame.time_base else None
+                if ft is None and from_start[0] and (start or end is not None):
+                    # no timestamps (a raw H.264 / HEVC stream, a Raspberry Pi's .h264): its place at the nominal
+                    # rate, as the writer times it; a trim kept every frame
+                    ft = decoded / float(info.fps or 25)
+                decoded += 1
                 if start and ft is not None and ft < start - half:
                     continue
                 if end is not None and ft is not None and ft >= end - half:
@@ -470,6 +510,44 @@ def _decoded(container, stream, data_end: list) -> Iterator:
         yield from packet.decode()
 
 
+def _decoded_from(container, stream, start: float, half: float, data_end: list, from_start: list,
+                  path: str) -> Iterator:
+    """The stream's frames as decoded from the keyframe before `start` (seconds; `half`: half a frame). A seek can land
+    past it -- MPEG-TS lands on the packet at the time asked, keyframe or not, and nothing decodes until the next
+    keyframe: a trim lost the frames up to it, or all of them --: then again from further back (1, 4, 16 ... s before
+    `start`), in the end from the beginning, until the first frame decoded comes before `start`. A stream FFmpeg cannot
+    seek (raw H.264 / HEVC, without timestamps: 'Operation not permitted') is read from its beginning.
+    `from_start[0]`: set False where the frames come from a seek, not the beginning. `path`: the file, opened again."""
+    back = 0.0
+    while True:
+        target = start - back
+        try:
+            if target > 0:
+                container.seek(int(target / stream.time_base), stream=stream, backward=True, any_frame=False)
+            else:
+                container.seek(0)   # the beginning (MPEG-TS's seek to its stream's first time lands past it)
+        except av.error.FFmpegError:
+            if back:
+                raise
+            # the failed seek read the stream to its end looking for timestamps: from the beginning of a new opening
+            with av.open(path) as fresh:
+                again = fresh.streams.video[0]
+                again.thread_type = "AUTO"
+                yield from _decoded(fresh, again, data_end)
+            return
+        from_start[0] = target <= 0
+        frames = _decoded(container, stream, data_end)
+        first = next(frames, None)
+        ft = float(first.pts * first.time_base) if first is not None and first.pts is not None and first.time_base \
+            else None
+        if target <= 0 or (first is not None and (ft is None or ft < start - half)):
+            if first is not None:
+                yield first
+            yield from frames
+            return
+        back = back * 4 if back else 1.0
+
+
 def _deinterlaced(frames: Iterator, info: VideoInfo, mode: str, on_deinterlace) -> Iterator:
     """`frames` made progressive where `mode` (deinterlace.reason) says so, else as they are. A decoding error is
     raised after the frames held by the deinterlacer (one) are given, as without it; a frame of another size goes
@@ -503,10 +581,12 @@ def _deinterlaced(frames: Iterator, info: VideoInfo, mode: str, on_deinterlace) 
 
 
 def _nothing_between(path: str, start: float | None, end: float | None, info: VideoInfo) -> VideoReadError:
-    """The error for a trim (--start/--end) that holds no frame: nothing is worth writing."""
+    """The error for a trim (--start/--end) that holds no frame: nothing is worth writing. The times are said from
+    the video's first timestamp (info.start_time), as the user gave them."""
+    t0 = info.start_time
     length = f" (the video is {info.duration:.3f} s long)" if info.duration else ""
-    return VideoReadError(f"{path}: no frame between {start or 0:g} s and "
-                          f"{'the end' if end is None else f'{end:g} s'}{length}", 0)
+    return VideoReadError(f"{path}: no frame between {max(0.0, (start or t0) - t0):g} s and "
+                          f"{'the end' if end is None else f'{end - t0:g} s'}{length}", 0)
 
 
 _Y4M_MAGIC = b"YUV4MPEG2 "
@@ -592,6 +672,10 @@ def choose_pix_fmt(codec: str, src_pix_fmt: str, width: int, height: int) -> str
     src_sub = src.chroma_width(2) < 2 or src.chroma_height(2) < 2
     lossless = codec in LOSSLESS_RGB_CODECS
 
+    def colours(fmt) -> int:
+        """Colour planes (alpha aside): 1 for grey; a palette's one plane of indices stands for colours."""
+        return 3 if fmt.name.startswith("pal") else sum(1 for c in fmt.components if not c.is_alpha)
+
     def key(name: str) -> tuple:
         f = av.VideoFormat(name)
         bits, alpha = _format_bits_alpha(name)
@@ -599,7 +683,10 @@ def choose_pix_fmt(codec: str, src_pix_fmt: str, width: int, height: int) -> str
         sub_h = f.chroma_height(2) < 2
         fits = (not sub_w or width % 2 == 0) and (not sub_h or height % 2 == 0)
         fits = fits or (salpha and name in (opened or ()))   # libvpx-vp9's yuva420p: any size
-        return (not fits, salpha and not alpha, bits < sbits, name.startswith(("nv", "yuvj", "bayer")),
+        # never a palette, which swscale cannot write (APNG's and GIF's first formats like YUV's, not RGB: every
+        # frame failed, ENOTSUP), and a colour source never to grey (the colour dropped) where the codec has colour
+        return (name.startswith("pal"), not fits, salpha and not alpha, colours(f) < colours(src), bits < sbits,
+                name.startswith(("nv", "yuvj", "bayer")),
                 lossless and not f.is_rgb, name != src_pix_fmt,
                 f.is_rgb != src.is_rgb, (sub_w or sub_h) != src_sub, abs(bits - sbits), alpha != salpha,
                 formats.index(name))
@@ -623,6 +710,22 @@ def encoder_options(codec: str, crf: int | None, preset: str | None) -> dict[str
         if codec == "libvpx-vp9":
             opts["b"] = "0"
     return opts
+
+
+# DNxHD's encoder opens only with a profile (DNxHR, frames from 256x120) or, as DNxHD, a bit rate naming one of its
+# fixed formats; without either avcodec_open2 fails (EINVAL): a DNxHR source or --codec dnxhd was never written.
+_DNXHR_FOR_FORMAT = {"yuv422p": "dnxhr_hq", "yuv422p10le": "dnxhr_hqx", "yuv444p10le": "dnxhr_444",
+                     "gbrp10le": "dnxhr_444"}
+
+
+def _dnxhd_options(info: VideoInfo, pix_fmt: str) -> dict[str, str]:
+    """The dnxhd encoder's profile: a DNxHR source's own at its pixel format, else the DNxHR profile of the pixel
+    format (HQ for 8-bit 4:2:2, HQX for 10-bit, 444). A DNxHD source's bit rate as the container measures it names no
+    format of the encoder's table (121241600 for its 120 Mb/s): it is written as DNxHR."""
+    profile = (info.profile or "").lower().replace(" ", "_")
+    if pix_fmt == info.pix_fmt and profile.startswith("dnxhr_"):
+        return {"profile": profile}
+    return {"profile": _DNXHR_FOR_FORMAT.get(pix_fmt, "dnxhr_hq")}
 
 
 class VideoWriter:
@@ -650,8 +753,11 @@ class VideoWriter:
         audio = audio or ("copy" if copy_audio else "none")
         held = [k for k, n in (("audio", info.audio_streams), ("subtitle", info.subtitle_streams)) if n]
         dropped = []  # the writer's first warnings
-        if raw and audio != "none" and info.path != PIPE and held:
-            dropped.append(f"{path}: {' and '.join(held)} streams not kept: {container_format} holds video only")
+        if (raw or info.path == PIPE) and audio != "none" and held:
+            # a pipe's audio was dropped without a word (an MKV or TS with audio on standard input)
+            why = ("standard input is read once, for its video (give the file as INPUT to keep them)"
+                   if info.path == PIPE else f"{container_format} holds video only")
+            dropped.append(f"{path}: {' and '.join(held)} streams not kept: {why}")
         if info.path == PIPE or raw:
             audio = "none"  # a pipe is read once (its audio is not there to copy); y4m holds video only
         if audio not in ("copy", "aac", "none"):
@@ -674,9 +780,14 @@ class VideoWriter:
         self.last_time: float | None = None  # seconds, end of the last frame written
         self._last_pts: int | None = None  # the last frame's, in the stream's time base: each next one is later
         self._retimed = 0  # frames whose source timestamp was not after the one before
+        self._last_t: Fraction | None = None  # the last frame's time as the source gave it (seconds)
         self.warnings: list[str] = dropped
-        self._tmp = None if path == PIPE else temp_path_for(path)  # standard output: written as it comes
+        # standard output, and a device or named pipe (/dev/null, a FIFO a player reads): written as it comes; renamed
+        # into place, a temporary file replaced the device node itself (as root, /dev/null became a regular file)
+        self._tmp = None if path == PIPE or is_special_file(path) else temp_path_for(path)
         self._options = {**encoder_options(codec, crf, preset), **(extra_options or {})}
+        if codec == "dnxhd":
+            self._options = {**_dnxhd_options(info, self.pix_fmt), **self._options}
         self._audio_in = None
         self._audio_packets: Iterator | None = None
         self._audio_map: dict = {}
@@ -688,11 +799,20 @@ class VideoWriter:
         try:
             self._open(tuple(k for k in kinds if (info.audio_streams if k == "audio" else info.subtitle_streams)))
         except VideoError:
-            remove_quietly(self._tmp)
+            if self._tmp is not None:   # standard output has none: unlink(None) hid the error under a TypeError
+                remove_quietly(self._tmp)
             raise
         except Exception as exc:
             self._close_quietly()
-            raise VideoError(f"{path}: cannot start encoding with {self.codec} ({self.pix_fmt}): {exc}") from exc
+            try:
+                fmt = av.VideoFormat(self.pix_fmt)
+                odd = (fmt.chroma_width(2) < 2 and info.width % 2) or (fmt.chroma_height(2) < 2 and info.height % 2)
+            except ValueError:   # no such pixel format: the error says so
+                odd = False
+            # x264's "Generic error in an external library" for --pix-fmt yuv420p at 161x91 named no cause
+            hint = (f" ({self.pix_fmt} halves the chroma, which {info.width}x{info.height} cannot: a 4:4:4 format, "
+                    f"or leave --pix-fmt out)" if odd else "")
+            raise VideoError(f"{path}: cannot start encoding with {self.codec} ({self.pix_fmt}): {exc}{hint}") from exc
 
     # -- setup ---------------------------------------------------------------------------------
     def _open(self, keep: tuple[str, ...]) -> None:
@@ -700,7 +820,7 @@ class VideoWriter:
         ("audio", "subtitle"); where the container cannot hold them, try again with fewer, and say so."""
         info = self.info
         try:
-            target = sys.stdout.buffer if self._tmp is None else self._tmp
+            target = self._tmp if self._tmp is not None else sys.stdout.buffer if self.path == PIPE else self.path
             # y4m's muxer takes more than 8 bits per sample only as a non-standard extension
             options = {"strict": "-1"} if self.container_format in _RAW_FORMATS and info.bits > 8 else None
             self._out = av.open(target, "w", format=self.container_format, options=options)
@@ -710,9 +830,23 @@ class VideoWriter:
         if self._codec_chosen is not None and not _container_holds(self._out.format.name, self.codec):
             self._take_containers_codec()
         self._keep_hdr10()
+        crf = self._options.get("crf")
+        if self.codec in ("libx264", "libx264rgb", "libx265") and crf is not None and float(crf) > 51:
+            # --crf goes to 63 for VP9 and AV1; x264 took more as 51 without a word, x265 refused to start
+            # ('Invalid data found when processing input')
+            self.warnings.append(f"{self.path}: --crf {crf}: {self.codec} takes 0 to 51 (VP9 and AV1 up to 63); "
+                                 f"encoded at 51")
+            self._options["crf"] = "51"
+        if self.codec == "libsvtav1":   # SVT-AV1 logs its whole configuration on stderr; errors only (SVT_LOG=1)
+            os.environ.setdefault("SVT_LOG", "1")
         stream = self._out.add_stream(self.codec, rate=rate, options=dict(self._options))
         if info.rotation:
             stream.set_display_rotation(info.rotation)
+            if not any(f in _ROTATION_FORMATS for f in self._out.format.name.split(",")):
+                # AVI, MPEG-TS, NUT, y4m ... have no display matrix: a phone's clip played on its side without a word
+                self.warnings.append(f"{self.path}: display rotation of {info.path} ({info.rotation} degrees) not "
+                                     f"kept: {self._out.format.name} does not store it (MP4, MOV, MKV and WebM do); it "
+                                     f"plays as stored")
         self._copy_metadata(stream)
         stream.width, stream.height = info.width, info.height
         stream.pix_fmt = self.pix_fmt
@@ -757,7 +891,10 @@ class VideoWriter:
                 self._out.start_encoding()
             except Exception as exc:  # e.g. SRT subtitles in MP4, or AAC in WebM
                 dropped = keep[-1]
-                hint = " (--audio aac re-encodes the audio)" if dropped == "audio" else " (MKV holds them)"
+                # re-encoding helps only where the container holds AAC and it was not asked already (GIF, APNG, WebP)
+                hint = (" (--audio aac re-encodes the audio)" if self.audio == "copy" and
+                        _container_holds(self._out.format.name, "aac") else "") if dropped == "audio" \
+                    else " (MKV holds them)"
                 self.warnings.append(f"{self.path}: {dropped} streams not kept: {self._out.format.name} "
                                      f"cannot hold them ({exc}){hint}")
                 self._close_quietly()
@@ -829,7 +966,11 @@ class VideoWriter:
         for s in ins:
             if s.type == "audio" and self.audio == "aac":
                 out = self._out.add_stream("aac", rate=s.codec_context.sample_rate or 48000)
-                out.layout = s.codec_context.layout
+                layout = s.codec_context.layout
+                # a layout of unspecified order ("1 channels": PCM in MKV, WAV), which the AAC encoder refuses
+                # (avcodec_open2: Invalid argument, the audio dropped): the default layout of its channel count
+                unordered = layout.name.endswith(" channels")
+                out.layout = _DEFAULT_LAYOUTS.get(len(layout.channels), layout) if unordered else layout
                 self._decoders[s.index] = out
             else:
                 out = self._out.add_stream_from_template(s)
@@ -845,18 +986,32 @@ class VideoWriter:
         tb = self._time_base
         if when is not None and when.pts is not None and when.time_base:
             t = when.pts * Fraction(when.time_base) - Fraction(self.offset).limit_denominator(1_000_000)
+            if self.offset and t < 0 and not self.frames_written:
+                # --start between two frames: read_video keeps the frame nearest to it, up to half a frame before.
+                # The output starts at that frame, audio too: at a negative time MP4's edit list hid it (one frame
+                # fewer than written), MKV's muxer moved it to 0 and every later frame with it
+                self.offset += float(t)
+                if self.audio_end is not None:
+                    self.audio_end -= float(t)
+                t = Fraction(0)
         else:
             t = self.frames_written / (self.info.fps or Fraction(25))
         pts = int(round(t / tb))
+        source_t, previous_t, self._last_t = t, self._last_t, t
         if self._last_pts is not None and pts <= self._last_pts:
             # a damaged timestamp (a corrupt block's, or one far ahead before it): the muxer refuses a frame
             # that is not after the one before; it goes one frame after that one instead
             t = (self._last_pts + 1) * tb + (1 / (self.info.fps or Fraction(25)) - tb)
             pts = int(round(t / tb))
             if not self._retimed:
-                self.warnings.append(f"{self.path}: frame {self.frames_written} (and any later like it): timestamp "
-                                     f"not after the previous frame's (damaged input?): written one frame after "
-                                     f"it, later than in the source")
+                # a variable frame rate into a container of one rate (AVI, y4m: a time base of one frame): frames
+                # closer than a frame apart share a tick, and were called damaged
+                why = ("timestamp not after the previous frame's (damaged input?)"
+                       if previous_t is None or source_t <= previous_t else
+                       f"less than a frame after the previous one (a variable frame rate), and "
+                       f"{self._out.format.name} here holds one frame per 1/{1 / tb} s")
+                self.warnings.append(f"{self.path}: frame {self.frames_written} (and any later like it): {why}: "
+                                     f"written one frame after it, later than in the source")
             self._retimed += 1
         vf.pts = self._last_pts = pts
         vf.time_base = tb
@@ -904,11 +1059,13 @@ class VideoWriter:
                 return
             self._lookahead = None
             if self.offset:
-                if t < 0:
-                    continue  # before --start
+                # before --start (or the container's first timestamp); the offset is a float and the container's
+                # start time whole microseconds: a packet at the very start came out a hair before it, and was lost
+                if t < -_START_SLACK:
+                    continue
                 shift = int(round(self.offset / pkt.time_base))
-                pkt.pts = None if pkt.pts is None else pkt.pts - shift
-                pkt.dts = None if pkt.dts is None else pkt.dts - shift
+                pkt.pts = None if pkt.pts is None else max(0, pkt.pts - shift)
+                pkt.dts = None if pkt.dts is None else max(0, pkt.dts - shift)
             index = pkt.stream.index
             if index in self._decoders:  # --audio aac: decode, re-encode
                 for frame in pkt.decode():
@@ -988,15 +1145,21 @@ def read_video_cv(info: VideoInfo) -> Iterator[Item]:
     import cv2
 
     cap = cv2.VideoCapture(info.path)
-    n = 0
+    n, last_s = 0, None
     try:
         while True:
             ok, bgr = cap.read()
             if not ok:
                 break
+            last_s = cap.get(cv2.CAP_PROP_POS_MSEC) / 1000.0   # the frame just read
             yield Item(np.ascontiguousarray(bgr[:, :, ::-1]), None)
             n += 1
-        if info.frames and n + max(2, info.frames // 50) < info.frames:
+        # OpenCV's count of an MKV / WebM is its duration x the mean rate: a variable rate has fewer frames, so a
+        # short count is a truncation only where the last frame also comes well before that duration (as read_video)
+        fps = float(info.fps or 25)
+        expected_s = (info.frames or 0) / fps
+        if info.frames and n + max(2, info.frames // 50) < info.frames and \
+                (not last_s or last_s + max(0.05 * expected_s, 3.0 / fps) < expected_s):
             raise VideoReadError(f"{info.path}: the stream ended at frame {n}, expected about "
                                  f"{info.frames} frames (truncated file?)", n)
     finally:
