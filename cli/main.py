@@ -43,3 +43,6 @@ main.add_command(overlay_cmd.overlay_command)
 main.add_command(scenes_cmd.scenes_command)
 main.add_command(bench_cmd.bench_command)
 main.add_command(compare_cmd.compare_command)
+
+if __name__ == "__main__":   # python -m mlaa_stream.cli.main, as the mlaa-stream script runs it
+    main()

@@ -752,3 +752,10 @@ def test_a_lab_sized_threshold_with_luma_or_rgb_is_warned(tmp_path, args, warned
     assert ("no edges are found" in stderr(r)) == warned
     if warned:
         assert f"--threshold {args[-1]} with --metric " in stderr(r)
+
+
+def test_python_dash_m_runs_the_command():
+    # `python -m mlaa_stream.cli.main ...` did nothing and exited 0: the module had no __main__ entry
+    r = subprocess.run([sys.executable, "-m", "mlaa_stream.cli.main", "--version"], capture_output=True, text=True,
+                       timeout=120)
+    assert r.returncode == 0 and "version" in r.stdout, (r.stdout, r.stderr)

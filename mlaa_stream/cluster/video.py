@@ -175,8 +175,6 @@ def join_segments(segments: list[Segment], info, output: str, *, overwrite: bool
                     _copy_tags(s.metadata, o.metadata)
                     copies[s.index] = o
         out.start_encoding()
-        heap: list = []  # (time, order, packet): video and copied packets interleaved by time
-        order = 0
 
         def video_packets():
             for seg in segments:
