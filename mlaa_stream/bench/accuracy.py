@@ -20,6 +20,7 @@ import numpy as np
 from mlaa_stream.yardstick import metrics as M
 from mlaa_stream.spatial.fast_filter import FastFilter
 from mlaa_stream.spatial.fxaa import FXAA
+from mlaa_stream.bench.smaa import SMAA
 from mlaa_stream.spatial.filter import PRESETS, Filter
 from mlaa_stream.temporal.methods import DEFAULT_LOOKAHEAD
 from mlaa_stream.yardstick.scenes import Scene, generate_scenes, timing_frame
@@ -86,6 +87,7 @@ class SpatialTemporal:
 METHODS: dict[str, Callable[[str | None], Processor]] = {
     "none": lambda device: NoAA(),
     "fxaa": lambda device: FXAA(device=device),
+    "smaa": lambda device: SMAA(),   # SMAA 1x ultra, numpy on the host: its ms column is not a GPU's
     "mlaa": lambda device: Filter(device=device),
     "mlaa+temporal": lambda device: SpatialTemporal(device, "auto", lookahead=DEFAULT_LOOKAHEAD),
     "mlaa+temporal:tss": lambda device: SpatialTemporal(device, "tss", lookahead=DEFAULT_LOOKAHEAD),
