@@ -117,6 +117,37 @@ def test_straight_step_unchanged(smaa, axis):
     np.testing.assert_array_equal(smaa.process(img), img)
 
 
+def test_rectangle_sides_and_corner_rounding(smaa):
+    """A flat rectangle: each side is a U pattern (crossing edges at both ends on the rectangle's side), and the
+    crossing edges go on past the side's two rows, so corner rounding keeps 25 % of the U's area: a side pixel i
+    of a side n pixels long takes 0.25 * (0.5 - (i + 0.5) / n) (i < n / 2, mirrored beyond) from across the
+    side. Inside pixels of each side within 1 level of that; the corners change by at most that; the rest not."""
+    a, b = two_colours(np.random.default_rng(17))
+    img = np.broadcast_to(a, (30, 32, 3)).copy()
+    y0, y1, x0, x1 = 10, 20, 8, 20                    # rows 10..19, columns 8..19: 10 tall, 12 wide
+    img[y0:y1, x0:x1] = b
+    out = smaa.process(img)
+
+    def u_share(i: int, n: int) -> float:
+        i = min(i, n - 1 - i)
+        return 0.25 * (0.5 - (i + 0.5) / n)
+
+    want = img.astype(np.float64)
+    w, h = x1 - x0, y1 - y0
+    for i in range(1, w - 1):
+        want[y0, x0 + i] = mix(b, a, u_share(i, w))       # top side: the inside row takes from the row above
+        want[y1 - 1, x0 + i] = mix(b, a, u_share(i, w))   # bottom side
+    for i in range(1, h - 1):
+        want[y0 + i, x0] = mix(b, a, u_share(i, h))       # left and right sides
+        want[y0 + i, x1 - 1] = mix(b, a, u_share(i, h))
+    corners = np.zeros(img.shape[:2], bool)
+    corners[[y0, y0, y1 - 1, y1 - 1], [x0, x1 - 1, x0, x1 - 1]] = True
+    diff = np.abs(out.astype(np.float64) - want)[~corners]
+    assert diff.max() <= 1.0, f"max difference {diff.max():.2f} levels"
+    limit = np.abs(mix(b, a, u_share(0, h)) - b) + 1.0
+    assert (np.abs(out[corners].astype(np.float64) - b) <= limit).all()
+
+
 def test_flat_and_smooth_gradient_unchanged(smaa):
     """A flat colour and a seeded smooth photograph-like field (low-frequency colour with 1-level grain; no
     neighbour step near the 0.05 luma threshold): no edges, every sample back bit for bit."""
