@@ -9,15 +9,17 @@ import numpy as np
 import pytest
 
 from mlaa_stream.bench import accuracy as B
-from mlaa_stream.bench.smaa import SMAA, area_table, detect_edges
+from mlaa_stream.bench.smaa import SMAA, area_table, detect_edges, diag_area_table
 from mlaa_stream.device.colour import linear_to_srgb, srgb_to_linear
 
 STEP = 8   # the stair-step test's run length: a line of slope 1/8
 
 
-@pytest.fixture(scope="module")
-def smaa() -> SMAA:
-    return SMAA()
+@pytest.fixture(scope="module", params=[False, True], ids=["orthogonal", "diagonals"])
+def smaa(request) -> SMAA:
+    """The default (orthogonal patterns) and the opt-in diagonal patterns: every known answer below but the
+    long 45-degree line holds for both (their lines are no diagonals of 4+ pixels)."""
+    return SMAA(diagonals=request.param)
 
 
 def two_colours(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
@@ -105,6 +107,59 @@ def test_stair_step_gets_revectorised_coverage(smaa, transpose, mirror):
     assert diff.max() <= 1.0, f"max difference {diff.max():.2f} levels"
     # Sanity of the answer itself: it blends about half the pixels along the boundary.
     assert (np.abs(want[core] - img[core]).max(-1) > 1).sum() >= 4 * STEP
+
+
+def test_diagonal_area_table_against_dense_sampling():
+    """Diagonal areas against a 2-D grid of samples of the half-plane: the current pixel (square (1 + l, l) of
+    the pattern frame) above the line, its neighbour across the top edge (square (1 + l, 1 + l)) below it."""
+    table = diag_area_table()
+    g = (np.arange(200) + 0.5) / 200
+    gx, gy = np.meshgrid(g, g)
+
+    def shares(p1, p2, left: int) -> np.ndarray:
+        def below(sx, sy):
+            x, y = sx + gx, sy + gy
+            return np.mean(y < p1[1] + (p2[1] - p1[1]) / (p2[0] - p1[0]) * (x - p1[0]))
+        return np.array([1.0 - below(1 + left, left), below(1 + left, 1 + left)])
+
+    for left, right in [(0, 3), (2, 2), (5, 9), (15, 15), (16, 3)]:
+        d = left + right + 1
+        outer, inner = ((1, 0), (1 + d, d)), ((1, 1), (1 + d, 1 + d))
+        # No crossing edge at either end: the mean of the lines through the steps' outer and inner corners.
+        np.testing.assert_allclose(table[0, 0, left, right], (shares(*outer, left) + shares(*inner, left)) / 2,
+                                   atol=0.01)
+        # A vertical crossing at the start and a horizontal one at the end: the line through the outer corners.
+        np.testing.assert_allclose(table[1, 2, left, right], shares(*outer, left), atol=0.01)
+        np.testing.assert_allclose(table[2, 1, left, right], shares(*inner, left), atol=0.01)
+        # A horizontal crossing at the start, a vertical one at the end: from the inner corner to the outer one.
+        np.testing.assert_allclose(table[2, 2, left, right], shares((1, 1), (1 + d, d), left), atol=0.01)
+    np.testing.assert_allclose(table[0, 0, 16, 15], (0.25, 0.25), atol=1e-6)
+
+
+@pytest.mark.parametrize("diagonals", [True, False], ids=["diagonals", "orthogonal"])
+@pytest.mark.parametrize("rising", [True, False], ids=["slash", "backslash"])
+def test_long_diagonal_line(rising, diagonals):
+    """A long 45-degree edge. With diagonals=True the diagonal search finds it, its ends are out of reach (16
+    steps), so each pixel of the staircase and the pixel across its top edge mix 25 % of each other (the mean
+    of the line through the steps' outer corners, which halves the staircase pixels, and the one through their
+    inner corners, which halves the pixels across). Orthogonal patterns alone (the default) see 1-pixel Z
+    steps: 12.5 % (a triangle of legs 1/2). Away from the line: unchanged."""
+    smaa = SMAA(diagonals=diagonals)
+    share = 0.25 if diagonals else 0.125
+    a, b = two_colours(np.random.default_rng(19))
+    h, w = 80, 80
+    ys, xs = np.mgrid[0:h, 0:w]
+    below = (ys + xs >= 79) if rising else (ys - xs >= 0)
+    img = np.where(below[..., None], b, a).astype(np.uint8)
+    out = smaa.process(img)
+    want = img.astype(np.float64)
+    for y in range(20, 60):
+        x = 79 - y if rising else y               # the staircase pixel of row y (b, with a above it)
+        want[y, x] = mix(b, a, share)
+        want[y - 1, x] = mix(a, b, share)
+    core = (slice(20, 59), slice(20, 60))
+    diff = np.abs(out[core].astype(np.float64) - want[core])
+    assert diff.max() <= 1.0, f"max difference {diff.max():.2f} levels"
 
 
 @pytest.mark.parametrize("axis", [0, 1], ids=["horizontal", "vertical"])

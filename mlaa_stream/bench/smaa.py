@@ -20,9 +20,10 @@ What is implemented, with the ULTRA preset's settings:
    computed here from the geometry, exactly, at import -- see `area_table`); corner rounding 25 %;
 3. neighbourhood blending in linear light (sRGB decoded, blended, encoded: "SMAA 1x ultra (linear blend)").
 
-Not implemented: diagonal patterns (SMAA's diagonal search, up to 16 steps) -- 1:1-ish slopes are handled
-as the orthogonal patterns of their short steps, as MLAA does. Also not: predication, temporal reprojection,
-SMAA S2x/T2x/4x. The area table holds the exact coverage for integer distances, where the shader reads
+Diagonal patterns (SMAA's diagonal search, 16 steps, and AreaTex's diagonal lines) are an option,
+SMAA(diagonals=True), off by default and not what the bench's "smaa" runs: see `_diagonal_weights` for what
+they do and the note there for why they are off. Without them, 1:1-ish slopes are handled as the orthogonal
+patterns of their short steps, as MLAA does. Not implemented: predication, temporal reprojection, S2x/T2x/4x. The area table holds the exact coverage for integer distances, where the shader reads
 a 16x16-per-pattern texture with sqrt-compressed distances and bilinear filtering (the same values at
 squared distances, interpolated between).
 
@@ -197,15 +198,142 @@ def _line_weights(along: np.ndarray, across: np.ndarray, rounding: float, max_di
     return own, other
 
 
+# --- diagonal patterns (paper section 4.2, "diagonal patterns"; SMAA's diagonal search and AreaTex diagonal part)
+# A diagonal line is a run of pixels along a 45-degree direction that each have two edges: the top and the left
+# edge for "/" lines (rising to the right), the top and the right edge for "\\" lines. Its area is computed in a
+# frame where the line runs from its first pixel, the square (1, 0), along (+1, +1), y up: the current pixel is
+# the square (1 + left, left) and its neighbour across the top edge the square (1 + left, 1 + left) ("/" lines;
+# "\\" lines are the mirror image, so the two shares swap). The crossing edges at each end (0 none, 1 the
+# vertical one, 2 the horizontal one, 3 both) say where the line starts and ends; where an end is not known
+# (no crossing edge) the area is the mean over the two 45-degree lines it could be (the line through the
+# steps' outer corners and the one through their inner corners), which is also what a long line's middle gets.
+# Each entry: lines (x1, y1, x2, y2), the line from (x1, y1) to (x2 + d, y2 + d), d the line's length in pixels.
+_DIAG_LINES: dict[tuple[int, int], tuple[tuple[int, int, int, int], ...]] = {
+    (0, 0): ((1, 1, 1, 1), (1, 0, 1, 0)), (1, 0): ((1, 0, 0, 0), (1, 0, 1, 0)),
+    (0, 2): ((0, 0, 1, 0), (1, 0, 1, 0)), (1, 2): ((1, 0, 1, 0),),
+    (2, 0): ((1, 1, 0, 0), (1, 1, 1, 0)), (3, 0): ((1, 1, 0, 0), (1, 0, 1, 0)),
+    (2, 2): ((1, 1, 1, 0),), (3, 2): ((1, 1, 1, 0), (1, 0, 1, 0)),
+    (0, 1): ((0, 0, 1, 1), (1, 0, 1, 1)), (1, 1): ((1, 0, 1, 1),),
+    (0, 3): ((0, 0, 1, 1), (1, 0, 1, 0)), (1, 3): ((1, 0, 1, 1), (1, 0, 1, 0)),
+    (2, 1): ((1, 1, 1, 1),), (3, 1): ((1, 1, 1, 1), (1, 0, 1, 1)),
+    (2, 3): ((1, 1, 1, 1), (1, 1, 1, 0)), (3, 3): ((1, 1, 1, 1), (1, 0, 1, 0)),
+}
+DIAG_SIZE = 20   # distances 0..19 each way (the search reaches 16)
+
+
+def _below(x1: float, y1: float, x2: np.ndarray, y2: np.ndarray, sx: np.ndarray, sy: np.ndarray) -> np.ndarray:
+    """Share of the unit square at (sx, sy) below the (infinite) line through (x1, y1) and (x2, y2), x2 > x1:
+    the height under the line clipped to [0, 1] (u = line - sy), integrated exactly over the square's width
+    with the antiderivative F of clip(u, 0, 1) (0 below 0, u^2 / 2 up to 1, u - 1/2 above)."""
+    slope = (y2 - y1) / (x2 - x1)
+
+    def F(u: np.ndarray) -> np.ndarray:
+        return np.where(u <= 0.0, 0.0, np.where(u >= 1.0, u - 0.5, 0.5 * u * u))
+
+    u0 = y1 + slope * (sx - x1) - sy
+    return (F(u0 + slope) - F(u0)) / slope
+
+
+@lru_cache(maxsize=None)
+def diag_area_table() -> np.ndarray:
+    """Blending areas of the diagonal patterns: table[c1, c2, left, right] = (current, across), float32: the
+    share of the current pixel on the far side of the line (the square (1 + left, left), above the line) and
+    of its neighbour across the top edge (the square (1 + left, 1 + left), below it), mean over the pattern's
+    candidate lines (see _DIAG_LINES). Shares under 1/255 are 0, as in SMAA's 8-bit texture, so that a pattern
+    that hardly touches the pixel does not count as a diagonal (which would skip the orthogonal patterns)."""
+    left, right = np.meshgrid(np.arange(DIAG_SIZE, dtype=np.float64), np.arange(DIAG_SIZE, dtype=np.float64),
+                              indexing="ij")
+    d = np.maximum(left + right + 1.0, 4.0)   # lines of 4+ pixels only: shorter ones are not diagonals
+    out = np.zeros((4, 4, DIAG_SIZE, DIAG_SIZE, 2))
+    for (c1, c2), lines in _DIAG_LINES.items():
+        for x1, y1, x2, y2 in lines:
+            args = (float(x1), float(y1), x2 + d, y2 + d)
+            out[c1, c2, ..., 0] += 1.0 - _below(*args, 1.0 + left, left)
+            out[c1, c2, ..., 1] += _below(*args, 1.0 + left, 1.0 + left)
+        out[c1, c2] /= len(lines)
+    out[out < 1.0 / 255.0] = 0.0
+    return out.astype(np.float32)
+
+
+def _diagonal_weights(left: np.ndarray, top: np.ndarray, max_steps: int = MAX_SEARCH_STEPS_DIAG
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(r, g, found): the weights of diagonal lines through pixels with a top edge, and where one was found
+    (those pixels then skip the orthogonal patterns, horizontal and vertical, as in SMAA).
+
+    For a "/" line the search runs from the pixel down-left (only when the pixel also has a left edge) and
+    up-right over pixels with both edges, at most max_steps each way; down-left, one more pixel with a top
+    edge only ends the line. For a "\\" line likewise up-left and (when the pixel has a right edge) down-right
+    over pixels with top and right edges, one more with a top edge ending it down-right. Lines of 4+ pixels
+    count. An end's crossing edges are read beside it (see diag_area_table), none where the search ran out."""
+    h, w = top.shape
+    pad = max_steps + 2
+    L, T = np.pad(left, pad), np.pad(top, pad)
+    R = np.zeros_like(L)
+    R[:, :-1] = L[:, 1:]                                 # an edge at the pixel's right
+    r_out, g_out = np.zeros((h, w), np.float32), np.zeros((h, w), np.float32)
+    ys, xs = np.nonzero(top)
+    if ys.size == 0:
+        return r_out, g_out, np.zeros((h, w), bool)
+    yp, xp = ys + pad, xs + pad
+    table = diag_area_table()
+
+    def search(run: np.ndarray, dy: int, dx: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Pixels of `run` in a row from the pixel along (dx, dy): (distance, ran out, last pixel's top edge)."""
+        n = np.zeros(ys.size, np.int64)
+        alive = np.ones(ys.size, bool)
+        for k in range(1, max_steps + 1):
+            alive &= run[yp + k * dy, xp + k * dx]
+            n += alive
+        z = np.minimum(n, max_steps - 1)
+        last_top = T[yp + (z + 1) * dy, xp + (z + 1) * dx]
+        return z, n >= max_steps, last_top
+
+    # "/" lines: pixels with top and left edges, down-left and up-right.
+    run1 = L & T
+    has_left = L[yp, xp]
+    z, out_l, last_top = search(run1, 1, -1)
+    d_l = np.where(has_left, z + last_top, 0)
+    out_l &= has_left
+    d_r, out_r, _ = search(run1, -1, 1)
+    e1y, e1x, e2y, e2x = yp + d_l, xp - d_l, yp - d_r, xp + d_r        # the down-left and up-right ends
+    c1 = np.where(out_l, 0, 2 * T[e1y, e1x - 1] + L[e1y, e1x])
+    c2 = np.where(out_r, 0, 2 * T[e2y, e2x + 1] + L[e2y - 1, e2x + 1])
+    ok = (d_l + d_r) > 2
+    w1 = table[c1, c2, np.minimum(d_l, DIAG_SIZE - 1), np.minimum(d_r, DIAG_SIZE - 1)] * ok[:, None]
+
+    # "\\" lines: pixels with top and right edges, up-left and down-right; the mirror image, shares swapped.
+    run2 = T & R
+    d_l, out_l, _ = search(run2, -1, -1)
+    has_right = R[yp, xp]
+    z, out_r, last_top = search(run2, 1, 1)
+    d_r = np.where(has_right, z + last_top, 0)
+    out_r &= has_right
+    e1y, e1x, e2y, e2x = yp - d_l, xp - d_l, yp + d_r, xp + d_r        # the up-left and down-right ends
+    c1 = np.where(out_l, 0, 2 * T[e1y, e1x - 1] + L[e1y - 1, e1x])
+    c2 = np.where(out_r, 0, 2 * T[e2y, e2x + 1] + L[e2y, e2x + 1])
+    ok = (d_l + d_r) > 2
+    w2 = table[c1, c2, np.minimum(d_l, DIAG_SIZE - 1), np.minimum(d_r, DIAG_SIZE - 1)] * ok[:, None]
+
+    r_out[ys, xs] = w1[:, 0] + w2[:, 1]
+    g_out[ys, xs] = w1[:, 1] + w2[:, 0]
+    return r_out, g_out, (r_out + g_out) > 0
+
+
 def blending_weights(left: np.ndarray, top: np.ndarray, corner_rounding: float = CORNER_ROUNDING,
-                     max_distance: int = MAX_DISTANCE) -> np.ndarray:
+                     max_distance: int = MAX_DISTANCE, diagonals: bool = False) -> np.ndarray:
     """SMAA's blend texture, (h, w, 4) float32: r, g for the edge at the pixel's top (r: the pixel takes from
     the one above, g: the one above takes from the pixel), b, a for the edge at its left (b: the pixel takes
-    from its left neighbour, a: the left neighbour takes from the pixel)."""
+    from its left neighbour, a: the left neighbour takes from the pixel). A pixel on a diagonal line takes the
+    diagonal's r, g and no orthogonal weights (SMAA gives diagonals priority)."""
     rounding = corner_rounding / 100.0
     r, g = _line_weights(top, left, rounding, max_distance)
     bt, at = _line_weights(left.T, top.T, rounding, max_distance)   # vertical lines: the same, transposed
-    return np.stack([r, g, bt.T, at.T], -1)
+    b, a = bt.T, at.T
+    if diagonals:
+        dr, dg, found = _diagonal_weights(left, top)
+        r, g = np.where(found, dr, r), np.where(found, dg, g)
+        b, a = np.where(found, 0.0, b), np.where(found, 0.0, a)
+    return np.stack([r, g, b, a], -1).astype(np.float32)
 
 
 # --- pass 3: neighbourhood blending (paper section 3, "blending") ---------------------------------------------
@@ -258,7 +386,7 @@ class SMAA:
 
     def __init__(self, device: object = None, *, threshold: float = THRESHOLD,
                  adaptation: float = CONTRAST_ADAPTATION, corner_rounding: float = CORNER_ROUNDING,
-                 max_search_steps: int = MAX_SEARCH_STEPS, bgr: bool = False):
+                 max_search_steps: int = MAX_SEARCH_STEPS, diagonals: bool = False, bgr: bool = False):
         if not 0.0 < threshold <= 1.0:
             raise ValueError(f"threshold: expected a number in (0, 1], got {threshold!r}")
         if not 0.0 <= corner_rounding <= 100.0:
@@ -267,8 +395,9 @@ class SMAA:
             raise ValueError(f"max_search_steps: expected a positive integer, got {max_search_steps!r}")
         self.threshold, self.adaptation = float(threshold), float(adaptation)
         self.corner_rounding, self.max_distance = float(corner_rounding), 2 * int(max_search_steps)
-        self.bgr = bgr
-        area_table(self.max_distance)                 # build the table now, not inside the first timed frame
+        self.diagonals, self.bgr = bool(diagonals), bgr
+        area_table(self.max_distance)                 # build the tables now, not inside the first timed frame
+        diag_area_table()
 
     @property
     def device_name(self) -> str:
@@ -290,7 +419,7 @@ class SMAA:
             rgb = colour[..., ::-1] if self.bgr else colour
             luma = (rgb.astype(np.float32) / np.float32(scale)) @ _LUMA
         left, top = detect_edges(luma, self.threshold, self.adaptation)
-        weights = blending_weights(left, top, self.corner_rounding, self.max_distance)
+        weights = blending_weights(left, top, self.corner_rounding, self.max_distance, self.diagonals)
         if frame.dtype.kind == "u":
             lin = _decode_lut(int(scale))[colour]
         else:
