@@ -23,12 +23,13 @@ What is implemented, with the ULTRA preset's settings:
 Diagonal patterns (SMAA's diagonal search, 16 steps, and AreaTex's diagonal lines) are an option,
 SMAA(diagonals=True), off by default and not what the bench's "smaa" runs: see `_diagonal_weights` for what
 they do and the note there for why they are off. Without them, 1:1-ish slopes are handled as the orthogonal
-patterns of their short steps, as MLAA does. Not implemented: predication, temporal reprojection, S2x/T2x/4x. The area table holds the exact coverage for integer distances, where the shader reads
+patterns of their short steps, as MLAA does. Not implemented: predication, temporal reprojection, S2x/T2x/4x.
+The orthogonal area table holds the exact coverage for integer distances, where the shader reads
 a 16x16-per-pattern texture with sqrt-compressed distances and bilinear filtering (the same values at
 squared distances, interpolated between).
 
 Speed: this is numpy on the host CPU, not OpenCL -- the bench's ms column for "smaa" measures this
-reference implementation, not what SMAA costs on a GPU (about 1-2 ms at 1080p in the paper).
+reference implementation, not what SMAA costs as a GPU shader.
 """
 from __future__ import annotations
 
@@ -383,9 +384,9 @@ def _decode_lut(levels: int) -> np.ndarray:
 
 
 class SMAA:
-    """SMAA 1x, ULTRA preset, orthogonal patterns with corner rounding, blended in linear light -- numpy on the
-    host CPU, so the bench's ms column for it measures this reference, not a GPU shader (see the module
-    docstring for what is and is not implemented). `process(frame)`: uint8 / uint16 / float32 grey or RGB,
+    """SMAA 1x, ULTRA preset, orthogonal patterns with corner rounding (diagonal ones with diagonals=True), blended
+    in linear light -- numpy on the host CPU, so the bench's ms column for it measures this reference, not a
+    GPU shader (see the module docstring for what is and is not implemented). `process(frame)`: uint8 / uint16 / float32 grey or RGB,
     (h, w) or (h, w, c) with c 1-4 (2: grey and alpha, 4: RGBA); alpha passes through unchanged; the same
     shape and dtype back. Values are taken as sRGB-encoded in [0, 1] (float frames: outside it, blended
     pixels are clamped to it; unblended pixels come back bit for bit). `device` is accepted for the bench's
