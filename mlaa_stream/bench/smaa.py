@@ -386,11 +386,12 @@ def _decode_lut(levels: int) -> np.ndarray:
 class SMAA:
     """SMAA 1x, ULTRA preset, orthogonal patterns with corner rounding (diagonal ones with diagonals=True),
     blended in linear light -- numpy on the host CPU, so the bench's ms column for it measures this reference,
-    not a GPU shader (see the module docstring for what is and is not implemented). `process(frame)`: uint8 / uint16 / float32 grey or RGB,
-    (h, w) or (h, w, c) with c 1-4 (2: grey and alpha, 4: RGBA); alpha passes through unchanged; the same
-    shape and dtype back. Values are taken as sRGB-encoded in [0, 1] (float frames: outside it, blended
-    pixels are clamped to it; unblended pixels come back bit for bit). `device` is accepted for the bench's
-    factories and ignored."""
+    not a GPU shader (see the module docstring for what is and is not implemented).
+
+    `process(frame)`: uint8 / uint16 / float32 grey or RGB, (h, w) or (h, w, c) with c 1-4 (2: grey and alpha,
+    4: RGBA); alpha passes through unchanged; the same shape and dtype back. Values are taken as sRGB-encoded
+    in [0, 1] (float frames: outside it, blended pixels are clamped to it; unblended pixels come back bit for
+    bit). `device` is accepted for the bench's factories and ignored."""
 
     def __init__(self, device: object = None, *, threshold: float = THRESHOLD,
                  adaptation: float = CONTRAST_ADAPTATION, corner_rounding: float = CORNER_ROUNDING,
