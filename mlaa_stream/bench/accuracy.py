@@ -3,6 +3,10 @@ frame -- written as docs/bench/results.csv, docs/bench/README.md and docs/bench/
 
 Add a method with one line in METHODS: a name and a factory taking the device spec and returning
 an object with `process(frame) -> frame` (and optionally `close()`).
+
+Peer methods: "fxaa" is FXAA 3.11 as an OpenCL kernel (mlaa_stream/spatial/fxaa.py); "smaa" is SMAA 1x ultra
+(orthogonal patterns, corner rounding, blended in linear light; no diagonal patterns) in numpy on the host
+(mlaa_stream/bench/smaa.py), so its ms column measures numpy on the CPU, not OpenCL nor a GPU shader.
 """
 from __future__ import annotations
 
@@ -20,6 +24,7 @@ import numpy as np
 from mlaa_stream.yardstick import metrics as M
 from mlaa_stream.spatial.fast_filter import FastFilter
 from mlaa_stream.spatial.fxaa import FXAA
+from mlaa_stream.bench.smaa import SMAA
 from mlaa_stream.spatial.filter import PRESETS, Filter
 from mlaa_stream.temporal.methods import DEFAULT_LOOKAHEAD
 from mlaa_stream.yardstick.scenes import Scene, generate_scenes, timing_frame
@@ -86,6 +91,7 @@ class SpatialTemporal:
 METHODS: dict[str, Callable[[str | None], Processor]] = {
     "none": lambda device: NoAA(),
     "fxaa": lambda device: FXAA(device=device),
+    "smaa": lambda device: SMAA(),   # SMAA 1x ultra, numpy on the host: its ms column is not a GPU's
     "mlaa": lambda device: Filter(device=device),
     "mlaa+temporal": lambda device: SpatialTemporal(device, "auto", lookahead=DEFAULT_LOOKAHEAD),
     "mlaa+temporal:tss": lambda device: SpatialTemporal(device, "tss", lookahead=DEFAULT_LOOKAHEAD),
@@ -96,6 +102,12 @@ METHODS: dict[str, Callable[[str | None], Processor]] = {
 # The fast preset as Antialiaser(preset="fast") runs it: FastFilter, without host copies on CPU devices.
 METHODS.update({f"mlaa:{name}": (lambda device, kw=kw: (FastFilter if kw.get("fast") else Filter)(device=device, **kw))
                 for name, kw in PRESETS.items() if kw})
+# What a method's row means beyond its name, printed under the tables of README.md when the method ran.
+METHOD_NOTES: dict[str, str] = {
+    "smaa": "SMAA 1x ultra (luma edges 0.05, contrast adaptation 2.0, 32 search steps, corner rounding 25 %; "
+            "orthogonal patterns only, no diagonal ones), blended in linear light: `mlaa_stream/bench/smaa.py`, "
+            "numpy on the host CPU -- its ms is numpy's, not an OpenCL kernel's nor a GPU shader's",
+}
 TRUTH = "truth"  # a reference row: the supersampled truth itself (no timing)
 # Categories whose input already equals the truth almost everywhere: they measure damage, and their
 # (ill-conditioned) error-removed ratios stay out of the all-category means.
@@ -335,6 +347,9 @@ def write_readme(res: BenchResult, path: Path, chart_name: str, scenes: list[Sce
         _table(HEAD, [_cells(m, summ[m], ms[m]) for m in res.methods if m in summ]),
         "",
     ]
+    notes = [f"- `{m}`: {METHOD_NOTES[m]}" for m in res.methods if m in METHOD_NOTES and m in summ]
+    if notes:
+        parts += notes + [""]
     if res.failures:
         parts += ["Methods that failed:", ""]
         parts += [f"- `{m}`: {e}" for m, e in res.failures.items()] + [""]
