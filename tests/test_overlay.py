@@ -654,6 +654,23 @@ def test_parse_bare_geometry():
     assert len(feats) == 1 and feats[0].lines_at(5)[0].shape == (3, 2)
 
 
+@pytest.mark.parametrize("geom", [
+    {"type": "LineString", "coordinates": [[0, 0], [4, 2, 7.5], [9, 3]]},
+    {"type": "MultiLineString", "coordinates": [[[0, 0], [4, 2, 7.5], [9, 3]], [[1, 1], [2, 2]]]},
+])
+def test_a_third_coordinate_on_some_positions_only_is_ignored(geom):
+    # a position may carry an altitude (docs/grlaa.md: "a third coordinate is ignored"); on some points only, numpy
+    # refused the ragged list: the LineString failed with numpy's own message (no file, no feature), the
+    # MultiLineString with "expected coordinates"
+    feats = parse_overlay({"type": "Feature", "properties": {}, "geometry": geom}, "route.geojson")
+    assert np.array_equal(feats[0].lines_at(0)[0], [[0, 0], [4, 2], [9, 3]])
+    frames = parse_overlay({"type": "Feature", "geometry": None, "properties": {"frames": {"3": geom["coordinates"]}}})
+    assert np.array_equal(frames[0].lines_at(3)[0], [[0, 0], [4, 2], [9, 3]])
+    bad = {"type": "LineString", "coordinates": [[0, 0], [4]]}
+    with pytest.raises(ValueError, match=r"route.geojson: feature 0: line 0: expected positions .*fewer than 2"):
+        parse_overlay({"type": "Feature", "properties": {}, "geometry": bad}, "route.geojson")
+
+
 # ---------------------------------------------------------------------------------- CLI
 
 def _png(path, pixels):

@@ -775,21 +775,39 @@ def _geometry_lines(geom, where: str) -> list[np.ndarray] | None:
     raise ValueError(f"{where}: expected a LineString or MultiLineString geometry, got {kind!r}")
 
 
+def _positions(line) -> np.ndarray | None:
+    """One line's positions as float64 (N, k): at once where every position has as many numbers, else one by
+    one, keeping x and y (GeoJSON lets a position carry a third number, which is ignored, on some points only);
+    None where a position is not a list of 2 or more numbers."""
+    try:
+        return np.asarray(line, dtype=np.float64)
+    except (TypeError, ValueError):  # positions of mixed lengths: numpy refuses the ragged list
+        pass
+    try:
+        if isinstance(line, (str, bytes)) or any(isinstance(p, (str, bytes)) or len(p) < 2 for p in line):
+            return None
+        return np.array([[float(p[0]), float(p[1])] for p in line], dtype=np.float64)
+    except (TypeError, ValueError):
+        return None
+
+
 def _coords_lines(coords, where: str, multi: bool | None = None) -> list[np.ndarray]:
     """LineString ([[x, y], ...]) or MultiLineString ([[[x, y], ...], ...]) coordinates."""
     try:
-        a = [np.asarray(c, dtype=np.float64) for c in coords] if coords is not None else None
+        a = [np.asarray(c, dtype=np.float64) if multi is False else _positions(c) for c in coords] \
+            if coords is not None else None
     except (TypeError, ValueError):
         a = None
-    if a is None or len(a) == 0:
+    if a is None or len(a) == 0 or any(p is None for p in a):
         raise ValueError(f"{where}: expected coordinates [[x, y], ...], got {coords!r:.60}")
     if multi is None:
         multi = a[0].ndim == 2
-    parts = a if multi else [np.asarray(coords, dtype=np.float64)]
+    parts = a if multi else [_positions(coords)]
     out = []
     for j, p in enumerate(parts):
-        if p.ndim != 2 or p.shape[1] < 2 or len(p) < 1:
-            raise ValueError(f"{where}: line {j}: expected positions [[x, y], ...], got shape {p.shape}")
+        if p is None or p.ndim != 2 or p.shape[1] < 2 or len(p) < 1:
+            raise ValueError(f"{where}: line {j}: expected positions [[x, y], ...], got "
+                             f"{'a position of fewer than 2 numbers' if p is None else f'shape {p.shape}'}")
         if not np.isfinite(p[:, :2]).all():
             raise ValueError(f"{where}: line {j}: expected finite coordinates, got NaN or infinity")
         out.append(np.ascontiguousarray(p[:, :2]))
