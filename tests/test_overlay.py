@@ -562,6 +562,24 @@ def test_parse_color():
     assert parse_color([0, 255, 51]) == (0.0, 1.0, 0.2)
 
 
+@pytest.mark.parametrize("bad", ["#-1-1-1", "+f+f+f", "# 1 1 1", "#\uff11\uff11\uff11"])
+def test_parse_color_takes_hex_digits_only(bad):
+    # int(s, 16) took a sign and spaces: '#-1-1-1' was -1/255 per channel (below black), drawn as black
+    with pytest.raises(ValueError, match="expected '#rrggbb'"):
+        parse_color(bad)
+
+
+def test_colours_as_one_number_and_per_line_lists_of_mixed_forms(renderer):
+    # a number (cv2's grey colour) raised TypeError ('int' object is not iterable), and a per-line list mixing
+    # a string and a tuple numpy's "inhomogeneous shape" ValueError
+    frame = np.zeros((16, 24, 3), np.uint8)
+    line = np.array([[2.0, 8.0], [21.0, 8.0]])
+    assert parse_color(128) == parse_color((128,)) == parse_color(np.array(128)) == (128 / 255,) * 3
+    assert (renderer.draw(frame, [line], width=3, color=128)[8, 10] == 128).all()
+    out = renderer.draw(frame, [line, line + [0, 5]], width=3, color=["#ff0000", (0, 255, 0)], bgr=True)
+    assert tuple(out[8, 10]) == (0, 0, 255) and tuple(out[13, 10]) == (0, 255, 0)
+
+
 # ------------------------------------------------------------------------- overlay files
 
 def _write(tmp_path, doc, name="ov.geojson"):

@@ -9,7 +9,9 @@ from __future__ import annotations
 
 import json
 import math
+import numbers
 import os
+import string
 from dataclasses import dataclass
 from typing import Callable
 
@@ -32,23 +34,24 @@ DEVICE_CLIP_MARGIN = 4096.0  # points this far off the frame: segment tables in 
 # rather than drawn as nothing.
 MAX_WIDTH = 65536.0
 _FOOTPRINT_HALF_DIAGONAL = math.sqrt(0.5)
+_HEX_DIGITS = frozenset(string.hexdigits)  # ASCII only: int(..., 16) also takes other scripts' digits
 
 # --------------------------------------------------------------------------------------- styles
 
 def parse_color(value, what: str = "color") -> tuple[float, float, float]:
-    """A colour as sRGB in [0, 1], in the order given: '#rrggbb' (always RGB) or 3 numbers 0..255."""
+    """A colour as sRGB in [0, 1], in the order given: '#rrggbb' / '#rgb' (always RGB), 3 numbers 0..255, or one
+    number 0..255 (or a 1-sequence): grey."""
     if isinstance(value, str):
         s = value.strip().lstrip("#")
         if len(s) == 3:
             s = "".join(ch * 2 for ch in s)
-        try:
-            if len(s) != 6:
-                raise ValueError
-            return tuple(int(s[i:i + 2], 16) / 255.0 for i in (0, 2, 4))  # type: ignore[return-value]
-        except ValueError:
-            raise ValueError(f"{what}: expected '#rrggbb', got {value!r}") from None
+        # hex digits only: int(..., 16) alone took '#-1-1-1' (-1/255: a colour below black) and '+f+f+f'
+        if len(s) != 6 or not all(ch in _HEX_DIGITS for ch in s):
+            raise ValueError(f"{what}: expected '#rrggbb', got {value!r}")
+        return tuple(int(s[i:i + 2], 16) / 255.0 for i in (0, 2, 4))  # type: ignore[return-value]
     try:
-        vals = [float(v) for v in value]
+        # one number (a 0-d array too): grey, as a 1-sequence is (cv2 takes a scalar colour too)
+        vals = [float(value)] if isinstance(value, numbers.Real) or np.ndim(value) == 0 else [float(v) for v in value]
     except (TypeError, ValueError):
         raise ValueError(f"{what}: expected '#rrggbb' or 3 numbers 0..255, got {value!r}") from None
     if len(vals) == 1:
@@ -86,8 +89,18 @@ class LineStyle:
 
 
 def _is_one_color(v) -> bool:
-    return isinstance(v, str) or (np.ndim(v) == 1 and len(v) in (1, 3)
-                                  and not isinstance(v[0], (str, list, tuple, np.ndarray)))
+    """Whether `v` is one colour (a string, a number, 1 or 3 numbers) rather than one per line. Per-line lists may
+    mix forms (["#ff0000", (0, 0, 255)]), which np.ndim alone refused with numpy's own message."""
+    if isinstance(v, (str, numbers.Real)):  # a number: grey (parse_color)
+        return True
+    if isinstance(v, np.ndarray):
+        return v.ndim == 0 or (v.ndim == 1 and len(v) in (1, 3))
+    try:
+        items = list(v)
+    except TypeError:
+        return False
+    return len(items) in (1, 3) and all(isinstance(x, numbers.Real) or (isinstance(x, np.ndarray) and x.ndim == 0)
+                                        for x in items)
 
 
 def _per_line(value, n: int, name: str, is_one: Callable[[object], bool]) -> list:
