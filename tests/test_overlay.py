@@ -13,6 +13,7 @@ import json
 import math
 import os
 import re
+import warnings
 
 import numpy as np
 import pyopencl as cl
@@ -458,6 +459,21 @@ def test_huge_coordinates_are_clipped_exactly(renderer):
     out = renderer.draw(frame, lines, width=3, cap="butt")
     ref = reference_draw_polylines(frame, lines, width=3, cap="butt")
     assert np.abs(out.astype(int) - ref.astype(int)).max() <= 1 and (out != frame).any()
+
+
+@pytest.mark.parametrize("far", [1e17, 1e18, 1e20, 1e300, 1.7e308])
+def test_lines_from_astronomically_far_are_cut_to_the_frame_exactly(renderer, far):
+    # the cut end was o + t * d in float64, off by ulp(|o|): a line from x = -1e18 to x = 30 drew 3 pixels, one
+    # from -1e17 ended at 32; lines between two far ends (a line drawn "to infinity") drew 4 pixels
+    frame = np.full((40, 60, 3), 30, np.uint8)
+    for far_line, near_line, kw in (
+            ([[-far, 20.0], [30.0, 20.0]], [[-100.0, 20.0], [30.0, 20.0]], dict(width=3, cap="butt")),
+            ([[-far, -far], [far, far]], [[-100.0, -100.0], [100.0, 100.0]], dict(width=3)),
+            ([[-far, 7.0], [far, 7.0], [far, 9.0]], [[-100.0, 7.0], [100.0, 7.0]], dict(width=2))):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # no float64 overflow on the way either
+            out = renderer.draw(frame, [np.array(far_line)], **kw)
+        assert np.array_equal(out, renderer.draw(frame, [np.array(near_line)], **kw)), far_line
 
 
 @pytest.mark.parametrize("seed", [0, 1])

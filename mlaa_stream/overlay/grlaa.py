@@ -13,6 +13,7 @@ import numbers
 import os
 import string
 from dataclasses import dataclass
+from fractions import Fraction
 from typing import Callable
 
 import numpy as np
@@ -26,6 +27,7 @@ ENC8_SIZE = 65536  # kernels/grlaa.cl: uint8 encode table
 BIN_LOCAL = 64     # work-group size of the binning kernel
 BIN_CAP = 64       # initial room for entries per tile (grows when a tile lists more)
 DEVICE_CLIP_MARGIN = 4096.0  # points this far off the frame: segment tables in float64 on the host
+EXACT_CLIP_BEYOND = 2.0 ** 32  # segments with an end this far out are cut to the frame exactly (_clip_segments)
 # The widest stroke (and outline) drawn: kernels/grlaa.cl computes distances to the stroke's edge in float32, whose
 # spacing at 2^15 px (half this width) is 2^-8 px. Against the float64 reference an edge 65536 px wide is within 1
 # level of 8-bit coverage (measured: 3 levels at 2^20, the edge lost at 2^23, and nothing at all drawn from ~4.3e9
@@ -336,24 +338,57 @@ def _clip_segments(cols: list[np.ndarray], reach: np.ndarray, width: int, height
         return None, cols
     m = m[out]
     ox, oy = x0[out], y0[out]
-    dx, dy = x1[out] - ox, y1[out] - oy
-    t0, t1 = np.zeros(len(out)), np.ones(len(out))
-    ok = np.ones(len(out), bool)
-    for p, q in ((-dx, ox + m), (dx, width - 1 + m - ox), (-dy, oy + m), (dy, height - 1 + m - oy)):
-        with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):  # exact below where float64 overflows
+        dx, dy = x1[out] - ox, y1[out] - oy
+        t0, t1 = np.zeros(len(out)), np.ones(len(out))
+        ok = np.ones(len(out), bool)
+        for p, q in ((-dx, ox + m), (dx, width - 1 + m - ox), (-dy, oy + m), (dy, height - 1 + m - oy)):
             r = q / p
-        ok &= ~((p == 0) & (q < 0))
-        t0 = np.where(p < 0, np.maximum(t0, r), t0)
-        t1 = np.where(p > 0, np.minimum(t1, r), t1)
-    ok &= t0 <= t1
+            ok &= ~((p == 0) & (q < 0))
+            t0 = np.where(p < 0, np.maximum(t0, r), t0)
+            t1 = np.where(p > 0, np.minimum(t1, r), t1)
+        ok &= t0 <= t1
+        cut_out = [ox + t0 * dx, oy + t0 * dy, ox + t1 * dx, oy + t1 * dy]
+    # o + t * d cancels: a cut end lies near the frame, the ends it is cut from up to |o| away, so its error is
+    # ulp(|o|) (a line from x = -1e18 to the frame started thousands of pixels late). Beyond EXACT_CLIP_BEYOND px
+    # (error over 1e-6 px) such segments are cut in exact rational arithmetic instead.
+    big = np.flatnonzero(np.maximum(np.maximum(np.abs(ox), np.abs(oy)),
+                                    np.maximum(np.abs(x1[out]), np.abs(y1[out]))) > EXACT_CLIP_BEYOND)
+    for i in big:
+        o = out[i]
+        got = _clip_exact(float(x0[o]), float(y0[o]), float(x1[o]), float(y1[o]), float(m[i]), width, height)
+        ok[i] = got is not None
+        if got is not None:
+            for c, v in enumerate(got):
+                cut_out[c][i] = v
     keep = np.ones(len(x0), bool)
     keep[out] = ok
     cut = []
-    for v, o, d, t in ((x0, ox, dx, t0), (y0, oy, dy, t0), (x1, ox, dx, t1), (y1, oy, dy, t1)):
+    for v, c in zip((x0, y0, x1, y1), cut_out):
         v = v.copy()
-        v[out] = o + t * d
+        v[out] = c
         cut.append(v[keep])
     return keep, cut
+
+
+def _clip_exact(x0: float, y0: float, x1: float, y1: float, m: float, width: int,
+                height: int) -> tuple[float, float, float, float] | None:
+    """_clip_segments' Liang-Barsky for one segment in exact rationals (its ends are exact binary fractions); the
+    cut ends rounded to float64 once. None where the segment misses the box."""
+    X0, Y0, X1, Y1, M = map(Fraction, (x0, y0, x1, y1, m))
+    dx, dy = X1 - X0, Y1 - Y0
+    t0, t1 = Fraction(0), Fraction(1)
+    for p, q in ((-dx, X0 + M), (dx, width - 1 + M - X0), (-dy, Y0 + M), (dy, height - 1 + M - Y0)):
+        if p == 0:
+            if q < 0:
+                return None
+        elif p < 0:
+            t0 = max(t0, q / p)
+        else:
+            t1 = min(t1, q / p)
+    if t0 > t1:
+        return None
+    return float(X0 + t0 * dx), float(Y0 + t0 * dy), float(X0 + t1 * dx), float(Y0 + t1 * dy)
 
 
 # ----------------------------------------------------------------------------- OpenCL renderer
