@@ -69,6 +69,10 @@ def _run(input_path: str, output: str, lines_path: str, frame: int, strength: fl
     if os.path.exists(output) and not overwrite:
         _err(f"{output}: exists; use --overwrite to replace it")
         return EXIT_USAGE
+    folder = os.path.dirname(os.path.abspath(output))
+    if not os.path.isdir(folder):  # as the filter command says it (OpenImageIO's error named the temporary file)
+        _err(f"{folder}: the output folder does not exist")
+        return EXIT_FAILED
 
     from mlaa_stream.device.context import DeviceError, KernelBuildError
     from mlaa_stream.io.images import (ImageReadError, ImageWriteError, read_image, split_for_filter,

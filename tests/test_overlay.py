@@ -744,6 +744,22 @@ def test_cli_overlay(renderer, tmp_path):
 
 
 
+@pytest.mark.parametrize("where", ["nodir", "afile"])
+def test_cli_overlay_into_a_missing_output_folder_names_the_folder(tmp_path, where):
+    # OpenImageIO's error named the hidden temporary file, and under a file a Python warning (with its source line)
+    # said the temporary file could not be removed
+    from click.testing import CliRunner
+    from mlaa_stream.cli.main import main
+    src = str(tmp_path / "in.png")
+    _png(src, np.full((30, 40, 3), 200, np.uint8))
+    (tmp_path / "afile").write_text("x")
+    lines = _write(tmp_path, {"type": "LineString", "coordinates": [[3, 15], [37, 15]]})
+    r = CliRunner().invoke(main, ["overlay", src, "-o", str(tmp_path / where / "out.png"), "--lines", lines])
+    assert r.exit_code == 1, r.output
+    assert f"{tmp_path / where}: the output folder does not exist" in r.output
+    assert "tmp" not in r.output.replace(str(tmp_path), "") and "Warning" not in r.output
+
+
 def test_cli_overlay_refuses_an_exr_without_colour(tmp_path):
     """Lines drawn into a depth pass would be depths of nothing: refused, naming the channels (a traceback before)."""
     import OpenImageIO as oiio

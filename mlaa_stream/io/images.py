@@ -601,7 +601,7 @@ def remove_quietly(path: str) -> None:
     """Remove a temporary file if it is there; a failure to remove it must not hide the real error."""
     try:
         os.unlink(path)
-    except FileNotFoundError:
+    except (FileNotFoundError, NotADirectoryError):  # not there (a file where its folder should be: never made)
         pass
     except OSError as exc:  # pragma: no cover - e.g. the directory became read-only meanwhile
         import warnings
