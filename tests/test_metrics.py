@@ -256,3 +256,22 @@ def test_compare_scores_a_multi_layer_exr_by_its_beauty(tmp_path):
     assert r.exit_code == 0, r.output
     rmse = float(r.output.split("RMSE vs truth (8-bit levels): out ")[1].split()[0])
     assert rmse < 0.6, r.output
+
+
+@pytest.mark.parametrize("names", [("Z",), ("N.x", "N.y", "N.z")])
+def test_compare_refuses_an_exr_without_colour(tmp_path, names):
+    """A depth or normals pass (which the filter copies unchanged) was scored as colour: its channels taken by
+    position, an RMSE of depths against colours with exit 0. Refused, naming its channels, as the filter does."""
+    import OpenImageIO as oiio
+    spec = oiio.ImageSpec(12, 8, len(names), "float")
+    spec.channelnames = names
+    path = str(tmp_path / "pass.exr")
+    out = oiio.ImageOutput.create(path)
+    assert out.open(path, spec) and out.write_image(np.full((8, 12, len(names)), 0.5, np.float32))
+    out.close()
+    _write(tmp_path / "b.png", np.full((8, 12, 3), 128, np.uint8))
+    for args in ([path, str(tmp_path / "b.png")], [str(tmp_path / "b.png"), path]):
+        r = CliRunner().invoke(main, ["compare", *args, "--no-flip"])
+        assert r.exit_code == 1, r.output
+        assert f"pass.exr: expected colour channels, got no colour channels ({', '.join(names)})" in r.output
+        assert "RMSE" not in r.output
