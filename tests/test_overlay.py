@@ -650,6 +650,22 @@ def test_overlay_file_not_json(tmp_path):
         load_overlay(str(p))
 
 
+@pytest.mark.parametrize("encoding", ["utf-8-sig", "utf-16"])
+def test_overlay_files_with_a_byte_order_mark_are_read(tmp_path, encoding):
+    # a Windows editor's UTF-8 BOM was refused ("Unexpected UTF-8 BOM"), UTF-16 failed with the codec's message alone
+    doc = {"type": "LineString", "coordinates": [[1, 2], [30, 20]]}
+    p = tmp_path / "route.geojson"
+    p.write_bytes(json.dumps(doc).encode(encoding))
+    assert np.array_equal(load_overlay(str(p)).features[0].lines_at(0)[0], [[1, 2], [30, 20]])
+
+
+def test_an_overlay_file_that_is_not_text_is_named(tmp_path):
+    p = tmp_path / "route.geojson"
+    p.write_bytes(b'{"type": "LineString", "coordinates": [[1, 2], [3, 4]], "name": "\xff"}')
+    with pytest.raises(ValueError, match=r"route.geojson: expected JSON text \(UTF-8\), got bytes that are not text"):
+        load_overlay(str(p))
+
+
 @pytest.mark.parametrize("field,value,shown", [
     ("width", 1e40, "1e+40"), ("width", math.inf, "inf"), ("width", math.nan, "nan"), ("width", -2.0, "-2"),
     ("width", 65536.5, "65536.5"), ("outline_width", 1e40, "1e+40"), ("outline_width", -1.0, "-1")])

@@ -935,13 +935,20 @@ def parse_overlay(doc: dict, name: str = "overlay") -> list[OverlayFeature]:
 def read_overlay(path: str) -> list[OverlayFeature]:
     """Parse an overlay file (JSON/GeoJSON, docs/grlaa.md); errors name the file and feature."""
     try:
-        with open(path, encoding="utf-8") as fh:
-            doc = json.load(fh)
+        with open(path, "rb") as fh:
+            raw = fh.read()
     except OSError as exc:
         raise ValueError(f"{path}: cannot read ({exc.strerror})") from exc
+    try:
+        # bytes: json detects UTF-8 with a byte order mark (Windows editors write one: "Unexpected UTF-8 BOM"
+        # before) and UTF-16/32, as RFC 8259 lets a reader
+        doc = json.loads(raw)
     except json.JSONDecodeError as exc:
         raise ValueError(f"{path}: expected JSON, got an error at line {exc.lineno} "
                          f"column {exc.colno}: {exc.msg}") from exc
+    except UnicodeDecodeError as exc:  # named the codec, not the file
+        raise ValueError(f"{path}: expected JSON text (UTF-8), got bytes that are not text ({exc.reason} at "
+                         f"byte {exc.start})") from exc
     return parse_overlay(doc, os.fspath(path))
 
 
