@@ -805,3 +805,27 @@ def test_lines_wholly_far_off_the_frame_leave_it_unchanged(zero_copy):
     near = far + [np.array([[5.0, 5.0], [50.0, 40.0]])]
     assert np.array_equal(r.draw(frame, near, width=3.0),
                           OverlayRenderer(zero_copy=zero_copy).draw(frame, near, width=3.0))
+
+
+def test_cli_filter_overlay_draws_linear_light_into_exrs(tmp_path):
+    """`mlaa-stream shot.exr -o out.exr --overlay lines` drew the file's sRGB colours as they are into linear light
+    (#3080ff's red 0.19 instead of 0.03: washed out), where `mlaa-stream overlay` composites EXRs as linear light.
+    Each frame of a folder is drawn as it is: linear for the EXR, sRGB codes for the PNG."""
+    from click.testing import CliRunner
+    from mlaa_stream.cli.main import main
+    from mlaa_stream.io.images import read_image, write_image
+    src = tmp_path / "shots"
+    src.mkdir()
+    write_image(str(src / "a.exr"), np.full((30, 40, 3), 0.2, np.float16))
+    _png(str(src / "b.png"), np.full((30, 40, 3), 90, np.uint8))
+    lines = _write(tmp_path, {"type": "Feature", "properties": {"width": 8, "color": "#3080ff"},
+                              "geometry": {"type": "LineString", "coordinates": [[2, 15], [37, 15]]}})
+    colour = np.array([0x30, 0x80, 0xFF]) / 255
+    for args in ([str(src / "a.exr"), "-o", str(tmp_path / "one.exr")], [str(src), "-o", str(tmp_path / "out")],
+                 [str(src), "-o", str(tmp_path / "out_t"), "--temporal"]):
+        r = CliRunner().invoke(main, [*args, "--overlay", lines, "-q"])
+        assert r.exit_code == 0, r.output
+    for exr in (tmp_path / "one.exr", tmp_path / "out" / "a.exr", tmp_path / "out_t" / "a.exr"):
+        np.testing.assert_allclose(read_image(str(exr)).pixels[15, 20, :3].astype(float), srgb_to_linear(colour),
+                                   atol=2e-3)
+    assert tuple(read_image(str(tmp_path / "out" / "b.png")).pixels[15, 20]) == (0x30, 0x80, 0xFF)

@@ -954,15 +954,17 @@ def read_overlay(path: str) -> list[OverlayFeature]:
 
 def load_overlay(path: str, bgr: bool = True, device: str | int | None = None,
                  strength: float = 1.0, linear: bool = False,
-                 inplace: bool = False) -> Callable[[np.ndarray, int], np.ndarray]:
-    """Read an overlay file once; returns draw(frame, index) -> frame with that frame's lines drawn.
+                 inplace: bool = False) -> Callable[..., np.ndarray]:
+    """Read an overlay file once; returns draw(frame, index, linear=None) -> frame with that frame's lines drawn.
 
-    `bgr` is the channel order of the frames it will get (file colours are always RGB).
+    `bgr` is the channel order of the frames it will get (file colours are always RGB). `linear`: the frames hold
+    linear light (EXR) instead of sRGB codes; draw's own `linear` says it for one frame (a folder mixing EXR and
+    PNG: the command line passes each frame's, as its `per_frame_linear` attribute says it may).
     """
     features = read_overlay(path)
-    renderer: list[OverlayRenderer] = []
+    renderers: dict[bool, OverlayRenderer] = {}   # one per kind of frame: the renderer's kernel is built for one
 
-    def draw(frame: np.ndarray, index: int) -> np.ndarray:
+    def draw(frame: np.ndarray, index: int, linear: bool | None = None) -> np.ndarray:
         lines, styles = [], []
         for f in features:
             for ln in f.lines_at(int(index)):
@@ -970,12 +972,14 @@ def load_overlay(path: str, bgr: bool = True, device: str | int | None = None,
                 styles.append(f.style)
         if not lines:
             return frame if inplace else frame.copy()
-        if not renderer:
-            renderer.append(OverlayRenderer(device, strength, linear=linear))
-        return renderer[0].draw_styled(frame, lines, styles, bgr=bgr, inplace=inplace,
-                                       what=f"frame {index}")
+        lin = default_linear if linear is None else bool(linear)
+        if lin not in renderers:
+            renderers[lin] = OverlayRenderer(device, strength, linear=lin)
+        return renderers[lin].draw_styled(frame, lines, styles, bgr=bgr, inplace=inplace, what=f"frame {index}")
 
+    default_linear = bool(linear)
     draw.features = features  # type: ignore[attr-defined]
+    draw.per_frame_linear = True  # type: ignore[attr-defined]
     return draw
 
 
