@@ -113,13 +113,18 @@ class SequenceTemporal:
             self.stage(frame_in, frame_out, number)
 
 
-def frame_hooks(post_hooks: list, index_of: Callable[[int], int], linear_of: Callable[[int], bool]) -> list:
-    """Post hooks on the pipeline's positions: each gets its frame's index (index_of), and a hook that takes it (the
-    --overlay hook: `per_frame_linear`) whether the frame holds linear light (linear_of: an EXR among PNGs). Drawn as
-    sRGB codes into a linear-light frame, an overlay's colours came out washed out (#3080ff's red 0.19, not 0.03)."""
+def frame_hooks(post_hooks: list, index_of: Callable[[int], int],
+                kind_of: Callable[[int], tuple[bool, bool]]) -> list:
+    """Post hooks on the pipeline's positions: each gets its frame's index (index_of), and a hook that takes them (the
+    --overlay hook: `per_frame_format`) whether the frame holds linear light and premultiplied alpha (kind_of: an
+    EXR among PNGs). Drawn as sRGB codes into a linear-light frame, an overlay's colours came out washed out
+    (#3080ff's red 0.19, not 0.03); over premultiplied colour taken for straight, too light where alpha < 1."""
     def wrap(hook: Callable) -> Callable:
-        if getattr(hook, "per_frame_linear", False):
-            return lambda f, i: hook(f, index_of(i), linear=linear_of(i))
+        if getattr(hook, "per_frame_format", False):
+            def hooked(f, i):
+                linear, premultiplied = kind_of(i)
+                return hook(f, index_of(i), linear=linear, premultiplied=premultiplied)
+            return hooked
         return lambda f, i: hook(f, index_of(i))
     return [wrap(h) for h in post_hooks]
 
@@ -381,7 +386,7 @@ class ImageJob(Job):
         self.read_linear: dict = {}   # position -> the frame is linear light (the temporal stage's colour space)
         positions = getattr(self, "positions", {})
         hook_index: dict = {}   # position read -> the file's place in the whole plan (self.positions)
-        hook_linear: dict = {}  # position read -> linear light, for the --overlay hook (read_linear is popped)
+        hook_kind: dict = {}  # position read -> (linear light, premultiplied alpha) for the --overlay hook
 
         def source():
             """image_source, remembering which file each position is (for the temporal stage and the hooks)."""
@@ -392,11 +397,11 @@ class ImageJob(Job):
                         self.read_order[position] = item.meta[0]
                         self.read_linear[position] = is_linear(item.meta[1])
                         hook_index[position] = positions.get(id(item.meta[0]), position)
-                        hook_linear[position] = self.read_linear[position]
+                        hook_kind[position] = (self.read_linear[position], item.premultiplied)  # (read_linear: popped)
                     yield item
             finally:
                 inner.close()
-        post_hooks = frame_hooks(post_hooks, lambda i: hook_index.get(i, i), lambda i: hook_linear.get(i, False))
+        post_hooks = frame_hooks(post_hooks, lambda i: hook_index.get(i, i), lambda i: hook_kind.get(i, (False, False)))
         if temporal is not None and getattr(self, "warm_up", None):
             self._warm_up(filt, temporal)
         try:

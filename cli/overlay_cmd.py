@@ -75,8 +75,8 @@ def _run(input_path: str, output: str, lines_path: str, frame: int, strength: fl
         return EXIT_FAILED
 
     from mlaa_stream.device.context import DeviceError, KernelBuildError
-    from mlaa_stream.io.images import (ImageReadError, ImageWriteError, read_image, split_for_filter,
-                                       unpremultiplies, write_image)
+    from mlaa_stream.io.images import (ImageReadError, ImageWriteError, is_premultiplied, read_image,
+                                       split_for_filter, unpremultiplies, write_image)
     from mlaa_stream.overlay.grlaa import OverlayRenderer, read_overlay
     from mlaa_stream.io.sequence import is_linear
 
@@ -107,7 +107,9 @@ def _run(input_path: str, output: str, lines_path: str, frame: int, strength: fl
         renderer = OverlayRenderer(device, strength, linear=is_linear(image))
         if verbose:
             click.echo(f"mlaa-stream: {len(lines)} lines on {renderer.device_name}", err=True)
-        out = renderer.draw_styled(pixels, lines, styles, bgr=False, what=input_path)
+        # an EXR's RGBA (a TIFF's tagged so) is premultiplied: the renderer composites over straight alpha
+        out = renderer.draw_styled(pixels, lines, styles, bgr=False, what=input_path,
+                                   premultiplied=is_premultiplied(image.spec))
     except DeviceError as exc:
         _err(str(exc))
         return EXIT_NO_DEVICE

@@ -829,3 +829,49 @@ def test_cli_filter_overlay_draws_linear_light_into_exrs(tmp_path):
         np.testing.assert_allclose(read_image(str(exr)).pixels[15, 20, :3].astype(float), srgb_to_linear(colour),
                                    atol=2e-3)
     assert tuple(read_image(str(tmp_path / "out" / "b.png")).pixels[15, 20]) == (0x30, 0x80, 0xFF)
+
+
+def _premultiplied_exr(path, shape=(30, 40)):
+    import OpenImageIO as oiio
+    spec = oiio.ImageSpec(shape[1], shape[0], 4, "half")
+    spec.channelnames, spec.alpha_channel = ("R", "G", "B", "A"), 3
+    px = np.zeros((*shape, 4), np.float32)
+    px[..., :3], px[..., 3] = 0.1, 0.5   # straight 0.2 at alpha 0.5
+    out = oiio.ImageOutput.create(path)
+    assert out.open(path, spec) and out.write_image(px) and out.close()
+
+
+def test_overlays_over_premultiplied_alpha_composite_as_premultiplied(renderer, tmp_path):
+    """An EXR's RGBA is premultiplied; the renderer composites over straight alpha, and took the premultiplied
+    colour for straight: white at opacity 0.5 over 0.1 at alpha 0.5 gave 0.70 (written premultiplied) where
+    0.5 + 0.5 * 0.1 = 0.55 is right, in `mlaa-stream overlay` and in the filter's --overlay alike."""
+    from click.testing import CliRunner
+    from mlaa_stream.cli.main import main
+    from mlaa_stream.io.images import read_image
+    from mlaa_stream.overlay.grlaa import LineStyle
+    src = str(tmp_path / "pm.exr")
+    _premultiplied_exr(src)
+    lines = _write(tmp_path, {"type": "Feature", "properties": {"width": 8, "color": "#ffffff", "opacity": 0.5},
+                              "geometry": {"type": "LineString", "coordinates": [[2, 15], [37, 15]]}})
+    for args in (["overlay", src, "-o", str(tmp_path / "a.exr"), "--lines", lines],
+                 [src, "-o", str(tmp_path / "b.exr"), "--overlay", lines, "-q"]):
+        r = CliRunner().invoke(main, args)
+        assert r.exit_code == 0, r.output
+    for name in ("a.exr", "b.exr"):
+        px = read_image(str(tmp_path / name)).pixels.astype(np.float32)
+        np.testing.assert_allclose(px[15, 20], [0.55, 0.55, 0.55, 0.75], atol=1e-3)
+        np.testing.assert_array_equal(px[:5], read_image(src).pixels[:5].astype(np.float32))   # untouched
+    # the API: 16-bit premultiplied samples, untouched ones bit for bit
+    frame = np.zeros((16, 24, 4), np.uint16)
+    frame[..., :3], frame[..., 3] = 9000, 30000
+    frame[3, 3] = (7, 8, 9, 10)   # a dark, nearly transparent sample: its division must not come back changed
+    out = renderer.draw_styled(frame, [np.array([[2.0, 10.0], [21.0, 10.0]])], [LineStyle(4.0, opacity=0.5)],
+                               premultiplied=True)
+    assert np.array_equal(out[:6], frame[:6])
+    # as the same pixels drawn straight (9000 / 30000 of full scale) and premultiplied after
+    straight = frame.copy()
+    straight[..., :3] = round(65535 * 9000 / 30000)
+    ref = renderer.draw_styled(straight, [np.array([[2.0, 10.0], [21.0, 10.0]])], [LineStyle(4.0, opacity=0.5)])
+    ref = ref.astype(np.float64)
+    ref[..., :3] *= ref[..., 3:] / 65535
+    assert np.abs(out[6:].astype(np.float64) - ref[6:]).max() <= 3 and out[10, 12, 3] > 40000

@@ -685,9 +685,17 @@ class OverlayRenderer:
         return styles
 
     def draw_styled(self, frame: np.ndarray, lines: list[np.ndarray], styles: list[LineStyle],
-                    bgr: bool = True, inplace: bool = False, what: str = "frame") -> np.ndarray:
-        """`draw` with checked lines (as_lines) and one LineStyle per line."""
+                    bgr: bool = True, inplace: bool = False, what: str = "frame",
+                    premultiplied: bool = False) -> np.ndarray:
+        """`draw` with checked lines (as_lines) and one LineStyle per line. `premultiplied`: a 4-channel frame's
+        colour is premultiplied by its alpha (an EXR's RGBA), not straight: see draw_premultiplied."""
         allp = np.concatenate(lines) if lines else np.zeros((0, 2))
+        if premultiplied and frame.ndim == 3 and frame.shape[2] == 4 and lines:
+            out = draw_premultiplied(lambda f: self._draw(f, lines, allp, styles, bgr, False, what), frame)
+            if inplace:
+                frame[...] = out
+                return frame
+            return out
         return self._draw(frame, lines, allp, styles, bgr, inplace, what)
 
     def _draw(self, frame: np.ndarray, lines: list[np.ndarray], allp: np.ndarray,
@@ -765,6 +773,29 @@ class OverlayRenderer:
         return dst
 
     __call__ = draw
+
+
+def draw_premultiplied(draw_straight: Callable[[np.ndarray], np.ndarray], frame: np.ndarray) -> np.ndarray:
+    """Draw over an (H, W, 4) frame whose colour is premultiplied by its alpha (EXR's RGBA, a TIFF tagged so):
+    `draw_straight(f)` composites over straight alpha (kernels/grlaa.cl), which took the premultiplied colour for
+    straight (a white line at opacity 0.5 over 0.1 premultiplied at alpha 0.5 gave 0.70, not 0.55). So the colour
+    is divided by alpha (as float32, 0..1), drawn, and multiplied by the new alpha: only on the pixels the lines
+    touched, every other sample stays bit for bit. Where alpha is 0 the colour stays as it is (nothing to divide)."""
+    top = 1.0 if frame.dtype.kind == "f" else float(np.iinfo(frame.dtype).max)
+    px = frame.astype(np.float32) / np.float32(top)
+    alpha = px[..., 3:]
+    straight = px.copy()
+    straight[..., :3] = np.where(alpha > 0, px[..., :3] / np.where(alpha > 0, alpha, 1), px[..., :3])
+    drawn = draw_straight(straight)
+    touched = (drawn != straight).any(axis=2)
+    prem = drawn[touched]
+    prem[:, :3] *= prem[:, 3:]
+    out = frame.copy()
+    if frame.dtype.kind == "f":
+        out[touched] = prem.astype(frame.dtype)
+    else:
+        out[touched] = np.clip(np.rint(prem * top), 0, top).astype(frame.dtype)
+    return out
 
 
 _renderers: dict[tuple, OverlayRenderer] = {}
@@ -959,12 +990,13 @@ def load_overlay(path: str, bgr: bool = True, device: str | int | None = None,
 
     `bgr` is the channel order of the frames it will get (file colours are always RGB). `linear`: the frames hold
     linear light (EXR) instead of sRGB codes; draw's own `linear` says it for one frame (a folder mixing EXR and
-    PNG: the command line passes each frame's, as its `per_frame_linear` attribute says it may).
+    PNG), and its `premultiplied` that a 4-channel frame's colour is premultiplied by its alpha (an EXR's RGBA):
+    the command line passes both for each frame, as draw's `per_frame_format` attribute says it may.
     """
     features = read_overlay(path)
     renderers: dict[bool, OverlayRenderer] = {}   # one per kind of frame: the renderer's kernel is built for one
 
-    def draw(frame: np.ndarray, index: int, linear: bool | None = None) -> np.ndarray:
+    def draw(frame: np.ndarray, index: int, linear: bool | None = None, premultiplied: bool = False) -> np.ndarray:
         lines, styles = [], []
         for f in features:
             for ln in f.lines_at(int(index)):
@@ -975,11 +1007,12 @@ def load_overlay(path: str, bgr: bool = True, device: str | int | None = None,
         lin = default_linear if linear is None else bool(linear)
         if lin not in renderers:
             renderers[lin] = OverlayRenderer(device, strength, linear=lin)
-        return renderers[lin].draw_styled(frame, lines, styles, bgr=bgr, inplace=inplace, what=f"frame {index}")
+        return renderers[lin].draw_styled(frame, lines, styles, bgr=bgr, inplace=inplace, what=f"frame {index}",
+                                          premultiplied=premultiplied)
 
     default_linear = bool(linear)
     draw.features = features  # type: ignore[attr-defined]
-    draw.per_frame_linear = True  # type: ignore[attr-defined]
+    draw.per_frame_format = True  # type: ignore[attr-defined]
     return draw
 
 
