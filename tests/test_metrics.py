@@ -275,3 +275,25 @@ def test_compare_refuses_an_exr_without_colour(tmp_path, names):
         assert r.exit_code == 1, r.output
         assert f"pass.exr: expected colour channels, got no colour channels ({', '.join(names)})" in r.output
         assert "RMSE" not in r.output
+
+
+def test_bench_results_it_cannot_write_are_named(tmp_path, monkeypatch):
+    """A folder in the way of results.csv (README.md, the chart) ended the run, once every method had been measured,
+    in a traceback (IsADirectoryError): refused before the run now, a usage error; a failed write (a full disk) is
+    named, exit 1."""
+    import errno
+
+    out = tmp_path / "bench"
+    (out / "results.csv").mkdir(parents=True)
+    args = ["bench", "--quick", "--methods", "none", "--scenes", "wires", "--no-flip", "--out", str(out)]
+    r = CliRunner().invoke(main, args)
+    assert r.exit_code == 2 and f"{out / 'results.csv'}: a folder is in the way" in r.output, r.output
+    (out / "results.csv").rmdir()
+
+    def full(res, path):
+        raise OSError(errno.ENOSPC, "No space left on device", str(path))
+    monkeypatch.setattr(B, "write_csv", full)
+    r = CliRunner().invoke(main, args)
+    assert r.exit_code == 1, r.output
+    assert f"{out / 'results.csv'}: cannot write the results (No space left on device)" in r.output
+    assert isinstance(r.exception, SystemExit)
