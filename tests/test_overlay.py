@@ -875,3 +875,7 @@ def test_overlays_over_premultiplied_alpha_composite_as_premultiplied(renderer, 
     ref = ref.astype(np.float64)
     ref[..., :3] *= ref[..., 3:] / 65535
     assert np.abs(out[6:].astype(np.float64) - ref[6:]).max() <= 3 and out[10, 12, 3] > 40000
+    frame.flags.writeable = False
+    with pytest.raises(ValueError, match="expected a writeable array for inplace drawing"):
+        renderer.draw_styled(frame, [np.array([[2.0, 10.0], [21.0, 10.0]])], [LineStyle(4.0)], inplace=True,
+                             premultiplied=True)

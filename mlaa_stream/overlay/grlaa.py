@@ -691,6 +691,8 @@ class OverlayRenderer:
         colour is premultiplied by its alpha (an EXR's RGBA), not straight: see draw_premultiplied."""
         allp = np.concatenate(lines) if lines else np.zeros((0, 2))
         if premultiplied and frame.ndim == 3 and frame.shape[2] == 4 and lines:
+            if inplace and not frame.flags.writeable:  # as _draw says it
+                raise ValueError(f"{what}: expected a writeable array for inplace drawing, got a read-only one")
             out = draw_premultiplied(lambda f: self._draw(f, lines, allp, styles, bgr, False, what), frame)
             if inplace:
                 frame[...] = out
