@@ -56,6 +56,11 @@ def overlay_command(input_path: str, output: str, lines_path: str, frame: int, s
 
 def _run(input_path: str, output: str, lines_path: str, frame: int, strength: float,
          overwrite: bool, device: str | None, verbose: int, quiet: bool) -> int:
+    for path, what in ((input_path, "IN_IMAGE"), (output, "-o"), (lines_path, "--lines")):
+        if path == "-":  # else "got nothing", "cannot read (No such file)" or "no writer for this extension"
+            _err(f"{what} -: standard input and output are not read or written here; give a file "
+                 f"(the filter command's --overlay draws on a video through pipes)")
+            return EXIT_USAGE
     if not os.path.isfile(input_path):
         got = "a folder" if os.path.isdir(input_path) else "nothing"
         _err(f"{input_path}: expected an image file, got {got}")

@@ -776,6 +776,23 @@ def test_cli_overlay_into_a_missing_output_folder_names_the_folder(tmp_path, whe
     assert "tmp" not in r.output.replace(str(tmp_path), "") and "Warning" not in r.output
 
 
+@pytest.mark.parametrize("which", [0, 1, 2])
+def test_cli_overlay_refuses_standard_input_and_output(tmp_path, monkeypatch, which):
+    # '-' was taken for a file name: "expected an image file, got nothing", "cannot read (No such file or
+    # directory)" or, for -o, "no OpenImageIO writer for this extension"
+    from click.testing import CliRunner
+    from mlaa_stream.cli.main import main
+    monkeypatch.chdir(tmp_path)
+    _png("in.png", np.full((30, 40, 3), 200, np.uint8))
+    _write(tmp_path, {"type": "LineString", "coordinates": [[3, 15], [37, 15]]}, "l.json")
+    args = ["in.png", "out.png", "l.json"]
+    args[which] = "-"
+    r = CliRunner().invoke(main, ["overlay", args[0], "-o", args[1], "--lines", args[2]])
+    assert r.exit_code == 2, r.output
+    assert f"{('IN_IMAGE', '-o', '--lines')[which]} -: standard input and output are not read or written" in r.output
+    assert sorted(os.listdir(tmp_path)) == ["in.png", "l.json"]
+
+
 def test_cli_overlay_refuses_an_exr_without_colour(tmp_path):
     """Lines drawn into a depth pass would be depths of nothing: refused, naming the channels (a traceback before)."""
     import OpenImageIO as oiio
