@@ -99,7 +99,8 @@ def _f(v: float, fmt: str) -> str:
 def compare_command(out_path, truth_path, input_path, flip) -> None:
     """Score a filtered image OUT against a reference TRUTH (and the input IN).
 
-    A linear-light image (EXR, untagged float) among display-encoded ones is compared sRGB-encoded.
+    A linear-light image (EXR, untagged float) among display-encoded ones is compared sRGB-encoded. Pixels
+    with NaN or infinite samples are left out of the scores (a note says how many).
     """
     from mlaa_stream.yardstick import metrics as M
 
@@ -119,6 +120,21 @@ def compare_command(out_path, truth_path, input_path, flip) -> None:
         if img is not None and img.shape != truth.shape:
             raise CommandError(f"{name}: expected {truth.shape[1]}x{truth.shape[0]} like "
                                        f"{truth_path}, got {img.shape[1]}x{img.shape[0]}")
+    # NaN / infinite samples (a render's, which the filter passes through unchanged) made every score n/a (or inf)
+    # without a word: their pixels are left out of the scores, said with how many
+    present = [(p, img) for p, img in ((out_path, out), (truth_path, truth), (input_path, inp)) if img is not None]
+    bad = np.zeros(truth.shape[:2], bool)
+    holders = []
+    for p, img in present:
+        nonfinite = ~np.isfinite(img).all(axis=2)
+        if nonfinite.any():
+            bad |= nonfinite
+            holders.append(p)
+    if bad.any():
+        for _, img in present:
+            img[bad] = 0.0   # the same value in every image: no error there, in no score
+        click.echo(f"mlaa-stream: note: {int(bad.sum())} pixels with NaN or infinite samples (in "
+                   f"{', '.join(holders)}) left out of the scores", err=True)
     with_flip = flip and M.flip_available()
     r = compare_numbers(out, truth, inp, with_flip)
     click.echo(f"RMSE vs truth (8-bit levels): out {_f(r['rmse'], '.3f')}"

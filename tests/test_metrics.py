@@ -297,3 +297,21 @@ def test_bench_results_it_cannot_write_are_named(tmp_path, monkeypatch):
     assert r.exit_code == 1, r.output
     assert f"{out / 'results.csv'}: cannot write the results (No space left on device)" in r.output
     assert isinstance(r.exception, SystemExit)
+
+
+def test_compare_leaves_non_finite_pixels_out_and_says_so(tmp_path):
+    """One NaN sample (a render's, which the filter passes through) made every score 'n/a', an infinite one the RMSE
+    'inf', without a word. Such pixels are left out of the scores, with a note naming the file and how many."""
+    from mlaa_stream.io.images import write_image
+    rng = np.random.default_rng(7)
+    truth = rng.random((16, 24, 3)).astype(np.float32)
+    out = truth.copy()
+    out[2:4, 2:10] += 0.1   # an error that must still be scored
+    out[8, 8, 1], out[9, 9, 0] = np.nan, np.inf
+    write_image(str(tmp_path / "t.exr"), truth)
+    write_image(str(tmp_path / "o.exr"), out)
+    r = CliRunner().invoke(main, ["compare", str(tmp_path / "o.exr"), str(tmp_path / "t.exr"), "--no-flip"])
+    assert r.exit_code == 0, r.output
+    assert "2 pixels with NaN or infinite samples (in " in r.output and "o.exr) left out of the scores" in r.output
+    rmse = float(r.output.split("RMSE vs truth (8-bit levels): out ")[1].split()[0])
+    assert math.isfinite(rmse) and rmse > 1
