@@ -49,6 +49,10 @@ def bench_command(quick, out_dir, methods, frames, flip, seed, scene_names, list
         os.makedirs(out_dir, exist_ok=True)
     except OSError as exc:
         raise click.BadParameter(f"{out_dir}: cannot create the folder ({exc.strerror})", param_hint="--out") from exc
+    for name in B.OUTPUT_NAMES:  # now, not as a traceback once every method has been measured
+        if os.path.isdir(os.path.join(out_dir, name)):
+            raise click.BadParameter(f"{os.path.join(out_dir, name)}: a folder is in the way of the results",
+                                     param_hint="--out")
     command = "mlaa-stream " + " ".join(shlex.quote(a) for a in ["bench", *sys.argv[2:]]) \
         if len(sys.argv) > 1 and sys.argv[1] == "bench" else "mlaa-stream bench" + (" --quick" if quick else "")
     try:
@@ -57,6 +61,10 @@ def bench_command(quick, out_dir, methods, frames, flip, seed, scene_names, list
     except DeviceError as exc:
         click.echo(f"mlaa-stream: {exc}", err=True)
         sys.exit(3)
+    except OSError as exc:  # writing the results (a full disk): said, not a traceback
+        click.echo(f"mlaa-stream: error: {exc.filename or out_dir}: cannot write the results "
+                   f"({exc.strerror or exc})", err=True)
+        sys.exit(1)
     except ValueError as exc:
         raise click.UsageError(str(exc)) from exc
     click.echo(f"mlaa-stream: results in {out_dir}", err=True)

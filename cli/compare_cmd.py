@@ -23,7 +23,8 @@ def read_image_encoding(path: str) -> tuple[np.ndarray, bool]:
     space tagged linear/ACES -- not ACEScc/ACEScct --, or untagged float such as EXR)."""
     import OpenImageIO as oiio
 
-    from mlaa_stream.io.images import cryptomatte_channels, filter_channel_indices
+    from mlaa_stream.io.images import (NAMED_CHANNEL_FORMATS, colour_by_name, cryptomatte_channels,
+                                       filter_channel_indices)
     from mlaa_stream.io.sequence import is_linear_colour_space
 
     if os.path.isdir(path):  # OpenImageIO would answer that it has no reader for the format named like the folder
@@ -37,6 +38,7 @@ def read_image_encoding(path: str) -> tuple[np.ndarray, bool]:
         raise CommandError(f"{path}: cannot open ({oiio.geterror()})")
     try:
         spec = inp.spec()
+        format_name = inp.format_name()
         cs = spec.get_string_attribute("oiio:ColorSpace", "").lower()
         floating = spec.format.basetype in (oiio.FLOAT, oiio.HALF, oiio.DOUBLE)
         tagged = is_linear_colour_space(cs)
@@ -51,7 +53,15 @@ def read_image_encoding(path: str) -> tuple[np.ndarray, bool]:
         arr = arr[..., None]
     # the colour channels the filter takes, by name: a multi-layer EXR's beauty, not a pass that sorts first
     names = tuple(spec.channelnames) if len(spec.channelnames) == arr.shape[2] else ("",) * arr.shape[2]
-    colour = list(filter_channel_indices(names, spec.alpha_channel, cryptomatte_channels(names, spec)))
+    data = cryptomatte_channels(names, spec)
+    if format_name in NAMED_CHANNEL_FORMATS and len(set(names)) == len(names) and "" not in names \
+            and not colour_by_name(names, spec.alpha_channel, data):
+        # an EXR of depth, normals or motion vectors (the filter copies it unchanged): its channels taken by position
+        # for colour gave an RMSE of a depth against colours
+        shown = ", ".join(names[:6]) + (f" and {len(names) - 6} more" if len(names) > 6 else "")
+        what = "only cryptomatte" if len(data) == len(names) else "no colour"
+        raise CommandError(f"{path}: expected colour channels, got {what} channels ({shown})")
+    colour = list(filter_channel_indices(names, spec.alpha_channel, data))
     if not colour:
         raise CommandError(f"{path}: expected colour channels, got only cryptomatte channels")
     arr = arr[..., colour[:3]] if len(colour) >= 3 else np.repeat(arr[..., colour[:1]], 3, axis=2)
@@ -89,7 +99,8 @@ def _f(v: float, fmt: str) -> str:
 def compare_command(out_path, truth_path, input_path, flip) -> None:
     """Score a filtered image OUT against a reference TRUTH (and the input IN).
 
-    A linear-light image (EXR, untagged float) among display-encoded ones is compared sRGB-encoded.
+    A linear-light image (EXR, untagged float) among display-encoded ones is compared sRGB-encoded. Pixels
+    with NaN or infinite samples are left out of the scores (a note says how many).
     """
     from mlaa_stream.yardstick import metrics as M
 
@@ -109,6 +120,21 @@ def compare_command(out_path, truth_path, input_path, flip) -> None:
         if img is not None and img.shape != truth.shape:
             raise CommandError(f"{name}: expected {truth.shape[1]}x{truth.shape[0]} like "
                                        f"{truth_path}, got {img.shape[1]}x{img.shape[0]}")
+    # NaN / infinite samples (a render's, which the filter passes through unchanged) made every score n/a (or inf)
+    # without a word: their pixels are left out of the scores, said with how many
+    present = [(p, img) for p, img in ((out_path, out), (truth_path, truth), (input_path, inp)) if img is not None]
+    bad = np.zeros(truth.shape[:2], bool)
+    holders = []
+    for p, img in present:
+        nonfinite = ~np.isfinite(img).all(axis=2)
+        if nonfinite.any():
+            bad |= nonfinite
+            holders.append(p)
+    if bad.any():
+        for _, img in present:
+            img[bad] = 0.0   # the same value in every image: no error there, in no score
+        click.echo(f"mlaa-stream: note: {int(bad.sum())} pixels with NaN or infinite samples (in "
+                   f"{', '.join(holders)}) left out of the scores", err=True)
     with_flip = flip and M.flip_available()
     r = compare_numbers(out, truth, inp, with_flip)
     click.echo(f"RMSE vs truth (8-bit levels): out {_f(r['rmse'], '.3f')}"

@@ -25,7 +25,7 @@ def devices_command() -> None:
         for hint in unregistered_pip_runtimes():
             click.echo(f"mlaa-stream: {hint}", err=True)
         sys.exit(3)
-    env = os.environ.get(DEVICE_ENV)
+    env = os.environ.get(DEVICE_ENV, "").strip()  # blank is unset, as select_device takes it
     try:
         chosen = select_device(None)
         why = f"${DEVICE_ENV}={env}" if env else default_choice(devices)[1]

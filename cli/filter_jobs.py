@@ -7,6 +7,7 @@ from __future__ import annotations
 import os
 import sys
 import tempfile
+from typing import Callable
 
 from mlaa_stream.cli.console import EXIT_BROKEN_PIPE, EXIT_FAILED, EXIT_OK, Console, Failed, Usage, is_broken_pipe
 from mlaa_stream.device.transfer import TRANSFER_NAMES
@@ -110,6 +111,22 @@ class SequenceTemporal:
             self.stage(frame_in, frame_out, number, future=list(future)[:self.lookahead])
         else:
             self.stage(frame_in, frame_out, number)
+
+
+def frame_hooks(post_hooks: list, index_of: Callable[[int], int],
+                kind_of: Callable[[int], tuple[bool, bool]]) -> list:
+    """Post hooks on the pipeline's positions: each gets its frame's index (index_of), and a hook that takes them (the
+    --overlay hook: `per_frame_format`) whether the frame holds linear light and premultiplied alpha (kind_of: an
+    EXR among PNGs). Drawn as sRGB codes into a linear-light frame, an overlay's colours came out washed out
+    (#3080ff's red 0.19, not 0.03); over premultiplied colour taken for straight, too light where alpha < 1."""
+    def wrap(hook: Callable) -> Callable:
+        if getattr(hook, "per_frame_format", False):
+            def hooked(f, i):
+                linear, premultiplied = kind_of(i)
+                return hook(f, index_of(i), linear=linear, premultiplied=premultiplied)
+            return hooked
+        return lambda f, i: hook(f, index_of(i))
+    return [wrap(h) for h in post_hooks]
 
 
 class Job:
@@ -369,6 +386,7 @@ class ImageJob(Job):
         self.read_linear: dict = {}   # position -> the frame is linear light (the temporal stage's colour space)
         positions = getattr(self, "positions", {})
         hook_index: dict = {}   # position read -> the file's place in the whole plan (self.positions)
+        hook_kind: dict = {}  # position read -> (linear light, premultiplied alpha) for the --overlay hook
 
         def source():
             """image_source, remembering which file each position is (for the temporal stage and the hooks)."""
@@ -379,10 +397,11 @@ class ImageJob(Job):
                         self.read_order[position] = item.meta[0]
                         self.read_linear[position] = is_linear(item.meta[1])
                         hook_index[position] = positions.get(id(item.meta[0]), position)
+                        hook_kind[position] = (self.read_linear[position], item.premultiplied)  # (read_linear: popped)
                     yield item
             finally:
                 inner.close()
-        post_hooks = [(lambda h: (lambda f, i: h(f, hook_index.get(i, i))))(h) for h in post_hooks]
+        post_hooks = frame_hooks(post_hooks, lambda i: hook_index.get(i, i), lambda i: hook_kind.get(i, (False, False)))
         if temporal is not None and getattr(self, "warm_up", None):
             self._warm_up(filt, temporal)
         try:

@@ -56,6 +56,11 @@ def overlay_command(input_path: str, output: str, lines_path: str, frame: int, s
 
 def _run(input_path: str, output: str, lines_path: str, frame: int, strength: float,
          overwrite: bool, device: str | None, verbose: int, quiet: bool) -> int:
+    for path, what in ((input_path, "IN_IMAGE"), (output, "-o"), (lines_path, "--lines")):
+        if path == "-":  # else "got nothing", "cannot read (No such file)" or "no writer for this extension"
+            _err(f"{what} -: standard input and output are not read or written here; give a file "
+                 f"(the filter command's --overlay draws on a video through pipes)")
+            return EXIT_USAGE
     if not os.path.isfile(input_path):
         got = "a folder" if os.path.isdir(input_path) else "nothing"
         _err(f"{input_path}: expected an image file, got {got}")
@@ -69,10 +74,14 @@ def _run(input_path: str, output: str, lines_path: str, frame: int, strength: fl
     if os.path.exists(output) and not overwrite:
         _err(f"{output}: exists; use --overwrite to replace it")
         return EXIT_USAGE
+    folder = os.path.dirname(os.path.abspath(output))
+    if not os.path.isdir(folder):  # as the filter command says it (OpenImageIO's error named the temporary file)
+        _err(f"{folder}: the output folder does not exist")
+        return EXIT_FAILED
 
     from mlaa_stream.device.context import DeviceError, KernelBuildError
-    from mlaa_stream.io.images import (ImageReadError, ImageWriteError, read_image, split_for_filter,
-                                       unpremultiplies, write_image)
+    from mlaa_stream.io.images import (ImageReadError, ImageWriteError, is_premultiplied, read_image,
+                                       split_for_filter, unpremultiplies, write_image)
     from mlaa_stream.overlay.grlaa import OverlayRenderer, read_overlay
     from mlaa_stream.io.sequence import is_linear
 
@@ -103,7 +112,9 @@ def _run(input_path: str, output: str, lines_path: str, frame: int, strength: fl
         renderer = OverlayRenderer(device, strength, linear=is_linear(image))
         if verbose:
             click.echo(f"mlaa-stream: {len(lines)} lines on {renderer.device_name}", err=True)
-        out = renderer.draw_styled(pixels, lines, styles, bgr=False, what=input_path)
+        # an EXR's RGBA (a TIFF's tagged so) is premultiplied: the renderer composites over straight alpha
+        out = renderer.draw_styled(pixels, lines, styles, bgr=False, what=input_path,
+                                   premultiplied=is_premultiplied(image.spec))
     except DeviceError as exc:
         _err(str(exc))
         return EXIT_NO_DEVICE

@@ -6,6 +6,7 @@ Exit codes: 0 written; 1 a file could not be written; 2 usage error (also: files
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import click
@@ -25,7 +26,10 @@ def write_png(path: Path, img: np.ndarray) -> None:
     spec = oiio.ImageSpec(a.shape[1], a.shape[0], a.shape[2], oiio.UINT8)
     out = oiio.ImageOutput.create(str(path))
     if out is None or not out.open(str(path), spec):
-        raise OSError(f"{path}: cannot write ({oiio.geterror()})")
+        # OpenImageIO says nothing for a folder in the way ("cannot write ()")
+        why = (out.geterror() if out is not None else "") or oiio.geterror() or \
+            ("a folder is in the way" if os.path.isdir(path) else "cannot create the file")
+        raise OSError(f"{path}: cannot write ({why})")
     try:
         if not out.write_image(a):
             raise OSError(f"{path}: cannot write ({out.geterror()})")
@@ -92,5 +96,9 @@ def scenes_command(out_dir, small, seed, only, overwrite) -> None:
     index = [{"name": s.name, "category": s.category, "width": s.size[0], "height": s.size[1],
               "frames": s.frames, "notes": s.notes, "edge_pixels": int(s.edges.sum()),
               "wire_pixels": None if s.wires is None else int(s.wires.sum())} for s in scenes]
-    (out / "scenes.json").write_text(json.dumps({"seed": seed, "small": small, "scenes": index}, indent=1))
+    try:
+        (out / "scenes.json").write_text(json.dumps({"seed": seed, "small": small, "scenes": index}, indent=1))
+    except OSError as exc:  # a folder in the way, a full disk: said, exit 1, not a traceback
+        click.echo(f"mlaa-stream: {out / 'scenes.json'}: cannot write ({exc.strerror or exc})", err=True)
+        raise SystemExit(1) from exc
     click.echo(f"wrote {len(plan)} images of {len(scenes)} scenes to {out}", err=True)

@@ -257,3 +257,22 @@ def test_a_device_name_matching_several_devices_is_an_error_naming_them(monkeypa
     monkeypatch.setattr(dev, "_all_devices", lambda: pocl)
     with pytest.raises(dev.DeviceError, match="'EPYC' matches 2"):
         dev.select_device("EPYC")
+
+
+def test_a_blank_device_variable_is_unset_and_a_missing_kind_is_named(monkeypatch):
+    """$MLAA_STREAM_DEVICE set to spaces was stripped to '' and matched every device's name ("'' matches 2 OpenCL
+    devices" where two are listed); `gpu` on a machine without one said "no OpenCL device matches 'gpu'", as if
+    it were a name part."""
+    cpus = [StubDevice(f"pthread-CPU{k}", StubPlatform("Portable Computing Language", "OpenCL 3.0 PoCL 3.1", k),
+                       k * 10, cl.device_type.CPU) for k in (1, 2)]
+    monkeypatch.setattr(dev, "_all_devices", lambda: cpus)
+    for d in cpus:  # default_choice's probe: both build (its default argument is the function itself)
+        monkeypatch.setitem(dev._probed, (d.platform.name, d.platform.version, d.name), None)
+    monkeypatch.setenv(dev.DEVICE_ENV, "  ")
+    assert dev.select_device(None) is dev.select_device(" ") is dev.default_choice(cpus)[0]
+    monkeypatch.setattr("mlaa_stream.cli.devices_cmd._all_devices", dev._all_devices)
+    res = CliRunner().invoke(main, ["devices"])
+    assert res.exit_code == 0 and "matches" not in res.output and "$MLAA_STREAM_DEVICE=" not in res.output, res.output
+    monkeypatch.delenv(dev.DEVICE_ENV)
+    with pytest.raises(dev.DeviceError, match=r"^no OpenCL device is a GPU \('gpu' picks one of that kind\)"):
+        dev.select_device("gpu")

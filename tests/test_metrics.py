@@ -256,3 +256,62 @@ def test_compare_scores_a_multi_layer_exr_by_its_beauty(tmp_path):
     assert r.exit_code == 0, r.output
     rmse = float(r.output.split("RMSE vs truth (8-bit levels): out ")[1].split()[0])
     assert rmse < 0.6, r.output
+
+
+@pytest.mark.parametrize("names", [("Z",), ("N.x", "N.y", "N.z")])
+def test_compare_refuses_an_exr_without_colour(tmp_path, names):
+    """A depth or normals pass (which the filter copies unchanged) was scored as colour: its channels taken by
+    position, an RMSE of depths against colours with exit 0. Refused, naming its channels, as the filter does."""
+    import OpenImageIO as oiio
+    spec = oiio.ImageSpec(12, 8, len(names), "float")
+    spec.channelnames = names
+    path = str(tmp_path / "pass.exr")
+    out = oiio.ImageOutput.create(path)
+    assert out.open(path, spec) and out.write_image(np.full((8, 12, len(names)), 0.5, np.float32))
+    out.close()
+    _write(tmp_path / "b.png", np.full((8, 12, 3), 128, np.uint8))
+    for args in ([path, str(tmp_path / "b.png")], [str(tmp_path / "b.png"), path]):
+        r = CliRunner().invoke(main, ["compare", *args, "--no-flip"])
+        assert r.exit_code == 1, r.output
+        assert f"pass.exr: expected colour channels, got no colour channels ({', '.join(names)})" in r.output
+        assert "RMSE" not in r.output
+
+
+def test_bench_results_it_cannot_write_are_named(tmp_path, monkeypatch):
+    """A folder in the way of results.csv (README.md, the chart) ended the run, once every method had been measured,
+    in a traceback (IsADirectoryError): refused before the run now, a usage error; a failed write (a full disk) is
+    named, exit 1."""
+    import errno
+
+    out = tmp_path / "bench"
+    (out / "results.csv").mkdir(parents=True)
+    args = ["bench", "--quick", "--methods", "none", "--scenes", "wires", "--no-flip", "--out", str(out)]
+    r = CliRunner().invoke(main, args)
+    assert r.exit_code == 2 and f"{out / 'results.csv'}: a folder is in the way" in r.output, r.output
+    (out / "results.csv").rmdir()
+
+    def full(res, path):
+        raise OSError(errno.ENOSPC, "No space left on device", str(path))
+    monkeypatch.setattr(B, "write_csv", full)
+    r = CliRunner().invoke(main, args)
+    assert r.exit_code == 1, r.output
+    assert f"{out / 'results.csv'}: cannot write the results (No space left on device)" in r.output
+    assert isinstance(r.exception, SystemExit)
+
+
+def test_compare_leaves_non_finite_pixels_out_and_says_so(tmp_path):
+    """One NaN sample (a render's, which the filter passes through) made every score 'n/a', an infinite one the RMSE
+    'inf', without a word. Such pixels are left out of the scores, with a note naming the file and how many."""
+    from mlaa_stream.io.images import write_image
+    rng = np.random.default_rng(7)
+    truth = rng.random((16, 24, 3)).astype(np.float32)
+    out = truth.copy()
+    out[2:4, 2:10] += 0.1   # an error that must still be scored
+    out[8, 8, 1], out[9, 9, 0] = np.nan, np.inf
+    write_image(str(tmp_path / "t.exr"), truth)
+    write_image(str(tmp_path / "o.exr"), out)
+    r = CliRunner().invoke(main, ["compare", str(tmp_path / "o.exr"), str(tmp_path / "t.exr"), "--no-flip"])
+    assert r.exit_code == 0, r.output
+    assert "2 pixels with NaN or infinite samples (in " in r.output and "o.exr) left out of the scores" in r.output
+    rmse = float(r.output.split("RMSE vs truth (8-bit levels): out ")[1].split()[0])
+    assert math.isfinite(rmse) and rmse > 1

@@ -13,6 +13,7 @@ import json
 import math
 import os
 import re
+import warnings
 
 import numpy as np
 import pyopencl as cl
@@ -460,6 +461,21 @@ def test_huge_coordinates_are_clipped_exactly(renderer):
     assert np.abs(out.astype(int) - ref.astype(int)).max() <= 1 and (out != frame).any()
 
 
+@pytest.mark.parametrize("far", [1e17, 1e18, 1e20, 1e300, 1.7e308])
+def test_lines_from_astronomically_far_are_cut_to_the_frame_exactly(renderer, far):
+    # the cut end was o + t * d in float64, off by ulp(|o|): a line from x = -1e18 to x = 30 drew 3 pixels, one
+    # from -1e17 ended at 32; lines between two far ends (a line drawn "to infinity") drew 4 pixels
+    frame = np.full((40, 60, 3), 30, np.uint8)
+    for far_line, near_line, kw in (
+            ([[-far, 20.0], [30.0, 20.0]], [[-100.0, 20.0], [30.0, 20.0]], dict(width=3, cap="butt")),
+            ([[-far, -far], [far, far]], [[-100.0, -100.0], [100.0, 100.0]], dict(width=3)),
+            ([[-far, 7.0], [far, 7.0], [far, 9.0]], [[-100.0, 7.0], [100.0, 7.0]], dict(width=2))):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # no float64 overflow on the way either
+            out = renderer.draw(frame, [np.array(far_line)], **kw)
+        assert np.array_equal(out, renderer.draw(frame, [np.array(near_line)], **kw)), far_line
+
+
 @pytest.mark.parametrize("seed", [0, 1])
 def test_device_segment_tables_match_numpy(renderer, seed):
     """kernels/grlaa.cl grlaa_segments (float32, points within DEVICE_CLIP_MARGIN of the frame)
@@ -562,6 +578,24 @@ def test_parse_color():
     assert parse_color([0, 255, 51]) == (0.0, 1.0, 0.2)
 
 
+@pytest.mark.parametrize("bad", ["#-1-1-1", "+f+f+f", "# 1 1 1", "#\uff11\uff11\uff11"])
+def test_parse_color_takes_hex_digits_only(bad):
+    # int(s, 16) took a sign and spaces: '#-1-1-1' was -1/255 per channel (below black), drawn as black
+    with pytest.raises(ValueError, match="expected '#rrggbb'"):
+        parse_color(bad)
+
+
+def test_colours_as_one_number_and_per_line_lists_of_mixed_forms(renderer):
+    # a number (cv2's grey colour) raised TypeError ('int' object is not iterable), and a per-line list mixing
+    # a string and a tuple numpy's "inhomogeneous shape" ValueError
+    frame = np.zeros((16, 24, 3), np.uint8)
+    line = np.array([[2.0, 8.0], [21.0, 8.0]])
+    assert parse_color(128) == parse_color((128,)) == parse_color(np.array(128)) == (128 / 255,) * 3
+    assert (renderer.draw(frame, [line], width=3, color=128)[8, 10] == 128).all()
+    out = renderer.draw(frame, [line, line + [0, 5]], width=3, color=["#ff0000", (0, 255, 0)], bgr=True)
+    assert tuple(out[8, 10]) == (0, 0, 255) and tuple(out[13, 10]) == (0, 255, 0)
+
+
 # ------------------------------------------------------------------------- overlay files
 
 def _write(tmp_path, doc, name="ov.geojson"):
@@ -616,6 +650,22 @@ def test_overlay_file_not_json(tmp_path):
         load_overlay(str(p))
 
 
+@pytest.mark.parametrize("encoding", ["utf-8-sig", "utf-16"])
+def test_overlay_files_with_a_byte_order_mark_are_read(tmp_path, encoding):
+    # a Windows editor's UTF-8 BOM was refused ("Unexpected UTF-8 BOM"), UTF-16 failed with the codec's message alone
+    doc = {"type": "LineString", "coordinates": [[1, 2], [30, 20]]}
+    p = tmp_path / "route.geojson"
+    p.write_bytes(json.dumps(doc).encode(encoding))
+    assert np.array_equal(load_overlay(str(p)).features[0].lines_at(0)[0], [[1, 2], [30, 20]])
+
+
+def test_an_overlay_file_that_is_not_text_is_named(tmp_path):
+    p = tmp_path / "route.geojson"
+    p.write_bytes(b'{"type": "LineString", "coordinates": [[1, 2], [3, 4]], "name": "\xff"}')
+    with pytest.raises(ValueError, match=r"route.geojson: expected JSON text \(UTF-8\), got bytes that are not text"):
+        load_overlay(str(p))
+
+
 @pytest.mark.parametrize("field,value,shown", [
     ("width", 1e40, "1e+40"), ("width", math.inf, "inf"), ("width", math.nan, "nan"), ("width", -2.0, "-2"),
     ("width", 65536.5, "65536.5"), ("outline_width", 1e40, "1e+40"), ("outline_width", -1.0, "-1")])
@@ -652,6 +702,23 @@ def test_the_widest_stroke_allowed_is_drawn(renderer):
 def test_parse_bare_geometry():
     feats = parse_overlay({"type": "LineString", "coordinates": [[0, 0], [1, 1], [2, 0]]})
     assert len(feats) == 1 and feats[0].lines_at(5)[0].shape == (3, 2)
+
+
+@pytest.mark.parametrize("geom", [
+    {"type": "LineString", "coordinates": [[0, 0], [4, 2, 7.5], [9, 3]]},
+    {"type": "MultiLineString", "coordinates": [[[0, 0], [4, 2, 7.5], [9, 3]], [[1, 1], [2, 2]]]},
+])
+def test_a_third_coordinate_on_some_positions_only_is_ignored(geom):
+    # a position may carry an altitude (docs/grlaa.md: "a third coordinate is ignored"); on some points only, numpy
+    # refused the ragged list: the LineString failed with numpy's own message (no file, no feature), the
+    # MultiLineString with "expected coordinates"
+    feats = parse_overlay({"type": "Feature", "properties": {}, "geometry": geom}, "route.geojson")
+    assert np.array_equal(feats[0].lines_at(0)[0], [[0, 0], [4, 2], [9, 3]])
+    frames = parse_overlay({"type": "Feature", "geometry": None, "properties": {"frames": {"3": geom["coordinates"]}}})
+    assert np.array_equal(frames[0].lines_at(3)[0], [[0, 0], [4, 2], [9, 3]])
+    bad = {"type": "LineString", "coordinates": [[0, 0], [4]]}
+    with pytest.raises(ValueError, match=r"route.geojson: feature 0: line 0: expected positions .*fewer than 2"):
+        parse_overlay({"type": "Feature", "properties": {}, "geometry": bad}, "route.geojson")
 
 
 # ---------------------------------------------------------------------------------- CLI
@@ -693,6 +760,39 @@ def test_cli_overlay(renderer, tmp_path):
 
 
 
+@pytest.mark.parametrize("where", ["nodir", "afile"])
+def test_cli_overlay_into_a_missing_output_folder_names_the_folder(tmp_path, where):
+    # OpenImageIO's error named the hidden temporary file, and under a file a Python warning (with its source line)
+    # said the temporary file could not be removed
+    from click.testing import CliRunner
+    from mlaa_stream.cli.main import main
+    src = str(tmp_path / "in.png")
+    _png(src, np.full((30, 40, 3), 200, np.uint8))
+    (tmp_path / "afile").write_text("x")
+    lines = _write(tmp_path, {"type": "LineString", "coordinates": [[3, 15], [37, 15]]})
+    r = CliRunner().invoke(main, ["overlay", src, "-o", str(tmp_path / where / "out.png"), "--lines", lines])
+    assert r.exit_code == 1, r.output
+    assert f"{tmp_path / where}: the output folder does not exist" in r.output
+    assert "tmp" not in r.output.replace(str(tmp_path), "") and "Warning" not in r.output
+
+
+@pytest.mark.parametrize("which", [0, 1, 2])
+def test_cli_overlay_refuses_standard_input_and_output(tmp_path, monkeypatch, which):
+    # '-' was taken for a file name: "expected an image file, got nothing", "cannot read (No such file or
+    # directory)" or, for -o, "no OpenImageIO writer for this extension"
+    from click.testing import CliRunner
+    from mlaa_stream.cli.main import main
+    monkeypatch.chdir(tmp_path)
+    _png("in.png", np.full((30, 40, 3), 200, np.uint8))
+    _write(tmp_path, {"type": "LineString", "coordinates": [[3, 15], [37, 15]]}, "l.json")
+    args = ["in.png", "out.png", "l.json"]
+    args[which] = "-"
+    r = CliRunner().invoke(main, ["overlay", args[0], "-o", args[1], "--lines", args[2]])
+    assert r.exit_code == 2, r.output
+    assert f"{('IN_IMAGE', '-o', '--lines')[which]} -: standard input and output are not read or written" in r.output
+    assert sorted(os.listdir(tmp_path)) == ["in.png", "l.json"]
+
+
 def test_cli_overlay_refuses_an_exr_without_colour(tmp_path):
     """Lines drawn into a depth pass would be depths of nothing: refused, naming the channels (a traceback before)."""
     import OpenImageIO as oiio
@@ -722,3 +822,77 @@ def test_lines_wholly_far_off_the_frame_leave_it_unchanged(zero_copy):
     near = far + [np.array([[5.0, 5.0], [50.0, 40.0]])]
     assert np.array_equal(r.draw(frame, near, width=3.0),
                           OverlayRenderer(zero_copy=zero_copy).draw(frame, near, width=3.0))
+
+
+def test_cli_filter_overlay_draws_linear_light_into_exrs(tmp_path):
+    """`mlaa-stream shot.exr -o out.exr --overlay lines` drew the file's sRGB colours as they are into linear light
+    (#3080ff's red 0.19 instead of 0.03: washed out), where `mlaa-stream overlay` composites EXRs as linear light.
+    Each frame of a folder is drawn as it is: linear for the EXR, sRGB codes for the PNG."""
+    from click.testing import CliRunner
+    from mlaa_stream.cli.main import main
+    from mlaa_stream.io.images import read_image, write_image
+    src = tmp_path / "shots"
+    src.mkdir()
+    write_image(str(src / "a.exr"), np.full((30, 40, 3), 0.2, np.float16))
+    _png(str(src / "b.png"), np.full((30, 40, 3), 90, np.uint8))
+    lines = _write(tmp_path, {"type": "Feature", "properties": {"width": 8, "color": "#3080ff"},
+                              "geometry": {"type": "LineString", "coordinates": [[2, 15], [37, 15]]}})
+    colour = np.array([0x30, 0x80, 0xFF]) / 255
+    for args in ([str(src / "a.exr"), "-o", str(tmp_path / "one.exr")], [str(src), "-o", str(tmp_path / "out")],
+                 [str(src), "-o", str(tmp_path / "out_t"), "--temporal"]):
+        r = CliRunner().invoke(main, [*args, "--overlay", lines, "-q"])
+        assert r.exit_code == 0, r.output
+    for exr in (tmp_path / "one.exr", tmp_path / "out" / "a.exr", tmp_path / "out_t" / "a.exr"):
+        np.testing.assert_allclose(read_image(str(exr)).pixels[15, 20, :3].astype(float), srgb_to_linear(colour),
+                                   atol=2e-3)
+    assert tuple(read_image(str(tmp_path / "out" / "b.png")).pixels[15, 20]) == (0x30, 0x80, 0xFF)
+
+
+def _premultiplied_exr(path, shape=(30, 40)):
+    import OpenImageIO as oiio
+    spec = oiio.ImageSpec(shape[1], shape[0], 4, "half")
+    spec.channelnames, spec.alpha_channel = ("R", "G", "B", "A"), 3
+    px = np.zeros((*shape, 4), np.float32)
+    px[..., :3], px[..., 3] = 0.1, 0.5   # straight 0.2 at alpha 0.5
+    out = oiio.ImageOutput.create(path)
+    assert out.open(path, spec) and out.write_image(px) and out.close()
+
+
+def test_overlays_over_premultiplied_alpha_composite_as_premultiplied(renderer, tmp_path):
+    """An EXR's RGBA is premultiplied; the renderer composites over straight alpha, and took the premultiplied
+    colour for straight: white at opacity 0.5 over 0.1 at alpha 0.5 gave 0.70 (written premultiplied) where
+    0.5 + 0.5 * 0.1 = 0.55 is right, in `mlaa-stream overlay` and in the filter's --overlay alike."""
+    from click.testing import CliRunner
+    from mlaa_stream.cli.main import main
+    from mlaa_stream.io.images import read_image
+    from mlaa_stream.overlay.grlaa import LineStyle
+    src = str(tmp_path / "pm.exr")
+    _premultiplied_exr(src)
+    lines = _write(tmp_path, {"type": "Feature", "properties": {"width": 8, "color": "#ffffff", "opacity": 0.5},
+                              "geometry": {"type": "LineString", "coordinates": [[2, 15], [37, 15]]}})
+    for args in (["overlay", src, "-o", str(tmp_path / "a.exr"), "--lines", lines],
+                 [src, "-o", str(tmp_path / "b.exr"), "--overlay", lines, "-q"]):
+        r = CliRunner().invoke(main, args)
+        assert r.exit_code == 0, r.output
+    for name in ("a.exr", "b.exr"):
+        px = read_image(str(tmp_path / name)).pixels.astype(np.float32)
+        np.testing.assert_allclose(px[15, 20], [0.55, 0.55, 0.55, 0.75], atol=1e-3)
+        np.testing.assert_array_equal(px[:5], read_image(src).pixels[:5].astype(np.float32))   # untouched
+    # the API: 16-bit premultiplied samples, untouched ones bit for bit
+    frame = np.zeros((16, 24, 4), np.uint16)
+    frame[..., :3], frame[..., 3] = 9000, 30000
+    frame[3, 3] = (7, 8, 9, 10)   # a dark, nearly transparent sample: its division must not come back changed
+    out = renderer.draw_styled(frame, [np.array([[2.0, 10.0], [21.0, 10.0]])], [LineStyle(4.0, opacity=0.5)],
+                               premultiplied=True)
+    assert np.array_equal(out[:6], frame[:6])
+    # as the same pixels drawn straight (9000 / 30000 of full scale) and premultiplied after
+    straight = frame.copy()
+    straight[..., :3] = round(65535 * 9000 / 30000)
+    ref = renderer.draw_styled(straight, [np.array([[2.0, 10.0], [21.0, 10.0]])], [LineStyle(4.0, opacity=0.5)])
+    ref = ref.astype(np.float64)
+    ref[..., :3] *= ref[..., 3:] / 65535
+    assert np.abs(out[6:].astype(np.float64) - ref[6:]).max() <= 3 and out[10, 12, 3] > 40000
+    frame.flags.writeable = False
+    with pytest.raises(ValueError, match="expected a writeable array for inplace drawing"):
+        renderer.draw_styled(frame, [np.array([[2.0, 10.0], [21.0, 10.0]])], [LineStyle(4.0)], inplace=True,
+                             premultiplied=True)

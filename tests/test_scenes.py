@@ -239,3 +239,15 @@ def test_an_output_folder_that_cannot_be_made_is_named_not_a_traceback(tmp_path)
     r = CliRunner().invoke(main, ["bench", "--quick", "--methods", "none", "--scenes", "diagonals", "--frames", "1",
                                   "--out", str(tmp_path / "f" / "b")])
     assert r.exit_code == 2 and "--out: " in r.output and "cannot create the folder (Not a directory)" in r.output
+
+
+@pytest.mark.parametrize("in_the_way", ["scenes.json", "diagonals_00_input.png"])
+def test_scenes_command_names_an_output_it_cannot_write(tmp_path, in_the_way):
+    """A folder where scenes.json goes ended in a traceback (IsADirectoryError); one where an image goes said
+    'cannot write ()'. Both exit 1 naming the file and why."""
+    out = tmp_path / "scenes"
+    (out / in_the_way).mkdir(parents=True)
+    r = CliRunner().invoke(main, ["scenes", str(out), "--small", "--only", "diagonals", "--overwrite"])
+    assert r.exit_code == 1, r.output
+    assert f"{out / in_the_way}: cannot write (" in r.output and "cannot write ()" not in r.output
+    assert r.exception is None or isinstance(r.exception, SystemExit)

@@ -437,10 +437,13 @@ def plot_chart(res: BenchResult, path: Path) -> None:
     fig.savefig(path)
 
 
+OUTPUT_NAMES = ("results.csv", "README.md", "speed_vs_accuracy.png")
+
+
 def write_outputs(res: BenchResult, out_dir: Path, scenes: list[Scene]) -> list[Path]:
-    """results.csv, README.md and speed_vs_accuracy.png under out_dir (replaced on every run)."""
+    """results.csv, README.md and speed_vs_accuracy.png (OUTPUT_NAMES) under out_dir (replaced on every run)."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    paths = [out_dir / "results.csv", out_dir / "README.md", out_dir / "speed_vs_accuracy.png"]
+    paths = [out_dir / name for name in OUTPUT_NAMES]
     write_csv(res, paths[0])
     write_readme(res, paths[1], paths[2].name, scenes)
     plot_chart(res, paths[2])

@@ -236,8 +236,9 @@ def select_device(spec: str | int | None = None):
     of a kind, two CPU runtimes)."""
     devices = _all_devices()
     source = ""  # where the spec came from, in errors: a user who typed no --device must learn it was the variable
-    if spec is None or spec == "":
-        spec = os.environ.get(DEVICE_ENV) or None
+    if spec is None or str(spec).strip() == "":
+        # blank (a variable set to spaces) is unset, as empty is: stripped to '', it matched every device's name
+        spec = os.environ.get(DEVICE_ENV, "").strip() or None
         source = f"${DEVICE_ENV}: " if spec is not None else ""
     if spec is None:
         return default_choice(devices)[0]
@@ -255,6 +256,9 @@ def select_device(spec: str | int | None = None):
                or s.upper() == _kind(d)]
     if not matches:
         names = ", ".join(d.name.strip() for d in devices)
+        if s.upper() in ("GPU", "CPU"):  # a kind word, not a name part: say that no device is of that kind
+            raise DeviceError(f"{source}no OpenCL device is a {s.upper()} ({s!r} picks one of that kind); "
+                              f"available: {names}")
         raise DeviceError(f"{source}no OpenCL device matches {s!r}; available: {names}")
     distinct = [(i, d) for k, (i, d) in enumerate(matches) if not any(same_device(d, e) for _, e in matches[:k])]
     if len(distinct) > 1:

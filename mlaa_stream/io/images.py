@@ -367,6 +367,7 @@ def colour_by_name(names: tuple[str, ...], alpha_channel: int = -1,
 # Formats whose files name their channels (an EXR's "Z", "N.x", "motion.u"); other formats' names are OpenImageIO's
 # defaults by position (a 2-channel TIFF's "R", "G" is grey and alpha), which say nothing of what a channel holds.
 _NAMED_CHANNEL_FORMATS = ("openexr",)
+NAMED_CHANNEL_FORMATS = _NAMED_CHANNEL_FORMATS  # for the compare command
 
 
 def without_colour(image: Image) -> str | None:
@@ -601,7 +602,7 @@ def remove_quietly(path: str) -> None:
     """Remove a temporary file if it is there; a failure to remove it must not hide the real error."""
     try:
         os.unlink(path)
-    except FileNotFoundError:
+    except (FileNotFoundError, NotADirectoryError):  # not there (a file where its folder should be: never made)
         pass
     except OSError as exc:  # pragma: no cover - e.g. the directory became read-only meanwhile
         import warnings

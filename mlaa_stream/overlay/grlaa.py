@@ -9,8 +9,11 @@ from __future__ import annotations
 
 import json
 import math
+import numbers
 import os
+import string
 from dataclasses import dataclass
+from fractions import Fraction
 from typing import Callable
 
 import numpy as np
@@ -24,6 +27,7 @@ ENC8_SIZE = 65536  # kernels/grlaa.cl: uint8 encode table
 BIN_LOCAL = 64     # work-group size of the binning kernel
 BIN_CAP = 64       # initial room for entries per tile (grows when a tile lists more)
 DEVICE_CLIP_MARGIN = 4096.0  # points this far off the frame: segment tables in float64 on the host
+EXACT_CLIP_BEYOND = 2.0 ** 32  # segments with an end this far out are cut to the frame exactly (_clip_segments)
 # The widest stroke (and outline) drawn: kernels/grlaa.cl computes distances to the stroke's edge in float32, whose
 # spacing at 2^15 px (half this width) is 2^-8 px. Against the float64 reference an edge 65536 px wide is within 1
 # level of 8-bit coverage (measured: 3 levels at 2^20, the edge lost at 2^23, and nothing at all drawn from ~4.3e9
@@ -32,23 +36,24 @@ DEVICE_CLIP_MARGIN = 4096.0  # points this far off the frame: segment tables in 
 # rather than drawn as nothing.
 MAX_WIDTH = 65536.0
 _FOOTPRINT_HALF_DIAGONAL = math.sqrt(0.5)
+_HEX_DIGITS = frozenset(string.hexdigits)  # ASCII only: int(..., 16) also takes other scripts' digits
 
 # --------------------------------------------------------------------------------------- styles
 
 def parse_color(value, what: str = "color") -> tuple[float, float, float]:
-    """A colour as sRGB in [0, 1], in the order given: '#rrggbb' (always RGB) or 3 numbers 0..255."""
+    """A colour as sRGB in [0, 1], in the order given: '#rrggbb' / '#rgb' (always RGB), 3 numbers 0..255, or one
+    number 0..255 (or a 1-sequence): grey."""
     if isinstance(value, str):
         s = value.strip().lstrip("#")
         if len(s) == 3:
             s = "".join(ch * 2 for ch in s)
-        try:
-            if len(s) != 6:
-                raise ValueError
-            return tuple(int(s[i:i + 2], 16) / 255.0 for i in (0, 2, 4))  # type: ignore[return-value]
-        except ValueError:
-            raise ValueError(f"{what}: expected '#rrggbb', got {value!r}") from None
+        # hex digits only: int(..., 16) alone took '#-1-1-1' (-1/255: a colour below black) and '+f+f+f'
+        if len(s) != 6 or not all(ch in _HEX_DIGITS for ch in s):
+            raise ValueError(f"{what}: expected '#rrggbb', got {value!r}")
+        return tuple(int(s[i:i + 2], 16) / 255.0 for i in (0, 2, 4))  # type: ignore[return-value]
     try:
-        vals = [float(v) for v in value]
+        # one number (a 0-d array too): grey, as a 1-sequence is (cv2 takes a scalar colour too)
+        vals = [float(value)] if isinstance(value, numbers.Real) or np.ndim(value) == 0 else [float(v) for v in value]
     except (TypeError, ValueError):
         raise ValueError(f"{what}: expected '#rrggbb' or 3 numbers 0..255, got {value!r}") from None
     if len(vals) == 1:
@@ -86,8 +91,18 @@ class LineStyle:
 
 
 def _is_one_color(v) -> bool:
-    return isinstance(v, str) or (np.ndim(v) == 1 and len(v) in (1, 3)
-                                  and not isinstance(v[0], (str, list, tuple, np.ndarray)))
+    """Whether `v` is one colour (a string, a number, 1 or 3 numbers) rather than one per line. Per-line lists may
+    mix forms (["#ff0000", (0, 0, 255)]), which np.ndim alone refused with numpy's own message."""
+    if isinstance(v, (str, numbers.Real)):  # a number: grey (parse_color)
+        return True
+    if isinstance(v, np.ndarray):
+        return v.ndim == 0 or (v.ndim == 1 and len(v) in (1, 3))
+    try:
+        items = list(v)
+    except TypeError:
+        return False
+    return len(items) in (1, 3) and all(isinstance(x, numbers.Real) or (isinstance(x, np.ndarray) and x.ndim == 0)
+                                        for x in items)
 
 
 def _per_line(value, n: int, name: str, is_one: Callable[[object], bool]) -> list:
@@ -323,24 +338,57 @@ def _clip_segments(cols: list[np.ndarray], reach: np.ndarray, width: int, height
         return None, cols
     m = m[out]
     ox, oy = x0[out], y0[out]
-    dx, dy = x1[out] - ox, y1[out] - oy
-    t0, t1 = np.zeros(len(out)), np.ones(len(out))
-    ok = np.ones(len(out), bool)
-    for p, q in ((-dx, ox + m), (dx, width - 1 + m - ox), (-dy, oy + m), (dy, height - 1 + m - oy)):
-        with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):  # exact below where float64 overflows
+        dx, dy = x1[out] - ox, y1[out] - oy
+        t0, t1 = np.zeros(len(out)), np.ones(len(out))
+        ok = np.ones(len(out), bool)
+        for p, q in ((-dx, ox + m), (dx, width - 1 + m - ox), (-dy, oy + m), (dy, height - 1 + m - oy)):
             r = q / p
-        ok &= ~((p == 0) & (q < 0))
-        t0 = np.where(p < 0, np.maximum(t0, r), t0)
-        t1 = np.where(p > 0, np.minimum(t1, r), t1)
-    ok &= t0 <= t1
+            ok &= ~((p == 0) & (q < 0))
+            t0 = np.where(p < 0, np.maximum(t0, r), t0)
+            t1 = np.where(p > 0, np.minimum(t1, r), t1)
+        ok &= t0 <= t1
+        cut_out = [ox + t0 * dx, oy + t0 * dy, ox + t1 * dx, oy + t1 * dy]
+    # o + t * d cancels: a cut end lies near the frame, the ends it is cut from up to |o| away, so its error is
+    # ulp(|o|) (a line from x = -1e18 to the frame started thousands of pixels late). Beyond EXACT_CLIP_BEYOND px
+    # (error over 1e-6 px) such segments are cut in exact rational arithmetic instead.
+    big = np.flatnonzero(np.maximum(np.maximum(np.abs(ox), np.abs(oy)),
+                                    np.maximum(np.abs(x1[out]), np.abs(y1[out]))) > EXACT_CLIP_BEYOND)
+    for i in big:
+        o = out[i]
+        got = _clip_exact(float(x0[o]), float(y0[o]), float(x1[o]), float(y1[o]), float(m[i]), width, height)
+        ok[i] = got is not None
+        if got is not None:
+            for c, v in enumerate(got):
+                cut_out[c][i] = v
     keep = np.ones(len(x0), bool)
     keep[out] = ok
     cut = []
-    for v, o, d, t in ((x0, ox, dx, t0), (y0, oy, dy, t0), (x1, ox, dx, t1), (y1, oy, dy, t1)):
+    for v, c in zip((x0, y0, x1, y1), cut_out):
         v = v.copy()
-        v[out] = o + t * d
+        v[out] = c
         cut.append(v[keep])
     return keep, cut
+
+
+def _clip_exact(x0: float, y0: float, x1: float, y1: float, m: float, width: int,
+                height: int) -> tuple[float, float, float, float] | None:
+    """_clip_segments' Liang-Barsky for one segment in exact rationals (its ends are exact binary fractions); the
+    cut ends rounded to float64 once. None where the segment misses the box."""
+    X0, Y0, X1, Y1, M = map(Fraction, (x0, y0, x1, y1, m))
+    dx, dy = X1 - X0, Y1 - Y0
+    t0, t1 = Fraction(0), Fraction(1)
+    for p, q in ((-dx, X0 + M), (dx, width - 1 + M - X0), (-dy, Y0 + M), (dy, height - 1 + M - Y0)):
+        if p == 0:
+            if q < 0:
+                return None
+        elif p < 0:
+            t0 = max(t0, q / p)
+        else:
+            t1 = min(t1, q / p)
+    if t0 > t1:
+        return None
+    return float(X0 + t0 * dx), float(Y0 + t0 * dy), float(X0 + t1 * dx), float(Y0 + t1 * dy)
 
 
 # ----------------------------------------------------------------------------- OpenCL renderer
@@ -637,9 +685,19 @@ class OverlayRenderer:
         return styles
 
     def draw_styled(self, frame: np.ndarray, lines: list[np.ndarray], styles: list[LineStyle],
-                    bgr: bool = True, inplace: bool = False, what: str = "frame") -> np.ndarray:
-        """`draw` with checked lines (as_lines) and one LineStyle per line."""
+                    bgr: bool = True, inplace: bool = False, what: str = "frame",
+                    premultiplied: bool = False) -> np.ndarray:
+        """`draw` with checked lines (as_lines) and one LineStyle per line. `premultiplied`: a 4-channel frame's
+        colour is premultiplied by its alpha (an EXR's RGBA), not straight: see draw_premultiplied."""
         allp = np.concatenate(lines) if lines else np.zeros((0, 2))
+        if premultiplied and frame.ndim == 3 and frame.shape[2] == 4 and lines:
+            if inplace and not frame.flags.writeable:  # as _draw says it
+                raise ValueError(f"{what}: expected a writeable array for inplace drawing, got a read-only one")
+            out = draw_premultiplied(lambda f: self._draw(f, lines, allp, styles, bgr, False, what), frame)
+            if inplace:
+                frame[...] = out
+                return frame
+            return out
         return self._draw(frame, lines, allp, styles, bgr, inplace, what)
 
     def _draw(self, frame: np.ndarray, lines: list[np.ndarray], allp: np.ndarray,
@@ -719,6 +777,29 @@ class OverlayRenderer:
     __call__ = draw
 
 
+def draw_premultiplied(draw_straight: Callable[[np.ndarray], np.ndarray], frame: np.ndarray) -> np.ndarray:
+    """Draw over an (H, W, 4) frame whose colour is premultiplied by its alpha (EXR's RGBA, a TIFF tagged so):
+    `draw_straight(f)` composites over straight alpha (kernels/grlaa.cl), which took the premultiplied colour for
+    straight (a white line at opacity 0.5 over 0.1 premultiplied at alpha 0.5 gave 0.70, not 0.55). So the colour
+    is divided by alpha (as float32, 0..1), drawn, and multiplied by the new alpha: only on the pixels the lines
+    touched, every other sample stays bit for bit. Where alpha is 0 the colour stays as it is (nothing to divide)."""
+    top = 1.0 if frame.dtype.kind == "f" else float(np.iinfo(frame.dtype).max)
+    px = frame.astype(np.float32) / np.float32(top)
+    alpha = px[..., 3:]
+    straight = px.copy()
+    straight[..., :3] = np.where(alpha > 0, px[..., :3] / np.where(alpha > 0, alpha, 1), px[..., :3])
+    drawn = draw_straight(straight)
+    touched = (drawn != straight).any(axis=2)
+    prem = drawn[touched]
+    prem[:, :3] *= prem[:, 3:]
+    out = frame.copy()
+    if frame.dtype.kind == "f":
+        out[touched] = prem.astype(frame.dtype)
+    else:
+        out[touched] = np.clip(np.rint(prem * top), 0, top).astype(frame.dtype)
+    return out
+
+
 _renderers: dict[tuple, OverlayRenderer] = {}
 
 
@@ -775,21 +856,39 @@ def _geometry_lines(geom, where: str) -> list[np.ndarray] | None:
     raise ValueError(f"{where}: expected a LineString or MultiLineString geometry, got {kind!r}")
 
 
+def _positions(line) -> np.ndarray | None:
+    """One line's positions as float64 (N, k): at once where every position has as many numbers, else one by
+    one, keeping x and y (GeoJSON lets a position carry a third number, which is ignored, on some points only);
+    None where a position is not a list of 2 or more numbers."""
+    try:
+        return np.asarray(line, dtype=np.float64)
+    except (TypeError, ValueError):  # positions of mixed lengths: numpy refuses the ragged list
+        pass
+    try:
+        if isinstance(line, (str, bytes)) or any(isinstance(p, (str, bytes)) or len(p) < 2 for p in line):
+            return None
+        return np.array([[float(p[0]), float(p[1])] for p in line], dtype=np.float64)
+    except (TypeError, ValueError):
+        return None
+
+
 def _coords_lines(coords, where: str, multi: bool | None = None) -> list[np.ndarray]:
     """LineString ([[x, y], ...]) or MultiLineString ([[[x, y], ...], ...]) coordinates."""
     try:
-        a = [np.asarray(c, dtype=np.float64) for c in coords] if coords is not None else None
+        a = [np.asarray(c, dtype=np.float64) if multi is False else _positions(c) for c in coords] \
+            if coords is not None else None
     except (TypeError, ValueError):
         a = None
-    if a is None or len(a) == 0:
+    if a is None or len(a) == 0 or any(p is None for p in a):
         raise ValueError(f"{where}: expected coordinates [[x, y], ...], got {coords!r:.60}")
     if multi is None:
         multi = a[0].ndim == 2
-    parts = a if multi else [np.asarray(coords, dtype=np.float64)]
+    parts = a if multi else [_positions(coords)]
     out = []
     for j, p in enumerate(parts):
-        if p.ndim != 2 or p.shape[1] < 2 or len(p) < 1:
-            raise ValueError(f"{where}: line {j}: expected positions [[x, y], ...], got shape {p.shape}")
+        if p is None or p.ndim != 2 or p.shape[1] < 2 or len(p) < 1:
+            raise ValueError(f"{where}: line {j}: expected positions [[x, y], ...], got "
+                             f"{'a position of fewer than 2 numbers' if p is None else f'shape {p.shape}'}")
         if not np.isfinite(p[:, :2]).all():
             raise ValueError(f"{where}: line {j}: expected finite coordinates, got NaN or infinity")
         out.append(np.ascontiguousarray(p[:, :2]))
@@ -869,27 +968,37 @@ def parse_overlay(doc: dict, name: str = "overlay") -> list[OverlayFeature]:
 def read_overlay(path: str) -> list[OverlayFeature]:
     """Parse an overlay file (JSON/GeoJSON, docs/grlaa.md); errors name the file and feature."""
     try:
-        with open(path, encoding="utf-8") as fh:
-            doc = json.load(fh)
+        with open(path, "rb") as fh:
+            raw = fh.read()
     except OSError as exc:
         raise ValueError(f"{path}: cannot read ({exc.strerror})") from exc
+    try:
+        # bytes: json detects UTF-8 with a byte order mark (Windows editors write one: "Unexpected UTF-8 BOM"
+        # before) and UTF-16/32, as RFC 8259 lets a reader
+        doc = json.loads(raw)
     except json.JSONDecodeError as exc:
         raise ValueError(f"{path}: expected JSON, got an error at line {exc.lineno} "
                          f"column {exc.colno}: {exc.msg}") from exc
+    except UnicodeDecodeError as exc:  # named the codec, not the file
+        raise ValueError(f"{path}: expected JSON text (UTF-8), got bytes that are not text ({exc.reason} at "
+                         f"byte {exc.start})") from exc
     return parse_overlay(doc, os.fspath(path))
 
 
 def load_overlay(path: str, bgr: bool = True, device: str | int | None = None,
                  strength: float = 1.0, linear: bool = False,
-                 inplace: bool = False) -> Callable[[np.ndarray, int], np.ndarray]:
-    """Read an overlay file once; returns draw(frame, index) -> frame with that frame's lines drawn.
+                 inplace: bool = False) -> Callable[..., np.ndarray]:
+    """Read an overlay file once; returns draw(frame, index, linear=None) -> frame with that frame's lines drawn.
 
-    `bgr` is the channel order of the frames it will get (file colours are always RGB).
+    `bgr` is the channel order of the frames it will get (file colours are always RGB). `linear`: the frames hold
+    linear light (EXR) instead of sRGB codes; draw's own `linear` says it for one frame (a folder mixing EXR and
+    PNG), and its `premultiplied` that a 4-channel frame's colour is premultiplied by its alpha (an EXR's RGBA):
+    the command line passes both for each frame, as draw's `per_frame_format` attribute says it may.
     """
     features = read_overlay(path)
-    renderer: list[OverlayRenderer] = []
+    renderers: dict[bool, OverlayRenderer] = {}   # one per kind of frame: the renderer's kernel is built for one
 
-    def draw(frame: np.ndarray, index: int) -> np.ndarray:
+    def draw(frame: np.ndarray, index: int, linear: bool | None = None, premultiplied: bool = False) -> np.ndarray:
         lines, styles = [], []
         for f in features:
             for ln in f.lines_at(int(index)):
@@ -897,12 +1006,15 @@ def load_overlay(path: str, bgr: bool = True, device: str | int | None = None,
                 styles.append(f.style)
         if not lines:
             return frame if inplace else frame.copy()
-        if not renderer:
-            renderer.append(OverlayRenderer(device, strength, linear=linear))
-        return renderer[0].draw_styled(frame, lines, styles, bgr=bgr, inplace=inplace,
-                                       what=f"frame {index}")
+        lin = default_linear if linear is None else bool(linear)
+        if lin not in renderers:
+            renderers[lin] = OverlayRenderer(device, strength, linear=lin)
+        return renderers[lin].draw_styled(frame, lines, styles, bgr=bgr, inplace=inplace, what=f"frame {index}",
+                                          premultiplied=premultiplied)
 
+    default_linear = bool(linear)
     draw.features = features  # type: ignore[attr-defined]
+    draw.per_frame_format = True  # type: ignore[attr-defined]
     return draw
 
 
