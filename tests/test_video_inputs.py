@@ -13,6 +13,7 @@ from click.testing import CliRunner
 from mlaa_stream.cli.main import main
 from mlaa_stream.io.video import VideoError, VideoWriter, choose_pix_fmt, probe_video
 from demo_maker import make_demo
+from clips import mux_moving_edge
 
 
 
@@ -441,13 +442,7 @@ def test_an_av1_source_stays_av1(tmp_path):
     with av.open(str(src), "w") as out:
         s = out.add_stream(encoder, rate=25)
         s.width, s.height, s.pix_fmt = 96, 64, "yuv420p"
-        for i in range(4):
-            img = np.zeros((64, 96, 3), np.uint8)
-            img[:, 30 + i:] = 220
-            for p in s.encode(av.VideoFrame.from_ndarray(img, format="rgb24")):
-                out.mux(p)
-        for p in s.encode():
-            out.mux(p)
+        mux_moving_edge(out, s, 4, 30, 220)
     r = run(src, "-o", tmp_path / "out.webm")
     assert r.exit_code == 0, r.output
     assert "cannot hold" not in r.output
@@ -465,13 +460,7 @@ def test_a_dnxhr_source_and_codec_dnxhd_are_written(tmp_path):
     with av.open(str(src), "w") as out:
         s = out.add_stream("dnxhd", rate=25, options={"profile": "dnxhr_sq"})
         s.width, s.height, s.pix_fmt = 256, 144, "yuv422p"
-        for i in range(3):
-            img = np.zeros((144, 256, 3), np.uint8)
-            img[:, 100 + i:] = 220
-            for p in s.encode(av.VideoFrame.from_ndarray(img, format="rgb24")):
-                out.mux(p)
-        for p in s.encode():
-            out.mux(p)
+        mux_moving_edge(out, s, 3, 100, 220)
     r = run(src, "-o", tmp_path / "out.mov")
     assert r.exit_code == 0, r.output
     with av.open(str(tmp_path / "out.mov")) as c:
@@ -581,13 +570,7 @@ def test_a_subsampled_pix_fmt_at_an_odd_size_names_the_cause(tmp_path):
     with av.open(str(src), "w") as out:
         s = out.add_stream("libx264", rate=25)
         s.width, s.height, s.pix_fmt = 65, 47, "yuv444p"
-        for i in range(3):
-            img = np.zeros((47, 65, 3), np.uint8)
-            img[:, 20 + i:] = 200
-            for p in s.encode(av.VideoFrame.from_ndarray(img, format="rgb24")):
-                out.mux(p)
-        for p in s.encode():
-            out.mux(p)
+        mux_moving_edge(out, s, 3, 20, 200)
     r = run(src, "-o", tmp_path / "out.mkv", "--pix-fmt", "yuv420p")
     assert r.exit_code == 1 and "yuv420p halves the chroma, which 65x47 cannot" in r.output, r.output
     r = run(src, "-o", tmp_path / "out.mkv", "--pix-fmt", "nosuchformat")

@@ -12,6 +12,7 @@ from click.testing import CliRunner
 from mlaa_stream.cli.main import main
 from mlaa_stream.io.video import probe_video
 from demo_maker import make_demo
+from clips import mux_moving_edge
 
 
 
@@ -189,13 +190,7 @@ def test_audio_aac_re_encodes_pcm_of_unspecified_layout(tmp_path):
         v.width, v.height, v.pix_fmt = 64, 48, "yuv420p"
         a = o.add_stream("pcm_s16le", rate=48000)
         a.layout = "mono"
-        for i in range(10):
-            img = np.zeros((48, 64, 3), np.uint8)
-            img[:, 20 + i:] = 200
-            for p in v.encode(av.VideoFrame.from_ndarray(img, format="rgb24")):
-                o.mux(p)
-        for p in v.encode():
-            o.mux(p)
+        mux_moving_edge(o, v, 10, 20, 200)
         tone = (3000 * np.sin(np.arange(19200) / 20)).astype(np.int16)[None]
         for k in range(0, 19200, 960):
             f = av.AudioFrame.from_ndarray(tone[:, k:k + 960], format="s16", layout="mono")
@@ -222,13 +217,7 @@ def test_a_rotation_the_output_cannot_store_is_named(tmp_path, ext, kept):
         s = out.add_stream("libx264", rate=25)
         s.width, s.height, s.pix_fmt = 64, 48, "yuv420p"
         s.set_display_rotation(90)
-        for i in range(12):
-            img = np.zeros((48, 64, 3), np.uint8)
-            img[:, 20 + i:] = 200
-            for p in s.encode(av.VideoFrame.from_ndarray(img, format="rgb24")):
-                out.mux(p)
-        for p in s.encode():
-            out.mux(p)
+        mux_moving_edge(out, s, 12, 20, 200)
     r = run(src, "-o", tmp_path / f"out.{ext}")
     assert r.exit_code == 0, r.output
     with av.open(str(tmp_path / f"out.{ext}")) as c:
