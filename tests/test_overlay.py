@@ -627,7 +627,7 @@ def test_load_overlay_fixed_and_per_frame(renderer, tmp_path):
 
 @pytest.mark.parametrize("doc,match", [
     ({"type": "FeatureCollection", "features": [{"type": "Feature", "properties": {},
-      "geometry": {"type": "Point", "coordinates": [1, 2]}}]}, "feature 0: expected a LineString"),
+      "geometry": {"type": "Circle", "coordinates": [1, 2]}}]}, "feature 0: expected a GeoJSON geometry"),
     ({"type": "FeatureCollection", "features": [{"type": "Feature", "properties": {"width": -1},
       "geometry": {"type": "LineString", "coordinates": [[1, 2], [3, 4]]}}]},
      "feature 0: expected width > 0"),
@@ -719,6 +719,29 @@ def test_a_third_coordinate_on_some_positions_only_is_ignored(geom):
     bad = {"type": "LineString", "coordinates": [[0, 0], [4]]}
     with pytest.raises(ValueError, match=r"route.geojson: feature 0: line 0: expected positions .*fewer than 2"):
         parse_overlay({"type": "Feature", "properties": {}, "geometry": bad}, "route.geojson")
+
+
+def test_geometries_other_than_lines_among_them():
+    # a GeoJSON export mixes geometry types: one Point refused the whole file ("expected a LineString ... 'Point'");
+    # points and empty geometries draw nothing, a polygon its rings as closed lines, a collection its members
+    ring = [[0, 0], [4, 0], [4, 3], [0, 0]]
+    doc = {"type": "FeatureCollection", "features": [
+        {"type": "Feature", "properties": {}, "geometry": {"type": "Point", "coordinates": [1, 2]}},
+        {"type": "Feature", "properties": {}, "geometry": {"type": "MultiPoint", "coordinates": [[1, 2], [3, 4]]}},
+        {"type": "Feature", "properties": {}, "geometry": {"type": "LineString", "coordinates": []}},
+        {"type": "Feature", "properties": {}, "geometry": {"type": "Polygon", "coordinates": [ring, ring[::-1]]}},
+        {"type": "Feature", "properties": {}, "geometry": {"type": "MultiPolygon", "coordinates": [[ring], []]}},
+        {"type": "Feature", "properties": {}, "geometry": {"type": "GeometryCollection", "geometries": [
+            {"type": "Point", "coordinates": [0, 0]}, {"type": "LineString", "coordinates": [[5, 5], [9, 9]]}]}},
+    ]}
+    feats = parse_overlay(doc, "mixed.geojson")
+    assert [len(f.lines_at(0)) for f in feats] == [0, 0, 0, 2, 1, 1]
+    assert np.array_equal(feats[3].lines_at(0)[1], np.array(ring[::-1], float))
+    assert np.array_equal(feats[5].lines_at(0)[0], [[5, 5], [9, 9]])
+    with pytest.raises(ValueError, match=r"mixed.geojson: feature 0: geometry 0: expected a GeoJSON geometry"):
+        parse_overlay({"type": "Feature", "properties": {}, "geometry": {"type": "GeometryCollection",
+                                                                         "geometries": [{"type": "Sphere"}]}},
+                      "mixed.geojson")
 
 
 # ---------------------------------------------------------------------------------- CLI

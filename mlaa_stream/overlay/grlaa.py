@@ -849,11 +849,32 @@ def _geometry_lines(geom, where: str) -> list[np.ndarray] | None:
         raise ValueError(f"{where}: expected a GeoJSON geometry object, got {type(geom).__name__}")
     kind = geom["type"]
     coords = geom.get("coordinates")
+    # GeoJSON exports mix geometry types: what has no line draws nothing (points; an empty geometry, which RFC 7946
+    # allows), a polygon draws its rings as closed lines, a collection its members -- one such feature refused the
+    # whole file ("expected a LineString ... got 'Point'")
+    if kind in ("Point", "MultiPoint") or (kind in _LINE_KINDS and isinstance(coords, list) and not coords):
+        return []
     if kind == "LineString":
         return _coords_lines(coords, where, multi=False)
     if kind == "MultiLineString":
         return _coords_lines(coords, where, multi=True)
-    raise ValueError(f"{where}: expected a LineString or MultiLineString geometry, got {kind!r}")
+    if kind == "Polygon":   # [ring, ...], each ring closed: its first position repeated last
+        return _coords_lines(coords, where, multi=True)
+    if kind == "MultiPolygon":   # [polygon, ...]
+        if not isinstance(coords, list) or not all(isinstance(p, list) for p in coords):
+            raise ValueError(f"{where}: expected MultiPolygon coordinates [[[[x, y], ...], ...], ...], "
+                             f"got {coords!r:.60}")
+        return [ring for j, poly in enumerate(coords) if poly
+                for ring in _coords_lines(poly, f"{where}: polygon {j}", multi=True)]
+    if kind == "GeometryCollection":
+        members = geom.get("geometries")
+        if not isinstance(members, list):
+            raise ValueError(f"{where}: expected 'geometries' to be a list, got {type(members).__name__}")
+        return [line for j, g in enumerate(members) for line in (_geometry_lines(g, f"{where}: geometry {j}") or [])]
+    raise ValueError(f"{where}: expected a GeoJSON geometry (LineString, MultiLineString, Polygon, ...), got {kind!r}")
+
+
+_LINE_KINDS = ("LineString", "MultiLineString", "Polygon", "MultiPolygon")
 
 
 def _positions(line) -> np.ndarray | None:
