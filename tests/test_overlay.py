@@ -578,6 +578,14 @@ def test_parse_color():
     assert parse_color([0, 255, 51]) == (0.0, 1.0, 0.2)
 
 
+def test_a_colour_on_a_zero_to_one_scale_is_refused_not_drawn_near_black():
+    # [1.0, 0.5, 0] on the 0..255 scale is under one level per channel: the line came out black without a word
+    with pytest.raises(ValueError, match=r"route: color: expected 3 numbers 0..255, got .*multiply it by 255"):
+        parse_color([1.0, 0.5, 0.0], "route: color")
+    assert parse_color([1, 0, 1]) == (1 / 255, 0.0, 1 / 255)   # whole levels stay levels
+    assert parse_color([0.0, 0.0, 0.0]) == (0.0, 0.0, 0.0)
+
+
 @pytest.mark.parametrize("bad", ["#-1-1-1", "+f+f+f", "# 1 1 1", "#\uff11\uff11\uff11"])
 def test_parse_color_takes_hex_digits_only(bad):
     # int(s, 16) took a sign and spaces: '#-1-1-1' was -1/255 per channel (below black), drawn as black

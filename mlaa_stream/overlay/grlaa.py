@@ -60,6 +60,9 @@ def parse_color(value, what: str = "color") -> tuple[float, float, float]:
         vals = vals * 3
     if len(vals) != 3 or not all(0.0 <= v <= 255.0 for v in vals):
         raise ValueError(f"{what}: expected 3 numbers 0..255, got {value!r}")
+    if all(v <= 1.0 for v in vals) and any(v != int(v) for v in vals):
+        # fractions of one level each: a colour written on a 0..1 scale ([1.0, 0.5, 0]), drawn near-black without a word
+        raise ValueError(f"{what}: expected 3 numbers 0..255, got {value!r} (a 0..1 colour? multiply it by 255)")
     return tuple(v / 255.0 for v in vals)  # type: ignore[return-value]
 
 
