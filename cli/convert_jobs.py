@@ -14,7 +14,7 @@ from mlaa_stream.io.sequence import FIRST_FRAME_NUMBER, image_transfer
 
 def _sequence_plan(job: Job) -> list:
     """The input images in order (folder: name order; pattern: frame numbers), as FrameFile items."""
-    from mlaa_stream.io.sequence import FrameFile, expand_pattern, format_ranges, list_folder, parse_frames
+    from mlaa_stream.io.sequence import FrameFile, expand_pattern, format_spans, list_folder, parse_frames
 
     if job.kind == "folder":
         srcs, others = list_folder(job.input)
@@ -33,7 +33,7 @@ def _sequence_plan(job: Job) -> list:
     if not found:
         raise Usage(f"{job.input}: no files match this frame pattern")
     if missing:
-        job.con.warn(f"{job.input}: missing frames {format_ranges(missing)} (the video skips them)")
+        job.con.warn(f"{job.input}: missing frames {format_spans(missing)} (the video skips them)")
     return [FrameFile(p, "", n) for n, p in found]
 
 

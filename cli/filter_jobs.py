@@ -162,7 +162,7 @@ class ImageJob(Job):
 
     def prepare(self) -> None:
         from mlaa_stream.io.images import has_writer, is_image_path, remove_quietly, stale_temp_files
-        from mlaa_stream.io.sequence import (Report, expand_pattern, format_ranges, is_pattern, list_folder,
+        from mlaa_stream.io.sequence import (Report, expand_pattern, format_spans, is_pattern, list_folder,
                                 output_over_input, parse_frames, plan_images, same_file)
 
         o, con = self.opts, self.con
@@ -191,7 +191,7 @@ class ImageJob(Job):
                 raise Usage(f"{self.input}: no files match this frame pattern"
                             + (f" for frames {o['frames']}" if rng else ""))
             if missing:
-                msg = f"{self.input}: missing frames {format_ranges(missing)}"
+                msg = f"{self.input}: missing frames {format_spans(missing)}"
                 if rng is not None:
                     self.report.fail(msg)  # frames asked for by --frames that are not there
                     self.failed_early = True

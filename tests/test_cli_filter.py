@@ -371,6 +371,25 @@ def test_a_pattern_finds_the_names_it_writes_as_frames_does_not_a_second_padding
                                                             (12345, str(folder / "g12345.png"))]
 
 
+def test_frames_are_found_by_listing_the_folder_once_and_gaps_come_as_spans(tmp_path):
+    # --frames A-B tested a path per number: 1-2000000 took 17 s, a typo's 1-100000000 minutes and a list of every
+    # missing number (gigabytes); the folder is listed once and the missing numbers come back as spans
+    from mlaa_stream.io.sequence import expand_pattern, format_spans
+
+    folder = tmp_path / "seq"
+    folder.mkdir()
+    for n in (3, 4, 9):
+        (folder / f"s.{n:04d}.png").write_bytes(b"")
+    found = [(3, str(folder / "s.0003.png")), (4, str(folder / "s.0004.png")), (9, str(folder / "s.0009.png"))]
+    assert expand_pattern(str(folder / "s.%04d.png")) == (found, [(5, 8)])
+    (folder / "s.0005.png").mkdir()   # with --frames, a folder of a frame's name is no frame, as before
+    # (old code: 3 million file tests and a list of every missing number; 10 ** 12 would not end)
+    assert expand_pattern(str(folder / "s.%04d.png"), (1, 3_000_000)) == (found, [(1, 2), (5, 8), (10, 3_000_000)])
+    assert format_spans([(1, 2), (5, 8), (10, 10 ** 12)]) == "1-2, 5-8, 10-1000000000000"
+    r = run(folder / "s.%04d.png", "--frames", "1-3000000", "-o", tmp_path / "out" / "o.%04d.png")
+    assert r.exit_code == 1 and "missing frames 1-2, 5-8, 10-3000000" in r.output, r.output
+
+
 def test_sequence_gaps_are_reported(tmp_path):
     make_sequence(tmp_path / "seq", [1, 2, 5, 6, 9])
     r = run(tmp_path / "seq" / "shot.%04d.png", "-o", tmp_path / "o")
