@@ -366,8 +366,7 @@ def colour_by_name(names: tuple[str, ...], alpha_channel: int = -1,
 
 # Formats whose files name their channels (an EXR's "Z", "N.x", "motion.u"); other formats' names are OpenImageIO's
 # defaults by position (a 2-channel TIFF's "R", "G" is grey and alpha), which say nothing of what a channel holds.
-_NAMED_CHANNEL_FORMATS = ("openexr",)
-NAMED_CHANNEL_FORMATS = _NAMED_CHANNEL_FORMATS  # for the compare command
+NAMED_CHANNEL_FORMATS = ("openexr",)
 
 
 def without_colour(image: Image) -> str | None:
@@ -376,7 +375,7 @@ def without_colour(image: Image) -> str | None:
     -- depth, normals, positions, motion vectors, ids --, which a blend corrupts (a depth between two surfaces is
     neither's). Render pipelines write such passes as files of their own beside the beauty."""
     names = tuple(image.spec.channelnames)
-    if image.format_name not in _NAMED_CHANNEL_FORMATS or len(names) != image.pixels.shape[2]:
+    if image.format_name not in NAMED_CHANNEL_FORMATS or len(names) != image.pixels.shape[2]:
         return None
     data = cryptomatte_channels(names, image.spec)
     if colour_by_name(names, image.spec.alpha_channel, data):
