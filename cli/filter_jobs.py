@@ -444,8 +444,10 @@ class ImageJob(Job):
             # --resume: the whole job with the complete outputs marked done, so that each chunk still reads its
             # warm-up (and look-ahead) frames, as one machine warms up from the skipped frames before it
             files, done = self.whole_plan, frozenset(self.report.skipped)
+        connected = False
         try:
             with connect(self.opts["cluster"]) as client:
+                connected = True
                 self.con.info(f"cluster: {len(client.scheduler_info()['workers'])} workers")
                 report = run_chunks(client, files, self.opts["filter_kwargs"],
                                     overwrite=self.opts["overwrite"], strict=self.strict,
@@ -460,7 +462,10 @@ class ImageJob(Job):
         except (ClusterJobError, OSError) as exc:
             progress.close()
             self.con.error(str(exc))
-            self.con.error("stopped: the outputs written are complete; --resume goes on from there")
+            # a scheduler never reached wrote nothing: "the outputs written are complete" told of outputs there were not
+            self.con.error("stopped: the outputs written are complete; --resume goes on from there" if connected else
+                           f"stopped: no frame was filtered, nothing written (the cluster at {self.opts['cluster']} "
+                           f"was not reached)")
             return EXIT_FAILED
         progress.close()
         self.written = len(report.written) + len(report.skipped)

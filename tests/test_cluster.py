@@ -306,3 +306,20 @@ def test_an_mpeg_ts_in_segments_keeps_every_frame(client, tmp_path):
     n = filter_video_on_cluster(client, src, str(tmp_path / "cl.mkv"), segment_seconds=0.3)
     frames, _ = decoded(tmp_path / "cl.mkv")
     assert n == len(frames) == 50
+
+
+def test_a_scheduler_never_reached_says_nothing_was_written(tmp_path, monkeypatch):
+    # connect() failing (a scheduler down: Dask's "Timed out trying to connect" after 30 s) ended in "the outputs
+    # written are complete; --resume goes on from there" -- no output had been written
+    import mlaa_stream.cluster.connect as connect_module
+
+    def unreachable(address):
+        raise OSError(f"Timed out trying to connect to {address} after 30 s")
+
+    monkeypatch.setattr(connect_module, "connect", unreachable)
+    sequence(tmp_path / "in", n=2)
+    r = CliRunner().invoke(main, [str(tmp_path / "in" / "shot.%04d.png"), "-o", str(tmp_path / "o" / "c.%04d.png"),
+                                  "--cluster", "tcp://192.0.2.1:8786"])
+    assert r.exit_code == 1, r.output
+    assert "nothing written (the cluster at tcp://192.0.2.1:8786 was not reached)" in r.output, r.output
+    assert "--resume goes on" not in r.output
