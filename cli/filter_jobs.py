@@ -480,9 +480,16 @@ class ImageJob(Job):
 
 
 def _ring_frames(stage) -> int:
-    """How many frames before the first one to write the temporal stage wants (its ring; the blend: 3)."""
-    inner = getattr(stage, "tss", stage)
-    return int(getattr(inner, "frames", 3))
+    """How many frames before the first one to write the temporal stage wants, as a cluster's chunk reads them
+    (cluster/temporal.py TemporalSpec.warmup): TSS its ring of K frames, the blend BLEND_WARMUP (its recursive history
+    never becomes identical; 3 frames left the first written frame 12 levels off the uninterrupted run's), both the
+    longer."""
+    from mlaa_stream.cluster.temporal import BLEND_WARMUP
+    from mlaa_stream.temporal.tss import TSSStage
+
+    tss = stage if isinstance(stage, TSSStage) else getattr(stage, "tss", None)
+    ring = int(tss.frames) if tss is not None else 0
+    return ring if isinstance(stage, TSSStage) else max(ring, BLEND_WARMUP)
 
 
 def _warm_up_images(job: "ImageJob", filt, temporal: "SequenceTemporal") -> None:
