@@ -23,8 +23,7 @@ def read_image_encoding(path: str) -> tuple[np.ndarray, bool]:
     space tagged linear/ACES -- not ACEScc/ACEScct --, or untagged float such as EXR)."""
     import OpenImageIO as oiio
 
-    from mlaa_stream.io.images import (NAMED_CHANNEL_FORMATS, colour_by_name, cryptomatte_channels,
-                                       filter_channel_indices)
+    from mlaa_stream.io.images import cryptomatte_channels, filter_channel_indices, no_colour_reason
     from mlaa_stream.io.sequence import is_linear_colour_space
 
     if os.path.isdir(path):  # OpenImageIO would answer that it has no reader for the format named like the folder
@@ -53,15 +52,13 @@ def read_image_encoding(path: str) -> tuple[np.ndarray, bool]:
         arr = arr[..., None]
     # the colour channels the filter takes, by name: a multi-layer EXR's beauty, not a pass that sorts first
     names = tuple(spec.channelnames) if len(spec.channelnames) == arr.shape[2] else ("",) * arr.shape[2]
-    data = cryptomatte_channels(names, spec)
-    if format_name in NAMED_CHANNEL_FORMATS and len(set(names)) == len(names) and "" not in names \
-            and not colour_by_name(names, spec.alpha_channel, data):
-        # an EXR of depth, normals or motion vectors (the filter copies it unchanged): its channels taken by position
-        # for colour gave an RMSE of a depth against colours
-        shown = ", ".join(names[:6]) + (f" and {len(names) - 6} more" if len(names) > 6 else "")
-        what = "only cryptomatte" if len(data) == len(names) else "no colour"
-        raise CommandError(f"{path}: expected colour channels, got {what} channels ({shown})")
-    colour = list(filter_channel_indices(names, spec.alpha_channel, data))
+    # an EXR of depth, normals or motion vectors (the filter copies it unchanged): its channels taken by position for
+    # colour gave an RMSE of a depth against colours
+    why = no_colour_reason(format_name, spec, arr.shape[2]) if len(set(names)) == len(names) and "" not in names \
+        else None
+    if why is not None:
+        raise CommandError(f"{path}: expected colour channels, got {why}")
+    colour = list(filter_channel_indices(names, spec.alpha_channel, cryptomatte_channels(names, spec)))
     if not colour:
         raise CommandError(f"{path}: expected colour channels, got only cryptomatte channels")
     arr = arr[..., colour[:3]] if len(colour) >= 3 else np.repeat(arr[..., colour[:1]], 3, axis=2)

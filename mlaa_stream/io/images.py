@@ -374,11 +374,17 @@ def without_colour(image: Image) -> str | None:
     None where it has colour: a file that names its channels (an EXR) and names no colour (colour_by_name) holds data
     -- depth, normals, positions, motion vectors, ids --, which a blend corrupts (a depth between two surfaces is
     neither's). Render pipelines write such passes as files of their own beside the beauty."""
-    names = tuple(image.spec.channelnames)
-    if image.format_name not in NAMED_CHANNEL_FORMATS or len(names) != image.pixels.shape[2]:
+    return no_colour_reason(image.format_name, image.spec, image.pixels.shape[2])
+
+
+def no_colour_reason(format_name: str, spec: oiio.ImageSpec, channels: int) -> str | None:
+    """without_colour's verdict from a file's format name, spec and number of channels read (the compare command
+    reads pixels itself)."""
+    names = tuple(spec.channelnames)
+    if format_name not in NAMED_CHANNEL_FORMATS or len(names) != channels:
         return None
-    data = cryptomatte_channels(names, image.spec)
-    if colour_by_name(names, image.spec.alpha_channel, data):
+    data = cryptomatte_channels(names, spec)
+    if colour_by_name(names, spec.alpha_channel, data):
         return None
     shown = ", ".join(names[:6]) + (f" and {len(names) - 6} more" if len(names) > 6 else "")
     return f"{'only cryptomatte' if len(data) == len(names) else 'no colour'} channels ({shown})"
